@@ -1,0 +1,57 @@
+"""ament_python / pip build script for sma_wrist.
+
+The same file serves `colcon build` on a ROS 2 machine (data_files land in
+share/sma_wrist, executables in lib/sma_wrist for `ros2 run`) and `pip install .`
+on a plain Python machine (the embedded runtime replaces rclpy there).
+"""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'sma_wrist'
+
+NODES = {
+    'plant_sim': 'sma_wrist.nodes.plant_sim:main',
+    'hysteresis_compensator': 'sma_wrist.nodes.hysteresis_compensator:main',
+    'adaptive_controller': 'sma_wrist.nodes.adaptive_controller:main',
+    'tem_controller': 'sma_wrist.nodes.tem_controller:main',
+    'trajectory_generator': 'sma_wrist.nodes.trajectory_generator:main',
+}
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/msg_defs', glob('msg_defs/*')),
+    ],
+    python_requires='>=3.10',
+    install_requires=[
+        'setuptools',
+        'numpy>=1.21',
+        'scipy>=1.8',
+        'rosbags>=0.10',
+        'mcap>=1.1',
+        # ROS params files and the msg_defs contract are YAML; ROS itself ships python3-yaml.
+        'PyYAML>=5.4',
+    ],
+    extras_require={
+        'test': ['pytest>=7', 'hypothesis>=6'],
+        # Reports write PNG plots; optional so a headless robot install stays small.
+        'plot': ['matplotlib>=3.5'],
+    },
+    zip_safe=True,
+    maintainer='sma_wrist developers',
+    maintainer_email='dev@sma-wrist.invalid',
+    description='SMA-muscle wrist: SD-GPI hysteresis plant, controllers, embedded rclpy runtime.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [f'{name} = {target}' for name, target in NODES.items()]
+        + ['sma-wrist = sma_wrist.cli:main'],
+    },
+)

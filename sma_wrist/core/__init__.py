@@ -1,0 +1,1 @@
+"""Numerical core of sma_wrist. Nothing under this package imports ROS."""
