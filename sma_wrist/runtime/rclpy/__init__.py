@@ -1,0 +1,90 @@
+"""Embedded rclpy: the subset of rclpy that sma_wrist nodes use, in one process, on virtual time.
+
+Installed as ``rclpy`` by :func:`sma_wrist.runtime.activate` only where the real rclpy is
+not importable.  Function signatures follow rclpy/__init__.py (Humble).
+"""
+from __future__ import annotations
+
+from typing import Any, Iterable, Optional
+
+from .context import Context
+from .executors import Executor, SingleThreadedExecutor
+from .node import Node
+from .utilities import get_default_context, get_rmw_implementation_identifier, ok, remove_ros_args
+from .utilities import shutdown as _shutdown
+from .utilities import try_shutdown as _try_shutdown
+
+__all__ = ['create_node', 'get_global_executor', 'init', 'ok', 'shutdown', 'spin', 'spin_once',
+           'try_shutdown', 'get_default_context', 'remove_ros_args',
+           'get_rmw_implementation_identifier', 'Node', 'Context']
+
+__embedded__ = True
+
+_global_executor: Optional[Executor] = None
+
+
+def init(*, args: Optional[Iterable[str]] = None, context: Optional[Context] = None,
+         domain_id: Optional[int] = None, signal_handler_options: Any = None) -> None:
+    """Initialize the context (parse --ros-args, reset virtual time to 0)."""
+    global _global_executor
+    ctx = get_default_context() if context is None else context
+    ctx.init(args, domain_id=domain_id)
+    if context is None:
+        _global_executor = None
+
+
+def shutdown(*, context: Optional[Context] = None, uninstall_handlers: Optional[bool] = None) -> None:
+    global _global_executor
+    _shutdown(context=context)
+    if context is None:
+        _global_executor = None
+
+
+def try_shutdown(*, context: Optional[Context] = None,
+                 uninstall_handlers: Optional[bool] = None) -> None:
+    global _global_executor
+    _try_shutdown(context=context)
+    if context is None:
+        _global_executor = None
+
+
+def create_node(node_name: str, *, context: Optional[Context] = None, **kwargs: Any) -> Node:
+    return Node(node_name, context=context, **kwargs)
+
+
+def get_global_executor() -> Executor:
+    global _global_executor
+    if _global_executor is None or _global_executor.context is not get_default_context():
+        _global_executor = SingleThreadedExecutor()
+    return _global_executor
+
+
+def spin_once(node: Node, *, executor: Optional[Executor] = None,
+              timeout_sec: Optional[float] = None) -> None:
+    executor = get_global_executor() if executor is None else executor
+    try:
+        executor.add_node(node)
+        executor.spin_once(timeout_sec=timeout_sec)
+    finally:
+        executor.remove_node(node)
+
+
+def spin(node: Node, executor: Optional[Executor] = None) -> None:
+    executor = get_global_executor() if executor is None else executor
+    try:
+        executor.add_node(node)
+        while executor.context.ok():
+            before = (executor.callbacks_run,)
+            from sma_wrist.runtime.vclock import VCLOCK
+            t0 = VCLOCK.steady_ns
+            executor.spin_once()
+            if executor.callbacks_run == before[0] and VCLOCK.steady_ns == t0 \
+                    and not executor._pending_rest():
+                return  # nothing can ever become ready (rclpy would block forever)
+    finally:
+        executor.remove_node(node)
+
+
+def spin_until_future_complete(node: Node, future: Any, executor: Optional[Executor] = None,
+                               timeout_sec: Optional[float] = None) -> None:
+    raise NotImplementedError('futures are not part of the embedded runtime subset')
