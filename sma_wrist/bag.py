@@ -1,0 +1,373 @@
+"""rosbag2 (MCAP) recording from the embedded runtime, and robust reading.
+
+Recording
+---------
+:class:`BagRecorder` taps publications in an embedded-runtime context (all topics or a
+list) and writes them with rosbags' ``Writer`` and ``StoragePlugin.MCAP``.  The timestamp
+of each message is the ROS time of the publishing node's clock at ``publish()`` (sim time
+for ``use_sim_time`` nodes).
+
+Humble compatibility: rosbags writes metadata version 8 or 9; Humble's rosbag2
+(rosbag2_storage/src/rosbag2_storage/metadata_io.cpp, struct version 5) decodes any
+version but reads ``offered_qos_profiles`` as a YAML *string* with integer policies
+(rosbag2_transport/src/rosbag2_transport/qos.cpp, ``node["history"].as<int>()``).  Version
+9 writes a YAML list with policy names, which Humble cannot parse.  We therefore write
+version 8 (string, integer policies) and then rewrite ``metadata.yaml`` as version 5:
+same fields minus the post-Humble keys (``type_description_hash``, ``custom_data``,
+``ros_distro``).  Jazzy and rosbags read version 5 too.  The ``rosbag2`` metadata record
+inside the .mcap keeps rosbags' version-8 text; Humble's MCAP plugin does not read it.
+
+Crash safety: the writer is closed in ``finally`` blocks (``with BagRecorder(...)`` or
+:meth:`sma_wrist.runtime.launch.Runtime.record`), so Ctrl-C or an exception leaves a
+complete bag.  Every ``flush_every`` messages the pending MCAP chunk is written and the
+file flushed, so even a killed process leaves a salvageable .mcap (no metadata.yaml).
+
+Reading
+-------
+:func:`read_bag` returns ``{topic: (t_ns int64 array, [messages])}`` with rclpy-like
+message objects; :func:`bag_info` summarises a bag.  Truncated or corrupt bags raise
+:class:`BagError` naming the file and the problem; ``BagError.salvaged`` holds the
+messages that could still be read from complete MCAP chunks (``read_bag(...,
+salvage=True)`` returns them instead of raising).
+"""
+from __future__ import annotations
+
+import io
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Iterator, Optional
+
+import numpy as np
+import yaml
+
+from sma_wrist.core.errors import SmaWristError
+
+BagData = dict[str, tuple[np.ndarray, list[Any]]]
+
+HUMBLE_METADATA_VERSION = 5
+
+
+class BagError(SmaWristError):
+    """A bag could not be written or read completely."""
+
+    def __init__(self, path: str | Path, problem: str, salvaged: Optional[BagData] = None) -> None:
+        self.path = str(path)
+        self.problem = problem
+        self.salvaged: BagData = salvaged or {}
+        n = sum(len(v[1]) for v in self.salvaged.values())
+        extra = f' ({n} messages salvaged)' if salvaged is not None else ''
+        super().__init__(f'{self.path}: {problem}{extra}')
+
+
+# --------------------------------------------------------------------------- recording
+def _rosbags_qos(qos: Any) -> Any:
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+
+    def t(d: Any) -> QosTime:
+        sec, nsec = divmod(int(d.nanoseconds), 10**9)
+        return QosTime(sec, nsec)
+
+    return Qos(QosHistory(int(qos.history)), int(qos.depth), QosReliability(int(qos.reliability)),
+               QosDurability(int(qos.durability)), t(qos.deadline), t(qos.lifespan),
+               QosLiveliness(int(qos.liveliness)), t(qos.liveliness_lease_duration),
+               bool(qos.avoid_ros_namespace_conventions))
+
+
+def make_humble_compatible(bag_dir: str | Path) -> None:
+    """Rewrite metadata.yaml of a rosbags v8 bag as rosbag2 metadata version 5 (Humble)."""
+    meta_path = Path(bag_dir) / 'metadata.yaml'
+    doc = yaml.safe_load(meta_path.read_text())
+    info = doc['rosbag2_bagfile_information']
+    if info.get('version', 0) not in (5, 8):
+        raise BagError(bag_dir, f"metadata version {info.get('version')} cannot be down-converted")
+    for key in ('custom_data', 'ros_distro'):
+        info.pop(key, None)
+    for t in info.get('topics_with_message_count', []):
+        t['topic_metadata'].pop('type_description_hash', None)
+        qos = t['topic_metadata'].get('offered_qos_profiles', '')
+        if not isinstance(qos, str):
+            raise BagError(bag_dir, 'offered_qos_profiles must be a string for Humble')
+    info['version'] = HUMBLE_METADATA_VERSION
+    tmp = meta_path.with_suffix('.yaml.tmp')
+    tmp.write_text(yaml.safe_dump(doc, default_flow_style=False, sort_keys=True))
+    tmp.replace(meta_path)
+
+
+class BagRecorder:
+    """Record publications of an embedded-runtime context into a rosbag2 MCAP bag.
+
+    Parameters
+    ----------
+    path:
+        Bag directory to create (must not exist).
+    topics:
+        Topic names to record; None records every topic (including ones created later).
+    context:
+        rclpy Context whose graph is tapped; default: the default context.
+    flush_every:
+        Write the pending MCAP chunk and flush the file every this many messages
+        (0 disables; chunks are still written every 1 MiB by rosbags).
+    humble_compatible:
+        Rewrite metadata.yaml as version 5 on close (see module docstring).
+    """
+
+    def __init__(self, path: str | Path, topics: Optional[Iterable[str]] = None, *,
+                 context: Any = None, flush_every: int = 2000, humble_compatible: bool = True) -> None:
+        self.path = Path(path)
+        self.topics = None if topics is None else [t if t.startswith('/') else '/' + t for t in topics]
+        self._context = context
+        self.flush_every = int(flush_every)
+        self.humble_compatible = humble_compatible
+        self._writer: Any = None
+        self._conns: dict[str, Any] = {}
+        self._remove_tap: Any = None
+        self.count = 0
+        self.counts: dict[str, int] = {}
+        self._since_flush = 0
+        self.closed = False
+
+    # -- lifecycle ---------------------------------------------------------
+    def start(self) -> 'BagRecorder':
+        from rosbags.rosbag2 import StoragePlugin, Writer
+        from rosbags.rosbag2.errors import WriterError
+
+        from sma_wrist.runtime.rclpy.utilities import get_default_context
+        ctx = self._context if self._context is not None else get_default_context()
+        if not ctx.ok():
+            raise BagError(self.path, 'cannot record: the rclpy context is not initialised')
+        try:
+            self._writer = Writer(self.path, version=8, storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+        except WriterError as exc:
+            raise BagError(self.path, str(exc)) from None
+        self._remove_tap = ctx.graph.add_tap(self._tap, self.topics)
+        return self
+
+    def __enter__(self) -> 'BagRecorder':
+        return self.start() if self._writer is None else self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def _connection(self, topic: Any) -> Any:
+        from sma_wrist.runtime.messages import TYPESTORE
+        qos = [_rosbags_qos(p.qos_profile) for p in topic.publishers[:1]]
+        conn = self._writer.add_connection(topic.name, topic.msg_type._TYPE, typestore=TYPESTORE,
+                                           offered_qos_profiles=qos)
+        self._conns[topic.name] = conn
+        self.counts[topic.name] = 0
+        return conn
+
+    def _tap(self, topic: Any, msg: Any, t_ns: int) -> None:
+        from sma_wrist.runtime.messages import TYPESTORE
+        conn = self._conns.get(topic.name)
+        if conn is None:
+            conn = self._connection(topic)
+        self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg._to_rb(), msg._TYPE))
+        self.count += 1
+        self.counts[topic.name] += 1
+        if self.flush_every:
+            self._since_flush += 1
+            if self._since_flush >= self.flush_every:
+                self.flush()
+
+    def flush(self) -> None:
+        """Write the pending chunk and flush the file (salvageable after a hard kill)."""
+        self._since_flush = 0
+        storage = getattr(self._writer, 'storage', None)
+        if storage is None:
+            return
+        if storage.chunk.bio.tell():
+            storage.close_chunk()
+        storage.bio.flush()
+
+    def close(self) -> None:
+        """Stop tapping, write the MCAP summary and metadata.yaml. Idempotent."""
+        if self.closed or self._writer is None:
+            return
+        self.closed = True
+        if self._remove_tap is not None:
+            self._remove_tap()
+            self._remove_tap = None
+        self._writer.close()
+        if self.humble_compatible:
+            make_humble_compatible(self.path)
+
+
+# --------------------------------------------------------------------------- reading
+@dataclass
+class TopicSummary:
+    type: str
+    count: int
+
+
+@dataclass
+class BagInfo:
+    path: str
+    version: int
+    storage: str
+    topics: dict[str, TopicSummary] = field(default_factory=dict)
+    message_count: int = 0
+    start_ns: int = 0
+    end_ns: int = 0
+
+    @property
+    def duration_ns(self) -> int:
+        return max(0, self.end_ns - self.start_ns)
+
+    @property
+    def duration(self) -> float:
+        return self.duration_ns / 1e9
+
+
+def _bag_dir(path: str | Path) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise BagError(p, 'no such bag (directory or .mcap file does not exist)')
+    return p
+
+
+def _mcap_files(p: Path) -> list[Path]:
+    if p.is_file():
+        return [p]
+    return sorted(p.glob('*.mcap'))
+
+
+def iter_mcap(file: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
+    """(topic, msgtype, log_time_ns, cdr bytes) of an MCAP file via the `mcap` library's
+    indexed reader (raises on a truncated file)."""
+    from mcap.reader import make_reader
+    with open(file, 'rb') as f:
+        reader = make_reader(f)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            yield channel.topic, schema.name if schema else '', message.log_time, message.data
+
+
+def salvage_mcap(file: str | Path) -> tuple[list[tuple[str, str, int, bytes]], str]:
+    """Read an MCAP file sequentially record by record, keeping every message of each
+    complete chunk; return (messages, problem) where problem is '' for a clean file."""
+    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Footer, Message, Schema
+    out: list[tuple[str, str, int, bytes]] = []
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, int]] = {}
+    data = Path(file).read_bytes()
+    problem = ''
+    seen_footer = False
+    try:
+        for rec in StreamReader(io.BytesIO(data), skip_magic=False).records:
+            if isinstance(rec, Schema):
+                schemas[rec.id] = rec.name
+            elif isinstance(rec, Channel):
+                channels[rec.id] = (rec.topic, rec.schema_id)
+            elif isinstance(rec, Message):
+                topic, sid = channels.get(rec.channel_id, ('', 0))
+                out.append((topic, schemas.get(sid, ''), rec.log_time, rec.data))
+            elif isinstance(rec, Footer):
+                seen_footer = True
+    except Exception as exc:  # noqa: BLE001 - any decoding failure means "stop here"
+        problem = f'MCAP data is truncated or corrupt after {len(out)} messages ({type(exc).__name__}: {exc})'
+    if not problem and not seen_footer:
+        problem = f'MCAP file has no footer (recording was not closed) after {len(out)} messages'
+    return out, problem
+
+
+def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> BagData:
+    from sma_wrist.runtime.messages import deserialize
+    times: dict[str, list[int]] = {}
+    msgs: dict[str, list[Any]] = {}
+    for topic, msgtype, t, data in rows:
+        try:
+            m = deserialize(data, msgtype)
+        except Exception:  # noqa: BLE001 - a damaged message is skipped in salvage
+            continue
+        times.setdefault(topic, []).append(t)
+        msgs.setdefault(topic, []).append(m)
+    return {k: (np.asarray(times[k], dtype=np.int64), msgs[k]) for k in times}
+
+
+def _salvage(p: Path) -> tuple[BagData, str]:
+    rows: list[tuple[str, str, int, bytes]] = []
+    problems = []
+    files = _mcap_files(p)
+    if not files:
+        return {}, 'no .mcap file in the bag directory'
+    for f in files:
+        r, problem = salvage_mcap(f)
+        rows.extend(r)
+        if problem:
+            problems.append(f'{f.name}: {problem}')
+    rows.sort(key=lambda r: r[2])
+    return _to_bagdata(rows), '; '.join(problems)
+
+
+def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
+             salvage: bool = False) -> BagData:
+    """All messages of a bag: ``{topic: (t_ns int64 array, [messages])}`` in time order.
+
+    Raises BagError if the bag is missing, truncated or corrupt (``.salvaged`` holds what
+    could be read); with ``salvage=True`` returns the salvaged messages instead.
+    """
+    from rosbags.rosbag2 import Reader
+
+    p = _bag_dir(path)
+    wanted = None if topics is None else set(topics)
+
+    def select(data: BagData) -> BagData:
+        return data if wanted is None else {k: v for k, v in data.items() if k in wanted}
+
+    problem = ''
+    if p.is_dir() and (p / 'metadata.yaml').exists():
+        try:
+            with Reader(p) as reader:
+                conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+                rows = [(c.topic, c.msgtype, t, bytes(raw)) for c, t, raw in reader.messages(connections=conns)]
+                expected = sum(c.msgcount for c in conns)
+            if len(rows) != expected:
+                problem = f'metadata.yaml lists {expected} messages but the storage holds {len(rows)}'
+            else:
+                return select(_to_bagdata(rows))
+        except Exception as exc:  # noqa: BLE001 - rosbags raises several error types
+            problem = f'{type(exc).__name__}: {exc}'
+    elif p.is_dir():
+        problem = 'metadata.yaml is missing (the recording was not closed)'
+    data, salvage_problem = _salvage(p)
+    if not problem:
+        if not salvage_problem:
+            return select(data)  # a bare, complete .mcap file
+        problem = salvage_problem
+    elif salvage_problem:
+        problem = f'{problem}; {salvage_problem}'
+    if salvage:
+        return select(data)
+    raise BagError(p, problem, select(data))
+
+
+def bag_info(path: str | Path) -> BagInfo:
+    """Topics, types, counts, start/end/duration of a bag (BagError if unreadable)."""
+    from rosbags.rosbag2 import Reader
+
+    p = _bag_dir(path)
+    if not (p.is_dir() and (p / 'metadata.yaml').exists()):
+        data, problem = _salvage(p)
+        raise BagError(p, problem or 'metadata.yaml is missing', data)
+    try:
+        meta = yaml.safe_load((p / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        with Reader(p) as reader:
+            info = BagInfo(path=str(p), version=int(meta['version']),
+                           storage=str(meta['storage_identifier']),
+                           message_count=reader.message_count,
+                           start_ns=reader.start_time if reader.message_count else 0,
+                           end_ns=reader.end_time if reader.message_count else 0)
+            for c in reader.connections:
+                prev = info.topics.get(c.topic)
+                info.topics[c.topic] = TopicSummary(c.msgtype, c.msgcount + (prev.count if prev else 0))
+            # touch the storage index so a truncated .mcap is reported here too
+            for _ in reader.messages(connections=reader.connections[:1]):
+                break
+        return info
+    except BagError:
+        raise
+    except Exception as exc:  # noqa: BLE001
+        data, problem = _salvage(p)
+        raise BagError(p, f'{type(exc).__name__}: {exc}' + (f'; {problem}' if problem else ''), data) from None
