@@ -45,6 +45,7 @@ from sma_wrist.core.errors import SmaWristError
 BagData = dict[str, tuple[np.ndarray, list[Any]]]
 
 HUMBLE_METADATA_VERSION = 5
+MCAP_MAGIC = b'\x89MCAP0\r\n'
 
 
 class BagError(SmaWristError):
@@ -244,30 +245,75 @@ def iter_mcap(file: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
 
 
 def salvage_mcap(file: str | Path) -> tuple[list[tuple[str, str, int, bytes]], str]:
-    """Read an MCAP file sequentially record by record, keeping every message of each
-    complete chunk; return (messages, problem) where problem is '' for a clean file."""
-    from mcap.stream_reader import StreamReader
-    from mcap.records import Channel, Footer, Message, Schema
+    """Read an MCAP file record by record without its index, keeping every complete
+    message -- also those at the start of a chunk cut off by truncation (uncompressed
+    chunks, as BagRecorder writes them).  Returns (messages, problem); problem is '' for
+    a clean, closed file."""
+    data = Path(file).read_bytes()
     out: list[tuple[str, str, int, bytes]] = []
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int]] = {}
-    data = Path(file).read_bytes()
-    problem = ''
-    seen_footer = False
+    if data[:8] != MCAP_MAGIC:
+        return out, 'not an MCAP file (bad magic)'
+    state = {'footer': False, 'problem': ''}
+
+    def s16(b: bytes, o: int) -> tuple[int, int]:
+        return int.from_bytes(b[o:o + 2], 'little'), o + 2
+
+    def string(b: bytes, o: int) -> tuple[str, int]:
+        n = int.from_bytes(b[o:o + 4], 'little')
+        if o + 4 + n > len(b):
+            raise ValueError('string runs past the end of its record')
+        return b[o + 4:o + 4 + n].decode(), o + 4 + n
+
+    def records(buf: bytes, pos: int, where: str) -> None:
+        while pos < len(buf):
+            if pos + 9 > len(buf):
+                state['problem'] = f'{where}: truncated record header at offset {pos}'
+                return
+            op = buf[pos]
+            length = int.from_bytes(buf[pos + 1:pos + 9], 'little')
+            body = buf[pos + 9:pos + 9 + length]
+            if len(body) < length:
+                if op == 0x06:  # chunk: read what is left of it
+                    chunk(body, pos)
+                state['problem'] = (state['problem'] or
+                                    f'{where}: truncated record (opcode 0x{op:02x}) at offset {pos}')
+                return
+            if op == 0x03:
+                sid, o = s16(body, 0)
+                schemas[sid] = string(body, o)[0]
+            elif op == 0x04:
+                cid, o = s16(body, 0)
+                sid, o = s16(body, o)
+                channels[cid] = (string(body, o)[0], sid)
+            elif op == 0x05:
+                cid, _ = s16(body, 0)
+                topic, sid = channels.get(cid, ('', 0))
+                out.append((topic, schemas.get(sid, ''), int.from_bytes(body[6:14], 'little'),
+                            bytes(body[22:])))
+            elif op == 0x06:
+                chunk(body, pos)
+            elif op == 0x02:
+                state['footer'] = True
+                return
+            pos += 9 + length
+
+    def chunk(body: bytes, pos: int) -> None:
+        comp, o = string(body, 28)
+        if comp:
+            state['problem'] = f'compressed chunk ({comp}) at offset {pos} cannot be salvaged'
+            return
+        records(body[o + 8:], 0, f'chunk at offset {pos}')
+
     try:
-        for rec in StreamReader(io.BytesIO(data), skip_magic=False).records:
-            if isinstance(rec, Schema):
-                schemas[rec.id] = rec.name
-            elif isinstance(rec, Channel):
-                channels[rec.id] = (rec.topic, rec.schema_id)
-            elif isinstance(rec, Message):
-                topic, sid = channels.get(rec.channel_id, ('', 0))
-                out.append((topic, schemas.get(sid, ''), rec.log_time, rec.data))
-            elif isinstance(rec, Footer):
-                seen_footer = True
-    except Exception as exc:  # noqa: BLE001 - any decoding failure means "stop here"
-        problem = f'MCAP data is truncated or corrupt after {len(out)} messages ({type(exc).__name__}: {exc})'
-    if not problem and not seen_footer:
+        records(data, 8, 'file')
+    except (ValueError, UnicodeDecodeError) as exc:
+        state['problem'] = state['problem'] or f'corrupt record: {exc}'
+    problem = state['problem']
+    if problem:
+        problem = f'MCAP data is truncated or corrupt after {len(out)} messages ({problem})'
+    elif not state['footer']:
         problem = f'MCAP file has no footer (recording was not closed) after {len(out)} messages'
     return out, problem
 
