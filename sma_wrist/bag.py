@@ -404,7 +404,7 @@ def bag_info(path: str | Path) -> BagInfo:
                            storage=str(meta['storage_identifier']),
                            message_count=reader.message_count,
                            start_ns=reader.start_time if reader.message_count else 0,
-                           end_ns=reader.end_time if reader.message_count else 0)
+                           end_ns=reader.end_time - 1 if reader.message_count else 0)
             for c in reader.connections:
                 prev = info.topics.get(c.topic)
                 info.topics[c.topic] = TopicSummary(c.msgtype, c.msgcount + (prev.count if prev else 0))
