@@ -1,0 +1,1 @@
+"""Data transcribed from the seed dissertation (tables only; no behaviour)."""
