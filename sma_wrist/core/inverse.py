@@ -1,0 +1,397 @@
+"""Inverse hysteresis compensation (seed Chapter 5, Eqs. 5.5-5.15).
+
+* :func:`pi_inverse_params`, :func:`pi_series`, :func:`pi_inverse_state`: the classical
+  Prandtl-Ishlinskii model y = q v + sum_j p_j F_{r_j}[v] (Eq. 5.4) and its analytic inverse
+  (Eqs. 5.9-5.11). Note the sign: the exact inverse weights are
+  p_hat_j = -p_j / ((q + P_j)(q + P_{j-1})); Eq. 5.11 prints them without the minus.
+* :class:`InverseCompensator`: temperature that makes the SD-GPI elongation equal a desired
+  value at a given load (Eqs. 5.5-5.8), stateful, vectorised over scenarios. ``method``
+  'numerical' (default) is a bracketed root on T against the frozen play memory, then the
+  memory is committed; 'analytic' is Eq. 5.7-5.8 literally (PI inverse on the mirrored output,
+  then gamma_l^-1 / gamma_r^-1 by direction), exact only when gamma_l = gamma_r = gamma and the
+  memoryless part is p0 gamma; 'auto' uses the analytic value where it meets the target to
+  ``tol`` and the numerical root elsewhere. Unreachable targets return the reachable extreme
+  with ``saturated = True``.
+* :class:`LinearCorrection` (Eqs. 5.12-5.14) and :func:`inverse_table_parameters` (Eq. 5.15,
+  Tables 5.2-5.3): the seed's data-driven corrections, with :func:`table_5_1_correction`
+  giving what the printed numbers do.
+* :func:`composition_error`: |v - y(y^-1(v))| along a decaying triangle at several loads.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
+from sma_wrist.core.hysteresis import (HysteresisState, SDGPIParams, initial_state, memoryless, play_bounds, simulate,
+                                       step)
+from sma_wrist.core.play import play_update
+from sma_wrist.data import seed_tables as st
+
+FloatArray = NDArray[np.float64]
+
+#: Effective wire length for strain = elongation / length (Sec. 3.2.1) [mm].
+WIRE_LENGTH_MM = 80.0
+
+
+# ----------------------------------------------------------------------------- classical PI and its inverse
+
+def pi_inverse_params(q: float, thresholds: ArrayLike, weights: ArrayLike) -> tuple[float, FloatArray, FloatArray]:
+    """Inverse PI parameters (q_hat, r_hat, p_hat), Eqs. 5.9-5.11.
+
+    Forward model y = q v + sum_j p_j F_{r_j}[v] with 0 < r_1 < ... < r_n, q > 0 and
+    q + P_j > 0 (P_j = p_1 + ... + p_j). Then v = q_hat y + sum_j p_hat_j F_{r_hat_j}[y] with
+    q_hat = 1/q (5.9), r_hat_j = q r_j + sum_{i<j} p_i (r_j - r_i) (5.10) and
+    p_hat_j = -p_j / ((q + P_j)(q + P_{j-1})) (5.11 with its sign restored).
+    """
+    r = np.asarray(thresholds, dtype=float)
+    p = np.asarray(weights, dtype=float)
+    if q <= 0 or r.shape != p.shape or np.any(np.diff(r) <= 0) or r[0] < 0:
+        raise ParameterError(f'PI inverse needs q > 0 and increasing r >= 0 matching p; got q={q}, r={r}')
+    P = q + np.cumsum(p)
+    P_prev = np.concatenate([[q], P[:-1]])
+    if np.any(P <= 0):
+        raise ParameterError('PI inverse needs q + P_j > 0 for every j (the loop must stay monotone)')
+    r_hat = q * r + np.array([np.sum(p[:j] * (r[j] - r[:j])) for j in range(r.size)])
+    p_hat = -p / (P * P_prev)
+    return 1.0 / q, r_hat, p_hat
+
+
+def pi_series(v: ArrayLike, q: float, thresholds: ArrayLike, weights: ArrayLike,
+              w0: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
+    """Classical PI output y = q v + sum_j p_j F_{r_j}[v] (Eqs. 5.1-5.4) and the play states (N, n).
+
+    ``w0`` are the play states before v[0] (default: f_r(v(0), 0), Eq. 5.1).
+    """
+    v = np.asarray(v, dtype=float)
+    r = np.asarray(thresholds, dtype=float)
+    p = np.asarray(weights, dtype=float)
+    check_finite('PI input v', v)
+    w = np.zeros_like(r) if w0 is None else np.array(w0, dtype=float)
+    W = np.empty((v.size, r.size))
+    for k, vk in enumerate(v):
+        w = play_update(w, vk - r, vk + r, out=w)
+        W[k] = w
+    return q * v + W @ p, W
+
+
+def pi_inverse_state(v: float, q: float, w: ArrayLike, weights: ArrayLike) -> FloatArray:
+    """Play states of the inverse PI consistent with forward states w at input v.
+
+    w_hat_j = (q + P_{j-1}) w_j + q_j-tail, i.e. w_hat_j = (q + P_{j-1}) w_j + sum_{i>=j} p_i w_i,
+    so that |y - w_hat_j| <= r_hat_j and the composition is exact from the first sample on.
+    The same map with (q_hat, p_hat) gives the forward states from the inverse ones.
+    """
+    w = np.asarray(w, dtype=float)
+    p = np.asarray(weights, dtype=float)
+    P_prev = q + np.concatenate([[0.0], np.cumsum(p)[:-1]])
+    tail = np.cumsum((p * w)[::-1])[::-1]  # sum_{i>=j} p_i w_i
+    return P_prev * w + tail
+
+
+# ----------------------------------------------------------------------------- SD-GPI inverse
+
+def _inverse_tanh(k: FloatArray, u: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """T with k0 tanh(k1 T + k2) + k3 = u; (T clipped to the envelope's open range, in_range flag)."""
+    z = (u - k[..., 3]) / k[..., 0]
+    ok = np.abs(z) < 1.0
+    z = np.clip(z, -1.0 + 1e-12, 1.0 - 1e-12)
+    return (np.arctanh(z) - k[..., 2]) / k[..., 1], ok
+
+
+def _output_frozen(params: SDGPIParams, w: FloatArray, T: FloatArray, m: FloatArray, heating: FloatArray) -> FloatArray:
+    """Elongation k_f - y_m at trial temperatures T from frozen play states w (Eqs. 3.19, 4.1, 4.2).
+
+    Broadcasts T (..., S) against w (S, n), m (S,), heating (..., S).
+    """
+    lower, upper = play_bounds(params, T, np.broadcast_to(m, T.shape))
+    wt = np.minimum(np.maximum(w, lower), upper)
+    return params.k_f - (memoryless(params, T, heating) + wt @ params.weights)
+
+
+@dataclass
+class InverseResult:
+    """Temperatures, saturation flags and the elongations they give (after the memory commit)."""
+
+    T: FloatArray
+    saturated: NDArray[np.bool_]
+    achieved_mm: FloatArray
+
+
+class InverseCompensator:
+    """Stateful inverse SD-GPI compensator, Eqs. 5.5-5.8, over S independent scenarios.
+
+    ``__call__(desired_elongation_mm, load_kgf) -> (T_desired, saturated)``: the temperature
+    [degC] in ``T_range`` whose SD-GPI elongation, from the current memory and at that load,
+    equals the desired one; the memory then advances to it (the compensator mirrors the
+    plant's memory as long as the plant follows the commanded temperature).
+    """
+
+    def __init__(self, params: SDGPIParams, *, T_range: tuple[float, float] | None = None, method: str = 'numerical',
+                 grid: int = 33, tol_mm: float = 1e-9) -> None:
+        if method not in ('numerical', 'analytic', 'auto'):
+            raise ModelInputError('inverse method', method, "{'analytic', 'auto', 'numerical'}")
+        lo, hi = T_range if T_range is not None else params.T_valid
+        if not (params.T_valid[0] <= lo < hi <= params.T_valid[1]):
+            raise ModelInputError('compensator T_range', (lo, hi), f'inside {params.T_valid}', 'degC')
+        self.params = params
+        self.T_range = (float(lo), float(hi))
+        self.method = method
+        self.grid = int(grid)
+        self.tol_mm = float(tol_mm)
+        self.state: HysteresisState | None = None
+        self._pi: tuple[float, FloatArray, FloatArray] | None = None
+        self._w_hat: FloatArray | None = None
+        self._ym_prev: FloatArray | None = None
+
+    # -- memory
+    def reset(self, T0: ArrayLike, load_kgf: ArrayLike, *, branch: str = 'cooling') -> None:
+        """Start from the memory the plant has after a long approach to (T0, load) along ``branch``."""
+        self.state = initial_state(self.params, T0, load_kgf, branch=branch)
+        self._w_hat = None
+
+    def output(self, load_kgf: ArrayLike) -> FloatArray:
+        """Elongation [mm] the current memory gives at its last temperature."""
+        st_ = self._require_state()
+        m = np.broadcast_to(np.asarray(load_kgf, float), st_.T_prev.shape)
+        return _output_frozen(self.params, st_.w, st_.T_prev, m, st_.heating)
+
+    def _require_state(self) -> HysteresisState:
+        if self.state is None:
+            raise ParameterError('InverseCompensator: call reset(T0, load) before the first target')
+        return self.state
+
+    # -- the inverse
+    def __call__(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+        res = self.solve(desired_elongation_mm, load_kgf)
+        return res.T, res.saturated
+
+    def from_strain(self, desired_strain: ArrayLike, load_kgf: ArrayLike) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Same as calling with elongation = strain x 80 mm (Sec. 3.2.1 effective length)."""
+        return self(np.asarray(desired_strain, float) * WIRE_LENGTH_MM, load_kgf)
+
+    def solve(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike) -> InverseResult:
+        st_ = self._require_state()
+        S = st_.T_prev.shape
+        y_d = np.broadcast_to(np.asarray(desired_elongation_mm, float), S).copy()
+        m = np.broadcast_to(np.asarray(load_kgf, float), S).copy()
+        check_finite('desired elongation', y_d, 'mm')
+        lo_m, hi_m = self.params.load_range
+        if np.any(m < lo_m) or np.any(m > hi_m):
+            raise ModelInputError('wire load m', float(m.min() if m.min() < lo_m else m.max()), f'[{lo_m:g}, {hi_m:g}]', 'kgf')
+        T_num, sat = self._numerical(y_d, m)
+        if self.method == 'numerical':
+            T = T_num
+        else:
+            T_an = self._analytic(y_d, m)
+            if self.method == 'analytic':
+                T, sat = T_an, np.zeros(S, bool)
+            else:  # auto: keep the analytic value where it meets the target, else the root
+                heat = np.where(T_an > st_.T_prev, True, np.where(T_an < st_.T_prev, False, st_.heating))
+                ok = np.abs(_output_frozen(self.params, st_.w, T_an, m, heat) - y_d) <= max(self.tol_mm, 1e-9)
+                T = np.where(ok, T_an, T_num)
+        y = step(self.params, st_, T, m, check=False)
+        if self.method == 'analytic':
+            sat = np.abs(y - y_d) > 1e-6
+        return InverseResult(T, sat, y)
+
+    def _numerical(self, y_d: FloatArray, m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Bracketed root of y(T) = y_d on each side of T_prev against frozen memory; nearest root wins.
+
+        Both sides are searched at once: a grid walking away from T_prev finds the first sign
+        change, bisection refines it (y(T) is continuous on each side). Without any sign change
+        the grid point closest to the target is returned and flagged saturated.
+        """
+        st_ = self._require_state()
+        p = self.params
+        lo, hi = self.T_range
+        T0 = np.clip(st_.T_prev, lo, hi)
+        a, b = p.envelopes.coefficients(m)  # load fixed during the solve: evaluate once
+        r, wts, w = p.thresholds, p.weights, st_.w
+        c, d, p0, k_f = p.c, p.d, p.p0, p.k_f
+        S = y_d.size
+        # columns 0..S-1 heating side, S..2S-1 cooling side
+        T0s = np.concatenate([T0, T0])
+        ends = np.concatenate([np.full(S, hi), np.full(S, lo)])
+        side_heat = np.concatenate([np.ones(S, bool), np.zeros(S, bool)])
+        a2, b2, w2, y2 = np.concatenate([a, a]), np.concatenate([b, b]), np.concatenate([w, w]), np.concatenate([y_d, y_d])
+        h_prev = np.concatenate([st_.heating, st_.heating])
+
+        def resid(T: FloatArray) -> FloatArray:  # T (..., 2S)
+            heat = np.where(T == T0s, h_prev, side_heat)
+            gl = b2[..., 0] * np.tanh(b2[..., 1] * T + b2[..., 2]) + b2[..., 3]
+            gr = a2[..., 0] * np.tanh(a2[..., 1] * T + a2[..., 2]) + a2[..., 3]
+            wt = np.minimum(np.maximum(w2, gl[..., None] - r), gr[..., None] + r)
+            mem = np.where(heat, c[0] * np.tanh(c[1] * T + c[2]) + c[3], d[0] * np.tanh(d[1] * T + d[2]) + d[3])
+            return k_f - (p0 * mem + wt @ wts) - y2
+
+        s = np.linspace(0.0, 1.0, self.grid)[:, None]
+        Tg = T0s + s * (ends - T0s)  # (G, 2S) starting at T_prev
+        f = resid(Tg)
+        change = f[:-1] * f[1:] <= 0
+        has = change.any(axis=0)
+        k = np.argmax(change, axis=0)
+        cols = np.arange(2 * S)
+        lo_T, hi_T, f_lo = Tg[k, cols], Tg[k + 1, cols], f[k, cols]
+        for _ in range(48):  # bracket < (T range / grid) / 2^48
+            mid = 0.5 * (lo_T + hi_T)
+            fm = resid(mid)
+            left = f_lo * fm <= 0
+            hi_T = np.where(left, mid, hi_T)
+            lo_T = np.where(left, lo_T, mid)
+            f_lo = np.where(left, f_lo, fm)
+        root = np.where(has, 0.5 * (lo_T + hi_T), np.nan)
+        dist = np.where(has, np.abs(root - T0s), np.inf).reshape(2, S)
+        pick = np.argmin(dist, axis=0)  # nearest root: the smallest move that reaches the target
+        T_root = root.reshape(2, S)[pick, np.arange(S)]
+        kk = np.argmin(np.abs(f), axis=0)  # saturation: the reachable value closest to the target
+        e = np.abs(f[kk, cols]).reshape(2, S)
+        pe = np.argmin(e, axis=0)
+        T_sat = Tg[kk, cols].reshape(2, S)[pe, np.arange(S)]
+        found = np.isfinite(dist.min(axis=0))
+        return np.where(found, T_root, T_sat), ~found
+
+    def _analytic(self, y_d: FloatArray, m: FloatArray) -> FloatArray:
+        """Eqs. 5.7-5.8: u = PI^-1[y_m desired] (q = p0, Eqs. 5.9-5.11), T = gamma_{l|r}^-1(u)."""
+        st_ = self._require_state()
+        p = self.params
+        if self._pi is None:
+            self._pi = pi_inverse_params(p.p0, p.thresholds, p.weights)
+        q_hat, r_hat, p_hat = self._pi
+        ym = p.k_f - y_d
+        if self._w_hat is None:  # consistent with the forward memory: u = current envelope value
+            a, b = p.envelopes.coefficients(m)
+            from sma_wrist.core.hysteresis import tanh_envelope
+            u0 = np.where(st_.heating, tanh_envelope(b, st_.T_prev), tanh_envelope(a, st_.T_prev))
+            self._w_hat = np.stack([pi_inverse_state(float(u), p.p0, w, p.weights) for u, w in zip(u0, st_.w)])
+            self._ym_prev = p.p0 * u0 + st_.w @ p.weights
+        self._w_hat = play_update(self._w_hat, ym[:, None] - r_hat, ym[:, None] + r_hat, out=self._w_hat)
+        u = q_hat * ym + self._w_hat @ p_hat
+        rising = ym > self._ym_prev  # y_m rising = contraction = heating (Eq. 5.8: v' >= 0 -> gamma_l^-1)
+        self._ym_prev = ym
+        a, b = p.envelopes.coefficients(m)
+        T_l, _ = _inverse_tanh(b, u)
+        T_r, _ = _inverse_tanh(a, u)
+        return np.clip(np.where(rising, T_l, T_r), *self.T_range)
+
+
+# ----------------------------------------------------------------------------- composition error
+
+def decaying_triangle(y_lo: float, y_hi: float, n_cycles: int = 4, samples_per_half: int = 40,
+                      decay: float = 0.6) -> FloatArray:
+    """Desired elongation: triangles between y_hi and a trough rising towards the middle (minor loops)."""
+    mid = 0.5 * (y_lo + y_hi)
+    pts = [y_hi]
+    amp = 1.0
+    for _ in range(n_cycles):
+        pts += [mid - amp * (mid - y_lo), mid + amp * (y_hi - mid)]
+        amp *= decay
+    out = [np.linspace(pts[i], pts[i + 1], samples_per_half, endpoint=False) for i in range(len(pts) - 1)]
+    return np.concatenate(out + [np.array([pts[-1]])])
+
+
+@dataclass(frozen=True)
+class CompositionError:
+    """|v - y(y^-1(v))| per load [mm] and as % of the desired range."""
+
+    loads_kgf: FloatArray
+    max_mm: FloatArray
+    rms_mm: FloatArray
+    max_pct: FloatArray
+    rms_pct: FloatArray
+    range_mm: FloatArray
+    saturated_fraction: FloatArray
+
+
+def reachable_range(params: SDGPIParams, loads_kgf: ArrayLike, T_range: tuple[float, float],
+                    n: int = 400) -> tuple[FloatArray, FloatArray]:
+    """(min, max) elongation along the major loop T_lo -> T_hi -> T_lo, per load."""
+    m = np.atleast_1d(np.asarray(loads_kgf, float))
+    lo, hi = T_range
+    T = np.concatenate([np.linspace(lo, hi, n), np.linspace(hi, lo, n)])
+    y = simulate(params, np.repeat(T[:, None], m.size, axis=1), m[None, :].repeat(T.size, 0), branch='cooling')
+    return y.min(axis=0), y.max(axis=0)
+
+
+def composition_error(params: SDGPIParams, loads: ArrayLike = np.linspace(0.65, 1.05, 9), *,
+                      T_range: tuple[float, float] = (15.0, 85.0), method: str = 'numerical',
+                      margin: float = 0.05, n_cycles: int = 4) -> CompositionError:
+    """Drive a decaying triangle v (inside margin of the reachable range) through y(y^-1(v)) per load.
+
+    The compensator starts on the cooling branch at T_range[0]; the plant (``simulate``) is
+    driven by the compensator's temperatures from the same memory.
+    """
+    m = np.atleast_1d(np.asarray(loads, float))
+    y_lo, y_hi = reachable_range(params, m, T_range)
+    span = y_hi - y_lo
+    V = np.stack([decaying_triangle(a + margin * s, b - margin * s, n_cycles) for a, b, s in zip(y_lo, y_hi, span)], axis=1)
+    comp = InverseCompensator(params, T_range=T_range, method=method)
+    comp.reset(np.full(m.size, T_range[0]), m, branch='cooling')
+    T = np.empty_like(V)
+    sat = np.zeros(V.shape, bool)
+    for k in range(V.shape[0]):
+        T[k], sat[k] = comp(V[k], m)
+    y = simulate(params, T, np.broadcast_to(m, T.shape), state=initial_state(params, np.full(m.size, T_range[0]), m))
+    err = np.abs(V - y)
+    rng = V.max(axis=0) - V.min(axis=0)
+    rms = np.sqrt(np.mean(err ** 2, axis=0))
+    return CompositionError(m, err.max(axis=0), rms, 100 * err.max(axis=0) / rng, 100 * rms / rng, rng,
+                            sat.mean(axis=0))
+
+
+# ----------------------------------------------------------------------------- seed corrections (Eqs. 5.12-5.15)
+
+@dataclass(frozen=True)
+class LinearCorrection:
+    """v = a_l u + c_l with a_l, c_l quadratic in the load (Eqs. 5.12-5.14).
+
+    ``p_a`` = (p_a1, p_a2, p_a3), ``p_c`` likewise; ``load_scale`` converts kgf to the unit
+    the quadratics use. :meth:`precompensate` returns the command u that the fitted linear
+    relation maps to the wanted v.
+    """
+
+    p_a: tuple[float, float, float]
+    p_c: tuple[float, float, float]
+    load_scale: float = 1.0
+
+    def gain_offset(self, load_kgf: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        s = np.asarray(load_kgf, float) * self.load_scale
+        return np.polyval(self.p_a, s), np.polyval(self.p_c, s)
+
+    def precompensate(self, v: ArrayLike, load_kgf: ArrayLike) -> FloatArray:
+        a, c = self.gain_offset(load_kgf)
+        return (np.asarray(v, float) - c) / a
+
+    @classmethod
+    def fit(cls, loads_kgf: ArrayLike, u_ext: ArrayLike, v_ext: ArrayLike) -> 'LinearCorrection':
+        """Fit Eqs. 5.12-5.14: per load a line through the (u, v) max/min points, then quadratics in load.
+
+        ``u_ext``, ``v_ext``: (L, 2) compensated outputs and desired inputs at the min and max points.
+        """
+        m = np.asarray(loads_kgf, float)
+        u = np.asarray(u_ext, float)
+        v = np.asarray(v_ext, float)
+        a = (v[:, 1] - v[:, 0]) / (u[:, 1] - u[:, 0])
+        c = v[:, 0] - a * u[:, 0]
+        deg = min(2, m.size - 1)
+        pa = np.polyfit(m, a, deg)
+        pc = np.polyfit(m, c, deg)
+        pad = lambda x: tuple(np.concatenate([np.zeros(3 - x.size), x]).tolist())  # noqa: E731
+        return cls(pad(pa), pad(pc))  # type: ignore[arg-type]
+
+
+def table_5_1_correction(load_unit_scale: float = 1.0) -> LinearCorrection:
+    """Table 5.1 as a :class:`LinearCorrection` (load in kgf times ``load_unit_scale``)."""
+    t = st.TABLE_5_1
+    return LinearCorrection((t['p_a1'], t['p_a2'], t['p_a3']), (t['p_c1'], t['p_c2'], t['p_c3']), load_unit_scale)
+
+
+def inverse_table_parameters(load_g: float, *, load_scale: float = 1e-3) -> dict[str, float]:
+    """Tables 5.2-5.3 (Eq. 5.15) evaluated at a load [g], the load in g x ``load_scale`` (default kg)."""
+    for (lo, hi), rows in st.TABLES_5_2_5_3.items():
+        if lo <= load_g <= hi:
+            s = load_g * load_scale
+            return {k: float(np.polyval(v, s)) for k, v in rows.items()}
+    raise ModelInputError('load', load_g, '[650, 1050]', 'g')
