@@ -95,3 +95,41 @@ def test_row_helpers() -> None:
     assert q['b'][3] == (-173.1184, 267.5202, -64.2441)
     with pytest.raises(KeyError):
         st.gpi_row(600)
+
+
+# ----------------------------------------------------------------------------- what the tables give (measured)
+
+from sma_wrist.core import seed_params as sp  # noqa: E402
+
+
+def test_literal_750g_row_has_no_hysteresis_and_is_not_sma_like() -> None:
+    res = {(r.p0_label, r.mirror): r.metrics for r in sp.evaluate_conventions([750], sources=['GPI'], envelopes=['literal'])}
+    m = res[('1', False)]  # the design doc's -47.5..-32.1
+    assert m.y_min == pytest.approx(-47.49, abs=0.05) and m.y_max == pytest.approx(-32.07, abs=0.05)
+    assert abs(m.width_C) < 2.0 and not m.sma_like
+    assert not any(v.sma_like for v in res.values())
+
+
+def test_literal_envelopes_cross_swapped_mostly_ordered() -> None:
+    """gamma_l <= gamma_r (Sec. 3.3) holds on < 25 % of 20-78 degC literally, > 75 % swapped (650-1000 g)."""
+    for load in st.GPI_LOADS_G[:-1]:
+        assert sp.envelope_order_fraction(sp.gpi_params(load, envelope='literal')) < 0.25
+        assert sp.envelope_order_fraction(sp.gpi_params(load, envelope='swapped')) > 0.75
+
+
+def test_swapped_p0_zero_gives_superelastic_loops_750_to_900g() -> None:
+    res = sp.evaluate_conventions([750, 800, 850, 900], sources=['GPI'], envelopes=['swapped'], p0s=[0.0, 1.0],
+                                  mirrors=[True])
+    for r in res:
+        if r.p0 == 0.0:
+            assert r.metrics.sma_like
+            assert 38.0 < r.metrics.width_C < 44.0 and 2.4 < r.metrics.stroke_mm < 3.8
+        elif r.load_g in (750, 800):  # p0 = 1: the memoryless part adds a 7-16 mm step at ~48 degC
+            assert r.metrics.stroke_mm > 7.0 and not r.metrics.sma_like
+
+
+def test_table_4_5_load_unit_is_kg_but_rows_not_reproduced() -> None:
+    by = {(u['unit'], u['reversed_order']): u for u in sp.load_unit_test()}
+    assert min(by, key=lambda k: by[k]['median_log10_ratio']) == ('kg', False)
+    assert by[('kg', False)]['median_rel_error'] > 0.5  # SD-GPI quadratics do not give Table 4.1's rows
+    assert all(row['rms_pct_of_gpi_range'] > 40 for row in sp.sdgpi_vs_gpi())

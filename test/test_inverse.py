@@ -1,0 +1,115 @@
+"""Inverse compensation (Eqs. 5.5-5.15): exact PI inverse, SD-GPI compensator, saturation, seed corrections."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.hysteresis import SDGPIParams, initial_state, simulate
+from sma_wrist.core.inverse import (InverseCompensator, LinearCorrection, composition_error, inverse_table_parameters,
+                                    pi_inverse_params, pi_inverse_state, pi_series, table_5_1_correction)
+
+
+def _piecewise_monotone(rng: np.random.Generator, n_seg: int = 30) -> np.ndarray:
+    ext = np.cumsum(rng.normal(0, 2, n_seg))
+    return np.concatenate([np.linspace(ext[i], ext[i + 1], rng.integers(2, 12), endpoint=False)
+                           for i in range(n_seg - 1)])
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_pi_inverse_is_exact_both_ways(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    r = np.sort(rng.uniform(0.05, 3, 12))
+    p = rng.uniform(0, 1, 12) * np.exp(-r)
+    q = rng.uniform(0.2, 2)
+    qh, rh, ph = pi_inverse_params(q, r, p)
+    y_d = _piecewise_monotone(rng)
+    v, Wh = pi_series(y_d, qh, rh, ph)
+    y, _ = pi_series(v[1:], q, r, p, w0=pi_inverse_state(y_d[0], qh, Wh[0], ph))
+    assert np.abs(y - y_d[1:]).max() < 1e-9
+    v_in = _piecewise_monotone(rng)
+    y, W = pi_series(v_in, q, r, p)
+    v_back, _ = pi_series(y[1:], qh, rh, ph, w0=pi_inverse_state(v_in[0], q, W[0], p))
+    assert np.abs(v_back - v_in[1:]).max() < 1e-9
+
+
+def test_pi_inverse_weights_are_negative() -> None:
+    """Eq. 5.11 as printed has no minus sign; the exact inverse weights are negative."""
+    _, rh, ph = pi_inverse_params(1.0, [0.1, 0.2, 0.3], [0.5, 0.25, 0.125])
+    assert np.all(ph < 0)
+    np.testing.assert_allclose(rh, [0.1, 0.2 + 0.5 * 0.1, 0.3 + 0.5 * 0.2 + 0.25 * 0.1])
+    np.testing.assert_allclose(ph[0], -0.5 / (1.5 * 1.0))
+
+
+def test_compensator_hits_targets_and_flags_saturation() -> None:
+    P = default_sdgpi()
+    comp = InverseCompensator(P, T_range=(15.0, 85.0))
+    loads = np.array([0.7, 0.8, 0.9])
+    comp.reset(np.full(3, 15.0), loads)
+    y_top = comp.output(loads)
+    T, sat = comp(y_top - 1.0, loads)
+    assert not sat.any()
+    assert np.all(T > 15.0)
+    np.testing.assert_allclose(comp.output(loads), y_top - 1.0, atol=1e-9)
+    T, sat = comp(np.array([-50.0, 50.0, -50.0]), loads)  # unreachable both ways
+    assert sat.all()
+    # the reachable extreme: nothing in the range gets closer
+    assert T[0] == pytest.approx(85.0, abs=3.0) and T[2] == pytest.approx(85.0, abs=3.0)
+    T, sat = comp.from_strain(np.full(3, 1.5 / 80.0), loads)
+    assert not sat.any()
+    np.testing.assert_allclose(comp.output(loads), 1.5, atol=1e-9)
+
+
+def test_compensator_needs_reset() -> None:
+    with pytest.raises(Exception):
+        InverseCompensator(default_sdgpi())(1.0, 0.8)
+
+
+def test_composition_error_numerical_is_at_root_tolerance() -> None:
+    ce = composition_error(default_sdgpi(), loads=np.linspace(0.65, 1.05, 5))
+    assert np.all(ce.saturated_fraction == 0)
+    assert ce.max_mm.max() < 1e-8
+    assert np.all(ce.range_mm > 0.3)
+
+
+def test_analytic_inverse_exact_when_envelopes_coincide() -> None:
+    """Eqs. 5.7-5.8 are exact for gamma_l = gamma_r = memoryless gamma (GPI = PI o gamma)."""
+    g = [2.0, 0.08, -4.0, 3.0]
+    P = SDGPIParams.from_gpi(g, g, g, g, rho=0.4, tau=3.0, c_thr=0.05, n=15, p0=0.5)
+    comp = InverseCompensator(P, T_range=(0.0, 100.0), method='analytic')
+    comp.reset([20.0], [0.0], branch='cooling')
+    y0 = float(comp.output([0.0])[0])
+    lo_, hi_ = 6.0 - (0.5 + P.weights.sum()) * 4.9, 6.0 - (0.5 + P.weights.sum()) * 1.1
+    v = np.concatenate([np.linspace(y0, lo_ + 0.5, 40), np.linspace(lo_ + 0.5, hi_ - 0.8, 30),
+                        np.linspace(hi_ - 0.8, lo_ + 1.0, 20)])
+    T = np.array([comp(np.array([x]), np.array([0.0]))[0][0] for x in v])
+    y = simulate(P, T, 0.0, state=initial_state(P, [20.0], [0.0]))
+    assert np.abs(y - v).max() < 1e-9
+
+
+def test_analytic_inverse_on_default_set_is_far_off() -> None:
+    """Measured: the default set's memoryless part is thermal expansion, not p0 gamma: Eq. 5.7 fails there."""
+    ce = composition_error(default_sdgpi(), loads=np.array([0.8]), method='analytic')
+    assert ce.rms_pct[0] > 20.0
+
+
+def test_table_5_1_gain_is_far_from_one() -> None:
+    """Measured: Table 5.1 with the load in kg gives gradients a_l of 0.005-0.08, offsets -0.21..1.0."""
+    a, c = table_5_1_correction().gain_offset(np.array([0.65, 0.8, 1.05]))
+    np.testing.assert_allclose(a, [0.0806, 0.0765, 0.0049], atol=5e-4)
+    np.testing.assert_allclose(c, [-0.214, -0.132, 0.996], atol=5e-3)
+
+
+def test_linear_correction_fit_roundtrip() -> None:
+    loads = np.array([0.65, 0.8, 0.95, 1.05])
+    a_true, c_true = 0.9 + 0.1 * loads ** 2, 0.2 - 0.1 * loads
+    u = np.stack([np.full(4, 0.5), np.full(4, 3.0)], axis=1)
+    v = a_true[:, None] * u + c_true[:, None]
+    corr = LinearCorrection.fit(loads, u, v)
+    np.testing.assert_allclose(corr.precompensate(v[:, 1], loads), u[:, 1], atol=1e-9)
+
+
+def test_tables_5_2_5_3_give_negative_density_and_thresholds() -> None:
+    """Measured: read with the load in kg, Tables 5.2-5.3 give rho < 0 and c < 0 at 700 g."""
+    p = inverse_table_parameters(700)
+    assert p['rho'] < 0 and p['c'] < 0
