@@ -1,0 +1,217 @@
+"""Feedback-linearising TEM temperature controller (seed Sec. 5.2, Eqs. 5.38-5.47).
+
+Per face f of a module, Eqs. 4.13/4.14 are quadratic in the model input I
+(:func:`sma_wrist.core.thermal.rate_terms`)::
+
+    dT_f/dt = K_R I^2 + B_f I + D_f,
+    B_f = K_at T_f + K_t T_other,   D_f = -K_Tinf T_f + K_T T_other + K_inf       (5.38-5.40)
+
+Asking for the closed loop de/dt + k e = 0 with e = T_d - T (Eq. 5.42; the seed has k = 1,
+here ``gain_per_s``) means dT_f/dt = dT_d/dt + k e (Eq. 5.41), so I is a root of (Eq. 5.44-5.45)::
+
+    a I^2 + b I + c = 0,   a = K_R,  b = B_f,  c = D_f - k (T_d - T_f) - dT_d/dt.
+
+Eq. 5.44 as printed has ``- T_1 + T_1d`` in c_1, i.e. ``+ k e``: with it the error obeys
+de/dt = +e and grows. Eqs. 5.41-5.43 have the sign used here (test_tem_control checks the
+closed loop). Eq. 5.38 also swaps alpha_1/alpha_2 between its rows; the Table 4.9 column of
+each face settles that.
+
+Root (Eq. 5.46): the smaller-magnitude root, computed as c / q with
+q = -(b + sign(b) sqrt(b^2 - 4ac)) / 2 (no cancellation). It is the branch that tends to the
+linear inverse -c/b as K_R -> 0, is continuous wherever b != 0 (b keeps its sign on the
+whole physical window: it vanishes only near T = 0 degC), and lies on the side of the parabola
+where dT/dt is monotone in I with the sign of b, so it is a true local inverse. The two
+roots sum to -b/K_R (|b|/K_R = 0.69 T on the T1 face, 0.79 T on T2 at uniform T), so for
+faces above ~15 degC the other root lies outside the command limits (test_tem_control).
+When b^2 < 4ac no input reaches the demanded rate; the controller then takes the vertex
+-b / (2a), the input that comes closest, and flags ``no_root``. Every command is then clipped
+to the thermal command limits and flagged ``saturated``: nothing is clipped silently.
+
+Modes (Eq. 5.47): one module with I = h1 I_1 + h2 I_2 (the seed's Figs. 5.23-5.25, h = (1, 1)),
+or two layers, one controller per layer with h = (1, 0) acting on the muscle face
+(Figs. 5.26-5.28). Commands come out in volts, u = -I / input_per_volt, positive heats the
+muscle (T1) face (docs/thermal.md).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sma_wrist.core import thermal as th
+from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+TWO_LAYER_WEIGHTS = (1.0, 0.0)
+SEED_ONE_MODULE_WEIGHTS = (1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class TemControlParams:
+    """Controller parameters.
+
+    gain_per_s: k of the error dynamics de/dt + k e = 0 (Eq. 5.42; the seed uses 1) [1/s].
+    weights: (h1, h2) of Eq. 5.47 on the (muscle/T1, exchanger/T2) faces; (1, 0) = two layers.
+    rate_filter_s: time constant of the first-order filter on the estimated dT_d/dt [s]
+        (only :class:`TemController` estimates; 0 = raw backward difference).
+    """
+
+    gain_per_s: float = 1.0
+    weights: tuple[float, float] = TWO_LAYER_WEIGHTS
+    rate_filter_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.gain_per_s) and self.gain_per_s > 0):
+            raise ParameterError(f'gain_per_s = {self.gain_per_s!r} must be finite and > 0')
+        if len(self.weights) != 2 or not np.all(np.isfinite(self.weights)) or not any(self.weights):
+            raise ParameterError(f'weights = {self.weights!r} must be two finite numbers, not both 0')
+        if not (np.isfinite(self.rate_filter_s) and self.rate_filter_s >= 0):
+            raise ParameterError(f'rate_filter_s = {self.rate_filter_s!r} must be finite and >= 0')
+
+
+@dataclass
+class TemControlResult:
+    """One controller evaluation for N scenarios and L layers."""
+
+    command_V: FloatArray  # (N, L) drive voltage after saturation, positive heats the T1 face
+    current: FloatArray  # (N, L) model input I = -input_per_volt * command_V
+    face_current: FloatArray  # (N, L, 2) I_1, I_2 of Eq. 5.46 before weighting and saturation
+    no_root: BoolArray  # (N, L, 2) demanded rate unreachable (vertex used); False where the weight is 0
+    saturated: BoolArray  # (N, L) command clipped to the limits
+
+    @property
+    def any_flag(self) -> BoolArray:
+        """(N, L) True where the linearising law could not be applied as is."""
+        return self.saturated | self.no_root.any(axis=-1)
+
+
+def quadratic_coefficients(thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike, T_d_rate: ArrayLike,
+                           gain_per_s: float = 1.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(a, b, c) of a I^2 + b I + c = 0 per face (Eqs. 5.44-5.45, sign of e as in Eq. 5.42).
+
+    state, T_d, T_d_rate: (N, L, 2) degC, degC, degC/s (broadcastable to the state).
+    """
+    T = np.asarray(state, dtype=float)
+    A, B, D = th.rate_terms(thermal, T)
+    c = D - gain_per_s * (np.asarray(T_d, dtype=float) - T) - np.asarray(T_d_rate, dtype=float)
+    return np.broadcast_to(A, T.shape), B, c
+
+
+def small_root(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> tuple[FloatArray, BoolArray]:
+    """Smaller-magnitude real root of a x^2 + b x + c (a > 0) and a mask of where it exists (Eq. 5.46).
+
+    Where b^2 < 4ac the vertex -b / (2a) is returned (closest approach) and the mask is False.
+    """
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c = np.asarray(c, dtype=float)
+    disc = b * b - 4.0 * a * c
+    real = disc >= 0
+    sgn = np.where(b >= 0, 1.0, -1.0)
+    q = -0.5 * (b + sgn * np.sqrt(np.maximum(disc, 0.0)))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        root = np.where(q != 0, c / np.where(q != 0, q, 1.0), 0.0)  # q = 0 only when b = c = 0
+    return np.where(real, root, -b / (2.0 * a)), real
+
+
+def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike,
+                                 T_d_rate: ArrayLike, params: TemControlParams = TemControlParams()
+                                 ) -> TemControlResult:
+    """Eqs. 5.44-5.47 for N scenarios of L modules: per-face roots, weighted sum, saturation.
+
+    state (N, L, 2) degC; T_d and T_d_rate broadcastable to it (degC, degC/s), one target per
+    face (faces with weight 0 are ignored, but must be finite). Raises ModelInputError on
+    non-finite inputs.
+    """
+    T = th.check_state(state)
+    T_d = np.broadcast_to(np.asarray(T_d, dtype=float), T.shape)
+    rate = np.broadcast_to(np.asarray(T_d_rate, dtype=float), T.shape)
+    check_finite('desired temperature', T_d, 'degC')
+    check_finite('desired temperature rate', rate, 'degC/s')
+    a, b, c = quadratic_coefficients(thermal, T, T_d, rate, params.gain_per_s)
+    face_current, real = small_root(a, b, c)
+    h = np.asarray(params.weights, dtype=float)
+    current = face_current @ h  # Eq. 5.47
+    command, saturated = th.saturate_command(thermal, th.command_from_input(thermal, current))
+    return TemControlResult(command, th.model_input(thermal, command), face_current, ~real & (h != 0), saturated)
+
+
+def two_layer_command(thermal: th.ThermalParams, state: ArrayLike, T_d_muscle: ArrayLike, T_d_rate: ArrayLike,
+                      gain_per_s: float = 1.0) -> TemControlResult:
+    """Two layers (Fig. 5.26): one controller per layer on its muscle face, h = (1, 0).
+
+    state (N, L, 2); T_d_muscle and T_d_rate (N, L) desired muscle temperatures and rates.
+    """
+    T = th.check_state(state)
+    T_d = np.array(T, dtype=float)  # exchanger-face targets are unused (h2 = 0): e = 0 there
+    T_d[..., th.MUSCLE_FACE] = T_d_muscle
+    rate = np.zeros_like(T)
+    rate[..., th.MUSCLE_FACE] = T_d_rate
+    return feedback_linearising_command(thermal, T, T_d, rate, TemControlParams(gain_per_s, TWO_LAYER_WEIGHTS))
+
+
+def one_module_command(thermal: th.ThermalParams, state: ArrayLike, T_d_faces: ArrayLike, T_d_rate: ArrayLike,
+                       weights: tuple[float, float] = SEED_ONE_MODULE_WEIGHTS, gain_per_s: float = 1.0
+                       ) -> TemControlResult:
+    """The seed's first plan (Fig. 5.23): one module, targets on both faces, I = h1 I_1 + h2 I_2.
+
+    state (N, 1, 2) or (N, 2); T_d_faces and T_d_rate (N, 2) targets of the (T1, T2) faces.
+    """
+    T = np.asarray(state, dtype=float)
+    if T.ndim == 2:
+        T = T[:, None, :]
+    T_d = np.asarray(T_d_faces, dtype=float)
+    rate = np.asarray(T_d_rate, dtype=float)
+    return feedback_linearising_command(thermal, T, T_d.reshape(T_d.shape[:-1] + (1, 2)) if T_d.ndim == 2 else T_d,
+                                        rate.reshape(rate.shape[:-1] + (1, 2)) if rate.ndim == 2 else rate,
+                                        TemControlParams(gain_per_s, tuple(weights)))
+
+
+class TemController:
+    """Stateful wrapper: keeps the previous target to estimate dT_d/dt when it is not given.
+
+    The estimate is the backward difference (T_d(t) - T_d(t_prev)) / (t - t_prev), filtered by
+    a first-order lag of ``params.rate_filter_s``; it is 0 on the first call.
+    """
+
+    def __init__(self, thermal: th.ThermalParams, params: TemControlParams = TemControlParams()) -> None:
+        self.thermal = thermal
+        self.params = params
+        self.reset()
+
+    def reset(self) -> None:
+        self._t_prev: float | None = None
+        self._T_d_prev: FloatArray | None = None
+        self._rate: FloatArray | None = None
+
+    def estimate_rate(self, t: float, T_d: FloatArray) -> FloatArray:
+        """Update and return the filtered dT_d/dt estimate (same shape as T_d)."""
+        if self._t_prev is None or self._T_d_prev is None or self._T_d_prev.shape != T_d.shape:
+            raw = np.zeros_like(T_d)
+            self._rate = raw
+        else:
+            dt = t - self._t_prev
+            if not (np.isfinite(dt) and dt > 0):
+                raise ModelInputError('controller time step', dt, '(0, inf)', 's')
+            raw = (T_d - self._T_d_prev) / dt
+            alpha = dt / (self.params.rate_filter_s + dt)
+            assert self._rate is not None
+            self._rate = self._rate + alpha * (raw - self._rate)
+        self._t_prev = t
+        self._T_d_prev = T_d.copy()
+        return self._rate
+
+    def update(self, t: float, state: ArrayLike, T_d: ArrayLike, T_d_rate: ArrayLike | None = None
+               ) -> TemControlResult:
+        """Command for state (N, L, 2) and per-face targets T_d (N, L, 2) at time t [s].
+
+        With weights (1, 0) the exchanger-face targets are ignored; pass anything finite.
+        """
+        T = th.check_state(state)
+        T_d_arr = np.array(np.broadcast_to(np.asarray(T_d, dtype=float), T.shape))
+        check_finite('desired temperature', T_d_arr, 'degC')
+        rate = self.estimate_rate(t, T_d_arr) if T_d_rate is None else T_d_rate
+        return feedback_linearising_command(self.thermal, T, T_d_arr, rate, self.params)

@@ -1,0 +1,221 @@
+"""Feedback-linearising TEM controller (Eqs. 5.38-5.47): root choice, flags, limits, Figs. 5.24-5.28 story."""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sma_wrist.core import tem_control as tc
+from sma_wrist.core import thermal as th
+from sma_wrist.core.errors import ModelInputError, ParameterError
+
+P = th.ThermalParams()
+WIDE = P.with_limits(-30.0, 30.0)  # the seed's Simulink runs had no limits; +-30 V is I = +-12, still stable
+DT = 0.05
+Ref = Callable[[float], tuple[np.ndarray, np.ndarray]]
+
+
+def seed_sine(t: float) -> tuple[np.ndarray, np.ndarray]:
+    """T_d,i = 50 + 30 sin(0.1 t + (i - 1) pi), i = 1, 2 (Sec. 5.2) and its rate."""
+    ph = np.array([0.0, np.pi])
+    return 50 + 30 * np.sin(0.1 * t + ph), 3.0 * np.cos(0.1 * t + ph)
+
+
+def slow_sine(t: float) -> tuple[np.ndarray, np.ndarray]:
+    """A sine the default limits can follow: 45 +- 20 degC at 0.02 rad/s (0.4 degC/s)."""
+    ph = np.array([0.0, np.pi])
+    return 45 + 20 * np.sin(0.02 * t + ph), 0.4 * np.cos(0.02 * t + ph)
+
+
+def steps(t: float) -> tuple[np.ndarray, np.ndarray]:
+    return np.array([60.0, 40.0]), np.zeros(2)
+
+
+def run(p: th.ThermalParams, ref: Ref, mode: str, T_end: float = 400.0) -> dict[str, np.ndarray]:
+    """Closed loop from rest. 'one': one module, face i tracks T_d,i, h = (1, 1). 'two': layer i's muscle tracks T_d,i."""
+    T = th.rest_state(p, 1, 1 if mode == 'one' else 2)
+    out: dict[str, list] = {'e': [], 'u': [], 'T': [], 'flag': []}
+    for k in range(int(round(T_end / DT))):
+        T_d, rate = ref(k * DT)
+        if mode == 'one':
+            r = tc.one_module_command(p, T, T_d[None], rate[None], tc.SEED_ONE_MODULE_WEIGHTS)
+            out['e'].append(T_d - T[0, 0])
+        else:
+            r = tc.two_layer_command(p, T, T_d[None], rate[None])
+            out['e'].append(T_d - T[0, :, 0])
+        out['u'].append(r.command_V[0])
+        out['flag'].append(r.any_flag[0])
+        T = th.step(p, T, r.command_V, DT)
+        out['T'].append(T[0])
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def tail(x: np.ndarray, t_from: float = 200.0) -> np.ndarray:
+    return x[int(round(t_from / DT)):]
+
+
+# ------------------------------------------------------------------ the story
+
+def test_one_module_cannot_hold_two_temperatures_fig_5_24_5_25() -> None:
+    """h1 = h2 = 1 on one module: large steady errors on both faces, even without command limits."""
+    for ref, min_rms in ((steps, 10.0), (seed_sine, 3.0)):
+        e = tail(run(WIDE, ref, 'one')['e'])
+        rms = np.sqrt((e ** 2).mean(axis=0))
+        assert np.all(rms > min_rms), (ref.__name__, rms)  # measured: step 15.4 / 14.9, sine 4.5 / 6.5 degC
+
+
+def test_two_layers_track_the_seed_references_fig_5_27_5_28() -> None:
+    """Two layers, h = (1, 0) each, same (wide) limits: errors below 0.02 degC after 200 s."""
+    for ref in (steps, seed_sine):
+        res = run(WIDE, ref, 'two')
+        assert np.abs(tail(res['e'])).max() < 0.02, ref.__name__  # measured 0.011 (sine), 0 (step)
+        assert not tail(res['flag']).any()
+        assert np.all((res['u'] >= WIDE.u_min_V) & (res['u'] <= WIDE.u_max_V))
+
+
+def test_seed_sine_needs_commands_beyond_the_physical_limits() -> None:
+    """Measured: following 50 +- 30 sin(0.1 t) takes -25.6..+19.3 V and drives the exchanger face to ~106 degC."""
+    res = run(WIDE, seed_sine, 'two')
+    u = tail(res['u'])
+    assert u.min() < P.u_min_V - 10 and u.max() > P.u_max_V + 5
+    assert res['T'][:, :, th.EXCHANGER_FACE].max() > 100.0
+    limited = run(P, seed_sine, 'two')
+    assert tail(limited['flag']).any()  # with the default limits the shortfall is reported, not hidden
+    assert np.abs(tail(limited['e'])).max() > 5.0
+
+
+@pytest.mark.parametrize('ref', [steps, slow_sine])
+def test_two_layers_track_within_default_limits(ref: Ref) -> None:
+    res = run(P, ref, 'two')
+    assert np.abs(tail(res['e'])).max() < 0.01  # measured: 0 (step), 0.0007 (slow sine)
+    assert not tail(res['flag']).any()
+    assert np.all((res['u'] >= P.u_min_V) & (res['u'] <= P.u_max_V))
+    assert res['u'].max() == P.u_max_V  # the start-up transient does hit the limit (and is flagged)
+    assert res['flag'][:100].any()
+    assert not th.out_of_window(P, res['T']).any()
+
+
+def test_estimated_reference_rate_tracks_too() -> None:
+    ctl = tc.TemController(P, tc.TemControlParams())
+    T = th.rest_state(P, 1)
+    errs = []
+    for k in range(int(400 / DT)):
+        T_d, _ = slow_sine(k * DT)
+        T_d_faces = np.stack([T_d, T[0, :, 1]], axis=-1)[None]  # exchanger targets ignored (h2 = 0)
+        r = ctl.update(k * DT, T, T_d_faces)
+        errs.append(T_d - T[0, :, 0])
+        T = th.step(P, T, r.command_V, DT)
+    assert np.abs(tail(np.array(errs))).max() < 0.02  # backward difference lags half a sample
+    # without the rate feed-forward the error is the lag of a first-order loop, ~0.4 degC here
+    with pytest.raises(ModelInputError):
+        ctl.update((k - 1) * DT, T, T_d_faces)  # time going backwards
+
+
+def test_printed_sign_of_eq_5_44_makes_the_error_grow() -> None:
+    """c with +k e (Eq. 5.44 as printed) gives de/dt = +k e; with -k e (Eq. 5.42) e decays as exp(-k t)."""
+    k = 0.5
+    for gain, grows in ((k, False), (-k, True)):
+        T = th.rest_state(P, 1, 1)
+        T_d = T + np.array([[[3.0, 0.0]]])
+        e0 = 3.0
+        for _ in range(int(2.0 / 0.001)):  # the law is continuous-time; a short hold keeps ZOH error ~1e-4
+            a, b, c = tc.quadratic_coefficients(P, T, T_d, 0.0, gain)
+            I, real = tc.small_root(a, b, c)
+            assert real[..., 0].all() or grows  # the growing error eventually asks for unreachable rates
+            T = th.step(P.with_limits(-100, 100), T, th.command_from_input(P, I[..., 0]), 0.001,
+                        validate=False)
+        e = float(T_d[0, 0, 0] - T[0, 0, 0])
+        if grows:
+            assert e > e0 * 1.5  # e0 exp(+1) = 8.2 while the rate is reachable
+        else:
+            assert e == pytest.approx(e0 * np.exp(-k * 2.0), rel=1e-3)
+
+
+# --------------------------------------------------------------- root choice
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(5.0, 80.0), st.floats(5.0, 80.0), st.floats(5.0, 80.0), st.floats(-3.0, 3.0),
+       st.floats(0.1, 5.0))
+def test_chosen_root_is_a_true_inverse(T1: float, T2: float, T_d: float, rate: float, gain: float) -> None:
+    """Where the root exists and is inside the limits, the plant's rate equals dT_d/dt + k e exactly."""
+    T = np.array([[[T1, T2]]])
+    r = tc.feedback_linearising_command(P, T, [[[T_d, T2]]], [[[rate, 0.0]]], tc.TemControlParams(gain))
+    assert P.u_min_V <= r.command_V[0, 0] <= P.u_max_V
+    if r.saturated[0, 0] or r.no_root[0, 0, 0]:
+        return
+    achieved = th.derivative(P, T, r.command_V)[0, 0, 0]
+    assert achieved == pytest.approx(rate + gain * (T_d - T1), abs=1e-9)
+    a, b, c = tc.quadratic_coefficients(P, T, [[[T_d, T2]]], [[[rate, 0.0]]], gain)
+    roots = np.roots([a[0, 0, 0], b[0, 0, 0], c[0, 0, 0]])
+    assert abs(r.face_current[0, 0, 0]) == pytest.approx(np.abs(roots).min(), rel=1e-9)
+    other = roots[np.argmax(np.abs(roots))]
+    if min(T1, T2) >= 15.0:  # the roots sum to -b/K_R, |b| grows with T: the other root is beyond the limits
+        assert not (th.model_input(P, P.u_max_V) <= other <= th.model_input(P, P.u_min_V))
+
+
+def test_root_is_continuous_along_a_target_sweep() -> None:
+    """Over the targets whose rate is reachable (one interval around e = 0) the root is monotone, without jumps."""
+    T = np.array([[[40.0, 30.0]]])
+    T_d = np.linspace(20, 80, 6001)
+    a, b, c = tc.quadratic_coefficients(P, np.broadcast_to(T, (6001, 1, 2)),
+                                        np.stack([T_d, np.full_like(T_d, 30.0)], -1)[:, None], 0.0)
+    I, real = tc.small_root(a, b, c)
+    idx = np.flatnonzero(real[:, 0, 0])
+    assert idx.size > 100 and np.all(np.diff(idx) == 1)  # one contiguous interval
+    assert T_d[idx[0]] < 40.0 < T_d[idx[-1]]
+    I = I[idx, 0, 0]
+    assert np.all(np.diff(I) < 0)  # hotter target -> more negative I (heats T1)
+    # always the branch where d(rate)/dI = 2 a I + b keeps the sign of b (the invertible side)
+    assert np.all(np.sign(2 * a[idx, 0, 0] * I + b[idx, 0, 0]) == np.sign(b[idx, 0, 0]))
+    assert np.abs(np.diff(I)).max() < 0.5  # the other root is > 8 away: no branch jump
+
+
+def test_no_real_root_is_flagged_and_saturates_toward_the_vertex() -> None:
+    T = np.array([[[50.0, 30.0], [50.0, 30.0]]])
+    # layer 0 asks for -50 degC/s (unreachable), layer 1 for +50 degC/s (root exists, far beyond limits)
+    r = tc.two_layer_command(P, T, [[50.0, 50.0]], [[-50.0, 50.0]])
+    np.testing.assert_array_equal(r.no_root[0, :, 0], [True, False])
+    assert not r.no_root[..., 1].any()  # h2 = 0: the exchanger face is not controlled, never flagged
+    np.testing.assert_array_equal(r.saturated[0], [True, True])
+    np.testing.assert_array_equal(r.command_V[0], [P.u_min_V, P.u_max_V])
+    a, b, c = tc.quadratic_coefficients(P, T, [[[50.0, 30.0], [50.0, 30.0]]], [[[-50.0, 0.0], [50.0, 0.0]]])
+    assert b[0, 0, 0] ** 2 - 4 * a[0, 0, 0] * c[0, 0, 0] < 0 <= b[0, 1, 0] ** 2 - 4 * a[0, 1, 0] * c[0, 1, 0]
+    assert r.face_current[0, 0, 0] == pytest.approx(-b[0, 0, 0] / (2 * a[0, 0, 0]))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.floats(0.0, 80.0), min_size=4, max_size=4), st.floats(0.0, 90.0), st.floats(0.0, 90.0),
+       st.floats(-20.0, 20.0), st.floats(-20.0, 20.0))
+def test_limits_never_exceeded_and_every_clip_reported(T_list: list[float], d1: float, d2: float, r1: float,
+                                                       r2: float) -> None:
+    T = np.array(T_list).reshape(1, 2, 2)
+    r = tc.two_layer_command(P, T, [[d1, d2]], [[r1, r2]])
+    assert np.all((r.command_V >= P.u_min_V) & (r.command_V <= P.u_max_V))
+    wanted = th.command_from_input(P, r.face_current[..., 0])
+    np.testing.assert_array_equal(r.saturated, (wanted < P.u_min_V) | (wanted > P.u_max_V))
+    np.testing.assert_allclose(r.current, th.model_input(P, r.command_V))
+
+
+def test_one_module_weights_sum_the_face_currents_eq_5_47() -> None:
+    T = np.array([[40.0, 35.0]])
+    r = tc.one_module_command(WIDE, T, [[42.0, 33.0]], [[0.0, 0.0]], (0.7, 0.4))
+    assert r.current[0, 0] == pytest.approx(0.7 * r.face_current[0, 0, 0] + 0.4 * r.face_current[0, 0, 1])
+    assert not r.saturated.any()
+
+
+def test_typed_errors() -> None:
+    T = th.rest_state(P, 1)
+    with pytest.raises(ModelInputError):
+        tc.two_layer_command(P, T, [[np.nan, 40.0]], [[0.0, 0.0]])
+    with pytest.raises(ModelInputError):
+        tc.two_layer_command(P, T, [[40.0, 40.0]], [[np.inf, 0.0]])
+    bad = T.copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ModelInputError):
+        tc.two_layer_command(P, bad, [[40.0, 40.0]], [[0.0, 0.0]])
+    for kw in (dict(gain_per_s=0.0), dict(gain_per_s=np.nan), dict(weights=(0.0, 0.0)), dict(rate_filter_s=-1.0)):
+        with pytest.raises(ParameterError):
+            tc.TemControlParams(**kw)
