@@ -215,3 +215,58 @@ class TemController:
         check_finite('desired temperature', T_d_arr, 'degC')
         rate = self.estimate_rate(t, T_d_arr) if T_d_rate is None else T_d_rate
         return feedback_linearising_command(self.thermal, T, T_d_arr, rate, self.params)
+
+
+def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: float = 400.0,
+           dt: float = 0.05) -> dict[str, float]:
+    """Closed loop from rest as in Sec. 5.2; returns error and command statistics after 200 s."""
+    ph = np.array([0.0, np.pi])
+    refs = {
+        'step 60/40': lambda t: (np.array([60.0, 40.0]), np.zeros(2)),
+        'seed sine 50+-30, 0.1 rad/s': lambda t: (50 + 30 * np.sin(0.1 * t + ph), 3.0 * np.cos(0.1 * t + ph)),
+        'slow sine 45+-20, 0.02 rad/s': lambda t: (45 + 20 * np.sin(0.02 * t + ph), 0.4 * np.cos(0.02 * t + ph)),
+    }
+    ref = refs[reference]
+    T = th.rest_state(thermal, 1, 1 if mode == 'one module' else 2)
+    k_tail = int(round(200.0 / dt))
+    e_max = np.zeros(2)
+    e_sq = np.zeros(2)
+    u_lo, u_hi, T_hi, flagged = np.inf, -np.inf, -np.inf, 0
+    for k in range(int(round(duration_s / dt))):
+        T_d, rate = ref(k * dt)
+        if mode == 'one module':
+            r = one_module_command(thermal, T, T_d[None], rate[None], SEED_ONE_MODULE_WEIGHTS)
+            e = T_d - T[0, 0]
+        else:
+            r = two_layer_command(thermal, T, T_d[None], rate[None])
+            e = T_d - T[0, :, th.MUSCLE_FACE]
+        T = th.step(thermal, T, r.command_V, dt)
+        T_hi = max(T_hi, float(T.max()))
+        if k >= k_tail:
+            e_max = np.maximum(e_max, np.abs(e))
+            e_sq += e * e
+            u_lo, u_hi = min(u_lo, float(r.command_V.min())), max(u_hi, float(r.command_V.max()))
+            flagged += int(r.any_flag.any())
+    n = int(round(duration_s / dt)) - k_tail
+    rms = np.sqrt(e_sq / n)
+    return {'max_e1': e_max[0], 'max_e2': e_max[1], 'rms_e1': rms[0], 'rms_e2': rms[1], 'u_min': u_lo,
+            'u_max': u_hi, 'T_max': T_hi, 'flagged_fraction': flagged / n}
+
+
+def _main() -> None:  # pragma: no cover - the report quoted in docs/thermal.md
+    default = th.ThermalParams()
+    wide = default.with_limits(-30.0, 30.0)
+    print('Closed loop from rest, k = 1 /s, dt = 0.05 s, statistics over 200-400 s')
+    print(f'{"limits":>10} {"mode":>11} {"reference":>29} | max|e1| max|e2| rms e1 rms e2 [degC]'
+          ' | u range [V] | max face T | flagged')
+    for name, p in (('+-30 V', wide), ('default', default)):
+        for mode in ('one module', 'two layers'):
+            for ref in ('step 60/40', 'seed sine 50+-30, 0.1 rad/s', 'slow sine 45+-20, 0.02 rad/s'):
+                s = _story(p, mode, ref)
+                print(f'{name:>10} {mode:>11} {ref:>29} | {s["max_e1"]:7.3f} {s["max_e2"]:7.3f} {s["rms_e1"]:6.3f}'
+                      f' {s["rms_e2"]:6.3f} | {s["u_min"]:+6.2f} {s["u_max"]:+6.2f} | {s["T_max"]:7.2f}'
+                      f' | {s["flagged_fraction"]:.2f}')
+
+
+if __name__ == '__main__':  # pragma: no cover
+    _main()
