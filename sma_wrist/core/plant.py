@@ -1,0 +1,229 @@
+"""The coupled wrist plant: TEM drive -> temperatures -> wire loads -> joint angle.
+
+One step of length dt (docs/model.md, "Coupling and integration"):
+
+1. TEM heat balance (Eqs. 4.13-4.14, :mod:`sma_wrist.core.thermal`), RK4, from the drive
+   commands of both layers -> muscle temperatures T_i.
+2. Chain kinematics (Eq. 4.17) -> bundle elongations y_1 = e0 - x, y_2 = e0 + x,
+   x = R_eff (q - q_neutral).
+3. Per-wire loads m_i from the SD-GPI elongation-load relation against frozen memory
+   (:class:`sma_wrist.core.muscle.MuscleModel`), then the memory is committed.
+4. Joint (Eq. 4.18): torque (F_1 - F_2) R_eff with F_i = N_w m_i g, linearly implicit
+   Euler with the bundles' stiffness from the load solve.
+
+Everything is vectorised over N scenarios (payloads, commands, initial states); both
+muscles of all scenarios are stacked on one axis (2N) so each numpy call serves all.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from sma_wrist.core import thermal as th
+from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.errors import ModelInputError, check_finite, check_range
+from sma_wrist.core.hysteresis import SDGPIParams, play_bounds
+from sma_wrist.core.joint import G, JointParams, joint_step
+from sma_wrist.core.muscle import MuscleGeometry, MuscleModel
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class PlantParams:
+    """Everything that defines the simulated wrist."""
+
+    hysteresis: SDGPIParams = field(default_factory=default_sdgpi)
+    muscle: MuscleGeometry = field(default_factory=MuscleGeometry)
+    joint: JointParams = field(default_factory=JointParams)
+    thermal: th.ThermalParams = field(default_factory=th.ThermalParams)
+    #: Bundle elongation at q_neutral [mm], set by the pre-load calibration of Sec. 2.2.3:
+    #: with it the +-30 deg range is reachable up to ~0.65 kg at 0.09 m (docs/model.md).
+    preload_elongation_mm: float = 2.15
+    dt: float = 1e-3  # plant step [s]
+    newton_iterations: int = 3
+    max_muscle_temperature_C: float = 90.0  # beyond: over-temperature flag
+
+    def __post_init__(self) -> None:
+        if not (0 < self.dt <= 0.01):
+            raise ModelInputError('plant step dt', self.dt, '(0, 0.01]', 's')
+
+
+@dataclass
+class PlantState:
+    """State of N wrists."""
+
+    t: float
+    thermal: FloatArray
+    q: FloatArray  # (N,) rad
+    qd: FloatArray  # (N,) rad/s
+    w: FloatArray  # (2N, n) play memory; rows [muscle 1 of all scenarios, then muscle 2]
+    heating: BoolArray  # (2N,)
+    T_prev: FloatArray  # (2N,)
+    load_kgf: FloatArray  # (2N,) per-wire load
+    compliance: FloatArray  # (2N,) mm/kgf
+    payload_kg: FloatArray  # (N,)
+    flags: dict[str, BoolArray] = field(default_factory=dict)
+
+    def copy(self) -> 'PlantState':
+        return PlantState(self.t, self.thermal.copy(), self.q.copy(), self.qd.copy(), self.w.copy(),
+                          self.heating.copy(), self.T_prev.copy(), self.load_kgf.copy(), self.compliance.copy(),
+                          self.payload_kg.copy(), {k: v.copy() for k, v in self.flags.items()})
+
+
+class WristPlant:
+    """N simulated wrists stepped together. See the module docstring for the step."""
+
+    def __init__(self, params: PlantParams | None = None, payload_kg: ArrayLike = 0.3, n: int | None = None) -> None:
+        self.params = params or PlantParams()
+        payload = np.atleast_1d(np.asarray(payload_kg, dtype=float))
+        if n is not None:
+            payload = np.broadcast_to(payload, (n,)).copy()
+        check_range('payload', payload, 0.0, 2.0, 'kg')
+        self.n = payload.size
+        self.muscles = MuscleModel(self.params.hysteresis, self.params.muscle)
+        self.state = self.rest_state(payload)
+
+    # ----------------------------------------------------------------- set-up
+    def rest_state(self, payload_kg: FloatArray, q0: ArrayLike | None = None) -> PlantState:
+        """Wrists at thermal rest (zero drive), cooled from hot, at static equilibrium (or q0)."""
+        p = self.params
+        n = payload_kg.size
+        thermal = th.rest_state(p.thermal, n)
+        T = th.muscle_temperature(p.thermal, thermal).T.reshape(-1)  # (2N,)
+        m0 = np.full(2 * n, 0.8)
+        lower, upper = play_bounds(p.hysteresis, T, m0)
+        state = PlantState(0.0, thermal, np.full(n, p.joint.q_neutral_rad), np.zeros(n), upper.copy(),
+                           np.zeros(2 * n, bool), T.copy(), m0, np.ones(2 * n), payload_kg.copy())
+        if q0 is None:
+            state.q = self._static_equilibrium(state)
+        else:
+            state.q = np.broadcast_to(np.asarray(q0, float), (n,)).copy()
+        self._update_loads(state, T, commit=True)
+        state.flags = self._no_flags(n)
+        return state
+
+    def _no_flags(self, n: int) -> dict[str, BoolArray]:
+        return {k: np.zeros(n, bool) for k in ('command_saturated', 'over_temperature', 'slack', 'overload', 'at_stop')}
+
+    def _static_equilibrium(self, state: PlantState) -> FloatArray:
+        """Angle where muscle torque balances gravity, by bisection (torque falls with q)."""
+        jp = self.params.joint
+        lo = np.full(self.n, jp.q_min_rad)
+        hi = np.full(self.n, jp.q_max_rad)
+        T = state.T_prev
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            state.q = mid
+            tau = self._update_loads(state, T, commit=False)[0] - jp.gravity_torque(mid, state.payload_kg)
+            lo = np.where(tau > 0, mid, lo)
+            hi = np.where(tau > 0, hi, mid)
+        return 0.5 * (lo + hi)
+
+    # ------------------------------------------------------------------ step
+    def _update_loads(self, state: PlantState, T: FloatArray, commit: bool,
+                      iterations: int = 30) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
+        """Solve the wire loads at the current angle; returns (torque, stiffness, slack, overload)."""
+        p = self.params
+        x = p.joint.chain_displacement_mm(state.q)
+        y_geo = np.concatenate([p.preload_elongation_mm - x, p.preload_elongation_mm + x])
+        sol = self.muscles.solve_load(T, y_geo, state.w, state.heating, state.load_kgf, iterations)
+        if commit:
+            self.muscles.commit(T, sol.load_kgf, state.w)
+            state.load_kgf = sol.load_kgf
+            state.compliance = sol.compliance_mm_per_kgf
+        return self._torque_and_stiffness(sol.load_kgf, sol.compliance_mm_per_kgf) + (
+            sol.slack.reshape(2, -1).any(0), sol.overload.reshape(2, -1).any(0))
+
+    def _torque_and_stiffness(self, load: FloatArray, compliance: FloatArray) -> tuple[FloatArray, FloatArray]:
+        p = self.params
+        n_g_r = p.muscle.n_wires * G * p.joint.r_eff_m
+        m1, m2 = load[: self.n], load[self.n:]
+        c1, c2 = compliance[: self.n], compliance[self.n:]
+        torque = n_g_r * (m1 - m2)
+        # d tau/dq = -N g R_eff (R_mm / c1 + R_mm / c2) with R_mm = dx/dq in mm/rad
+        stiffness = n_g_r * 1e3 * p.joint.r_eff_m * (1.0 / c1 + 1.0 / c2)
+        return torque, stiffness
+
+    def step(self, command_V: ArrayLike) -> PlantState:
+        """Advance all wrists by dt under TEM drive commands of shape (N, 2) [V].
+
+        Commands beyond the TEM limits are clipped and flagged (``flags['command_saturated']``),
+        non-finite commands raise ModelInputError.
+        """
+        p = self.params
+        s = self.state
+        u = np.broadcast_to(np.asarray(command_V, dtype=float), (self.n, 2))
+        check_finite('TEM command', u, 'V')
+        u, clipped = th.saturate_command(p.thermal, u)
+        s.thermal = th.step(p.thermal, s.thermal, u, p.dt)
+        self.step_mechanics(th.muscle_temperature(p.thermal, s.thermal))
+        s.flags['command_saturated'] = clipped.any(axis=1)
+        return s
+
+    def step_mechanics(self, muscle_temperature_C: ArrayLike) -> PlantState:
+        """Advance loads and joint by dt at given (N, 2) muscle temperatures (steps 2-4).
+
+        Used by :meth:`step`, and on its own to replay recorded temperatures through the
+        hysteresis and joint without the thermal model (model-discrepancy replay).
+        """
+        p = self.params
+        s = self.state
+        T = np.broadcast_to(np.asarray(muscle_temperature_C, dtype=float), (self.n, 2)).T.reshape(-1)
+        check_finite('muscle temperature', T, 'degC')
+        hot = T > p.max_muscle_temperature_C
+        T = np.clip(T, *p.hysteresis.T_valid)
+        dT = T - s.T_prev
+        s.heating = np.where(dT > 0, True, np.where(dT < 0, False, s.heating))
+        s.T_prev = T
+        torque, stiffness, slack, overload = self._update_loads(s, T, commit=True, iterations=p.newton_iterations)
+        s.q, s.qd, _ = joint_step(p.joint, s.q, s.qd, torque, stiffness, s.payload_kg, p.dt)
+        s.t += p.dt
+        s.flags = {
+            'command_saturated': np.zeros(self.n, bool),
+            'over_temperature': hot.reshape(2, -1).any(0),
+            'slack': slack,
+            'overload': overload,
+            'at_stop': (s.q <= p.joint.q_min_rad) | (s.q >= p.joint.q_max_rad),
+        }
+        return s
+
+    # --------------------------------------------------------------- outputs
+    @property
+    def muscle_temperature_C(self) -> FloatArray:
+        """(N, 2) muscle temperatures."""
+        return th.muscle_temperature(self.params.thermal, self.state.thermal)
+
+    @property
+    def wire_stress_Pa(self) -> FloatArray:
+        """(N, 2) per-wire stresses."""
+        return self.params.muscle.stress_Pa(self.state.load_kgf.reshape(2, -1).T)
+
+    @property
+    def muscle_torque_Nm(self) -> FloatArray:
+        """(N,) net muscle torque at the output shaft."""
+        return self._torque_and_stiffness(self.state.load_kgf, self.state.compliance)[0]
+
+    def simulate(self, commands_V: ArrayLike, record_every: int = 1) -> dict[str, FloatArray]:
+        """Open-loop run under a command history of shape (K, N, 2) or (K, 2); returns recorded arrays."""
+        u = np.asarray(commands_V, dtype=float)
+        if u.ndim == 2:
+            u = u[:, None, :]
+        k_total = u.shape[0]
+        rows = range(0, k_total, record_every)
+        out = {k: np.empty((len(rows),) + shape) for k, shape in
+               (('t', ()), ('q', (self.n,)), ('qd', (self.n,)), ('T', (self.n, 2)), ('stress', (self.n, 2)))}
+        j = 0
+        for k in range(k_total):
+            self.step(u[k])
+            if k % record_every == 0:
+                out['t'][j] = self.state.t
+                out['q'][j] = self.state.q
+                out['qd'][j] = self.state.qd
+                out['T'][j] = self.muscle_temperature_C
+                out['stress'][j] = self.wire_stress_Pa
+                j += 1
+        return out
