@@ -261,12 +261,19 @@ def test_simulate_equals_repeated_steps() -> None:
 
 @settings(max_examples=60, deadline=None)
 @given(st.lists(st.floats(0.0, 80.0), min_size=4, max_size=4), st.floats(-12.0, 13.0), st.floats(-12.0, 13.0),
-       st.floats(1e-3, 1.0))
-def test_step_rk4_and_two_half_steps_agree(T_list: list[float], u1: float, u2: float, dt: float) -> None:
+       st.floats(0.05, 1.0))
+def test_step_is_rk4_with_fourth_order_step_doubling_error(T_list: list[float], u1: float, u2: float,
+                                                          dt: float) -> None:
     T = np.array(T_list).reshape(1, 2, 2)
     u = np.array([[u1, u2]])
-    full = th.step(P, T, u, dt)
-    np.testing.assert_allclose(full, _rk4_reference(P, T, u, dt), atol=1e-11)
-    half = th.step(P, th.step(P, T, u, dt / 2), u, dt / 2)
-    # RK4's local error is (hM)^5 v / 120 here; |M| < 0.12 /s and |v| < 10 degC/s in the window.
-    assert np.abs(full - half).max() < 0.12 ** 5 * dt ** 5 * 10 / 120 + 1e-11
+    np.testing.assert_allclose(th.step(P, T, u, dt), _rk4_reference(P, T, u, dt), atol=1e-11)
+
+    def doubling_error(h: float) -> float:
+        half = th.step(P, th.step(P, T, u, h / 2), u, h / 2)
+        return float(np.abs(th.step(P, T, u, h) - half).max())
+    # The state-dependent Joule/Peltier terms make a fixed a-priori bound unreliable (a former |v| < 10 degC/s
+    # bound was falsified at T=(0,0,0,39), u2=13 V); the order is the property: halving h must cut the
+    # step-doubling error by ~2^5, and 16x leaves room for the h^6 term.
+    e_h, e_half = doubling_error(dt), doubling_error(dt / 2)
+    assert e_h < 1e-4 * dt
+    assert e_half < e_h / 16 + 1e-12
