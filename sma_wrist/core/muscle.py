@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.hysteresis import SDGPIParams, memoryless, tanh_envelope
+from sma_wrist.core.hysteresis import SDGPIParams, memoryless
 
 FloatArray = NDArray[np.float64]
 G = 9.81  # m/s^2
@@ -85,58 +85,78 @@ class MuscleModel:
         self._p = params.weights
 
     def elongation(self, T: FloatArray, m: FloatArray, w: FloatArray, heating: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
-        """(elongation [mm], d elongation / d m [mm/kgf]) of (1) with memory w frozen."""
+        """(elongation [mm], d elongation / d m [mm/kgf]) of (1) with memory w frozen; 1-D arrays over bundles."""
+        return self._elongation(T, m, w, memoryless(self.params, T, heating))
+
+    def _elongation(self, T: FloatArray, m: FloatArray, w: FloatArray, y_memoryless: FloatArray
+                    ) -> tuple[FloatArray, FloatArray]:
         geo = self.geometry
-        env = self.params.envelopes
-        mc = np.clip(m, self.m_lo, self.m_hi)
-        inside = (m > self.m_lo) & (m < self.m_hi)
-        a, b = env.coefficients(mc)
-        da, db = env.coefficient_slopes(mc)
-        ua = a[:, 1] * T + a[:, 2]
-        ub = b[:, 1] * T + b[:, 2]
-        ta, tb = np.tanh(ua), np.tanh(ub)
-        gamma_r = a[:, 0] * ta + a[:, 3]
-        gamma_l = b[:, 0] * tb + b[:, 3]
-        lower = gamma_l[:, None] - self._r
-        upper = gamma_r[:, None] + self._r
+        mc = np.minimum(np.maximum(m, self.m_lo), self.m_hi)
+        k, dk = self.params.envelopes.coefficients_and_slopes(mc)  # (N, 2, 4): [a set, b set]
+        Tc = T[:, None]
+        th = np.tanh(k[:, :, 1] * Tc + k[:, :, 2])
+        gamma = k[:, :, 0] * th + k[:, :, 3]  # (gamma_r, gamma_l)
+        lower = gamma[:, 1:2] - self._r
+        upper = gamma[:, 0:1] + self._r
         below = w < lower  # operator pushed up by the heating envelope
         above = w > upper  # operator pushed down by the cooling envelope
         w_now = np.minimum(np.maximum(w, lower), upper)
-        y_m = memoryless(self.params, T, heating) + w_now @ self._p
+        y_m = y_memoryless + w_now @ self._p
         # d gamma/dm of k0 tanh(k1 T + k2) + k3 with every k quadratic in m (Eqs. 4.4-4.5)
-        dgr = da[:, 0] * ta + a[:, 0] * (1.0 - ta * ta) * (da[:, 1] * T + da[:, 2]) + da[:, 3]
-        dgl = db[:, 0] * tb + b[:, 0] * (1.0 - tb * tb) * (db[:, 1] * T + db[:, 2]) + db[:, 3]
-        dym_dm = (below @ self._p) * dgl + (above @ self._p) * dgr
+        dgamma = dk[:, :, 0] * th + k[:, :, 0] * (1.0 - th * th) * (dk[:, :, 1] * Tc + dk[:, :, 2]) + dk[:, :, 3]
+        dym_dm = (below @ self._p) * dgamma[:, 1] + (above @ self._p) * dgamma[:, 0]
+        inside = (m > self.m_lo) & (m < self.m_hi)  # envelopes are frozen outside the calibrated loads
         y = geo.length_scale * (self.params.k_f - y_m) + geo.elastic_mm_per_kgf * m
-        dy = geo.length_scale * np.where(inside, -dym_dm, 0.0) + geo.elastic_mm_per_kgf
+        dy = geo.elastic_mm_per_kgf - geo.length_scale * (dym_dm * inside)
         return y, dy
 
     def solve_load(self, T: FloatArray, y_geo_mm: FloatArray, w: FloatArray, heating: NDArray[np.bool_],
-                   m_guess: FloatArray, iterations: int = 4) -> LoadSolution:
-        """Per-wire load making (1) hold, against frozen memory ``w`` (not modified)."""
+                   m_guess: FloatArray, tol_mm: float = 1e-7, max_iterations: int = 60) -> LoadSolution:
+        """Per-wire load making (1) hold, against frozen memory ``w`` (not modified).
+
+        Newton from ``m_guess`` safeguarded by a bracket that every evaluation narrows
+        (``rtsafe``): (1) is monotone but only piecewise smooth (operators start and stop
+        moving, the stress plateau is ~100x softer than the elastic branch), so a bare
+        Newton step can overshoot a kink; then the bracket's midpoint is taken. Only the
+        wires whose residual exceeds ``tol_mm`` are iterated, so a warm start from the
+        previous step's load costs one or two evaluations.
+        """
         m_max = self.geometry.max_load_kgf
-        lo = np.zeros_like(m_guess)
-        hi = np.full_like(m_guess, m_max)
-        m = np.clip(m_guess, 0.0, m_max)
-        for _ in range(iterations):
-            y, dy = self.elongation(T, m, w, heating)
-            f = y - y_geo_mm
-            pos = f > 0
-            hi = np.where(pos, m, hi)
-            lo = np.where(pos, lo, m)
-            step = m - f / dy
-            ok = (step > lo) & (step < hi)
-            m = np.where(ok, step, 0.5 * (lo + hi))
-        y, dy = self.elongation(T, m, w, heating)
+        m = np.clip(np.array(m_guess, dtype=float), 0.0, m_max)
+        lo = np.zeros_like(m)
+        hi = np.full_like(m, m_max)
+        y0 = memoryless(self.params, T, heating)  # independent of the load: once per solve
+        y, dy = self._elongation(T, m, w, y0)
         res = y - y_geo_mm
-        slack = (m <= 1e-9) & (res > 0)
-        overload = (m >= m_max - 1e-9) & (res < 0)
+        active = np.flatnonzero(np.abs(res) > tol_mm)
+        for _ in range(max_iterations):
+            if active.size == 0:
+                break
+            f = res[active]
+            ma = m[active]
+            pos = f > 0
+            hi[active] = np.where(pos, ma, hi[active])
+            lo[active] = np.where(pos, lo[active], ma)
+            newton = ma - f / dy[active]
+            la, ha = lo[active], hi[active]
+            inside = (newton > la) & (newton < ha)
+            m_new = np.where(inside, newton, 0.5 * (la + ha))
+            # a bracket collapsed onto 0 or m_max: the root is outside, the wire is slack/overloaded
+            done = (ha - la) < 1e-12
+            m[active] = m_new
+            ya, dya = self._elongation(T[active], m_new, w[active], y0[active])
+            y[active], dy[active] = ya, dya
+            res[active] = ya - y_geo_mm[active]
+            active = active[(np.abs(res[active]) > tol_mm) & ~done]
+        slack = (m <= 1e-9) & (res > tol_mm)
+        overload = (m >= m_max - 1e-9) & (res < -tol_mm)
         return LoadSolution(m, dy, slack, overload, res)
 
     def commit(self, T: FloatArray, m: FloatArray, w: FloatArray) -> None:
         """Commit the play-operator memory at the solved load (Eq. 3.19), in place."""
-        mc = np.clip(m, self.m_lo, self.m_hi)
-        a, b = self.params.envelopes.coefficients(mc)
-        lower = tanh_envelope(b, T)[:, None] - self._r
-        upper = tanh_envelope(a, T)[:, None] + self._r
+        mc = np.minimum(np.maximum(m, self.m_lo), self.m_hi)
+        k, _ = self.params.envelopes.coefficients_and_slopes(mc)
+        gamma = k[:, :, 0] * np.tanh(k[:, :, 1] * T[:, None] + k[:, :, 2]) + k[:, :, 3]
+        lower = gamma[:, 1:2] - self._r
+        upper = gamma[:, 0:1] + self._r
         np.minimum(np.maximum(w, lower, out=w), upper, out=w)

@@ -44,12 +44,14 @@ class PlantParams:
     #: with it the +-30 deg range is reachable up to ~0.65 kg at 0.09 m (docs/model.md).
     preload_elongation_mm: float = 2.15
     dt: float = 1e-3  # plant step [s]
-    newton_iterations: int = 3
+    load_tolerance_mm: float = 1e-7  # residual of the wire-load solve (muscle.py Eq. 1)
     max_muscle_temperature_C: float = 90.0  # beyond: over-temperature flag
 
     def __post_init__(self) -> None:
         if not (0 < self.dt <= 0.01):
             raise ModelInputError('plant step dt', self.dt, '(0, 0.01]', 's')
+        if not (0 < self.load_tolerance_mm <= 1e-3):
+            raise ModelInputError('load_tolerance_mm', self.load_tolerance_mm, '(0, 1e-3]', 'mm')
 
 
 @dataclass
@@ -124,13 +126,12 @@ class WristPlant:
         return 0.5 * (lo + hi)
 
     # ------------------------------------------------------------------ step
-    def _update_loads(self, state: PlantState, T: FloatArray, commit: bool,
-                      iterations: int = 30) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
+    def _update_loads(self, state: PlantState, T: FloatArray, commit: bool) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
         """Solve the wire loads at the current angle; returns (torque, stiffness, slack, overload)."""
         p = self.params
         x = p.joint.chain_displacement_mm(state.q)
         y_geo = np.concatenate([p.preload_elongation_mm - x, p.preload_elongation_mm + x])
-        sol = self.muscles.solve_load(T, y_geo, state.w, state.heating, state.load_kgf, iterations)
+        sol = self.muscles.solve_load(T, y_geo, state.w, state.heating, state.load_kgf, self.params.load_tolerance_mm)
         if commit:
             self.muscles.commit(T, sol.load_kgf, state.w)
             state.load_kgf = sol.load_kgf
@@ -179,7 +180,7 @@ class WristPlant:
         dT = T - s.T_prev
         s.heating = np.where(dT > 0, True, np.where(dT < 0, False, s.heating))
         s.T_prev = T
-        torque, stiffness, slack, overload = self._update_loads(s, T, commit=True, iterations=p.newton_iterations)
+        torque, stiffness, slack, overload = self._update_loads(s, T, commit=True)
         s.q, s.qd, _ = joint_step(p.joint, s.q, s.qd, torque, stiffness, s.payload_kg, p.dt)
         s.t += p.dt
         s.flags = {
