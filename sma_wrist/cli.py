@@ -1,0 +1,150 @@
+"""``sma-wrist``: run the closed loop, inspect bags, benchmark (and the later tools).
+
+Every subcommand reports bad input as ``error: ...`` with exit code 2, never a traceback.
+The embedded rclpy runtime is activated before any node module is imported; where ROS 2
+is sourced it steps aside (``sma-wrist run`` then tells you to use ``ros2 launch``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from typing import Any, Callable, Sequence
+
+from sma_wrist.core.errors import SmaWristError
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f'{text!r} must be a finite number > 0')
+    return v
+
+
+def _payload(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not (math.isfinite(v) and 0.0 <= v <= 1.5):
+        raise argparse.ArgumentTypeError(f'payload {text!r} kg is outside [0, 1.5] kg')
+    return v
+
+
+def _activate() -> None:
+    from sma_wrist import runtime
+    if not runtime.activate():
+        raise SmaWristError('ROS 2 is sourced in this shell, so the embedded runtime is off: use '
+                            '`ros2 launch sma_wrist wrist_sim.launch.py` there, or run sma-wrist from a shell '
+                            'without ROS 2')
+
+
+def _print_metrics(summary: Any) -> None:
+    m = summary.metrics
+    print(f'run: {summary.controller}, payload {summary.payload_kg:g} kg, {summary.sim_time_s:.1f} s simulated '
+          f'in {summary.wall_s:.1f} s wall ({summary.real_time_factor:.1f}x real time)'
+          + (' -- INTERRUPTED' if summary.interrupted else ''))
+    if summary.bag:
+        print(f'bag: {summary.bag} ({summary.messages_recorded} messages, rosbag2/MCAP)')
+    if m:
+        total = m['total_abs_error_pct']
+        print(f"max error        {m['max_error_pct']:8.2f} % of reference range ({m['max_abs_error_rad']:.4f} rad)")
+        print(f"RMS error        {m['rms_error_pct']:8.2f} % ({m['rms_error_rad']:.4f} rad)")
+        print('total abs error  ' + (f'{total:8.0f} % (Table 6.2: sum of |e| % over the last full cycle at 1 kHz)'
+                                     if total is not None else '     n/a (needs one full 62.8 s cycle)'))
+        if m.get('peak_command_V') is not None:
+            print(f"peak TEM command {m['peak_command_V']:8.2f} V")
+
+
+def cmd_run(a: argparse.Namespace) -> int:
+    _activate()
+    from sma_wrist.closed_loop import print_progress, run_closed_loop
+    summary = run_closed_loop(a.controller, a.payload_kg, a.duration, a.bag, a.params_file or (),
+                              progress=None if a.quiet else print_progress, hardware=a.hardware is not None,
+                              extra_params={'/hardware_bridge': {'port': a.hardware}} if a.hardware else None)
+    if a.json:
+        print(json.dumps({'bag': summary.bag, 'controller': summary.controller, 'payload_kg': summary.payload_kg,
+                          'sim_time_s': summary.sim_time_s, 'wall_s': summary.wall_s,
+                          'real_time_factor': summary.real_time_factor, 'messages': summary.messages_recorded,
+                          'interrupted': summary.interrupted, 'metrics': summary.metrics}, indent=2))
+    else:
+        _print_metrics(summary)
+    return 130 if summary.interrupted else 0
+
+
+def cmd_info(a: argparse.Namespace) -> int:
+    from sma_wrist.bag import bag_info
+    info = bag_info(a.bag)
+    if a.json:
+        print(json.dumps({'path': str(info.path), 'storage': info.storage, 'duration_s': info.duration,
+                          'messages': info.message_count,
+                          'topics': {k: {'type': v.type, 'count': v.count} for k, v in info.topics.items()}},
+                         indent=2))
+        return 0
+    print(f'bag:      {info.path} (rosbag2 metadata v{info.version}, {info.storage})')
+    print(f'duration: {info.duration:.3f} s    messages: {info.message_count}')
+    width = max((len(k) for k in info.topics), default=5)
+    for name, t in sorted(info.topics.items()):
+        print(f'  {name:<{width}}  {t.count:8d}  {t.type}')
+    return 0
+
+
+def cmd_bench(a: argparse.Namespace) -> int:
+    from sma_wrist import bench
+    result = bench.run(a.section or None, quick=a.quick)
+    print(json.dumps(result, indent=2) if a.json else bench.format_text(result))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog='sma-wrist', description='SMA wrist simulation, recording and analysis tools.')
+    sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
+
+    r = sub.add_parser('run', help='run the closed loop on the embedded runtime, record a bag, print metrics')
+    r.add_argument('--controller', default='inverse_adaptive', choices=('inverse_adaptive', 'direct_adaptive', 'pid'))
+    r.add_argument('--payload-kg', type=_payload, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
+    r.add_argument('--duration', type=_positive_float, default=126.0, help='simulated seconds (default 126)')
+    r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist)')
+    r.add_argument('--params-file', action='append', help='ROS params file applied after config/wrist.yaml')
+    r.add_argument('--hardware', metavar='PORT', default=None,
+                   help='use hardware_bridge on this serial port instead of plant_sim')
+    r.add_argument('--json', action='store_true', help='print one JSON object')
+    r.add_argument('--quiet', action='store_true', help='no progress line')
+    r.set_defaults(func=cmd_run)
+
+    i = sub.add_parser('info', help='summarise a bag: topics, counts, duration')
+    i.add_argument('bag')
+    i.add_argument('--json', action='store_true')
+    i.set_defaults(func=cmd_info)
+
+    b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')
+    b.add_argument('--json', action='store_true')
+    b.add_argument('--quick', action='store_true', help='short runs (smoke test of the benchmark itself)')
+    b.add_argument('--section', action='append', help='only these sections')
+    b.set_defaults(func=cmd_bench)
+    return ap
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = build_parser()
+    a = ap.parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = a.func
+    try:
+        return func(a)
+    except SmaWristError as e:
+        print(f'error: {e}', file=sys.stderr)
+        return 2
+    except FileExistsError as e:
+        print(f'error: {e.filename or e} already exists; choose a new --bag directory', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print('interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

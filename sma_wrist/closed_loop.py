@@ -1,0 +1,127 @@
+"""Run the wrist's node graph on the embedded runtime, record a bag, measure it.
+
+The embedded counterpart of ``ros2 launch sma_wrist wrist_sim.launch.py`` + ``ros2 bag
+record -a``: the same node classes, the same params files (config/wrist.yaml, then the
+user's), the same per-node overrides the launch file sets (use_sim_time, payload_kg, mode).
+The runtime must be active before this module is imported (``sma_wrist.cli`` does it).
+"""
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from sma_wrist.runtime.launch import Runtime
+from sma_wrist.share import share_path
+
+CONTROLLERS = ('inverse_adaptive', 'direct_adaptive', 'pid')
+
+
+@dataclass
+class RunSummary:
+    bag: str | None
+    controller: str
+    payload_kg: float
+    sim_time_s: float
+    wall_s: float
+    messages_recorded: int
+    interrupted: bool
+    metrics: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time_s / self.wall_s if self.wall_s > 0 else float('inf')
+
+
+def graph_nodes(controller: str, hardware: bool = False) -> list[type]:
+    """Node classes of the closed loop, plant (or bridge) first so it owns time from t = 0."""
+    if controller not in CONTROLLERS:
+        raise ValueError(f'controller {controller!r} is not one of {", ".join(CONTROLLERS)}')
+    from sma_wrist.nodes.adaptive_controller import AdaptiveController
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    from sma_wrist.nodes.tem_controller import TemController
+    from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+    if hardware:
+        from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
+    else:
+        from sma_wrist.nodes.plant_sim import PlantSim as Source
+    nodes: list[type] = [Source, TrajectoryGenerator, AdaptiveController]
+    if controller == 'inverse_adaptive':
+        nodes.append(HysteresisCompensator)
+    nodes.append(TemController)
+    return nodes
+
+
+def ros_args(params_files: Sequence[str | Path] = ()) -> list[str]:
+    args = ['--ros-args', '--params-file', str(share_path('config/wrist.yaml'))]
+    for f in params_files:
+        args += ['--params-file', str(f)]
+    return args
+
+
+def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
+              extra: dict[str, dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:
+    """What the launch file sets on top of the params files."""
+    out: dict[str, dict[str, Any]] = {
+        '/**': {'use_sim_time': True},
+        f'/{source}': {'use_sim_time': False, 'payload_kg': float(payload_kg)},
+        '/adaptive_controller': {'mode': controller},
+    }
+    for k, v in (extra or {}).items():
+        out.setdefault(k, {}).update(v)
+    return out
+
+
+def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.3, duration_s: float = 126.0,
+                    bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
+                    extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
+                    progress: Callable[[float, float, float], None] | None = None,
+                    hardware: bool = False) -> RunSummary:
+    """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
+
+    ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops
+    the run; the bag is closed with everything up to the interrupt and the summary says so.
+    """
+    source = 'hardware_bridge' if hardware else 'plant_sim'
+    nodes = graph_nodes(controller, hardware)
+    wall0 = time.perf_counter()
+    interrupted = False
+    recorded = 0
+    sim_s = 0.0
+    with Runtime(ros_args(params_files), params=overrides(controller, payload_kg, source, extra_params)) as rt:
+        if bag is not None:
+            rec = rt.record(bag, topics)
+        rt.add_nodes(nodes)
+        chunk = max(duration_s / 100.0, 0.01)
+        t = 0.0
+        try:
+            while t < duration_s - 1e-12:
+                t = min(duration_s, t + chunk)
+                rt.run_until(t, until='sim')
+                if progress is not None:
+                    progress(t, duration_s, time.perf_counter() - wall0)
+        except KeyboardInterrupt:
+            interrupted = True
+        sim_s = (rt.sim_ns or 0) / 1e9
+        if bag is not None:
+            recorded = rec.count
+    summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
+                         time.perf_counter() - wall0, recorded, interrupted)
+    if bag is not None:
+        from sma_wrist.runs import load_run, run_metrics
+        summary.metrics = run_metrics(load_run(bag))
+    return summary
+
+
+def print_progress(t: float, total: float, wall: float) -> None:
+    """One-line progress on stderr (a terminal sees it update in place)."""
+    rtf = t / wall if wall > 0 else float('inf')
+    end = '\n' if t >= total else ''
+    sys.stderr.write(f'\r[sma-wrist] {t:7.1f} / {total:.1f} s simulated  ({100 * t / total:5.1f} %, '
+                     f'{rtf:6.1f}x real time){end}')
+    sys.stderr.flush()
+
+
+__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'run_closed_loop', 'print_progress', 'ros_args', 'overrides']

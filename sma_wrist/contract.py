@@ -1,0 +1,93 @@
+"""The interface contract (``msg_defs/topics.yaml``) as typed data.
+
+One source of truth: nodes take topic names, types and QoS from here, the docs table and
+the tests read the same file. No ROS imports: message classes are resolved by the caller
+(``std_msgs.msg.Float64`` under either runtime).
+
+The file is found by :func:`sma_wrist.share.share_path` under every install layout.
+"""
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.share import ShareFileNotFound, share_path
+
+class ContractError(SmaWristError):
+    """The contract file is missing or inconsistent, or a topic is not in it."""
+
+
+@dataclass(frozen=True)
+class Topic:
+    name: str
+    type: str  # e.g. 'std_msgs/msg/Float64'
+    unit: str
+    rate_hz: float  # nominal, 0 = event driven
+    publisher: str
+    subscribers: tuple[str, ...]
+    description: str
+    qos: str = 'reliable'  # 'reliable' (depth 10) or 'transient_local' (latched, depth 1)
+    alt_publisher: str | None = None
+
+    @property
+    def package(self) -> str:
+        return self.type.split('/')[0]
+
+    @property
+    def message(self) -> str:
+        return self.type.split('/')[-1]
+
+
+@dataclass(frozen=True)
+class Contract:
+    version: int
+    frame_id: str
+    joint_name: str
+    topics: dict[str, Topic]
+    path: Path
+
+    def topic(self, name: str) -> Topic:
+        try:
+            return self.topics[name]
+        except KeyError:
+            raise ContractError(f'topic {name!r} is not in the interface contract {self.path}') from None
+
+    def published_by(self, node: str) -> list[Topic]:
+        return [t for t in self.topics.values() if node in (t.publisher, t.alt_publisher)]
+
+
+def contract_path() -> Path:
+    try:
+        return share_path('msg_defs/topics.yaml')
+    except ShareFileNotFound as e:
+        raise ContractError(str(e)) from None
+
+
+@functools.lru_cache(maxsize=None)
+def load_contract(path: str | None = None) -> Contract:
+    """Parse and check the contract (cached)."""
+    p = Path(path) if path else contract_path()
+    try:
+        raw: Any = yaml.safe_load(p.read_text())
+        topics = {}
+        for t in raw['topics']:
+            topic = Topic(name=t['name'], type=t['type'], unit=str(t['unit']), rate_hz=float(t['rate_hz']),
+                          publisher=t['publisher'], subscribers=tuple(t.get('subscribers') or ()),
+                          description=t['description'], qos=t.get('qos', 'reliable'),
+                          alt_publisher=t.get('alt_publisher'))
+            if topic.name in topics:
+                raise ContractError(f'{p}: topic {topic.name} listed twice')
+            if topic.qos not in ('reliable', 'transient_local'):
+                raise ContractError(f'{p}: topic {topic.name}: qos {topic.qos!r} is not reliable|transient_local')
+            topics[topic.name] = topic
+        return Contract(int(raw['contract_version']), raw['frame_id'], raw['joint_name'], topics, p)
+    except (KeyError, TypeError, ValueError, yaml.YAMLError) as e:
+        raise ContractError(f'{p}: malformed interface contract ({type(e).__name__}: {e})') from None
+
+
+__all__ = ['Contract', 'ContractError', 'Topic', 'contract_path', 'load_contract']

@@ -1,0 +1,185 @@
+"""adaptive_controller: joint angle tracking (back-stepping adaptive law, or the Sec. 6.1 PID).
+
+Thin adapter over :class:`sma_wrist.core.joint_controller.JointController`. Every scalar
+field of the core parameter dataclasses is a declared ROS parameter with the dataclass
+default: ``mode``, the composition's own fields, ``adaptive.<field>``
+(:class:`~sma_wrist.core.adaptive.AdaptiveParams`, Eqs. 5.24, 5.32, 5.37) and
+``pid.<field>`` (:class:`~sma_wrist.core.pid.PIDParams`). The paper's Table 6.1 gains are
+the params file ``config/paper_table_6_1.yaml``.
+
+Computes on each measured joint state (100 Hz with the default plant) with the latest
+reference. In ``inverse_adaptive`` mode it publishes desired strain and stress of both
+muscles for hysteresis_compensator; in ``direct_adaptive`` and ``pid`` it publishes the
+desired temperatures itself. A stale or missing reference or joint state stops the
+output (tem_controller then switches the TEMs off) and is reported on /diagnostics.
+"""
+from __future__ import annotations
+
+import dataclasses
+import typing
+from typing import Any, Mapping
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from sensor_msgs.msg import Temperature
+from std_msgs.msg import Float64
+
+from sma_wrist.core.adaptive import AdaptiveParams
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.joint_controller import JointController as JointLaw
+from sma_wrist.core.joint_controller import JointControllerParams
+from sma_wrist.core.muscle import MuscleGeometry
+from sma_wrist.core.pid import PIDParams
+from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
+
+NONNEGATIVE_PREFIXES = ('c1', 'c2', 'gamma', 'kp', 'ki', 'kd', 'boundary', 'tracking', 'derivative_filter')
+
+
+def _fields_as_params(cls: type, prefix: str, skip: tuple[str, ...] = ()) -> tuple[Param, ...]:
+    """A Param for every scalar (float/int/str-choice/bool) field of a parameter dataclass."""
+    hints = typing.get_type_hints(cls)
+    default = cls()
+    out = []
+    for f in dataclasses.fields(cls):
+        if f.name in skip or not f.init:
+            continue
+        v = getattr(default, f.name)
+        name = prefix + f.name
+        doc = f'{cls.__name__}.{f.name} (sma_wrist.core)'
+        choices = typing.get_args(hints[f.name]) if typing.get_origin(hints[f.name]) is typing.Literal else ()
+        if choices:
+            out.append(Param(name, str(v), doc, choices=tuple(str(c) for c in choices)))
+        elif isinstance(v, bool):
+            out.append(Param(name, v, doc))
+        elif isinstance(v, (int, float)):
+            lo = 0.0 if f.name.startswith(NONNEGATIVE_PREFIXES) else -1e9
+            out.append(Param(name, float(v), doc, '', (lo, 1e9)))
+    return tuple(out)
+
+
+def _own_fields() -> tuple[Param, ...]:
+    return _fields_as_params(JointControllerParams, '', skip=('adaptive', 'pid'))
+
+
+class AdaptiveController(WristNode):
+    PARAMS = (
+        Param('stale_timeout_s', 0.25, 'reference/joint-state age that stops the output', 's', (0.01, 10.0)),
+    ) + _own_fields() + _fields_as_params(AdaptiveParams, 'adaptive.', skip=('mode',)) \
+        + _fields_as_params(PIDParams, 'pid.')
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('adaptive_controller', **kwargs)
+        self.law = JointLaw(self._core_params(self.p))
+        self.geometry = MuscleGeometry()
+        self.reference: tuple[float, float, float] | None = None
+        self.T_meas = np.full(2, np.nan)
+        self.t_last: float | None = None
+        self.fresh = Freshness(self, ('reference', 'joint_states'))
+        self.pub_strain = [self.publisher(f'/wrist/muscle_{i}/strain_desired') for i in (1, 2)]
+        self.pub_stress = [self.publisher(f'/wrist/muscle_{i}/stress_desired') for i in (1, 2)]
+        self.pub_T = [self.publisher(f'/wrist/muscle_{i}/temperature_desired') for i in (1, 2)]
+        self.subscription('/wrist/reference', self._on_reference)
+        self.subscription('/wrist/joint_states', self._on_joint_state)
+        for i in (1, 2):
+            self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
+        self.watchdog = self.create_timer(0.05, self._check_stale)
+
+    # -- parameters ----------------------------------------------------------------
+    @staticmethod
+    def _core_params(p: Mapping[str, Any]) -> JointControllerParams:
+        """Core parameter objects from the flat ROS parameters (raises ParameterError)."""
+        def section(cls: type, prefix: str) -> dict[str, Any]:
+            names = {f.name for f in dataclasses.fields(cls)}
+            return {k[len(prefix):]: v for k, v in p.items() if k.startswith(prefix) and k[len(prefix):] in names}
+        adaptive = AdaptiveParams(mode=p['mode'] if p['mode'] != 'pid' else 'inverse_adaptive',
+                                  **section(AdaptiveParams, 'adaptive.'))
+        pid = PIDParams(**section(PIDParams, 'pid.'))
+        own = {f.name: p[f.name] for f in dataclasses.fields(JointControllerParams)
+               if f.name not in ('adaptive', 'pid') and f.name in p}
+        return JointControllerParams(**{**own, 'adaptive': adaptive, 'pid': pid})
+
+    def validate(self, values: Mapping[str, Any]) -> str | None:
+        problem = super().validate(values)
+        if problem is None:
+            try:
+                self._core_params(values)
+            except SmaWristError as e:
+                problem = str(e)
+        return problem
+
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        # Gains change in place of the law; a mode change restarts the estimates.
+        self.law = JointLaw(self._core_params(self.p))
+
+    # -- inputs ----------------------------------------------------------------------
+    def _on_reference(self, msg: Any) -> None:
+        try:
+            q, qd, qdd = msg.position[0], msg.velocity[0], msg.effort[0]
+        except IndexError:
+            self.reject_input('reference', 'needs position, velocity and effort (acceleration)')
+            return
+        if not finite(q, qd, qdd):
+            self.reject_input('reference', f'non-finite reference ({q}, {qd}, {qdd})')
+            return
+        self.reference = (q, qd, qdd)
+        self.fresh.mark('reference')
+
+    def _on_temperature(self, i: int, msg: Any) -> None:
+        if finite(msg.temperature):
+            self.T_meas[i - 1] = msg.temperature
+
+    def _on_joint_state(self, msg: Any) -> None:
+        try:
+            q, qd = msg.position[0], msg.velocity[0]
+        except IndexError:
+            self.reject_input('joint_states', 'needs position and velocity')
+            return
+        if not finite(q, qd):
+            self.reject_input('joint_states', f'non-finite joint state ({q}, {qd})')
+            return
+        self.fresh.mark('joint_states')
+        t = self.now_ns() * 1e-9
+        dt, self.t_last = (None if self.t_last is None else t - self.t_last), t
+        if self.reference is None or dt is None or dt <= 0:
+            return
+        if self.fresh.stale(self.p['stale_timeout_s']):
+            return
+        try:
+            cmd = self.law.update(q, qd, *self.reference, dt, muscle_temperature_C=self.T_meas.copy())
+        except SmaWristError as e:
+            self.diagnose('law', DiagnosticStatus.ERROR, f'control law failed, output stopped: {e}')
+            return
+        self.diagnose('saturation', DiagnosticStatus.WARN if cmd.saturated else DiagnosticStatus.OK,
+                      'command saturated: reference beyond what the muscles can reach' if cmd.saturated
+                      else 'command within limits', {k: f'{v:.4g}' for k, v in cmd.info.items()})
+        self._publish(cmd)
+
+    def _publish(self, cmd: Any) -> None:
+        for i in range(2):
+            self.pub_strain[i].publish(Float64(data=float(cmd.strain_desired[i])))
+        if cmd.force_N is not None:
+            # one wire's stress: the bundle force is shared by its parallel wires
+            stress = self.geometry.stress_Pa(np.asarray(cmd.force_N) / (self.geometry.n_wires * 9.81))
+            for i in range(2):
+                self.pub_stress[i].publish(Float64(data=float(stress[i])))
+        if cmd.temperature_desired_C is not None:
+            stamp = self.get_clock().now().to_msg()
+            for i in range(2):
+                m = Temperature(temperature=float(cmd.temperature_desired_C[i]), variance=0.0)
+                m.header.stamp = stamp
+                m.header.frame_id = f'muscle_{i + 1}'
+                self.pub_T[i].publish(m)
+
+    def _check_stale(self) -> None:
+        stale = self.fresh.stale(self.p['stale_timeout_s'])
+        level = DiagnosticStatus.ERROR if stale and self.t_last is not None else DiagnosticStatus.OK
+        self.diagnose('watchdog', level, f'no fresh {", ".join(stale)}: output stopped' if level != DiagnosticStatus.OK
+                      else 'inputs fresh')
+
+
+def main(args: list[str] | None = None) -> int:
+    return main_for(AdaptiveController, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,222 @@
+"""What every sma_wrist node shares: declared parameters with descriptors, contract topics,
+input checks and /diagnostics. Plain rclpy (Humble and Jazzy); no runtime detection.
+
+A node lists its parameters as :class:`Param` specs. :class:`WristNode` declares them with
+a ``ParameterDescriptor`` (description with unit, ``FloatingPointRange``/``IntegerRange``,
+read-only), so rclpy itself rejects wrong types and out-of-range values with its own
+reason; the node's ``validate`` adds choice and cross-parameter checks in the on-set
+callback and ``apply`` changes state only after everything passed (ros2/demos'
+set_parameters_callback pattern).
+"""
+from __future__ import annotations
+
+import importlib
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from sma_wrist.contract import Topic, load_contract
+from sma_wrist.core.errors import SmaWristError
+
+
+@dataclass(frozen=True)
+class Param:
+    """A declared parameter: default value, unit, description and valid values."""
+
+    name: str
+    default: Any
+    description: str
+    unit: str = ''
+    range: tuple[float, float] | None = None  # inclusive, checked by rclpy
+    choices: tuple[str, ...] | None = None  # checked by WristNode.validate
+    read_only: bool = False
+    runtime: bool = True  # False: change needs a restart; rejected with that reason
+
+    def descriptor(self) -> ParameterDescriptor:
+        text = self.description + (f' [{self.unit}]' if self.unit else '')
+        d = ParameterDescriptor(description=text, read_only=self.read_only)
+        if self.choices:
+            d.additional_constraints = 'one of: ' + ', '.join(self.choices)
+        if self.range is not None:
+            lo, hi = self.range
+            if isinstance(self.default, bool):
+                pass
+            elif isinstance(self.default, int):
+                d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+            elif isinstance(self.default, float):
+                d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+        return d
+
+
+def message_class(topic: Topic) -> Any:
+    """The ROS message class of a contract topic (e.g. std_msgs.msg.Float64)."""
+    return getattr(importlib.import_module(f'{topic.package}.msg'), topic.message)
+
+
+def qos_for(topic: Topic) -> QoSProfile:
+    if topic.qos == 'transient_local':
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+class WristNode(Node):
+    """Base of the sma_wrist nodes: parameters from specs, contract topics, diagnostics."""
+
+    PARAMS: Sequence[Param] = ()
+
+    def __init__(self, name: str, **kwargs: Any) -> None:
+        super().__init__(name, **kwargs)
+        self.contract = load_contract()
+        self._specs = {p.name: p for p in self.PARAMS}
+        for p in self.PARAMS:
+            self.declare_parameter(p.name, p.default, p.descriptor())
+        self.p: dict[str, Any] = {p.name: self.get_parameter(p.name).value for p in self.PARAMS}
+        problem = self.validate(self.p)
+        if problem:
+            # Bad values from a params file / command line: refuse to start with the reason.
+            raise SmaWristError(f'{self.get_name()}: invalid parameters: {problem}')
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._diag_last: dict[str, tuple[int, str]] = {}
+        self.rejected_inputs = 0
+
+    # -- parameters ------------------------------------------------------------
+    def validate(self, values: Mapping[str, Any]) -> str | None:
+        """Reason the parameter set is invalid, or None. Override to add cross-checks."""
+        for name, v in values.items():
+            spec = self._specs.get(name)
+            if spec is None:
+                continue
+            if spec.choices and v not in spec.choices:
+                return f'{name} = {v!r} is not one of {", ".join(spec.choices)}'
+            if isinstance(v, float) and not math.isfinite(v):
+                return f'{name} = {v!r} is not a finite number'
+        return None
+
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        """Take validated parameter changes into effect. Override."""
+
+    def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+        changed = {p.name: p.value for p in params if p.name in self._specs}
+        for name in changed:
+            if not self._specs[name].runtime:
+                return SetParametersResult(successful=False, reason=f'{name} cannot change while running; restart the node')
+        candidate = {**self.p, **changed}
+        try:
+            problem = self.validate(candidate)
+            if problem is None:
+                self.apply_checked(changed, candidate)
+        except SmaWristError as e:
+            problem = str(e)
+        if problem:
+            self.get_logger().warning(f'rejected parameter change: {problem}')
+            return SetParametersResult(successful=False, reason=problem)
+        return SetParametersResult(successful=True, reason='')
+
+    def apply_checked(self, changed: Mapping[str, Any], candidate: Mapping[str, Any]) -> None:
+        old = dict(self.p)
+        self.p = dict(candidate)
+        try:
+            self.apply(changed)
+        except SmaWristError:
+            self.p = old
+            raise
+
+    # -- topics ------------------------------------------------------------------
+    def publisher(self, topic_name: str) -> Any:
+        t = self.contract.topic(topic_name)
+        return self.create_publisher(message_class(t), t.name, qos_for(t))
+
+    def subscription(self, topic_name: str, callback: Callable[[Any], None]) -> Any:
+        t = self.contract.topic(topic_name)
+        return self.create_subscription(message_class(t), t.name, callback, qos_for(t))
+
+    def now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    # -- diagnostics ---------------------------------------------------------------
+    def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None) -> None:
+        """Publish one DiagnosticStatus when ``key``'s level or message changes, and log it.
+
+        Called every cycle with the current state; publishes on change only, so a
+        persistent fault is one message, and its recovery (level OK) another.
+        """
+        last = self._diag_last.get(key)
+        if last == (level, message):
+            return
+        if last is None and level == DiagnosticStatus.OK:
+            self._diag_last[key] = (level, message)
+            return
+        self._diag_last[key] = (level, message)
+        status = DiagnosticStatus(level=level, name=f'{self.get_name()}: {key}', message=message,
+                                  hardware_id='sma_wrist',
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()])
+        arr = DiagnosticArray(status=[status])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(arr)
+        log = self.get_logger()
+        if level == DiagnosticStatus.OK:
+            log.info(f'{key}: {message}')
+        elif level == DiagnosticStatus.WARN:
+            log.warning(f'{key}: {message}')
+        else:
+            log.error(f'{key}: {message}')
+
+    def reject_input(self, topic: str, reason: str) -> None:
+        """Count and report a malformed message; the last good value stays in use."""
+        self.rejected_inputs += 1
+        self.diagnose(f'input {topic}', DiagnosticStatus.WARN, f'rejected message: {reason}',
+                      {'rejected_total': self.rejected_inputs})
+
+
+def finite(*values: float) -> bool:
+    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+
+
+class Freshness:
+    """Time of the last good sample per input, to detect stale sensors."""
+
+    def __init__(self, node: WristNode, names: Sequence[str]) -> None:
+        self.node = node
+        self.stamp_ns: dict[str, int | None] = {n: None for n in names}
+
+    def mark(self, name: str) -> None:
+        self.stamp_ns[name] = self.node.now_ns()
+
+    def stale(self, timeout_s: float) -> list[str]:
+        now = self.node.now_ns()
+        return [n for n, t in self.stamp_ns.items() if t is None or (now - t) > timeout_s * 1e9]
+
+    def seen_all(self) -> bool:
+        return all(t is not None for t in self.stamp_ns.values())
+
+
+def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
+    """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_class()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except SmaWristError as e:
+        print(f'error: {e}', flush=True)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+__all__ = ['Param', 'WristNode', 'Freshness', 'finite', 'main_for', 'message_class', 'qos_for']

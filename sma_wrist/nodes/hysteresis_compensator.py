@@ -1,0 +1,113 @@
+"""hysteresis_compensator: desired muscle strain + stress -> desired muscle temperature.
+
+Inverse SD-GPI (Eqs. 5.5-5.8) in the wrist's coordinates (:mod:`sma_wrist.core.compensation`).
+Computes when a fresh set of all four targets (strain and stress of both muscles) has arrived
+from adaptive_controller; its memory starts from the measured temperatures and stresses.
+Targets the window cannot reach give the nearest reachable temperature, reported on
+/diagnostics; malformed targets are rejected and counted.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from sensor_msgs.msg import Temperature
+
+from sma_wrist.core.compensation import MuscleCompensator
+from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.nodes.common import Param, WristNode, finite, main_for
+
+INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
+
+
+class HysteresisCompensator(WristNode):
+    PARAMS = (
+        Param('temperature_min_C', 20.0, 'lowest temperature the compensator asks for', 'degC', (-10.0, 110.0)),
+        Param('temperature_max_C', 80.0, 'highest temperature the compensator asks for', 'degC', (-10.0, 110.0)),
+        Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
+              choices=('numerical', 'analytic', 'auto')),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('hysteresis_compensator', **kwargs)
+        self._build()
+        self.values = dict.fromkeys(INPUTS, np.nan)
+        self.fresh = dict.fromkeys(INPUTS, False)
+        self.T_meas = np.full(2, np.nan)
+        self.stress_meas = np.full(2, np.nan)
+        self.started = False
+        self.pub_T = [self.publisher(f'/wrist/muscle_{i}/temperature_desired') for i in (1, 2)]
+        for i in (1, 2):
+            self.subscription(f'/wrist/muscle_{i}/strain_desired', lambda m, i=i: self._on_target(f'strain_{i}', m))
+            self.subscription(f'/wrist/muscle_{i}/stress_desired', lambda m, i=i: self._on_target(f'stress_{i}', m))
+            self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_measured_T(i, m))
+            self.subscription(f'/wrist/muscle_{i}/stress', lambda m, i=i: self._on_measured_stress(i, m))
+
+    def validate(self, values: Mapping[str, Any]) -> str | None:
+        problem = super().validate(values)
+        if problem is None and not values['temperature_min_C'] < values['temperature_max_C']:
+            problem = (f'temperature_min_C = {values["temperature_min_C"]} must be below '
+                       f'temperature_max_C = {values["temperature_max_C"]}')
+        return problem
+
+    def _build(self) -> None:
+        self.comp = MuscleCompensator(default_sdgpi(), T_range_C=(self.p['temperature_min_C'],
+                                                                  self.p['temperature_max_C']),
+                                      method=self.p['method'])
+        self.started = False  # re-seed the memory from the next measurement
+
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        self._build()
+
+    def _on_measured_T(self, i: int, msg: Any) -> None:
+        if finite(msg.temperature):
+            self.T_meas[i - 1] = msg.temperature
+
+    def _on_measured_stress(self, i: int, msg: Any) -> None:
+        if finite(msg.data) and msg.data >= 0:
+            self.stress_meas[i - 1] = msg.data
+
+    def _on_target(self, key: str, msg: Any) -> None:
+        v = msg.data
+        if not finite(v) or (key.startswith('stress') and v < 0):
+            self.reject_input(key + '_desired', f'{v!r} is not a valid target')
+            return
+        self.values[key] = v
+        self.fresh[key] = True
+        if all(self.fresh.values()):
+            self.fresh = dict.fromkeys(INPUTS, False)
+            self._compensate()
+
+    def _compensate(self) -> None:
+        strain = np.array([self.values['strain_1'], self.values['strain_2']])
+        stress = np.array([self.values['stress_1'], self.values['stress_2']])
+        if not self.started:
+            if not (np.isfinite(self.T_meas).all() and np.isfinite(self.stress_meas).all()):
+                return  # memory needs a measured starting point
+            self.comp.reset(self.T_meas, self.stress_meas)
+            self.started = True
+        try:
+            res = self.comp(strain, stress)
+        except SmaWristError as e:
+            self.diagnose('inverse', DiagnosticStatus.ERROR, f'inverse failed: {e}')
+            return
+        sat = res.saturated | res.load_clipped
+        self.diagnose('saturation', DiagnosticStatus.WARN if sat.any() else DiagnosticStatus.OK,
+                      'target outside the reachable temperature/load window' if sat.any() else 'targets reachable',
+                      {'load_kgf': np.round(res.load_kgf, 3).tolist()})
+        stamp = self.get_clock().now().to_msg()
+        for i in range(2):
+            msg = Temperature(temperature=float(res.temperature_C[i]), variance=0.0)
+            msg.header.stamp = stamp
+            msg.header.frame_id = f'muscle_{i + 1}'
+            self.pub_T[i].publish(msg)
+
+
+def main(args: list[str] | None = None) -> int:
+    return main_for(HysteresisCompensator, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,149 @@
+"""plant_sim: the simulated wrist (TEM heat balance + SD-GPI muscles + joint), and the clock.
+
+Subscribes the TEM drive commands, integrates :class:`sma_wrist.core.plant.WristPlant`
+at ``dt_s`` (1 kHz), and every ``1 / publish_rate_hz`` of simulated time publishes
+``/clock`` and the measurements (temperatures, per-wire stresses, joint state) stamped
+with simulated time. It runs on its own (steady/system) clock with ``use_sim_time``
+false: one timer period of ``1 / (publish_rate_hz * real_time_factor)`` s advances the
+simulation by ``1 / publish_rate_hz``; the other nodes set ``use_sim_time:=true``.
+On the embedded runtime the steady clock is virtual, so the graph runs as fast as the
+CPU allows and the result does not depend on the machine.
+
+Safety: commands beyond the TEM limits are clipped (flagged on /diagnostics), NaN/inf
+commands are rejected (last good command kept), a command older than
+``command_timeout_s`` is replaced by 0 V (TEMs off), and a muscle above
+``max_muscle_temperature_C`` is reported.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any, Mapping
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, Temperature
+from std_msgs.msg import Float64
+
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.plant import PlantParams, WristPlant
+from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
+
+
+class PlantSim(WristNode):
+    PARAMS = (
+        Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m', 'kg', (0.0, 1.5)),
+        Param('dt_s', 1e-3, 'plant integration step', 's', (1e-4, 1e-2), runtime=False),
+        Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in simulated time', 'Hz',
+              (1.0, 1000.0), runtime=False),
+        Param('real_time_factor', 1.0, 'simulated seconds per second of the node clock (steady time)', '',
+              (0.01, 1000.0), runtime=False),
+        Param('initial_angle_rad', -1.0, 'start angle; negative = static equilibrium at zero drive', 'rad',
+              (-1.0, 1.4), runtime=False),
+        Param('command_timeout_s', 0.5, 'a TEM command older than this is replaced by 0 V', 's', (0.01, 60.0)),
+        Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature threshold (reported)', 'degC',
+              (30.0, 120.0)),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('plant_sim', **kwargs)
+        p = self.p
+        self.sim_params = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'])
+        q0 = None if p['initial_angle_rad'] < 0 else p['initial_angle_rad']
+        self.plant = WristPlant(self.sim_params, payload_kg=p['payload_kg'])
+        if q0 is not None:
+            self.plant.state = self.plant.rest_state(np.array([p['payload_kg']]), q0=q0)
+        self.steps_per_tick = max(1, int(round(1.0 / (p['publish_rate_hz'] * p['dt_s']))))
+        self.command_V = np.zeros((1, 2))
+        self.fresh = Freshness(self, ('tem_1', 'tem_2'))
+        self._tick_count = 0
+
+        self.pub_clock = self.publisher('/clock')
+        self.pub_joint = self.publisher('/wrist/joint_states')
+        self.pub_temp = [self.publisher(f'/wrist/muscle_{i}/temperature') for i in (1, 2)]
+        self.pub_stress = [self.publisher(f'/wrist/muscle_{i}/stress') for i in (1, 2)]
+        self.pub_payload = self.publisher('/wrist/payload')
+        for i in (1, 2):
+            self.subscription(f'/wrist/tem_{i}/command', lambda msg, i=i: self._on_command(i, msg))
+        period = 1.0 / (p['publish_rate_hz'] * p['real_time_factor'])
+        self.timer = self.create_timer(period, self._tick)
+        self._publish_payload()
+        self._publish_measurements()
+        self.get_logger().info(
+            f'plant_sim: payload {p["payload_kg"]} kg, dt {p["dt_s"]} s, {self.steps_per_tick} steps per '
+            f'{1.0 / p["publish_rate_hz"]:g} s tick, start angle {float(self.plant.state.q[0]):.3f} rad')
+
+    # -- parameters ------------------------------------------------------------
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        if 'payload_kg' in changed:
+            self.plant.state.payload_kg[:] = changed['payload_kg']
+            self._publish_payload()
+        if 'max_muscle_temperature_C' in changed:
+            self.sim_params = replace(self.sim_params, max_muscle_temperature_C=changed['max_muscle_temperature_C'])
+            self.plant.params = self.sim_params
+
+    # -- inputs ----------------------------------------------------------------
+    def _on_command(self, i: int, msg: Any) -> None:
+        if not finite(msg.data):
+            self.reject_input(f'tem_{i}/command', f'non-finite command {msg.data!r} V')
+            return
+        self.command_V[0, i - 1] = msg.data
+        self.fresh.mark(f'tem_{i}')
+
+    # -- simulation ------------------------------------------------------------
+    def _tick(self) -> None:
+        stale = [n for n in self.fresh.stale(self.p['command_timeout_s']) if self.fresh.stamp_ns[n] is not None]
+        u = self.command_V.copy()
+        for n in stale:
+            u[0, int(n[-1]) - 1] = 0.0
+        self.diagnose('command', DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
+                      f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh')
+        saturated = hot = False
+        try:
+            for _ in range(self.steps_per_tick):
+                s = self.plant.step(u)
+                saturated |= bool(s.flags['command_saturated'][0])
+                hot |= bool(s.flags['over_temperature'][0])
+        except SmaWristError as e:
+            self.diagnose('model', DiagnosticStatus.ERROR, f'simulation stopped: {e}')
+            self.timer.cancel()
+            return
+        self.diagnose('saturation', DiagnosticStatus.WARN if saturated else DiagnosticStatus.OK,
+                      'TEM command clipped to the drive limits' if saturated else 'commands within limits',
+                      {'u_min_V': self.sim_params.thermal.u_min_V, 'u_max_V': self.sim_params.thermal.u_max_V})
+        self.diagnose('temperature', DiagnosticStatus.ERROR if hot else DiagnosticStatus.OK,
+                      f'muscle above {self.p["max_muscle_temperature_C"]} degC' if hot else 'temperatures normal')
+        self._publish_measurements()
+
+    def _stamp(self) -> Any:
+        return Time(nanoseconds=int(round(self.plant.state.t * 1e9))).to_msg()
+
+    def _publish_measurements(self) -> None:
+        stamp = self._stamp()
+        self.pub_clock.publish(Clock(clock=stamp))
+        T = self.plant.muscle_temperature_C[0]
+        stress = self.plant.wire_stress_Pa[0]
+        s = self.plant.state
+        for i in range(2):
+            msg = Temperature(temperature=float(T[i]), variance=0.0)
+            msg.header.stamp = stamp
+            msg.header.frame_id = f'muscle_{i + 1}'
+            self.pub_temp[i].publish(msg)
+            self.pub_stress[i].publish(Float64(data=float(stress[i])))
+        js = JointState(name=[self.contract.joint_name], position=[float(s.q[0])], velocity=[float(s.qd[0])],
+                        effort=[float(self.plant.muscle_torque_Nm[0])])
+        js.header.stamp = stamp
+        js.header.frame_id = self.contract.frame_id
+        self.pub_joint.publish(js)
+
+    def _publish_payload(self) -> None:
+        self.pub_payload.publish(Float64(data=float(self.p['payload_kg'])))
+
+
+def main(args: list[str] | None = None) -> int:
+    return main_for(PlantSim, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,143 @@
+"""tem_controller: desired muscle temperatures -> TEM drive commands (Eqs. 5.38-5.47).
+
+One node drives both layers (two-layer arrangement: one TEM layer per muscle, weights
+(1, 0) of Eq. 5.47). The feedback-linearising law needs both faces of each module; only
+the muscle face is measured, so the exchanger face comes from an observer: the heat
+balance (Eqs. 4.13-4.14) integrated with the commands this node sent, its muscle face
+reset to each measurement.
+
+It computes when a fresh temperature of both muscles has arrived (measurement-driven,
+100 Hz with the default plant), using the latest desired temperatures.
+
+Safety, in this order: no fresh measurement for ``stale_timeout_s`` -> 0 V (TEMs off) and
+an ERROR on /diagnostics until data returns; no desired temperature yet or a stale one ->
+0 V; a muscle above ``max_muscle_temperature_C`` may only be cooled; every command is
+clipped to [``u_min_V``, ``u_max_V``] (themselves inside the heat balance's runaway-free
+limits) and a clip is reported.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any, Mapping
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from std_msgs.msg import Float64
+
+from sma_wrist.core import thermal as th
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.tem_control import TemController as TemLaw
+from sma_wrist.core.tem_control import TemControlParams
+from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
+
+LIMITS = th.ThermalParams()
+
+
+class TemController(WristNode):
+    PARAMS = (
+        Param('gain_per_s', 1.0, 'k of the temperature error dynamics de/dt + k e = 0 (Eq. 5.42)', '1/s',
+              (0.01, 50.0)),
+        Param('rate_filter_s', 0.05, 'time constant of the filter on the estimated dT_d/dt', 's', (0.0, 10.0)),
+        Param('u_min_V', LIMITS.u_min_V, 'most negative (cooling) drive command', 'V', (LIMITS.u_min_V, 0.0)),
+        Param('u_max_V', LIMITS.u_max_V, 'most positive (heating) drive command', 'V', (0.0, LIMITS.u_max_V)),
+        Param('max_muscle_temperature_C', 85.0, 'above this a muscle is only cooled', 'degC', (30.0, 120.0)),
+        Param('stale_timeout_s', 0.25, 'measurement/target age that switches the TEMs off', 's', (0.01, 10.0)),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('tem_controller', **kwargs)
+        self._build()
+        self.observer = th.rest_state(self.thermal, 1)  # (1, 2 layers, 2 faces)
+        self.T_meas = np.full(2, np.nan)
+        self.T_d = np.full(2, np.nan)
+        self.new_meas = [False, False]
+        self.command_V = np.zeros(2)
+        self.t_last: float | None = None
+        self.meas = Freshness(self, ('muscle_1', 'muscle_2'))
+        self.targets = Freshness(self, ('target_1', 'target_2'))
+        self.pub_cmd = [self.publisher(f'/wrist/tem_{i}/command') for i in (1, 2)]
+        for i in (1, 2):
+            self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
+            self.subscription(f'/wrist/muscle_{i}/temperature_desired', lambda m, i=i: self._on_target(i, m))
+        self.watchdog = self.create_timer(0.05, self._check_stale)
+
+    def _build(self) -> None:
+        p = self.p
+        self.thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])
+        self.law = TemLaw(self.thermal, TemControlParams(gain_per_s=p['gain_per_s'],
+                                                         rate_filter_s=p['rate_filter_s']))
+
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        self._build()
+
+    # -- inputs ------------------------------------------------------------------
+    def _on_temperature(self, i: int, msg: Any) -> None:
+        T = msg.temperature
+        if not finite(T) or not (-50.0 <= T <= 200.0):
+            self.reject_input(f'muscle_{i}/temperature', f'{T!r} degC is not a plausible temperature')
+            return
+        self.T_meas[i - 1] = T
+        self.new_meas[i - 1] = True
+        self.meas.mark(f'muscle_{i}')
+        if all(self.new_meas):
+            self.new_meas = [False, False]
+            self._control()
+
+    def _on_target(self, i: int, msg: Any) -> None:
+        T = msg.temperature
+        if not finite(T):
+            self.reject_input(f'muscle_{i}/temperature_desired', f'non-finite target {T!r} degC')
+            return
+        self.T_d[i - 1] = T
+        self.targets.mark(f'target_{i}')
+
+    # -- control -----------------------------------------------------------------
+    def _control(self) -> None:
+        t = self.now_ns() * 1e-9
+        dt = None if self.t_last is None else t - self.t_last
+        if dt is not None and dt > 0:
+            # observer: propagate with the commands in force since the last sample
+            self.observer = th.step(self.thermal, self.observer, self.command_V[None, :],
+                                    min(dt, self.thermal.dt_max_s), validate=False)
+        self.t_last = t
+        self.observer[0, :, 0] = self.T_meas
+        if self.targets.stale(self.p['stale_timeout_s']):
+            self._send(np.zeros(2))
+            return
+        T_d = np.stack([self.T_d, self.T_d], axis=-1)[None]  # exchanger targets unused with weights (1, 0)
+        try:
+            res = self.law.update(t, self.observer, T_d)
+        except SmaWristError as e:
+            self.diagnose('law', DiagnosticStatus.ERROR, f'TEM law failed, TEMs off: {e}')
+            self._send(np.zeros(2))
+            return
+        u = res.command_V[0].copy()
+        hot = self.T_meas > self.p['max_muscle_temperature_C']
+        u = np.where(hot, np.minimum(u, 0.0), u)
+        sat = res.saturated[0]
+        self.diagnose('over_temperature', DiagnosticStatus.ERROR if hot.any() else DiagnosticStatus.OK,
+                      'muscle above limit: heating blocked' if hot.any() else 'muscle temperatures below limit',
+                      {'T_1_C': f'{self.T_meas[0]:.2f}', 'T_2_C': f'{self.T_meas[1]:.2f}'})
+        self.diagnose('saturation', DiagnosticStatus.WARN if sat.any() else DiagnosticStatus.OK,
+                      'command clipped to the drive limits' if sat.any() else 'commands within limits')
+        self.diagnose('watchdog', DiagnosticStatus.OK, 'measurements and targets fresh')
+        self._send(u)
+
+    def _check_stale(self) -> None:
+        stale = self.meas.stale(self.p['stale_timeout_s'])
+        if stale and self.meas.seen_all():
+            self.diagnose('watchdog', DiagnosticStatus.ERROR, f'no fresh {", ".join(stale)} temperature: TEMs off')
+            self._send(np.zeros(2))
+
+    def _send(self, u: np.ndarray) -> None:
+        self.command_V = np.asarray(u, dtype=float)
+        for i in range(2):
+            self.pub_cmd[i].publish(Float64(data=float(self.command_V[i])))
+
+
+def main(args: list[str] | None = None) -> int:
+    return main_for(TemController, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,90 @@
+"""trajectory_generator: publishes the desired wrist angle q_d(t), its rate and acceleration.
+
+Default: the Sec. 6.1 experiment q_d = 0.524 + 0.524 sin(0.1 t) rad. Other shapes: step,
+ramp, sine_sweep, constant (:mod:`sma_wrist.core.trajectory`). Time is the node clock
+(simulated time under ``use_sim_time``), measured from the first tick, so a run starts
+at t = 0 of its trajectory whenever the node comes up. Output: ``/wrist/reference``
+(sensor_msgs/JointState: position q_d, velocity, effort = acceleration, documented in
+msg_defs/topics.yaml).
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping
+
+from sensor_msgs.msg import JointState
+
+from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.trajectory import GENERATORS, Trajectory, make_trajectory
+from sma_wrist.nodes.common import Param, WristNode, main_for
+
+# Ranges by unit suffix for the per-shape parameters; the generators check the rest
+# (e.g. amplitude >= 0) and make_trajectory checks the whole q_d stays inside the limits.
+_RANGES = {'_rad_s': ((-10.0, 10.0), 'rad/s'), '_rad': ((-6.3, 6.3), 'rad'), '_s': ((0.0, 1e6), 's')}
+
+
+def _shape_params() -> tuple[Param, ...]:
+    """``<shape>.<field>`` for every field of every generator, defaults from the generator."""
+    out = []
+    for shape, cls in GENERATORS.items():
+        for f in dataclasses.fields(cls):
+            suffix = next(k for k in _RANGES if f.name.endswith(k))
+            rng, unit = _RANGES[suffix]
+            out.append(Param(f'{shape}.{f.name}', float(f.default), f'{shape}: {f.name} (sma_wrist.core.trajectory.'
+                             f'{cls.__name__})', unit, rng))
+    return tuple(out)
+
+
+class TrajectoryGenerator(WristNode):
+    PARAMS = (
+        Param('shape', 'sine', 'reference shape', choices=tuple(GENERATORS)),
+        Param('rate_hz', 100.0, 'publishing rate', 'Hz', (1.0, 1000.0), runtime=False),
+        Param('angle_min_rad', 0.0, 'lowest angle a reference may command', 'rad', (-0.35, 1.4)),
+        Param('angle_max_rad', 1.05, 'highest angle a reference may command', 'rad', (-0.35, 1.4)),
+    ) + _shape_params()
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('trajectory_generator', **kwargs)
+        self.trajectory: Trajectory = self._build(self.p)
+        self.pub = self.publisher('/wrist/reference')
+        self.t0_ns: int | None = None
+        self.timer = self.create_timer(1.0 / self.p['rate_hz'], self._tick)
+
+    def _build(self, p: Mapping[str, Any]) -> Trajectory:
+        """The core generator for a parameter set; ParameterError names what is wrong."""
+        shape = p['shape']
+        prefix = shape + '.'
+        kwargs = {k[len(prefix):]: v for k, v in p.items() if k.startswith(prefix)}
+        return make_trajectory(shape, (p['angle_min_rad'], p['angle_max_rad']), **kwargs)
+
+    def validate(self, values: Mapping[str, Any]) -> str | None:
+        problem = super().validate(values)
+        if problem:
+            return problem
+        try:
+            self._build(values)
+        except ParameterError as e:
+            return str(e)
+        return None
+
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        self.trajectory = self._build(self.p)
+
+    def _tick(self) -> None:
+        now = self.now_ns()
+        if self.t0_ns is None:
+            self.t0_ns = now
+        t = (now - self.t0_ns) * 1e-9
+        q, qd, qdd = (float(x) for x in self.trajectory(t))
+        msg = JointState(name=[self.contract.joint_name], position=[q], velocity=[qd], effort=[qdd])
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.contract.frame_id
+        self.pub.publish(msg)
+
+
+def main(args: list[str] | None = None) -> int:
+    return main_for(TrajectoryGenerator, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
