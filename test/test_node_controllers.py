@@ -1,0 +1,120 @@
+"""trajectory_generator, tem_controller and hysteresis_compensator on the embedded runtime."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sma_wrist.runtime.launch import Runtime
+
+
+def test_trajectory_generator_publishes_the_seed_sine_with_derivatives(probe_factory):
+    from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/reference',))
+        rt.add(TrajectoryGenerator)
+        rt.run_until(20.0, until='steady')
+    ref = probe.got['/wrist/reference']
+    t = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in ref])
+    q = np.array([m.position[0] for m in ref])
+    qd = np.array([m.velocity[0] for m in ref])
+    qdd = np.array([m.effort[0] for m in ref])
+    t0 = t[0]
+    np.testing.assert_allclose(q, 0.524 + 0.524 * np.sin(0.1 * (t - t0)), atol=1e-12)
+    np.testing.assert_allclose(qd, 0.0524 * np.cos(0.1 * (t - t0)), atol=1e-12)
+    np.testing.assert_allclose(qdd, -0.00524 * np.sin(0.1 * (t - t0)), atol=1e-12)
+    assert len(ref) == pytest.approx(2001, abs=1)
+
+
+def test_trajectory_parameter_changes_are_validated_against_the_angle_limits():
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+    with Runtime() as rt:
+        node = rt.add(TrajectoryGenerator)
+        too_big, = node.set_parameters([Parameter('sine.amplitude_rad', value=0.9)])
+        shape, = node.set_parameters([Parameter('shape', value='square')])
+        step, = node.set_parameters([Parameter('shape', value='step')])
+    assert not too_big.successful and 'angle limits' in too_big.reason
+    assert not shape.successful and 'not one of' in shape.reason
+    assert step.successful and type(node.trajectory).__name__ == 'Step'
+
+
+def test_bad_params_file_value_stops_the_node_with_a_reason(tmp_path):
+    from sma_wrist.core.errors import SmaWristError
+    from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+    f = tmp_path / 'p.yaml'
+    f.write_text('trajectory_generator:\n  ros__parameters:\n    shape: triangle\n')
+    with Runtime(['--ros-args', '--params-file', str(f)]) as rt:
+        with pytest.raises(SmaWristError, match="shape = 'triangle' is not one of"):
+            rt.add(TrajectoryGenerator)
+
+
+def _tem_run(probe_factory, T_meas, T_des, seconds=1.0, stop_meas_after=None):
+    from sma_wrist.nodes.tem_controller import TemController
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/tem_1/command', '/wrist/tem_2/command'))
+        node = rt.add(TemController)
+        timers = [probe.every(0.01, f'/wrist/muscle_{i}/temperature', temperature=T_meas[i - 1]) for i in (1, 2)]
+        for i in (1, 2):
+            probe.every(0.01, f'/wrist/muscle_{i}/temperature_desired', temperature=T_des[i - 1])
+        rt.run_until(seconds, until='steady')
+        if stop_meas_after is not None:
+            for t in timers:
+                t.cancel()
+            rt.run_until(seconds + stop_meas_after, until='steady')
+    u1 = [m.data for m in probe.got['/wrist/tem_1/command']]
+    u2 = [m.data for m in probe.got['/wrist/tem_2/command']]
+    return probe, node, u1, u2
+
+
+def test_tem_controller_heats_the_cold_muscle_and_cools_the_hot_one_within_limits(probe_factory):
+    _, node, u1, u2 = _tem_run(probe_factory, (30.0, 60.0), (50.0, 40.0))
+    assert u1[-1] > 0.5 and u2[-1] < -0.5
+    assert max(u1) <= 13.0 and min(u2) >= -12.0
+
+
+def test_tem_controller_watchdog_switches_off_on_stale_temperatures_and_reports(probe_factory):
+    probe, node, u1, u2 = _tem_run(probe_factory, (30.0, 60.0), (50.0, 40.0), stop_meas_after=1.0)
+    assert u1[-1] == 0.0 and u2[-1] == 0.0
+    assert any('TEMs off' in m and level == 2 for _, level, m in probe.diagnostics())
+
+
+def test_tem_controller_over_temperature_blocks_heating(probe_factory):
+    probe, node, u1, _ = _tem_run(probe_factory, (88.0, 40.0), (95.0, 40.0))
+    assert u1[-1] <= 0.0
+    assert any('heating blocked' in m for _, _, m in probe.diagnostics())
+
+
+def test_tem_controller_rejects_implausible_temperatures(probe_factory):
+    _, node, u1, _ = _tem_run(probe_factory, (math.inf, 40.0), (50.0, 40.0), seconds=0.3)
+    assert node.rejected_inputs > 0
+    assert all(u == 0.0 for u in u1)  # never a measurement of muscle 1: nothing to act on
+
+
+def test_compensator_node_matches_the_core_inverse(probe_factory):
+    from sma_wrist.core.compensation import MuscleCompensator
+    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    g = MuscleGeometry()
+    stress = g.stress_Pa(np.array([0.8, 0.7]))
+    strain = np.array([2.0, 2.4]) / g.wire_length_mm
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
+        rt.add(HysteresisCompensator)
+        for i in (1, 2):
+            probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0)
+            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
+        rt.run_until(0.01, until='steady')
+        for i in (1, 2):
+            probe.publish(f'/wrist/muscle_{i}/strain_desired', data=float(strain[i - 1]))
+            probe.publish(f'/wrist/muscle_{i}/stress_desired', data=float(stress[i - 1]))
+        rt.run_until(0.02, until='steady')
+    ref = MuscleCompensator(default_sdgpi())
+    ref.reset(np.array([40.0, 40.0]), stress)
+    expected = ref(strain, stress).temperature_C
+    got = [probe.got[f'/wrist/muscle_{i}/temperature_desired'][-1].temperature for i in (1, 2)]
+    np.testing.assert_allclose(got, expected, atol=1e-9)
+    assert 20.0 <= min(got) and max(got) <= 80.0

@@ -1,0 +1,90 @@
+"""plant_sim on the embedded runtime: drive in, measurements and /clock out, bad input handled."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from sma_wrist.runtime.launch import Runtime
+
+
+def _measure(probe_factory, command_1: float | None, seconds: float = 3.0, params: dict | None = None,
+             bad: bool = False):
+    from sma_wrist.nodes.plant_sim import PlantSim
+    with Runtime(params={'/plant_sim': params or {}}) as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature',
+                                   '/wrist/joint_states', '/clock', '/wrist/payload', '/wrist/muscle_1/stress'))
+        node = rt.add(PlantSim)
+        if command_1 is not None:
+            probe.every(0.01, '/wrist/tem_1/command', data=command_1)
+            probe.every(0.01, '/wrist/tem_2/command', data=0.0)
+        if bad:
+            probe.every(0.01, '/wrist/tem_1/command', data=math.nan)
+        rt.run_until(seconds, until='steady')
+        return probe, node
+
+
+def test_heating_command_warms_muscle_1_and_moves_the_joint_up(probe_factory):
+    idle, _ = _measure(probe_factory, 0.0)
+    hot, node = _measure(probe_factory, 10.0)
+    T_idle = idle.got['/wrist/muscle_1/temperature'][-1].temperature
+    T_hot = hot.got['/wrist/muscle_1/temperature'][-1].temperature
+    assert T_hot > T_idle + 3.0
+    # muscle 2 untouched
+    assert abs(hot.got['/wrist/muscle_2/temperature'][-1].temperature
+               - idle.got['/wrist/muscle_2/temperature'][-1].temperature) < 0.5
+    assert hot.got['/wrist/joint_states'][-1].position[0] >= idle.got['/wrist/joint_states'][-1].position[0]
+
+
+def test_clock_and_stamps_follow_simulated_time_at_the_publish_rate(probe_factory):
+    probe, node = _measure(probe_factory, 0.0, seconds=1.0, params={'publish_rate_hz': 50.0})
+    clocks = [c.clock.sec + 1e-9 * c.clock.nanosec for c in probe.got['/clock']]
+    assert clocks[0] == 0.0 and clocks[-1] == pytest.approx(1.0)
+    assert len(clocks) == 51
+    js = probe.got['/wrist/joint_states'][-1]
+    assert js.header.stamp.sec + 1e-9 * js.header.stamp.nanosec == pytest.approx(1.0)
+    assert js.name == ['wrist']
+    assert probe.got['/wrist/payload'][-1].data == 0.3
+    assert probe.got['/wrist/muscle_1/stress'][-1].data > 1e6  # Pa, pre-loaded wire
+
+
+def test_nan_commands_are_rejected_and_reported_not_applied(probe_factory):
+    probe, node = _measure(probe_factory, None, seconds=0.5, bad=True)
+    assert node.rejected_inputs > 0
+    assert (node.command_V == 0.0).all()
+    assert any('rejected message' in m for _, _, m in probe.diagnostics())
+    assert all(math.isfinite(t.temperature) for t in probe.got['/wrist/muscle_1/temperature'])
+
+
+def test_stale_command_switches_the_tem_off(probe_factory):
+    from sma_wrist.nodes.plant_sim import PlantSim
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature',))
+        rt.add(PlantSim)
+        probe.publish('/wrist/tem_1/command', data=12.0)  # once, then silence
+        rt.run_until(3.0, until='steady')
+        diags = probe.diagnostics()
+    assert any('no fresh command on tem_1' in m for _, _, m in diags)
+    T = [m.temperature for m in probe.got['/wrist/muscle_1/temperature']]
+    assert max(T) < T[0] + 3.0  # 12 V for 0.5 s at most, then off: no run-away heating
+    assert T[-1] < max(T)
+
+
+def test_out_of_range_payload_update_is_rejected_with_a_reason_and_valid_one_applies(probe_factory):
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.plant_sim import PlantSim
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/payload',))
+        node = rt.add(PlantSim)
+        bad, = node.set_parameters([Parameter('payload_kg', value=5.0)])
+        wrong_type, = node.set_parameters([Parameter('payload_kg', value='heavy')])
+        fixed, = node.set_parameters([Parameter('dt_s', value=0.002)])
+        good, = node.set_parameters([Parameter('payload_kg', value=0.5)])
+        rt.run_until(0.1, until='steady')
+    assert not bad.successful and 'out of range' in bad.reason
+    assert not wrong_type.successful
+    assert not fixed.successful and 'restart' in fixed.reason
+    assert good.successful
+    assert node.plant.state.payload_kg[0] == 0.5
+    assert [m.data for m in probe.got['/wrist/payload']][-1] == 0.5
