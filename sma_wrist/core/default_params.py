@@ -56,7 +56,9 @@ def _softplus(x: FloatArray) -> FloatArray:
 def loop_descriptors(m: ArrayLike) -> dict[str, FloatArray]:
     """Physical loop descriptors S, w, T_A, T_M at per-wire load m [kgf]."""
     m = np.asarray(m, dtype=float)
-    s = _logistic((m - 0.67) / 0.025)  # onset of superelasticity between 0.6 and 0.75 kgf
+    # Onset of superelasticity between 0.62 and 0.73 kgf: sharp enough that 600 g still shows the
+    # small (~0.36 mm) loop of Sec. 3.2 while 750 g shows the full one.
+    s = _logistic((m - 0.675) / 0.015)
     stroke = 0.39 + (3.9 - 0.39) * s
     width = 3.0 + (8.0 - 3.0) * s
     # Below the critical load: ~1 degC per 0.15 kgf. Above it the loop opens to A_f - M_f ~ 45 degC
@@ -64,7 +66,9 @@ def loop_descriptors(m: ArrayLike) -> dict[str, FloatArray]:
     # 1.05 kgf. The cooling centre may drop only ~6 degC while the stroke grows, or elongation would
     # fall with load somewhere (a snap-through the joint coupling cannot have): (w/2) d ln S bounds it.
     base = 6.7 * (m - 0.30)
-    climb = 0.05 * 130.0 * _softplus((m - 0.93) / 0.05)
+    # The climb starts past 0.9 kgf so 900 g still recovers ~3.2 mm in 20-78 degC, and takes the
+    # heating branch out of reach by 1050 g.
+    climb = 0.03 * 130.0 * _softplus((m - 0.96) / 0.03)
     T_M = 45.4 + base - 6.0 * s + 15.0 * s * (m - 0.75) + climb
     T_A = 49.6 + base + 15.0 * s + 15.0 * s * (m - 0.75) + climb
     return {'stroke_mm': stroke, 'width_C': width, 'T_A_C': T_A, 'T_M_C': T_M}
