@@ -60,7 +60,23 @@ def _print_metrics(summary: Any) -> None:
             print(f"peak TEM command {m['peak_command_V']:8.2f} V")
 
 
+def _prepare_bag(path: str | None, overwrite: bool) -> None:
+    """Refuse to clobber anything but a previous bag; --overwrite removes that one."""
+    import shutil
+    from pathlib import Path
+    if path is None or not Path(path).exists():
+        return
+    p = Path(path)
+    is_bag = p.is_dir() and ((p / 'metadata.yaml').exists() or any(p.glob('*.mcap')))
+    if not overwrite:
+        raise SmaWristError(f'{p} already exists; choose a new --bag directory or pass --overwrite')
+    if not is_bag:
+        raise SmaWristError(f'{p} exists and is not a rosbag2 directory; refusing to overwrite it')
+    shutil.rmtree(p)
+
+
 def cmd_run(a: argparse.Namespace) -> int:
+    _prepare_bag(a.bag, a.overwrite)
     _activate()
     from sma_wrist.closed_loop import print_progress, run_closed_loop
     summary = run_closed_loop(a.controller, a.payload_kg, a.duration, a.bag, a.params_file or (),
@@ -109,6 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument('--payload-kg', type=_payload, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
     r.add_argument('--duration', type=_positive_float, default=126.0, help='simulated seconds (default 126)')
     r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist)')
+    r.add_argument('--overwrite', action='store_true', help='replace an existing bag at --bag')
     r.add_argument('--params-file', action='append', help='ROS params file applied after config/wrist.yaml')
     r.add_argument('--hardware', metavar='PORT', default=None,
                    help='use hardware_bridge on this serial port instead of plant_sim')

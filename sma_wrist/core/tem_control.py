@@ -35,6 +35,7 @@ muscle (T1) face (docs/thermal.md).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -218,8 +219,11 @@ class TemController:
 
 
 def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: float = 400.0,
-           dt: float = 0.05) -> dict[str, float]:
-    """Closed loop from rest as in Sec. 5.2; returns error and command statistics after 200 s."""
+           dt: float = 0.05, trace: bool = False) -> dict[str, Any]:
+    """Closed loop from rest as in Sec. 5.2; returns error and command statistics after 200 s.
+
+    With ``trace`` also the time series: 't' (K,), 'T' and 'T_d' (K, 2) muscle temperatures.
+    """
     ph = np.array([0.0, np.pi])
     refs = {
         'step 60/40': lambda t: (np.array([60.0, 40.0]), np.zeros(2)),
@@ -232,8 +236,12 @@ def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: flo
     e_max = np.zeros(2)
     e_sq = np.zeros(2)
     u_lo, u_hi, T_hi, flagged = np.inf, -np.inf, -np.inf, 0
-    for k in range(int(round(duration_s / dt))):
+    K = int(round(duration_s / dt))
+    tr_T, tr_Td = np.empty((K, 2)), np.empty((K, 2))
+    for k in range(K):
         T_d, rate = ref(k * dt)
+        tr_Td[k] = T_d
+        tr_T[k] = T[0, 0] if mode == 'one module' else T[0, :, th.MUSCLE_FACE]  # faces of one module, or muscle faces
         if mode == 'one module':
             r = one_module_command(thermal, T, T_d[None], rate[None], SEED_ONE_MODULE_WEIGHTS)
             e = T_d - T[0, 0]
@@ -249,8 +257,11 @@ def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: flo
             flagged += int(r.any_flag.any())
     n = int(round(duration_s / dt)) - k_tail
     rms = np.sqrt(e_sq / n)
-    return {'max_e1': e_max[0], 'max_e2': e_max[1], 'rms_e1': rms[0], 'rms_e2': rms[1], 'u_min': u_lo,
-            'u_max': u_hi, 'T_max': T_hi, 'flagged_fraction': flagged / n}
+    out: dict[str, Any] = {'max_e1': e_max[0], 'max_e2': e_max[1], 'rms_e1': rms[0], 'rms_e2': rms[1],
+                           'u_min': u_lo, 'u_max': u_hi, 'T_max': T_hi, 'flagged_fraction': flagged / n}
+    if trace:
+        out.update(t=np.arange(K) * dt, T=tr_T, T_d=tr_Td)
+    return out
 
 
 def _main() -> None:  # pragma: no cover - the report quoted in docs/thermal.md
