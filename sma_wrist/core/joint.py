@@ -86,6 +86,7 @@ def joint_step(p: JointParams, q: FloatArray, qd: FloatArray, tau_muscle: FloatA
     q_new = q + dt * qd_new
     # Mechanical stops: inelastic.
     hit = (q_new < p.q_min_rad) | (q_new > p.q_max_rad)
-    q_new = np.clip(q_new, p.q_min_rad, p.q_max_rad)
-    qd_new = np.where(hit, 0.0, qd_new)
+    if hit.any():
+        q_new = np.minimum(np.maximum(q_new, p.q_min_rad), p.q_max_rad)
+        qd_new = np.where(hit, 0.0, qd_new)
     return q_new, qd_new, stuck | reversed_

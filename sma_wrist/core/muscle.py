@@ -72,6 +72,7 @@ class LoadSolution:
     slack: NDArray[np.bool_]  # wire would need a negative load: it is slack, load 0
     overload: NDArray[np.bool_]  # root beyond max_load_kgf: load clamped there
     residual_mm: FloatArray
+    memory: FloatArray  # (N, n) play memory committed at the solved load (Eq. 3.19)
 
 
 class MuscleModel:
@@ -86,10 +87,11 @@ class MuscleModel:
 
     def elongation(self, T: FloatArray, m: FloatArray, w: FloatArray, heating: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
         """(elongation [mm], d elongation / d m [mm/kgf]) of (1) with memory w frozen; 1-D arrays over bundles."""
-        return self._elongation(T, m, w, memoryless(self.params, T, heating))
+        return self._elongation(T, m, w, memoryless(self.params, T, heating))[:2]
 
     def _elongation(self, T: FloatArray, m: FloatArray, w: FloatArray, y_memoryless: FloatArray
-                    ) -> tuple[FloatArray, FloatArray]:
+                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(y, dy/dm, memory committed at m) of (1) for frozen memory ``w``."""
         geo = self.geometry
         mc = np.minimum(np.maximum(m, self.m_lo), self.m_hi)
         k, dk = self.params.envelopes.coefficients_and_slopes(mc)  # (N, 2, 4): [a set, b set]
@@ -108,7 +110,7 @@ class MuscleModel:
         inside = (m > self.m_lo) & (m < self.m_hi)  # envelopes are frozen outside the calibrated loads
         y = geo.length_scale * (self.params.k_f - y_m) + geo.elastic_mm_per_kgf * m
         dy = geo.elastic_mm_per_kgf - geo.length_scale * (dym_dm * inside)
-        return y, dy
+        return y, dy, w_now
 
     def solve_load(self, T: FloatArray, y_geo_mm: FloatArray, w: FloatArray, heating: NDArray[np.bool_],
                    m_guess: FloatArray, tol_mm: float = 1e-7, max_iterations: int = 60) -> LoadSolution:
@@ -119,38 +121,57 @@ class MuscleModel:
         moving, the stress plateau is ~100x softer than the elastic branch), so a bare
         Newton step can overshoot a kink; then the bracket's midpoint is taken. Only the
         wires whose residual exceeds ``tol_mm`` are iterated, so a warm start from the
-        previous step's load costs one or two evaluations.
+        previous step's load costs one or two evaluations. While every wire is still
+        active the iteration works on the whole arrays (views, no fancy-index copies of
+        the (N, n) memory); once some have converged, on the active subset.
+
+        The memory committed at the root (Eq. 3.19 at the solved load) is returned in
+        ``LoadSolution.memory``; :meth:`commit` gives the same array.
         """
         m_max = self.geometry.max_load_kgf
-        m = np.clip(np.array(m_guess, dtype=float), 0.0, m_max)
+        m = np.minimum(np.maximum(np.asarray(m_guess, dtype=float), 0.0), m_max)
         lo = np.zeros_like(m)
         hi = np.full_like(m, m_max)
         y0 = memoryless(self.params, T, heating)  # independent of the load: once per solve
-        y, dy = self._elongation(T, m, w, y0)
+        y, dy, w_now = self._elongation(T, m, w, y0)
         res = y - y_geo_mm
-        active = np.flatnonzero(np.abs(res) > tol_mm)
+        bad = np.abs(res) > tol_mm
+        n_total = m.size
+        active: NDArray[np.intp] | slice = slice(None) if bad.all() else np.flatnonzero(bad)
+        n_active = n_total if isinstance(active, slice) else active.size
         for _ in range(max_iterations):
-            if active.size == 0:
+            if n_active == 0:
                 break
             f = res[active]
             ma = m[active]
             pos = f > 0
-            hi[active] = np.where(pos, ma, hi[active])
-            lo[active] = np.where(pos, lo[active], ma)
+            la = np.where(pos, lo[active], ma)
+            ha = np.where(pos, ma, hi[active])
+            lo[active] = la
+            hi[active] = ha
             newton = ma - f / dy[active]
-            la, ha = lo[active], hi[active]
             inside = (newton > la) & (newton < ha)
             m_new = np.where(inside, newton, 0.5 * (la + ha))
             # a bracket collapsed onto 0 or m_max: the root is outside, the wire is slack/overloaded
             done = (ha - la) < 1e-12
             m[active] = m_new
-            ya, dya = self._elongation(T[active], m_new, w[active], y0[active])
-            y[active], dy[active] = ya, dya
-            res[active] = ya - y_geo_mm[active]
-            active = active[(np.abs(res[active]) > tol_mm) & ~done]
+            if isinstance(active, slice):
+                y, dy, w_now = self._elongation(T, m_new, w, y0)
+                res = y - y_geo_mm
+                keep = (np.abs(res) > tol_mm) & ~done
+                if keep.all():
+                    continue
+                active = np.flatnonzero(keep)
+            else:
+                ya, dya, wa = self._elongation(T[active], m_new, w[active], y0[active])
+                y[active], dy[active], w_now[active] = ya, dya, wa
+                ra = ya - y_geo_mm[active]
+                res[active] = ra
+                active = active[(np.abs(ra) > tol_mm) & ~done]
+            n_active = active.size
         slack = (m <= 1e-9) & (res > tol_mm)
         overload = (m >= m_max - 1e-9) & (res < -tol_mm)
-        return LoadSolution(m, dy, slack, overload, res)
+        return LoadSolution(m, dy, slack, overload, res, w_now)
 
     def commit(self, T: FloatArray, m: FloatArray, w: FloatArray) -> None:
         """Commit the play-operator memory at the solved load (Eq. 3.19), in place."""

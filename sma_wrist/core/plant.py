@@ -41,8 +41,8 @@ class PlantParams:
     joint: JointParams = field(default_factory=JointParams)
     thermal: th.ThermalParams = field(default_factory=th.ThermalParams)
     #: Bundle elongation at q_neutral [mm], set by the pre-load calibration of Sec. 2.2.3:
-    #: with it the +-30 deg range is reachable up to ~0.65 kg at 0.09 m (docs/model.md).
-    preload_elongation_mm: float = 2.15
+    #: with it the +-30 deg range is reachable up to ~0.7 kg at 0.09 m in the TEM-reachable window (docs/model.md).
+    preload_elongation_mm: float = 1.98
     dt: float = 1e-3  # plant step [s]
     load_tolerance_mm: float = 1e-7  # residual of the wire-load solve (muscle.py Eq. 1)
     max_muscle_temperature_C: float = 90.0  # beyond: over-temperature flag
@@ -133,11 +133,11 @@ class WristPlant:
         y_geo = np.concatenate([p.preload_elongation_mm - x, p.preload_elongation_mm + x])
         sol = self.muscles.solve_load(T, y_geo, state.w, state.heating, state.load_kgf, self.params.load_tolerance_mm)
         if commit:
-            self.muscles.commit(T, sol.load_kgf, state.w)
+            state.w = sol.memory  # the memory at the root: what MuscleModel.commit would give
             state.load_kgf = sol.load_kgf
             state.compliance = sol.compliance_mm_per_kgf
         return self._torque_and_stiffness(sol.load_kgf, sol.compliance_mm_per_kgf) + (
-            sol.slack.reshape(2, -1).any(0), sol.overload.reshape(2, -1).any(0))
+            sol.slack[: self.n] | sol.slack[self.n:], sol.overload[: self.n] | sol.overload[self.n:])
 
     def _torque_and_stiffness(self, load: FloatArray, compliance: FloatArray) -> tuple[FloatArray, FloatArray]:
         p = self.params
@@ -156,13 +156,24 @@ class WristPlant:
         non-finite commands raise ModelInputError.
         """
         p = self.params
+        tp = p.thermal
         s = self.state
-        u = np.broadcast_to(np.asarray(command_V, dtype=float), (self.n, 2))
-        check_finite('TEM command', u, 'V')
-        u, clipped = th.saturate_command(p.thermal, u)
-        s.thermal = th.step(p.thermal, s.thermal, u, p.dt)
-        self.step_mechanics(th.muscle_temperature(p.thermal, s.thermal))
-        s.flags['command_saturated'] = clipped.any(axis=1)
+        u = np.asarray(command_V, dtype=float)
+        if u.shape != (self.n, 2):
+            u = np.broadcast_to(u, (self.n, 2))
+        lo, hi = u.min(), u.max()  # NaN propagates into both, so the checks below catch it
+        if lo >= tp.u_min_V and hi <= tp.u_max_V:
+            clipped = None
+        else:
+            check_finite('TEM command', u, 'V')
+            uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
+            clipped = (uc != u).any(axis=1)
+            u = uc
+        # command in range, dt checked by PlantParams (<= 0.01 s < dt_max_s), state finite by construction
+        s.thermal = th.step(tp, s.thermal, u, p.dt, validate=False)
+        self._mechanics(s.thermal[:, :, th.MUSCLE_FACE].T.reshape(-1))
+        if clipped is not None:
+            s.flags['command_saturated'] = clipped
         return s
 
     def step_mechanics(self, muscle_temperature_C: ArrayLike) -> PlantState:
@@ -170,25 +181,40 @@ class WristPlant:
 
         Used by :meth:`step`, and on its own to replay recorded temperatures through the
         hysteresis and joint without the thermal model (model-discrepancy replay).
+        Non-finite temperatures raise ModelInputError; temperatures above
+        ``max_muscle_temperature_C`` are flagged (``over_temperature``) and beyond the
+        hysteresis model's validity window they are clamped to it (and flagged).
         """
+        T = np.broadcast_to(np.asarray(muscle_temperature_C, dtype=float), (self.n, 2)).T.reshape(-1)
+        if not np.isfinite(T.sum()):
+            check_finite('muscle temperature', T, 'degC')
+        return self._mechanics(T)
+
+    def _mechanics(self, T: FloatArray) -> PlantState:
+        """Steps 2-4 for stacked (2N,) muscle temperatures (muscle 1 of all scenarios, then muscle 2)."""
         p = self.params
         s = self.state
-        T = np.broadcast_to(np.asarray(muscle_temperature_C, dtype=float), (self.n, 2)).T.reshape(-1)
-        check_finite('muscle temperature', T, 'degC')
+        n = self.n
         hot = T > p.max_muscle_temperature_C
-        T = np.clip(T, *p.hysteresis.T_valid)
+        t_lo, t_hi = p.hysteresis.T_valid
+        if T.min() < t_lo or T.max() > t_hi:
+            T = np.minimum(np.maximum(T, t_lo), t_hi)
         dT = T - s.T_prev
-        s.heating = np.where(dT > 0, True, np.where(dT < 0, False, s.heating))
+        heating = s.heating.copy()
+        heating[dT > 0] = True
+        heating[dT < 0] = False
+        s.heating = heating
         s.T_prev = T
         torque, stiffness, slack, overload = self._update_loads(s, T, commit=True)
-        s.q, s.qd, _ = joint_step(p.joint, s.q, s.qd, torque, stiffness, s.payload_kg, p.dt)
+        jp = p.joint
+        s.q, s.qd, _ = joint_step(jp, s.q, s.qd, torque, stiffness, s.payload_kg, p.dt)
         s.t += p.dt
         s.flags = {
-            'command_saturated': np.zeros(self.n, bool),
-            'over_temperature': hot.reshape(2, -1).any(0),
+            'command_saturated': np.zeros(n, bool),
+            'over_temperature': hot[:n] | hot[n:],
             'slack': slack,
             'overload': overload,
-            'at_stop': (s.q <= p.joint.q_min_rad) | (s.q >= p.joint.q_max_rad),
+            'at_stop': (s.q <= jp.q_min_rad) | (s.q >= jp.q_max_rad),
         }
         return s
 
