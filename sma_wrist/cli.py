@@ -116,6 +116,46 @@ def cmd_bench(a: argparse.Namespace) -> int:
     return 0
 
 
+def _csv(kind: Callable[[str], Any]) -> Callable[[str], list[Any]]:
+    def parse(text: str) -> list[Any]:
+        items = [x.strip() for x in text.split(',') if x.strip()]
+        if not items:
+            raise argparse.ArgumentTypeError('empty list')
+        return [kind(x) for x in items]
+    return parse
+
+
+def _controller(text: str) -> str:
+    from sma_wrist.closed_loop import CONTROLLERS
+    if text not in CONTROLLERS:
+        raise argparse.ArgumentTypeError(f'{text!r} is not one of {", ".join(CONTROLLERS)}')
+    return text
+
+
+def cmd_experiment(a: argparse.Namespace) -> int:
+    from sma_wrist.experiment import run_experiment
+    table = run_experiment(a.controllers, a.payloads, a.out, duration_s=a.duration, workers=a.workers,
+                           params_files=a.params_file or (), plots=not a.no_plots)
+    print(json.dumps(table, indent=2) if a.json else
+          f'{len(table["runs"])} runs in {table["wall_s"]:.0f} s wall; report: {a.out}/report.md')
+    return 0
+
+
+def cmd_compare(a: argparse.Namespace) -> int:
+    from sma_wrist.runs import compare_runs
+    rows = compare_runs(a.bags, a.plot)
+    if a.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f'{"bag":40s} {"max %":>7s} {"RMS %":>7s} {"total %":>9s} {"peak V":>7s} {"payload":>8s}')
+    for r in rows:
+        tot = f'{r["total_abs_error_pct"]:9.0f}' if r['total_abs_error_pct'] is not None else '      n/a'
+        pk = f'{r["peak_command_V"]:7.2f}' if r['peak_command_V'] is not None else '    n/a'
+        pay = f'{r["payload_kg"]:8.2f}' if r['payload_kg'] is not None else '     n/a'
+        print(f'{r["bag"][-40:]:40s} {r["max_error_pct"]:7.2f} {r["rms_error_pct"]:7.2f} {tot} {pk} {pay}')
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog='sma-wrist', description='SMA wrist simulation, recording and analysis tools.')
     sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
@@ -132,6 +172,23 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument('--json', action='store_true', help='print one JSON object')
     r.add_argument('--quiet', action='store_true', help='no progress line')
     r.set_defaults(func=cmd_run)
+
+    e = sub.add_parser('experiment', help='the Chapter 6 comparison: controllers x payloads, bags, report')
+    e.add_argument('--controllers', type=_csv(_controller), default=['inverse_adaptive', 'direct_adaptive', 'pid'])
+    e.add_argument('--payloads', type=_csv(_payload), default=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], help='kg, comma separated')
+    e.add_argument('--out', default='runs/ch6')
+    e.add_argument('--duration', type=_positive_float, default=4 * math.pi / 0.1, help='s (default two periods)')
+    e.add_argument('--workers', type=int, default=None, help='parallel processes (default: CPU count)')
+    e.add_argument('--params-file', action='append', help='params file for every run (e.g. config/paper_table_6_1.yaml)')
+    e.add_argument('--no-plots', action='store_true')
+    e.add_argument('--json', action='store_true')
+    e.set_defaults(func=cmd_experiment)
+
+    c = sub.add_parser('compare', help='tracking metrics of recorded runs (sim or hardware), aligned on time')
+    c.add_argument('bags', nargs='+')
+    c.add_argument('--json', action='store_true')
+    c.add_argument('--plot', default=None, help='write an overlay PNG here')
+    c.set_defaults(func=cmd_compare)
 
     i = sub.add_parser('info', help='summarise a bag: topics, counts, duration')
     i.add_argument('bag')

@@ -116,11 +116,15 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
 
 
 def print_progress(t: float, total: float, wall: float) -> None:
-    """One-line progress on stderr (a terminal sees it update in place)."""
+    """Progress on stderr: one line updated in place on a terminal, a line per 10 % in a log."""
     rtf = t / wall if wall > 0 else float('inf')
-    end = '\n' if t >= total else ''
-    sys.stderr.write(f'\r[sma-wrist] {t:7.1f} / {total:.1f} s simulated  ({100 * t / total:5.1f} %, '
-                     f'{rtf:6.1f}x real time){end}')
+    text = f'[sma-wrist] {t:7.1f} / {total:.1f} s simulated ({100 * t / total:5.1f} %, {rtf:6.1f}x real time)'
+    if sys.stderr.isatty():
+        sys.stderr.write('\r' + text + ('\n' if t >= total else ''))
+    else:
+        step = total / 10.0
+        if int(t / step + 1e-9) != int((t - total / 100.0) / step + 1e-9) or t >= total:
+            sys.stderr.write(text + '\n')
     sys.stderr.flush()
 
 

@@ -94,3 +94,42 @@ def run_metrics(run: RunData) -> dict[str, Any]:
 
 
 __all__ = ['RunData', 'load_run', 'run_metrics']
+
+
+def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: str = '') -> None:
+    """Angle vs reference (top) and error in % of the reference range (bottom), runs overlaid.
+
+    Runs are aligned on their own time axis starting at the first reference sample, so a
+    hardware run recorded at wall-clock stamps lines up with a simulated one.
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, (ax_q, ax_e) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for k, (run, label) in enumerate(zip(runs, labels)):
+        t = run.t - run.t[0]
+        span = float(np.ptp(run.q_d)) or 1.0
+        if k == 0:
+            ax_q.plot(t, run.q_d, 'k--', lw=1, label='q_d')
+        ax_q.plot(t, run.q, lw=1, label=label)
+        ax_e.plot(t, 100.0 * (run.q - run.q_d) / span, lw=1, label=label)
+    ax_q.set_ylabel('angle [rad]')
+    ax_e.set_ylabel('error [% of reference range]')
+    ax_e.set_xlabel('time since first reference [s]')
+    for ax in (ax_q, ax_e):
+        ax.grid(True, alpha=0.3)
+        ax.legend(loc='best', fontsize=8)
+    if title:
+        ax_q.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> list[dict[str, Any]]:
+    """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot."""
+    runs = [load_run(p) for p in paths]
+    rows = [{'bag': str(p), **run_metrics(r)} for p, r in zip(paths, runs)]
+    if plot is not None:
+        plot_runs(runs, [Path(p).name for p in paths], plot, 'compare')
+    return rows
