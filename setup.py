@@ -43,6 +43,9 @@ setup(
         'test': ['pytest>=7', 'hypothesis>=6'],
         # Reports write PNG plots; optional so a headless robot install stays small.
         'plot': ['matplotlib>=3.5'],
+        # Compiles the per-sample plant step (sma_wrist/core/plant_kernel.py): ~1 us instead of
+        # ~0.3 ms per 1 kHz step, which is what makes the node graph run faster than real time.
+        'fast': ['numba>=0.57'],
     },
     zip_safe=True,
     maintainer='sma_wrist developers',

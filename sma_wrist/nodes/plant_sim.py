@@ -99,12 +99,10 @@ class PlantSim(WristNode):
             u[0, int(n[-1]) - 1] = 0.0
         self.diagnose('command', DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
                       f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh')
-        saturated = hot = False
         try:
-            for _ in range(self.steps_per_tick):
-                s = self.plant.step(u)
-                saturated |= bool(s.flags['command_saturated'][0])
-                hot |= bool(s.flags['over_temperature'][0])
+            s = self.plant.advance(u, self.steps_per_tick)
+            saturated = bool(s.flags['command_saturated'][0])
+            hot = bool(s.flags['over_temperature'][0])
         except SmaWristError as e:
             self.diagnose('model', DiagnosticStatus.ERROR, f'simulation stopped: {e}')
             self.timer.cancel()
