@@ -280,8 +280,10 @@ def bench_plant(quick: bool = False) -> dict:
 
         steps = max(20, n_batch * 256 // n)
         batched[str(n)] = n / _time_steps(step_batch, steps, repeats)
+    compiled = _bench_compiled(params, n_single, repeats)
     best_batched = max(batched.values())
     return {
+        **compiled,
         'dt_s': dt,
         'per_sample_steps_per_s': per_sample,
         'per_sample_real_time_factor': per_sample * dt,
@@ -290,6 +292,38 @@ def bench_plant(quick: bool = False) -> dict:
         'ratio_batched_over_plain': best_batched / plain_rate,
         'ratio_per_sample_over_plain': per_sample / plain_rate,
     }
+
+
+def _bench_compiled(params: object, n_steps: int, repeats: int) -> dict:
+    """WristPlant.advance through the optional numba kernel (plant_kernel), when installed."""
+    from sma_wrist.core import plant_kernel
+    from sma_wrist.core.plant import WristPlant
+
+    if not plant_kernel.AVAILABLE:
+        return {'compiled_available': False}
+    dt = params.dt  # type: ignore[attr-defined]
+    out: dict = {'compiled_available': True}
+    for n, key in ((1, 'compiled_per_sample_steps_per_s'), (256, 'compiled_batched_256_plant_steps_per_s')):
+        plant = WristPlant(params, payload_kg=np.linspace(0.0, 0.6, n))  # type: ignore[arg-type]
+        u = np.empty((n, 2))
+        plant.advance(np.zeros((n, 2)), 1)  # compile / load the cache outside the timing
+
+        def step(k: int, plant: WristPlant = plant, u: np.ndarray = u) -> None:
+            a = _command(k, dt)
+            u[:, 0] = a
+            u[:, 1] = -a
+            plant.advance(u, 1)
+
+        out[key] = n / _time_steps(step, n_steps if n == 1 else max(20, n_steps // 10), repeats)
+    plant = WristPlant(params, payload_kg=0.3)  # type: ignore[arg-type]
+    plant.advance(np.zeros((1, 2)), 10)
+    t0 = time.perf_counter()
+    ticks = max(10, n_steps // 10)
+    for k in range(ticks):  # the node's use: one call per 100 Hz tick of 10 steps
+        a = _command(10 * k, dt)
+        plant.advance(np.array([[a, -a]]), 10)
+    out['compiled_tick_of_10_steps_per_s'] = 10 * ticks / (time.perf_counter() - t0)
+    return out
 
 
 # -------------------------------------------------------------------------------- driver
