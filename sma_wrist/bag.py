@@ -32,7 +32,6 @@ salvage=True)`` returns them instead of raising).
 """
 from __future__ import annotations
 
-import io
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Optional
