@@ -11,7 +11,7 @@ from sma_wrist.core.hysteresis import initial_state
 from sma_wrist.core.muscle import MuscleGeometry, MuscleModel
 
 
-@pytest.mark.parametrize('load_kgf', [0.65, 0.8, 0.95])
+@pytest.mark.parametrize('load_kgf', [0.75, 0.8, 0.9])  # the superelastic plateau, strokes > 3 mm
 def test_compensated_temperature_gives_the_desired_bundle_elongation(load_kgf):
     params, g = default_sdgpi(), MuscleGeometry()
     model = MuscleModel(params, g)

@@ -234,14 +234,28 @@ class InverseCompensator:
         has = change.any(axis=0)
         k = np.argmax(change, axis=0)
         cols = np.arange(2 * S)
-        lo_T, hi_T, f_lo = Tg[k, cols], Tg[k + 1, cols], f[k, cols]
-        for _ in range(48):  # bracket < (T range / grid) / 2^48
-            mid = 0.5 * (lo_T + hi_T)
-            fm = resid(mid)
-            left = f_lo * fm <= 0
-            hi_T = np.where(left, mid, hi_T)
-            lo_T = np.where(left, lo_T, mid)
-            f_lo = np.where(left, f_lo, fm)
+        lo_T, hi_T, f_lo, f_hi = Tg[k, cols], Tg[k + 1, cols], f[k, cols], f[k + 1, cols]
+        # Illinois regula falsi on the bracket (superlinear; y(T) is smooth between operator
+        # kinks), stopping at the tolerance instead of a fixed 48 bisections (~7x fewer
+        # residual evaluations per call at the node's 100 Hz). Bisection where the secant stalls.
+        x = 0.5 * (lo_T + hi_T)
+        side = np.zeros(2 * S, np.int8)
+        for _ in range(60):
+            denom = f_hi - f_lo
+            sec = np.where(denom != 0, hi_T - f_hi * (hi_T - lo_T) / np.where(denom != 0, denom, 1.0), 0.5 * (lo_T + hi_T))
+            x = np.where((sec > np.minimum(lo_T, hi_T)) & (sec < np.maximum(lo_T, hi_T)), sec, 0.5 * (lo_T + hi_T))
+            fx = resid(x)
+            left = f_lo * fx <= 0  # root in [lo, x]
+            # Illinois: halve the retained end's value when the same end is kept twice in a row
+            f_lo = np.where(left, np.where(side == -1, 0.5 * f_lo, f_lo), fx)
+            f_hi = np.where(left, fx, np.where(side == 1, 0.5 * f_hi, f_hi))
+            lo_T = np.where(left, lo_T, x)
+            hi_T = np.where(left, x, hi_T)
+            side = np.where(left, -1, 1).astype(np.int8)
+            if np.all((np.abs(fx) <= 0.1 * self.tol_mm) | ~has | (np.abs(hi_T - lo_T) < 1e-12)):
+                break
+        # the last evaluated point is the root estimate (|residual| <= tol/10 there)
+        lo_T = hi_T = x
         root = np.where(has, 0.5 * (lo_T + hi_T), np.nan)
         dist = np.where(has, np.abs(root - T0s), np.inf).reshape(2, S)
         pick = np.argmin(dist, axis=0)  # nearest root: the smallest move that reaches the target
