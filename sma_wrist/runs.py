@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.bag import BagData, BagError, read_bag
-from sma_wrist.core.metrics import TrackingMetrics, tracking_metrics
+from sma_wrist.core.metrics import SEED_PERIOD_S, TrackingMetrics, tracking_metrics
 
 FloatArray = NDArray[np.float64]
 
@@ -83,10 +83,29 @@ def load_run(path: str | Path) -> RunData:
     return RunData(str(path), t, q, q_d, temps, command_t, command_V, float(pay[-1][1].data) if pay else None)
 
 
-def run_metrics(run: RunData) -> dict[str, Any]:
-    """Tracking metrics (Table 6.2 definitions, sma_wrist.core.metrics) plus peak TEM command."""
-    m: TrackingMetrics = tracking_metrics(run.t, run.q, run.q_d)
-    out = m.to_dict()
+def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]:
+    """Tracking metrics (sma_wrist.core.metrics) over the last full reference cycle, plus peak TEM command.
+
+    Table 6.2 reports "a full cycle of wrist movement"; the first cycle of a run from rest
+    holds the start-up transient (the wrist rests at its gravity equilibrium, q_d starts at
+    0.524 rad), so max and RMS are taken over the last full cycle when the run has one
+    (``window`` says which), and over the whole run as ``*_all``.
+    """
+    whole: TrackingMetrics = tracking_metrics(run.t, run.q, run.q_d)
+    span = run.t[-1] - run.t[0] if run.t.size else 0.0
+    if span >= period_s:
+        last = run.t >= run.t[-1] - period_s
+        m = tracking_metrics(run.t[last], run.q[last], run.q_d[last],
+                             reference_range_rad=whole.reference_range_rad, period_s=None)
+        out = m.to_dict()
+        out['total_abs_error_pct'] = whole.total_abs_error_pct
+        out['cycle_start_s'], out['cycle_period_s'] = whole.cycle_start_s, whole.cycle_period_s
+        out['window'] = 'last_cycle'
+    else:
+        out = whole.to_dict()
+        out['window'] = 'whole_run'
+    out['max_error_pct_all'] = whole.max_error_pct
+    out['rms_error_pct_all'] = whole.rms_error_pct
     out['peak_command_V'] = float(np.abs(run.command_V).max()) if run.command_V.size else None
     out['payload_kg'] = run.payload_kg
     out['duration_s'] = float(run.t[-1] - run.t[0]) if run.t.size else 0.0

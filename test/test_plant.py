@@ -179,7 +179,8 @@ def test_bad_dt_raises_with_range(bad: float) -> None:
 
 def test_saturation_is_flagged_not_silent() -> None:
     plant = WristPlant(payload_kg=[0.3, 0.3])
-    s = plant.step([[20.0, 0.0], [5.0, -5.0]])
+    limit = plant.params.thermal.u_max_V  # the driver rating (docs/thermal.md "Drive limits")
+    s = plant.step([[limit + 1.0, 0.0], [5.0, -5.0]])
     assert s.flags['command_saturated'].tolist() == [True, False]
     s = plant.step([[5.0, -5.0], [5.0, -5.0]])
     assert not s.flags['command_saturated'].any()

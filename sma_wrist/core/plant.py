@@ -40,7 +40,10 @@ class PlantParams:
     hysteresis: SDGPIParams = field(default_factory=default_sdgpi)
     muscle: MuscleGeometry = field(default_factory=MuscleGeometry)
     joint: JointParams = field(default_factory=JointParams)
-    thermal: th.ThermalParams = field(default_factory=th.ThermalParams)
+    #: TEM heat balance; the plant clips commands at the *driver rating* (+-24 V), not at the
+    #: heat balance's hold limits (-12/+13 V), which the TEM controller enforces only while a
+    #: face is hot (tem_control.DriveLimits, docs/thermal.md "Drive limits").
+    thermal: th.ThermalParams = field(default_factory=lambda: th.ThermalParams().with_limits(-24.0, 24.0))
     #: Bundle elongation at q_neutral [mm], set by the pre-load calibration of Sec. 2.2.3:
     #: with it the +-30 deg range is reachable up to ~0.7 kg at 0.09 m in the TEM-reachable window (docs/model.md).
     preload_elongation_mm: float = 1.98

@@ -281,3 +281,40 @@ def _main() -> None:  # pragma: no cover - the report quoted in docs/thermal.md
 
 if __name__ == '__main__':  # pragma: no cover
     _main()
+
+
+@dataclass(frozen=True)
+class DriveLimits:
+    """Transient drive limits with face protection (docs/thermal.md, "Drive limits").
+
+    The thermal model's ``u_min_V``/``u_max_V`` are *hold* limits: a command held forever
+    keeps every face inside the window. A temperature controller never holds its extreme
+    command; it may drive up to the driver rating (``boost_*``) while every face is below
+    ``protect_above_C``, and falls back to the hold limits for a layer as soon as one of its
+    faces is above it, which (being hold limits) bring the faces back inside the window.
+    """
+
+    boost_min_V: float = -24.0
+    boost_max_V: float = 24.0
+    protect_above_C: float = 75.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.boost_min_V) and np.isfinite(self.boost_max_V) and self.boost_min_V < 0 < self.boost_max_V):
+            raise ParameterError(f'boost limits ({self.boost_min_V!r}, {self.boost_max_V!r}) V must bracket 0')
+        if not np.isfinite(self.protect_above_C):
+            raise ParameterError(f'protect_above_C = {self.protect_above_C!r} must be finite')
+
+
+def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike, command_V: ArrayLike
+                      ) -> tuple[FloatArray, BoolArray]:
+    """Clip (N, L) commands to the boost limits, or to the hold limits of layers with a hot face.
+
+    Returns (command, limited) where ``limited`` marks commands that were changed.
+    """
+    T = np.asarray(state, dtype=float)
+    u = np.asarray(command_V, dtype=float)
+    hot = (T > limits.protect_above_C).any(axis=-1)
+    lo = np.where(hot, max(thermal.u_min_V, limits.boost_min_V), limits.boost_min_V)
+    hi = np.where(hot, min(thermal.u_max_V, limits.boost_max_V), limits.boost_max_V)
+    out = np.minimum(np.maximum(u, lo), hi)
+    return out, out != u

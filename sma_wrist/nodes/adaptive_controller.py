@@ -32,13 +32,17 @@ from sma_wrist.core.muscle import MuscleGeometry
 from sma_wrist.core.pid import PIDParams
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
+DEFAULTS = JointControllerParams()
 NONNEGATIVE_PREFIXES = ('c1', 'c2', 'gamma', 'kp', 'ki', 'kd', 'boundary', 'tracking', 'derivative_filter')
 
 
-def _fields_as_params(cls: type, prefix: str, skip: tuple[str, ...] = ()) -> tuple[Param, ...]:
-    """A Param for every scalar (float/int/str-choice/bool) field of a parameter dataclass."""
+def _fields_as_params(cls: type, prefix: str, skip: tuple[str, ...] = (), default: Any = None) -> tuple[Param, ...]:
+    """A Param for every scalar (float/int/str-choice/bool) field of a parameter dataclass.
+
+    Defaults come from ``default`` (an instance), else from the class's own defaults.
+    """
     hints = typing.get_type_hints(cls)
-    default = cls()
+    default = cls() if default is None else default
     out = []
     for f in dataclasses.fields(cls):
         if f.name in skip or not f.init:
@@ -64,8 +68,8 @@ def _own_fields() -> tuple[Param, ...]:
 class AdaptiveController(WristNode):
     PARAMS = (
         Param('stale_timeout_s', 0.25, 'reference/joint-state age that stops the output', 's', (0.01, 10.0)),
-    ) + _own_fields() + _fields_as_params(AdaptiveParams, 'adaptive.', skip=('mode',)) \
-        + _fields_as_params(PIDParams, 'pid.')
+    ) + _own_fields() + _fields_as_params(AdaptiveParams, 'adaptive.', skip=('mode',), default=DEFAULTS.adaptive) \
+        + _fields_as_params(PIDParams, 'pid.', default=DEFAULTS.pid)
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('adaptive_controller', **kwargs)

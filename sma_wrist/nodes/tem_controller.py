@@ -12,8 +12,9 @@ It computes when a fresh temperature of both muscles has arrived (measurement-dr
 Safety, in this order: no fresh measurement for ``stale_timeout_s`` -> 0 V (TEMs off) and
 an ERROR on /diagnostics until data returns; no desired temperature yet or a stale one ->
 0 V; a muscle above ``max_muscle_temperature_C`` may only be cooled; every command is
-clipped to [``u_min_V``, ``u_max_V``] (themselves inside the heat balance's runaway-free
-limits) and a clip is reported.
+clipped to the driver rating [``u_min_V``, ``u_max_V``], and to the heat balance's hold
+limits for a layer with a (measured or observed) face above ``protect_above_C``
+(:class:`~sma_wrist.core.tem_control.DriveLimits`); every clip is reported.
 """
 from __future__ import annotations
 
@@ -27,10 +28,11 @@ from std_msgs.msg import Float64
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.tem_control import TemController as TemLaw
-from sma_wrist.core.tem_control import TemControlParams
+from sma_wrist.core.tem_control import DriveLimits, TemControlParams, protected_command
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
-LIMITS = th.ThermalParams()
+LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
+DRIVE = DriveLimits()
 
 
 class TemController(WristNode):
@@ -38,8 +40,11 @@ class TemController(WristNode):
         Param('gain_per_s', 1.0, 'k of the temperature error dynamics de/dt + k e = 0 (Eq. 5.42)', '1/s',
               (0.01, 50.0)),
         Param('rate_filter_s', 0.05, 'time constant of the filter on the estimated dT_d/dt', 's', (0.0, 10.0)),
-        Param('u_min_V', LIMITS.u_min_V, 'most negative (cooling) drive command', 'V', (LIMITS.u_min_V, 0.0)),
-        Param('u_max_V', LIMITS.u_max_V, 'most positive (heating) drive command', 'V', (0.0, LIMITS.u_max_V)),
+        Param('u_min_V', DRIVE.boost_min_V, 'most negative (cooling) drive command: driver rating', 'V', (-29.0, -1.0)),
+        Param('u_max_V', DRIVE.boost_max_V, 'most positive (heating) drive command: driver rating', 'V', (1.0, 34.0)),
+        Param('protect_above_C', DRIVE.protect_above_C,
+              'above this face temperature a layer falls back to the hold limits '
+              f'[{LIMITS.u_min_V:g}, {LIMITS.u_max_V:g}] V', 'degC', (30.0, 80.0)),
         Param('max_muscle_temperature_C', 85.0, 'above this a muscle is only cooled', 'degC', (30.0, 120.0)),
         Param('stale_timeout_s', 0.25, 'measurement/target age that switches the TEMs off', 's', (0.01, 10.0)),
     )
@@ -63,7 +68,8 @@ class TemController(WristNode):
 
     def _build(self) -> None:
         p = self.p
-        self.thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])
+        self.drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'])
+        self.thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
         self.law = TemLaw(self.thermal, TemControlParams(gain_per_s=p['gain_per_s'],
                                                          rate_filter_s=p['rate_filter_s']))
 
@@ -111,10 +117,11 @@ class TemController(WristNode):
             self.diagnose('law', DiagnosticStatus.ERROR, f'TEM law failed, TEMs off: {e}')
             self._send(np.zeros(2))
             return
-        u = res.command_V[0].copy()
+        u_prot, limited = protected_command(LIMITS, self.drive, self.observer, res.command_V)
+        u = u_prot[0].copy()
         hot = self.T_meas > self.p['max_muscle_temperature_C']
         u = np.where(hot, np.minimum(u, 0.0), u)
-        sat = res.saturated[0]
+        sat = res.saturated[0] | limited[0]
         self.diagnose('over_temperature', DiagnosticStatus.ERROR if hot.any() else DiagnosticStatus.OK,
                       'muscle above limit: heating blocked' if hot.any() else 'muscle temperatures below limit',
                       {'T_1_C': f'{self.T_meas[0]:.2f}', 'T_2_C': f'{self.T_meas[1]:.2f}'})

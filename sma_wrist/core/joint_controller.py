@@ -1,0 +1,137 @@
+"""Joint controller composition: what the ``adaptive_controller`` node computes each sample.
+
+Three modes (seed Sec. 6.1, Table 6.1):
+
+- ``inverse_adaptive``: the back-stepping adaptive law (:mod:`sma_wrist.core.adaptive`,
+  Eqs. 5.24, 5.32, 5.37) gives desired muscle forces; with the desired strain of each
+  bundle at q_d (chain kinematics, Eq. 4.17) they go to the inverse SD-GPI compensator
+  (hysteresis_compensator node, Eqs. 5.5-5.8), which turns them into temperatures.
+- ``direct_adaptive``: the same law with only theta adapted; without an inverse, each
+  force deviation maps linearly to a temperature deviation around ``temperature_mid_C``
+  with the plateau's stress-temperature slope ``force_per_degC_N`` (the hysteresis is
+  treated as an unknown gain, which beta_hat absorbs in the inverse mode).
+- ``pid``: the Sec. 6.1 PID (:mod:`sma_wrist.core.pid`) on the angle error; its output u is a
+  differential temperature [degC]: T_1d = T_mid + u, T_2d = T_mid - u (muscle 1 contracts
+  when heated and raises q).
+
+All modes also return the desired strain (what the compensator needs) and never ask for
+temperatures outside [temperature_min_C, temperature_max_C] (reported as saturation).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sma_wrist.core.adaptive import KGF_N, N_WIRES, AdaptiveController, AdaptiveParams
+from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.pid import PID, PIDParams
+from sma_wrist.core.plant import PlantParams
+
+FloatArray = NDArray[np.float64]
+Mode = Literal['inverse_adaptive', 'direct_adaptive', 'pid']
+MODES = ('inverse_adaptive', 'direct_adaptive', 'pid')
+
+
+def tuned_adaptive() -> AdaptiveParams:
+    """Adaptive gains tuned on this project's plant (docs/control.md, "Tuning").
+
+    The seed's Table 6.1 gains (C1 = 3, C2 = 6.5) ask for forces of ~I/R C1 C2 e ~ 9 N at
+    0.5 rad of error on a joint whose muscles need tens of degC -- hundreds of N of force
+    request -- to cross the hysteresis; here C1 = C2 = 150 with slow adaptation
+    (Gamma_a = 1e-4: Table 6.1's 0.01-0.05 drive theta_hat to its bounds within a second on
+    this plant's phi = g l cos q / I ~ 350 /s^2/kg), forces 0.3-1.0 kgf per wire.
+    """
+    return AdaptiveParams(c1=150.0, c2=150.0, gamma_a=1e-4, gamma_b1=1e-4, gamma_b2=1e-4, gamma_d1=0.0,
+                          gamma_d2=0.0, preload_N=N_WIRES * 0.65 * KGF_N, force_min_N=N_WIRES * 0.3 * KGF_N,
+                          force_max_N=N_WIRES * 1.0 * KGF_N)
+
+
+@dataclass(frozen=True)
+class JointControllerParams:
+    """Mode, the laws' parameters and the temperature map of the modes without an inverse."""
+
+    mode: Mode = 'direct_adaptive'  # the mode that meets Sec. 6.1's 15 % on this plant (docs/control.md)
+    adaptive: AdaptiveParams = field(default_factory=tuned_adaptive)
+    #: PID on the angle error, output in degC of differential temperature (docs/control.md)
+    pid: PIDParams = field(default_factory=lambda: PIDParams(kp=300.0, ki=60.0, kd=0.0, output_min=-30.0,
+                                                              output_max=30.0))
+    temperature_mid_C: float = 50.0  # centre of the muscles' working band [degC]
+    temperature_min_C: float = 20.0
+    temperature_max_C: float = 80.0
+    force_per_degC_N: float = 1.0  # direct mode: force request per degC of temperature request [N/degC]
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
+        for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N'):
+            if not math.isfinite(getattr(self, name)):
+                raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
+        if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
+            raise ParameterError(f'need temperature_min_C < temperature_mid_C < temperature_max_C, got '
+                                 f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
+        if not self.force_per_degC_N > 0:
+            raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
+
+
+@dataclass(frozen=True)
+class JointCommand:
+    force_N: FloatArray | None  # (2,) desired chain force per muscle (adaptive modes)
+    strain_desired: FloatArray  # (2,) desired bundle strain at q_d
+    temperature_desired_C: FloatArray | None  # (2,) in direct_adaptive and pid modes
+    saturated: bool
+    info: dict[str, float]
+
+
+class JointController:
+    """One controller of the selected mode for one wrist."""
+
+    def __init__(self, params: JointControllerParams | None = None, plant: PlantParams | None = None) -> None:
+        self.params = params or JointControllerParams()
+        self.plant = plant or PlantParams()
+        self.reset()
+
+    def reset(self) -> None:
+        p = self.params
+        # the law's own mode decides what adapts (direct: theta only, Table 6.1)
+        self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode)) if p.mode != 'pid' else None
+        self.pid = PID(p.pid) if p.mode == 'pid' else None
+
+    def strain_at(self, q: float) -> FloatArray:
+        """Bundle strains (elongation / wire length) at angle q (Eq. 4.17, muscle.py)."""
+        x = float(self.plant.joint.chain_displacement_mm(q))
+        e0 = self.plant.preload_elongation_mm
+        return np.array([e0 - x, e0 + x]) / self.plant.muscle.wire_length_mm
+
+    def _clip_T(self, T: FloatArray) -> tuple[FloatArray, bool]:
+        p = self.params
+        Tc = np.clip(T, p.temperature_min_C, p.temperature_max_C)
+        return Tc, bool(np.any(Tc != T))
+
+    def update(self, q: float, qdot: float, q_d: float, qdot_d: float, qddot_d: float, dt: float,
+               muscle_temperature_C: FloatArray | None = None) -> JointCommand:
+        """One sample: measured q [rad], q' [rad/s]; reference q_d, q_d', q_d''; step dt [s]."""
+        p = self.params
+        strain = self.strain_at(q_d)
+        if self.pid is not None:
+            o = self.pid.update(q, q_d, dt)
+            u = float(o.u[0])
+            T, clipped = self._clip_T(np.array([p.temperature_mid_C + u, p.temperature_mid_C - u]))
+            return JointCommand(None, strain, T, bool(o.saturated[0]) or clipped,
+                                {'error_rad': float(o.error[0]), 'u_degC': u, 'integral': float(o.i_term[0])})
+        assert self.adaptive is not None
+        o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
+        force = np.array([o.force_1_N[0], o.force_2_N[0]])
+        info = {'z1_rad': float(o.z1[0]), 'z2_rad_s': float(o.z2[0]), 'theta_hat_kg': float(o.theta_hat[0]),
+                'beta_hat_1': float(o.beta_hat[0, 0]), 'beta_hat_2': float(o.beta_hat[0, 1]),
+                'delta_force_N': float(o.delta_force_N[0])}
+        if p.mode == 'inverse_adaptive':
+            return JointCommand(force, strain, None, bool(o.saturated[0]), info)
+        T, clipped = self._clip_T(p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N)
+        return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)
+
+
+__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES']

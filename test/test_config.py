@@ -1,0 +1,70 @@
+"""Params files and the topic contract agree with the code (one source of truth)."""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+import yaml
+
+from sma_wrist.contract import load_contract
+
+ROOT = Path(__file__).resolve().parent.parent
+NODE_CLASSES = {
+    'plant_sim': ('sma_wrist.nodes.plant_sim', 'PlantSim'),
+    'trajectory_generator': ('sma_wrist.nodes.trajectory_generator', 'TrajectoryGenerator'),
+    'adaptive_controller': ('sma_wrist.nodes.adaptive_controller', 'AdaptiveController'),
+    'hysteresis_compensator': ('sma_wrist.nodes.hysteresis_compensator', 'HysteresisCompensator'),
+    'tem_controller': ('sma_wrist.nodes.tem_controller', 'TemController'),
+}
+
+
+def _declared(node: str) -> set[str]:
+    import importlib
+    mod, cls = NODE_CLASSES[node]
+    return {p.name for p in getattr(importlib.import_module(mod), cls).PARAMS} | {'use_sim_time'}
+
+
+@pytest.mark.parametrize('path', sorted((ROOT / 'config').glob('*.yaml')), ids=lambda p: p.name)
+def test_every_params_file_key_is_a_declared_parameter(path):
+    tree = yaml.safe_load(path.read_text())
+    for node, body in tree.items():
+        assert set(body) == {'ros__parameters'}, f'{path.name}: {node} must hold only ros__parameters'
+        if node == '/**' or node not in NODE_CLASSES:
+            continue
+        unknown = set(body['ros__parameters']) - _declared(node)
+        assert not unknown, f'{path.name}: {node} has undeclared parameters {sorted(unknown)} (typo?)'
+
+
+def test_every_parameter_has_a_description_and_numbers_a_range():
+    import importlib
+    for node, (mod, cls) in NODE_CLASSES.items():
+        for p in getattr(importlib.import_module(mod), cls).PARAMS:
+            assert p.description, f'{node}.{p.name} has no description'
+            if isinstance(p.default, float):
+                assert p.range is not None, f'{node}.{p.name} has no range'
+                assert p.range[0] <= p.default <= p.range[1], f'{node}.{p.name} default outside its range'
+
+
+def test_contract_topics_are_the_ones_the_nodes_use():
+    """Every topic string in a node module is in the contract, and every contract topic has a node."""
+    contract = load_contract()
+    used = set()
+    for f in (ROOT / 'sma_wrist' / 'nodes').glob('*.py'):
+        for node in ast.walk(ast.parse(f.read_text())):
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.startswith('/wrist/'):
+                used.add(node.value)
+            if isinstance(node, ast.JoinedStr):
+                text = ''.join(v.value if isinstance(v, ast.Constant) else '{}' for v in node.values)
+                if text.startswith('/wrist/'):
+                    used |= {text.replace('{}', str(i)) for i in (1, 2)}
+    assert used <= set(contract.topics), sorted(used - set(contract.topics))
+    assert {t for t in contract.topics if t.startswith('/wrist/')} <= used
+
+
+def test_setup_installs_every_node_and_the_data_files():
+    text = (ROOT / 'setup.py').read_text()
+    for node in NODE_CLASSES:
+        assert f"'{node}': 'sma_wrist.nodes.{node}:main'" in text
+    for d in ('launch', 'config', 'msg_defs'):
+        assert f"'/{d}'" in text
