@@ -1,0 +1,311 @@
+"""Model-discrepancy diagnosis of a recorded wrist run (issue #5): ``sma-wrist diagnose BAG``.
+
+1. Replay the nominal plant on the run's recorded inputs, subsystem by subsystem
+   (commands -> temperatures; measured temperatures + payload -> angle; whole chain).
+2. Residual statistics per channel (RMS vs sensor noise, Ljung-Box whiteness, lag,
+   correlates: time, temperature rate, sign of joint velocity, angle, load, cycles).
+3. Fit every catalogue effect (:mod:`.effects`) on the first 60 % of the run, score it on
+   the rest (:mod:`.fit`), pick the best, bootstrap its gain over held-out segments.
+4. Output: JSON / markdown + PNG report / params file of the extended model.
+
+See docs/diagnose.md.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from sma_wrist.diagnose import effects as fx
+from sma_wrist.diagnose import fit as ft
+from sma_wrist.diagnose import report as rp
+from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
+
+__all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main', 'bench_diagnose']
+
+#: a candidate must lower the held-out score by this much (sum of log SSE ratios; 0.2 ~ 10 % RMS)
+MIN_SCORE = 0.2
+#: ... and its bootstrap 5th-percentile gain on its main channel must exceed this [%]
+MIN_GAIN_P05 = 2.0
+#: residual structure: RMS / white-noise sigma above this with a Ljung-Box rejection (p < 0.01)
+STRUCTURE_RATIO = 1.6
+
+
+@dataclass
+class DiagnosisResult:
+    discrepancy: bool
+    subsystem: str | None  # thermal | hysteresis | joint | sensor | None
+    cause: str | None  # catalogue id
+    parameters: dict[str, dict[str, Any]]
+    channel: str  # channel of rmse_before/after: thermal | mechanics | chain
+    rmse_before: float
+    rmse_after: float
+    gain_pct: float
+    gain_ci: tuple[float, float]
+    alternatives: list[dict[str, Any]]
+    unexplained: bool
+    correlates: list[dict[str, Any]]
+    channels: dict[str, dict[str, float]]
+    residual_stats: dict[str, dict[str, Any]]
+    summary: str
+    warnings: list[str] = field(default_factory=list)
+    source: str = ''
+    duration_s: float = 0.0
+    wall_s: float = 0.0
+    params_file: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d['gain_ci_pct'] = list(d.pop('gain_ci'))
+        return _plain(d)
+
+
+def _plain(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        return None if not np.isfinite(x) else float(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x
+
+
+def _param_dict(row: np.ndarray, names: Sequence[str]) -> dict[str, dict[str, Any]]:
+    out = {}
+    for k in names:
+        p = fx.PARAMS[fx.INDEX[k]]
+        out[k] = {'value': float(row[fx.INDEX[k]]), 'unit': p.unit, 'nominal': p.nominal, 'meaning': p.description}
+    return out
+
+
+def _regressors(ev: ft.Evaluator, q_model: np.ndarray | None, load: np.ndarray | None, sl: slice) -> dict[str, np.ndarray]:
+    run, m = ev.run, ev.model
+    reg: dict[str, np.ndarray] = {'time': run.t[sl]}
+    if run.T is not None:
+        reg['temperature rate'] = m.T_rate[sl].mean(axis=1)
+        reg['cycles'] = m.cycles[sl].mean(axis=1)
+        reg['temperature'] = run.T[sl].mean(axis=1)
+    if q_model is not None:
+        qd = np.gradient(q_model, run.dt)
+        reg['sign joint velocity'] = np.sign(np.where(np.abs(qd) > 1e-3, qd, 0.0))[sl]
+        reg['angle'] = q_model[sl]
+    if load is not None:
+        reg['load'] = (load[:, 0] - load[:, 1])[sl]
+    if run.u is not None:
+        reg['command 1'] = run.u[sl, 0]
+        reg['command 2'] = run.u[sl, 1]
+    return reg
+
+
+def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str | Path | None = None,
+                 candidates: Sequence[str] | None = None) -> DiagnosisResult:
+    """Diagnose an aligned run (see :func:`diagnose` for a bag)."""
+    t_start = time.perf_counter()
+    model = fx.ExtendedModel(run)
+    ev = ft.Evaluator(model)
+    if not ev.channels:
+        raise DiagnoseInputError('no channel can be replayed: need commands + temperatures, temperatures + angle, '
+                                 'or commands + angle')
+    fits: list[ft.Fit] = []
+    for e in fx.CATALOGUE:
+        if candidates is not None and e.id not in candidates:
+            continue
+        if not ft.channels_of(e, ev.channels):
+            continue
+        fits.append(ev.fit(e))
+    fits.sort(key=lambda f: f.score)
+    best = fits[0] if fits else None
+
+    def main_channel(f: ft.Fit) -> str:
+        return min(f.log_ratio, key=lambda c: f.log_ratio[c])
+
+    alternatives = []
+    for f in fits:
+        c = main_channel(f)
+        g = ev.gain(f, c)
+        alternatives.append({'cause': f.effect.id, 'subsystem': f.effect.subsystem, 'score': round(f.score, 4),
+                             'channel': c, 'gain_pct': round(g['gain_pct'], 2),
+                             'parameters': _param_dict(f.row, f.effect.params)})
+    channel = main_channel(best) if best else ev.channels[0]
+    g_best = ev.gain(best, channel) if best else None
+    significant = bool(best is not None and best.score < -MIN_SCORE and g_best['gain_pct_p05'] > MIN_GAIN_P05)
+    final_row = best.row if significant else fx.NOMINAL
+    final_fit = best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), fx.NOMINAL.copy()))
+
+    # residual statistics, nominal and final, after the burn-in
+    sl = slice(ev.i0, run.n)
+    pred_final = ev.predict(final_row[None])
+    q_nom = load_nom = None
+    if 'mechanics' in ev.channels or 'chain' in ev.channels:
+        src = 'measured' if 'mechanics' in ev.channels else 'chain'
+        qq, _, ll = model.mechanics(fx.NOMINAL[None], None, src)
+        q_nom, load_nom = qq[:, 0], ll[:, 0]
+    reg = _regressors(ev, q_nom, load_nom, sl)
+    stats: dict[str, dict[str, Any]] = {}
+    structure = []
+    for c in ev.channels:
+        stats[c] = {}
+        for which, pred in (('nominal', ev.pred_nom[c][:, 0]), ('extended', pred_final[c][:, 0])):
+            meas = ev.measured(c)
+            if c == 'thermal':
+                r = (meas - pred)[sl].T.ravel()
+                regs = {k: np.concatenate([v, v]) for k, v in reg.items()}
+                s = rp.channel_stats(r, ev.sigma[c], regs, meas[sl, 0], pred[sl, 0], run.dt)
+            else:
+                s = rp.channel_stats((meas - pred)[sl], ev.sigma[c], reg, meas[sl], pred[sl], run.dt)
+            stats[c][which] = s
+        s = stats[c]['extended']
+        if s['rms_over_noise'] > STRUCTURE_RATIO and not s['white']:
+            structure.append(c)
+    unexplained = bool(structure)
+    corr = [{'channel': c, **x} for c in structure for x in stats[c]['extended']['correlates'][:3]]
+
+    chan_gains = {c: ev.gain(final_fit, c) for c in ev.channels}
+    if significant:
+        e = best.effect
+        ps = ', '.join(f'{k} = {v["value"]:.4g} {v["unit"]}' for k, v in _param_dict(best.row, e.params).items())
+        summary = (f'{e.subsystem} discrepancy: {e.name} ({e.id}; {ps}); held-out {channel} RMS '
+                   f'{g_best["rmse_before"]:.4g} -> {g_best["rmse_after"]:.4g} ({g_best["gain_pct"]:.1f} % better)')
+        if unexplained:
+            summary += f'; structure remains in {", ".join(structure)}'
+    elif unexplained:
+        top = ', '.join(f'{x["regressor"]} ({x["r"]:+.2f})' for x in corr[:3])
+        summary = (f'unexplained discrepancy in {", ".join(structure)}: no catalogue effect explains it '
+                   f'(best {best.effect.id if best else "-"}, score {best.score if best else 0:.3f}); correlates: {top}')
+    else:
+        summary = 'no significant discrepancy: the nominal model explains the run to the sensor noise'
+    if significant:
+        subsystem = best.effect.subsystem
+    elif unexplained:
+        subsystem = {'thermal': 'thermal', 'mechanics': 'hysteresis/joint', 'chain': 'chain'}[structure[0]]
+    else:
+        subsystem = None
+    res = DiagnosisResult(
+        discrepancy=significant or unexplained, subsystem=subsystem, cause=best.effect.id if significant else None,
+        parameters=_param_dict(best.row, best.effect.params) if significant else {},
+        channel=channel if significant else (structure[0] if structure else channel),
+        rmse_before=chan_gains[channel]['rmse_before'] if not significant else g_best['rmse_before'],
+        rmse_after=(g_best['rmse_after'] if significant else chan_gains[channel]['rmse_after']),
+        gain_pct=g_best['gain_pct'] if significant else 0.0,
+        gain_ci=(g_best['gain_pct_p05'], g_best['gain_pct_p95']) if significant else (0.0, 0.0),
+        alternatives=alternatives, unexplained=unexplained, correlates=corr, channels=chan_gains,
+        residual_stats=stats, summary=summary, warnings=list(run.warnings), source=run.source,
+        duration_s=run.duration)
+    if params_out is not None:
+        res.params_file = str(write_params(res, params_out, run))
+    if report_dir is not None:
+        d = Path(report_dir)
+        d.mkdir(parents=True, exist_ok=True)
+        if res.params_file is None:
+            res.params_file = str(write_params(res, d / 'extended_params.yaml', run))
+        traces = {'t': run.t[sl], 'i_train': ev.i_train - ev.i0, 'regressors': reg,
+                  'meas': {c: ev.measured(c)[sl] for c in ev.channels},
+                  'nominal': {c: ev.pred_nom[c][sl, 0] for c in ev.channels},
+                  'best': {c: pred_final[c][sl, 0] for c in ev.channels}}
+        res.wall_s = time.perf_counter() - t_start
+        rp.write_report(res, d, traces)
+    res.wall_s = time.perf_counter() - t_start
+    return res
+
+
+def write_params(res: DiagnosisResult, path: str | Path, run: Run) -> Path:
+    """The extended model as a ROS 2 params file for plant_sim (schema: docs/diagnose.md)."""
+    import yaml
+    from sma_wrist.core.plant import PlantParams
+    p = PlantParams()
+    v = {k: d['value'] for k, d in res.parameters.items()}
+    tp, jp = p.thermal, p.joint
+    amb = tp.effective_ambient_C
+    params: dict[str, Any] = {
+        'payload_kg': float(run.payload_kg + v.get('payload_err_kg', 0.0)),
+        'model.thermal.input_per_volt': float(tp.input_per_volt * (1 + v.get('tem_gain_err', 0.0))),
+        'model.thermal.coupling_per_s': float(v.get('coupling_per_s', 0.0)),
+        'model.thermal.loss_scale': float(1 + v.get('loss_scale_err', 0.0)),
+        'model.thermal.ambient_C': [float(a + v.get('ambient_offset_C', 0.0)) for a in amb],
+        'model.thermal.ambient_drift_C_per_h': float(v.get('ambient_drift_C_per_h', 0.0)),
+        'model.joint.coulomb_Nm': float(v.get('coulomb_Nm', jp.coulomb_Nm)),
+        'model.joint.static_Nm': float(fx.STATIC_PER_COULOMB * v['coulomb_Nm']) if 'coulomb_Nm' in v else jp.static_Nm,
+        'model.joint.viscous_Nms': float(v.get('viscous_Nms', jp.viscous_Nms)),
+        'model.joint.backlash_rad': float(v.get('backlash_rad', 0.0)),
+        'model.preload_elongation_mm': float(p.preload_elongation_mm + v.get('preload_err_mm', 0.0)),
+        'model.hysteresis.wire_lag_s': float(v.get('hyst_lag_s', 0.0)),
+        'model.hysteresis.drift_C_per_cycle': float(v.get('hyst_drift_C_per_cycle', 0.0)),
+        'model.sensors.angle_delay_s': float(v.get('angle_delay_s', 0.0)),
+        'model.sensors.angle_offset_rad': float(v.get('angle_offset_rad', 0.0)),
+        'model.sensors.angle_gain_err': float(v.get('angle_gain_err', 0.0)),
+        'model.sensors.temperature_offset_C': float(v.get('temp_offset_C', 0.0)),
+        'model.sensors.temperature_lag_s': float(v.get('temp_lag_s', 0.0)),
+    }
+    doc = {'plant_sim': {'ros__parameters': params}}
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    head = (f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
+            f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
+            f'# schema: docs/diagnose.md "Params file"; model.* keys are nominal unless the cause changed them\n')
+    out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+    return out
+
+
+def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out: str | Path | None = None,
+             candidates: Sequence[str] | None = None) -> DiagnosisResult:
+    """Diagnose the bag at `path`; raises DiagnoseInputError for unusable input."""
+    run = load_run(path)
+    return diagnose_run(run, report_dir, params_out, candidates)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``sma-wrist diagnose BAG [--json] [--report DIR] [--params FILE]``; exit 0 ok, 2 bad input."""
+    ap = argparse.ArgumentParser(prog='sma-wrist diagnose',
+                                 description='Locate and name the model discrepancy of a recorded run (docs/diagnose.md).')
+    ap.add_argument('bag', help='rosbag2 directory (or .mcap) recorded per msg_defs/topics.yaml')
+    ap.add_argument('--json', action='store_true', help='print one JSON object instead of text')
+    ap.add_argument('--report', metavar='DIR', help='write diagnosis.md, PNG plots and extended_params.yaml here')
+    ap.add_argument('--params', metavar='FILE', help='write the extended model as a plant_sim params file')
+    ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
+    args = ap.parse_args(list(argv) if argv is not None else None)
+    try:
+        cands = args.candidates.split(',') if args.candidates else None
+        if cands:
+            unknown = [c for c in cands if c not in fx.EFFECTS]
+            if unknown:
+                raise DiagnoseInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
+        res = diagnose(args.bag, args.report, args.params, cands)
+    except DiagnoseInputError as exc:
+        if args.json:
+            print(json.dumps({'error': str(exc)}))
+        else:
+            print(f'sma-wrist diagnose: {exc}', file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 - main() never shows a traceback
+        msg = f'internal error {type(exc).__name__}: {exc} (please report with the bag)'
+        print(json.dumps({'error': msg}) if args.json else f'sma-wrist diagnose: {msg}', file=sys.stderr if not args.json else sys.stdout)
+        return 1
+    if args.json:
+        print(json.dumps(res.to_json()))
+        return 0
+    for w in res.warnings:
+        print(f'warning: {w}')
+    print(res.summary)
+    for c, g in res.channels.items():
+        print(f'  {c:9s} held-out RMS {g["rmse_before"]:.4g} -> {g["rmse_after"]:.4g} ({g["gain_pct"]:+.1f} %)')
+    print('  ranked candidates: ' + ', '.join(f'{a["cause"]} {a["score"]:.2f}' for a in res.alternatives[:5]))
+    if res.params_file:
+        print(f'  extended model: {res.params_file}')
+    if args.report:
+        print(f'  report: {Path(args.report) / "diagnosis.md"}')
+    return 0
+
+
+def bench_diagnose(quick: bool = True) -> dict[str, Any]:
+    from sma_wrist.diagnose.bench import bench_diagnose as _b
+    return _b(quick)

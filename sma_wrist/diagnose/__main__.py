@@ -1,0 +1,5 @@
+import sys
+
+from sma_wrist.diagnose import main
+
+sys.exit(main())

@@ -1,0 +1,250 @@
+"""Load a bag recorded per msg_defs/topics.yaml into aligned arrays, with input checks.
+
+The diagnosis needs, on one uniform time grid:
+
+* ``u``  (K, 2) TEM drive commands [V] (``/wrist/tem_{1,2}/command``, std_msgs/Float64),
+  zero-order held: the command stamped at t_k drives the plant over [t_k, t_k+1)
+  (plant_sim's convention: it publishes the state at t_k, the controller answers at t_k,
+  the plant integrates it until t_k+1);
+* ``T``  (K, 2) muscle temperatures [degC] (``/wrist/muscle_{1,2}/temperature``);
+* ``q``  (K,) wrist angle [rad] (``/wrist/joint_states`` position of joint ``wrist``);
+* ``payload_kg`` (``/wrist/payload``, latched std_msgs/Float64).
+
+Measurements are stamped with their header stamp when it is set (acquisition time), else
+with the bag's log time; commands with the log time. Problems are either fixed and
+reported in ``Run.warnings`` (NaNs dropped, unsorted or duplicate stamps sorted/removed,
+Kelvin temperatures or degree angles converted, gaps: the longest gap-free stretch is
+analysed) or raised as :class:`DiagnoseInputError` naming the problem and what is needed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sma_wrist.bag import BagError, read_bag
+from sma_wrist.core.errors import SmaWristError
+
+TOPICS = {
+    'u1': '/wrist/tem_1/command', 'u2': '/wrist/tem_2/command',
+    'T1': '/wrist/muscle_1/temperature', 'T2': '/wrist/muscle_2/temperature',
+    'joint': '/wrist/joint_states', 'payload': '/wrist/payload',
+}
+MIN_DURATION_S = 30.0
+DEFAULT_PAYLOAD_KG = 0.3
+MAX_COMMAND_V = 30.0
+
+
+class DiagnoseInputError(SmaWristError):
+    """The bag cannot be diagnosed; the message says what is wrong and what is needed."""
+
+
+@dataclass
+class Run:
+    """One run on a uniform grid. Any of u, T, q may be None when its topics are missing."""
+
+    t: np.ndarray  # (K,) s from the start of the analysed stretch
+    dt: float
+    u: np.ndarray | None
+    T: np.ndarray | None
+    q: np.ndarray | None
+    payload_kg: float
+    t0_s: float = 0.0  # bag time of t = 0
+    warnings: list[str] = field(default_factory=list)
+    source: str = ''
+
+    @property
+    def n(self) -> int:
+        return int(self.t.size)
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0]) if self.n else 0.0
+
+
+def _stamp_ns(msg: Any) -> int:
+    h = getattr(msg, 'header', None)
+    if h is None:
+        return 0
+    return int(h.stamp.sec) * 10**9 + int(h.stamp.nanosec)
+
+
+def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: list[str],
+            joint_name: str = 'wrist') -> tuple[np.ndarray, np.ndarray]:
+    """(t [s], values) of one topic, cleaned: NaNs dropped, sorted, de-duplicated."""
+    if kind == 'temperature':
+        vals = np.array([float(m.temperature) for m in msgs])
+    elif kind == 'joint':
+        out = []
+        for m in msgs:
+            names = list(m.name)
+            i = names.index(joint_name) if joint_name in names else 0
+            out.append(float(m.position[i]) if len(m.position) > i else np.nan)
+        vals = np.array(out)
+    else:
+        vals = np.array([float(m.data) for m in msgs])
+    stamps = np.array([_stamp_ns(m) for m in msgs], dtype=np.int64) if kind in ('temperature', 'joint') else None
+    t = (stamps if stamps is not None and np.all(stamps > 0) else np.asarray(t_log, np.int64)).astype(float) * 1e-9
+    bad = ~np.isfinite(vals)
+    if bad.any():
+        warnings.append(f'{name}: {int(bad.sum())} of {vals.size} samples are NaN/inf and were dropped '
+                        f'(need finite values; the gaps they leave are handled like missing samples)')
+        t, vals = t[~bad], vals[~bad]
+    if t.size > 1 and np.any(np.diff(t) < 0):
+        warnings.append(f'{name}: stamps are not sorted ({int((np.diff(t) < 0).sum())} steps back in time); '
+                        f'samples were sorted by stamp (need monotonic header stamps)')
+        o = np.argsort(t, kind='stable')
+        t, vals = t[o], vals[o]
+    if t.size > 1 and np.any(np.diff(t) == 0):
+        dup = np.r_[np.diff(t) == 0, False]
+        warnings.append(f'{name}: {int(dup.sum())} duplicate stamps; the last sample of each stamp was kept')
+        t, vals = t[~dup], vals[~dup]
+    return t, vals
+
+
+def _longest_gap_free(t: np.ndarray, dt: float) -> tuple[float, float, int]:
+    gaps = np.flatnonzero(np.diff(t) > 5.0 * dt)
+    edges = np.r_[0, gaps + 1, t.size]
+    lengths = [t[e - 1] - t[s] for s, e in zip(edges[:-1], edges[1:])]
+    i = int(np.argmax(lengths))
+    return float(t[edges[i]]), float(t[edges[i + 1] - 1]), int(gaps.size)
+
+
+def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
+    """Read and align a bag; raises DiagnoseInputError when nothing usable remains."""
+    warnings: list[str] = []
+    p = Path(path)
+    if not p.exists():
+        raise DiagnoseInputError(f'{p}: no such bag (need a rosbag2 directory with metadata.yaml and .mcap, '
+                                 f'or an .mcap file)')
+    try:
+        data = read_bag(p, list(TOPICS.values()))
+    except BagError as exc:
+        if not exc.salvaged:
+            raise DiagnoseInputError(f'{p}: cannot read the bag: {exc.problem}') from None
+        warnings.append(f'bag damaged ({exc.problem}); analysing the {sum(len(v[1]) for v in exc.salvaged.values())} '
+                        f'messages that could be salvaged')
+        data = exc.salvaged
+    except Exception as exc:  # noqa: BLE001 - anything rosbags raises
+        raise DiagnoseInputError(f'{p}: cannot read the bag: {type(exc).__name__}: {exc}') from None
+
+    series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    kinds = {'u1': 'float', 'u2': 'float', 'T1': 'temperature', 'T2': 'temperature', 'joint': 'joint',
+             'payload': 'float'}
+    for key, topic in TOPICS.items():
+        if topic in data and len(data[topic][1]):
+            try:
+                s = _series(topic, data[topic][0], data[topic][1], kinds[key], warnings)
+            except (AttributeError, TypeError, ValueError) as exc:
+                raise DiagnoseInputError(f'{topic}: unexpected message content ({exc}); the contract type is '
+                                         f'required (msg_defs/topics.yaml)') from None
+            if s[0].size:
+                series[key] = s
+    have_u = 'u1' in series and 'u2' in series
+    have_T = 'T1' in series and 'T2' in series
+    have_q = 'joint' in series
+    missing = [TOPICS[k] for k in ('u1', 'u2', 'T1', 'T2', 'joint') if k not in series]
+    if missing:
+        what = []
+        if not have_u:
+            what.append('without TEM commands the thermal replay (commands -> temperatures) and the whole chain are skipped')
+        if not have_T:
+            what.append('without muscle temperatures the thermal and hysteresis replays are skipped')
+        if not have_q:
+            what.append('without the joint angle only the thermal subsystem can be checked')
+        warnings.append(f'missing topic(s) {", ".join(missing)}: ' + '; '.join(what))
+    usable = (have_T and (have_u or have_q)) or (have_u and have_q)
+    if not usable:
+        raise DiagnoseInputError(
+            f'{p}: nothing to compare: found {sorted(TOPICS[k] for k in series) or "no contract topics"}; need the '
+            f'TEM commands {TOPICS["u1"]}, {TOPICS["u2"]} (std_msgs/Float64, V) with the muscle temperatures '
+            f'{TOPICS["T1"]}, {TOPICS["T2"]} (sensor_msgs/Temperature, degC), and/or {TOPICS["joint"]} '
+            f'(sensor_msgs/JointState, rad)')
+
+    # units
+    if have_T:
+        for k in ('T1', 'T2'):
+            t, v = series[k]
+            med = float(np.median(v))
+            if med > 150.0 and 200.0 < med < 450.0:
+                warnings.append(f'{TOPICS[k]}: median {med:.1f} looks like Kelvin; converted to degC (-273.15). '
+                                f'The contract (sensor_msgs/Temperature) is degC')
+                series[k] = (t, v - 273.15)
+            elif not (-40.0 < med < 150.0):
+                raise DiagnoseInputError(f'{TOPICS[k]}: median temperature {med:g} is not a muscle temperature in '
+                                         f'degC (expected about 15-90 degC)')
+    if have_q:
+        t, v = series['joint']
+        if np.nanmax(np.abs(v)) > 2 * np.pi:
+            if np.nanmax(np.abs(v)) < 400:
+                warnings.append(f'{TOPICS["joint"]}: angles up to {np.nanmax(np.abs(v)):.0f} look like degrees; '
+                                f'converted to rad (the contract is rad, REP-103)')
+                series['joint'] = (t, np.deg2rad(v))
+            else:
+                raise DiagnoseInputError(f'{TOPICS["joint"]}: angles up to {np.nanmax(np.abs(v)):g} are not radians')
+    if have_u:
+        for k in ('u1', 'u2'):
+            mx = float(np.max(np.abs(series[k][1])))
+            if mx > MAX_COMMAND_V:
+                raise DiagnoseInputError(f'{TOPICS[k]}: commands up to {mx:g} are not volts (the TEM drive is '
+                                         f'within +-{MAX_COMMAND_V:g} V; mV or a duty cycle in % ?)')
+
+    # grid: the measurement stamps of the reference topic
+    ref_key = 'joint' if have_q else 'T1'
+    t_ref = series[ref_key][0]
+    if t_ref.size < 3:
+        raise DiagnoseInputError(f'{TOPICS[ref_key]}: only {t_ref.size} samples; need at least '
+                                 f'{MIN_DURATION_S:g} s of data')
+    dt_med = float(np.median(np.diff(t_ref)))
+    lo = max(series[k][0][0] for k in series if k != 'payload')
+    hi = min(series[k][0][-1] for k in series if k != 'payload')
+    for k in series:
+        if k == 'payload':
+            continue
+        tk = series[k][0]
+        sel = tk[(tk >= lo) & (tk <= hi)]
+        if sel.size < 2:
+            continue
+        d = float(np.median(np.diff(tk))) if tk.size > 1 else dt_med
+        a, b, n_gaps = _longest_gap_free(sel, max(d, dt_med))
+        if n_gaps:
+            warnings.append(f'{TOPICS[k]}: {n_gaps} gap(s) longer than 5 samples; only the longest gap-free '
+                            f'stretch {a - t_ref[0]:.1f}-{b - t_ref[0]:.1f} s is analysed (the replay needs '
+                            f'continuous inputs)')
+        lo, hi = max(lo, a), min(hi, b)
+    if hi - lo < MIN_DURATION_S:
+        raise DiagnoseInputError(
+            f'{p}: only {max(hi - lo, 0):.1f} s of overlapping, gap-free data; need at least {MIN_DURATION_S:g} s '
+            f'(better several minutes with the muscles cycling through their transitions)')
+    step = max(1, int(round((1.0 / max_rate_hz) / dt_med)))
+    dt = dt_med * step
+    grid = np.arange(lo, hi + 1e-9, dt)
+
+    def interp(key: str) -> np.ndarray:
+        t, v = series[key]
+        return np.interp(grid, t, v)
+
+    def hold(key: str) -> np.ndarray:
+        t, v = series[key]
+        i = np.searchsorted(t, grid + 1e-7, side='right') - 1
+        return v[np.clip(i, 0, v.size - 1)]
+
+    u = np.stack([hold('u1'), hold('u2')], axis=1) if have_u else None
+    T = np.stack([interp('T1'), interp('T2')], axis=1) if have_T else None
+    q = interp('joint') if have_q else None
+    if 'payload' in series:
+        pv = series['payload'][1]
+        payload = float(pv[0])
+        if np.ptp(pv) > 1e-9:
+            warnings.append(f'/wrist/payload changed during the run ({pv.min():g}-{pv.max():g} kg); the first value '
+                            f'{payload:g} kg is used')
+        if not (0.0 <= payload <= 2.0):
+            raise DiagnoseInputError(f'/wrist/payload = {payload:g} is not a payload in kg (0-2 kg)')
+    else:
+        payload = DEFAULT_PAYLOAD_KG
+        warnings.append(f'/wrist/payload missing: assuming the plant default {DEFAULT_PAYLOAD_KG} kg (record the latched '
+                        f'/wrist/payload, std_msgs/Float64 kg); a payload mismatch may then be reported')
+    return Run(t=grid - grid[0], dt=dt, u=u, T=T, q=q, payload_kg=payload, t0_s=float(grid[0]), warnings=warnings,
+               source=str(p))

@@ -1,0 +1,343 @@
+"""Catalogue of candidate model discrepancies and the extended model that contains them all.
+
+Every effect is a parametric extension of the nominal plant (:class:`PlantParams()`), named
+by a physical mechanism and a subsystem. All effects live in one *extended model* whose
+parameter vector (:data:`PARAMS`) is nominal at its default values; a candidate frees a
+few of those parameters. Evaluation is batched: N parameter rows give N replays in one
+kernel call (candidate grids, finite-difference Jacobians, bootstrap).
+
+Signal chain of the extended model (docs/diagnose.md has the equations)::
+
+    commands u --TEM heat balance (gain, loss, Joule, coupling, ambient offset + drift)--> T_true
+    T_true --thermocouple (first-order lag, offset)--> T_measured
+    T_measured --inverse sensor--> T_true^ --wire lag, cycle drift--> T_wire
+    T_wire + payload --SD-GPI + joint (payload, Coulomb/static, viscous, pre-load)--> q
+    q --chain backlash (play), potentiometer (delay, offset, gain)--> q_measured
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from sma_wrist.core import thermal as th
+from sma_wrist.core.plant import PlantParams
+from sma_wrist.diagnose.kernels import Constants
+
+
+@dataclass(frozen=True)
+class Param:
+    name: str
+    unit: str
+    nominal: float
+    lower: float
+    upper: float
+    typical: float  # scale of a typical effect (finite-difference step x 20, grid span)
+    description: str
+
+
+PARAMS: tuple[Param, ...] = (
+    Param('tem_gain_err', '1', 0.0, -0.6, 1.0, 0.1, 'relative error of the TEM drive gain input_per_volt'),
+    Param('loss_scale_err', '1', 0.0, -0.6, 1.5, 0.1, 'relative error of the muscle-face heat loss (K_Tinf, K_T, K_inf)'),
+    Param('joule_scale_err', '1', 0.0, -0.9, 2.0, 0.2, 'relative error of the Joule term K_R'),
+    Param('ambient_offset_C', 'degC', 0.0, -15.0, 15.0, 1.0, 'constant ambient/coolant temperature offset'),
+    Param('ambient_drift_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'linear ambient/coolant temperature drift'),
+    Param('coupling_per_s', '1/s', 0.0, 0.0, 0.2, 0.01, 'heat conductance between the muscle faces / heat capacity'),
+    Param('temp_offset_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple offset (both channels)'),
+    Param('temp_lag_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple first-order time constant'),
+    Param('hyst_lag_s', 's', 0.0, 0.0, 60.0, 3.0, 'wire temperature lags the measured one (rate-dependent loops)'),
+    Param('hyst_drift_C_per_cycle', 'degC/cycle', 0.0, -10.0, 10.0, 1.0,
+          'transition temperatures move with the cycle count (functional fatigue)'),
+    Param('payload_err_kg', 'kg', 0.0, -0.5, 1.0, 0.1, 'true payload minus the recorded /wrist/payload'),
+    Param('coulomb_Nm', 'N m', 0.004, 0.0, 0.3, 0.02, 'Coulomb friction moment (static = 1.5 x Coulomb)'),
+    Param('viscous_Nms', 'N m s', 0.15, 0.0, 20.0, 1.0, 'viscous damping of the joint'),
+    Param('preload_err_mm', 'mm', 0.0, -1.0, 1.0, 0.05, 'bundle pre-load elongation error'),
+    Param('backlash_rad', 'rad', 0.0, 0.0, 0.3, 0.02, 'total play between chain and output shaft'),
+    Param('angle_delay_s', 's', 0.0, 0.0, 3.0, 0.2, 'potentiometer / acquisition delay'),
+    Param('angle_offset_rad', 'rad', 0.0, -0.5, 0.5, 0.02, 'potentiometer offset'),
+    Param('angle_gain_err', '1', 0.0, -0.5, 0.5, 0.03, 'potentiometer gain error about q_neutral'),
+)
+INDEX = {p.name: i for i, p in enumerate(PARAMS)}
+NOMINAL = np.array([p.nominal for p in PARAMS])
+LOWER = np.array([p.lower for p in PARAMS])
+UPPER = np.array([p.upper for p in PARAMS])
+TYPICAL = np.array([p.typical for p in PARAMS])
+STATIC_PER_COULOMB = 1.5  # the nominal joint's static / Coulomb ratio (0.006 / 0.004)
+#: one "cycle" of the hysteresis-drift effect: this much temperature travel (40 degC up and down)
+CYCLE_TRAVEL_C = 80.0
+
+THERMAL_KEYS = ('tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C', 'ambient_drift_C_per_h',
+                'coupling_per_s', 'temp_offset_C')
+MECH_KEYS = ('temp_offset_C', 'temp_lag_s', 'hyst_lag_s', 'hyst_drift_C_per_cycle', 'payload_err_kg', 'coulomb_Nm',
+             'viscous_Nms', 'preload_err_mm')
+_TH_IDX = [INDEX[k] for k in THERMAL_KEYS]
+_ME_IDX = [INDEX[k] for k in MECH_KEYS]
+
+
+@dataclass(frozen=True)
+class Effect:
+    id: str
+    name: str
+    subsystem: str  # thermal | hysteresis | joint | sensor
+    params: tuple[str, ...]
+    meaning: str
+
+
+CATALOGUE: tuple[Effect, ...] = (
+    Effect('sensor_delay', 'angle sensor delay', 'sensor', ('angle_delay_s',),
+           'the measured angle is the true angle some time ago (filtering, acquisition)'),
+    Effect('sensor_lag', 'temperature sensor first-order lag', 'sensor', ('temp_lag_s',),
+           'thermocouples respond with a time constant (poor contact with the bundle)'),
+    Effect('sensor_offset_gain', 'angle sensor offset and gain error', 'sensor', ('angle_offset_rad', 'angle_gain_err'),
+           'potentiometer mis-calibrated: q_meas = q + offset + gain_err (q - q_neutral)'),
+    Effect('temp_sensor_offset', 'temperature sensor offset', 'sensor', ('temp_offset_C',),
+           'both thermocouple channels read too high/low (cold-junction error)'),
+    Effect('ambient_drift', 'ambient/coolant temperature drift', 'thermal', ('ambient_drift_C_per_h',),
+           'room or coolant temperature changes linearly during the run'),
+    Effect('thermal_coupling', 'thermal coupling between the muscles', 'thermal', ('coupling_per_s',),
+           'heat flows between the two bundles (ThermalParams.coupling_per_s)'),
+    Effect('tem_mismatch', 'TEM drive gain mismatch', 'thermal', ('tem_gain_err',),
+           'the TEM pumps more/less heat per volt than Table 4.9 with input_per_volt = 0.4'),
+    Effect('payload_mismatch', 'payload mismatch', 'joint', ('payload_err_kg',),
+           'the mass at the lever differs from /wrist/payload'),
+    Effect('friction', 'Coulomb/static friction', 'joint', ('coulomb_Nm',),
+           'more dry friction in bearings/chain (static = 1.5 x Coulomb)'),
+    Effect('viscous_damping', 'viscous damping', 'joint', ('viscous_Nms',),
+           'the joint is more/less damped than 0.15 N m s'),
+    Effect('backlash', 'backlash', 'joint', ('backlash_rad',),
+           'play between chain/sprocket and the output shaft (play operator on the angle)'),
+    Effect('hysteresis_rate', 'rate-dependent hysteresis', 'hysteresis', ('hyst_lag_s',),
+           'the wires lag the measured temperature, loops widen with the heating rate'),
+    Effect('hysteresis_drift', 'hysteresis drift over cycles', 'hysteresis', ('hyst_drift_C_per_cycle',),
+           'transition temperatures move with the number of cycles (functional fatigue)'),
+    Effect('recalibrate_thermal', 'thermal parameter recalibration', 'thermal',
+           ('tem_gain_err', 'loss_scale_err', 'ambient_offset_C'),
+           'no new physics: Table 4.9 drive gain, heat loss and ambient refitted'),
+    Effect('recalibrate_mechanics', 'mechanical parameter recalibration', 'joint',
+           ('preload_err_mm', 'payload_err_kg', 'viscous_Nms'),
+           'no new physics: pre-load elongation, payload and damping refitted'),
+)
+EFFECTS = {e.id: e for e in CATALOGUE}
+
+
+def theta(**kw: float) -> np.ndarray:
+    """Full parameter vector: nominal except the given entries."""
+    v = NOMINAL.copy()
+    for k, x in kw.items():
+        v[INDEX[k]] = x
+    return v
+
+
+# ----------------------------------------------------------------------------- helpers
+def first_order(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
+    """First-order lag along axis 0 (exact discretisation for a ramp-free hold), x[0] at rest."""
+    if tau <= 0:
+        return x
+    a = float(np.exp(-dt / tau))
+    from scipy.signal import lfilter
+    zi = (a * x[0])[None] if x.ndim > 1 else np.array([a * x[0]])
+    y, _ = lfilter([1 - a], [1, -a], x, axis=0, zi=zi)
+    return y
+
+
+def play(x: np.ndarray, width: float) -> np.ndarray:
+    """Backlash (play operator) of total width `width` along axis 0, starting centred."""
+    if width <= 0:
+        return x
+    h = 0.5 * width
+    y = np.empty_like(x)
+    y[0] = x[0]
+    prev = x[0]
+    for k in range(1, x.shape[0]):
+        prev = np.minimum(np.maximum(prev, x[k] - h), x[k] + h)
+        y[k] = prev
+    return y
+
+
+def delayed(x: np.ndarray, delay: float, dt: float) -> np.ndarray:
+    """x(t - delay) with linear interpolation, held at x[0] before the start."""
+    if delay <= 0:
+        return x
+    s = delay / dt
+    i = int(np.floor(s))
+    f = s - i
+    n = x.shape[0]
+    idx0 = np.clip(np.arange(n) - i, 0, n - 1)
+    idx1 = np.clip(np.arange(n) - i - 1, 0, n - 1)
+    return (1 - f) * x[idx0] + f * x[idx1]
+
+
+def cycle_count(T: np.ndarray, dt: float) -> np.ndarray:
+    """Cycles so far per muscle: temperature travel / CYCLE_TRAVEL_C, on a 1 s-smoothed signal."""
+    win = max(3, int(round(1.0 / dt)) | 1)
+    Ts = savgol_filter(T, win, 1, axis=0) if T.shape[0] > win else T
+    travel = np.concatenate([np.zeros((1,) + T.shape[1:]), np.cumsum(np.abs(np.diff(Ts, axis=0)), axis=0)])
+    return travel / CYCLE_TRAVEL_C
+
+
+def smooth_and_rate(T: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-phase smoothed temperature (0.3 s window) and its rate (1 s window) [degC, degC/s]."""
+    w_s = max(5, int(round(0.3 / dt)) | 1)
+    w_r = max(5, int(round(1.0 / dt)) | 1)
+    if T.shape[0] <= w_r:
+        return T.copy(), np.gradient(T, dt, axis=0)
+    return savgol_filter(T, w_s, 2, axis=0), savgol_filter(T, w_r, 2, deriv=1, delta=dt, axis=0)
+
+
+# ----------------------------------------------------------------------------- model
+def thermal_coef(consts: Constants, th_row: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """(coef (14,), ambient drift [degC/s], ambient offset [degC]) for values of THERMAL_KEYS."""
+    c = consts.th_coef.copy()
+    v = dict(zip(THERMAL_KEYS, th_row))
+    c[0] *= 1.0 + v['tem_gain_err']
+    c[1] = v['coupling_per_s']
+    ls = 1.0 + v['loss_scale_err']
+    b = 2  # muscle face: K_at, K_t, K_Tinf, K_T, K_R, K_inf
+    c[b + 2] *= ls
+    c[b + 3] *= ls
+    c[b + 5] *= ls
+    for f in (0, 1):
+        c[2 + 6 * f + 4] *= 1.0 + v['joule_scale_err']
+    for f in (0, 1):
+        bb = 2 + 6 * f
+        c[bb + 5] += (c[bb + 2] - c[bb + 3]) * v['ambient_offset_C']
+    return c, v['ambient_drift_C_per_h'] / 3600.0, v['ambient_offset_C']
+
+
+class ExtendedModel:
+    """Batched replays of one run under parameter rows of :data:`PARAMS`.
+
+    Parameters
+    ----------
+    run:
+        :class:`sma_wrist.diagnose.data.Run` (uniform grid, commands, temperatures, angle, payload).
+    params:
+        Nominal plant; default ``PlantParams()``.
+    """
+
+    def __init__(self, run, params: PlantParams | None = None) -> None:  # type: ignore[no-untyped-def]
+        self.run = run
+        self.consts = Constants(params or PlantParams(dt=min(run.dt, 0.01)))
+        self.dt = run.dt
+        self.substeps = max(1, int(np.ceil(run.dt / 0.01 - 1e-9)))
+        tp = self.consts.params.thermal
+        self._rest = th.rest_state(tp, 1)[0]  # (2 layers, 2 faces)
+        if run.T is not None:
+            self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt)
+            self.cycles = cycle_count(run.T, run.dt)
+        self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
+        self._th_cache: dict[tuple, np.ndarray] = {}
+
+    # -- thermal ----------------------------------------------------------------------
+    def thermal_coef(self, th_row: np.ndarray) -> tuple[np.ndarray, float, float]:
+        return thermal_coef(self.consts, th_row)
+
+    def thermal_true(self, rows: np.ndarray, upto: int | None = None) -> np.ndarray:
+        """(K, N, 2) true muscle temperatures from the commands for parameter rows (N, P)."""
+        run = self.run
+        K = run.n if upto is None else upto
+        out = np.empty((K, rows.shape[0], 2))
+        todo: dict[tuple, list[int]] = {}
+        for j, r in enumerate(rows):
+            todo.setdefault((K,) + tuple(np.round(r[_TH_IDX], 12)), []).append(j)
+        missing = [k for k in todo if k not in self._th_cache]
+        if missing:
+            coefs, drifts, x0s = [], [], []
+            for key in missing:
+                c, drift, off = self.thermal_coef(np.array(key[1:]))
+                coefs.append(c)
+                drifts.append(drift)
+                T0 = run.T[0] - key[1 + THERMAL_KEYS.index('temp_offset_C')] if run.T is not None else self._rest[:, 0]
+                x0 = self._rest.copy()
+                x0[:, 1] += off  # exchanger face starts at its rest state, shifted by the ambient offset
+                x0[:, 1] += (T0 - self._rest[:, 0])
+                x0[:, 0] = T0
+                x0s.append(x0)
+            T, _ = self.consts.thermal(run.u[:K], self.dt, np.array(coefs), np.array(x0s), np.array(drifts),
+                                       self.substeps)
+            for i, key in enumerate(missing):
+                self._th_cache[key] = T[:, i]
+        for key, js in todo.items():
+            out[:, js] = self._th_cache[key][:, None]
+        return out
+
+    def thermal_measured(self, rows: np.ndarray, upto: int | None = None) -> np.ndarray:
+        """Predicted thermocouple readings (K, N, 2)."""
+        T = self.thermal_true(rows, upto)
+        out = np.empty_like(T)
+        for j, r in enumerate(rows):
+            out[:, j] = first_order(T[:, j], r[INDEX['temp_lag_s']], self.dt) + r[INDEX['temp_offset_C']]
+        return out
+
+    # -- mechanics ----------------------------------------------------------------------
+    def wire_temperature(self, r: np.ndarray, T_meas_s: np.ndarray, T_rate: np.ndarray, cycles: np.ndarray
+                         ) -> np.ndarray:
+        """Wire temperatures from (smoothed) measured ones under a parameter row."""
+        T = T_meas_s - r[INDEX['temp_offset_C']] + r[INDEX['temp_lag_s']] * T_rate
+        T = first_order(T, r[INDEX['hyst_lag_s']], self.dt)
+        return T - r[INDEX['hyst_drift_C_per_cycle']] * cycles
+
+    def joint_row(self, r: np.ndarray) -> np.ndarray:
+        jr = self.consts.joint_row.copy()
+        c = r[INDEX['coulomb_Nm']]
+        jr[0] = c
+        jr[1] = r[INDEX['viscous_Nms']]
+        jr[2] = STATIC_PER_COULOMB * c
+        jr[3] += r[INDEX['preload_err_mm']]
+        jr[4] = min(max(self.run.payload_kg + r[INDEX['payload_err_kg']], 0.0), 2.0)
+        return jr
+
+    def mechanics(self, rows: np.ndarray, upto: int | None = None, source: str = 'measured'
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q_true, qd, load) (K, N) / (K, N, 2) from measured temperatures ('measured') or the
+        thermal model ('chain')."""
+        K = self.run.n if upto is None else upto
+        N = rows.shape[0]
+        q = np.empty((K, N))
+        qd = np.empty((K, N))
+        load = np.empty((K, N, 2))
+        todo: dict[tuple, list[int]] = {}
+        for j, r in enumerate(rows):
+            key = (source, K) + tuple(np.round(r[_ME_IDX], 12))
+            if source == 'chain':
+                key = key + tuple(np.round(r[_TH_IDX], 12))
+            todo.setdefault(key, []).append(j)
+        missing = [k for k in todo if k not in self._mech_cache]
+        if missing:
+            Ts, jrows = [], []
+            chain_T = None
+            if source == 'chain':
+                chain_T = self.thermal_true(rows[[todo[k][0] for k in missing]], K)
+            for i, key in enumerate(missing):
+                r = rows[todo[key][0]]
+                if source == 'chain':
+                    Tt = chain_T[:, i]
+                    Tw = first_order(Tt, r[INDEX['hyst_lag_s']], self.dt) - r[INDEX['hyst_drift_C_per_cycle']] * cycle_count(Tt, self.dt)
+                else:
+                    Tw = self.wire_temperature(r, self.T_s[:K], self.T_rate[:K], self.cycles[:K])
+                Ts.append(Tw)
+                jrows.append(self.joint_row(r))
+            qq, qqd, ll = self.consts.mechanics(np.stack(Ts, axis=1), self.dt, np.array(jrows), self.substeps)
+            for i, key in enumerate(missing):
+                self._mech_cache[key] = (qq[:, i], qqd[:, i], ll[:, i])
+            if len(self._mech_cache) > 400:
+                for k in list(self._mech_cache)[:200]:
+                    del self._mech_cache[k]
+        for key, js in todo.items():
+            a, b, c = self._mech_cache[key]
+            q[:, js] = a[:, None]
+            qd[:, js] = b[:, None]
+            load[:, js] = c[:, None]
+        return q, qd, load
+
+    def angle_sensor(self, q: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Measured angle from the true one (K,) under a parameter row."""
+        y = play(q, r[INDEX['backlash_rad']])
+        y = delayed(y, r[INDEX['angle_delay_s']], self.dt)
+        qn = self.consts.params.joint.q_neutral_rad
+        return y + r[INDEX['angle_offset_rad']] + r[INDEX['angle_gain_err']] * (y - qn)
+
+    def angle_measured(self, rows: np.ndarray, upto: int | None = None, source: str = 'measured') -> np.ndarray:
+        q, _, _ = self.mechanics(rows, upto, source)
+        return np.stack([self.angle_sensor(q[:, j], r) for j, r in enumerate(rows)], axis=1)

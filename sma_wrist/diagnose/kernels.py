@@ -1,0 +1,285 @@
+"""Compiled replay kernels for the diagnosis: thermal and mechanics of the wrist plant,
+vectorised over N parameter scenarios with per-scenario parameters.
+
+The arithmetic is that of :mod:`sma_wrist.core.plant_kernel` (thermal RK4 of Eqs. 4.13-4.14,
+the SD-GPI wire-load solve, the joint of Eq. 4.18); its private load solve is reused so
+the numbers are the plant's. What the plant kernel cannot do and this module adds:
+
+* mechanics from *prescribed* muscle temperatures (the plant's ``step_mechanics``, compiled),
+* per-scenario thermal coefficients, ambient drift, joint friction, payload and pre-load,
+  so candidate effects and finite-difference Jacobians are one call.
+
+test_diagnose checks both kernels against :class:`sma_wrist.core.plant.WristPlant`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sma_wrist.core import plant_kernel as pk
+from sma_wrist.core.plant import PlantParams
+
+_jit = pk._jit  # numba.njit(cache=True, nogil=True) when numba is installed
+_solve_load = pk._solve_load
+_envelopes = pk._envelopes
+
+#: indices in the per-scenario thermal coefficient rows (pack_thermal)
+TH_IPV, TH_COUPLING = 0, 1
+#: per-scenario joint rows: coulomb, viscous, static, preload_mm, payload_kg
+J_COULOMB, J_VISCOUS, J_STATIC, J_PRELOAD, J_PAYLOAD = 0, 1, 2, 3, 4
+
+
+@_jit
+def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
+    """One RK4 step of both layers (2 x 2 faces) in place; ambient_shift [degC] moves K_inf."""
+    for stage in range(4):
+        if stage == 0:
+            for l in range(2):
+                for f in range(2):
+                    tmp[l, f] = x[l, f]
+            out = k1
+        elif stage == 1:
+            for l in range(2):
+                for f in range(2):
+                    tmp[l, f] = x[l, f] + 0.5 * dt * k1[l, f]
+            out = k2
+        elif stage == 2:
+            for l in range(2):
+                for f in range(2):
+                    tmp[l, f] = x[l, f] + 0.5 * dt * k2[l, f]
+            out = k3
+        else:
+            for l in range(2):
+                for f in range(2):
+                    tmp[l, f] = x[l, f] + dt * k3[l, f]
+            out = k4
+        ipv = coef[0]
+        coupling = coef[1]
+        for l in range(2):
+            cur = -ipv * (u0 if l == 0 else u1)
+            for f in range(2):
+                o = 1 - f
+                b = 2 + 6 * f
+                d = (coef[b + 4] * cur + coef[b] * tmp[l, f] + coef[b + 1] * tmp[l, o]) * cur \
+                    - coef[b + 2] * tmp[l, f] + coef[b + 3] * tmp[l, o] + coef[b + 5] \
+                    + (coef[b + 2] - coef[b + 3]) * ambient_shift
+                if f == 0 and coupling != 0.0:
+                    d += coupling * (tmp[1 - l, 0] - tmp[l, 0])
+                out[l, f] = d
+    for l in range(2):
+        for f in range(2):
+            x[l, f] += dt / 6.0 * (k1[l, f] + 2.0 * k2[l, f] + 2.0 * k3[l, f] + k4[l, f])
+
+
+@_jit
+def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma: no cover - compiled
+    """Muscle temperatures under sampled commands.
+
+    u (K, 2) [V] held from sample k to k+1 (already clipped); coef (N, 14) as
+    plant_kernel.pack_constants' th_coef; x0 (N, 2, 2) initial faces; drift_per_s (N,)
+    ambient shift rate [degC/s] of both faces; out_T (K, N, 2) muscle faces at the samples,
+    out_X (N, 2, 2) the final state.
+    """
+    K = u.shape[0]
+    N = coef.shape[0]
+    h = dt / substeps
+    x = np.empty((2, 2))
+    k1 = np.empty((2, 2))
+    k2 = np.empty((2, 2))
+    k3 = np.empty((2, 2))
+    k4 = np.empty((2, 2))
+    tmp = np.empty((2, 2))
+    for j in range(N):
+        for l in range(2):
+            for f in range(2):
+                x[l, f] = x0[j, l, f]
+        out_T[0, j, 0] = x[0, 0]
+        out_T[0, j, 1] = x[1, 0]
+        t = 0.0
+        for k in range(1, K):
+            for s in range(substeps):
+                _rk4_layers(x, u[k - 1, 0], u[k - 1, 1], coef[j], drift_per_s[j] * t, h, k1, k2, k3, k4, tmp)
+                t += h
+            out_T[k, j, 0] = x[0, 0]
+            out_T[k, j, 1] = x[1, 0]
+        for l in range(2):
+            for f in range(2):
+                out_X[j, l, f] = x[l, f]
+
+
+@_jit
+def _loads(T1, T2, q, w, i1, i2, w_now, heating, load, compliance, y_mem1, y_mem2, preload, n_total, commit,
+           stacked, edges, r, p, mech):  # pragma: no cover - compiled
+    """Solve both bundles' loads at angle q; returns (torque, stiffness)."""
+    scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
+    max_it = int(mech[8])
+    n_g_r, r_eff, q_neutral = mech[14], mech[15], mech[16]
+    x_mm = 1e3 * r_eff * (q - q_neutral)
+    torque = 0.0
+    inv_c = 0.0
+    for side in range(2):
+        i = i1 if side == 0 else i2
+        T = T1 if side == 0 else T2
+        y_mem = y_mem1 if side == 0 else y_mem2
+        y_geo = preload - x_mm if side == 0 else preload + x_mm
+        m, dy, res = _solve_load(T, y_geo, w[i], w_now, y_mem, load[i], stacked, edges, r, p, m_lo, m_hi,
+                                 scale, c_el, k_f, m_max, tol, max_it)
+        if commit:
+            w[i, :] = w_now
+            load[i] = m
+            compliance[i] = dy
+        torque += n_g_r * m if side == 0 else -n_g_r * m
+        inv_c += 1.0 / dy
+    return torque, n_g_r * 1e3 * r_eff * inv_c
+
+
+@_jit
+def _memoryless(T, heating, mem_c, mem_d, p0):  # pragma: no cover - compiled
+    if heating:
+        return p0 * (mem_c[0] * math.tanh(mem_c[1] * T + mem_c[2]) + mem_c[3])
+    return p0 * (mem_d[0] * math.tanh(mem_d[1] * T + mem_d[2]) + mem_d[3])
+
+
+@_jit
+def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mech, joint,
+                  out_q, out_qd, out_load):  # pragma: no cover - compiled
+    """Angle from prescribed muscle temperatures (WristPlant.step_mechanics, compiled).
+
+    T (K, N, 2) [degC] per scenario; temperatures are interpolated linearly inside a sample
+    interval when substeps > 1 (substeps = 1: the plant's step at the sample's temperature).
+    jrow (N, 5): coulomb [N m], viscous [N m s], static [N m], pre-load elongation [mm],
+    payload [kg]. The start is WristPlant.rest_state's: memory cooled from hot at T[0], loads
+    from 0.8 kgf, static equilibrium by bisection. Outputs (K, N), (K, N), (K, N, 2) [kgf].
+    """
+    K = T.shape[0]
+    N = T.shape[1]
+    n_op = r.size
+    h = dt / substeps
+    p0, T_lo, T_hi = mech[9], mech[10], mech[11]
+    I_w, lever, stick_v = joint[0], joint[1], joint[5]
+    q_min, q_max, g = joint[7], joint[8], joint[9]
+    w = np.empty((2, n_op))
+    w_now = np.empty(n_op)
+    heating = np.zeros(2, np.bool_)
+    T_prev = np.empty(2)
+    load = np.empty(2)
+    compliance = np.ones(2)
+    for j in range(N):
+        coulomb, viscous, static, preload, payload = jrow[j, 0], jrow[j, 1], jrow[j, 2], jrow[j, 3], jrow[j, 4]
+        # --- rest state: memory at the upper bound (cooled from hot) at m = 0.8 kgf
+        for side in range(2):
+            T0 = min(max(T[0, j, side], T_lo), T_hi)
+            c, s = _envelopes(stacked, edges, min(max(0.8, mech[4]), mech[5]))
+            g_r = c[0] * math.tanh(c[1] * T0 + c[2]) + c[3]
+            for i in range(n_op):
+                w[side, i] = g_r + r[i]
+            heating[side] = False
+            T_prev[side] = T0
+            load[side] = 0.8
+        T1, T2 = T_prev[0], T_prev[1]
+        ym1 = _memoryless(T1, False, mem_c, mem_d, p0)
+        ym2 = _memoryless(T2, False, mem_c, mem_d, p0)
+        lo = q_min
+        hi = q_max
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            tau, _s = _loads(T1, T2, mid, w, 0, 1, w_now, heating, load, compliance, ym1, ym2, preload, 2, False,
+                             stacked, edges, r, p, mech)
+            tau -= payload * g * lever * math.cos(mid)
+            if tau > 0:
+                lo = mid
+            else:
+                hi = mid
+        q = 0.5 * (lo + hi)
+        _loads(T1, T2, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2, preload, 2, True,
+               stacked, edges, r, p, mech)
+        qd = 0.0
+        out_q[0, j] = q
+        out_qd[0, j] = 0.0
+        out_load[0, j, 0] = load[0]
+        out_load[0, j, 1] = load[1]
+        inertia = I_w + payload * lever * lever
+        for k in range(1, K):
+            for s in range(substeps):
+                frac = (s + 1.0) / substeps
+                Ts0 = T[k - 1, j, 0] + frac * (T[k, j, 0] - T[k - 1, j, 0])
+                Ts1 = T[k - 1, j, 1] + frac * (T[k, j, 1] - T[k - 1, j, 1])
+                Ts0 = min(max(Ts0, T_lo), T_hi)
+                Ts1 = min(max(Ts1, T_lo), T_hi)
+                for side in range(2):
+                    Tn = Ts0 if side == 0 else Ts1
+                    if Tn > T_prev[side]:
+                        heating[side] = True
+                    elif Tn < T_prev[side]:
+                        heating[side] = False
+                    T_prev[side] = Tn
+                ym1 = _memoryless(Ts0, heating[0], mem_c, mem_d, p0)
+                ym2 = _memoryless(Ts1, heating[1], mem_c, mem_d, p0)
+                torque, stiffness = _loads(Ts0, Ts1, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2,
+                                           preload, 2, True, stacked, edges, r, p, mech)
+                tau_drive = torque - payload * g * lever * math.cos(q)
+                at_rest = abs(qd) < stick_v
+                stuck = at_rest and abs(tau_drive) <= static
+                if at_rest:
+                    direction = 1.0 if tau_drive > 0 else (-1.0 if tau_drive < 0 else 0.0)
+                else:
+                    direction = 1.0 if qd > 0 else -1.0
+                h_over_i = h / inertia
+                qd_new = (qd + h_over_i * (tau_drive - direction * coulomb)) / (1.0 + h_over_i * (viscous + h * stiffness))
+                s_new = 1.0 if qd_new > 0 else (-1.0 if qd_new < 0 else 0.0)
+                s_old = 1.0 if qd > 0 else (-1.0 if qd < 0 else 0.0)
+                reversed_ = (not at_rest) and s_new != s_old and abs(tau_drive) <= static + coulomb
+                if stuck or reversed_:
+                    qd_new = 0.0
+                q_new = q + h * qd_new
+                if q_new < q_min or q_new > q_max:
+                    q_new = min(max(q_new, q_min), q_max)
+                    qd_new = 0.0
+                q = q_new
+                qd = qd_new
+            out_q[k, j] = q
+            out_qd[k, j] = qd
+            out_load[k, j, 0] = load[0]
+            out_load[k, j, 1] = load[1]
+
+
+class Constants:
+    """The plant's constant arrays for the kernels, from a PlantParams."""
+
+    def __init__(self, params: PlantParams | None = None) -> None:
+        self.params = params or PlantParams()
+        th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint = pk.pack_constants(self.params)
+        self.th_coef = th_coef
+        self.mech = np.concatenate([mech, [self.params.joint.q_neutral_rad]])
+        self.stacked, self.edges, self.r, self.p = stacked, edges, r, p
+        self.mem_c, self.mem_d, self.joint = mem_c, mem_d, joint
+        jp = self.params.joint
+        self.joint_row = np.array([jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm,
+                                   self.params.preload_elongation_mm, jp.payload_kg])
+        self.u_limits = (self.params.thermal.u_min_V, self.params.thermal.u_max_V)
+
+    def thermal(self, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift_per_s: np.ndarray,
+                substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+        """(K, N, 2) muscle temperatures and the (N, 2, 2) final state; see :func:`thermal_sim`."""
+        u = np.ascontiguousarray(np.clip(u, *self.u_limits), dtype=float)
+        coef = np.ascontiguousarray(np.atleast_2d(coef), dtype=float)
+        n = coef.shape[0]
+        out = np.empty((u.shape[0], n, 2))
+        X = np.empty((n, 2, 2))
+        thermal_sim(u, float(dt), int(substeps), coef, np.ascontiguousarray(np.broadcast_to(x0, (n, 2, 2)), dtype=float),
+                    np.ascontiguousarray(np.broadcast_to(drift_per_s, (n,)), dtype=float), out, X)
+        return out, X
+
+    def mechanics(self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim`."""
+        T = np.ascontiguousarray(T, dtype=float)
+        k, n = T.shape[:2]
+        jrow = np.ascontiguousarray(np.broadcast_to(jrow, (n, 5)), dtype=float)
+        q = np.empty((k, n))
+        qd = np.empty((k, n))
+        load = np.empty((k, n, 2))
+        mechanics_sim(T, float(dt), int(substeps), jrow, self.stacked, self.edges, self.r, self.p, self.mem_c,
+                      self.mem_d, self.mech, self.joint, q, qd, load)
+        return q, qd, load

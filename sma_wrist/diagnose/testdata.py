@@ -1,0 +1,253 @@
+"""Synthetic "measured" runs with one known effect, written as bags per msg_defs/topics.yaml.
+
+The truth is the extended model of :mod:`sma_wrist.diagnose.effects` run open loop at a
+5x finer step than the 100 Hz samples (so the diagnosis' replay never matches it to the
+last digit), with ONE catalogue effect injected at a random magnitude (or none), driven
+by smooth random antagonistic TEM commands (random heating/cooling dwells of 45-105 s,
+12-13.5 V heating, -12 V cooling, 3 s first-order smoothing), then measured: thermocouple
+noise 0.05 degC, potentiometer noise 5e-4 rad, 16-bit ADC quantisation (temperatures over
+-50..150 degC, angle over -pi..pi).
+
+The bag is written by the embedded runtime and :class:`sma_wrist.bag.BagRecorder`: one node
+publishes, at every 10 ms tick of the virtual clock, ``/clock``, both temperatures and
+``/wrist/joint_states`` (header stamp = sample time), then both TEM commands (the command
+that drives the next interval, as plant_sim's graph does); ``/wrist/payload`` is latched
+once. ``corrupt=`` makes bad bags for the input checks.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.signal import lfilter
+
+from sma_wrist.core import thermal as th
+from sma_wrist.core.plant import PlantParams
+from sma_wrist.diagnose import effects as fx
+from sma_wrist.diagnose.kernels import Constants
+
+#: magnitude ranges of injected effects: param -> (low, high, random sign)
+RANGES: dict[str, dict[str, tuple[float, float, bool]]] = {
+    'sensor_delay': {'angle_delay_s': (0.15, 0.6, False)},
+    'sensor_lag': {'temp_lag_s': (1.0, 4.0, False)},
+    'sensor_offset_gain': {'angle_offset_rad': (0.02, 0.06, True), 'angle_gain_err': (0.04, 0.10, True)},
+    'temp_sensor_offset': {'temp_offset_C': (1.0, 3.0, True)},
+    'ambient_drift': {'ambient_drift_C_per_h': (8.0, 20.0, True)},
+    'thermal_coupling': {'coupling_per_s': (0.008, 0.03, False)},
+    'tem_mismatch': {'tem_gain_err': (0.08, 0.2, True)},
+    'payload_mismatch': {'payload_err_kg': (0.1, 0.25, True)},
+    'friction': {'coulomb_Nm': (0.03, 0.08, False)},
+    'viscous_damping': {'viscous_Nms': (2.0, 6.0, False)},
+    'backlash': {'backlash_rad': (0.02, 0.06, False)},
+    'hysteresis_rate': {'hyst_lag_s': (4.0, 12.0, False)},
+    'hysteresis_drift': {'hyst_drift_C_per_cycle': (1.5, 4.0, True)},
+    'recalibrate_thermal': {'loss_scale_err': (0.12, 0.25, True)},
+    'recalibrate_mechanics': {'preload_err_mm': (0.08, 0.2, True)},
+}
+NOISE_T_C = 0.05
+NOISE_Q_RAD = 5e-4
+ADC_BITS = 16
+T_SPAN_C = (-50.0, 150.0)
+Q_SPAN_RAD = (-np.pi, np.pi)
+SUBSTEPS = 5
+
+
+@dataclass
+class Truth:
+    """What was injected, and the sampled signals."""
+
+    effect: str  # catalogue id or 'none'
+    params: dict[str, float]
+    seed: int
+    payload_kg: float  # recorded payload (the true one differs under payload_mismatch)
+    dt: float
+    t: np.ndarray
+    u: np.ndarray
+    T: np.ndarray  # measured
+    q: np.ndarray  # measured
+    T_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    q_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+
+
+def commands(duration_s: float, dt: float, rng: np.random.Generator) -> np.ndarray:
+    """Smooth random antagonistic TEM commands (K, 2) [V]."""
+    K = int(round(duration_s / dt)) + 1
+    s = np.empty(K)
+    k = 0
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    while k < K:
+        n = int(rng.uniform(45.0, 105.0) / dt)
+        s[k:k + n] = sign
+        sign = -sign
+        k += n
+    a = dt / 3.0
+    s = lfilter([a], [1.0, a - 1.0], s, zi=[(1 - a) * s[0]])[0]
+    hot1, hot2 = rng.uniform(12.0, 13.5, 2)
+    u1 = np.where(s > 0, hot1 * s, 12.0 * s)
+    u2 = np.where(s < 0, -hot2 * s, -12.0 * s)
+    u = np.stack([u1, u2], axis=1)
+    return np.clip(u + rng.normal(0.0, 0.3, (1, 2)), -12.0, 13.5)
+
+
+def sample_params(effect: str, rng: np.random.Generator) -> dict[str, float]:
+    if effect == 'none':
+        return {}
+    out = {}
+    for name, (lo, hi, signed) in RANGES[effect].items():
+        v = rng.uniform(lo, hi)
+        if signed and rng.random() < 0.5:
+            v = -v
+        out[name] = float(v)
+    return out
+
+
+def quantise(x: np.ndarray, span: tuple[float, float], bits: int = ADC_BITS) -> np.ndarray:
+    lsb = (span[1] - span[0]) / (2 ** bits)
+    return np.clip(np.round((x - span[0]) / lsb) * lsb + span[0], *span)
+
+
+def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, params: dict[str, float] | None = None,
+             payload_kg: float | None = None, dt: float = 0.01) -> Truth:
+    """The measured signals of one synthetic run (no bag)."""
+    if effect != 'none' and effect not in fx.EFFECTS:
+        raise ValueError(f'unknown effect {effect!r}; catalogue: {", ".join(fx.EFFECTS)}')
+    rng = np.random.default_rng(seed)
+    payload = float(rng.uniform(0.2, 0.5)) if payload_kg is None else float(payload_kg)
+    injected = sample_params(effect, rng) if params is None else dict(params)
+    r = fx.theta(**injected)
+    consts = Constants(PlantParams(dt=dt))
+    u = commands(duration_s, dt, rng)
+    K = u.shape[0]
+    coef, drift, off = fx.thermal_coef(consts, r[[fx.INDEX[k] for k in fx.THERMAL_KEYS]])
+    x0 = th.rest_state(consts.params.thermal, 1)
+    x0 = x0 + off  # the ambient offset moves the rest state by exactly off
+    T_true, _ = consts.thermal(u, dt, coef, x0, np.array([drift]), SUBSTEPS)
+    T_true = T_true[:, 0]
+    T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) \
+        - r[fx.INDEX['hyst_drift_C_per_cycle']] * fx.cycle_count(T_true, dt)
+    jr = consts.joint_row.copy()
+    jr[0] = r[fx.INDEX['coulomb_Nm']]
+    jr[1] = r[fx.INDEX['viscous_Nms']]
+    jr[2] = fx.STATIC_PER_COULOMB * jr[0]
+    jr[3] += r[fx.INDEX['preload_err_mm']]
+    jr[4] = payload + r[fx.INDEX['payload_err_kg']]
+    q_true, _, _ = consts.mechanics(T_wire[:, None, :], dt, jr, SUBSTEPS)
+    q_true = q_true[:, 0]
+    # sensors
+    model = fx.ExtendedModel.__new__(fx.ExtendedModel)
+    model.dt = dt
+    model.consts = consts
+    q_meas = fx.ExtendedModel.angle_sensor(model, q_true, r)
+    T_meas = fx.first_order(T_true, r[fx.INDEX['temp_lag_s']], dt) + r[fx.INDEX['temp_offset_C']]
+    q_meas = quantise(q_meas + rng.normal(0.0, NOISE_Q_RAD, K), Q_SPAN_RAD)
+    T_meas = quantise(T_meas + rng.normal(0.0, NOISE_T_C, (K, 2)), T_SPAN_C)
+    t = np.arange(K) * dt
+    return Truth(effect, injected, seed, payload, dt, t, u, T_meas, q_meas, T_true, q_true)
+
+
+# ----------------------------------------------------------------------------- bags
+def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = None) -> Path:
+    """Write a Truth as a rosbag2 (MCAP) bag through the embedded runtime and BagRecorder.
+
+    corrupt: {'drop_topics': [...], 'nan_T': (start, n), 'kelvin': True, 'degrees': True,
+    'gap': (start_s, length_s), 'shuffle_stamps': n, 'duplicate_stamps': n}.
+    """
+    from sma_wrist import runtime
+    runtime.activate()
+    import rclpy
+    from rclpy.node import Node
+    from rclpy.qos import DurabilityPolicy, QoSProfile
+    from rclpy.time import Time
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState, Temperature
+    from std_msgs.msg import Float64
+
+    from sma_wrist.runtime.launch import run_nodes
+
+    c = dict(corrupt or {})
+    drop = set(c.get('drop_topics', ()))
+    K = truth.t.size
+    T = truth.T.copy()
+    q = truth.q.copy()
+    if 'nan_T' in c:
+        a, n = c['nan_T']
+        T[a:a + n, 0] = np.nan
+    if c.get('kelvin'):
+        T = T + 273.15
+    if c.get('degrees'):
+        q = np.rad2deg(q)
+    skip = np.zeros(K, bool)
+    if 'gap' in c:
+        a, n = c['gap']
+        skip[int(a / truth.dt):int((a + n) / truth.dt)] = True
+    stamp_ns = (np.arange(K) + 1) * int(round(truth.dt * 1e9))
+    head = stamp_ns.copy()
+    rng = np.random.default_rng(truth.seed + 7)
+    if c.get('shuffle_stamps'):
+        i = rng.choice(np.arange(1, K - 1), c['shuffle_stamps'], replace=False)
+        head[i], head[i + 1] = head[i + 1].copy(), head[i].copy()
+    if c.get('duplicate_stamps'):
+        i = rng.choice(np.arange(1, K - 1), c['duplicate_stamps'], replace=False)
+        head[i] = head[i - 1]
+    u = truth.u
+    payload = truth.payload_kg
+
+    class Measured(Node):
+        def __init__(self) -> None:
+            super().__init__('measured_wrist')
+            self.k = 0
+            self.pub = {}
+            for name, typ in (('/clock', Clock), ('/wrist/muscle_1/temperature', Temperature),
+                              ('/wrist/muscle_2/temperature', Temperature), ('/wrist/joint_states', JointState),
+                              ('/wrist/tem_1/command', Float64), ('/wrist/tem_2/command', Float64)):
+                if name not in drop:
+                    self.pub[name] = self.create_publisher(typ, name, 10)
+            if '/wrist/payload' not in drop:
+                latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+                self.create_publisher(Float64, '/wrist/payload', latched).publish(Float64(data=payload))
+            self.create_timer(truth.dt, self.tick)
+
+        def tick(self) -> None:
+            k = self.k
+            if k >= K:
+                return
+            self.k += 1
+            if skip[k]:
+                return
+            p = self.pub
+            stamp = Time(nanoseconds=int(head[k])).to_msg()
+            if '/clock' in p:
+                p['/clock'].publish(Clock(clock=Time(nanoseconds=int(stamp_ns[k])).to_msg()))
+            for i in (1, 2):
+                name = f'/wrist/muscle_{i}/temperature'
+                if name in p:
+                    m = Temperature(temperature=float(T[k, i - 1]), variance=NOISE_T_C ** 2)
+                    m.header.stamp = stamp
+                    m.header.frame_id = f'muscle_{i}'
+                    p[name].publish(m)
+            if '/wrist/joint_states' in p:
+                js = JointState(name=['wrist'], position=[float(q[k])], velocity=[0.0], effort=[0.0])
+                js.header.stamp = stamp
+                js.header.frame_id = 'wrist_base'
+                p['/wrist/joint_states'].publish(js)
+            for i in (1, 2):
+                name = f'/wrist/tem_{i}/command'
+                if name in p:
+                    p[name].publish(Float64(data=float(u[k, i - 1])))
+
+    path = Path(path)
+    try:
+        run_nodes([Measured], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady')
+    finally:
+        rclpy.try_shutdown()
+    return path
+
+
+def make_bag(path: str | Path, effect: str = 'none', seed: int = 0, duration_s: float = 240.0,
+             corrupt: dict[str, Any] | None = None, **kw: Any) -> Truth:
+    """simulate + write_bag; returns the Truth (injected effect and parameters)."""
+    truth = simulate(effect, seed, duration_s, **kw)
+    write_bag(truth, path, corrupt)
+    return truth
