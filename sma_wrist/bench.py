@@ -198,6 +198,27 @@ def _bench_compiled(params: object, n_steps: int, repeats: int) -> dict:
     return out
 
 
+@section('graph')
+def bench_graph(quick: bool = False) -> dict:
+    """The node graph on the embedded runtime (sma_wrist.closed_loop.bench_graph)."""
+    from sma_wrist.closed_loop import bench_graph as run_graph
+    return run_graph(quick)
+
+
+@section('experiment')
+def bench_experiment(quick: bool = False) -> dict:
+    """Wall time of the Chapter 6 experiment (3 controllers x 6 payloads, two periods, 2 workers)."""
+    import tempfile
+
+    from sma_wrist.experiment import run_experiment
+    ctrls = ['inverse_adaptive', 'direct_adaptive', 'pid']
+    loads = [0.1, 0.6] if quick else [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
+    duration = 10.0 if quick else 4 * math.pi / 0.1
+    with tempfile.TemporaryDirectory() as d:
+        t = run_experiment(ctrls, loads, d, duration_s=duration, workers=2, plots=False, log=open(os.devnull, 'w'))
+    return {'runs': len(t['runs']), 'sim_time_per_run_s': duration, 'wall_s_total': t['wall_s'], 'workers': 2}
+
+
 # -------------------------------------------------------------------------------- driver
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:

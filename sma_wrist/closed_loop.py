@@ -129,3 +129,25 @@ def print_progress(t: float, total: float, wall: float) -> None:
 
 
 __all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'run_closed_loop', 'print_progress', 'ros_args', 'overrides']
+
+
+def bench_graph(quick: bool = False) -> dict[str, Any]:
+    """Real-time factor of the full graph (100 Hz control, 1 kHz plant) with and without recording,
+    and the runtime's per-message cost (embedded runtime; run in a fresh process by sma-wrist bench)."""
+    import tempfile
+
+    from sma_wrist import runtime
+    runtime.activate()
+    duration = 10.0 if quick else 60.0
+    out: dict[str, Any] = {'sim_time_s': duration}
+    for controller in ('direct_adaptive', 'inverse_adaptive'):
+        run_closed_loop(controller, 0.3, 0.5)  # imports, numba cache load
+        s = run_closed_loop(controller, 0.3, duration)
+        out[f'{controller}_real_time_factor'] = s.real_time_factor
+        with tempfile.TemporaryDirectory() as d:
+            r = run_closed_loop(controller, 0.3, duration, Path(d) / 'bag')
+        out[f'{controller}_recorded_real_time_factor'] = r.real_time_factor
+        out[f'{controller}_messages_per_sim_s'] = r.messages_recorded / duration
+        out[f'{controller}_recording_cost_us_per_message'] = (
+            1e6 * (r.wall_s - s.wall_s) / max(r.messages_recorded, 1))
+    return out
