@@ -118,6 +118,11 @@ def cmd_bench(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_emulate_device(a: argparse.Namespace) -> int:
+    from sma_wrist.hw.emulator import run_from_args
+    return run_from_args(a)
+
+
 def _csv(kind: Callable[[str], Any]) -> Callable[[str], list[Any]]:
     def parse(text: str) -> list[Any]:
         items = [x.strip() for x in text.split(',') if x.strip()]

@@ -1,0 +1,400 @@
+"""A device emulator on a pseudo-terminal: the wrist's microcontroller, with the simulated plant.
+
+``sma-wrist emulate-device --port /tmp/wrist`` opens a pty, links its slave end at
+``--port`` and behaves like the firmware of docs/protocol.md: boot notice and hello,
+then ``$S`` samples at ``--rate-hz`` (1 kHz) of device time with 16-bit ADC quantisation
+and Gaussian noise of the plant :class:`sma_wrist.core.plant.WristPlant`; ``$C`` commands
+take effect ``--latency-ms`` after they arrive; no command for ``--watchdog-s`` of device
+time -> zero drive (flag ``FLAG_WATCHDOG``). Device time runs ``--time-scale`` times
+faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
+
+Fault injection (for tests and demos), from the command line as rates/periods, or from
+Python with :meth:`DeviceEmulator.inject`: garbage bytes, checksum errors, cut lines,
+resets, unplug (the pty's master is closed, the link removed; on replug the device
+boots again on a new pty at the same link), freezes (no samples), forced ADC counts.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import threading
+import time
+import tty
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Sequence
+
+import numpy as np
+
+from sma_wrist.hw import protocol as P
+from sma_wrist.hw.calibration import Calibration, quantise
+
+MAX_BACKLOG = 1 << 16  # bytes buffered for a host that does not read; beyond, output is dropped (UART overrun)
+
+
+@dataclass
+class EmulatorConfig:
+    """Device behaviour. Times are device time [s] unless named wall."""
+
+    rate_hz: float = 1000.0  # sample rate
+    time_scale: float = 1.0  # device seconds per wall second
+    payload_kg: float = 0.3
+    noise_counts: float = 2.0  # Gaussian ADC noise, standard deviation [counts]
+    latency_s: float = 0.001  # command -> drive delay
+    watchdog_s: float = 0.5  # zero drive without a command for this long
+    u_limit_V: float = 24.0  # driver rating; larger commands are clipped (FLAG_CLIPPED)
+    seed: int = 0
+    calibration: Calibration = field(default_factory=Calibration)
+    device_id: str = 'sma-wrist-emulator'
+    firmware: str = '1.0.0'
+    # random faults per sample line (probabilities) and periodic events (device s, 0 = never)
+    garbage_rate: float = 0.0
+    checksum_error_rate: float = 0.0
+    partial_rate: float = 0.0
+    reset_every_s: float = 0.0
+    unplug_every_s: float = 0.0
+    unplug_wall_s: float = 0.5
+
+
+@dataclass
+class EmulatorStats:
+    samples_sent: int = 0
+    commands_received: int = 0
+    bytes_dropped: int = 0
+    resets: int = 0
+    unplugs: int = 0
+    faults_injected: int = 0
+
+
+class DeviceEmulator:
+    """The emulated device. ``open()`` the pty, then ``start()`` (thread) or ``run()`` (blocking).
+
+    Thread-safe control: :meth:`inject`, :meth:`stop`. ``sent_log`` (if enabled) keeps
+    ``(wall time of write, Sample)`` of every sample sent, for latency benchmarks.
+    """
+
+    def __init__(self, config: EmulatorConfig | None = None, link: str | None = None, log_sent: bool = False) -> None:
+        from sma_wrist.core.plant import PlantParams, WristPlant
+        self.cfg = c = config or EmulatorConfig()
+        if not (c.rate_hz > 0 and c.time_scale > 0):
+            raise ValueError('rate_hz and time_scale must be > 0')
+        self.link = link
+        dt = min(1e-3, 1.0 / c.rate_hz)
+        self.steps_per_sample = max(1, int(round(1.0 / (c.rate_hz * dt))))
+        self.plant = WristPlant(PlantParams(dt=1.0 / (c.rate_hz * self.steps_per_sample)), payload_kg=c.payload_kg)
+        self.rng = np.random.default_rng(c.seed)
+        self.stats = EmulatorStats()
+        self.parser = P.Parser()
+        self.sent_log: list[tuple[float, P.Sample]] | None = [] if log_sent else None
+        self.slave_path: str | None = None
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._out = bytearray()
+        self._lock = threading.Lock()
+        self._actions: deque[tuple[str, Any]] = deque()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._u = np.zeros((1, 2))  # drive in effect [V]
+        self._pending: deque[tuple[float, np.ndarray]] = deque()  # (device time to apply, command)
+        self._forced: dict[int, int] = {}
+        self._freeze_until = 0.0  # wall
+        self._corrupt = 0
+        self._cut = 0
+        self._boot()
+
+    # ------------------------------------------------------------------ pty
+    def open(self) -> str:
+        """Open a new pty (raw, non-blocking master); link it at ``self.link``; return the slave path."""
+        master, slave = os.openpty()
+        tty.setraw(slave)
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self.slave_path = os.ttyname(slave)
+        if self.link:
+            tmp = f'{self.link}.tmp{os.getpid()}'
+            if os.path.lexists(tmp):
+                os.unlink(tmp)
+            os.symlink(self.slave_path, tmp)
+            os.replace(tmp, self.link)
+        return self.link or self.slave_path
+
+    def close(self) -> None:
+        """Unplug: close both pty ends (the host's reads fail) and remove the link."""
+        if self.link and os.path.islink(self.link) and os.readlink(self.link) == self.slave_path:
+            os.unlink(self.link)
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+        self._out.clear()
+
+    # ------------------------------------------------------------------ device
+    def _boot(self, reason: str = 'power') -> None:
+        """(Re)boot: time and sequence restart at 0, drive off, boot notice + hello queued."""
+        self._t_boot_wall = time.monotonic()
+        self._n = 0  # samples since boot
+        self._last_cmd_t = -1e9
+        self._u[:] = 0.0
+        self._pending.clear()
+        self.parser.reset()
+        self._out += P.encode(P.Reset(reason)) + P.encode(P.Hello(self.cfg.device_id, self.cfg.firmware,
+                                                                   int(round(self.cfg.rate_hz))))
+        self._boot_flag = True
+
+    @property
+    def device_time_s(self) -> float:
+        return self._n / self.cfg.rate_hz
+
+    def inject(self, kind: str, value: Any = None) -> None:
+        """Queue a fault: ``garbage`` (n bytes), ``corrupt`` (next n lines), ``cut`` (next n lines),
+        ``reset``, ``unplug`` (wall s), ``freeze`` (wall s, no output), ``force`` ((channel, counts|None)),
+        ``raw`` (bytes written as they are)."""
+        with self._lock:
+            self._actions.append((kind, value))
+
+    def _do_actions(self) -> None:
+        with self._lock:
+            actions = list(self._actions)
+            self._actions.clear()
+        for kind, v in actions:
+            self.stats.faults_injected += 1
+            if kind == 'garbage':
+                self._out += bytes(self.rng.integers(0, 256, int(v or 64), dtype=np.uint8))
+            elif kind == 'raw':
+                self._out += bytes(v)
+            elif kind == 'corrupt':
+                self._corrupt += int(v or 1)
+            elif kind == 'cut':
+                self._cut += int(v or 1)
+            elif kind == 'reset':
+                self.stats.resets += 1
+                self._boot('software')
+            elif kind == 'freeze':
+                self._freeze_until = time.monotonic() + float(v)
+            elif kind == 'force':
+                ch, counts = v
+                if counts is None:
+                    self._forced.pop(int(ch), None)
+                else:
+                    self._forced[int(ch)] = int(counts)
+            elif kind == 'unplug':
+                self._unplug(float(v if v is not None else self.cfg.unplug_wall_s))
+            else:
+                raise ValueError(f'unknown fault {kind!r}')
+
+    def _unplug(self, wall_s: float) -> None:
+        self.stats.unplugs += 1
+        self.close()
+        t_end = time.monotonic() + wall_s
+        while not self._stop.is_set() and time.monotonic() < t_end:
+            time.sleep(0.005)
+        # the wrist cooled/moved meanwhile at zero drive
+        lost = int(wall_s * self.cfg.time_scale * self.cfg.rate_hz)
+        self.plant.advance(np.zeros((1, 2)), max(1, lost * self.steps_per_sample))
+        self._boot('power')
+        self.open()
+
+    def _read_commands(self) -> None:
+        if self._master is None:
+            return
+        try:
+            data = os.read(self._master, 4096)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            return
+        now = self.device_time_s
+        for f in self.parser.feed(data):
+            if isinstance(f, P.Command):
+                self.stats.commands_received += 1
+                u = np.array([[f.u1_mV, f.u2_mV]], float) / 1000.0
+                self._pending.append((now + self.cfg.latency_s, u))
+            elif isinstance(f, P.Query):
+                self._out += P.encode(P.Hello(self.cfg.device_id, self.cfg.firmware, int(round(self.cfg.rate_hz))))
+
+    def _sample(self) -> bytes:
+        c = self.cfg
+        self._n += 1
+        t = self._n / c.rate_hz
+        while self._pending and self._pending[0][0] <= t:
+            self._u = self._pending.popleft()[1]
+            self._last_cmd_t = t
+        flags = 0
+        u = self._u
+        if t - self._last_cmd_t > c.watchdog_s:
+            u = np.zeros((1, 2))
+            flags |= P.FLAG_WATCHDOG
+        if np.abs(u).max() > c.u_limit_V:
+            u = np.clip(u, -c.u_limit_V, c.u_limit_V)
+            flags |= P.FLAG_CLIPPED
+        if self._boot_flag:
+            flags |= P.FLAG_BOOT
+            self._boot_flag = False
+        self.plant.advance(u, self.steps_per_sample)
+        th = self.plant.state.thermal[0]  # (layer, face)
+        temps = np.array([th[0, 0], th[1, 0], th[0, 1], th[1, 1]])
+        counts = c.calibration.to_counts(temps, float(self.plant.state.q[0]))
+        if c.noise_counts > 0:
+            counts = counts + self.rng.normal(0.0, c.noise_counts, 5)
+        adc = list(quantise(counts))
+        for ch, v in self._forced.items():
+            adc[ch] = v
+        s = P.Sample((self._n - 1) % P.SEQ_MODULUS, int(round((self._n - 1) * 1e6 / c.rate_hz)), tuple(adc), flags)
+        line = P.encode(s)
+        if self.sent_log is not None:
+            self.sent_log.append((time.perf_counter(), s))
+        self.stats.samples_sent += 1
+        r = self.rng.random(3) if (c.garbage_rate or c.checksum_error_rate or c.partial_rate) else None
+        if self._corrupt or (r is not None and r[0] < c.checksum_error_rate):
+            self._corrupt = max(0, self._corrupt - 1)
+            line = line[:-5] + b'%04X\n' % ((int(line[-5:-1], 16) ^ 0x0101) & 0xFFFF)
+        if self._cut or (r is not None and r[1] < c.partial_rate):
+            self._cut = max(0, self._cut - 1)
+            line = line[: len(line) // 2]
+        if r is not None and r[2] < c.garbage_rate:
+            line = bytes(self.rng.integers(0, 256, 16, dtype=np.uint8)) + line
+        return line
+
+    def _flush(self) -> None:
+        if self._master is None or not self._out:
+            return
+        try:
+            n = os.write(self._master, self._out)
+            del self._out[:n]
+        except (BlockingIOError, InterruptedError):
+            pass
+        except OSError:
+            self._out.clear()
+        if len(self._out) > MAX_BACKLOG:
+            self.stats.bytes_dropped += len(self._out)
+            self._out.clear()
+
+    def step_until(self, wall_now: float) -> int:
+        """Emit every sample due by ``wall_now`` (monotonic s); returns how many."""
+        c = self.cfg
+        due = int((wall_now - self._t_boot_wall) * c.time_scale * c.rate_hz)
+        k = 0
+        frozen = wall_now < self._freeze_until
+        while self._n < due:
+            line = self._sample()
+            if not frozen:
+                self._out += line
+            k += 1
+            if c.reset_every_s and self._n % max(1, int(c.reset_every_s * c.rate_hz)) == 0:
+                self.inject('reset')
+                break
+            if c.unplug_every_s and self._n % max(1, int(c.unplug_every_s * c.rate_hz)) == 0:
+                self.inject('unplug', c.unplug_wall_s)
+                break
+        return k
+
+    def run(self, duration_wall_s: float | None = None) -> None:
+        """Serve until :meth:`stop` (or ``duration_wall_s``); opens the pty if not open."""
+        if self._master is None:
+            self.open()
+        self._t_boot_wall = time.monotonic()
+        t_end = None if duration_wall_s is None else self._t_boot_wall + duration_wall_s
+        period = 1.0 / (self.cfg.rate_hz * self.cfg.time_scale)
+        try:
+            while not self._stop.is_set():
+                now = time.monotonic()
+                if t_end is not None and now >= t_end:
+                    break
+                self._do_actions()
+                self._read_commands()
+                self.step_until(time.monotonic())
+                self._flush()
+                # next sample due; sleep at most 1 ms so commands are read promptly
+                nxt = self._t_boot_wall + (self._n + 1) * period
+                time.sleep(min(max(nxt - time.monotonic(), 0.0), 0.001))
+        finally:
+            self.close()
+
+    def start(self) -> str:
+        """Open the pty and serve in a daemon thread; returns the port path."""
+        path = self.open()
+        self._thread = threading.Thread(target=self.run, name='sma-wrist-emulator', daemon=True)
+        self._thread.start()
+        return path
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5.0)
+
+
+# --------------------------------------------------------------------------- command line
+def add_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``sma-wrist emulate-device`` (also ``python -m sma_wrist.hw.emulator``)."""
+    ap.add_argument('--port', default=None, help='create a symlink to the pty here (default: print the pty path)')
+    ap.add_argument('--rate-hz', type=float, default=1000.0, help='sample rate in device time [Hz] (default 1000)')
+    ap.add_argument('--time-scale', type=float, default=1.0, help='device seconds per wall second (default 1)')
+    ap.add_argument('--payload-kg', type=float, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
+    ap.add_argument('--noise-counts', type=float, default=2.0, help='ADC noise, std dev [counts] (default 2)')
+    ap.add_argument('--latency-ms', type=float, default=1.0, help='command -> drive delay, device time [ms]')
+    ap.add_argument('--watchdog-s', type=float, default=0.5, help='zero drive without commands [device s]')
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--thermocouple-offsets-C', default='0,0,0,0',
+                    help='sensor errors of muscle 1, muscle 2, TEM face 1, TEM face 2 [degC]')
+    ap.add_argument('--garbage-rate', type=float, default=0.0, help='probability of garbage before a line')
+    ap.add_argument('--checksum-error-rate', type=float, default=0.0, help='probability of a wrong CRC per line')
+    ap.add_argument('--partial-rate', type=float, default=0.0, help='probability of a cut line')
+    ap.add_argument('--reset-every-s', type=float, default=0.0, help='device reset period [device s] (0: never)')
+    ap.add_argument('--unplug-every-s', type=float, default=0.0, help='unplug period [device s] (0: never)')
+    ap.add_argument('--unplug-wall-s', type=float, default=0.5, help='how long an unplug lasts [wall s]')
+    ap.add_argument('--duration', type=float, default=None, help='stop after this many wall seconds')
+
+
+def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
+    offsets = tuple(float(x) for x in a.thermocouple_offsets_C.split(','))
+    if len(offsets) != 4:
+        raise ValueError('--thermocouple-offsets-C needs 4 comma-separated values')
+    if not (a.rate_hz > 0 and a.time_scale > 0 and 0 <= a.payload_kg <= 1.5):
+        raise ValueError('--rate-hz and --time-scale must be > 0, --payload-kg in [0, 1.5]')
+    # the device's sensor error: it reads `offset` too high, i.e. counts of (T + offset)
+    cal = Calibration(offsets_C=tuple(-o for o in offsets))  # type: ignore[arg-type]
+    return EmulatorConfig(rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,
+                          noise_counts=a.noise_counts, latency_s=a.latency_ms / 1000.0, watchdog_s=a.watchdog_s,
+                          seed=a.seed, calibration=cal, garbage_rate=a.garbage_rate,
+                          checksum_error_rate=a.checksum_error_rate, partial_rate=a.partial_rate,
+                          reset_every_s=a.reset_every_s, unplug_every_s=a.unplug_every_s,
+                          unplug_wall_s=a.unplug_wall_s)
+
+
+def run_from_args(a: argparse.Namespace) -> int:
+    """Serve until SIGINT/SIGTERM or --duration; prints the port path first (flushed)."""
+    try:
+        cfg = config_from_args(a)
+    except ValueError as e:
+        print(f'error: {e}', flush=True)
+        return 2
+    emu = DeviceEmulator(cfg, link=a.port)
+    path = emu.open()
+    print(f'emulated wrist on {emu.slave_path}' + (f' (linked at {a.port})' if a.port else '')
+          + f', {cfg.rate_hz:g} Hz, time x{cfg.time_scale:g}', flush=True)
+    print(path, flush=True)
+    signal.signal(signal.SIGTERM, lambda *_: emu._stop.set())
+    try:
+        emu.run(a.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        emu.close()
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog='sma-wrist emulate-device', description=__doc__.split('\n')[0])
+    add_arguments(ap)
+    return run_from_args(ap.parse_args(argv))
+
+
+__all__ = ['EmulatorConfig', 'EmulatorStats', 'DeviceEmulator', 'add_arguments', 'config_from_args',
+           'run_from_args', 'main']
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,426 @@
+"""hardware_bridge: the real wrist (or its emulator) on a serial line, in place of plant_sim.
+
+Same topics, types and units as plant_sim (msg_defs/topics.yaml): /clock,
+/wrist/muscle_{1,2}/temperature, /wrist/muscle_{1,2}/stress, /wrist/joint_states,
+/wrist/payload (latched); subscribes /wrist/tem_{1,2}/command; reports on /diagnostics.
+The line protocol is docs/protocol.md (sma_wrist/hw/protocol.py); a reader thread
+(sma_wrist/hw/link.py) parses and reconnects with exponential backoff.
+
+Measurements: every ``1 / publish_rate_hz`` of device time the samples of that window
+(1 kHz) are calibrated (``adc.*``, ``calibration.*``: counts -> degC / rad) and published:
+temperatures as the window mean (variance = the window's), the angle as the least-squares
+line's value at the window end and its slope, low-pass filtered over ``velocity_filter_s``,
+as velocity. **The stresses and the effort are estimates**, not measurements: the SD-GPI
+wire-load solve at the measured temperatures and angle (sma_wrist/hw/estimate.py).
+
+Time: the device clock is the graph's clock. /clock is the device time stamp of the last
+sample of each window, rebased to 0 at the first sample and kept continuous (spliced one
+window after the last published time) across device resets and reconnects; the other
+nodes run with use_sim_time as with plant_sim, so an emulator running N x faster than
+wall time (--time-scale) makes the whole graph run N x faster. The bridge itself runs on
+its steady clock (use_sim_time false): its timer polls every half window; each tick waits
+up to ``sample_wait_s`` (wall) for the window to complete, then publishes. On the embedded
+runtime, whose steady clock is virtual, that wait is what paces the graph by the device:
+nothing is published before the device sent it. If the host falls behind, old windows
+are skipped (counted), the newest is published; data is never queued up into latency.
+
+Safety, checked every tick; any fault sends 0 V to both TEMs (the device's own watchdog
+also zeroes the drive without commands) and reports ERROR on /diagnostics until it clears:
+
+* no valid sample for ``sensor_timeout_s`` of wall time (unplugged, silent, garbage only);
+* a muscle above ``max_muscle_temperature_C`` or a TEM face above
+  ``max_tem_face_temperature_C`` (clears ``over_temperature_hysteresis_C`` lower);
+* angle outside [``angle_min_rad``, ``angle_max_rad``];
+* an ADC channel at 0 or full scale (open thermocouple, broken wiper) or a non-finite value.
+
+Commands: clipped to [``u_min_V``, ``u_max_V``]; NaN/inf commands are rejected and that
+TEM gets 0 V until a finite one arrives; a command older than ``command_timeout_s`` (sim
+time) is replaced by 0 V. Serial faults (garbage, bad checksums, cut lines, resets,
+unplug) never reach the topics: only CRC-checked, in-range, in-sequence samples do.
+"""
+from __future__ import annotations
+
+import math
+import queue
+import time
+from typing import Any, Mapping
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, Temperature
+from std_msgs.msg import Float64
+
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.hw import protocol as P
+from sma_wrist.hw.calibration import Calibration
+from sma_wrist.hw.estimate import StressEstimator, slope
+from sma_wrist.hw.link import SerialLink
+from sma_wrist.nodes.common import Param, WristNode, finite, main_for
+
+HELLO_WAIT_S = 0.5  # after connecting, samples before the device's hello (or this long, wall) are stale
+OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
+
+
+class HardwareBridge(WristNode):
+    PARAMS = (
+        Param('port', '/dev/ttyACM0', 'serial port (or pyserial URL) of the wrist controller', runtime=False),
+        Param('baud_rate', 921600, 'serial baud rate (1 kHz samples need >= 921600; ignored by USB CDC/pty)',
+              'bit/s', (9600, 4000000), runtime=False),
+        Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m, as mounted (published latched)', 'kg',
+              (0.0, 1.5)),
+        Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in device time', 'Hz',
+              (1.0, 500.0), runtime=False),
+        Param('sample_wait_s', 0.05, 'longest a tick waits for the device to complete a window (wall time)', 's',
+              (0.001, 1.0)),
+        Param('max_backlog_windows', 5, 'more queued data than this many windows: skip to the newest', '',
+              (1, 1000)),
+        Param('sensor_timeout_s', 0.1, 'no valid sample for this long (wall time): TEMs off, ERROR', 's',
+              (0.005, 10.0)),
+        Param('command_timeout_s', 0.5, 'a TEM command older than this (sim time) is replaced by 0 V', 's',
+              (0.01, 60.0)),
+        Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature: TEMs off above this', 'degC',
+              (30.0, 120.0)),
+        Param('max_tem_face_temperature_C', 85.0, 'TEM exchanger-face over-temperature: TEMs off above this',
+              'degC', (30.0, 150.0)),
+        Param('over_temperature_hysteresis_C', 5.0, 'an over-temperature clears this far below its limit', 'degC',
+              (0.0, 30.0)),
+        Param('angle_min_rad', -0.45, 'angle below this (past the -0.35 rad stop): TEMs off', 'rad', (-3.2, 3.2)),
+        Param('angle_max_rad', 1.5, 'angle above this (past the 1.40 rad stop): TEMs off', 'rad', (-3.2, 3.2)),
+        Param('u_min_V', -24.0, 'most negative TEM command sent (driver rating, cooling)', 'V', (-30.0, 0.0)),
+        Param('u_max_V', 24.0, 'most positive TEM command sent (driver rating, heating)', 'V', (0.0, 30.0)),
+        Param('velocity_filter_s', 0.02, 'time constant of the velocity low-pass', 's', (0.0, 1.0)),
+        Param('reconnect_backoff_initial_s', 0.05, 'first reconnect delay; doubles per failure', 's', (0.001, 10.0),
+              runtime=False),
+        Param('reconnect_backoff_max_s', 2.0, 'longest reconnect delay', 's', (0.01, 60.0), runtime=False),
+        Param('silence_reconnect_s', 1.0, 'reopen the port after this long without a valid frame (wall)', 's',
+              (0.05, 60.0), runtime=False),
+        Param('adc.temperature_gain_C_per_count', 0.004, 'thermocouple channels: degC per ADC count', 'degC',
+              (1e-5, 1.0)),
+        Param('adc.temperature_zero_C', -50.0, 'thermocouple channels: temperature at count 0', 'degC',
+              (-300.0, 300.0)),
+        Param('calibration.muscle_1_offset_C', 0.0, 'thermocouple offset added to muscle 1', 'degC', (-20.0, 20.0)),
+        Param('calibration.muscle_2_offset_C', 0.0, 'thermocouple offset added to muscle 2', 'degC', (-20.0, 20.0)),
+        Param('calibration.tem_face_1_offset_C', 0.0, 'thermocouple offset added to TEM 1 exchanger face', 'degC',
+              (-20.0, 20.0)),
+        Param('calibration.tem_face_2_offset_C', 0.0, 'thermocouple offset added to TEM 2 exchanger face', 'degC',
+              (-20.0, 20.0)),
+        Param('calibration.angle_gain_rad_per_count', 1e-4, 'potentiometer gain', 'rad', (-1e-2, 1e-2)),
+        Param('calibration.angle_offset_rad', -3.2768, 'angle at count 0', 'rad', (-10.0, 10.0)),
+    )
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__('hardware_bridge', **kwargs)
+        p = self.p
+        self.cal = self._calibration(p)
+        self.period_s = 1.0 / p['publish_rate_hz']
+        self.command_V = np.zeros(2)
+        self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
+        self.estimator = StressEstimator(payload_kg=p['payload_kg'])
+        self.seq = P.SequenceTracker()
+        self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
+                         'safe_ticks': 0}
+        self._window: list[tuple[float, np.ndarray, float, int]] = []  # (sim t [s], temps (4,), q, max/min count)
+        self._last_t_us: int | None = None
+        self._anchor: tuple[int, float] | None = None  # (device t_us, sim s) of the time base
+        self._last_pub_s: float | None = None
+        self._next_pub_s = 0.0
+        self._last_valid_wall: float | None = None
+        self._latest: tuple[np.ndarray, float, bool] | None = None  # temps, q, adc at a rail
+        self._hot = False
+        self._qd = 0.0
+        self._device = ''
+        self._await_hello_until = 0.0
+        self._diag_wall = 0.0
+
+        self.pub_clock = self.publisher('/clock')
+        self.pub_joint = self.publisher('/wrist/joint_states')
+        self.pub_temp = [self.publisher(f'/wrist/muscle_{i}/temperature') for i in (1, 2)]
+        self.pub_stress = [self.publisher(f'/wrist/muscle_{i}/stress') for i in (1, 2)]
+        self.pub_payload = self.publisher('/wrist/payload')
+        for i in (1, 2):
+            self.subscription(f'/wrist/tem_{i}/command', lambda msg, i=i: self._on_command(i, msg))
+        self._publish_payload()
+        self.link = SerialLink(p['port'], p['baud_rate'], backoff_initial_s=p['reconnect_backoff_initial_s'],
+                               backoff_max_s=p['reconnect_backoff_max_s'], silence_s=p['silence_reconnect_s'])
+        self.timer = self.create_timer(0.5 * self.period_s, self._tick)
+        self.link.start()
+        self.get_logger().info(f'hardware_bridge: port {p["port"]} at {p["baud_rate"]} bit/s, publishing at '
+                               f'{p["publish_rate_hz"]:g} Hz of device time, payload {p["payload_kg"]} kg')
+
+    def destroy_node(self) -> None:
+        link = getattr(self, 'link', None)
+        if link is not None:
+            try:
+                link.send_command(0.0, 0.0)
+            finally:
+                link.stop()
+        super().destroy_node()
+
+    # -- parameters ------------------------------------------------------------
+    @staticmethod
+    def _calibration(p: Mapping[str, Any]) -> Calibration:
+        return Calibration(p['adc.temperature_gain_C_per_count'], p['adc.temperature_zero_C'],
+                           (p['calibration.muscle_1_offset_C'], p['calibration.muscle_2_offset_C'],
+                            p['calibration.tem_face_1_offset_C'], p['calibration.tem_face_2_offset_C']),
+                           p['calibration.angle_gain_rad_per_count'], p['calibration.angle_offset_rad'])
+
+    def validate(self, values: Mapping[str, Any]) -> str | None:
+        problem = super().validate(values)
+        if problem:
+            return problem
+        if not values['angle_min_rad'] < values['angle_max_rad']:
+            return f'angle_min_rad {values["angle_min_rad"]} must be below angle_max_rad {values["angle_max_rad"]}'
+        if values['calibration.angle_gain_rad_per_count'] == 0.0:
+            return 'calibration.angle_gain_rad_per_count must not be 0'
+        if not values['reconnect_backoff_initial_s'] <= values['reconnect_backoff_max_s']:
+            return 'reconnect_backoff_initial_s must not exceed reconnect_backoff_max_s'
+        if not isinstance(values['port'], str) or not values['port'].strip():
+            return 'port must be a non-empty string'
+        return None
+
+    def apply(self, changed: Mapping[str, Any]) -> None:
+        if any(k.startswith(('adc.', 'calibration.')) for k in changed):
+            self.cal = self._calibration(self.p)
+        if 'payload_kg' in changed:
+            self._publish_payload()
+
+    # -- inputs ----------------------------------------------------------------
+    def _on_command(self, i: int, msg: Any) -> None:
+        if not finite(msg.data):
+            self.command_V[i - 1] = 0.0  # hardware: a garbled command turns that TEM off, not "keep last"
+            self.reject_input(f'tem_{i}/command', f'non-finite command {msg.data!r} V: TEM {i} off')
+            return
+        self.command_V[i - 1] = msg.data
+        self._cmd_t[i - 1] = self._last_pub_s if self._last_pub_s is not None else 0.0
+        self._send()
+
+    # -- serial events ---------------------------------------------------------
+    def _resync(self) -> None:
+        """Forget the time base and the open window (device reset, reconnect, time went back)."""
+        self._anchor = None
+        self._window.clear()
+        self._last_t_us = None
+        self.seq.restart()
+
+    def _handle(self, ev: tuple[str, float, Any]) -> None:
+        kind, wall, x = ev
+        if kind == 'connected':
+            self._resync()
+            # bytes the device wrote before we opened the port are stale: use samples only after the
+            # hello that answers the link's query (or after hello_wait_s if the device never answers)
+            self._await_hello_until = wall + HELLO_WAIT_S
+            self.diagnose('link', OK, f'connected to {x}')
+            return
+        if kind == 'disconnected':
+            self._resync()
+            self.diagnose('link', ERROR, f'serial link lost ({x}); reconnecting with backoff')
+            return
+        if isinstance(x, P.Sample):
+            self._on_sample(x, wall)
+        elif isinstance(x, P.Reset):
+            self.counters['resets'] += 1
+            self._resync()
+            self.diagnose('device', WARN, f'device reset ({x.reason}); time base spliced',
+                          {'resets': self.counters['resets']})
+        elif isinstance(x, P.Hello):
+            self._await_hello_until = 0.0
+            self._device = f'{x.device_id} {x.firmware} at {x.rate_hz} Hz'
+            self.diagnose('device', OK, f'device {self._device}, protocol v{x.version}')
+        elif isinstance(x, P.Error):
+            self.diagnose('device', WARN, f'device error {x.code}: {x.text}')
+
+    def _on_sample(self, s: P.Sample, wall: float) -> None:
+        if wall < self._await_hello_until:
+            self.counters['stale_discarded'] += 1
+            return
+        gap = self.seq.update(s.seq)
+        if self._last_t_us is not None and (gap < 0 or s.t_us <= self._last_t_us):
+            if s.t_us < self._last_t_us:  # time went back without a reset notice: the device restarted
+                self.counters['resets'] += 1
+                self._resync()
+                self.seq.update(s.seq)
+            else:  # repeated or reordered sample: drop
+                self.counters['invalid_samples'] += 1
+                return
+        if self._last_t_us is not None and \
+                s.t_us - self._last_t_us > 1e6 * self.p['max_backlog_windows'] * self.period_s:
+            # device time jumped (samples lost in an overrun or a stall): splice, /clock stays continuous
+            self.counters['time_gaps'] += 1
+            self._resync()
+            self.seq.update(s.seq)
+        temps, q = self.cal.to_physical(s.adc)
+        rail = min(s.adc) == 0 or max(s.adc) == P.ADC_MAX
+        if not (np.isfinite(temps).all() and math.isfinite(q)):
+            self.counters['invalid_samples'] += 1
+            return
+        self._last_t_us = s.t_us
+        if self._anchor is None:
+            start = 0.0 if self._last_pub_s is None else self._last_pub_s + self.period_s
+            self._anchor = (s.t_us, start)
+            self._next_pub_s = start
+        t = self._anchor[1] + (s.t_us - self._anchor[0]) * 1e-6
+        self._window.append((t, temps, q, int(rail)))
+        self._latest = (temps, q, rail)
+        self._last_valid_wall = wall
+        self.counters['samples'] += 1
+
+    # -- the tick ----------------------------------------------------------------
+    def _window_ready(self) -> bool:
+        return bool(self._window) and self._window[-1][0] >= self._next_pub_s - 1e-9
+
+    def _tick(self) -> None:
+        events = self.link.events
+        deadline = time.monotonic() + self.p['sample_wait_s']
+        # more queued events than max_backlog_windows windows of 1 kHz samples: the host is behind, skip ahead
+        backlog = self.p['max_backlog_windows'] * self.period_s * 1000.0
+        while True:
+            if self._window_ready() and events.qsize() < backlog:
+                break
+            try:
+                ev = events.get_nowait()
+            except queue.Empty:
+                if self._window_ready():
+                    break
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                try:
+                    ev = events.get(timeout=remaining)
+                except queue.Empty:
+                    break
+            self._handle(ev)
+        if self._window_ready():
+            self._publish_window()
+        self._check_safety()
+        self._send()
+        self._report()
+
+    def _publish_window(self) -> None:
+        t_end = self._window[-1][0]
+        w = [x for x in self._window if x[0] > t_end - self.period_s + 1e-9]
+        skipped = int((t_end - self._next_pub_s) / self.period_s + 1e-9)
+        self.counters['windows_skipped'] += max(0, skipped)
+        self._window.clear()
+        t = np.array([x[0] for x in w])
+        temps = np.array([x[1] for x in w])
+        qs = np.array([x[2] for x in w])
+        q, qd_raw = slope(t, qs)
+        tau = self.p['velocity_filter_s']
+        a = 1.0 if tau <= 0 or self._last_pub_s is None else self.period_s / (tau + self.period_s)
+        self._qd += a * (qd_raw - self._qd)
+        T = temps.mean(axis=0)
+        var = temps.var(axis=0) if len(w) > 1 else np.zeros(4)
+        s1, s2, torque = self.estimator.update(float(T[0]), float(T[1]), q)
+        values = (*T, *var, q, self._qd, s1, s2, torque)
+        if not all(math.isfinite(v) for v in values):
+            self.counters['invalid_samples'] += len(w)
+            self.diagnose('estimate', ERROR, 'non-finite value in a window: not published')
+            return
+        self._last_pub_s = t_end
+        self._next_pub_s = t_end + self.period_s
+        self.counters['windows'] += 1
+        stamp = Time(nanoseconds=int(round(t_end * 1e9))).to_msg()
+        self.pub_clock.publish(Clock(clock=stamp))
+        for i in range(2):
+            msg = Temperature(temperature=float(T[i]), variance=float(var[i]))
+            msg.header.stamp = stamp
+            msg.header.frame_id = f'muscle_{i + 1}'
+            self.pub_temp[i].publish(msg)
+        for i, s in enumerate((s1, s2)):
+            self.pub_stress[i].publish(Float64(data=float(s)))
+        js = JointState(name=[self.contract.joint_name], position=[float(q)], velocity=[float(self._qd)],
+                        effort=[float(torque)])
+        js.header.stamp = stamp
+        js.header.frame_id = self.contract.frame_id
+        self.pub_joint.publish(js)
+
+    # -- safety ----------------------------------------------------------------
+    def faults(self) -> list[str]:
+        """Reasons the TEMs must be off now (empty: normal operation)."""
+        p = self.p
+        out = []
+        now = time.monotonic()
+        if self._last_valid_wall is None or now - self._last_valid_wall > p['sensor_timeout_s']:
+            age = 'never' if self._last_valid_wall is None else f'{now - self._last_valid_wall:.3f} s ago'
+            out.append(f'sensor timeout (last valid sample {age})')
+            return out
+        assert self._latest is not None
+        temps, q, rail = self._latest
+        hyst = p['over_temperature_hysteresis_C'] if self._hot else 0.0
+        hot_m = temps[:2].max() > p['max_muscle_temperature_C'] - hyst
+        hot_f = temps[2:].max() > p['max_tem_face_temperature_C'] - hyst
+        self._hot = bool(hot_m or hot_f)
+        if hot_m:
+            out.append(f'muscle over-temperature ({temps[:2].max():.1f} degC, limit {p["max_muscle_temperature_C"]})')
+        if hot_f:
+            out.append(f'TEM face over-temperature ({temps[2:].max():.1f} degC, limit '
+                       f'{p["max_tem_face_temperature_C"]})')
+        if not p['angle_min_rad'] <= q <= p['angle_max_rad']:
+            out.append(f'angle {q:.3f} rad outside [{p["angle_min_rad"]}, {p["angle_max_rad"]}]')
+        if rail:
+            out.append('ADC channel at 0 or full scale (open or shorted sensor)')
+        return out
+
+    def _check_safety(self) -> None:
+        self._faults = self.faults()
+        if self._faults:
+            self.counters['safe_ticks'] += 1
+            self.diagnose('safety', ERROR, 'TEMs off: ' + '; '.join(self._faults), self.status_values())
+        else:
+            self.diagnose('safety', OK, 'normal operation')
+
+    def command_to_send(self) -> tuple[float, float]:
+        """The drive [V] the device gets now: 0 in a fault, stale commands 0, else clipped."""
+        if getattr(self, '_faults', None) is None:
+            self._faults = self.faults()
+        if self._faults:
+            return 0.0, 0.0
+        u = self.command_V.copy()
+        now = self._last_pub_s if self._last_pub_s is not None else 0.0
+        for i, t in enumerate(self._cmd_t):
+            if t is None or now - t > self.p['command_timeout_s']:
+                u[i] = 0.0
+        u = np.clip(u, self.p['u_min_V'], self.p['u_max_V'])
+        return float(u[0]), float(u[1])
+
+    def _send(self) -> None:
+        if self.link.connected:
+            u1, u2 = self.command_to_send()
+            self.link.send_command(u1, u2)
+
+    def status_values(self) -> dict[str, Any]:
+        st = self.link.parser.stats
+        return {**self.counters, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
+                'partial_lines': st.partial_lines, 'malformed': st.malformed, 'garbage_bytes': st.garbage_bytes,
+                'version_mismatch': st.version_mismatch, 'connects': self.link.stats.connects,
+                'open_failures': self.link.stats.open_failures, 'device': self._device,
+                'stress': 'model estimate (SD-GPI load solve at measured T and angle)'}
+
+    def _report(self) -> None:
+        """Line statistics on /diagnostics about once per wall second (WARN while errors accrue)."""
+        now = time.monotonic()
+        if now - self._diag_wall < 1.0:
+            return
+        self._diag_wall = now
+        v = self.status_values()
+        bad = self.link.parser.stats.rejected_lines + self.seq.lost
+        prev = getattr(self, '_bad_reported', 0)
+        self._bad_reported = bad
+        self.diagnose('line', WARN if bad > prev else OK,
+                      f'{bad - prev} line errors / lost samples in the last second' if bad > prev else 'line clean', v)
+
+    def _publish_payload(self) -> None:
+        self.pub_payload.publish(Float64(data=float(self.p['payload_kg'])))
+
+
+def main(args: list[str] | None = None) -> int:
+    return main_for(HardwareBridge, args)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
+
+
+__all__ = ['HardwareBridge', 'main', 'SmaWristError']
