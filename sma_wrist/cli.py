@@ -202,6 +202,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument('--json', action='store_true')
     i.set_defaults(func=cmd_info)
 
+    from sma_wrist.hw.emulator import add_arguments as _emulator_arguments
+    d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (docs/protocol.md)')
+    _emulator_arguments(d)
+    d.set_defaults(func=cmd_emulate_device)
+
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')
     b.add_argument('--json', action='store_true')
     b.add_argument('--quick', action='store_true', help='short runs (smoke test of the benchmark itself)')
