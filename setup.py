@@ -16,6 +16,7 @@ NODES = {
     'adaptive_controller': 'sma_wrist.nodes.adaptive_controller:main',
     'tem_controller': 'sma_wrist.nodes.tem_controller:main',
     'trajectory_generator': 'sma_wrist.nodes.trajectory_generator:main',
+    'hardware_bridge': 'sma_wrist.nodes.hardware_bridge:main',
 }
 
 setup(
@@ -38,6 +39,8 @@ setup(
         'mcap>=1.1',
         # ROS params files and the msg_defs contract are YAML; ROS itself ships python3-yaml.
         'PyYAML>=5.4',
+        # hardware_bridge's serial line to the wrist controller (sma_wrist/hw/link.py).
+        'pyserial>=3.4',
     ],
     extras_require={
         'test': ['pytest>=7', 'hypothesis>=6'],

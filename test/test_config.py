@@ -12,6 +12,7 @@ from sma_wrist.contract import load_contract
 ROOT = Path(__file__).resolve().parent.parent
 NODE_CLASSES = {
     'plant_sim': ('sma_wrist.nodes.plant_sim', 'PlantSim'),
+    'hardware_bridge': ('sma_wrist.nodes.hardware_bridge', 'HardwareBridge'),
     'trajectory_generator': ('sma_wrist.nodes.trajectory_generator', 'TrajectoryGenerator'),
     'adaptive_controller': ('sma_wrist.nodes.adaptive_controller', 'AdaptiveController'),
     'hysteresis_compensator': ('sma_wrist.nodes.hysteresis_compensator', 'HysteresisCompensator'),

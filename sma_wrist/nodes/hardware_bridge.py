@@ -121,13 +121,13 @@ class HardwareBridge(WristNode):
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
                          'safe_ticks': 0}
-        self._window: list[tuple[float, np.ndarray, float, int]] = []  # (sim t [s], temps (4,), q, max/min count)
+        self._window: list[tuple[float, tuple[float, ...], float, int]] = []  # (sim t [s], temps (4,), q, max/min count)
         self._last_t_us: int | None = None
         self._anchor: tuple[int, float] | None = None  # (device t_us, sim s) of the time base
         self._last_pub_s: float | None = None
         self._next_pub_s = 0.0
         self._last_valid_wall: float | None = None
-        self._latest: tuple[np.ndarray, float, bool] | None = None  # temps, q, adc at a rail
+        self._latest: tuple[tuple[float, ...], float, bool] | None = None  # temps, q, adc at a rail
         self._hot = False
         self._qd = 0.0
         self._device = ''
@@ -250,9 +250,9 @@ class HardwareBridge(WristNode):
             self.counters['time_gaps'] += 1
             self._resync()
             self.seq.update(s.seq)
-        temps, q = self.cal.to_physical(s.adc)
+        temps, q = self.cal.to_physical_fast(s.adc)
         rail = min(s.adc) == 0 or max(s.adc) == P.ADC_MAX
-        if not (np.isfinite(temps).all() and math.isfinite(q)):
+        if not (math.isfinite(sum(temps)) and math.isfinite(q)):
             self.counters['invalid_samples'] += 1
             return
         self._last_t_us = s.t_us
@@ -349,13 +349,13 @@ class HardwareBridge(WristNode):
         assert self._latest is not None
         temps, q, rail = self._latest
         hyst = p['over_temperature_hysteresis_C'] if self._hot else 0.0
-        hot_m = temps[:2].max() > p['max_muscle_temperature_C'] - hyst
-        hot_f = temps[2:].max() > p['max_tem_face_temperature_C'] - hyst
+        hot_m = max(temps[:2]) > p['max_muscle_temperature_C'] - hyst
+        hot_f = max(temps[2:]) > p['max_tem_face_temperature_C'] - hyst
         self._hot = bool(hot_m or hot_f)
         if hot_m:
-            out.append(f'muscle over-temperature ({temps[:2].max():.1f} degC, limit {p["max_muscle_temperature_C"]})')
+            out.append(f'muscle over-temperature ({max(temps[:2]):.1f} degC, limit {p["max_muscle_temperature_C"]})')
         if hot_f:
-            out.append(f'TEM face over-temperature ({temps[2:].max():.1f} degC, limit '
+            out.append(f'TEM face over-temperature ({max(temps[2:]):.1f} degC, limit '
                        f'{p["max_tem_face_temperature_C"]})')
         if not p['angle_min_rad'] <= q <= p['angle_max_rad']:
             out.append(f'angle {q:.3f} rad outside [{p["angle_min_rad"]}, {p["angle_max_rad"]}]')

@@ -1,0 +1,279 @@
+"""hardware_bridge against the device emulator on a pty (sma_wrist/nodes/hardware_bridge.py,
+sma_wrist/hw/emulator.py): data flow and calibration, the safety cut-off, serial faults,
+parameter updates, and the closed loop through bridge + emulator vs the simulator."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from sma_wrist.hw import protocol as P
+from sma_wrist.hw.calibration import Calibration
+from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig
+
+TOPICS = ('/wrist/joint_states', '/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature',
+          '/wrist/muscle_1/stress', '/wrist/muscle_2/stress', '/wrist/payload', '/clock')
+
+
+@pytest.fixture
+def emulator(tmp_path):
+    made = []
+
+    def make(**kw) -> DeviceEmulator:
+        emu = DeviceEmulator(EmulatorConfig(**kw), link=str(tmp_path / f'wrist{len(made)}'))
+        emu.start()
+        made.append(emu)
+        return emu
+    yield make
+    for e in made:
+        e.stop()
+
+
+@pytest.fixture
+def graph(ros_shutdown, probe_factory):
+    """(runtime, bridge, probe) for an emulator; the probe commands both TEMs at 100 Hz of sim time."""
+    from sma_wrist.runtime.launch import Runtime
+    made = []
+
+    def make(emu: DeviceEmulator, command_V: tuple[float, float] = (0.0, 0.0), **params):
+        from sma_wrist.nodes.hardware_bridge import HardwareBridge
+        rt = Runtime(params={'/hardware_bridge': {'port': emu.link, **params}})
+        made.append(rt)
+        bridge = rt.add(HardwareBridge)
+        probe = probe_factory(rt, TOPICS, sim_time=True)
+        probe.every(0.01, '/wrist/tem_1/command', data=float(command_V[0]))
+        probe.every(0.01, '/wrist/tem_2/command', data=float(command_V[1]))
+        return rt, bridge, probe
+    yield make
+    for rt in made:
+        rt.close()
+
+
+def run_wall(rt, seconds: float, stop_when=None) -> None:
+    """Spin the graph for about ``seconds`` of wall time (the bridge paces on the device)."""
+    t_end = time.monotonic() + seconds
+    rt.run_until(1e6, until='steady',
+                 stop_when=lambda: time.monotonic() > t_end or (stop_when is not None and stop_when()))
+
+
+def levels(probe, key: str) -> list[int]:
+    """Levels of the bridge's ``key`` status in order, starting with OK (a first OK is not published)."""
+    return [0] + [lvl for name, lvl, _ in probe.diagnostics() if name == f'hardware_bridge: {key}']
+
+
+def test_data_flows_calibrated_with_plant_sim_units(emulator, graph):
+    # the device's muscle-1 thermocouple reads 1.5 degC high; the bridge's offset parameter corrects it
+    emu = emulator(calibration=Calibration(offsets_C=(-1.5, 0.0, 0.0, 0.0)), noise_counts=1.0)
+    rt, bridge, probe = graph(emu, (6.0, -3.0), **{'calibration.muscle_1_offset_C': -1.5})
+    rt.run_until(1.0, until='sim')
+    js = probe.got['/wrist/joint_states']
+    # 100 Hz of device time; windows the host was too late for are skipped (counted), never queued
+    assert len(js) >= 50 and len(js) + bridge.counters['windows_skipped'] >= 95
+    clock = [c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']]
+    assert np.all(np.diff(clock) > 0) and clock[0] == 0.0
+    assert np.allclose(np.diff(clock), 0.01, atol=1e-6) or bridge.counters['windows_skipped'] > 0
+    T_true = emu.plant.muscle_temperature_C[0]
+    T1 = probe.got['/wrist/muscle_1/temperature'][-1].temperature
+    T2 = probe.got['/wrist/muscle_2/temperature'][-1].temperature
+    assert abs(T1 - T_true[0]) < 0.3 and abs(T2 - T_true[1]) < 0.3  # latest device state ~ the last window
+    assert abs(js[-1].position[0] - float(emu.plant.state.q[0])) < 2e-3
+    assert js[-1].header.frame_id == 'wrist_base' and js[-1].name == ['wrist']
+    stress_true = emu.plant.wire_stress_Pa[0]
+    s1 = probe.got['/wrist/muscle_1/stress'][-1].data
+    assert abs(s1 - stress_true[0]) / stress_true[0] < 0.02  # model estimate, labelled as such
+    assert probe.got['/wrist/payload'][-1].data == 0.3
+    assert emu.stats.commands_received > 50
+    assert np.allclose(emu._u, [[6.0, -3.0]])  # the device got the commanded drive
+    assert levels(probe, 'safety')[-1] == 0
+    assert 'estimate' in bridge.status_values()['stress']
+
+
+def test_watchdog_trips_and_recovers(emulator, graph):
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (5.0, 5.0))
+    rt.run_until(0.5, until='sim')
+    assert levels(probe, 'safety')[-1] == 0 and np.allclose(emu._u, 5.0)
+    n_before = len(probe.got['/wrist/joint_states'])
+    emu.inject('freeze', 0.4)  # device alive, no samples for 0.4 s wall
+    run_wall(rt, 0.3)
+    assert 2 in levels(probe, 'safety'), probe.diagnostics()
+    assert bridge.command_to_send() == (0.0, 0.0)
+    assert len(probe.got['/wrist/joint_states']) - n_before < 5  # nothing invented while frozen
+    time.sleep(0.05)
+    assert np.allclose(emu._u, 0.0)  # 0 V reached the device
+    run_wall(rt, 0.6, stop_when=lambda: levels(probe, 'safety')[-1] == 0)
+    assert levels(probe, 'safety')[-1] == 0  # recovered when data returned
+    rt.spin_for(0.2, until='sim')
+    assert bridge.command_to_send() == (5.0, 5.0)
+
+
+@pytest.mark.parametrize('fault', ['over_temperature_muscle', 'over_temperature_face', 'angle', 'adc_rail'])
+def test_faults_drive_zero_volts(emulator, graph, fault):
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (8.0, 8.0))
+    rt.run_until(0.3, until='sim')
+    assert bridge.command_to_send() == (8.0, 8.0)
+    cal = Calibration()
+    ch, counts = {
+        'over_temperature_muscle': (0, int(cal.to_counts(np.array([95.0, 0, 0, 0]), 0.0)[0])),
+        'over_temperature_face': (3, int(cal.to_counts(np.array([0, 0, 0, 90.0]), 0.0)[3])),
+        'angle': (4, int(cal.to_counts(np.zeros(4), 1.7)[4])),
+        'adc_rail': (1, P.ADC_MAX),
+    }[fault]
+    emu.inject('force', (ch, counts))
+    rt.spin_for(0.3, until='sim')
+    assert bridge.command_to_send() == (0.0, 0.0)
+    assert levels(probe, 'safety')[-1] == 2
+    time.sleep(0.05)
+    assert np.allclose(emu._u, 0.0)
+    emu.inject('force', (ch, None))
+    rt.spin_for(0.3, until='sim')
+    assert levels(probe, 'safety')[-1] == 0 and bridge.command_to_send() == (8.0, 8.0)
+
+
+def test_non_finite_command_turns_that_tem_off(emulator, graph):
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (4.0, 4.0))
+    rt.run_until(0.2, until='sim')
+    probe.publish('/wrist/tem_2/command', data=float('nan'))
+    rt.spin_for(0.001, until='steady')
+    assert bridge.command_V[1] == 0.0 and bridge.rejected_inputs == 1
+    rt.spin_for(0.2, until='sim')  # the probe's timer sends finite commands again
+    assert bridge.command_to_send() == (4.0, 4.0)
+
+
+@pytest.mark.parametrize('fault,value', [('garbage', 500), ('corrupt', 20), ('cut', 20), ('raw', b'$S,1,99*0000\n'),
+                                         ('reset', None)])
+def test_line_faults_never_publish_invalid_samples(emulator, graph, fault, value):
+    emu = emulator(noise_counts=0.0)
+    rt, bridge, probe = graph(emu, (3.0, 0.0))
+    rt.run_until(0.3, until='sim')
+    n0 = bridge.counters['samples']
+    emu.inject(fault, value)
+    rt.spin_for(0.5, until='sim')
+    st = bridge.link.parser.stats
+    if fault == 'corrupt':
+        assert st.bad_checksum >= 20
+    elif fault == 'cut':
+        assert st.partial_lines + st.malformed >= 19
+    elif fault == 'reset':
+        assert bridge.counters['resets'] >= 1
+    else:
+        assert st.garbage_bytes + st.bad_checksum + st.malformed + st.partial_lines > 0
+    assert bridge.counters['samples'] > n0 + 400  # the stream went on
+    # every published angle is a real device angle (no garbage value reached the topic)
+    q = np.array([m.position[0] for m in probe.got['/wrist/joint_states']])
+    assert np.all(np.abs(q - float(emu.plant.state.q[0])) < 0.05)
+    clock = [c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']]
+    assert np.all(np.diff(clock) > 0)  # monotonic also across the reset
+
+
+def test_unplug_reconnects_with_backoff_and_recovers(emulator, graph):
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (3.0, 3.0))
+    rt.run_until(0.3, until='sim')
+    emu.inject('unplug', 0.4)
+    run_wall(rt, 0.3)
+    assert 2 in levels(probe, 'link') and 2 in levels(probe, 'safety')
+    run_wall(rt, 2.0, stop_when=lambda: bridge.link.stats.connects >= 2 and levels(probe, 'safety')[-1] == 0)
+    assert bridge.link.stats.connects >= 2 and bridge.link.stats.open_failures >= 1
+    assert levels(probe, 'link')[-1] == 0 and levels(probe, 'safety')[-1] == 0
+    t_before = probe.got['/clock'][-1].clock
+    rt.spin_for(0.2, until='sim')
+    clock = [c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']]
+    assert np.all(np.diff(clock) > 0) and probe.got['/clock'][-1].clock != t_before
+
+
+def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, probe_factory):
+    from sma_wrist.nodes.hardware_bridge import HardwareBridge
+    from sma_wrist.runtime.launch import Runtime
+    with Runtime(params={'/hardware_bridge': {'port': str(tmp_path / 'nothing')}}) as rt:
+        bridge = rt.add(HardwareBridge)
+        probe = probe_factory(rt, ('/clock',))
+        run_wall(rt, 0.5)
+        assert bridge.link.stats.open_failures >= 3 and probe.got['/clock'] == []
+        assert levels(probe, 'safety') == [0, 2] and bridge.command_to_send() == (0.0, 0.0)
+        assert 0.05 < bridge.link.stats.backoff_s <= 2.0  # exponential, bounded
+
+
+def test_malformed_parameter_updates_rejected_node_keeps_running(emulator, graph):
+    from rclpy.parameter import Parameter
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (2.0, 2.0))
+    rt.run_until(0.2, until='sim')
+    bad = [Parameter('sensor_timeout_s', value='fast'), Parameter('sensor_timeout_s', value=-1.0),
+           Parameter('max_muscle_temperature_C', value=float('nan')), Parameter('angle_min_rad', value=2.0),
+           Parameter('calibration.angle_gain_rad_per_count', value=0.0), Parameter('port', value='/dev/other'),
+           Parameter('publish_rate_hz', value=50.0), Parameter('adc.temperature_gain_C_per_count', value=5.0)]
+    for p in bad:
+        res = bridge.set_parameters([p])[0]
+        assert not res.successful, p.name
+    assert bridge.p['sensor_timeout_s'] == 0.1 and bridge.p['angle_min_rad'] == -0.45
+    ok = bridge.set_parameters([Parameter('calibration.muscle_1_offset_C', value=2.0),
+                                Parameter('payload_kg', value=0.5)])
+    assert all(r.successful for r in ok)
+    n = len(probe.got['/wrist/joint_states'])
+    T_before = probe.got['/wrist/muscle_1/temperature'][-1].temperature
+    rt.spin_for(0.2, until='sim')
+    assert len(probe.got['/wrist/joint_states']) > n + 15
+    assert abs(probe.got['/wrist/muscle_1/temperature'][-1].temperature - T_before - 2.0) < 0.3
+    assert probe.got['/wrist/payload'][-1].data == 0.5
+
+
+def test_cli_emulator_on_a_pty(tmp_path):
+    import serial
+    link = str(tmp_path / 'dev')
+    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
+                             '--duration', '5'], stdout=subprocess.PIPE, text=True)
+    try:
+        assert 'emulated wrist on /dev/pts/' in proc.stdout.readline()
+        assert os.path.islink(link)
+        ser = serial.serial_for_url(link, timeout=0.05)
+        ser.write(P.encode(P.Query()))
+        parser = P.Parser()
+        frames: list = []
+        t_end = time.monotonic() + 2.0
+        while time.monotonic() < t_end and not (any(isinstance(f, P.Hello) for f in frames)
+                                                and any(isinstance(f, P.Sample) for f in frames)):
+            frames += parser.feed(ser.read(ser.in_waiting or 1))
+        assert any(isinstance(f, P.Hello) and f.rate_hz == 1000 for f in frames)
+        assert sum(isinstance(f, P.Sample) for f in frames) > 0 and parser.stats.bad_checksum == 0
+        ser.close()
+    finally:
+        proc.terminate()
+        proc.wait(10)
+
+
+#: tolerance of the hardware-in-the-loop run vs the simulator, percentage points of the reference range
+CLOSED_LOOP_TOL_PCT = {'max_error_pct': 12.0, 'rms_error_pct': 2.5}
+TIME_SCALE = 3.0
+
+
+def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_path, ros_shutdown):
+    """126 s (two 62.8 s cycles of the Sec. 6.1 sine) through emulator (subprocess, time x3) +
+    bridge + the controller graph, bag recorded; metrics close to plant_sim's on the same run."""
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.runs import load_run, run_metrics
+    link = str(tmp_path / 'wrist')
+    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
+                             '--time-scale', str(TIME_SCALE)], stdout=subprocess.PIPE, text=True)
+    try:
+        proc.stdout.readline()
+        t0 = time.monotonic()
+        hw = run_closed_loop('direct_adaptive', 0.3, 126.0, tmp_path / 'hw', hardware=True,
+                             extra_params={'/hardware_bridge': {'port': link}})
+        wall = time.monotonic() - t0
+    finally:
+        proc.terminate()
+        proc.wait(10)
+    sim = run_closed_loop('direct_adaptive', 0.3, 126.0, tmp_path / 'sim')
+    run = load_run(tmp_path / 'hw')
+    m = run_metrics(run)
+    assert m == hw.metrics and run.t[-1] > 125.0
+    assert wall < 60.0, f'{wall:.0f} s wall'
+    for k, tol in CLOSED_LOOP_TOL_PCT.items():
+        assert abs(m[k] - sim.metrics[k]) <= tol, (k, m[k], sim.metrics[k])
