@@ -71,7 +71,7 @@ class DeviceEmulator:
     """The emulated device. ``open()`` the pty, then ``start()`` (thread) or ``run()`` (blocking).
 
     Thread-safe control: :meth:`inject`, :meth:`stop`. ``sent_log`` (if enabled) keeps
-    ``(wall time of write, Sample)`` of every sample sent, for latency benchmarks.
+    ``(time.monotonic() when queued for writing, Sample)`` of every sample sent, for latency benchmarks.
     """
 
     def __init__(self, config: EmulatorConfig | None = None, link: str | None = None, log_sent: bool = False) -> None:
@@ -246,7 +246,7 @@ class DeviceEmulator:
         s = P.Sample((self._n - 1) % P.SEQ_MODULUS, int(round((self._n - 1) * 1e6 / c.rate_hz)), tuple(adc), flags)
         line = P.encode(s)
         if self.sent_log is not None:
-            self.sent_log.append((time.perf_counter(), s))
+            self.sent_log.append((time.monotonic(), s))
         self.stats.samples_sent += 1
         r = self.rng.random(3) if (c.garbage_rate or c.checksum_error_rate or c.partial_rate) else None
         if self._corrupt or (r is not None and r[0] < c.checksum_error_rate):
