@@ -163,6 +163,11 @@ def cmd_compare(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_diagnose(a: argparse.Namespace) -> int:
+    from sma_wrist.diagnose import run_cli
+    return run_cli(a)
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog='sma-wrist', description='SMA wrist simulation, recording and analysis tools.')
     sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
@@ -201,6 +206,11 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument('bag')
     i.add_argument('--json', action='store_true')
     i.set_defaults(func=cmd_info)
+
+    from sma_wrist.diagnose import add_arguments as diagnose_arguments
+    d = diagnose_arguments(sub.add_parser(
+        'diagnose', help='what the model gets wrong in a recorded run: locate, name, extend, measure (docs/diagnose.md)'))
+    d.set_defaults(func=cmd_diagnose)
 
     from sma_wrist.hw.emulator import add_arguments as _emulator_arguments
     d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (docs/protocol.md)')

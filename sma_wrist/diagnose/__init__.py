@@ -33,6 +33,8 @@ __all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 
 MIN_SCORE = 0.2
 #: ... and its bootstrap 5th-percentile gain on its main channel must exceed this [%]
 MIN_GAIN_P05 = 2.0
+#: held-out score margin (log SSE; 0.1 ~ 5 % RMS) within which fewer parameters win
+PARSIMONY_LOG = 0.1
 #: residual structure: RMS / white-noise sigma above this with a Ljung-Box rejection (p < 0.01)
 STRUCTURE_RATIO = 1.6
 
@@ -124,7 +126,14 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
             continue
         fits.append(ev.fit(e))
     fits.sort(key=lambda f: f.score)
-    best = fits[0] if fits else None
+    # parsimony: among candidates within PARSIMONY_LOG of the best held-out score, the one
+    # with the fewest parameters (a recalibration of three numbers always polishes a little
+    # more than the one physical effect that explains the data)
+    near = [f for f in fits if f.score <= fits[0].score + PARSIMONY_LOG] if fits else []
+    best = min(near, key=lambda f: (len(f.effect.params), f.score)) if near else None
+    if best is not None:
+        fits.remove(best)
+        fits.insert(0, best)
 
     def main_channel(f: ft.Fit) -> str:
         return min(f.log_ratio, key=lambda c: f.log_ratio[c])
@@ -138,7 +147,10 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
                              'parameters': _param_dict(f.row, f.effect.params)})
     channel = main_channel(best) if best else ev.channels[0]
     g_best = ev.gain(best, channel) if best else None
-    significant = bool(best is not None and best.score < -MIN_SCORE and g_best['gain_pct_p05'] > MIN_GAIN_P05)
+    # significant: beats nominal on held-out data, reliably, and the nominal misfit itself is
+    # beyond the noise / replay resolution (else a fit only polishes numerical error)
+    significant = bool(best is not None and best.score < -MIN_SCORE and g_best['gain_pct_p05'] > MIN_GAIN_P05
+                       and g_best['rmse_before'] > STRUCTURE_RATIO * ev.sigma[channel])
     final_row = best.row if significant else fx.NOMINAL
     final_fit = best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), fx.NOMINAL.copy()))
 
@@ -158,11 +170,11 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         for which, pred in (('nominal', ev.pred_nom[c][:, 0]), ('extended', pred_final[c][:, 0])):
             meas = ev.measured(c)
             if c == 'thermal':
-                r = (meas - pred)[sl].T.ravel()
+                r = ev.residual(c, pred)[sl].T.ravel()
                 regs = {k: np.concatenate([v, v]) for k, v in reg.items()}
                 s = rp.channel_stats(r, ev.sigma[c], regs, meas[sl, 0], pred[sl, 0], run.dt)
             else:
-                s = rp.channel_stats((meas - pred)[sl], ev.sigma[c], reg, meas[sl], pred[sl], run.dt)
+                s = rp.channel_stats(ev.residual(c, pred)[sl], ev.sigma[c], reg, meas[sl], pred[sl], run.dt)
             stats[c][which] = s
         s = stats[c]['extended']
         if s['rms_over_noise'] > STRUCTURE_RATIO and not s['white']:
@@ -176,6 +188,10 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         ps = ', '.join(f'{k} = {v["value"]:.4g} {v["unit"]}' for k, v in _param_dict(best.row, e.params).items())
         summary = (f'{e.subsystem} discrepancy: {e.name} ({e.id}; {ps}); held-out {channel} RMS '
                    f'{g_best["rmse_before"]:.4g} -> {g_best["rmse_after"]:.4g} ({g_best["gain_pct"]:.1f} % better)')
+        rivals = [f.effect.id for f in fits[1:] if f.score <= best.score + PARSIMONY_LOG]
+        if rivals:
+            summary += (f'; {", ".join(rivals)} explain(s) this run almost as well (held-out score within '
+                        f'{PARSIMONY_LOG}): a longer run or larger excitation would separate them')
         if unexplained:
             summary += f'; structure remains in {", ".join(structure)}'
     elif unexplained:
@@ -183,7 +199,7 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         summary = (f'unexplained discrepancy in {", ".join(structure)}: no catalogue effect explains it '
                    f'(best {best.effect.id if best else "-"}, score {best.score if best else 0:.3f}); correlates: {top}')
     else:
-        summary = 'no significant discrepancy: the nominal model explains the run to the sensor noise'
+        summary = 'no significant discrepancy: the nominal model explains the run to the sensor noise and the replay resolution'
     if significant:
         subsystem = best.effect.subsystem
     elif unexplained:
@@ -221,37 +237,21 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
 def write_params(res: DiagnosisResult, path: str | Path, run: Run) -> Path:
     """The extended model as a ROS 2 params file for plant_sim (schema: docs/diagnose.md)."""
     import yaml
-    from sma_wrist.core.plant import PlantParams
-    p = PlantParams()
-    v = {k: d['value'] for k, d in res.parameters.items()}
-    tp, jp = p.thermal, p.joint
-    amb = tp.effective_ambient_C
-    params: dict[str, Any] = {
-        'payload_kg': float(run.payload_kg + v.get('payload_err_kg', 0.0)),
-        'model.thermal.input_per_volt': float(tp.input_per_volt * (1 + v.get('tem_gain_err', 0.0))),
-        'model.thermal.coupling_per_s': float(v.get('coupling_per_s', 0.0)),
-        'model.thermal.loss_scale': float(1 + v.get('loss_scale_err', 0.0)),
-        'model.thermal.ambient_C': [float(a + v.get('ambient_offset_C', 0.0)) for a in amb],
-        'model.thermal.ambient_drift_C_per_h': float(v.get('ambient_drift_C_per_h', 0.0)),
-        'model.joint.coulomb_Nm': float(v.get('coulomb_Nm', jp.coulomb_Nm)),
-        'model.joint.static_Nm': float(fx.STATIC_PER_COULOMB * v['coulomb_Nm']) if 'coulomb_Nm' in v else jp.static_Nm,
-        'model.joint.viscous_Nms': float(v.get('viscous_Nms', jp.viscous_Nms)),
-        'model.joint.backlash_rad': float(v.get('backlash_rad', 0.0)),
-        'model.preload_elongation_mm': float(p.preload_elongation_mm + v.get('preload_err_mm', 0.0)),
-        'model.hysteresis.wire_lag_s': float(v.get('hyst_lag_s', 0.0)),
-        'model.hysteresis.drift_C_per_cycle': float(v.get('hyst_drift_C_per_cycle', 0.0)),
-        'model.sensors.angle_delay_s': float(v.get('angle_delay_s', 0.0)),
-        'model.sensors.angle_offset_rad': float(v.get('angle_offset_rad', 0.0)),
-        'model.sensors.angle_gain_err': float(v.get('angle_gain_err', 0.0)),
-        'model.sensors.temperature_offset_C': float(v.get('temp_offset_C', 0.0)),
-        'model.sensors.temperature_lag_s': float(v.get('temp_lag_s', 0.0)),
-    }
+
+    from sma_wrist.core import model_extensions as mx
+    # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
+    # model.payload_err_kg the joint carries on top of it
+    params: dict[str, Any] = {'payload_kg': float(run.payload_kg)}
+    params.update({f'model.{k}': float(d['value']) for k, d in res.parameters.items()})
+    replay_only = [k for k in res.parameters if k in mx.REPLAY_ONLY]
     doc = {'plant_sim': {'ros__parameters': params}}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     head = (f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
             f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
-            f'# schema: docs/diagnose.md "Params file"; model.* keys are nominal unless the cause changed them\n')
+            f'# schema: docs/diagnose.md "Params file": plant_sim parameters, model.* as in sma_wrist/core/model_extensions.py\n'
+            + (f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
+               f'which refuses this file\n' if replay_only else ''))
     out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     return out
 
@@ -263,16 +263,18 @@ def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out:
     return diagnose_run(run, report_dir, params_out, candidates)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """``sma-wrist diagnose BAG [--json] [--report DIR] [--params FILE]``; exit 0 ok, 2 bad input."""
-    ap = argparse.ArgumentParser(prog='sma-wrist diagnose',
-                                 description='Locate and name the model discrepancy of a recorded run (docs/diagnose.md).')
+def add_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``diagnose`` options (shared by ``sma-wrist diagnose`` and ``python -m sma_wrist.diagnose``)."""
     ap.add_argument('bag', help='rosbag2 directory (or .mcap) recorded per msg_defs/topics.yaml')
     ap.add_argument('--json', action='store_true', help='print one JSON object instead of text')
     ap.add_argument('--report', metavar='DIR', help='write diagnosis.md, PNG plots and extended_params.yaml here')
     ap.add_argument('--params', metavar='FILE', help='write the extended model as a plant_sim params file')
     ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
-    args = ap.parse_args(list(argv) if argv is not None else None)
+    return ap
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run a parsed ``diagnose`` command line; exit 0 ok, 2 bad input, 1 internal error."""
     try:
         cands = args.candidates.split(',') if args.candidates else None
         if cands:
@@ -286,7 +288,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             print(f'sma-wrist diagnose: {exc}', file=sys.stderr)
         return 2
-    except Exception as exc:  # noqa: BLE001 - main() never shows a traceback
+    except Exception as exc:  # noqa: BLE001 - the command never shows a traceback
         msg = f'internal error {type(exc).__name__}: {exc} (please report with the bag)'
         print(json.dumps({'error': msg}) if args.json else f'sma-wrist diagnose: {msg}', file=sys.stderr if not args.json else sys.stdout)
         return 1
@@ -304,6 +306,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.report:
         print(f'  report: {Path(args.report) / "diagnosis.md"}')
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m sma_wrist.diagnose BAG [--json] [--report DIR] [--params FILE]``."""
+    ap = add_arguments(argparse.ArgumentParser(
+        prog='sma-wrist diagnose', description='Locate and name the model discrepancy of a recorded run (docs/diagnose.md).'))
+    return run_cli(ap.parse_args(list(argv) if argv is not None else None))
 
 
 def bench_diagnose(quick: bool = True) -> dict[str, Any]:

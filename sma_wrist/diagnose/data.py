@@ -35,6 +35,8 @@ TOPICS = {
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
+#: gaps up to this long [s] are bridged (and masked); longer ones cut the run
+MAX_BRIDGE_S = 5.0
 
 
 class DiagnoseInputError(SmaWristError):
@@ -52,6 +54,8 @@ class Run:
     q: np.ndarray | None
     payload_kg: float
     t0_s: float = 0.0  # bag time of t = 0
+    #: (K,) False where a short gap was bridged (interpolated / held): left out of the residuals
+    valid: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
     source: str = ''
 
@@ -104,12 +108,18 @@ def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: 
     return t, vals
 
 
-def _longest_gap_free(t: np.ndarray, dt: float) -> tuple[float, float, int]:
-    gaps = np.flatnonzero(np.diff(t) > 5.0 * dt)
-    edges = np.r_[0, gaps + 1, t.size]
+def _longest_gap_free(t: np.ndarray, dt: float) -> tuple[float, float, int, list[tuple[float, float]]]:
+    """(start, end, number of long gaps, short gaps) of the longest stretch without a gap
+    longer than MAX_BRIDGE_S; gaps over 5 samples but at most MAX_BRIDGE_S are returned as
+    (from, to) intervals to bridge."""
+    d = np.diff(t)
+    long_gaps = np.flatnonzero(d > max(MAX_BRIDGE_S, 5.0 * dt))
+    edges = np.r_[0, long_gaps + 1, t.size]
     lengths = [t[e - 1] - t[s] for s, e in zip(edges[:-1], edges[1:])]
     i = int(np.argmax(lengths))
-    return float(t[edges[i]]), float(t[edges[i + 1] - 1]), int(gaps.size)
+    a, b = edges[i], edges[i + 1]
+    short = [(float(t[k]), float(t[k + 1])) for k in np.flatnonzero(d[a:b - 1] > 5.0 * dt) + a]
+    return float(t[a]), float(t[b - 1]), int(long_gaps.size), short
 
 
 def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
@@ -198,6 +208,7 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
         raise DiagnoseInputError(f'{TOPICS[ref_key]}: only {t_ref.size} samples; need at least '
                                  f'{MIN_DURATION_S:g} s of data')
     dt_med = float(np.median(np.diff(t_ref)))
+    bridged: list[tuple[float, float]] = []
     lo = max(series[k][0][0] for k in series if k != 'payload')
     hi = min(series[k][0][-1] for k in series if k != 'payload')
     for k in series:
@@ -208,11 +219,15 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
         if sel.size < 2:
             continue
         d = float(np.median(np.diff(tk))) if tk.size > 1 else dt_med
-        a, b, n_gaps = _longest_gap_free(sel, max(d, dt_med))
+        a, b, n_gaps, short = _longest_gap_free(sel, max(d, dt_med))
         if n_gaps:
-            warnings.append(f'{TOPICS[k]}: {n_gaps} gap(s) longer than 5 samples; only the longest gap-free '
+            warnings.append(f'{TOPICS[k]}: {n_gaps} gap(s) longer than {MAX_BRIDGE_S:g} s; only the longest '
                             f'stretch {a - t_ref[0]:.1f}-{b - t_ref[0]:.1f} s is analysed (the replay needs '
                             f'continuous inputs)')
+        if short:
+            warnings.append(f'{TOPICS[k]}: {len(short)} gap(s) of up to {max(y - x for x, y in short):.2f} s were '
+                            f'bridged (interpolated, commands held) and are left out of the residuals')
+            bridged.extend(short)
         lo, hi = max(lo, a), min(hi, b)
     if hi - lo < MIN_DURATION_S:
         raise DiagnoseInputError(
@@ -246,5 +261,8 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
         payload = DEFAULT_PAYLOAD_KG
         warnings.append(f'/wrist/payload missing: assuming the plant default {DEFAULT_PAYLOAD_KG} kg (record the latched '
                         f'/wrist/payload, std_msgs/Float64 kg); a payload mismatch may then be reported')
+    valid = np.ones(grid.size, bool)
+    for x, y in bridged:
+        valid[(grid > x) & (grid < y)] = False
     return Run(t=grid - grid[0], dt=dt, u=u, T=T, q=q, payload_kg=payload, t0_s=float(grid[0]), warnings=warnings,
-               source=str(p))
+               source=str(p), valid=valid)

@@ -22,48 +22,17 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from sma_wrist.core import thermal as th
+from sma_wrist.core.model_extensions import PARAMS, STATIC_PER_COULOMB
 from sma_wrist.core.plant import PlantParams
-from sma_wrist.diagnose.kernels import Constants
+from sma_wrist.diagnose.kernels import Constants, _jit
 
-
-@dataclass(frozen=True)
-class Param:
-    name: str
-    unit: str
-    nominal: float
-    lower: float
-    upper: float
-    typical: float  # scale of a typical effect (finite-difference step x 20, grid span)
-    description: str
-
-
-PARAMS: tuple[Param, ...] = (
-    Param('tem_gain_err', '1', 0.0, -0.6, 1.0, 0.1, 'relative error of the TEM drive gain input_per_volt'),
-    Param('loss_scale_err', '1', 0.0, -0.6, 1.5, 0.1, 'relative error of the muscle-face heat loss (K_Tinf, K_T, K_inf)'),
-    Param('joule_scale_err', '1', 0.0, -0.9, 2.0, 0.2, 'relative error of the Joule term K_R'),
-    Param('ambient_offset_C', 'degC', 0.0, -15.0, 15.0, 1.0, 'constant ambient/coolant temperature offset'),
-    Param('ambient_drift_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'linear ambient/coolant temperature drift'),
-    Param('coupling_per_s', '1/s', 0.0, 0.0, 0.2, 0.01, 'heat conductance between the muscle faces / heat capacity'),
-    Param('temp_offset_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple offset (both channels)'),
-    Param('temp_lag_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple first-order time constant'),
-    Param('hyst_lag_s', 's', 0.0, 0.0, 60.0, 3.0, 'wire temperature lags the measured one (rate-dependent loops)'),
-    Param('hyst_drift_C_per_cycle', 'degC/cycle', 0.0, -10.0, 10.0, 1.0,
-          'transition temperatures move with the cycle count (functional fatigue)'),
-    Param('payload_err_kg', 'kg', 0.0, -0.5, 1.0, 0.1, 'true payload minus the recorded /wrist/payload'),
-    Param('coulomb_Nm', 'N m', 0.004, 0.0, 0.3, 0.02, 'Coulomb friction moment (static = 1.5 x Coulomb)'),
-    Param('viscous_Nms', 'N m s', 0.15, 0.0, 20.0, 1.0, 'viscous damping of the joint'),
-    Param('preload_err_mm', 'mm', 0.0, -1.0, 1.0, 0.05, 'bundle pre-load elongation error'),
-    Param('backlash_rad', 'rad', 0.0, 0.0, 0.3, 0.02, 'total play between chain and output shaft'),
-    Param('angle_delay_s', 's', 0.0, 0.0, 3.0, 0.2, 'potentiometer / acquisition delay'),
-    Param('angle_offset_rad', 'rad', 0.0, -0.5, 0.5, 0.02, 'potentiometer offset'),
-    Param('angle_gain_err', '1', 0.0, -0.5, 0.5, 0.03, 'potentiometer gain error about q_neutral'),
-)
 INDEX = {p.name: i for i, p in enumerate(PARAMS)}
 NOMINAL = np.array([p.nominal for p in PARAMS])
 LOWER = np.array([p.lower for p in PARAMS])
 UPPER = np.array([p.upper for p in PARAMS])
 TYPICAL = np.array([p.typical for p in PARAMS])
-STATIC_PER_COULOMB = 1.5  # the nominal joint's static / Coulomb ratio (0.006 / 0.004)
+#: temperatures noisier than this [degC] are smoothed before the hysteresis replay
+SMOOTH_ABOVE_C = 0.01
 #: one "cycle" of the hysteresis-drift effect: this much temperature travel (40 degC up and down)
 CYCLE_TRAVEL_C = 80.0
 
@@ -82,7 +51,6 @@ class Effect:
     subsystem: str  # thermal | hysteresis | joint | sensor
     params: tuple[str, ...]
     meaning: str
-
 
 CATALOGUE: tuple[Effect, ...] = (
     Effect('sensor_delay', 'angle sensor delay', 'sensor', ('angle_delay_s',),
@@ -130,6 +98,15 @@ def theta(**kw: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- helpers
+def noise_sigma(x: np.ndarray, lsb: float = 0.0) -> float:
+    """White-noise std of a smooth signal from its second differences (robust, MAD)."""
+    d2 = np.diff(x, 2, axis=0).ravel()
+    if d2.size < 10:
+        return float(np.std(x)) or 1.0
+    mad = np.median(np.abs(d2 - np.median(d2))) * 1.4826
+    return float(max(mad / np.sqrt(6.0), lsb / np.sqrt(12.0), 1e-9))
+
+
 def first_order(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
     """First-order lag along axis 0 (exact discretisation for a ramp-free hold), x[0] at rest."""
     if tau <= 0:
@@ -142,15 +119,19 @@ def first_order(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:
-    """Backlash (play operator) of total width `width` along axis 0, starting centred."""
+    """Backlash (play operator) of total width `width` along axis 0 (1-D), starting centred."""
     if width <= 0:
         return x
-    h = 0.5 * width
+    return _play_1d(np.ascontiguousarray(x, dtype=float), 0.5 * width)
+
+
+@_jit
+def _play_1d(x, h):  # pragma: no cover - compiled
     y = np.empty_like(x)
-    y[0] = x[0]
     prev = x[0]
+    y[0] = prev
     for k in range(1, x.shape[0]):
-        prev = np.minimum(np.maximum(prev, x[k] - h), x[k] + h)
+        prev = min(max(prev, x[k] - h), x[k] + h)
         y[k] = prev
     return y
 
@@ -225,6 +206,10 @@ class ExtendedModel:
         self._rest = th.rest_state(tp, 1)[0]  # (2 layers, 2 faces)
         if run.T is not None:
             self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt)
+            if noise_sigma(run.T) < SMOOTH_ABOVE_C:
+                # noise-free (simulated) temperatures: smoothing would only distort the steep
+                # transitions (6x the replay error on a plant_sim run)
+                self.T_s = run.T.copy()
             self.cycles = cycle_count(run.T, run.dt)
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
@@ -256,6 +241,9 @@ class ExtendedModel:
                 x0s.append(x0)
             T, _ = self.consts.thermal(run.u[:K], self.dt, np.array(coefs), np.array(x0s), np.array(drifts),
                                        self.substeps)
+            if len(self._th_cache) > 200:  # bound memory; never evict what this call returns
+                for k in [k for k in self._th_cache if k not in todo][:100]:
+                    del self._th_cache[k]
             for i, key in enumerate(missing):
                 self._th_cache[key] = T[:, i]
         for key, js in todo.items():
@@ -321,8 +309,8 @@ class ExtendedModel:
             qq, qqd, ll = self.consts.mechanics(np.stack(Ts, axis=1), self.dt, np.array(jrows), self.substeps)
             for i, key in enumerate(missing):
                 self._mech_cache[key] = (qq[:, i], qqd[:, i], ll[:, i])
-            if len(self._mech_cache) > 400:
-                for k in list(self._mech_cache)[:200]:
+            if len(self._mech_cache) > 400:  # bound memory; never evict what this call returns
+                for k in [k for k in self._mech_cache if k not in todo][:200]:
                     del self._mech_cache[k]
         for key, js in todo.items():
             a, b, c = self._mech_cache[key]

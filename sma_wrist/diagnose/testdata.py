@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.signal import lfilter
@@ -27,6 +27,9 @@ from sma_wrist.core import thermal as th
 from sma_wrist.core.plant import PlantParams
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose.kernels import Constants
+
+if TYPE_CHECKING:
+    from sma_wrist.diagnose.data import Run
 
 #: magnitude ranges of injected effects: param -> (low, high, random sign)
 RANGES: dict[str, dict[str, tuple[float, float, bool]]] = {
@@ -145,6 +148,16 @@ def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, par
     T_meas = quantise(T_meas + rng.normal(0.0, NOISE_T_C, (K, 2)), T_SPAN_C)
     t = np.arange(K) * dt
     return Truth(effect, injected, seed, payload, dt, t, u, T_meas, q_meas, T_true, q_true)
+
+
+def run_from_truth(truth: Truth) -> 'Run':
+    """The Run that :func:`sma_wrist.diagnose.data.load_run` makes of ``write_bag(truth)``, without the bag.
+
+    Sweeps (the benchmark, most tests) use it: same arrays, no recording cost.
+    """
+    from sma_wrist.diagnose.data import Run
+    return Run(t=truth.t.copy(), dt=truth.dt, u=truth.u.copy(), T=truth.T.copy(), q=truth.q.copy(),
+               payload_kg=truth.payload_kg, source=f'synthetic {truth.effect} seed {truth.seed}')
 
 
 # ----------------------------------------------------------------------------- bags

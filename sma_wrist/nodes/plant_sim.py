@@ -9,6 +9,10 @@ simulation by ``1 / publish_rate_hz``; the other nodes set ``use_sim_time:=true`
 On the embedded runtime the steady clock is virtual, so the graph runs as fast as the
 CPU allows and the result does not depend on the machine.
 
+``model.*`` parameters (nominal by default) run the extended model that
+``sma-wrist diagnose`` writes as a params file (sma_wrist.core.model_extensions): thermal
+and joint deviations inside the plant, sensor effects on what is published.
+
 Safety: commands beyond the TEM limits are clipped (flagged on /diagnostics), NaN/inf
 commands are rejected (last good command kept), a command older than
 ``command_timeout_s`` is replaced by 0 V (TEMs off), and a muscle above
@@ -26,6 +30,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64
 
+from sma_wrist.core import model_extensions as mx
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import PlantParams, WristPlant
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
@@ -44,16 +49,28 @@ class PlantSim(WristNode):
         Param('command_timeout_s', 0.5, 'a TEM command older than this is replaced by 0 V', 's', (0.01, 60.0)),
         Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature threshold (reported)', 'degC',
               (30.0, 120.0)),
-    )
+    ) + tuple(
+        # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
+        Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
+        for e in mx.PARAMS)
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('plant_sim', **kwargs)
         p = self.p
-        self.sim_params = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'])
+        ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
+        self.sim_params = mx.plant_params(ext, PlantParams(dt=p['dt_s'],
+                                                           max_muscle_temperature_C=p['max_muscle_temperature_C']))
+        # /wrist/payload publishes payload_kg (what the user believes); the joint carries the true mass
+        self.payload_err_kg = ext['payload_err_kg']
+        true_payload = max(p['payload_kg'] + self.payload_err_kg, 0.0)
         q0 = None if p['initial_angle_rad'] < 0 else p['initial_angle_rad']
-        self.plant = WristPlant(self.sim_params, payload_kg=p['payload_kg'])
+        self.plant = WristPlant(self.sim_params, payload_kg=true_payload)
         if q0 is not None:
-            self.plant.state = self.plant.rest_state(np.array([p['payload_kg']]), q0=q0)
+            self.plant.state = self.plant.rest_state(np.array([true_payload]), q0=q0)
+        self.sensors = mx.SensorChain(ext, 1.0 / p['publish_rate_hz'], self.sim_params.joint.q_neutral_rad)
+        if ext != mx.NOMINAL:
+            self.get_logger().info('extended model: ' + ', '.join(
+                f'{k} = {v:g}' for k, v in ext.items() if v != mx.NOMINAL[k]))
         self.steps_per_tick = max(1, int(round(1.0 / (p['publish_rate_hz'] * p['dt_s']))))
         self.command_V = np.zeros((1, 2))
         self.fresh = Freshness(self, ('tem_1', 'tem_2'))
@@ -77,7 +94,7 @@ class PlantSim(WristNode):
     # -- parameters ------------------------------------------------------------
     def apply(self, changed: Mapping[str, Any]) -> None:
         if 'payload_kg' in changed:
-            self.plant.state.payload_kg[:] = changed['payload_kg']
+            self.plant.state.payload_kg[:] = max(changed['payload_kg'] + self.payload_err_kg, 0.0)
             self._publish_payload()
         if 'max_muscle_temperature_C' in changed:
             self.sim_params = replace(self.sim_params, max_muscle_temperature_C=changed['max_muscle_temperature_C'])
@@ -123,13 +140,17 @@ class PlantSim(WristNode):
         T = self.plant.muscle_temperature_C[0]
         stress = self.plant.wire_stress_Pa[0]
         s = self.plant.state
+        q_meas = float(s.q[0])
+        if not self.sensors.identity:
+            T = self.sensors.temperatures(T)
+            q_meas = self.sensors.angle(q_meas)
         for i in range(2):
             msg = Temperature(temperature=float(T[i]), variance=0.0)
             msg.header.stamp = stamp
             msg.header.frame_id = f'muscle_{i + 1}'
             self.pub_temp[i].publish(msg)
             self.pub_stress[i].publish(Float64(data=float(stress[i])))
-        js = JointState(name=[self.contract.joint_name], position=[float(s.q[0])], velocity=[float(s.qd[0])],
+        js = JointState(name=[self.contract.joint_name], position=[q_meas], velocity=[float(s.qd[0])],
                         effort=[float(self.plant.muscle_torque_Nm[0])])
         js.header.stamp = stamp
         js.header.frame_id = self.contract.frame_id
