@@ -219,6 +219,20 @@ def bench_experiment(quick: bool = False) -> dict:
     return {'runs': len(t['runs']), 'sim_time_per_run_s': duration, 'wall_s_total': t['wall_s'], 'workers': 2}
 
 
+@section('diagnose')
+def bench_diagnose(quick: bool = False) -> dict:
+    """Diagnosis accuracy over hidden-effect runs and the wall time on a 10-minute 100 Hz bag."""
+    from sma_wrist.diagnose.bench import bench_diagnose as run_diagnose
+    return run_diagnose(quick)
+
+
+@section('bridge')
+def bench_bridge(quick: bool = False) -> dict:
+    """1 kHz sample streaming emulator -> pty -> bridge link: loss, reordering, latency percentiles."""
+    from sma_wrist.hw.bench import bench_bridge as run_bridge
+    return run_bridge(5.0 if quick else 600.0)
+
+
 # -------------------------------------------------------------------------------- driver
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:

@@ -127,3 +127,33 @@ def test_compensator_node_matches_the_core_inverse(probe_factory):
     got = [probe.got[f'/wrist/muscle_{i}/temperature_desired'][-1].temperature for i in (1, 2)]
     np.testing.assert_allclose(got, expected, atol=1e-9)
     assert 20.0 <= min(got) and max(got) <= 80.0
+
+
+def test_flapping_condition_is_published_every_change_but_logged_at_most_every_10_s(probe_factory):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from sma_wrist.nodes.common import LOG_THROTTLE_S
+    from sma_wrist.nodes.tem_controller import TemController
+    logged: list[str] = []
+
+    class Log:
+        def info(self, m: str) -> None:
+            logged.append(m)
+        warning = error = info
+
+    with Runtime() as rt:
+        probe = probe_factory(rt)
+        node = rt.add(TemController)
+        node.get_logger = lambda: Log()
+        for k in range(20):  # a command touching its limit every other tick
+            node.diagnose('flap', DiagnosticStatus.WARN if k % 2 == 0 else DiagnosticStatus.OK, f'state {k % 2}')
+            rt.run_until(0.1 * (k + 1), until='steady')
+        rt.run_until(2.0 + LOG_THROTTLE_S, until='steady')
+        node.diagnose('flap', DiagnosticStatus.WARN, 'state 0')
+        node.diagnose('fault', DiagnosticStatus.ERROR, 'e1')
+        node.diagnose('fault', DiagnosticStatus.ERROR, 'e2')
+        rt.run_until(2.1 + LOG_THROTTLE_S, until='steady')
+    flap = [s for s in probe.diagnostics() if s[0].endswith('flap')]
+    assert len(flap) == 21  # /diagnostics sees every change
+    assert logged[0] == 'flap: state 0' and logged[1].startswith('flap: state 0 (19 more changes')
+    assert logged[2:] == ['fault: e1', 'fault: e2']  # errors are never throttled

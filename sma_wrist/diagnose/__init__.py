@@ -27,7 +27,7 @@ from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
 from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
-__all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main', 'bench_diagnose']
+__all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main']
 
 #: a candidate must lower the held-out score by this much (sum of log SSE ratios; 0.2 ~ 10 % RMS)
 MIN_SCORE = 0.2
@@ -313,8 +313,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap = add_arguments(argparse.ArgumentParser(
         prog='sma-wrist diagnose', description='Locate and name the model discrepancy of a recorded run (docs/diagnose.md).'))
     return run_cli(ap.parse_args(list(argv) if argv is not None else None))
-
-
-def bench_diagnose(quick: bool = True) -> dict[str, Any]:
-    from sma_wrist.diagnose.bench import bench_diagnose as _b
-    return _b(quick)

@@ -26,6 +26,10 @@ from sma_wrist.contract import Topic, load_contract
 from sma_wrist.core.errors import SmaWristError
 
 
+#: a /diagnostics condition that keeps changing is logged at most this often per key [s]
+LOG_THROTTLE_S = 10.0
+
+
 @dataclass(frozen=True)
 class Param:
     """A declared parameter: default value, unit, description and valid values."""
@@ -87,6 +91,7 @@ class WristNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._diag_last: dict[str, tuple[int, str]] = {}
+        self._diag_logged: dict[str, tuple[int | None, int]] = {}  # key -> (last log time [ns], changes not logged)
         self.rejected_inputs = 0
 
     # -- parameters ------------------------------------------------------------
@@ -163,13 +168,23 @@ class WristNode(Node):
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(arr)
+        # the log follows /diagnostics, but a condition that flaps (a command touching its
+        # limit every few ticks) is logged at most once per LOG_THROTTLE_S per key; errors always
+        now = self.get_clock().now().nanoseconds
+        t_last, quiet = self._diag_logged.get(key, (None, 0))
+        if level != DiagnosticStatus.ERROR and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
+            self._diag_logged[key] = (t_last, quiet + 1)
+            return
+        self._diag_logged[key] = (now, 0)
+        text = f'{key}: {message}' + (f' ({quiet} more changes in the last {LOG_THROTTLE_S:g} s, see /diagnostics)'
+                                      if quiet else '')
         log = self.get_logger()
         if level == DiagnosticStatus.OK:
-            log.info(f'{key}: {message}')
+            log.info(text)
         elif level == DiagnosticStatus.WARN:
-            log.warning(f'{key}: {message}')
+            log.warning(text)
         else:
-            log.error(f'{key}: {message}')
+            log.error(text)
 
     def reject_input(self, topic: str, reason: str) -> None:
         """Count and report a malformed message; the last good value stays in use."""
