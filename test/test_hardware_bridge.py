@@ -248,8 +248,11 @@ def test_cli_emulator_on_a_pty(tmp_path):
         proc.wait(10)
 
 
-#: tolerance of the hardware-in-the-loop run vs the simulator, percentage points of the reference range
-CLOSED_LOOP_TOL_PCT = {'max_error_pct': 12.0, 'rms_error_pct': 2.5}
+#: tolerance of the hardware-in-the-loop run vs the simulator, percentage points of the reference range.
+#: Measured on an idle 2-core machine at time scale 3: 7.41 / 3.38 % vs plant_sim's 7.22 / 2.95 %
+#: (ADC quantisation and noise, window averaging, the filtered velocity). On a loaded machine the
+#: bridge skips windows it cannot keep up with (by design, docs/protocol.md) and tracks worse.
+CLOSED_LOOP_TOL_PCT = {'max_error_pct': 5.0, 'rms_error_pct': 1.5}
 TIME_SCALE = 3.0
 
 
@@ -274,6 +277,7 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     run = load_run(tmp_path / 'hw')
     m = run_metrics(run)
     assert m == hw.metrics and run.t[-1] > 125.0
-    assert wall < 60.0, f'{wall:.0f} s wall'
+    assert wall < 126.0  # the device's time scale drove the graph (speed itself: sma-wrist bench)
+    assert m['max_error_pct'] < 15.0  # the tracking requirement holds through the bridge too
     for k, tol in CLOSED_LOOP_TOL_PCT.items():
         assert abs(m[k] - sim.metrics[k]) <= tol, (k, m[k], sim.metrics[k])
