@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from sma_wrist.core.errors import SmaWristError
 from sma_wrist.runtime.launch import Runtime
 from sma_wrist.share import share_path
 
@@ -33,6 +34,28 @@ class RunSummary:
     @property
     def real_time_factor(self) -> float:
         return self.sim_time_s / self.wall_s if self.wall_s > 0 else float('inf')
+
+
+#: a hardware run whose device time has not advanced for this long (wall) [s] is stopped
+DEVICE_STALL_S = 10.0
+
+
+class _Stall:
+    """``stop_when`` for hardware runs: True once device (sim) time stood still for ``limit_s`` of wall time."""
+
+    def __init__(self, rt: Runtime, limit_s: float) -> None:
+        self.rt, self.limit_s = rt, limit_s
+        self.last_ns: int | None = None
+        self.since = time.monotonic()
+        self.stalled = False
+
+    def __call__(self) -> bool:
+        now, sim = time.monotonic(), self.rt.sim_ns
+        if sim != self.last_ns:
+            self.last_ns, self.since = sim, now
+        elif now - self.since > self.limit_s:
+            self.stalled = True
+        return self.stalled
 
 
 def graph_nodes(controller: str, hardware: bool = False) -> list[type]:
@@ -87,7 +110,7 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
     wall0 = time.perf_counter()
-    interrupted = False
+    interrupted = stalled = False
     recorded = 0
     sim_s = 0.0
     with Runtime(ros_args(params_files), params=overrides(controller, payload_kg, source, extra_params)) as rt:
@@ -96,10 +119,14 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         rt.add_nodes(nodes)
         chunk = max(duration_s / 100.0, 0.01)
         t = 0.0
+        stall = _Stall(rt, DEVICE_STALL_S) if hardware else None
         try:
             while t < duration_s - 1e-12:
                 t = min(duration_s, t + chunk)
-                rt.run_until(t, until='sim')
+                rt.run_until(t, until='sim', stop_when=stall)
+                if stall is not None and stall.stalled:
+                    stalled = True
+                    break
                 if progress is not None:
                     progress(t, duration_s, time.perf_counter() - wall0)
         except KeyboardInterrupt:
@@ -107,6 +134,11 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         sim_s = (rt.sim_ns or 0) / 1e9
         if bag is not None:
             recorded = rec.count
+    if stalled:
+        raise SmaWristError(
+            f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {sim_s:.2f} s of device time: check '
+            f"hardware_bridge's port, that the device is powered and streaming (docs/protocol.md); TEMs were "
+            f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if bag is not None else ''))
     summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
                          time.perf_counter() - wall0, recorded, interrupted)
     if bag is not None:

@@ -281,3 +281,13 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     assert m['max_error_pct'] < 15.0  # the tracking requirement holds through the bridge too
     for k, tol in CLOSED_LOOP_TOL_PCT.items():
         assert abs(m[k] - sim.metrics[k]) <= tol, (k, m[k], sim.metrics[k])
+
+
+def test_hardware_run_without_a_device_stops_with_a_clear_error(tmp_path, monkeypatch, ros_shutdown):
+    from sma_wrist import closed_loop
+    from sma_wrist.core.errors import SmaWristError
+    monkeypatch.setattr(closed_loop, 'DEVICE_STALL_S', 1.0)
+    with pytest.raises(SmaWristError, match='no data from the device for 1 s'):
+        closed_loop.run_closed_loop('pid', 0.3, 5.0, tmp_path / 'bag', hardware=True,
+                                    extra_params={'/hardware_bridge': {'port': str(tmp_path / 'absent')}})
+    assert (tmp_path / 'bag' / 'metadata.yaml').exists()  # the bag was closed, not lost
