@@ -17,6 +17,8 @@ from sma_wrist.runs import load_run
 
 PID_LOADS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6)
 DIRECT_LOADS = (0.1, 0.35, 0.6)
+#: inverse_adaptive meets 15 % only at these loads (measured-stress envelopes; docs/control.md)
+INVERSE_LOADS = (0.1, 0.3)
 
 
 @pytest.fixture(scope='module')
@@ -25,14 +27,15 @@ def tracking_runs(tmp_path_factory):
     from sma_wrist.experiment import run_experiment
     out = tmp_path_factory.mktemp('ch6')
     rows = []
-    for ctrl, loads in (('pid', PID_LOADS), ('direct_adaptive', DIRECT_LOADS)):
+    for ctrl, loads in (('pid', PID_LOADS), ('direct_adaptive', DIRECT_LOADS), ('inverse_adaptive', INVERSE_LOADS)):
         rows += run_experiment([ctrl], loads, out, duration_s=4 * math.pi / 0.1, workers=2, plots=False,
                                log=open('/dev/null', 'w'))['runs']
     return {(r['controller'], r['payload_kg']): r for r in rows}
 
 
 @pytest.mark.parametrize('controller, payload', [('pid', m) for m in PID_LOADS] +
-                         [('direct_adaptive', m) for m in DIRECT_LOADS])
+                         [('direct_adaptive', m) for m in DIRECT_LOADS] +
+                         [('inverse_adaptive', m) for m in INVERSE_LOADS])
 def test_closed_loop_tracks_the_seed_sine_within_15_percent(tracking_runs, controller, payload):
     """The Sec. 6.1 requirement, on the last full cycle (the first holds the start from rest)."""
     r = tracking_runs[(controller, payload)]

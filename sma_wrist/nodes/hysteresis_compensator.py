@@ -28,6 +28,9 @@ class HysteresisCompensator(WristNode):
         Param('temperature_max_C', 80.0, 'highest temperature the compensator asks for', 'degC', (-10.0, 110.0)),
         Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
               choices=('numerical', 'analytic', 'auto')),
+        Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
+              '(default, docs/control.md) or the desired stress from adaptive_controller (Eq. 5.5 as written)',
+              choices=('measured', 'desired')),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -83,6 +86,8 @@ class HysteresisCompensator(WristNode):
     def _compensate(self) -> None:
         strain = np.array([self.values['strain_1'], self.values['strain_2']])
         stress = np.array([self.values['stress_1'], self.values['stress_2']])
+        if self.p['stress_source'] == 'measured' and np.isfinite(self.stress_meas).all():
+            stress = self.stress_meas.copy()
         if not self.started:
             if not (np.isfinite(self.T_meas).all() and np.isfinite(self.stress_meas).all()):
                 return  # memory needs a measured starting point
