@@ -34,7 +34,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Iterator, Optional
+from typing import Any, Callable, Iterable, Iterator, Optional
 
 import numpy as np
 import yaml
@@ -109,10 +109,16 @@ class BagRecorder:
         (0 disables; chunks are still written every 1 MiB by rosbags).
     humble_compatible:
         Rewrite metadata.yaml as version 5 on close (see module docstring).
+    clock_ns:
+        The recorder's clock for the log time of every message [ns] (``Runtime.record`` gives the
+        sim time once /clock runs, like ``ros2 bag record --use-sim-time``); None: the
+        publishing node's clock.
     """
 
     def __init__(self, path: str | Path, topics: Optional[Iterable[str]] = None, *,
-                 context: Any = None, flush_every: int = 2000, humble_compatible: bool = True) -> None:
+                 context: Any = None, flush_every: int = 2000, humble_compatible: bool = True,
+                 clock_ns: Optional[Callable[[], int]] = None) -> None:
+        self._clock_ns = clock_ns
         self.path = Path(path)
         self.topics = None if topics is None else [t if t.startswith('/') else '/' + t for t in topics]
         self._context = context
@@ -163,7 +169,8 @@ class BagRecorder:
         conn = self._conns.get(topic.name)
         if conn is None:
             conn = self._connection(topic)
-        self._writer.write(conn, t_ns, TYPESTORE.serialize_cdr(msg._to_rb(), msg._TYPE))
+        t = self._clock_ns() if self._clock_ns is not None else t_ns
+        self._writer.write(conn, t, TYPESTORE.serialize_cdr(msg._to_rb(), msg._TYPE))
         self.count += 1
         self.counts[topic.name] += 1
         if self.flush_every:

@@ -281,6 +281,11 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     assert m['max_error_pct'] < 15.0  # the tracking requirement holds through the bridge too
     for k, tol in CLOSED_LOOP_TOL_PCT.items():
         assert abs(m[k] - sim.metrics[k]) <= tol, (k, m[k], sim.metrics[k])
+    # the hardware bag feeds the diagnosis like any measured bag: both subsystems replayed
+    from sma_wrist.diagnose import diagnose
+    res = diagnose(tmp_path / 'hw')
+    assert set(res.channels) == {'thermal', 'mechanics'} and res.duration_s > 120.0
+    assert res.channels['thermal']['rmse_before'] < 1.0  # degC: the emulator is the nominal plant
 
 
 def test_hardware_run_without_a_device_stops_with_a_clear_error(tmp_path, monkeypatch, ros_shutdown):

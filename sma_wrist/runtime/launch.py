@@ -99,12 +99,18 @@ class Runtime:
         self.nodes.append(node)
         return node
 
+    def _record_time_ns(self) -> int:
+        return self._sim_ns if self._sim_ns is not None else VCLOCK.steady_ns
+
     def add_nodes(self, factories: Iterable[Any]) -> list[Any]:
         return [self.add(f) for f in factories]
 
     def record(self, path: str | Path, topics: Optional[Iterable[str]] = None, **kwargs: Any) -> Any:
         """Start a BagRecorder on this context; it is closed by close()/the with block."""
         from sma_wrist.bag import BagRecorder
+        # one clock for every message's log time, as ros2 bag record with --use-sim-time: the
+        # publishers' own clocks differ (hardware_bridge polls its steady clock twice per window)
+        kwargs.setdefault('clock_ns', self._record_time_ns)
         rec = BagRecorder(path, topics, context=self.context, **kwargs).start()
         self.recorders.append(rec)
         return rec
