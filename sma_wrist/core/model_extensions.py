@@ -8,14 +8,14 @@ data can be run in the closed loop. At the nominal values the plant is the plain
 
 Where each effect acts (docs/diagnose.md has the equations)::
 
-    commands --TEM heat balance (gain, loss, Joule, coupling, ambient)--> T_true
+    commands --delay--> TEM heat balance (gain, loss, Joule, coupling, ambient)--> T_true
     T_true --thermocouple (first-order lag, offset)--> T_measured
     T_true --wire lag, cycle drift--> T_wire --SD-GPI + joint (payload, friction, pre-load)--> q
     q --backlash (play), potentiometer (delay, offset, gain)--> q_measured
 
 :func:`plant_params` folds the thermal and joint parameters into a
 :class:`~sma_wrist.core.plant.PlantParams`; :class:`SensorChain` is the measurement part.
-The wire lag, cycle drift and ambient drift are not simulated by the plant
+The command delay, wire lag, cycle drift and ambient drift are not simulated by the plant
 (:data:`REPLAY_ONLY`): the diagnosis' replay models them, plant_sim refuses them.
 """
 from __future__ import annotations
@@ -50,6 +50,8 @@ PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('ambient_drift_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'linear ambient/coolant temperature drift'),
     ExtensionParam('coupling_per_s', '1/s', 0.0, 0.0, 0.2, 0.01,
                    'heat conductance between the muscle faces / heat capacity'),
+    ExtensionParam('command_delay_s', 's', 0.0, 0.0, 1.0, 0.02,
+                   'the TEM drive applies a command this long after it was sent (link, driver, host latency)'),
     ExtensionParam('temp_offset_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple offset (both channels)'),
     ExtensionParam('temp_lag_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple first-order time constant'),
     ExtensionParam('hyst_lag_s', 's', 0.0, 0.0, 60.0, 3.0, 'wire temperature lags the measured one (rate-dependent loops)'),
@@ -69,7 +71,7 @@ NOMINAL = {p.name: p.nominal for p in PARAMS}
 #: the nominal joint's static / Coulomb friction ratio (0.006 / 0.004 N m)
 STATIC_PER_COULOMB = 1.5
 #: effects the diagnosis replays but the plant does not simulate
-REPLAY_ONLY = ('hyst_lag_s', 'hyst_drift_C_per_cycle', 'ambient_drift_C_per_h')
+REPLAY_ONLY = ('hyst_lag_s', 'hyst_drift_C_per_cycle', 'ambient_drift_C_per_h', 'command_delay_s')
 
 
 def check(values: Mapping[str, float]) -> dict[str, float]:

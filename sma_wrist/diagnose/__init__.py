@@ -42,7 +42,7 @@ STRUCTURE_RATIO = 1.6
 @dataclass
 class DiagnosisResult:
     discrepancy: bool
-    subsystem: str | None  # thermal | hysteresis | joint | sensor | None
+    subsystem: str | None  # thermal | actuator | hysteresis | joint | sensor | None
     cause: str | None  # catalogue id
     parameters: dict[str, dict[str, Any]]
     channel: str  # channel of rmse_before/after: thermal | mechanics | chain

@@ -37,7 +37,7 @@ SMOOTH_ABOVE_C = 0.01
 CYCLE_TRAVEL_C = 80.0
 
 THERMAL_KEYS = ('tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C', 'ambient_drift_C_per_h',
-                'coupling_per_s', 'temp_offset_C')
+                'coupling_per_s', 'temp_offset_C', 'command_delay_s')
 MECH_KEYS = ('temp_offset_C', 'temp_lag_s', 'hyst_lag_s', 'hyst_drift_C_per_cycle', 'payload_err_kg', 'coulomb_Nm',
              'viscous_Nms', 'preload_err_mm')
 _TH_IDX = [INDEX[k] for k in THERMAL_KEYS]
@@ -48,7 +48,7 @@ _ME_IDX = [INDEX[k] for k in MECH_KEYS]
 class Effect:
     id: str
     name: str
-    subsystem: str  # thermal | hysteresis | joint | sensor
+    subsystem: str  # thermal | actuator | hysteresis | joint | sensor
     params: tuple[str, ...]
     meaning: str
 
@@ -67,6 +67,8 @@ CATALOGUE: tuple[Effect, ...] = (
            'heat flows between the two bundles (ThermalParams.coupling_per_s)'),
     Effect('tem_mismatch', 'TEM drive gain mismatch', 'thermal', ('tem_gain_err',),
            'the TEM pumps more/less heat per volt than Table 4.9 with input_per_volt = 0.4'),
+    Effect('actuator_delay', 'TEM command delay', 'actuator', ('command_delay_s',),
+           'the drive applies each command late (serial link, driver, a host that falls behind)'),
     Effect('payload_mismatch', 'payload mismatch', 'joint', ('payload_err_kg',),
            'the mass at the lever differs from /wrist/payload'),
     Effect('friction', 'Coulomb/static friction', 'joint', ('coulomb_Nm',),
@@ -239,8 +241,13 @@ class ExtendedModel:
                 x0[:, 1] += (T0 - self._rest[:, 0])
                 x0[:, 0] = T0
                 x0s.append(x0)
-            T, _ = self.consts.thermal(run.u[:K], self.dt, np.array(coefs), np.array(x0s), np.array(drifts),
-                                       self.substeps)
+            # one kernel call per distinct command delay (the delay changes the input itself)
+            i_delay = 1 + THERMAL_KEYS.index('command_delay_s')
+            T = np.empty((K, len(missing), 2))
+            for d in sorted({key[i_delay] for key in missing}):
+                sel = [i for i, key in enumerate(missing) if key[i_delay] == d]
+                T[:, sel], _ = self.consts.thermal(delayed(run.u, d, self.dt)[:K], self.dt, np.array(coefs)[sel],
+                                                   np.array(x0s)[sel], np.array(drifts)[sel], self.substeps)
             if len(self._th_cache) > 200:  # bound memory; never evict what this call returns
                 for k in [k for k in self._th_cache if k not in todo][:100]:
                     del self._th_cache[k]

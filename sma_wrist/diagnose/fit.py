@@ -32,7 +32,7 @@ MAX_FIT_SAMPLES = 12000  # residual samples per channel in a fit (evenly subsamp
 #: misses the angle by 4.3e-4 rad RMS on a 1.05 rad range (docs/diagnose.md)
 REPLAY_RESOLUTION = 1e-3
 
-THERMAL_EFFECT_PARAMS = {'tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C',
+THERMAL_EFFECT_PARAMS = {'command_delay_s', 'tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C',
                          'ambient_drift_C_per_h', 'coupling_per_s'}
 TEMP_SENSOR_PARAMS = {'temp_offset_C', 'temp_lag_s'}
 

@@ -40,6 +40,7 @@ RANGES: dict[str, dict[str, tuple[float, float, bool]]] = {
     'ambient_drift': {'ambient_drift_C_per_h': (8.0, 20.0, True)},
     'thermal_coupling': {'coupling_per_s': (0.008, 0.03, False)},
     'tem_mismatch': {'tem_gain_err': (0.08, 0.2, True)},
+    'actuator_delay': {'command_delay_s': (0.1, 0.4, False)},
     'payload_mismatch': {'payload_err_kg': (0.1, 0.25, True)},
     'friction': {'coulomb_Nm': (0.03, 0.08, False)},
     'viscous_damping': {'viscous_Nms': (2.0, 6.0, False)},
@@ -126,7 +127,8 @@ def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, par
     coef, drift, off = fx.thermal_coef(consts, r[[fx.INDEX[k] for k in fx.THERMAL_KEYS]])
     x0 = th.rest_state(consts.params.thermal, 1)
     x0 = x0 + off  # the ambient offset moves the rest state by exactly off
-    T_true, _ = consts.thermal(u, dt, coef, x0, np.array([drift]), SUBSTEPS)
+    u_applied = fx.delayed(u, r[fx.INDEX['command_delay_s']], dt)
+    T_true, _ = consts.thermal(u_applied, dt, coef, x0, np.array([drift]), SUBSTEPS)
     T_true = T_true[:, 0]
     T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) \
         - r[fx.INDEX['hyst_drift_C_per_cycle']] * fx.cycle_count(T_true, dt)
