@@ -30,6 +30,8 @@ def generate_launch_description() -> LaunchDescription:
 
     return LaunchDescription([
         DeclareLaunchArgument('port', default_value='/dev/ttyACM0', description='serial port of the wrist'),
+        # direct_adaptive by default on hardware: the inverse mode relies on the SD-GPI matching the
+        # wires and on the bridge's stress *estimate*; check that with `sma-wrist diagnose` first
         DeclareLaunchArgument('controller', default_value='direct_adaptive',
                               choices=['inverse_adaptive', 'direct_adaptive', 'pid']),
         DeclareLaunchArgument('payload_kg', default_value='0.3', description='payload at 0.09 m [kg]'),

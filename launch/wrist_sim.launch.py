@@ -27,7 +27,7 @@ def generate_launch_description() -> LaunchDescription:
                     parameters=[defaults, extra, {'use_sim_time': sim_time, **(overrides or {})}], **kw)
 
     return LaunchDescription([
-        DeclareLaunchArgument('controller', default_value='direct_adaptive',
+        DeclareLaunchArgument('controller', default_value='inverse_adaptive',
                               choices=['inverse_adaptive', 'direct_adaptive', 'pid']),
         DeclareLaunchArgument('payload_kg', default_value='0.3', description='payload at 0.09 m [kg]'),
         DeclareLaunchArgument('params_file', default_value=defaults,

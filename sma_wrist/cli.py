@@ -173,7 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     r = sub.add_parser('run', help='run the closed loop on the embedded runtime, record a bag, print metrics')
-    r.add_argument('--controller', default='direct_adaptive', choices=('inverse_adaptive', 'direct_adaptive', 'pid'))
+    r.add_argument('--controller', default='inverse_adaptive', choices=('inverse_adaptive', 'direct_adaptive', 'pid'))
     r.add_argument('--payload-kg', type=_payload, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
     r.add_argument('--duration', type=_positive_float, default=126.0, help='simulated seconds (default 126)')
     r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist)')

@@ -17,8 +17,8 @@ from sma_wrist.runs import load_run
 
 PID_LOADS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6)
 DIRECT_LOADS = (0.1, 0.35, 0.6)
-#: inverse_adaptive meets 15 % only at these loads (measured-stress envelopes; docs/control.md)
-INVERSE_LOADS = (0.1, 0.3)
+#: issue 4's target: inverse_adaptive under 5 % at every payload up to 0.6 kg
+INVERSE_LOADS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6)
 
 
 @pytest.fixture(scope='module')
@@ -34,14 +34,22 @@ def tracking_runs(tmp_path_factory):
 
 
 @pytest.mark.parametrize('controller, payload', [('pid', m) for m in PID_LOADS] +
-                         [('direct_adaptive', m) for m in DIRECT_LOADS] +
-                         [('inverse_adaptive', m) for m in INVERSE_LOADS])
+                         [('direct_adaptive', m) for m in DIRECT_LOADS])
 def test_closed_loop_tracks_the_seed_sine_within_15_percent(tracking_runs, controller, payload):
     """The Sec. 6.1 requirement, on the last full cycle (the first holds the start from rest)."""
     r = tracking_runs[(controller, payload)]
     assert r['window'] == 'last_cycle'
     assert r['max_error_pct'] < 15.0, r
     assert r['peak_command_V'] <= 24.0  # driver rating
+
+
+@pytest.mark.parametrize('payload', INVERSE_LOADS)
+def test_inverse_adaptive_stays_under_5_percent_at_every_payload(tracking_runs, payload):
+    """Observed-memory inverse with the reversal lead (docs/control.md): measured 2.0-3.7 %."""
+    r = tracking_runs[('inverse_adaptive', payload)]
+    assert r['window'] == 'last_cycle'
+    assert r['max_error_pct'] < 5.0, r
+    assert r['peak_command_V'] <= 24.0
 
 
 def test_bag_round_trip_rosbags_and_mcap_agree_with_what_was_published(tmp_path):

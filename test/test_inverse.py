@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from sma_wrist.core.default_params import default_sdgpi
-from sma_wrist.core.hysteresis import SDGPIParams, initial_state, simulate
+from sma_wrist.core.hysteresis import SDGPIParams, initial_state, simulate, step
 from sma_wrist.core.inverse import (InverseCompensator, LinearCorrection, composition_error, inverse_table_parameters,
                                     pi_inverse_params, pi_inverse_state, pi_series, table_5_1_correction)
 
@@ -58,6 +58,53 @@ def test_compensator_hits_targets_and_flags_saturation() -> None:
     T, sat = comp.from_strain(np.full(3, 1.5 / 80.0), loads)
     assert not sat.any()
     np.testing.assert_allclose(comp.output(loads), 1.5, atol=1e-9)
+
+
+def _lagging_wire(observe: bool, n: int = 1600, dt: float = 0.05) -> float:
+    """Wire whose temperature follows the command with a 1.5 s lag (at most 4 degC/s), at 0.85 kgf.
+
+    Returns max |elongation the compensator believes - elongation of the wire| [mm].
+    """
+    P = default_sdgpi()
+    m = np.array([0.85])
+    comp = InverseCompensator(P, T_range=(20.0, 80.0))
+    comp.reset([20.0], m)
+    wire = initial_state(P, np.array([20.0]), m)
+    T = np.array([20.0])
+    belief = 0.0
+    for k in range(n):
+        y_d = np.array([2.0 - 1.4 * np.cos(2 * np.pi * k * dt / 40.0)])
+        if observe:
+            comp.observe(T, m)
+            res = comp.solve(y_d, m, commit=False)
+        else:
+            res = comp.solve(y_d, m)
+        T = T + np.clip((res.T - T) / 1.5, -4.0, 4.0) * dt
+        y = step(P, wire, T, m)
+        if observe:
+            comp.observe(T, m)
+        belief = max(belief, float(np.abs(comp.output(m) - y).max()))
+    return belief
+
+
+def test_observed_memory_mirrors_a_lagging_wire_and_the_committed_one_does_not() -> None:
+    """Eq. 5.5 commits the command; a wire that lags it then has another memory (docs/control.md)."""
+    assert _lagging_wire(observe=True) < 1e-9
+    assert _lagging_wire(observe=False) > 0.5  # mm, of a 2.8 mm stroke (measured 3.3)
+
+
+def test_solve_without_commit_leaves_the_memory_and_reports_what_the_answer_gives() -> None:
+    P = default_sdgpi()
+    loads = np.array([0.75, 0.95])
+    comp = InverseCompensator(P, T_range=(20.0, 80.0))
+    comp.reset(np.array([30.0, 60.0]), loads)
+    before = comp.state.copy()
+    res = comp.solve(np.array([1.2, 2.0]), loads, commit=False)
+    np.testing.assert_array_equal(comp.state.w, before.w)
+    np.testing.assert_array_equal(comp.state.T_prev, before.T_prev)
+    ref = initial_state(P, np.array([30.0, 60.0]), loads)
+    np.testing.assert_allclose(res.achieved_mm, step(P, ref, res.T, loads), atol=1e-12)
+    np.testing.assert_allclose(res.achieved_mm[~res.saturated], np.array([1.2, 2.0])[~res.saturated], atol=1e-8)
 
 
 def test_compensator_needs_reset() -> None:

@@ -1,11 +1,13 @@
 """Mode composition of the joint controller (what adaptive_controller publishes)."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.joint_controller import JointController, JointControllerParams
+from sma_wrist.core.joint_controller import REVERSAL_STEP_RAD, JointController, JointControllerParams, time_to_turn
 from sma_wrist.core.plant import PlantParams
 
 
@@ -56,8 +58,70 @@ def test_direct_mode_adapts_only_theta():
     assert c.info['theta_hat_kg'] != 0.0
 
 
+def test_time_to_turn_of_the_seed_sine_is_its_time_to_the_extremum():
+    w, a = 0.1, 0.524
+    for t_left in (0.5, 2.0, 2.75, 4.0):
+        phase = math.pi / 2 - w * t_left  # t_left seconds before the top
+        s = time_to_turn(a * w * math.cos(phase), -a * w * w * math.sin(phase))
+        # the local parabola of a sine turns at tan(w t_left) / w: within 3 % of t_left up to 2.75 s
+        assert s == pytest.approx(math.tan(w * t_left) / w, rel=1e-12)
+        assert abs(s - t_left) < (0.03 * t_left if t_left <= 2.75 else 0.06 * t_left)
+    assert time_to_turn(0.05, 0.0) == math.inf  # ramp: no turn
+    assert time_to_turn(-0.05, -0.01) == math.inf  # moving away from the last turn
+
+
+def _sine_run(lead_s, t_end=90.0, dt=0.01):
+    """Inverse mode on the seed sine with the joint on the reference; (t, q_d, strain target) per sample."""
+    jc = JointController(JointControllerParams(mode='inverse_adaptive', reversal_lead_s=lead_s))
+    rows = []
+    for t in np.arange(0.0, t_end, dt):
+        q_d = 0.524 + 0.524 * math.sin(0.1 * t)
+        c = jc.update(q_d, 0.0524 * math.cos(0.1 * t), q_d, 0.0524 * math.cos(0.1 * t), -0.00524 * math.sin(0.1 * t), dt)
+        rows.append((t, q_d, c.strain_desired.copy(), jc.strain_at(q_d)))
+    return rows
+
+
+def test_reversal_lead_latches_a_target_past_the_angle_around_each_turn_only():
+    lead = 2.75
+    rows = _sine_run(lead)
+    jc = JointController(JointControllerParams(mode='inverse_adaptive'))
+    held = np.array([not np.allclose(s, s_qd) for _, _, s, s_qd in rows])
+    t = np.array([r[0] for r in rows])
+    turns = (5 * math.pi, 15 * math.pi)  # top at 15.7 s, bottom at 47.1 s
+    for t_turn, after in zip(turns, (-1.0, 1.0)):
+        near = (t > t_turn - 5) & (t < t_turn + 5)
+        t_held = t[near & held]
+        # starts when the parabola's time to the turn drops below the lead
+        assert t_held.min() == pytest.approx(t_turn - math.atan(0.1 * lead) / 0.1, abs=0.015)
+        assert t_held.max() > t_turn  # lasts until q_d has passed the hold point after the turn
+        k = np.flatnonzero(near & held)[0]
+        q_start = rows[k][1]
+        # the held strain is that of an angle one step past q in the direction after the turn
+        np.testing.assert_allclose(rows[k][2], jc.strain_at(q_start + after * REVERSAL_STEP_RAD), rtol=1e-9)
+    assert not held[(t < turns[0] - lead) | ((t > turns[0] + 5) & (t < turns[1] - lead))].any()
+
+
+def test_reversal_hold_releases_when_the_reference_only_slows_down_and_not_at_once_when_ahead():
+    jc = JointController(JointControllerParams(mode='inverse_adaptive', reversal_lead_s=2.0))
+    # rising towards a top 1 s ahead, the joint 0.015 rad above q_d: latched 0.01 below q, which
+    # q_d has not reached yet -- but it has not turned either, so the hold stays
+    c = jc.update(0.53, 0.0, 0.515, 0.02, -0.02, 0.01)
+    assert jc.hold is not None
+    np.testing.assert_allclose(c.strain_desired, jc.strain_at(0.53 - REVERSAL_STEP_RAD))
+    c = jc.update(0.53, 0.0, 0.52, 0.01, -0.02, 0.01)
+    np.testing.assert_allclose(c.strain_desired, jc.strain_at(0.53 - REVERSAL_STEP_RAD))
+    # the reference re-accelerates upwards (an inflection, no turn): released, q_d again
+    c = jc.update(0.53, 0.0, 0.525, 0.01, 0.02, 0.01)
+    assert jc.hold is None
+    np.testing.assert_allclose(c.strain_desired, jc.strain_at(0.525))
+
+
+def test_reversal_lead_zero_is_the_strain_at_q_d_throughout():
+    assert all(np.allclose(s, s_qd) for _, _, s, s_qd in _sine_run(0.0, t_end=50.0))
+
+
 @pytest.mark.parametrize('kw', [dict(mode='mpc'), dict(temperature_mid_C=90.0), dict(force_per_degC_N=0.0),
-                                dict(temperature_min_C=float('nan'))])
+                                dict(temperature_min_C=float('nan')), dict(reversal_lead_s=-1.0)])
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ParameterError):
         JointControllerParams(**kw)

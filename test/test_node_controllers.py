@@ -129,6 +129,47 @@ def test_compensator_node_matches_the_core_inverse(probe_factory):
     assert 20.0 <= min(got) and max(got) <= 80.0
 
 
+@pytest.mark.parametrize('memory_source', ['measured', 'commanded'])
+def test_compensator_memory_follows_the_measured_or_the_commanded_temperature(probe_factory, memory_source):
+    """A wire that did not follow its first command: the second answer differs by where the memory is."""
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.core.compensation import MuscleCompensator
+    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    g = MuscleGeometry()
+    stress = g.stress_Pa(np.array([0.8, 0.8]))
+    first = np.array([1.0, 1.0]) / g.wire_length_mm  # contract: heat
+    second = np.array([1.1, 1.1]) / g.wire_length_mm  # a little back
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired',))
+        node = rt.add(HysteresisCompensator)
+        assert node.set_parameters([Parameter('memory_source', value=memory_source)])[0].successful
+        for i in (1, 2):
+            probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0)  # and it stays there
+            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
+        rt.run_until(0.01, until='steady')
+        for k, target in enumerate((first, second)):
+            for i in (1, 2):
+                probe.publish(f'/wrist/muscle_{i}/strain_desired', data=float(target[i - 1]))
+                probe.publish(f'/wrist/muscle_{i}/stress_desired', data=float(stress[i - 1]))
+            rt.run_until(0.02 + 0.01 * k, until='steady')
+    got = [m.temperature for m in probe.got['/wrist/muscle_1/temperature_desired']]
+    ref = MuscleCompensator(default_sdgpi())
+    ref.reset(np.array([40.0, 40.0]), stress)
+    if memory_source == 'measured':
+        answers = []
+        for target in (first, second):
+            ref.observe(np.array([40.0, 40.0]), stress)
+            answers.append(ref(target, stress, commit=False).temperature_C[0])
+        assert 40.0 < answers[1] < answers[0]  # still heating, a little less
+    else:
+        answers = [ref(target, stress).temperature_C[0] for target in (first, second)]
+        assert answers[1] < answers[0] - 10.0  # the committed memory says: cool across the gap
+    np.testing.assert_allclose(got[-2:], answers, atol=1e-9)
+
+
 def test_flapping_condition_is_published_every_change_but_logged_at_most_every_10_s(probe_factory):
     from diagnostic_msgs.msg import DiagnosticStatus
 

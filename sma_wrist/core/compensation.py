@@ -48,12 +48,19 @@ class MuscleCompensator:
         m = self._load(np.asarray(stress_Pa, float))[0]
         self.inverse.reset(np.asarray(T0_C, float), m, branch=branch)
 
+    def observe(self, T_C: ArrayLike, stress_Pa: ArrayLike) -> None:
+        """Advance the memory with measured temperatures and stresses (InverseCompensator.observe)."""
+        sigma = np.asarray(stress_Pa, float)
+        check_finite('measured stress', sigma, 'Pa')
+        self.inverse.observe(np.asarray(T_C, float), self._load(sigma)[0])
+
     def _load(self, stress_Pa: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
         m = self.geometry.load_kgf(stress_Pa)
         lo, hi = self.params.load_range
         return np.clip(m, lo, hi), (m < lo) | (m > hi)
 
-    def __call__(self, strain: ArrayLike, stress_Pa: ArrayLike) -> CompensationResult:
+    def __call__(self, strain: ArrayLike, stress_Pa: ArrayLike, *, commit: bool = True) -> CompensationResult:
+        """Desired temperatures; ``commit`` advances the memory to them (Eq. 5.5), else :meth:`observe` does."""
         eps = np.asarray(strain, float)
         sigma = np.asarray(stress_Pa, float)
         check_finite('desired strain', eps)
@@ -61,7 +68,7 @@ class MuscleCompensator:
         g = self.geometry
         m, clipped = self._load(sigma)
         y = (eps * g.wire_length_mm - g.elastic_mm_per_kgf * m) / g.length_scale
-        res = self.inverse.solve(y, m)
+        res = self.inverse.solve(y, m, commit=commit)
         return CompensationResult(res.T, res.saturated, clipped, m, y)
 
 

@@ -220,6 +220,24 @@ class InverseCompensator:
         self.state = initial_state(self.params, T0, load_kgf, branch=branch)
         self._w_hat = None
 
+    def observe(self, T: ArrayLike, load_kgf: ArrayLike) -> None:
+        """Advance the memory with a measured temperature [degC] and load [kgf] (the plant's own history).
+
+        Eq. 5.5 commits the commanded temperature, which mirrors the plant only while the plant
+        follows its command. A thermal actuator lags by seconds; then the committed memory sweeps
+        operators the wire never swept and the next root lands on the wrong branch (the desired
+        temperature chatters between branches). Observing the measurement keeps the memory true.
+        """
+        st_ = self._require_state()
+        lo, hi = self.params.T_valid
+        lo_m, hi_m = self.params.load_range
+        T = np.clip(np.broadcast_to(np.asarray(T, float), st_.T_prev.shape), lo, hi)
+        m = np.clip(np.broadcast_to(np.asarray(load_kgf, float), st_.T_prev.shape), lo_m, hi_m)
+        check_finite('measured wire temperature', T, 'degC')
+        check_finite('measured wire load', m, 'kgf')
+        step(self.params, st_, T, m, check=False)
+        self._w_hat = None
+
     def output(self, load_kgf: ArrayLike) -> FloatArray:
         """Elongation [mm] the current memory gives at its last temperature."""
         st_ = self._require_state()
@@ -240,7 +258,12 @@ class InverseCompensator:
         """Same as calling with elongation = strain x 80 mm (Sec. 3.2.1 effective length)."""
         return self(np.asarray(desired_strain, float) * WIRE_LENGTH_MM, load_kgf)
 
-    def solve(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike) -> InverseResult:
+    def solve(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike, *, commit: bool = True) -> InverseResult:
+        """Temperatures reaching the desired elongation from the current memory.
+
+        commit: advance the memory to the answer (Eq. 5.5, memory of the commands); False leaves
+        it to :meth:`observe` and reports the elongation the answer would give.
+        """
         st_ = self._require_state()
         S = st_.T_prev.shape
         y_d = np.broadcast_to(np.asarray(desired_elongation_mm, float), S).copy()
@@ -260,7 +283,11 @@ class InverseCompensator:
                 heat = np.where(T_an > st_.T_prev, True, np.where(T_an < st_.T_prev, False, st_.heating))
                 ok = np.abs(_output_frozen(self.params, st_.w, T_an, m, heat) - y_d) <= max(self.tol_mm, 1e-9)
                 T = np.where(ok, T_an, T_num)
-        y = step(self.params, st_, T, m, check=False)
+        if commit:
+            y = step(self.params, st_, T, m, check=False)
+        else:
+            heat = np.where(T > st_.T_prev, True, np.where(T < st_.T_prev, False, st_.heating))
+            y = _output_frozen(self.params, st_.w, T, m, heat)
         if self.method == 'analytic':
             sat = np.abs(y - y_d) > 1e-6
         return InverseResult(T, sat, y)

@@ -50,11 +50,27 @@ def tuned_adaptive() -> AdaptiveParams:
                           force_max_N=N_WIRES * 1.0 * KGF_N)
 
 
+#: how far past the measured angle the held target lies during a reversal lead [rad]; larger
+#: than the mismatch between the chain's strain at q and the inverse model's, so the inverse
+#: sees a clear turn (at 2e-3 rad it flipped between branches)
+REVERSAL_STEP_RAD = 1e-2
+
+
+def time_to_turn(qdot_d: float, qddot_d: float) -> float:
+    """Time [s] until the reference velocity crosses zero, from its local parabola (inf if it does not).
+
+    q_d(t + s) ~ q_d + qdot_d s + qddot_d s^2 / 2 has its extremum at s* = -qdot_d / qddot_d.
+    """
+    if qdot_d * qddot_d < 0:
+        return -qdot_d / qddot_d
+    return math.inf
+
+
 @dataclass(frozen=True)
 class JointControllerParams:
     """Mode, the laws' parameters and the temperature map of the modes without an inverse."""
 
-    mode: Mode = 'direct_adaptive'  # the mode that meets Sec. 6.1's 15 % on this plant (docs/control.md)
+    mode: Mode = 'inverse_adaptive'  # the seed's controller; under 5 % on this plant (docs/control.md)
     adaptive: AdaptiveParams = field(default_factory=tuned_adaptive)
     #: PID on the angle error, output in degC of differential temperature (docs/control.md)
     pid: PIDParams = field(default_factory=lambda: PIDParams(kp=300.0, ki=60.0, kd=0.0, output_min=-30.0,
@@ -63,11 +79,15 @@ class JointControllerParams:
     temperature_min_C: float = 20.0
     temperature_max_C: float = 80.0
     force_per_degC_N: float = 1.0  # direct mode: force request per degC of temperature request [N/degC]
+    #: inverse mode: start crossing the hysteresis gap this long before the reference turns [s]
+    #: (0 = the strain at q_d throughout, Eq. 5.5 as written; docs/control.md "Reversal lead")
+    reversal_lead_s: float = 2.75
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
-        for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N'):
+        for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N',
+                     'reversal_lead_s'):
             if not math.isfinite(getattr(self, name)):
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
@@ -75,6 +95,8 @@ class JointControllerParams:
                                  f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
         if not self.force_per_degC_N > 0:
             raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
+        if not self.reversal_lead_s >= 0:
+            raise ParameterError(f'reversal_lead_s = {self.reversal_lead_s!r} must be >= 0')
 
 
 @dataclass(frozen=True)
@@ -99,12 +121,42 @@ class JointController:
         # the law's own mode decides what adapts (direct: theta only, Table 6.1)
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode)) if p.mode != 'pid' else None
         self.pid = PID(p.pid) if p.mode == 'pid' else None
+        self.hold: tuple[float, float] | None = None  # (held angle, direction after the turn)
 
     def strain_at(self, q: float) -> FloatArray:
         """Bundle strains (elongation / wire length) at angle q (Eq. 4.17, muscle.py)."""
         x = float(self.plant.joint.chain_displacement_mm(q))
         e0 = self.plant.preload_elongation_mm
         return np.array([e0 - x, e0 + x]) / self.plant.muscle.wire_length_mm
+
+    def _reversal_lead(self, strain: FloatArray, q: float, q_d: float, qdot_d: float, qddot_d: float,
+                       info: dict[str, float]) -> FloatArray:
+        """Inverse mode: cross the hysteresis gap around the reference's turn instead of after it.
+
+        Reversing a wire's strain first needs a temperature change across the gap between its
+        heating and cooling branches (~25 degC, 5-6 s at the drive limit on this plant), during
+        which the joint cannot follow. Starting ``reversal_lead_s`` before the turn, the target is
+        latched just past the measured angle in the direction after the turn, so the inverse
+        answers with the far side of the gap. The latch holds until q_d, turned, has come past
+        it (a joint already past q_d at the latch must not release at once), or until the
+        reference stops heading for a turn (it only slowed down); then q_d takes over. The stall
+        is then centred on the turn, where q_d moves least.
+        """
+        to_turn = time_to_turn(qdot_d, qddot_d)
+        info['time_to_turn_s'] = to_turn
+        if self.hold is None and to_turn < self.params.reversal_lead_s:
+            after = -math.copysign(1.0, qdot_d)
+            self.hold = (q + after * REVERSAL_STEP_RAD, after)
+        if self.hold is not None:
+            q_hold, after = self.hold
+            turned = qdot_d * after >= 0
+            approaching = qdot_d * after < 0 and qddot_d * after > 0
+            if (turned and (q_d - q_hold) * after >= 0) or not (turned or approaching):
+                self.hold = None
+            else:
+                info['reversal_hold_rad'] = q_hold
+                return self.strain_at(q_hold)
+        return strain
 
     def _clip_T(self, T: FloatArray) -> tuple[FloatArray, bool]:
         p = self.params
@@ -129,6 +181,7 @@ class JointController:
                 'beta_hat_1': float(o.beta_hat[0, 0]), 'beta_hat_2': float(o.beta_hat[0, 1]),
                 'delta_force_N': float(o.delta_force_N[0])}
         if p.mode == 'inverse_adaptive':
+            strain = self._reversal_lead(strain, q, q_d, qdot_d, qddot_d, info)
             return JointCommand(force, strain, None, bool(o.saturated[0]), info)
         T, clipped = self._clip_T(p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N)
         return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)

@@ -33,7 +33,7 @@ from sma_wrist.core.pid import PIDParams
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 DEFAULTS = JointControllerParams()
-NONNEGATIVE_PREFIXES = ('c1', 'c2', 'gamma', 'kp', 'ki', 'kd', 'boundary', 'tracking', 'derivative_filter')
+NONNEGATIVE_PREFIXES = ('c1', 'c2', 'gamma', 'kp', 'ki', 'kd', 'boundary', 'tracking', 'derivative_filter', 'reversal')
 
 
 def _fields_as_params(cls: type, prefix: str, skip: tuple[str, ...] = (), default: Any = None) -> tuple[Param, ...]:

@@ -31,6 +31,9 @@ class HysteresisCompensator(WristNode):
         Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
               '(default, docs/control.md) or the desired stress from adaptive_controller (Eq. 5.5 as written)',
               choices=('measured', 'desired')),
+        Param('memory_source', 'measured', "the inverse's hysteresis memory follows the measured temperatures "
+              '(default: the plant lags its command, docs/control.md) or the commanded ones (Eq. 5.5 as written)',
+              choices=('measured', 'commanded')),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -93,8 +96,11 @@ class HysteresisCompensator(WristNode):
                 return  # memory needs a measured starting point
             self.comp.reset(self.T_meas, self.stress_meas)
             self.started = True
+        observed = self.p['memory_source'] == 'measured'
         try:
-            res = self.comp(strain, stress)
+            if observed:
+                self.comp.observe(self.T_meas, self.stress_meas)
+            res = self.comp(strain, stress, commit=not observed)
         except SmaWristError as e:
             self.diagnose('inverse', DiagnosticStatus.ERROR, f'inverse failed: {e}')
             return
