@@ -113,3 +113,18 @@ def test_bad_options_raise_parameter_errors() -> None:
     # a constant reference is fine with an explicit range
     m = mt.tracking_metrics(t, t * 0 + 0.5 + 0.0105, t * 0 + 0.5, reference_range_rad=1.05)
     assert m.max_error_pct == pytest.approx(1.0)
+
+
+def test_seed_claims_are_checked_against_the_rows_not_asserted():
+    from sma_wrist.experiment import seed_claims
+    rows = [dict(controller=c, payload_kg=m, total_abs_error_pct=t, max_error_pct=x)
+            for c, m, t, x in (('inverse_adaptive', 0.1, 5.0, 2.0), ('pid', 0.1, 9.0, 9.0),
+                               ('inverse_adaptive', 0.2, 7.0, 3.0), ('pid', 0.2, 6.0, 8.5),
+                               ('inverse_adaptive', 0.3, 8.0, 3.5), ('pid', 0.3, 10.0, 11.0))]
+    claims = seed_claims(rows)
+    assert 'inverse_adaptive has the lowest total absolute error. Here: at 2 of 3 loads -- differs.' in claims[0]
+    assert 'pid has the highest total absolute error. Here: at 2 of 3 loads -- differs.' in claims[1]
+    assert claims[2].endswith('-- differs.')  # 9 -> 6 -> 10 does not grow
+    assert claims[3] == 'Seed: max errors 8.4-10.4 %. Here: inverse_adaptive 2.00-3.50 %; pid 8.50-11.00 %.'
+    rows[3]['total_abs_error_pct'] = 9.5
+    assert seed_claims(rows)[2].endswith('-- agrees.')
