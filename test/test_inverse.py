@@ -93,6 +93,24 @@ def test_observed_memory_mirrors_a_lagging_wire_and_the_committed_one_does_not()
     assert _lagging_wire(observe=False) > 0.5  # mm, of a 2.8 mm stroke (measured 3.3)
 
 
+def test_observe_advances_the_memory_exactly_as_the_model_step() -> None:
+    """observe (compiled where numba is present) is hysteresis.step on the measured samples."""
+    P = default_sdgpi()
+    rng = np.random.default_rng(3)
+    m0 = np.array([0.7, 0.85, 1.0])
+    comp = InverseCompensator(P, T_range=(20.0, 80.0))
+    comp.reset(np.full(3, 30.0), m0)
+    ref = initial_state(P, np.full(3, 30.0), m0)
+    T = 30.0 + np.cumsum(rng.normal(0.0, 2.0, (400, 3)), axis=0).clip(-25, 45)
+    m = m0 + 0.05 * np.sin(np.arange(400) / 17.0)[:, None]
+    for k in range(400):
+        comp.observe(T[k], m[k])
+        step(P, ref, T[k], m[k])
+    np.testing.assert_allclose(comp.state.w, ref.w, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(comp.state.heating, ref.heating)
+    np.testing.assert_array_equal(comp.state.T_prev, ref.T_prev)
+
+
 def test_solve_without_commit_leaves_the_memory_and_reports_what_the_answer_gives() -> None:
     P = default_sdgpi()
     loads = np.array([0.75, 0.95])

@@ -160,15 +160,19 @@ class SDGPIParams:
                                const(a), const(b))
         return cls(env, np.asarray(c, float), np.asarray(d, float), float(rho), float(tau), float(c_thr), **kw)  # type: ignore[arg-type]
 
-    @property
+    @functools.cached_property
     def thresholds(self) -> FloatArray:
-        """r_j = c j, j = 1..n (Eq. 3.24) [mm]."""
-        return self.c_thr * np.arange(1, self.n + 1, dtype=float)
+        """r_j = c j, j = 1..n (Eq. 3.24) [mm]. Read-only (cached: every model step reads it)."""
+        r = self.c_thr * np.arange(1, self.n + 1, dtype=float)
+        r.flags.writeable = False
+        return r
 
-    @property
+    @functools.cached_property
     def weights(self) -> FloatArray:
-        """p(r_j) = rho exp(-tau r_j) (Eq. 3.23)."""
-        return self.rho * np.exp(-self.tau * self.thresholds)
+        """p(r_j) = rho exp(-tau r_j) (Eq. 3.23). Read-only, cached."""
+        p = self.rho * np.exp(-self.tau * self.thresholds)
+        p.flags.writeable = False
+        return p
 
     @property
     def load_range(self) -> tuple[float, float]:

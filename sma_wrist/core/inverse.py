@@ -30,7 +30,7 @@ from sma_wrist.core import plant_kernel as _pk
 
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis import (HysteresisState, SDGPIParams, initial_state, memoryless, play_bounds, simulate,
-                                       step)
+                                       step, tanh_envelope)
 from sma_wrist.core.play import play_update
 from sma_wrist.data import seed_tables as st
 
@@ -105,12 +105,20 @@ def _inverse_tanh(k: FloatArray, u: FloatArray) -> tuple[FloatArray, NDArray[np.
     return (np.arctanh(z) - k[..., 2]) / k[..., 1], ok
 
 
-def _output_frozen(params: SDGPIParams, w: FloatArray, T: FloatArray, m: FloatArray, heating: FloatArray) -> FloatArray:
+def _output_frozen(params: SDGPIParams, w: FloatArray, T: FloatArray, m: FloatArray, heating: FloatArray,
+                   coefficients: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
     """Elongation k_f - y_m at trial temperatures T from frozen play states w (Eqs. 3.19, 4.1, 4.2).
 
-    Broadcasts T (..., S) against w (S, n), m (S,), heating (..., S).
+    Broadcasts T (..., S) against w (S, n), m (S,), heating (..., S). ``coefficients``: the
+    envelopes' (a, b) at m when the caller has them already.
     """
-    lower, upper = play_bounds(params, T, np.broadcast_to(m, T.shape))
+    if coefficients is None:
+        lower, upper = play_bounds(params, T, np.broadcast_to(m, T.shape))
+    else:
+        a, b = coefficients
+        r = params.thresholds
+        lower = tanh_envelope(b, T)[..., None] - r
+        upper = tanh_envelope(a, T)[..., None] + r
     wt = np.minimum(np.maximum(w, lower), upper)
     return params.k_f - (memoryless(params, T, heating) + wt @ params.weights)
 
@@ -174,6 +182,22 @@ def _bracket_roots(T0s, ends, side_heat, h_prev, a2, b2, w2, y2, r, wts, c, d, p
 
 
 @_pk._jit
+def _play_step(T, a, b, r, w, heating, T_prev):  # pragma: no cover - compiled
+    """Compiled :func:`sma_wrist.core.hysteresis.step` memory update (Eq. 3.19) for S wires, in place."""
+    S, n = w.shape
+    for s in range(S):
+        gl = b[s, 0] * math.tanh(b[s, 1] * T[s] + b[s, 2]) + b[s, 3]
+        gr = a[s, 0] * math.tanh(a[s, 1] * T[s] + a[s, 2]) + a[s, 3]
+        for i in range(n):
+            w[s, i] = min(max(w[s, i], gl - r[i]), gr + r[i])
+        if T[s] > T_prev[s]:
+            heating[s] = True
+        elif T[s] < T_prev[s]:
+            heating[s] = False
+        T_prev[s] = T[s]
+
+
+@_pk._jit
 def _resid1(T, j, T0s, side_heat, h_prev, a2, b2, w2, y2, r, wts, c, d, p0, k_f, n_op):  # pragma: no cover
     heat = h_prev[j] if T == T0s[j] else side_heat[j]
     gl = b2[j, 0] * math.tanh(b2[j, 1] * T + b2[j, 2]) + b2[j, 3]
@@ -213,6 +237,8 @@ class InverseCompensator:
         self._pi: tuple[float, FloatArray, FloatArray] | None = None
         self._w_hat: FloatArray | None = None
         self._ym_prev: FloatArray | None = None
+        self._coef_key: bytes | None = None
+        self._coef: tuple[FloatArray, FloatArray] = (np.empty((0, 4)), np.empty((0, 4)))
 
     # -- memory
     def reset(self, T0: ArrayLike, load_kgf: ArrayLike, *, branch: str = 'cooling') -> None:
@@ -235,8 +261,24 @@ class InverseCompensator:
         m = np.clip(np.broadcast_to(np.asarray(load_kgf, float), st_.T_prev.shape), lo_m, hi_m)
         check_finite('measured wire temperature', T, 'degC')
         check_finite('measured wire load', m, 'kgf')
-        step(self.params, st_, T, m, check=False)
+        if _pk.AVAILABLE:  # the node calls this at 100 Hz: ~100 us of numpy per call -> a few us
+            a, b = self._coefficients(m)
+            heating = st_.heating.copy()
+            _play_step(T.astype(np.float64), a, b, np.asarray(self.params.thresholds, np.float64), st_.w, heating,
+                       st_.T_prev)
+            st_.heating = heating
+        else:
+            step(self.params, st_, T, m, check=False)
         self._w_hat = None
+
+    def _coefficients(self, m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Envelope coefficients at loads m, remembered for the last m (observe and solve share it)."""
+        key = m.tobytes()
+        if self._coef_key != key:
+            a, b = self.params.envelopes.coefficients(m)
+            self._coef = (np.ascontiguousarray(a, np.float64), np.ascontiguousarray(b, np.float64))
+            self._coef_key = key
+        return self._coef
 
     def output(self, load_kgf: ArrayLike) -> FloatArray:
         """Elongation [mm] the current memory gives at its last temperature."""
@@ -287,7 +329,7 @@ class InverseCompensator:
             y = step(self.params, st_, T, m, check=False)
         else:
             heat = np.where(T > st_.T_prev, True, np.where(T < st_.T_prev, False, st_.heating))
-            y = _output_frozen(self.params, st_.w, T, m, heat)
+            y = _output_frozen(self.params, st_.w, T, m, heat, self._coefficients(m))
         if self.method == 'analytic':
             sat = np.abs(y - y_d) > 1e-6
         return InverseResult(T, sat, y)
@@ -303,7 +345,7 @@ class InverseCompensator:
         p = self.params
         lo, hi = self.T_range
         T0 = np.clip(st_.T_prev, lo, hi)
-        a, b = p.envelopes.coefficients(m)  # load fixed during the solve: evaluate once
+        a, b = self._coefficients(m)  # load fixed during the solve: evaluate once
         r, wts, w = p.thresholds, p.weights, st_.w
         c, d, p0, k_f = p.c, p.d, p.p0, p.k_f
         S = y_d.size
@@ -387,7 +429,6 @@ class InverseCompensator:
         ym = p.k_f - y_d
         if self._w_hat is None:  # consistent with the forward memory: u = current envelope value
             a, b = p.envelopes.coefficients(m)
-            from sma_wrist.core.hysteresis import tanh_envelope
             u0 = np.where(st_.heating, tanh_envelope(b, st_.T_prev), tanh_envelope(a, st_.T_prev))
             self._w_hat = np.stack([pi_inverse_state(float(u), p.p0, w, p.weights) for u, w in zip(u0, st_.w)])
             self._ym_prev = p.p0 * u0 + st_.w @ p.weights
