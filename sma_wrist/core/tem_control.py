@@ -113,9 +113,12 @@ def small_root(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> tuple[FloatArray, Bo
     real = disc >= 0
     sgn = np.where(b >= 0, 1.0, -1.0)
     q = -0.5 * (b + sgn * np.sqrt(np.maximum(disc, 0.0)))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        root = np.where(q != 0, c / np.where(q != 0, q, 1.0), 0.0)  # q = 0 only when b = c = 0
-    return np.where(real, root, -b / (2.0 * a)), real
+    # q = 0 only when b = c = 0; a near-zero q gives an infinite root, which the callers clip to
+    # the drive limits and report as saturation
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        root = np.where(q != 0, c / np.where(q != 0, q, 1.0), 0.0)
+        vertex = -b / (2.0 * a)
+    return np.where(real, root, vertex), real
 
 
 def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike,
