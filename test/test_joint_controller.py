@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.joint_controller import REVERSAL_STEP_RAD, JointController, JointControllerParams, time_to_turn
+from sma_wrist.core.joint_controller import (REVERSAL_STEP_RAD, JointController, JointControllerParams, time_to_meet,
+                                            time_to_turn)
 from sma_wrist.core.plant import PlantParams
 
 
@@ -68,6 +69,33 @@ def test_time_to_turn_of_the_seed_sine_is_its_time_to_the_extremum():
         assert abs(s - t_left) < (0.03 * t_left if t_left <= 2.75 else 0.06 * t_left)
     assert time_to_turn(0.05, 0.0) == math.inf  # ramp: no turn
     assert time_to_turn(-0.05, -0.01) == math.inf  # moving away from the last turn
+
+
+def test_time_to_meet_a_joint_on_behind_or_beyond_the_reference():
+    qd, qdd = 0.02, -0.01  # rising, top in s* = 2 s, 0.02 rad above q_d
+    s, after = time_to_meet(0.0, qd, qdd)
+    assert s == pytest.approx(4.0) and after == -1.0  # on the reference: 2 s*, then downwards
+    s, after = time_to_meet(0.5, qd, qdd)  # 0.5 rad behind: q_d turns and comes back to it later
+    assert s == pytest.approx(2.0 + math.sqrt(2 * 0.52 / 0.01)) and after == -1.0
+    s, after = time_to_meet(-0.05, qd, qdd)  # above the coming top: it turns there
+    assert s == pytest.approx(4.0) and after == -1.0
+    assert time_to_meet(0.1, 0.02, 0.0) == (math.inf, 0.0)  # a ramp running away from the joint
+    s, after = time_to_meet(-0.1, 0.02, 0.0)  # a ramp catching up with a joint ahead of it
+    assert s == pytest.approx(5.0) and after == 1.0
+
+
+def test_joint_far_behind_is_not_held_at_the_turn_but_before_the_reference_comes_back():
+    """From rest at 0.05 rad: the first top passes, the hold comes when q_d returns towards q."""
+    jc = JointController(JointControllerParams(mode='inverse_adaptive', reversal_lead_s=2.75))
+    q, held = 0.05, []
+    for t in np.arange(0.0, 50.0, 0.01):
+        q_d = 0.524 + 0.524 * math.sin(0.1 * t)
+        jc.update(q, 0.0, q_d, 0.0524 * math.cos(0.1 * t), -0.00524 * math.sin(0.1 * t), 0.01)
+        held.append((t, jc.hold is not None, q_d))
+    t_held = [t for t, h, _ in held if h]
+    assert min(t_held) > 5 * math.pi + 5.0  # not around the top at 15.7 s
+    q_d_at_start = next(q_d for t, h, q_d in held if h)
+    assert q_d_at_start - q < 0.35  # but on the way back, shortly before q_d reaches the joint
 
 
 def _sine_run(lead_s, t_end=90.0, dt=0.01):

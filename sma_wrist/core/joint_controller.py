@@ -66,6 +66,31 @@ def time_to_turn(qdot_d: float, qddot_d: float) -> float:
     return math.inf
 
 
+def time_to_meet(error: float, qdot_d: float, qddot_d: float) -> tuple[float, float]:
+    """When the reference, on its local parabola, last comes to a joint that stays where it is.
+
+    Largest s > 0 with error + qdot_d s + qddot_d s^2 / 2 = 0 (error = q_d - q [rad]), and the
+    sign of the reference velocity there: the direction the joint must move afterwards.
+    (inf, 0) if the reference does not come to the joint. For a joint on the reference this is
+    the far root, 2 s* (:func:`time_to_turn`); for one far behind, the time q_d needs to come
+    back to it after its turn; for one beyond the coming extremum, 2 s* as well.
+    """
+    if qddot_d == 0.0:
+        roots = [-error / qdot_d] if qdot_d != 0.0 else []
+    else:
+        disc = qdot_d * qdot_d - 2.0 * qddot_d * error
+        if disc < 0.0:  # the joint lies beyond the reference's coming extremum: it turns there
+            s_turn = time_to_turn(qdot_d, qddot_d)
+            return (2.0 * s_turn, -math.copysign(1.0, qdot_d)) if math.isfinite(s_turn) else (math.inf, 0.0)
+        r = math.sqrt(disc)
+        roots = [(-qdot_d - r) / qddot_d, (-qdot_d + r) / qddot_d]
+    positive = [x for x in roots if x > 0.0]
+    if not positive:
+        return math.inf, 0.0
+    s = max(positive)
+    return s, math.copysign(1.0, qdot_d + qddot_d * s)
+
+
 @dataclass(frozen=True)
 class JointControllerParams:
     """Mode, the laws' parameters and the temperature map of the modes without an inverse."""
@@ -131,27 +156,32 @@ class JointController:
 
     def _reversal_lead(self, strain: FloatArray, q: float, q_d: float, qdot_d: float, qddot_d: float,
                        info: dict[str, float]) -> FloatArray:
-        """Inverse mode: cross the hysteresis gap around the reference's turn instead of after it.
+        """Inverse mode: cross the hysteresis gap around the joint's reversal instead of after it.
 
         Reversing a wire's strain first needs a temperature change across the gap between its
         heating and cooling branches (~25 degC, 5-6 s at the drive limit on this plant), during
-        which the joint cannot follow. Starting ``reversal_lead_s`` before the turn, the target is
-        latched just past the measured angle in the direction after the turn, so the inverse
-        answers with the far side of the gap. The latch holds until q_d, turned, has come past
-        it (a joint already past q_d at the latch must not release at once), or until the
-        reference stops heading for a turn (it only slowed down); then q_d takes over. The stall
-        is then centred on the turn, where q_d moves least.
+        which the joint cannot follow. The joint must reverse where the reference, coming back,
+        meets it (:func:`time_to_meet`): for a joint on the reference, 2 s* after now, s* the
+        time to the reference's turn; for one lagging behind (from rest, or short of a peak it
+        cannot reach), later. When that meeting is less than 2 ``reversal_lead_s`` away and the
+        joint must then move the other way, the target is latched just past the measured angle
+        in the new direction, so the inverse answers with the far side of the gap. The latch
+        holds until q_d, moving the new way, has come past it, or until the reference no longer
+        comes back (it only slowed down); then q_d takes over. For a joint on the reference the
+        stall is centred on the turn, where q_d moves least.
         """
-        to_turn = time_to_turn(qdot_d, qddot_d)
-        info['time_to_turn_s'] = to_turn
-        if self.hold is None and to_turn < self.params.reversal_lead_s:
-            after = -math.copysign(1.0, qdot_d)
+        e = q_d - q
+        s_meet, after = time_to_meet(e, qdot_d, qddot_d)
+        info['time_to_meet_s'] = s_meet
+        # a reversal: the reference turns before it meets the joint, or the joint, clearly behind
+        # it, still has to go the other way first
+        turns = after != math.copysign(1.0, qdot_d) or (abs(e) > REVERSAL_STEP_RAD and after != math.copysign(1.0, e))
+        if self.hold is None and s_meet < 2.0 * self.params.reversal_lead_s and turns:
             self.hold = (q + after * REVERSAL_STEP_RAD, after)
         if self.hold is not None:
-            q_hold, after = self.hold
-            turned = qdot_d * after >= 0
-            approaching = qdot_d * after < 0 and qddot_d * after > 0
-            if (turned and (q_d - q_hold) * after >= 0) or not (turned or approaching):
+            q_hold, held_after = self.hold
+            turned = qdot_d * held_after > 0
+            if (turned and (q_d - q_hold) * held_after >= 0) or (not turned and after != held_after):
                 self.hold = None
             else:
                 info['reversal_hold_rad'] = q_hold
