@@ -75,13 +75,39 @@ def test_tem_controller_heats_the_cold_muscle_and_cools_the_hot_one_within_limit
     assert max(u1) <= 24.0 and min(u2) >= -24.0  # driver rating
 
 
-def test_tem_controller_falls_back_to_hold_limits_when_a_face_is_hot(probe_factory):
-    # muscle 1 far below its target asks for full heating; at 76 degC (above protect_above_C)
-    # its layer may only use the hold limits, while the cold layer 2 may boost
-    _, node, u1, u2 = _tem_run(probe_factory, (76.0, 30.0), (79.0, 20.0), seconds=0.3)
-    assert 0.0 < max(u1) <= 13.0
+def test_tem_controller_holds_back_a_layer_whose_faces_would_leave_the_window(probe_factory):
+    # muscle 1 at 79 degC asks for full heating towards 85: held back below the driver rating (the
+    # heat balance predicts its face past 80 degC), while the cold layer 2 may boost
+    probe, node, u1, u2 = _tem_run(probe_factory, (79.0, 30.0), (85.0, 20.0), seconds=0.3)
+    assert max(u1) < 24.0
+    assert min(u2) == -24.0
+    assert any('clipped' in m for _, _, m in probe.diagnostics())
     cold, _, v1, _ = _tem_run(probe_factory, (40.0, 30.0), (79.0, 20.0), seconds=0.3)
-    assert max(v1) > 13.0
+    assert max(v1) == 24.0
+
+
+def test_tem_controller_fixed_switch_falls_back_to_hold_limits_when_a_face_is_hot(probe_factory):
+    """predictive_protection false: the hold limits once a face passes protect_above_C."""
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.tem_controller import TemController
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/tem_1/command',))
+        node = rt.add(TemController)
+        assert node.set_parameters([Parameter('predictive_protection', value=False)])[0].successful
+        assert node.set_parameters([Parameter('face_max_C', value=40.0)])[0].successful
+        good, = node.set_parameters([Parameter('face_min_C', value=39.0)])
+        assert good.successful
+        bad, = node.set_parameters([Parameter('face_min_C', value=40.0)])
+        assert not bad.successful and 'below face_max_C' in bad.reason
+        assert node.set_parameters([Parameter('face_max_C', value=80.0)])[0].successful
+        for i, T in ((1, 76.0), (2, 30.0)):
+            probe.every(0.01, f'/wrist/muscle_{i}/temperature', temperature=T)
+        for i, T in ((1, 79.0), (2, 20.0)):
+            probe.every(0.01, f'/wrist/muscle_{i}/temperature_desired', temperature=T)
+        rt.run_until(0.3, until='steady')
+    u1 = [m.data for m in probe.got['/wrist/tem_1/command']]
+    assert 0.0 < max(u1) <= 13.0
 
 
 def test_tem_controller_watchdog_switches_off_on_stale_temperatures_and_reports(probe_factory):

@@ -34,7 +34,7 @@ muscle (T1) face (docs/thermal.md).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -292,32 +292,113 @@ class DriveLimits:
 
     The thermal model's ``u_min_V``/``u_max_V`` are *hold* limits: a command held forever
     keeps every face inside the window. A temperature controller never holds its extreme
-    command; it may drive up to the driver rating (``boost_*``) while every face is below
-    ``protect_above_C``, and falls back to the hold limits for a layer as soon as one of its
-    faces is above it, which (being hold limits) bring the faces back inside the window.
+    command; it may drive up to the driver rating (``boost_*``) as long as the faces stay
+    inside the TEM's operating window.
+
+    predictive (default): a command is allowed when the heat balance, started from the
+    (observed) faces with that command held for ``horizon_s``, keeps every face of its layer
+    inside [``face_min_C``, ``face_max_C``]; otherwise the allowed command nearest to the request
+    is sent. The fixed switch it replaces (hold limits once a face passes ``protect_above_C``)
+    let faces reach 84.5 degC for 24 s of a 252 s run (thermal inertia after the switch) and
+    cut the authority the sine's peak needs (docs/control.md). A layer with a face already
+    outside the window gets the hold limits regardless (the backstop when the model is wrong).
+    predictive=False: the fixed switch at ``protect_above_C``.
     """
 
     boost_min_V: float = -24.0
     boost_max_V: float = 24.0
     protect_above_C: float = 75.0
+    predictive: bool = True
+    face_min_C: float = 0.0
+    face_max_C: float = 80.0
+    horizon_s: float = 3.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.boost_min_V) and np.isfinite(self.boost_max_V) and self.boost_min_V < 0 < self.boost_max_V):
             raise ParameterError(f'boost limits ({self.boost_min_V!r}, {self.boost_max_V!r}) V must bracket 0')
         if not np.isfinite(self.protect_above_C):
             raise ParameterError(f'protect_above_C = {self.protect_above_C!r} must be finite')
+        if not (np.isfinite(self.face_min_C) and np.isfinite(self.face_max_C) and self.face_min_C < self.face_max_C):
+            raise ParameterError(f'face window ({self.face_min_C!r}, {self.face_max_C!r}) degC must be finite, min < max')
+        if not (np.isfinite(self.horizon_s) and 0 < self.horizon_s <= 30.0):
+            raise ParameterError(f'horizon_s = {self.horizon_s!r} must be in (0, 30] s')
 
 
-def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike, command_V: ArrayLike
-                      ) -> tuple[FloatArray, BoolArray]:
-    """Clip (N, L) commands to the boost limits, or to the hold limits of layers with a hot face.
+#: candidate commands tried by the predictive protection, as fractions of the boost range (1 V steps at +-24 V)
+_CANDIDATES = np.linspace(0.0, 1.0, 49)  # includes 0 V
 
+
+def _held_faces_inside(thermal: th.ThermalParams, limits: DriveLimits, T: FloatArray, U: FloatArray
+                       ) -> tuple[BoolArray, FloatArray]:
+    """Hold each command of U (K, N, L) for the horizon from faces T (N, L, 2): (inside (K, N, L),
+    how far the faces leave the window [degC])."""
+    K = U.shape[0]
+    X = np.broadcast_to(T, (K,) + T.shape).reshape(-1, T.shape[-2], 2)
+    Uf = np.ascontiguousarray(U).reshape(-1, T.shape[-2])
+    n = max(1, int(np.ceil(limits.horizon_s / thermal.dt_max_s)))
+    hi_T, lo_T = X.max(axis=-1), X.min(axis=-1)
+    for _ in range(n):
+        X = th.step(thermal, X, Uf, limits.horizon_s / n, validate=False)
+        hi_T, lo_T = np.maximum(hi_T, X.max(axis=-1)), np.minimum(lo_T, X.min(axis=-1))
+    excess = (np.maximum(hi_T - limits.face_max_C, 0.0) + np.maximum(limits.face_min_C - lo_T, 0.0)).reshape(U.shape)
+    return excess == 0.0, excess
+
+
+def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """(lo, hi) [V], shape (N, L): the commands that, held for the horizon from the faces in
+    ``state`` (N, L, 2), keep every face of their layer inside the window (1 V grid over the boost
+    range). Where none does, both are the command that leaves the window least."""
+    T = np.asarray(state, dtype=float)
+    wide = replace(thermal, u_min_V=limits.boost_min_V, u_max_V=limits.boost_max_V)
+    cand = limits.boost_min_V + _CANDIDATES * (limits.boost_max_V - limits.boost_min_V)
+    U = np.broadcast_to(cand[:, None, None], (cand.size,) + T.shape[:-1])
+    safe, excess = _held_faces_inside(wide, limits, T, U)
+    lo = np.where(safe, U, np.inf).min(axis=0)
+    hi = np.where(safe, U, -np.inf).max(axis=0)
+    least = np.take_along_axis(U, np.argmin(excess, axis=0)[None], 0)[0]
+    none = ~safe.any(axis=0)
+    return np.where(none, least, lo), np.where(none, least, hi)
+
+
+def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike, command_V: ArrayLike,
+                      command_range: tuple[FloatArray, FloatArray] | None = None) -> tuple[FloatArray, BoolArray]:
+    """Clip (N, L) commands so the faces of each layer stay in the TEM's window (DriveLimits).
+
+    state: (N, L, 2) face temperatures [degC]. ``command_range``: a recent
+    :func:`safe_command_range` to reuse (the faces move over seconds; tem_controller refreshes
+    it at 10 Hz, ~1 ms each, and clips every 100 Hz command to it); computed here if None.
     Returns (command, limited) where ``limited`` marks commands that were changed.
     """
     T = np.asarray(state, dtype=float)
     u = np.asarray(command_V, dtype=float)
-    hot = (T > limits.protect_above_C).any(axis=-1)
-    lo = np.where(hot, max(thermal.u_min_V, limits.boost_min_V), limits.boost_min_V)
-    hi = np.where(hot, min(thermal.u_max_V, limits.boost_max_V), limits.boost_max_V)
+    if not limits.predictive:
+        hot = (T > limits.protect_above_C).any(axis=-1)
+        lo = np.where(hot, max(thermal.u_min_V, limits.boost_min_V), limits.boost_min_V)
+        hi = np.where(hot, min(thermal.u_max_V, limits.boost_max_V), limits.boost_max_V)
+        out = np.minimum(np.maximum(u, lo), hi)
+        return out, out != u
+    lo, hi = command_range if command_range is not None else safe_command_range(thermal, limits, T)
     out = np.minimum(np.maximum(u, lo), hi)
+    # backstop: a face already outside the window -> hold limits for that layer
+    outside = ((T > limits.face_max_C) | (T < limits.face_min_C)).any(axis=-1)
+    out = np.where(outside, np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)),
+                                       min(thermal.u_max_V, limits.boost_max_V)), out)
+    return out, out != u
+    req = np.minimum(np.maximum(u, limits.boost_min_V), limits.boost_max_V)
+    wide = replace(thermal, u_min_V=limits.boost_min_V, u_max_V=limits.boost_max_V)
+    safe_req, _ = _held_faces_inside(wide, limits, T, req[None])
+    out = req
+    if not safe_req[0].all():  # near the window: the nearest command that keeps it (most calls stop above)
+        cand = limits.boost_min_V + _CANDIDATES * (limits.boost_max_V - limits.boost_min_V)
+        U = np.broadcast_to(cand[:, None, None], (cand.size,) + req.shape)
+        safe, excess = _held_faces_inside(wide, limits, T, U)
+        dist = np.where(safe, np.abs(U - req[None]), np.inf)
+        best = np.argmin(dist, axis=0)
+        # none safe: the command that leaves the window least
+        pick = np.where(np.isfinite(np.take_along_axis(dist, best[None], 0)[0]), best, np.argmin(excess, axis=0))
+        out = np.where(safe_req[0], req, np.take_along_axis(U, pick[None], 0)[0])
+    # backstop: a face already outside the window -> hold limits for that layer
+    outside = ((T > limits.face_max_C) | (T < limits.face_min_C)).any(axis=-1)
+    out = np.where(outside, np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)),
+                                       min(thermal.u_max_V, limits.boost_max_V)), out)
     return out, out != u

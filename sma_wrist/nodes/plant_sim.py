@@ -31,6 +31,7 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64
 
 from sma_wrist.core import model_extensions as mx
+from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import PlantParams, WristPlant
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
@@ -129,6 +130,13 @@ class PlantSim(WristNode):
                       {'u_min_V': self.sim_params.thermal.u_min_V, 'u_max_V': self.sim_params.thermal.u_max_V})
         self.diagnose('temperature', DiagnosticStatus.ERROR if hot else DiagnosticStatus.OK,
                       f'muscle above {self.p["max_muscle_temperature_C"]} degC' if hot else 'temperatures normal')
+        # the TEMs' own operating window (docs/thermal.md), sampled at the tick: faces move over seconds
+        lo, hi = self.sim_params.thermal.window_C
+        faces = s.thermal[0]
+        outside = bool(th.out_of_window(self.sim_params.thermal, faces).any())
+        self.diagnose('tem_faces', DiagnosticStatus.ERROR if outside else DiagnosticStatus.OK,
+                      f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
+                      {'hottest_C': f'{faces.max():.2f}', 'coldest_C': f'{faces.min():.2f}'} if outside else None)
         self._publish_measurements()
 
     def _stamp(self) -> Any:

@@ -12,9 +12,9 @@ It computes when a fresh temperature of both muscles has arrived (measurement-dr
 Safety, in this order: no fresh measurement for ``stale_timeout_s`` -> 0 V (TEMs off) and
 an ERROR on /diagnostics until data returns; no desired temperature yet or a stale one ->
 0 V; a muscle above ``max_muscle_temperature_C`` may only be cooled; every command is
-clipped to the driver rating [``u_min_V``, ``u_max_V``], and to the heat balance's hold
-limits for a layer with a (measured or observed) face above ``protect_above_C``
-(:class:`~sma_wrist.core.tem_control.DriveLimits`); every clip is reported.
+clipped to the driver rating [``u_min_V``, ``u_max_V``], and to what keeps every (measured or
+observed) face of its layer inside the TEM's window over the protection horizon, predicted by
+the heat balance (:class:`~sma_wrist.core.tem_control.DriveLimits`); every clip is reported.
 """
 from __future__ import annotations
 
@@ -28,11 +28,13 @@ from std_msgs.msg import Float64
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.tem_control import TemController as TemLaw
-from sma_wrist.core.tem_control import DriveLimits, TemControlParams, protected_command
+from sma_wrist.core.tem_control import DriveLimits, TemControlParams, protected_command, safe_command_range
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
 DRIVE = DriveLimits()
+#: how often the predicted safe command range is recomputed [s] (the faces move over seconds)
+RANGE_REFRESH_S = 0.1
 
 
 class TemController(WristNode):
@@ -42,8 +44,15 @@ class TemController(WristNode):
         Param('rate_filter_s', 0.05, 'time constant of the filter on the estimated dT_d/dt', 's', (0.0, 10.0)),
         Param('u_min_V', DRIVE.boost_min_V, 'most negative (cooling) drive command: driver rating', 'V', (-29.0, -1.0)),
         Param('u_max_V', DRIVE.boost_max_V, 'most positive (heating) drive command: driver rating', 'V', (1.0, 34.0)),
+        Param('predictive_protection', DRIVE.predictive,
+              'allow a command while the heat balance predicts every face of its layer inside '
+              '[face_min_C, face_max_C] over protection_horizon_s (else: the fixed switch at protect_above_C)'),
+        Param('face_min_C', DRIVE.face_min_C, 'TEM operating window, lower face limit', 'degC', (-40.0, 40.0)),
+        Param('face_max_C', DRIVE.face_max_C, 'TEM operating window, upper face limit', 'degC', (40.0, 120.0)),
+        Param('protection_horizon_s', DRIVE.horizon_s, 'how far ahead the protection predicts the faces', 's',
+              (0.1, 30.0)),
         Param('protect_above_C', DRIVE.protect_above_C,
-              'above this face temperature a layer falls back to the hold limits '
+              'predictive_protection false: above this face temperature a layer falls back to the hold limits '
               f'[{LIMITS.u_min_V:g}, {LIMITS.u_max_V:g}] V', 'degC', (30.0, 80.0)),
         Param('max_muscle_temperature_C', 85.0, 'above this a muscle is only cooled', 'degC', (30.0, 120.0)),
         Param('stale_timeout_s', 0.25, 'measurement/target age that switches the TEMs off', 's', (0.01, 10.0)),
@@ -66,9 +75,18 @@ class TemController(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature_desired', lambda m, i=i: self._on_target(i, m))
         self.watchdog = self.create_timer(0.05, self._check_stale)
 
+    def validate(self, values: Mapping[str, Any]) -> str | None:
+        problem = super().validate(values)
+        if problem is None and not values['face_min_C'] < values['face_max_C']:
+            problem = f'face_min_C = {values["face_min_C"]} must be below face_max_C = {values["face_max_C"]}'
+        return problem
+
     def _build(self) -> None:
         p = self.p
-        self.drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'])
+        self.drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'], p['predictive_protection'],
+                                 p['face_min_C'], p['face_max_C'], p['protection_horizon_s'])
+        self.command_range = None
+        self.range_t: float | None = None
         self.thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
         self.law = TemLaw(self.thermal, TemControlParams(gain_per_s=p['gain_per_s'],
                                                          rate_filter_s=p['rate_filter_s']))
@@ -117,7 +135,10 @@ class TemController(WristNode):
             self.diagnose('law', DiagnosticStatus.ERROR, f'TEM law failed, TEMs off: {e}')
             self._send(np.zeros(2))
             return
-        u_prot, limited = protected_command(LIMITS, self.drive, self.observer, res.command_V)
+        if self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S):
+            self.command_range = safe_command_range(LIMITS, self.drive, self.observer)
+            self.range_t = t
+        u_prot, limited = protected_command(LIMITS, self.drive, self.observer, res.command_V, self.command_range)
         u = u_prot[0].copy()
         hot = self.T_meas > self.p['max_muscle_temperature_C']
         u = np.where(hot, np.minimum(u, 0.0), u)
