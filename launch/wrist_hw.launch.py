@@ -9,24 +9,39 @@ other node runs on it (use_sim_time). payload_kg:= is the payload actually mount
 published latched and used by the bridge's stress estimate).
 """
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
-from launch.conditions import IfCondition
-from launch.substitutions import LaunchConfiguration, PathJoinSubstitution, PythonExpression
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
-from launch_ros.parameter_descriptions import ParameterValue
 from launch_ros.substitutions import FindPackageShare
+
+from sma_wrist.launch_support import node_params_file
+
+
+def _graph(context) -> list:
+    controller = LaunchConfiguration('controller').perform(context)
+    payload = float(LaunchConfiguration('payload_kg').perform(context))
+    defaults = PathJoinSubstitution([FindPackageShare('sma_wrist'), 'config', 'wrist.yaml']).perform(context)
+    extra = LaunchConfiguration('params_file').perform(context)
+    port = LaunchConfiguration('port').perform(context)
+
+    def node(executable: str, sim_time: bool, overrides: dict | None = None) -> Node:
+        values = {'use_sim_time': sim_time, **(overrides or {})}
+        return Node(package='sma_wrist', executable=executable, name=executable, output='screen',
+                    parameters=[defaults, extra, node_params_file(executable, values)])
+
+    nodes = [
+        node('hardware_bridge', False, {'payload_kg': payload, 'port': port}),
+        node('trajectory_generator', True),
+        node('adaptive_controller', True, {'mode': controller}),
+    ]
+    if controller == 'inverse_adaptive':
+        nodes.append(node('hysteresis_compensator', True))
+    nodes.append(node('tem_controller', True))
+    return nodes
 
 
 def generate_launch_description() -> LaunchDescription:
-    controller = LaunchConfiguration('controller')
-    payload = LaunchConfiguration('payload_kg')
-    port = LaunchConfiguration('port')
     defaults = PathJoinSubstitution([FindPackageShare('sma_wrist'), 'config', 'wrist.yaml'])
-    extra = LaunchConfiguration('params_file')
-
-    def node(executable: str, sim_time: bool, overrides: dict | None = None, **kw) -> Node:
-        return Node(package='sma_wrist', executable=executable, name=executable, output='screen',
-                    parameters=[defaults, extra, {'use_sim_time': sim_time, **(overrides or {})}], **kw)
 
     return LaunchDescription([
         DeclareLaunchArgument('port', default_value='/dev/ttyACM0', description='serial port of the wrist'),
@@ -37,11 +52,5 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('payload_kg', default_value='0.3', description='payload at 0.09 m [kg]'),
         DeclareLaunchArgument('params_file', default_value=defaults,
                               description='params file applied after config/wrist.yaml'),
-        node('hardware_bridge', False, {'payload_kg': ParameterValue(payload, value_type=float),
-                                        'port': ParameterValue(port, value_type=str)}),
-        node('trajectory_generator', True),
-        node('adaptive_controller', True, {'mode': ParameterValue(controller, value_type=str)}),
-        node('hysteresis_compensator', True,
-             condition=IfCondition(PythonExpression(["'", controller, "' == 'inverse_adaptive'"]))),
-        node('tem_controller', True),
+        OpaqueFunction(function=_graph),
     ])

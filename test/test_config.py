@@ -73,3 +73,23 @@ def test_setup_installs_every_node_and_the_data_files():
         assert f"'{node}': 'sma_wrist.nodes.{node}:main'" in text
     for d in ('launch', 'config', 'msg_defs'):
         assert f"'/{d}'" in text
+
+
+def test_launch_overrides_written_under_the_node_name_beat_config_wrist_yaml():
+    """What the launch files do for controller:= / payload_kg:= (sma_wrist.launch_support): a
+    ``/**`` override would lose to wrist.yaml's own node sections (rcl's first-appearance order)."""
+    import rclpy
+
+    from sma_wrist.launch_support import node_params_file
+    from sma_wrist.nodes.plant_sim import PlantSim
+    from sma_wrist.runtime.launch import Runtime
+    from sma_wrist.share import share_path
+    path = node_params_file('plant_sim', {'payload_kg': 0.7, 'use_sim_time': False})
+    try:
+        with Runtime(['--ros-args', '--params-file', str(share_path('config/wrist.yaml')), '--params-file', path]) as rt:
+            assert rt.add(PlantSim).get_parameter('payload_kg').value == 0.7
+        wild = node_params_file('/**', {'payload_kg': 0.7})
+        with Runtime(['--ros-args', '--params-file', str(share_path('config/wrist.yaml')), '--params-file', wild]) as rt:
+            assert rt.add(PlantSim).get_parameter('payload_kg').value == 0.3  # the trap
+    finally:
+        rclpy.try_shutdown()

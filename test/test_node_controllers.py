@@ -110,6 +110,29 @@ def test_tem_controller_fixed_switch_falls_back_to_hold_limits_when_a_face_is_ho
     assert 0.0 < max(u1) <= 13.0
 
 
+def test_tem_controller_times_its_law_by_the_measurement_stamps(probe_factory):
+    """Under use_sim_time the node clock may not have moved between two samples (found under
+    ROS 2 Humble: 'controller time step = 0.0 s', TEMs off); the stamps the plant put on the
+    measurements give the step, and a repeated stamp leaves the command in force."""
+    from builtin_interfaces.msg import Time
+    from std_msgs.msg import Header
+
+    from sma_wrist.nodes.tem_controller import TemController
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/tem_1/command',))
+        rt.add(TemController)
+        for i in (1, 2):
+            probe.every(0.01, f'/wrist/muscle_{i}/temperature_desired', temperature=50.0)
+        rt.run_until(0.05, until='steady')
+        for k, stamp in enumerate((1.00, 1.00, 1.01)):  # the second sample repeats the first's stamp
+            for i in (1, 2):
+                probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0,
+                              header=Header(stamp=Time(sec=int(stamp), nanosec=int(round(stamp % 1 * 1e9)))))
+            rt.run_until(0.06 + 0.01 * k, until='steady')
+    assert len(probe.got['/wrist/tem_1/command']) == 2  # one per distinct stamp
+    assert not any('law failed' in m for _, _, m in probe.diagnostics())
+
+
 def test_tem_controller_watchdog_switches_off_on_stale_temperatures_and_reports(probe_factory):
     probe, node, u1, u2 = _tem_run(probe_factory, (30.0, 60.0), (50.0, 40.0), stop_meas_after=1.0)
     assert u1[-1] == 0.0 and u2[-1] == 0.0

@@ -88,3 +88,26 @@ def test_out_of_range_payload_update_is_rejected_with_a_reason_and_valid_one_app
     assert good.successful
     assert node.plant.state.payload_kg[0] == 0.5
     assert [m.data for m in probe.got['/wrist/payload']][-1] == 0.5
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['-p', 'payload_kg:=1'], 'invalid parameter'),  # an integer for a double (write 1.0)
+    (['-p', 'payload_kg:=5.0'], 'invalid parameter'),  # outside the descriptor's range
+    (['-p', 'use_sim_time:=true'], 'publishes /clock itself'),  # it would wait for its own clock
+])
+def test_bad_startup_parameters_exit_2_with_the_reason_not_a_traceback(capsys, argv, message):
+    from sma_wrist.nodes.common import main_for
+    from sma_wrist.nodes.plant_sim import PlantSim
+    assert main_for(PlantSim, ['plant_sim', '--ros-args', *argv]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith('error: ') and message in out and 'Traceback' not in out
+
+
+def test_clock_owner_refuses_use_sim_time_at_run_time(probe_factory):
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.plant_sim import PlantSim
+    with Runtime() as rt:
+        node = rt.add(PlantSim)
+        res, = node.set_parameters([Parameter('use_sim_time', value=True)])
+    assert not res.successful and 'publishes /clock itself' in res.reason

@@ -159,6 +159,22 @@ def test_params_file_wildcards_namespaces_and_cli_order(ros, tmp_path):
     assert [p.value for p in a.declare_parameters('nested', [('q', 3)])] == [3]
 
 
+def test_params_merge_by_node_key_in_order_of_first_appearance_as_rcl_does(ros, tmp_path):
+    """A later file's /** does not beat an earlier file's node section (rcl's table is keyed by
+    node name in first-appearance order); a later section of the same node does. This is what
+    made launch arguments silently lose to config/wrist.yaml under ROS 2 Humble."""
+    base, wild, own = tmp_path / 'base.yaml', tmp_path / 'wild.yaml', tmp_path / 'own.yaml'
+    base.write_text('/**:\n  ros__parameters:\n    use_it: true\nplant:\n  ros__parameters:\n    load: 0.3\n')
+    wild.write_text('/**:\n  ros__parameters:\n    load: 0.5\n')
+    own.write_text('plant:\n  ros__parameters:\n    load: 0.7\n')
+    ros(['--ros-args', '--params-file', str(base), '--params-file', str(wild)])
+    assert Node('plant').declare_parameter('load', 0.0).value == 0.3
+    assert Node('other').declare_parameter('load', 0.0).value == 0.5
+    rclpy.shutdown()
+    ros(['--ros-args', '--params-file', str(base), '--params-file', str(wild), '--params-file', str(own)])
+    assert Node('plant').declare_parameter('load', 0.0).value == 0.7
+
+
 def test_cli_args_remap_and_constructor_overrides(ros):
     ros(['--ros-args', '-p', 'x:=1'])
     n = Node('orig', cli_args=['--ros-args', '-r', '__node:=renamed', '-p', 'x:=2'],

@@ -142,7 +142,7 @@ class AdaptiveController(WristNode):
             self.reject_input('joint_states', f'non-finite joint state ({q}, {qd})')
             return
         self.fresh.mark('joint_states')
-        t = self.now_ns() * 1e-9
+        t = self.stamp_s(msg)
         dt, self.t_last = (None if self.t_last is None else t - self.t_last), t
         if self.reference is None or dt is None or dt <= 0:
             return

@@ -18,6 +18,7 @@ from typing import Any, Callable, Mapping, Sequence
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -76,6 +77,9 @@ class WristNode(Node):
     """Base of the sma_wrist nodes: parameters from specs, contract topics, diagnostics."""
 
     PARAMS: Sequence[Param] = ()
+    #: the node publishes /clock and times itself by its own (system) clock; with
+    #: use_sim_time it would wait for its own /clock and the whole graph would stop
+    OWNS_CLOCK = False
 
     def __init__(self, name: str, **kwargs: Any) -> None:
         super().__init__(name, **kwargs)
@@ -84,7 +88,7 @@ class WristNode(Node):
         for p in self.PARAMS:
             self.declare_parameter(p.name, p.default, p.descriptor())
         self.p: dict[str, Any] = {p.name: self.get_parameter(p.name).value for p in self.PARAMS}
-        problem = self.validate(self.p)
+        problem = self.validate(self.p) or self._sim_time_problem(self.get_parameter('use_sim_time').value)
         if problem:
             # Bad values from a params file / command line: refuse to start with the reason.
             raise SmaWristError(f'{self.get_name()}: invalid parameters: {problem}')
@@ -110,7 +114,19 @@ class WristNode(Node):
     def apply(self, changed: Mapping[str, Any]) -> None:
         """Take validated parameter changes into effect. Override."""
 
+    def _sim_time_problem(self, use_sim_time: Any) -> str | None:
+        if self.OWNS_CLOCK and use_sim_time is True:
+            return (f'use_sim_time = true: {self.get_name()} publishes /clock itself and would wait '
+                    'for its own clock; it must run with use_sim_time false')
+        return None
+
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
+        for p in params:
+            if p.name == 'use_sim_time':
+                problem = self._sim_time_problem(p.value)
+                if problem:
+                    self.get_logger().warning(f'rejected parameter change: {problem}')
+                    return SetParametersResult(successful=False, reason=problem)
         changed = {p.name: p.value for p in params if p.name in self._specs}
         for name in changed:
             if not self._specs[name].runtime:
@@ -147,6 +163,19 @@ class WristNode(Node):
 
     def now_ns(self) -> int:
         return self.get_clock().now().nanoseconds
+
+    def stamp_s(self, msg: Any) -> float:
+        """Time of a measurement [s]: its header stamp, else (unstamped) the node clock.
+
+        Under use_sim_time the node clock only moves when a /clock message has been
+        taken, and /clock arrives on its own best-effort subscription, so two samples
+        10 ms apart often see the same now() (dt = 0) or 20 ms: control laws must
+        difference the stamps the plant (or the device) put on the data.
+        """
+        st = msg.header.stamp
+        if st.sec or st.nanosec:
+            return st.sec + 1e-9 * st.nanosec
+        return self.now_ns() * 1e-9
 
     # -- diagnostics ---------------------------------------------------------------
     def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None) -> None:
@@ -227,6 +256,18 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     except SmaWristError as e:
         print(f'error: {e}', flush=True)
         return 2
+    except ParameterException as e:
+        # an override of the wrong type (payload_kg:=1 for a double: write 1.0) or out of
+        # its descriptor's range, from --params-file or -p: rclpy refuses it in declare_parameter
+        reason = e.args[0] if len(e.args) == 1 else ' '.join(str(a) for a in e.args)
+        print(f'error: {getattr(node_class, "__name__", "node")}: invalid parameter: {reason}', flush=True)
+        return 2
+    except Exception:
+        # Ctrl-C: rclpy's signal handler shuts the context down, and a callback that is
+        # publishing at that moment raises (Humble: RCLError "publisher's context is
+        # invalid"). That is the shutdown that was asked for, not a failure.
+        if rclpy.ok():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

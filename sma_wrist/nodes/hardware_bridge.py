@@ -64,6 +64,7 @@ OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.E
 
 
 class HardwareBridge(WristNode):
+    OWNS_CLOCK = True
     PARAMS = (
         Param('port', '/dev/ttyACM0', 'serial port (or pyserial URL) of the wrist controller', runtime=False),
         Param('baud_rate', 921600, 'serial baud rate (1 kHz samples need >= 921600; ignored by USB CDC/pty)',

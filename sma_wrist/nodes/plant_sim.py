@@ -38,6 +38,7 @@ from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 
 class PlantSim(WristNode):
+    OWNS_CLOCK = True
     PARAMS = (
         Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m', 'kg', (0.0, 1.5)),
         Param('dt_s', 1e-3, 'plant integration step', 's', (1e-4, 1e-2), runtime=False),

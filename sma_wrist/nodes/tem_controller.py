@@ -64,6 +64,7 @@ class TemController(WristNode):
         self.observer = th.rest_state(self.thermal, 1)  # (1, 2 layers, 2 faces)
         self.T_meas = np.full(2, np.nan)
         self.T_d = np.full(2, np.nan)
+        self.t_meas = [0.0, 0.0]  # stamp [s] of the latest measurement per muscle
         self.new_meas = [False, False]
         self.command_V = np.zeros(2)
         self.t_last: float | None = None
@@ -101,6 +102,7 @@ class TemController(WristNode):
             self.reject_input(f'muscle_{i}/temperature', f'{T!r} degC is not a plausible temperature')
             return
         self.T_meas[i - 1] = T
+        self.t_meas[i - 1] = self.stamp_s(msg)
         self.new_meas[i - 1] = True
         self.meas.mark(f'muscle_{i}')
         if all(self.new_meas):
@@ -117,8 +119,10 @@ class TemController(WristNode):
 
     # -- control -----------------------------------------------------------------
     def _control(self) -> None:
-        t = self.now_ns() * 1e-9
+        t = max(self.t_meas)
         dt = None if self.t_last is None else t - self.t_last
+        if dt is not None and dt <= 0:
+            return  # a repeated or out-of-order sample: the command in force stays
         if dt is not None and dt > 0:
             # observer: propagate with the commands in force since the last sample
             self.observer = th.step(self.thermal, self.observer, self.command_V[None, :],

@@ -9,8 +9,9 @@ Supported inside ``--ros-args ... [--]``:
 * ``--log-level [name:=]LEVEL``; ``--enclave``, ``--disable-*``/``--enable-*`` flags are
   accepted and ignored.
 
-Rules are kept in command-line order; for a node, later rules win (rcl appends params
-files and ``-p`` rules to one override table as it meets them).  rclpy
+Rules are kept in command-line order and merged as rcl does (:func:`overrides_for`: one
+table keyed by node name in order of first appearance, later values replacing earlier ones
+within a key).  rclpy
 (src/rclpy/node.cpp ``_populate_node_parameters_from_rcl_params``) matches a node key by
 turning ``/*`` into ``(/\\w+)`` and testing the node's fully-qualified name, after
 prefixing keys that lack a leading ``/``.
@@ -249,10 +250,22 @@ def node_pattern_matches(pattern: str, fqn: str) -> bool:
 
 
 def overrides_for(node_fqn: str, sources: Iterable[RosArguments]) -> dict[str, Any]:
-    """Parameter overrides that apply to one node, later rules winning."""
-    result: dict[str, Any] = {}
+    """Parameter overrides that apply to one node, merged as rcl and rclpy merge them.
+
+    rcl parses every params file and ``-p`` rule into one table keyed by the node name *as
+    written*, in order of first appearance (rcl_yaml_param_parser reuses an existing key); a
+    later value replaces an earlier one within its key. rclpy then applies the keys that match
+    the node in table order. So ``plant_sim: {payload_kg: 0.3}`` in one file beats a later
+    file's ``/**: {payload_kg: 0.5}`` (``/**`` appeared first), while a later ``plant_sim:``
+    entry replaces it. (Measured under ROS 2 Humble: launch_ros writes a launch file's
+    ``parameters=[{...}]`` under ``/**``, and config/wrist.yaml's node sections won.)
+    """
+    table: dict[str, dict[str, Any]] = {}  # insertion order = first appearance of the key
     for src in sources:
         for rule in src.params:
-            if node_pattern_matches(rule.node, node_fqn):
-                result[rule.name] = rule.value
+            table.setdefault(rule.node, {})[rule.name] = rule.value
+    result: dict[str, Any] = {}
+    for key, values in table.items():
+        if node_pattern_matches(key, node_fqn):
+            result.update(values)
     return result

@@ -1,0 +1,30 @@
+"""Helpers the launch files import (kept in the package so both launch files share them).
+
+Why a file per node: a ``parameters=[{...}]`` dict is written by launch_ros under ``/**``,
+and rcl merges every params file into one table keyed by node name *in order of first
+appearance*, which rclpy then applies key by key (rclpy ``_populate_node_parameters_from_rcl_params``).
+config/wrist.yaml's own ``plant_sim:`` / ``adaptive_controller:`` / ``hardware_bridge:``
+sections come after its ``/**`` and would silently win over controller:=, payload_kg:= and
+port:= (found running the launch files under ROS 2 Humble). Written under the node's own
+name, a later file's value replaces the earlier one in that node's entry.
+"""
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from typing import Any, Mapping
+
+import yaml
+
+
+def node_params_file(node_name: str, values: Mapping[str, Any]) -> str:
+    """Path of a new params file that sets ``values`` under ``node_name``."""
+    safe = re.sub(r'\W', '_', node_name)  # '/**' is a valid node key, not a file name
+    fd, path = tempfile.mkstemp(prefix=f'sma_wrist_{safe}_', suffix='.yaml')
+    with os.fdopen(fd, 'w') as f:
+        yaml.safe_dump({node_name: {'ros__parameters': dict(values)}}, f)
+    return path
+
+
+__all__ = ['node_params_file']
