@@ -14,7 +14,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from sma_wrist.launch_support import node_params_file
+from sma_wrist.launch_support import graph_specs, node_params_file
 
 
 def _graph(context) -> list:
@@ -24,20 +24,9 @@ def _graph(context) -> list:
     extra = LaunchConfiguration('params_file').perform(context)
     port = LaunchConfiguration('port').perform(context)
 
-    def node(executable: str, sim_time: bool, overrides: dict | None = None) -> Node:
-        values = {'use_sim_time': sim_time, **(overrides or {})}
-        return Node(package='sma_wrist', executable=executable, name=executable, output='screen',
-                    parameters=[defaults, extra, node_params_file(executable, values)])
-
-    nodes = [
-        node('hardware_bridge', False, {'payload_kg': payload, 'port': port}),
-        node('trajectory_generator', True),
-        node('adaptive_controller', True, {'mode': controller}),
-    ]
-    if controller == 'inverse_adaptive':
-        nodes.append(node('hysteresis_compensator', True))
-    nodes.append(node('tem_controller', True))
-    return nodes
+    return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
+                 parameters=[defaults, extra, node_params_file(exe, values)])
+            for exe, values in graph_specs('hardware_bridge', {'payload_kg': payload, 'port': port}, controller)]
 
 
 def generate_launch_description() -> LaunchDescription:

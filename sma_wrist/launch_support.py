@@ -27,4 +27,20 @@ def node_params_file(node_name: str, values: Mapping[str, Any]) -> str:
     return path
 
 
-__all__ = ['node_params_file']
+def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str
+                ) -> list[tuple[str, dict[str, Any]]]:
+    """(executable, its own parameter overrides) of every node of the wrist graph, in start order.
+
+    ``source`` owns /clock (plant_sim or hardware_bridge) and runs on its own clock; every other
+    node runs on /clock. The compensator only serves the inverse mode.
+    """
+    specs = [(source, {'use_sim_time': False, **source_overrides}),
+             ('trajectory_generator', {'use_sim_time': True}),
+             ('adaptive_controller', {'use_sim_time': True, 'mode': controller})]
+    if controller == 'inverse_adaptive':
+        specs.append(('hysteresis_compensator', {'use_sim_time': True}))
+    specs.append(('tem_controller', {'use_sim_time': True}))
+    return specs
+
+
+__all__ = ['node_params_file', 'graph_specs']
