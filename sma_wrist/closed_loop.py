@@ -30,6 +30,7 @@ class RunSummary:
     messages_recorded: int
     interrupted: bool
     metrics: dict[str, Any] = field(default_factory=dict)
+    run: Any = None  # sma_wrist.runs.RunData read back from the bag (what the metrics came from)
 
     @property
     def real_time_factor(self) -> float:
@@ -143,7 +144,8 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
                          time.perf_counter() - wall0, recorded, interrupted)
     if bag is not None:
         from sma_wrist.runs import load_run, run_metrics
-        summary.metrics = run_metrics(load_run(bag))
+        summary.run = load_run(bag)
+        summary.metrics = run_metrics(summary.run)
     return summary
 
 
