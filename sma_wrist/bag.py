@@ -155,22 +155,23 @@ class BagRecorder:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def _connection(self, topic: Any) -> Any:
+    def _connection(self, topic: Any) -> tuple[Any, Any]:
+        from sma_wrist.runtime.fastcdr import encoder_for
         from sma_wrist.runtime.messages import TYPESTORE
         qos = [_rosbags_qos(p.qos_profile) for p in topic.publishers[:1]]
         conn = self._writer.add_connection(topic.name, topic.msg_type._TYPE, typestore=TYPESTORE,
                                            offered_qos_profiles=qos)
-        self._conns[topic.name] = conn
+        entry = self._conns[topic.name] = (conn, encoder_for(topic.msg_type._TYPE))
         self.counts[topic.name] = 0
-        return conn
+        return entry
 
     def _tap(self, topic: Any, msg: Any, t_ns: int) -> None:
-        from sma_wrist.runtime.messages import TYPESTORE
-        conn = self._conns.get(topic.name)
-        if conn is None:
-            conn = self._connection(topic)
+        entry = self._conns.get(topic.name)
+        if entry is None:
+            entry = self._connection(topic)
+        conn, encode = entry
         t = self._clock_ns() if self._clock_ns is not None else t_ns
-        self._writer.write(conn, t, TYPESTORE.serialize_cdr(msg._to_rb(), msg._TYPE))
+        self._writer.write(conn, t, encode(msg))
         self.count += 1
         self.counts[topic.name] += 1
         if self.flush_every:
@@ -325,13 +326,17 @@ def salvage_mcap(file: str | Path) -> tuple[list[tuple[str, str, int, bytes]], s
 
 
 def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> BagData:
-    from sma_wrist.runtime.messages import deserialize
+    from sma_wrist.runtime.fastcdr import decoder_for
     times: dict[str, list[int]] = {}
     msgs: dict[str, list[Any]] = {}
+    decoders: dict[str, Any] = {}
     for topic, msgtype, t, data in rows:
         try:
-            m = deserialize(data, msgtype)
-        except Exception:  # noqa: BLE001 - a damaged message is skipped in salvage
+            decode = decoders.get(msgtype)
+            if decode is None:
+                decode = decoders[msgtype] = decoder_for(msgtype)
+            m = decode(data)
+        except Exception:  # noqa: BLE001 - a damaged message (or unknown type) is skipped in salvage
             continue
         times.setdefault(topic, []).append(t)
         msgs.setdefault(topic, []).append(m)
