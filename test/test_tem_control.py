@@ -261,3 +261,41 @@ def test_predictive_protection_passes_a_safe_request_and_reports_a_clipped_one()
     assert u[0, 1] < 24.0 and limited[0, 1]  # a face at 79 degC: held back
     fixed, _ = protected_command(P, DriveLimits(predictive=False), x, np.array([[24.0, 24.0]]))
     assert fixed[0, 1] == P.u_max_V  # the old switch: hold limit above protect_above_C
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_one_wrist_kernels_agree_with_the_numpy_path(seed):
+    """tem_controller's per-sample path (tem_kernel, compiled with numba) against the numpy
+    reference: observer step, linearising law (roots, vertex, flags, saturation) and the
+    predictive command range, on random faces, targets and rates."""
+    from sma_wrist.core.tem_control import DriveLimits, observer_step, safe_command_range
+    rng = np.random.default_rng(seed)
+    x = th.rest_state(P, 1) + rng.uniform(-20.0, 55.0, (1, 2, 2))
+    T_d = rng.uniform(0.0, 90.0, (1, 2, 2))
+    rate = rng.uniform(-20.0, 20.0, (1, 2, 2))
+    u = rng.uniform(P.u_min_V, P.u_max_V, (1, 2))
+    for weights in ((1.0, 0.0), (0.7, 0.4)):
+        params = tc.TemControlParams(gain_per_s=float(rng.uniform(0.2, 3.0)), weights=weights)
+        ref = tc.feedback_linearising_command(P, x, T_d, rate, params, compiled=False)
+        got = tc.feedback_linearising_command(P, x, T_d, rate, params, compiled=True)
+        for name in ('command_V', 'current', 'face_current'):
+            np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=1e-12, atol=1e-12)
+        for name in ('no_root', 'saturated'):
+            np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
+    np.testing.assert_allclose(observer_step(P, x, u, 0.01, compiled=True),
+                               observer_step(P, x, u, 0.01, compiled=False), rtol=1e-13, atol=1e-12)
+    D = DriveLimits()
+    for a, b in zip(safe_command_range(P, D, x, compiled=True), safe_command_range(P, D, x, compiled=False)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_one_wrist_kernel_rejects_non_finite_inputs_like_the_numpy_path():
+    x = th.rest_state(P, 1)
+    for compiled in (True, False):
+        with pytest.raises(ModelInputError, match='desired temperature'):
+            tc.feedback_linearising_command(P, x, [[[np.nan, 30.0]] * 2], 0.0, compiled=compiled)
+        bad = x.copy()
+        bad[0, 1, 0] = np.inf
+        with pytest.raises(ModelInputError, match='thermal state'):
+            tc.feedback_linearising_command(P, bad, 40.0, 0.0, compiled=compiled)

@@ -33,10 +33,13 @@ class ParameterError(SmaWristError, ValueError):
 
 def check_finite(name: str, value: object, unit: str = '') -> None:
     """Raise ModelInputError if any element of value is NaN or infinite."""
+    if type(value) is float and math.isfinite(value):
+        return
     arr = np.asarray(value, dtype=float)
-    if not np.all(np.isfinite(arr)):
-        bad = arr[~np.isfinite(arr)].ravel()[0] if arr.ndim else float(arr)
-        raise ModelInputError(name, float(bad), '(finite numbers)', unit)
+    if np.isfinite(arr).all():  # the method, not np.all(): this runs on every controller sample
+        return
+    bad = arr[~np.isfinite(arr)].ravel()[0] if arr.ndim else float(arr)
+    raise ModelInputError(name, float(bad), '(finite numbers)', unit)
 
 
 def check_range(name: str, value: object, lo: float, hi: float, unit: str = '') -> None:

@@ -124,6 +124,28 @@ def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
 
 
 @_jit
+def thermal_rk4(x, u, dt, th_coef, y0, xs, kk, acc):  # pragma: no cover - compiled
+    """One classical RK4 step of Eqs. 4.13-4.14 on both layers, x (2, 2) [degC] in place, command
+    u (2,) [V] held over dt [s]; y0, xs, kk, acc are (2, 2) scratch arrays."""
+    for l in range(2):
+        for f in range(2):
+            y0[l, f] = x[l, f]
+            xs[l, f] = y0[l, f]
+            acc[l, f] = 0.0
+    for stage in range(4):
+        _thermal_rate(xs, u, th_coef, kk)
+        wgt = 1.0 if (stage == 0 or stage == 3) else 2.0
+        frac = 1.0 if stage == 2 else 0.5
+        for l in range(2):
+            for f in range(2):
+                acc[l, f] += wgt * kk[l, f]
+                xs[l, f] = y0[l, f] + frac * dt * kk[l, f]
+    for l in range(2):
+        for f in range(2):
+            x[l, f] = y0[l, f] + dt / 6.0 * acc[l, f]
+
+
+@_jit
 def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags,
               th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
     """Advance N wrists by n_steps plant steps under held commands u (N, 2) [V], in place.
@@ -151,23 +173,7 @@ def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, 
     acc = np.empty((2, 2))
     for _ in range(n_steps):
         for j in range(n):
-            # thermal: classical RK4 of Eqs. 4.13-4.14 on both layers, command held over the step
-            for l in range(2):
-                for f in range(2):
-                    y0[l, f] = thermal[j, l, f]
-                    xs[l, f] = y0[l, f]
-                    acc[l, f] = 0.0
-            for stage in range(4):
-                _thermal_rate(xs, u[j], th_coef, kk)
-                wgt = 1.0 if (stage == 0 or stage == 3) else 2.0
-                frac = 1.0 if stage == 2 else 0.5
-                for l in range(2):
-                    for f in range(2):
-                        acc[l, f] += wgt * kk[l, f]
-                        xs[l, f] = y0[l, f] + frac * dt * kk[l, f]
-            for l in range(2):
-                for f in range(2):
-                    thermal[j, l, f] = y0[l, f] + dt / 6.0 * acc[l, f]
+            thermal_rk4(thermal[j], u[j], dt, th_coef, y0, xs, kk, acc)
             # mechanics at the new muscle temperatures
             x_mm = 1e3 * r_eff * (q[j] - q_neutral)
             torque = 0.0
@@ -228,12 +234,17 @@ def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, 
                 flags[j, 3] = True
 
 
+def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """th_coef (14,) of :func:`step_many` from a thermal.ThermalParams."""
+    faces = [[tp._k_at[f], tp._k_t[f], tp._k_tinf[f], tp._k_tc[f], tp._k_r[f], tp._k_inf[f]] for f in (0, 1)]
+    return np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1], dtype=float)
+
+
 def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
     """The kernel's constant arrays from a plant.PlantParams (see :func:`step_many`)."""
     from sma_wrist.core.joint import G
     tp, hp, mg, jp = params.thermal, params.hysteresis, params.muscle, params.joint
-    faces = [[tp._k_at[f], tp._k_t[f], tp._k_tinf[f], tp._k_tc[f], tp._k_r[f], tp._k_inf[f]] for f in (0, 1)]
-    th_coef = np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1], dtype=float)
+    th_coef = thermal_constants(tp)
     m_lo, m_hi = hp.load_range
     mech = np.array([params.dt, mg.length_scale, mg.elastic_mm_per_kgf, hp.k_f, m_lo, m_hi, mg.max_load_kgf,
                      params.load_tolerance_mm, 60.0, hp.p0, hp.T_valid[0], hp.T_valid[1],

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sma_wrist.core import plant_kernel, tem_kernel
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 
@@ -121,26 +122,70 @@ def small_root(a: ArrayLike, b: ArrayLike, c: ArrayLike) -> tuple[FloatArray, Bo
     return np.where(real, root, vertex), real
 
 
+def _one_wrist(state: FloatArray, compiled: bool | None) -> bool:
+    """Whether a call on ``state`` goes to the compiled one-wrist kernels (tem_kernel): one
+    scenario of two layers and numba present (``compiled=None``), or forced (True/False)."""
+    if compiled is None:
+        return tem_kernel.AVAILABLE and state.shape == (1, 2, 2)
+    return compiled and state.shape == (1, 2, 2)
+
+
+def _kernel_constants(thermal: th.ThermalParams) -> FloatArray:
+    coef = _KERNEL_CONSTANTS.get(id(thermal))
+    if coef is None or coef[0] is not thermal:
+        coef = _KERNEL_CONSTANTS[id(thermal)] = (thermal, plant_kernel.thermal_constants(thermal))
+    return coef[1]
+
+
+#: id(ThermalParams) -> (params, th_coef); params are frozen, so the packed constants stay valid
+_KERNEL_CONSTANTS: dict[int, tuple[th.ThermalParams, FloatArray]] = {}
+
+
 def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike,
-                                 T_d_rate: ArrayLike, params: TemControlParams = TemControlParams()
-                                 ) -> TemControlResult:
+                                 T_d_rate: ArrayLike, params: TemControlParams = TemControlParams(),
+                                 *, compiled: bool | None = None) -> TemControlResult:
     """Eqs. 5.44-5.47 for N scenarios of L modules: per-face roots, weighted sum, saturation.
 
     state (N, L, 2) degC; T_d and T_d_rate broadcastable to it (degC, degC/s), one target per
     face (faces with weight 0 are ignored, but must be finite). Raises ModelInputError on
-    non-finite inputs.
+    non-finite inputs. One wrist of two layers runs in :func:`tem_kernel.linearising_command`
+    when numba is installed (``compiled``: None = that choice, False = numpy here).
     """
     T = th.check_state(state)
     T_d = np.broadcast_to(np.asarray(T_d, dtype=float), T.shape)
     rate = np.broadcast_to(np.asarray(T_d_rate, dtype=float), T.shape)
     check_finite('desired temperature', T_d, 'degC')
     check_finite('desired temperature rate', rate, 'degC/s')
+    if _one_wrist(T, compiled):
+        command, face = np.empty((1, 2)), np.empty((1, 2, 2))
+        no_root, saturated = np.empty((1, 2, 2), bool), np.empty((1, 2), bool)
+        if not tem_kernel.linearising_command(
+                np.ascontiguousarray(T[0]), np.ascontiguousarray(T_d[0]), np.ascontiguousarray(rate[0]),
+                _kernel_constants(thermal), float(params.gain_per_s), np.asarray(params.weights, dtype=float),
+                thermal.u_min_V, thermal.u_max_V, command[0], face[0], no_root[0], saturated[0]):
+            raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
+        return TemControlResult(command, th.model_input(thermal, command), face, no_root, saturated)
     a, b, c = quadratic_coefficients(thermal, T, T_d, rate, params.gain_per_s)
     face_current, real = small_root(a, b, c)
     h = np.asarray(params.weights, dtype=float)
     current = face_current @ h  # Eq. 5.47
     command, saturated = th.saturate_command(thermal, th.command_from_input(thermal, current))
     return TemControlResult(command, th.model_input(thermal, command), face_current, ~real & (h != 0), saturated)
+
+
+def observer_step(thermal: th.ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: float,
+                  *, compiled: bool | None = None) -> FloatArray:
+    """The controller's observer between samples: faces (N, L, 2) [degC] after the commands
+    (N, L) [V] in force were held for dt [s] (thermal.step, RK4 of Eqs. 4.13-4.14; inputs are
+    the controller's own, already checked). One wrist runs in :func:`tem_kernel.observer_step`
+    when numba is installed (``compiled`` as in :func:`feedback_linearising_command`)."""
+    T = np.asarray(state, dtype=float)
+    if _one_wrist(T, compiled):
+        x = np.array(T[0])
+        tem_kernel.observer_step(x, np.ascontiguousarray(np.asarray(command_V, dtype=float).reshape(2)), float(dt),
+                                 _kernel_constants(thermal))
+        return x[None]
+    return th.step(thermal, T, command_V, dt, validate=False)
 
 
 def two_layer_command(thermal: th.ThermalParams, state: ArrayLike, T_d_muscle: ArrayLike, T_d_rate: ArrayLike,
@@ -344,13 +389,23 @@ def _held_faces_inside(thermal: th.ThermalParams, limits: DriveLimits, T: FloatA
     return excess == 0.0, excess
 
 
-def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike) -> tuple[FloatArray, FloatArray]:
+def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike,
+                       *, compiled: bool | None = None) -> tuple[FloatArray, FloatArray]:
     """(lo, hi) [V], shape (N, L): the commands that, held for the horizon from the faces in
     ``state`` (N, L, 2), keep every face of their layer inside the window (1 V grid over the boost
-    range). Where none does, both are the command that leaves the window least."""
+    range). Where none does, both are the command that leaves the window least. One wrist of two
+    layers runs in :func:`tem_kernel.held_command_range` when numba is installed (``compiled`` as
+    in :func:`feedback_linearising_command`)."""
     T = np.asarray(state, dtype=float)
-    wide = replace(thermal, u_min_V=limits.boost_min_V, u_max_V=limits.boost_max_V)
     cand = limits.boost_min_V + _CANDIDATES * (limits.boost_max_V - limits.boost_min_V)
+    if _one_wrist(T, compiled):
+        lo, hi = np.empty((1, 2)), np.empty((1, 2))
+        n = max(1, int(np.ceil(limits.horizon_s / thermal.dt_max_s)))
+        tem_kernel.held_command_range(np.ascontiguousarray(T[0]), cand, float(limits.horizon_s), n,
+                                      float(limits.face_min_C), float(limits.face_max_C),
+                                      _kernel_constants(thermal), lo[0], hi[0])
+        return lo, hi
+    wide = replace(thermal, u_min_V=limits.boost_min_V, u_max_V=limits.boost_max_V)
     U = np.broadcast_to(cand[:, None, None], (cand.size,) + T.shape[:-1])
     safe, excess = _held_faces_inside(wide, limits, T, U)
     lo = np.where(safe, U, np.inf).min(axis=0)
@@ -379,24 +434,6 @@ def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: Arr
         return out, out != u
     lo, hi = command_range if command_range is not None else safe_command_range(thermal, limits, T)
     out = np.minimum(np.maximum(u, lo), hi)
-    # backstop: a face already outside the window -> hold limits for that layer
-    outside = ((T > limits.face_max_C) | (T < limits.face_min_C)).any(axis=-1)
-    out = np.where(outside, np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)),
-                                       min(thermal.u_max_V, limits.boost_max_V)), out)
-    return out, out != u
-    req = np.minimum(np.maximum(u, limits.boost_min_V), limits.boost_max_V)
-    wide = replace(thermal, u_min_V=limits.boost_min_V, u_max_V=limits.boost_max_V)
-    safe_req, _ = _held_faces_inside(wide, limits, T, req[None])
-    out = req
-    if not safe_req[0].all():  # near the window: the nearest command that keeps it (most calls stop above)
-        cand = limits.boost_min_V + _CANDIDATES * (limits.boost_max_V - limits.boost_min_V)
-        U = np.broadcast_to(cand[:, None, None], (cand.size,) + req.shape)
-        safe, excess = _held_faces_inside(wide, limits, T, U)
-        dist = np.where(safe, np.abs(U - req[None]), np.inf)
-        best = np.argmin(dist, axis=0)
-        # none safe: the command that leaves the window least
-        pick = np.where(np.isfinite(np.take_along_axis(dist, best[None], 0)[0]), best, np.argmin(excess, axis=0))
-        out = np.where(safe_req[0], req, np.take_along_axis(U, pick[None], 0)[0])
     # backstop: a face already outside the window -> hold limits for that layer
     outside = ((T > limits.face_max_C) | (T < limits.face_min_C)).any(axis=-1)
     out = np.where(outside, np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)),

@@ -28,7 +28,8 @@ from std_msgs.msg import Float64
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.tem_control import TemController as TemLaw
-from sma_wrist.core.tem_control import DriveLimits, TemControlParams, protected_command, safe_command_range
+from sma_wrist.core.tem_control import (DriveLimits, TemControlParams, observer_step, protected_command,
+                                        safe_command_range)
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
@@ -125,8 +126,8 @@ class TemController(WristNode):
             return  # a repeated or out-of-order sample: the command in force stays
         if dt is not None and dt > 0:
             # observer: propagate with the commands in force since the last sample
-            self.observer = th.step(self.thermal, self.observer, self.command_V[None, :],
-                                    min(dt, self.thermal.dt_max_s), validate=False)
+            self.observer = observer_step(self.thermal, self.observer, self.command_V[None, :],
+                                          min(dt, self.thermal.dt_max_s))
         self.t_last = t
         self.observer[0, :, 0] = self.T_meas
         if self.targets.stale(self.p['stale_timeout_s']):

@@ -1,0 +1,110 @@
+"""Compiled per-sample TEM control for one wrist (two layers), optional numba.
+
+tem_controller runs at 100 Hz on one wrist: an observer step of the heat balance, the
+linearising law and, at 10 Hz, the predictive command range. On (1, 2, 2) arrays numpy's
+per-call overhead is most of the cost (~200 us a sample); these are the same equations as
+scalar loops, compiled by numba when it is installed (the plant kernel's set-up, see
+:mod:`sma_wrist.core.plant_kernel`), plain Python otherwise. The numpy functions of
+:mod:`sma_wrist.core.thermal` and :mod:`sma_wrist.core.tem_control` stay the reference and
+the path for N scenarios; :mod:`sma_wrist.core.tem_control` dispatches here for one wrist,
+and test_tem_control checks both paths agree.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sma_wrist.core.plant_kernel import AVAILABLE, _jit, thermal_rk4
+
+__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range']
+
+
+@_jit
+def observer_step(x, u, dt, th_coef):  # pragma: no cover - compiled
+    """RK4 step of Eqs. 4.13-4.14 for faces x (2, 2) [degC] in place under u (2,) [V] held dt [s]."""
+    s = np.empty((4, 2, 2))
+    thermal_rk4(x, u, dt, th_coef, s[0], s[1], s[2], s[3])
+
+
+@_jit
+def linearising_command(x, T_d, rate, th_coef, gain, h, u_min, u_max, command, face_current, no_root,
+                        saturated):  # pragma: no cover - compiled
+    """Eqs. 5.44-5.47 per layer of faces x (2, 2): the smaller root of A I^2 + B I + c = 0 per face
+    (the vertex where there is none), weighted by h (2,), as a command [V] clipped to
+    [u_min, u_max]. Outputs (written in place): command (2,), face_current (2, 2),
+    no_root (2, 2) bool, saturated (2,) bool. Returns False on a non-finite command."""
+    ipv = th_coef[0]
+    coupling = th_coef[1]
+    for l in range(2):
+        cur = 0.0
+        for f in range(2):
+            o = 1 - f
+            b0 = 2 + 6 * f  # K_at, K_t, K_Tinf, K_T, K_R, K_inf of this face
+            a = th_coef[b0 + 4]
+            b = th_coef[b0] * x[l, f] + th_coef[b0 + 1] * x[l, o]
+            d = th_coef[b0 + 3] * x[l, o] - th_coef[b0 + 2] * x[l, f] + th_coef[b0 + 5]
+            if f == 0 and coupling != 0.0:
+                d += coupling * (x[1 - l, 0] - x[l, 0])
+            c = d - gain * (T_d[l, f] - x[l, f]) - rate[l, f]
+            disc = b * b - 4.0 * a * c
+            sgn = 1.0 if b >= 0 else -1.0
+            q = -0.5 * (b + sgn * math.sqrt(max(disc, 0.0)))
+            if disc >= 0:
+                root = c / q if q != 0 else 0.0
+                no_root[l, f] = False
+            else:
+                root = -b / (2.0 * a)
+                no_root[l, f] = h[f] != 0
+            face_current[l, f] = root
+            cur += root * h[f]
+        u = -cur / ipv
+        if not math.isfinite(u):
+            return False
+        clipped = min(max(u, u_min), u_max)
+        saturated[l] = clipped != u
+        command[l] = clipped
+    return True
+
+
+@_jit
+def held_command_range(x, candidates, horizon_s, n_sub, face_min, face_max, th_coef, lo, hi):  # pragma: no cover
+    """Per layer, the lowest and highest candidate command [V] that, held for horizon_s from the
+    faces x (2, 2) (RK4 in n_sub steps), keeps both faces of the layer in [face_min, face_max];
+    where none does, both are the candidate that leaves the window least (first on ties).
+    Results in lo, hi (2,)."""
+    s = np.empty((5, 2, 2))
+    y = s[4]
+    u = np.empty(2)
+    h = horizon_s / n_sub
+    best = np.full(2, np.inf)
+    least = np.zeros(2)
+    lo[:] = np.inf
+    hi[:] = -np.inf
+    for k in range(candidates.size):
+        for l in range(2):
+            u[l] = candidates[k]
+            for f in range(2):
+                y[l, f] = x[l, f]
+        top = np.empty(2)
+        bottom = np.empty(2)
+        for l in range(2):
+            top[l] = max(y[l, 0], y[l, 1])
+            bottom[l] = min(y[l, 0], y[l, 1])
+        for _ in range(n_sub):
+            thermal_rk4(y, u, h, th_coef, s[0], s[1], s[2], s[3])
+            for l in range(2):
+                top[l] = max(top[l], y[l, 0], y[l, 1])
+                bottom[l] = min(bottom[l], y[l, 0], y[l, 1])
+        for l in range(2):
+            excess = max(top[l] - face_max, 0.0) + max(face_min - bottom[l], 0.0)
+            if excess == 0.0:
+                lo[l] = min(lo[l], candidates[k])
+                hi[l] = max(hi[l], candidates[k])
+            if excess < best[l]:
+                best[l] = excess
+                least[l] = candidates[k]
+    for l in range(2):
+        if not math.isfinite(lo[l]):
+            lo[l] = least[l]
+            hi[l] = least[l]
