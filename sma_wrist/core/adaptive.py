@@ -37,6 +37,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sma_wrist.core import adaptive_kernel
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, format_choices
 
 FloatArray = NDArray[np.float64]
@@ -76,11 +77,6 @@ class ControlGeometry:
     def inertia_kgm2(self) -> float:
         """I = I_w + M_known l^2 used in phi and in v_i."""
         return self.joint_inertia_kgm2 + self.known_payload_kg * self.lever_m ** 2
-
-
-def _box(x: FloatArray, b: tuple[float, float]) -> FloatArray:
-    """Projection onto [b0, b1] (for a box, clipping after the Euler step is the projection)."""
-    return np.minimum(np.maximum(x, b[0]), b[1])
 
 
 def _positive(name: str, v: float) -> None:
@@ -225,6 +221,7 @@ class AdaptiveController:
             raise ParameterError(f'n = {n!r} is outside the valid range [1, inf)')
         self.n = int(n)
         self._theta0 = theta0_kg
+        self._k: tuple[AdaptiveParams, FloatArray] | None = None  # (params, packed kernel constants)
         self.reset()
 
     def reset(self) -> None:
@@ -237,23 +234,6 @@ class AdaptiveController:
             raise ParameterError(f'theta0_kg = {th0!r} is outside its bounds [{lo:g}, {hi:g}]')
         self.state = AdaptiveState(th0, np.full((self.n, 2), p.beta0), np.full((self.n, 2), p.d0_rad_s2))
 
-    def _law(self, st: AdaptiveState, z1: FloatArray, z2: FloatArray, phi: FloatArray, base: FloatArray,
-             s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-        """Eq. 5.32: virtual accelerations (n, 2), muscle commands v_1, v_2 (N)."""
-        g = self.params.geometry
-        v_c = (base + phi * st.theta_hat)[:, None] - 2.0 * s[:, None] * st.d_hat
-        k = g.inertia_kgm2 / (2.0 * g.r_eff_m)
-        v1 = k * v_c[:, 0] / st.beta_hat[:, 0]
-        v2 = -k * v_c[:, 1] / st.beta_hat[:, 1]
-        return v_c, v1, v2, v1 - v2
-
-    def _forces(self, v1: FloatArray, v2: FloatArray) -> tuple[FloatArray, FloatArray, BoolArray]:
-        p = self.params
-        f1, f2 = p.preload_N + v1, p.preload_N + v2
-        sat = (f1 < p.force_min_N) | (f1 > p.force_max_N) | (f2 < p.force_min_N) | (f2 > p.force_max_N)
-        lo, hi = p.force_min_N, p.force_max_N
-        return np.minimum(np.maximum(f1, lo), hi), np.minimum(np.maximum(f2, lo), hi), sat
-
     def update(self, q: ArrayLike, qdot: ArrayLike, q_d: ArrayLike, qdot_d: ArrayLike, qddot_d: ArrayLike,
                dt: float) -> ControlOutput:
         """Advance the estimates by dt (s) with this sample and return the desired forces.
@@ -261,7 +241,7 @@ class AdaptiveController:
         q, qdot: measured angle (rad) and rate (rad/s); q_d, qdot_d, qddot_d: reference
         (sma_wrist.core.trajectory). Raises ModelInputError on non-finite input or dt <= 0.
         """
-        p, g = self.params, self.params.geometry
+        p = self.params
         if not (isinstance(dt, (int, float, np.integer, np.floating)) and math.isfinite(dt) and dt > 0):
             raise ModelInputError('dt', dt, '(0, inf)', 's')
         names = (('q', 'rad'), ('qdot', 'rad/s'), ('q_d', 'rad'), ('qdot_d', 'rad/s'), ('qddot_d', 'rad/s^2'))
@@ -277,46 +257,16 @@ class AdaptiveController:
         if not np.isfinite(stacked).all():
             for (name, unit), x in zip(names, raw):
                 check_finite(name, x, unit)  # raises, naming the first non-finite input
-        arrs = list(stacked)
-        q_, qd_, qr, qdr, qddr = arrs
-
-        # Eq. 5.24 and the alpha1 derivative from the measured rate
-        z1 = q_ - qr
-        z2 = qd_ - qdr + p.c1 * z1
-        alpha1_dot = -p.c1 * (qd_ - qdr)
-        phi = g.g_m_s2 * g.lever_m * np.cos(q_) / g.inertia_kgm2
-        base = -p.c2 * z2 - z1 + alpha1_dot + qddr
-        s = np.tanh(z2 / p.boundary_layer_rad_s) if p.robust == 'tanh' else np.sign(z2)
-
-        old = self.state
-        v_c_old, *_ = self._law(old, z1, z2, phi, base, s)
-
-        # Eq. 5.37 (corrected), semi-implicit Euler, then projection onto the boxes
-        new = old.copy()
-        new.theta_hat = _box(old.theta_hat - dt * p.gamma_a * phi * z2, p.theta_bounds_kg)
-        if p.mode == 'inverse_adaptive':
-            gb = np.array([p.gamma_b1, p.gamma_b2])
-            gd = np.array([p.gamma_d1, p.gamma_d2])
-            new.beta_hat = _box(old.beta_hat + dt * gb * (z2[:, None] * v_c_old) / (2.0 * old.beta_hat), p.beta_bounds)
-            new.d_hat = _box(old.d_hat + dt * gd * (z2 * s)[:, None], p.d_bounds_rad_s2)
-
-        v_c, v1, v2, dv = self._law(new, z1, z2, phi, base, s)
-        f1, f2, sat = self._forces(v1, v2)
-        if sat.any():
-            # anti-windup: where the new command saturates, keep the old estimates and their command
-            v_c_o, v1_o, v2_o, dv_o = self._law(old, z1, z2, phi, base, s)
-            f1_o, f2_o, _ = self._forces(v1_o, v2_o)
-            new.theta_hat = np.where(sat, old.theta_hat, new.theta_hat)
-            new.beta_hat = np.where(sat[:, None], old.beta_hat, new.beta_hat)
-            new.d_hat = np.where(sat[:, None], old.d_hat, new.d_hat)
-            v_c = np.where(sat[:, None], v_c_o, v_c)
-            dv = np.where(sat, dv_o, dv)
-            f1, f2 = np.where(sat, f1_o, f1), np.where(sat, f2_o, f2)
-            # ``saturated`` stays True there: the limit bound this step, even if the old command fits
-        self.state = new
-        return ControlOutput(force_1_N=f1, force_2_N=f2, delta_force_N=f1 - f2, delta_force_request_N=dv,
-                             saturated=sat, z1=z1, z2=z2, v_c=v_c, theta_hat=new.theta_hat.copy(),
-                             beta_hat=new.beta_hat.copy(), d_hat=new.d_hat.copy())
+        # Eqs. 5.24, 5.32, 5.37 per scenario (adaptive_kernel: compiled with numba, else plain Python)
+        st = self.state
+        if self._k is None or self._k[0] is not p:
+            self._k = (p, adaptive_kernel.pack(p))
+        out = np.empty((self.n, adaptive_kernel.OUT_LEN))
+        adaptive_kernel.update(stacked, float(dt), st.theta_hat, st.beta_hat, st.d_hat, self._k[1], out)
+        return ControlOutput(force_1_N=out[:, 0], force_2_N=out[:, 1], delta_force_N=out[:, 0] - out[:, 1],
+                             delta_force_request_N=out[:, 2], saturated=out[:, 7] != 0.0, z1=out[:, 3],
+                             z2=out[:, 4], v_c=out[:, 5:7], theta_hat=st.theta_hat.copy(),
+                             beta_hat=st.beta_hat.copy(), d_hat=st.d_hat.copy())
 
 
 __all__ = ['ControlGeometry', 'AdaptiveParams', 'AdaptiveState', 'ControlOutput', 'AdaptiveController']
