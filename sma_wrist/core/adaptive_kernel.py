@@ -15,7 +15,7 @@ import numpy as np
 
 from sma_wrist.core.plant_kernel import AVAILABLE, _jit
 
-__all__ = ['AVAILABLE', 'K_LEN', 'OUT_LEN', 'pack', 'update']
+__all__ = ['AVAILABLE', 'K_LEN', 'OUT_LEN', 'pack', 'update', 'warm_up']
 
 #: layout of the packed constants (see :func:`pack`) and of one scenario's output row
 K_LEN = 22
@@ -91,3 +91,13 @@ def update(x, dt, theta, beta, d, k, out):  # pragma: no cover - compiled
         out[j, 5] = vc1
         out[j, 6] = vc2
         out[j, 7] = 1.0 if sat else 0.0
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) :func:`update` before a node spins (see
+    :func:`sma_wrist.core.tem_kernel.warm_up`)."""
+    if not AVAILABLE:
+        return
+    from sma_wrist.core.adaptive import AdaptiveParams
+    update(np.zeros((5, 1)), 0.01, np.zeros(1), np.ones((1, 2)), np.zeros((1, 2)), pack(AdaptiveParams()),
+           np.empty((1, OUT_LEN)))

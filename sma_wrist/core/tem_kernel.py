@@ -17,7 +17,7 @@ import numpy as np
 
 from sma_wrist.core.plant_kernel import AVAILABLE, _jit, thermal_rk4
 
-__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range']
+__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range', 'warm_up']
 
 
 @_jit
@@ -108,3 +108,21 @@ def held_command_range(x, candidates, horizon_s, n_sub, face_min, face_max, th_c
         if not math.isfinite(lo[l]):
             lo[l] = least[l]
             hi[l] = least[l]
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel here on dummy data.
+
+    A node calls this before it spins: a cold numba cache costs seconds on the first call, which
+    in a running loop would look like a stalled controller to the plant's watchdog.
+    """
+    if not AVAILABLE:
+        return
+    from sma_wrist.core.plant_kernel import thermal_constants
+    from sma_wrist.core.thermal import ThermalParams
+    coef = thermal_constants(ThermalParams())
+    x, two = np.full((2, 2), 30.0), np.zeros(2)
+    observer_step(x, two, 0.01, coef)
+    linearising_command(x, x, np.zeros((2, 2)), coef, 1.0, np.array([1.0, 0.0]), -1.0, 1.0, two.copy(),
+                        np.empty((2, 2)), np.empty((2, 2), np.bool_), np.empty(2, np.bool_))
+    held_command_range(x, np.linspace(-1.0, 1.0, 3), 1.0, 1, 0.0, 80.0, coef, two.copy(), two.copy())

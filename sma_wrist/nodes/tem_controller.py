@@ -25,6 +25,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from std_msgs.msg import Float64
 
+from sma_wrist.core import tem_kernel
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.tem_control import TemController as TemLaw
@@ -61,6 +62,7 @@ class TemController(WristNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('tem_controller', **kwargs)
+        tem_kernel.warm_up()  # compile before the first sample, not inside the loop
         self._build()
         self.observer = th.rest_state(self.thermal, 1)  # (1, 2 layers, 2 faces)
         self.T_meas = np.full(2, np.nan)
