@@ -111,3 +111,37 @@ def test_clock_owner_refuses_use_sim_time_at_run_time(probe_factory):
         node = rt.add(PlantSim)
         res, = node.set_parameters([Parameter('use_sim_time', value=True)])
     assert not res.successful and 'publishes /clock itself' in res.reason
+
+
+def test_real_time_monitor_reports_the_achieved_factor_per_window():
+    from sma_wrist.nodes.plant_sim import RealTimeMonitor
+    m = RealTimeMonitor(window_s=5.0)
+    assert m.update(0.0, 100.0) is None  # starts a window
+    assert m.update(2.0, 104.0) is None  # window not over
+    assert m.update(2.5, 105.0) == pytest.approx(0.5)
+    assert m.update(7.5, 110.0) == pytest.approx(1.0)
+    assert m.update(8.0, 50.0) is None  # clock jumped back: restart, no bogus factor
+
+
+@pytest.mark.parametrize('slow', [False, True])
+def test_plant_that_cannot_keep_real_time_warns_on_diagnostics(probe_factory, slow):
+    """A machine too slow for real_time_factor: each tick here costs one more tick period of the
+    (virtual) steady clock, so the plant runs at 0.5x. plant_sim says so on /diagnostics."""
+    from sma_wrist.nodes.plant_sim import PlantSim
+    from sma_wrist.runtime.vclock import VCLOCK
+
+    class SlowPlant(PlantSim):
+        def _tick(self):
+            super()._tick()
+            if slow:
+                VCLOCK.advance_to(VCLOCK.steady_ns + 10_000_000)  # the tick took 10 ms of wall time
+
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/clock',))
+        rt.add(SlowPlant)
+        rt.run_until(12.0, until='steady')
+        warned = [m for _, _, m in probe.diagnostics() if 'real_time_factor' in m]
+    if slow:
+        assert warned and 'simulating at 0.50x' in warned[0]
+    else:
+        assert not warned

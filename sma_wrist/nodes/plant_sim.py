@@ -37,6 +37,36 @@ from sma_wrist.core.plant import PlantParams, WristPlant
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 
+#: window over which plant_sim compares simulated time with its clock [s of node clock]
+REAL_TIME_WINDOW_S = 5.0
+#: an achieved factor below this fraction of real_time_factor is reported (WARN)
+REAL_TIME_TOLERANCE = 0.9
+
+
+class RealTimeMonitor:
+    """Achieved real-time factor of a plant timed by its node clock.
+
+    Under ROS the timer fires late when the machine cannot keep up (the embedded runtime's
+    virtual clock never does): the plant then runs slower than ``real_time_factor`` while the
+    controllers, on its /clock, see nothing wrong. Each window of ``window_s`` of node-clock
+    time, :meth:`update` returns simulated seconds / clock seconds over that window.
+    """
+
+    def __init__(self, window_s: float = REAL_TIME_WINDOW_S) -> None:
+        self.window_s = window_s
+        self.start: tuple[float, float] | None = None  # (sim s, clock s) at the window's start
+
+    def update(self, sim_s: float, clock_s: float) -> float | None:
+        if self.start is None or clock_s < self.start[1]:
+            self.start = (sim_s, clock_s)
+            return None
+        sim0, clock0 = self.start
+        if clock_s - clock0 < self.window_s:
+            return None
+        self.start = (sim_s, clock_s)
+        return (sim_s - sim0) / (clock_s - clock0)
+
+
 class PlantSim(WristNode):
     OWNS_CLOCK = True
     PARAMS = (
@@ -77,6 +107,7 @@ class PlantSim(WristNode):
         self.command_V = np.zeros((1, 2))
         self.fresh = Freshness(self, ('tem_1', 'tem_2'))
         self._tick_count = 0
+        self.real_time = RealTimeMonitor()
 
         self.pub_clock = self.publisher('/clock')
         self.pub_joint = self.publisher('/wrist/joint_states')
@@ -139,6 +170,18 @@ class PlantSim(WristNode):
                       f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
                       {'hottest_C': f'{faces.max():.2f}', 'coldest_C': f'{faces.min():.2f}'} if outside else None)
         self._publish_measurements()
+        self._check_real_time()
+
+    def _check_real_time(self) -> None:
+        achieved = self.real_time.update(self.plant.state.t, self.get_clock().now().nanoseconds * 1e-9)
+        if achieved is None:
+            return
+        wanted = self.p['real_time_factor']
+        slow = achieved < REAL_TIME_TOLERANCE * wanted
+        self.diagnose('real_time', DiagnosticStatus.WARN if slow else DiagnosticStatus.OK,
+                      f'simulating at {achieved:.2f}x instead of real_time_factor {wanted:g}x: the machine cannot '
+                      'keep up (lower real_time_factor)' if slow else f'simulating at {achieved:.2f}x as set',
+                      {'achieved': f'{achieved:.3f}', 'real_time_factor': f'{wanted:g}'})
 
     def _stamp(self) -> Any:
         return Time(nanoseconds=int(round(self.plant.state.t * 1e9))).to_msg()
