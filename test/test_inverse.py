@@ -1,10 +1,16 @@
 """Inverse compensation (Eqs. 5.5-5.15): exact PI inverse, SD-GPI compensator, saturation, seed corrections."""
 from __future__ import annotations
 
+from unittest import mock
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
+from sma_wrist.core import plant_kernel
 from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.hysteresis import SDGPIParams, initial_state, simulate, step
 from sma_wrist.core.inverse import (InverseCompensator, LinearCorrection, composition_error, inverse_table_parameters,
                                     pi_inverse_params, pi_inverse_state, pi_series, table_5_1_correction)
@@ -123,6 +129,76 @@ def test_solve_without_commit_leaves_the_memory_and_reports_what_the_answer_give
     ref = initial_state(P, np.array([30.0, 60.0]), loads)
     np.testing.assert_allclose(res.achieved_mm, step(P, ref, res.T, loads), atol=1e-12)
     np.testing.assert_allclose(res.achieved_mm[~res.saturated], np.array([1.2, 2.0])[~res.saturated], atol=1e-8)
+
+
+def _numpy_path(on: bool) -> mock._patch:
+    """The compensator's numpy reference (on) or, where numba is installed, its compiled path."""
+    return mock.patch.object(plant_kernel, 'AVAILABLE', plant_kernel.AVAILABLE and not on)
+
+
+@pytest.mark.skipif(not plant_kernel.AVAILABLE, reason='numba is not installed: there is only the numpy path')
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.sampled_from([1, 2, 3]))
+def test_compiled_observe_and_solve_agree_with_the_numpy_path(seed: int, S: int) -> None:
+    """The node's 100 Hz calls, observe + solve(commit=False) compiled (one pass per wire, grid walks
+    stopped once they cannot beat the other side's root), against the numpy reference on random
+    memories, measurements (some outside the model's window: clipped) and targets (some
+    unreachable: saturated, some needing heating, some cooling)."""
+    P = default_sdgpi()
+    rng = np.random.default_rng(seed)
+    (lo, hi), (m_lo, m_hi) = P.T_valid, P.load_range
+    T_lo = float(rng.uniform(15.0, 40.0))
+    T_range = (T_lo, T_lo + float(rng.uniform(10.0, 60.0)))
+    T0, m0 = rng.uniform(*T_range, S), rng.uniform(m_lo, m_hi, S)
+    branch = str(rng.choice(['cooling', 'heating']))
+    comps = []
+    for numpy_path in (True, False):
+        comps.append(InverseCompensator(P, T_range=T_range))
+        comps[-1].reset(T0, m0, branch=branch)
+    T, m = T0.copy(), m0.copy()
+    for k in range(60):
+        T = T + rng.normal(0.0, 3.0, S)
+        m = np.clip(m + rng.normal(0.0, 0.03, S), m_lo, m_hi)
+        T_meas, m_meas = T.copy(), m.copy()
+        if k % 7 == 3:  # outside the model's window: observe clips
+            T_meas[0], m_meas[-1] = [lo - 5.0, np.inf, hi + 3.0][k % 3], [m_lo - 0.1, m_hi + 0.2][k % 2]
+        y_now = comps[0].output(m)
+        y_d = y_now + rng.normal(0.0, [0.05, 0.5, 3.0][k % 3], S)
+        out = []
+        for comp, numpy_path in zip(comps, (True, False)):
+            with _numpy_path(numpy_path):
+                comp.observe(T_meas, m_meas)
+                out.append(comp.solve(y_d, m, commit=False))
+        ref, got = out
+        np.testing.assert_array_equal(got.saturated, ref.saturated)
+        np.testing.assert_allclose(got.T, ref.T, rtol=0, atol=1e-6)
+        np.testing.assert_allclose(got.achieved_mm, ref.achieved_mm, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(comps[1].state.w, comps[0].state.w, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(comps[1].state.heating, comps[0].state.heating)
+        np.testing.assert_array_equal(comps[1].state.T_prev, comps[0].state.T_prev)
+
+
+@pytest.mark.parametrize('numpy_path', [True, False])
+def test_bad_measurements_and_targets_raise_and_leave_the_memory(numpy_path: bool) -> None:
+    P = default_sdgpi()
+    m = np.array([0.8, 0.9])
+    comp = InverseCompensator(P, T_range=(20.0, 80.0))
+    comp.reset(np.array([40.0, 45.0]), m)
+    before = comp.state.copy()
+    with _numpy_path(numpy_path):
+        with pytest.raises(ModelInputError, match='measured wire temperature'):
+            comp.observe(np.array([np.nan, 41.0]), m)
+        with pytest.raises(ModelInputError, match='measured wire load'):
+            comp.observe(np.array([41.0, 41.0]), np.array([0.8, np.nan]))
+        with pytest.raises(ModelInputError, match='desired elongation'):
+            comp.solve(np.array([2.0, np.inf]), m, commit=False)
+        with pytest.raises(ModelInputError, match='wire load m'):
+            comp.solve(np.array([2.0, 2.0]), np.array([0.8, 5.0]), commit=False)
+        np.testing.assert_array_equal(comp.state.w, before.w)
+        np.testing.assert_array_equal(comp.state.T_prev, before.T_prev)
+        np.testing.assert_array_equal(comp.state.heating, before.heating)
+        T, sat = comp(2.0, 0.85)  # scalars broadcast to every wire
+        assert T.shape == sat.shape == (2,)
 
 
 def test_compensator_needs_reset() -> None:

@@ -76,8 +76,9 @@ class EnvelopeSections:
         object.__setattr__(self, 'a', a)
         object.__setattr__(self, 'b', b)
 
-    @property
+    @functools.cached_property
     def load_range(self) -> tuple[float, float]:
+        """(lowest, highest) load [kgf]; cached: the compensator reads it several times a tick."""
         return float(self.edges_kg[0]), float(self.edges_kg[-1])
 
     def section(self, m: FloatArray) -> NDArray[np.intp]:

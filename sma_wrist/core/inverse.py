@@ -132,85 +132,167 @@ class InverseResult:
     achieved_mm: FloatArray
 
 
+def _per_wire(x: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
+    """x as a float array of the memory's shape: x itself when it already is one (the node's call:
+    no broadcast, no copy, the kernels only read it), else a broadcast copy."""
+    if type(x) is np.ndarray and x.shape == shape and x.dtype == np.float64 and x.flags.c_contiguous:
+        return x
+    return np.broadcast_to(np.asarray(x, float), shape).copy()
+
+
+# Compiled one-wrist paths (optional numba, the set-up of sma_wrist.core.plant_kernel). The node
+# calls observe + solve at 100 Hz on two wires, where numpy's per-call overhead on (2,) arrays
+# was ~250 us a tick; these are the same equations as scalar loops over the wires. The numpy
+# code of InverseCompensator stays the reference and the path without numba (test_inverse
+# checks both agree).
 
 @_pk._jit
-def _bracket_roots(T0s, ends, side_heat, h_prev, a2, b2, w2, y2, r, wts, c, d, p0, k_f, G, tol,
-                   Tg, f, root):  # pragma: no cover - compiled
-    """Compiled :meth:`InverseCompensator._numerical` core, column by column: residual on a
-    G-point grid from T_prev to the window end, first sign change, Illinois refinement to
-    |residual| <= tol / 10. Fills Tg, f (G, 2S) and root (2S; NaN without a sign change)."""
-    n_col = T0s.shape[0]
-    n_op = r.shape[0]
-    for j in range(n_col):
-        for g in range(G):
-            Tg[g, j] = T0s[j] + (g / (G - 1.0)) * (ends[j] - T0s[j])
-            f[g, j] = _resid1(Tg[g, j], j, T0s, side_heat, h_prev, a2, b2, w2, y2, r, wts, c, d, p0, k_f, n_op)
-        k = -1
-        for g in range(G - 1):
-            if f[g, j] * f[g + 1, j] <= 0:
-                k = g
-                break
-        if k < 0:
-            root[j] = np.nan
-            continue
-        lo_T, hi_T, f_lo, f_hi = Tg[k, j], Tg[k + 1, j], f[k, j], f[k + 1, j]
-        x = 0.5 * (lo_T + hi_T)
-        side = 0
-        for _ in range(60):
-            denom = f_hi - f_lo
-            sec = hi_T - f_hi * (hi_T - lo_T) / denom if denom != 0 else 0.5 * (lo_T + hi_T)
-            if sec > min(lo_T, hi_T) and sec < max(lo_T, hi_T):
-                x = sec
-            else:
-                x = 0.5 * (lo_T + hi_T)
-            fx = _resid1(x, j, T0s, side_heat, h_prev, a2, b2, w2, y2, r, wts, c, d, p0, k_f, n_op)
-            if f_lo * fx <= 0:  # root in [lo, x]; Illinois: halve the end kept twice
-                if side == -1:
-                    f_lo = 0.5 * f_lo
-                f_hi = fx
-                hi_T = x
-                side = -1
-            else:
-                if side == 1:
-                    f_hi = 0.5 * f_hi
-                f_lo = fx
-                lo_T = x
-                side = 1
-            if abs(fx) <= 0.1 * tol or abs(hi_T - lo_T) < 1e-12:
-                break
-        root[j] = x
+def _residual(T, T0, h_prev, heat_side, coef, w, y, r, wts, c, d, p0, k_f):  # pragma: no cover - compiled
+    """k_f - y_m(T) - y of one wire against frozen play states w (Eqs. 3.19, 3.21, 3.22, 4.1, 4.2).
 
-
-@_pk._jit
-def _play_step(T, a, b, r, w, heating, T_prev):  # pragma: no cover - compiled
-    """Compiled :func:`sma_wrist.core.hysteresis.step` memory update (Eq. 3.19) for S wires, in place."""
-    S, n = w.shape
-    for s in range(S):
-        gl = b[s, 0] * math.tanh(b[s, 1] * T[s] + b[s, 2]) + b[s, 3]
-        gr = a[s, 0] * math.tanh(a[s, 1] * T[s] + a[s, 2]) + a[s, 3]
-        for i in range(n):
-            w[s, i] = min(max(w[s, i], gl - r[i]), gr + r[i])
-        if T[s] > T_prev[s]:
-            heating[s] = True
-        elif T[s] < T_prev[s]:
-            heating[s] = False
-        T_prev[s] = T[s]
-
-
-@_pk._jit
-def _resid1(T, j, T0s, side_heat, h_prev, a2, b2, w2, y2, r, wts, c, d, p0, k_f, n_op):  # pragma: no cover
-    heat = h_prev[j] if T == T0s[j] else side_heat[j]
-    gl = b2[j, 0] * math.tanh(b2[j, 1] * T + b2[j, 2]) + b2[j, 3]
-    gr = a2[j, 0] * math.tanh(a2[j, 1] * T + a2[j, 2]) + a2[j, 3]
+    coef: (a0..a3, b0..b3) at the wire's load (Eqs. 4.4-4.5). The memoryless part keeps the
+    last direction h_prev at T = T0 and takes the side's direction heat_side elsewhere.
+    """
+    heat = h_prev if T == T0 else heat_side
+    gl = coef[4] * math.tanh(coef[5] * T + coef[6]) + coef[7]
+    gr = coef[0] * math.tanh(coef[1] * T + coef[2]) + coef[3]
     acc = 0.0
-    for i in range(n_op):
-        wt = min(max(w2[j, i], gl - r[i]), gr + r[i])
-        acc += wt * wts[i]
+    for i in range(r.shape[0]):
+        acc += min(max(w[i], gl - r[i]), gr + r[i]) * wts[i]
     if heat:
         mem = c[0] * math.tanh(c[1] * T + c[2]) + c[3]
     else:
         mem = d[0] * math.tanh(d[1] * T + d[2]) + d[3]
-    return k_f - (p0 * mem + acc) - y2[j]
+    return k_f - (p0 * mem + acc) - y
+
+
+@_pk._jit
+def _refine(lo_T, hi_T, f_lo, f_hi, T0, h_prev, heat_side, coef, w, y, r, wts, c, d, p0, k_f, tol):  # pragma: no cover
+    """Illinois regula falsi on a bracket [lo_T, hi_T] of :func:`_residual` (bisection where the
+    secant stalls) to |residual| <= tol / 10; the last point evaluated."""
+    x = 0.5 * (lo_T + hi_T)
+    side = 0
+    for _ in range(60):
+        denom = f_hi - f_lo
+        sec = hi_T - f_hi * (hi_T - lo_T) / denom if denom != 0 else 0.5 * (lo_T + hi_T)
+        if sec > min(lo_T, hi_T) and sec < max(lo_T, hi_T):
+            x = sec
+        else:
+            x = 0.5 * (lo_T + hi_T)
+        fx = _residual(x, T0, h_prev, heat_side, coef, w, y, r, wts, c, d, p0, k_f)
+        if f_lo * fx <= 0:  # root in [lo, x]; Illinois: halve the end kept twice
+            if side == -1:
+                f_lo = 0.5 * f_lo
+            f_hi = fx
+            hi_T = x
+            side = -1
+        else:
+            if side == 1:
+                f_hi = 0.5 * f_hi
+            f_lo = fx
+            lo_T = x
+            side = 1
+        if abs(fx) <= 0.1 * tol or abs(hi_T - lo_T) < 1e-12:
+            break
+    return x
+
+
+@_pk._jit
+def _argmin_abs(f):  # pragma: no cover - compiled
+    """Index of the first smallest |f| (np.argmin(np.abs(f)))."""
+    k = 0
+    for g in range(1, f.shape[0]):
+        if abs(f[g]) < abs(f[k]):
+            k = g
+    return k
+
+
+@_pk._jit
+def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg, f):  # pragma: no cover - compiled
+    """(T, saturated) of one wire as :meth:`InverseCompensator._numerical` and ``_pick`` give them.
+
+    Side 0 walks a G-point grid Tg[0] from T0 to hi (heating), side 1 Tg[1] to lo (cooling), in
+    step, each to its first sign change, then refines it. A side whose next bracket starts
+    farther from T0 than the other side's root stops there: its root could not be the nearer
+    one, so the answer is the same as with both grids walked to their ends (which the saturated
+    case, no root on either side, still does), for a fraction of the residuals when the target
+    is close to the last temperature (the node's case).
+    """
+    G = Tg.shape[1]
+    root = np.full(2, np.nan)
+    live = np.ones(2, np.bool_)
+    for g in range(G):
+        for side in range(2):
+            if not live[side]:
+                continue
+            if g > 0 and math.isfinite(root[1 - side]) and abs(Tg[side, g - 1] - T0) > abs(root[1 - side] - T0):
+                live[side] = False
+                continue
+            Tg[side, g] = T0 + (g / (G - 1.0)) * ((hi if side == 0 else lo) - T0)
+            f[side, g] = _residual(Tg[side, g], T0, h_prev, side == 0, coef, w, y, r, wts, c, d, p0, k_f)
+            if g > 0 and f[side, g - 1] * f[side, g] <= 0:
+                root[side] = _refine(Tg[side, g - 1], Tg[side, g], f[side, g - 1], f[side, g], T0, h_prev, side == 0,
+                                     coef, w, y, r, wts, c, d, p0, k_f, tol)
+                live[side] = False
+        if not (live[0] or live[1]):
+            break
+    dist0 = abs(root[0] - T0) if math.isfinite(root[0]) else np.inf
+    dist1 = abs(root[1] - T0) if math.isfinite(root[1]) else np.inf
+    if math.isfinite(min(dist0, dist1)):  # nearest root: the smallest move that reaches the target
+        return (root[1] if dist1 < dist0 else root[0]), False
+    k0, k1 = _argmin_abs(f[0]), _argmin_abs(f[1])  # saturated: the reachable grid value closest to the target
+    return (Tg[1, k1] if abs(f[1, k1]) < abs(f[0, k0]) else Tg[0, k0]), True
+
+
+@_pk._jit
+def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0, k_f, lo, hi, m_lo, m_hi, G, tol,
+                   T, sat, y):  # pragma: no cover - compiled
+    """Compiled :meth:`InverseCompensator._numerical` and :func:`_output_frozen` at the answer,
+    wire by wire (Eqs. 3.19-3.22, 4.1-4.5).
+
+    Writes T, sat and y (S,); returns False when a target is not finite or a load is not inside
+    [m_lo, m_hi] (then the caller runs its input checks), the outputs being written all the same.
+    """
+    ok = True
+    Tg = np.empty((2, G))
+    f = np.empty((2, G))
+    for s in range(T_prev.shape[0]):
+        if not (math.isfinite(y_d[s]) and m_lo <= m[s] <= m_hi):
+            ok = False
+        coef, _ = _pk._envelopes(stacked, edges, m[s])
+        T[s], sat[s] = _nearest_root(min(max(T_prev[s], lo), hi), heating[s], coef, w[s], y_d[s], r, wts, c, d, p0,
+                                     k_f, lo, hi, tol, Tg, f)
+        # elongation at the answer against the frozen memory (the residual of target 0), the
+        # memoryless part's direction from T_prev (Eq. 3.22)
+        Ts = T[s]
+        heat = Ts > T_prev[s] or (Ts == T_prev[s] and heating[s])
+        y[s] = _residual(Ts, np.nan, heat, heat, coef, w[s], 0.0, r, wts, c, d, p0, k_f)
+    return ok
+
+
+@_pk._jit
+def _observe_step(T, m, T_lo, T_hi, m_lo, m_hi, stacked, edges, r, w, heating, T_prev):  # pragma: no cover
+    """Compiled :meth:`InverseCompensator.observe`: T and m clipped to the model's window, the
+    envelopes at the clipped load (Eqs. 4.4-4.5, 3.21), the play update (Eq. 3.19) of w (S, n)
+    and the direction, in place. Returns False, touching nothing, when an input is NaN."""
+    S = T.shape[0]
+    for s in range(S):
+        if math.isnan(T[s]) or math.isnan(m[s]):
+            return False
+    for s in range(S):
+        Ts = min(max(T[s], T_lo), T_hi)
+        coef, _ = _pk._envelopes(stacked, edges, min(max(m[s], m_lo), m_hi))
+        gl = coef[4] * math.tanh(coef[5] * Ts + coef[6]) + coef[7]
+        gr = coef[0] * math.tanh(coef[1] * Ts + coef[2]) + coef[3]
+        for i in range(r.shape[0]):
+            w[s, i] = min(max(w[s, i], gl - r[i]), gr + r[i])
+        if Ts > T_prev[s]:
+            heating[s] = True
+        elif Ts < T_prev[s]:
+            heating[s] = False
+        T_prev[s] = Ts
+    return True
+
 
 class InverseCompensator:
     """Stateful inverse SD-GPI compensator, Eqs. 5.5-5.8, over S independent scenarios.
@@ -239,6 +321,13 @@ class InverseCompensator:
         self._ym_prev: FloatArray | None = None
         self._coef_key: bytes | None = None
         self._coef: tuple[FloatArray, FloatArray] = (np.empty((0, 4)), np.empty((0, 4)))
+        f64 = np.float64
+        env = params.envelopes
+        # the compiled paths' parameter arguments, converted once
+        self._kernel_params = (np.ascontiguousarray(env._stacked, f64), np.ascontiguousarray(env.edges_kg, f64),
+                               np.ascontiguousarray(params.thresholds, f64), np.ascontiguousarray(params.weights, f64),
+                               np.ascontiguousarray(params.c, f64), np.ascontiguousarray(params.d, f64),
+                               float(params.p0), float(params.k_f))
 
     # -- memory
     def reset(self, T0: ArrayLike, load_kgf: ArrayLike, *, branch: str = 'cooling') -> None:
@@ -257,22 +346,25 @@ class InverseCompensator:
         st_ = self._require_state()
         lo, hi = self.params.T_valid
         lo_m, hi_m = self.params.load_range
-        T = np.clip(np.broadcast_to(np.asarray(T, float), st_.T_prev.shape), lo, hi)
-        m = np.clip(np.broadcast_to(np.asarray(load_kgf, float), st_.T_prev.shape), lo_m, hi_m)
+        T = _per_wire(T, st_.T_prev.shape)
+        m = _per_wire(load_kgf, st_.T_prev.shape)
+        if _pk.AVAILABLE:  # the node calls this at 100 Hz: ~100 us of numpy per call -> a few us
+            stacked, edges, r = self._kernel_params[:3]
+            heating = st_.heating.copy()
+            if _observe_step(T, m, lo, hi, lo_m, hi_m, stacked, edges, r, st_.w, heating, st_.T_prev):
+                st_.heating = heating
+                self._w_hat = None
+                return
+        T = np.clip(T, lo, hi)  # NaN stays NaN and is reported below
+        m = np.clip(m, lo_m, hi_m)
         check_finite('measured wire temperature', T, 'degC')
         check_finite('measured wire load', m, 'kgf')
-        if _pk.AVAILABLE:  # the node calls this at 100 Hz: ~100 us of numpy per call -> a few us
-            a, b = self._coefficients(m)
-            heating = st_.heating.copy()
-            _play_step(T.astype(np.float64), a, b, np.asarray(self.params.thresholds, np.float64), st_.w, heating,
-                       st_.T_prev)
-            st_.heating = heating
-        else:
-            step(self.params, st_, T, m, check=False)
+        step(self.params, st_, T, m, check=False)
         self._w_hat = None
 
     def _coefficients(self, m: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Envelope coefficients at loads m, remembered for the last m (observe and solve share it)."""
+        """Envelope coefficients at loads m, remembered for the last m (the numpy root search and
+        the elongation at its answer share it)."""
         key = m.tobytes()
         if self._coef_key != key:
             a, b = self.params.envelopes.coefficients(m)
@@ -308,12 +400,16 @@ class InverseCompensator:
         """
         st_ = self._require_state()
         S = st_.T_prev.shape
-        y_d = np.broadcast_to(np.asarray(desired_elongation_mm, float), S).copy()
-        m = np.broadcast_to(np.asarray(load_kgf, float), S).copy()
-        check_finite('desired elongation', y_d, 'mm')
-        lo_m, hi_m = self.params.load_range
-        if np.any(m < lo_m) or np.any(m > hi_m):
-            raise ModelInputError('wire load m', float(m.min() if m.min() < lo_m else m.max()), f'[{lo_m:g}, {hi_m:g}]', 'kgf')
+        y_d = _per_wire(desired_elongation_mm, S)
+        m = _per_wire(load_kgf, S)
+        if _pk.AVAILABLE and self.method == 'numerical' and not commit:
+            # the node's call at 100 Hz: root, pick and elongation in one compiled pass; the
+            # checks run (and raise) only when the kernel saw a bad target or load
+            T, sat, y, ok = self._invert_compiled(y_d, m)
+            if not ok:
+                self._check_targets(y_d, m)
+            return InverseResult(T, sat, y)
+        self._check_targets(y_d, m)
         T_num, sat = self._numerical(y_d, m)
         if self.method == 'numerical':
             T = T_num
@@ -334,6 +430,24 @@ class InverseCompensator:
             sat = np.abs(y - y_d) > 1e-6
         return InverseResult(T, sat, y)
 
+    def _check_targets(self, y_d: FloatArray, m: FloatArray) -> None:
+        """Raise ModelInputError for a non-finite desired elongation or a load outside the model's range."""
+        check_finite('desired elongation', y_d, 'mm')
+        lo_m, hi_m = self.params.load_range
+        if np.any(m < lo_m) or np.any(m > hi_m):
+            raise ModelInputError('wire load m', float(m.min() if m.min() < lo_m else m.max()), f'[{lo_m:g}, {hi_m:g}]', 'kgf')
+
+    def _invert_compiled(self, y_d: FloatArray,
+                         m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, bool]:
+        """(T, saturated, elongation at T against the frozen memory, inputs valid) from :func:`_invert_frozen`."""
+        st_ = self._require_state()
+        S = st_.T_prev.shape
+        T, sat, y = np.empty(S), np.empty(S, np.bool_), np.empty(S)
+        lo_m, hi_m = self.params.load_range
+        ok = _invert_frozen(st_.T_prev, st_.heating, st_.w, y_d, m, *self._kernel_params, *self.T_range, lo_m, hi_m,
+                            self.grid, self.tol_mm, T, sat, y)
+        return T, sat, y, ok
+
     def _numerical(self, y_d: FloatArray, m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Bracketed root of y(T) = y_d on each side of T_prev against frozen memory; nearest root wins.
 
@@ -341,6 +455,9 @@ class InverseCompensator:
         change, bisection refines it (y(T) is continuous on each side). Without any sign change
         the grid point closest to the target is returned and flagged saturated.
         """
+        if _pk.AVAILABLE:  # same search, compiled: ~0.8 ms of numpy -> ~10 us per call
+            T, sat, _, _ = self._invert_compiled(y_d, m)
+            return T, sat
         st_ = self._require_state()
         p = self.params
         lo, hi = self.T_range
@@ -365,16 +482,6 @@ class InverseCompensator:
             return k_f - (p0 * mem + wt @ wts) - y2
 
         cols = np.arange(2 * S)
-        if _pk.AVAILABLE:  # same search, compiled: ~0.8 ms -> tens of us per call at the node's 100 Hz
-            G = self.grid
-            Tg, f, root = np.empty((G, 2 * S)), np.empty((G, 2 * S)), np.empty(2 * S)
-            f64 = np.float64
-            _bracket_roots(T0s.astype(f64), ends.astype(f64), side_heat, h_prev.astype(np.bool_),
-                           np.ascontiguousarray(a2, f64), np.ascontiguousarray(b2, f64), np.ascontiguousarray(w2, f64),
-                           y2.astype(f64), np.asarray(r, f64), np.asarray(wts, f64), np.asarray(c, f64),
-                           np.asarray(d, f64), float(p0), float(k_f), G, float(self.tol_mm), Tg, f, root)
-            has = np.isfinite(root)
-            return self._pick(root, has, Tg, f, T0s, cols, S)
         s = np.linspace(0.0, 1.0, self.grid)[:, None]
         Tg = T0s + s * (ends - T0s)  # (G, 2S) starting at T_prev
         f = resid(Tg)

@@ -44,6 +44,7 @@ class HysteresisCompensator(WristNode):
         self.T_meas = np.full(2, np.nan)
         self.stress_meas = np.full(2, np.nan)
         self.started = False
+        self._saturated: bool | None = None  # last state reported on /diagnostics
         self.pub_T = [self.publisher(f'/wrist/muscle_{i}/temperature_desired') for i in (1, 2)]
         for i in (1, 2):
             self.subscription(f'/wrist/muscle_{i}/strain_desired', lambda m, i=i: self._on_target(f'strain_{i}', m))
@@ -59,9 +60,14 @@ class HysteresisCompensator(WristNode):
         return problem
 
     def _build(self) -> None:
-        self.comp = MuscleCompensator(default_sdgpi(), T_range_C=(self.p['temperature_min_C'],
-                                                                  self.p['temperature_max_C']),
-                                      method=self.p['method'])
+        window = (self.p['temperature_min_C'], self.p['temperature_max_C'])
+        self.comp = MuscleCompensator(default_sdgpi(), T_range_C=window, method=self.p['method'])
+        # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
+        # here rather than at the first sample of a running loop
+        warm = MuscleCompensator(default_sdgpi(), T_range_C=window, method=self.p['method'])
+        warm.reset(np.full(2, 40.0), np.full(2, 1.2e8))
+        warm.observe(np.full(2, 41.0), np.full(2, 1.2e8))
+        warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
         self.started = False  # re-seed the memory from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:
@@ -88,9 +94,10 @@ class HysteresisCompensator(WristNode):
 
     def _compensate(self) -> None:
         strain = np.array([self.values['strain_1'], self.values['strain_2']])
-        stress = np.array([self.values['stress_1'], self.values['stress_2']])
         if self.p['stress_source'] == 'measured' and np.isfinite(self.stress_meas).all():
             stress = self.stress_meas.copy()
+        else:
+            stress = np.array([self.values['stress_1'], self.values['stress_2']])
         if not self.started:
             if not (np.isfinite(self.T_meas).all() and np.isfinite(self.stress_meas).all()):
                 return  # memory needs a measured starting point
@@ -104,10 +111,12 @@ class HysteresisCompensator(WristNode):
         except SmaWristError as e:
             self.diagnose('inverse', DiagnosticStatus.ERROR, f'inverse failed: {e}')
             return
-        sat = res.saturated | res.load_clipped
-        self.diagnose('saturation', DiagnosticStatus.WARN if sat.any() else DiagnosticStatus.OK,
-                      'target outside the reachable temperature/load window' if sat.any() else 'targets reachable',
-                      {'load_kgf': np.round(res.load_kgf, 3).tolist()})
+        sat = bool((res.saturated | res.load_clipped).any())
+        if sat != self._saturated:  # diagnose publishes on change only: skip building its values (~10 us a tick)
+            self._saturated = sat
+            self.diagnose('saturation', DiagnosticStatus.WARN if sat else DiagnosticStatus.OK,
+                          'target outside the reachable temperature/load window' if sat else 'targets reachable',
+                          {'load_kgf': np.round(res.load_kgf, 3).tolist()})
         stamp = self.get_clock().now().to_msg()
         for i in range(2):
             msg = Temperature(temperature=float(res.temperature_C[i]), variance=0.0)
