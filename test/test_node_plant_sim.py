@@ -125,8 +125,9 @@ def test_real_time_monitor_reports_the_achieved_factor_per_window():
 
 @pytest.mark.parametrize('slow', [False, True])
 def test_plant_that_cannot_keep_real_time_warns_on_diagnostics(probe_factory, slow):
-    """A machine too slow for real_time_factor: each tick here costs one more tick period of the
-    (virtual) steady clock, so the plant runs at 0.5x. plant_sim says so on /diagnostics."""
+    """A machine too slow for real_time_factor: each tick here costs 20 ms of the (virtual) steady
+    clock, twice its period; the timer skips the missed period as rcl's does, so the plant runs at
+    0.5x. plant_sim says so on /diagnostics."""
     from sma_wrist.nodes.plant_sim import PlantSim
     from sma_wrist.runtime.vclock import VCLOCK
 
@@ -134,7 +135,7 @@ def test_plant_that_cannot_keep_real_time_warns_on_diagnostics(probe_factory, sl
         def _tick(self):
             super()._tick()
             if slow:
-                VCLOCK.advance_to(VCLOCK.steady_ns + 10_000_000)  # the tick took 10 ms of wall time
+                VCLOCK.advance_to(VCLOCK.steady_ns + 20_000_000)  # the tick took 20 ms of wall time
 
     with Runtime() as rt:
         probe = probe_factory(rt, ('/clock',))

@@ -98,6 +98,13 @@ class WristPlant:
         self.muscles = MuscleModel(self.params.hysteresis, self.params.muscle)
         self._kernel_constants: tuple[PlantParams, tuple[np.ndarray, ...]] | None = None
         self.state = self.rest_state(payload)
+        if plant_kernel.AVAILABLE and self.params.engine == 'auto':
+            # the first compiled step loads (or compiles) the kernel: 0.1-0.3 s from numba's cache.
+            # Pay it here, not in the first step of a loop that runs against a clock (the device
+            # emulator's thread, a plant_sim under ROS): one step on a copy, then the state is restored
+            start = self.state.copy()
+            self.advance(np.zeros((self.n, 2)), 1)
+            self.state = start
 
     # ----------------------------------------------------------------- set-up
     def rest_state(self, payload_kg: FloatArray, q0: ArrayLike | None = None) -> PlantState:

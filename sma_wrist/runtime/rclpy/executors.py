@@ -208,6 +208,11 @@ class Executor:
                 return 'shutdown'
             if stop_when is not None and stop_when():
                 return 'condition'
+            if VCLOCK.steady_ns > end:
+                # callbacks moved the clock past the end themselves (a tick that costs more than its
+                # period, as a slow machine would): a timer is then ready at every scan, so the
+                # deadline check below is never reached
+                return 'time'
             ready = self._collect()
             if ready:
                 for entry in ready:
