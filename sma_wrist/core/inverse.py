@@ -435,7 +435,8 @@ class InverseCompensator:
         check_finite('desired elongation', y_d, 'mm')
         lo_m, hi_m = self.params.load_range
         if np.any(m < lo_m) or np.any(m > hi_m):
-            raise ModelInputError('wire load m', float(m.min() if m.min() < lo_m else m.max()), f'[{lo_m:g}, {hi_m:g}]', 'kgf')
+            bad = float(m.min() if m.min() < lo_m else m.max())
+            raise ModelInputError('wire load m', bad, f'[{lo_m:g}, {hi_m:g}]', 'kgf')
 
     def _invert_compiled(self, y_d: FloatArray,
                          m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, bool]:
