@@ -251,15 +251,21 @@ def iter_mcap(file: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
             yield channel.topic, schema.name if schema else '', message.log_time, message.data
 
 
-def salvage_mcap(file: str | Path) -> tuple[list[tuple[str, str, int, bytes]], str]:
+def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
+                 ) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """Read an MCAP file record by record without its index, keeping every complete
-    message -- also those at the start of a chunk cut off by truncation (uncompressed
-    chunks, as BagRecorder writes them).  Returns (messages, problem); problem is '' for
-    a clean, closed file."""
+    message (of ``topics``, default all) -- also those at the start of a chunk cut off by
+    truncation (uncompressed chunks, as BagRecorder writes them).  Returns (messages in file
+    order, problem); problem is '' for a clean, closed file.
+
+    It is also :func:`read_bag`'s fast path for closed bags: one pass over the bytes, about 2x
+    faster than rosbags' indexed reader on a run bag; anything it does not handle (compressed
+    chunks) is reported as a problem and read_bag falls back to rosbags."""
     data = Path(file).read_bytes()
     out: list[tuple[str, str, int, bytes]] = []
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int]] = {}
+    keep: dict[int, tuple[str, str]] = {}  # channel id -> (topic, type) of a wanted channel
     if data[:8] != MCAP_MAGIC:
         return out, 'not an MCAP file (bad magic)'
     state = {'footer': False, 'problem': ''}
@@ -274,13 +280,29 @@ def salvage_mcap(file: str | Path) -> tuple[list[tuple[str, str, int, bytes]], s
         return b[o + 4:o + 4 + n].decode(), o + 4 + n
 
     def records(buf: bytes, pos: int, where: str) -> None:
-        while pos < len(buf):
-            if pos + 9 > len(buf):
+        size = len(buf)
+        while pos < size:
+            if pos + 9 > size:
                 state['problem'] = f'{where}: truncated record header at offset {pos}'
                 return
             op = buf[pos]
             length = int.from_bytes(buf[pos + 1:pos + 9], 'little')
-            body = buf[pos + 9:pos + 9 + length]
+            end = pos + 9 + length
+            if op == 0x05 and end <= size and length >= 22:
+                # a message (the bulk of the file): channel u16, sequence u32, log and publish time u64,
+                # data; only the wanted channels' bytes are copied
+                cid = buf[pos + 9] | buf[pos + 10] << 8
+                if cid in keep:
+                    topic, msgtype = keep[cid]
+                    out.append((topic, msgtype, int.from_bytes(buf[pos + 15:pos + 23], 'little'),
+                                buf[pos + 31:end]))
+                elif topics is None:  # a message before its channel (damaged file): keep what is known
+                    topic, sid = channels.get(cid, ('', 0))
+                    out.append((topic, schemas.get(sid, ''), int.from_bytes(buf[pos + 15:pos + 23], 'little'),
+                                buf[pos + 31:end]))
+                pos = end
+                continue
+            body = buf[pos + 9:end]
             if len(body) < length:
                 if op == 0x06:  # chunk: read what is left of it
                     chunk(body, pos)
@@ -294,11 +316,8 @@ def salvage_mcap(file: str | Path) -> tuple[list[tuple[str, str, int, bytes]], s
                 cid, o = s16(body, 0)
                 sid, o = s16(body, o)
                 channels[cid] = (string(body, o)[0], sid)
-            elif op == 0x05:
-                cid, _ = s16(body, 0)
-                topic, sid = channels.get(cid, ('', 0))
-                out.append((topic, schemas.get(sid, ''), int.from_bytes(body[6:14], 'little'),
-                            bytes(body[22:])))
+                if topics is None or channels[cid][0] in topics:
+                    keep[cid] = (channels[cid][0], schemas.get(sid, ''))
             elif op == 0x06:
                 chunk(body, pos)
             elif op == 0x02:
@@ -358,6 +377,34 @@ def _salvage(p: Path) -> tuple[BagData, str]:
     return _to_bagdata(rows), '; '.join(problems)
 
 
+def _read_closed_mcap(p: Path, wanted: Optional[frozenset[str]]) -> Optional[BagData]:
+    """read_bag's fast path: a closed bag of uncompressed MCAP files (BagRecorder's) in one pass
+    each (:func:`salvage_mcap`), its message counts checked against metadata.yaml. None for
+    anything else (other storage, compression, a damaged file, counts that differ): read_bag
+    then uses rosbags' reader and its error reporting."""
+    files = _mcap_files(p)
+    if not files:
+        return None
+    try:
+        meta = yaml.safe_load((p / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        if meta.get('storage_identifier') != 'mcap':
+            return None
+        expected = sum(int(t['message_count']) for t in meta['topics_with_message_count']
+                       if wanted is None or t['topic_metadata']['name'] in wanted)
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):
+        return None
+    rows: list[tuple[str, str, int, bytes]] = []
+    for f in files:
+        r, problem = salvage_mcap(f, wanted)
+        if problem:
+            return None
+        rows.extend(r)
+    if len(rows) != expected:
+        return None
+    rows.sort(key=lambda r: r[2])  # stable, and linear on a recording already in time order
+    return _to_bagdata(rows)
+
+
 def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
              salvage: bool = False) -> BagData:
     """All messages of a bag: ``{topic: (t_ns int64 array, [messages])}`` in time order.
@@ -375,6 +422,9 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
 
     problem = ''
     if p.is_dir() and (p / 'metadata.yaml').exists():
+        fast = _read_closed_mcap(p, None if wanted is None else frozenset(wanted))
+        if fast is not None:
+            return fast
         try:
             with Reader(p) as reader:
                 conns = [c for c in reader.connections if wanted is None or c.topic in wanted]

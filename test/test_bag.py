@@ -264,3 +264,40 @@ def test_direct_cdr_decoder_rejects_cut_messages():
     for cut in (8, 20, len(data) - 4):
         with pytest.raises(Exception):
             decode(data[:cut])
+
+
+def test_one_pass_reader_equals_rosbags_reader_and_falls_back_to_it(tmp_path, monkeypatch):
+    """read_bag reads a closed, uncompressed MCAP bag in one pass (salvage_mcap); it must give
+    what rosbags' indexed reader gives, all topics and a subset, and hand anything it does not
+    handle (here: a file it reports a problem with, as for a compressed chunk) to rosbags."""
+    import sma_wrist.bag as bag_mod
+    bag = tmp_path / 'run'
+    _run(bag)
+    fast_all, fast_sub = read_bag(bag), read_bag(bag, ['/wrist/joint_states', '/clock'])
+    calls = []
+
+    def declined(*args, **kwargs):
+        calls.append(args)
+        return [], 'compressed chunk (zstd) at offset 8 cannot be salvaged'
+
+    monkeypatch.setattr(bag_mod, 'salvage_mcap', declined)
+    slow_all, slow_sub = read_bag(bag), read_bag(bag, ['/wrist/joint_states', '/clock'])
+    assert calls  # the fast path was tried and declined
+    for fast, slow in ((fast_all, slow_all), (fast_sub, slow_sub)):
+        assert fast.keys() == slow.keys()
+        for topic in fast:
+            assert list(fast[topic][0]) == list(slow[topic][0]) and fast[topic][1] == slow[topic][1], topic
+    assert set(fast_sub) == {'/wrist/joint_states', '/clock'}
+
+
+def test_one_pass_reader_checks_counts_against_metadata(tmp_path):
+    """A metadata.yaml that promises more messages than the file holds is not trusted by the fast
+    path: the rosbags path reports the mismatch as a BagError with what could be salvaged."""
+    bag = tmp_path / 'run'
+    _run(bag)
+    meta = bag / 'metadata.yaml'
+    doc = yaml.safe_load(meta.read_text())
+    doc['rosbag2_bagfile_information']['topics_with_message_count'][0]['message_count'] += 5
+    meta.write_text(yaml.safe_dump(doc))
+    with pytest.raises(BagError, match='metadata|messages'):
+        read_bag(bag)

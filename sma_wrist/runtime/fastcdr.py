@@ -30,6 +30,7 @@ _D = struct.Struct('<d')
 _DD = struct.Struct('<dd')
 _CLOCK = struct.Struct('<4siI')
 _ZEROS = bytes(8)
+_DOUBLES: dict[int, struct.Struct] = {}  # '<nd' by n: sequences have a handful of lengths
 
 
 def _pad(pos: int, align: int) -> int:
@@ -150,7 +151,10 @@ def _decoders() -> dict[str, Decoder]:
         pos += _pad(pos - 4, 8)
         if pos + 8 * n > len(data):
             raise ValueError('sequence runs past the end of the message')
-        return list(struct.unpack_from(f'<{n}d', data, pos)), pos + 8 * n
+        packer = _DOUBLES.get(n)
+        if packer is None:
+            packer = _DOUBLES[n] = struct.Struct(f'<{n}d')
+        return list(packer.unpack_from(data, pos)), pos + 8 * n
 
     def joint_state(data: bytes) -> Any:
         header, pos = _read_header(data, 4, Header, Time)
