@@ -167,17 +167,27 @@ __all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'run_closed_loop', 'print
 
 def bench_graph(quick: bool = False) -> dict[str, Any]:
     """Real-time factor of the full graph (100 Hz control, 1 kHz plant) with and without recording,
-    and the runtime's per-message cost (embedded runtime; run in a fresh process by sma-wrist bench)."""
+    and the runtime's per-message cost (embedded runtime; run in a fresh process by sma-wrist bench).
+
+    ``floor_*``: the same topology with nodes that only publish (runtime.bench.bench_contract_floor),
+    the ceiling for any node implementation; ``nodes_us_per_tick`` is what the real nodes add to it.
+    """
     import tempfile
 
     from sma_wrist import runtime
+    from sma_wrist.runtime.bench import bench_contract_floor
     runtime.activate()
     duration = 10.0 if quick else 60.0
-    out: dict[str, Any] = {'sim_time_s': duration}
+    floor = bench_contract_floor(duration)
+    out: dict[str, Any] = {'sim_time_s': duration, 'floor_real_time_factor': floor['real_time_factor'],
+                           'floor_us_per_tick': floor['us_per_tick'],
+                           'floor_messages_per_tick': floor['published_per_tick'],
+                           'floor_deliveries_per_tick': floor['deliveries_per_tick']}
     for controller in ('direct_adaptive', 'inverse_adaptive'):
         run_closed_loop(controller, 0.3, 0.5)  # imports, numba cache load
         s = run_closed_loop(controller, 0.3, duration)
         out[f'{controller}_real_time_factor'] = s.real_time_factor
+        out[f'{controller}_nodes_us_per_tick'] = 1e6 * s.wall_s / (duration * 100.0) - floor['us_per_tick']
         with tempfile.TemporaryDirectory() as d:
             r = run_closed_loop(controller, 0.3, duration, Path(d) / 'bag')
         out[f'{controller}_recorded_real_time_factor'] = r.real_time_factor
