@@ -299,3 +299,44 @@ def test_one_wrist_kernel_rejects_non_finite_inputs_like_the_numpy_path():
         bad[0, 1, 0] = np.inf
         with pytest.raises(ModelInputError, match='thermal state'):
             tc.feedback_linearising_command(P, bad, 40.0, 0.0, compiled=compiled)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.booleans())
+def test_tem_loop_compiled_sample_matches_the_numpy_functions(seed, predictive):
+    """TemLoop's one-call kernel (observer, rate estimate, law, protection, hot muscle) against
+    the numpy functions it fuses, over 300 samples of a loop closed through the heat balance:
+    irregular sample times, targets that jump, stale stretches, a muscle above the limit."""
+    from sma_wrist.core.tem_control import DriveLimits, TemLoop
+    rng = np.random.default_rng(seed)
+    drive = DriveLimits(predictive=predictive, protect_above_C=float(rng.uniform(40.0, 75.0)))
+    params = tc.TemControlParams(gain_per_s=float(rng.uniform(0.3, 3.0)), rate_filter_s=float(rng.uniform(0.0, 0.2)))
+    law_limits = P.with_limits(-24.0, 24.0)
+    max_muscle_C = float(rng.uniform(35.0, 70.0))
+    loops = [TemLoop(law_limits, params, drive, P, max_muscle_C, compiled=c) for c in (False, True)]
+    assert loops[1].compiled == tc.tem_kernel.AVAILABLE and not loops[0].compiled
+    x = th.rest_state(P, 1) + rng.uniform(0.0, 45.0, (1, 2, 2))
+    t = 0.0
+    seen_hot = seen_clip = False
+    T_d = np.array([40.0, 35.0])
+    for k in range(300):
+        t += float(rng.choice([0.01, 0.01, 0.02, 0.003]))
+        if rng.random() < 0.05:
+            T_d = rng.uniform(20.0, 75.0, 2)
+        stale = rng.random() < 0.03
+        T_meas = x[0, :, 0] + rng.normal(0.0, 0.05, 2)
+        out = [loop.sample(t, T_meas, None if stale else T_d) for loop in loops]
+        ref, got = out
+        np.testing.assert_allclose(got.command_V, ref.command_V, rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(got.hot, ref.hot)
+        seen_hot |= bool(ref.hot.any())
+        assert (ref.command_V[ref.hot] <= 0.0).all()
+        np.testing.assert_array_equal(got.saturated, ref.saturated)
+        seen_clip |= bool(ref.saturated.any())
+        np.testing.assert_allclose(loops[1].observer, loops[0].observer, rtol=1e-10, atol=1e-9)
+        x = th.step(P.with_limits(-24.0, 24.0), x, ref.command_V[None], min(0.02, P.dt_max_s))
+        if k == 150 and not seen_hot:  # make sure the hot-muscle rule is exercised: heat past the limit
+            x[0, 0, 0] = max_muscle_C + 2.0
+            T_d = np.array([max_muscle_C + 10.0, T_d[1]])
+    assert seen_hot and seen_clip
+    assert loops[0].sample(t, x[0, :, 0], T_d) is None  # a repeated stamp leaves the command

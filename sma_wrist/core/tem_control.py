@@ -439,3 +439,126 @@ def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: Arr
     out = np.where(outside, np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)),
                                        min(thermal.u_max_V, limits.boost_max_V)), out)
     return out, out != u
+
+
+#: how often TemLoop recomputes the predictive command range [s] (the faces move over seconds)
+RANGE_REFRESH_S = 0.1
+
+
+@dataclass
+class TemSample:
+    """What one TemLoop sample decided for the two layers."""
+
+    command_V: FloatArray  # (2,) drive commands to send [V]
+    saturated: BoolArray  # (2,) the law's command was clipped (driver rating or face protection)
+    hot: BoolArray  # (2,) the muscle is above max_muscle_C: heating blocked
+
+
+class TemLoop:
+    """One wrist's TEM control per measurement, as tem_controller runs it (two layers, h = (1, 0)).
+
+    Per sample at time t [s] with measured muscle temperatures T_meas (2,) [degC]:
+
+    1. observer: the heat balance (Eqs. 4.13-4.14) stepped from the last sample under the
+       command in force (:func:`observer_step`, at most ``thermal.dt_max_s``), its muscle faces
+       then set to T_meas (only the muscle face is measured);
+    2. the linearising law (:class:`TemController`, Eqs. 5.44-5.47) toward T_d (2,), with the
+       estimated dT_d/dt;
+    3. face protection (:func:`protected_command`, range refreshed every RANGE_REFRESH_S);
+    4. a muscle above ``max_muscle_C`` may only be cooled.
+
+    Without targets (``T_d`` None: stale or missing) the TEMs are switched off (0 V); :meth:`off`
+    does the same from outside (watchdog). ``compiled`` (None: numba if installed) runs steps 1-4
+    as one call of :func:`tem_kernel.control_sample`; False runs the numpy functions named above,
+    which stay the reference (test_tem_control compares the two over closed-loop sequences).
+    """
+
+    def __init__(self, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
+                 hold: th.ThermalParams, max_muscle_C: float, *, compiled: bool | None = None) -> None:
+        if tuple(params.weights) != TWO_LAYER_WEIGHTS:
+            raise ParameterError(f'TemLoop runs two layers, weights {TWO_LAYER_WEIGHTS}; got {params.weights!r}')
+        self.thermal, self.params, self.drive, self.hold = thermal, params, drive, hold
+        self.max_muscle_C = float(max_muscle_C)
+        self.compiled = tem_kernel.AVAILABLE if compiled is None else bool(compiled) and tem_kernel.AVAILABLE
+        self.law = TemController(thermal, params)
+        self.observer = th.rest_state(thermal, 1)  # (1, 2 layers, 2 faces)
+        self.command_V = np.zeros(2)  # in force since the last sample
+        self.t_last: float | None = None
+        self.command_range: tuple[FloatArray, FloatArray] | None = None
+        self.range_t: float | None = None
+        # compiled path: the law's rate state as arrays the kernel updates in place
+        self._rate, self._T_d_prev, self._rng = np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2))
+        self._flags = np.zeros(2, np.int64)
+        self._T_meas, self._T_d = np.zeros(2), np.zeros(2)
+        self._coef = _kernel_constants(thermal)
+        self._candidates = drive.boost_min_V + _CANDIDATES * (drive.boost_max_V - drive.boost_min_V)
+        self._cfg = np.array([params.gain_per_s, params.rate_filter_s, *params.weights, thermal.u_min_V,
+                              thermal.u_max_V, float(drive.predictive), drive.horizon_s,
+                              max(1, int(np.ceil(drive.horizon_s / thermal.dt_max_s))), drive.face_min_C,
+                              drive.face_max_C, drive.protect_above_C, drive.boost_min_V, drive.boost_max_V,
+                              hold.u_min_V, hold.u_max_V, self.max_muscle_C], dtype=float)
+
+    def off(self) -> FloatArray:
+        """Switch the TEMs off: 0 V is the command in force from now on."""
+        self.command_V = np.zeros(2)
+        return self.command_V
+
+    def sample(self, t: float, T_meas: ArrayLike, T_d: ArrayLike | None) -> TemSample | None:
+        """One sample (steps 1-4 above); None for a repeated or out-of-order t (command unchanged).
+
+        Raises ModelInputError (command in force unchanged) if the law cannot produce a finite
+        command; the caller decides (tem_controller switches off).
+        """
+        dt = None if self.t_last is None else t - self.t_last
+        if dt is not None and dt <= 0:
+            return None
+        self.t_last = t
+        dt_obs = 0.0 if dt is None else min(dt, self.thermal.dt_max_s)
+        if T_d is None:
+            self._observe(T_meas, dt_obs)
+            return TemSample(self.off(), np.zeros(2, bool), np.zeros(2, bool))
+        refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
+        if self.compiled:
+            return self._sample_compiled(t, T_meas, T_d, dt_obs, refresh)
+        self._observe(T_meas, dt_obs)
+        res = self.law.update(t, self.observer, np.stack([T_d, T_d], axis=-1)[None])
+        if refresh:
+            self.command_range = safe_command_range(self.hold, self.drive, self.observer, compiled=False)
+            self.range_t = t
+        u_prot, limited = protected_command(self.hold, self.drive, self.observer, res.command_V, self.command_range)
+        hot = np.asarray(T_meas, dtype=float) > self.max_muscle_C
+        self.command_V = np.where(hot, np.minimum(u_prot[0], 0.0), u_prot[0])
+        return TemSample(self.command_V, res.saturated[0] | limited[0], hot)
+
+    def _observe(self, T_meas: ArrayLike, dt_obs: float) -> None:
+        if dt_obs > 0:
+            self.observer = observer_step(self.thermal, self.observer, self.command_V[None, :], dt_obs,
+                                          compiled=self.compiled)
+        self.observer[0, :, 0] = T_meas
+
+    def _sample_compiled(self, t: float, T_meas: ArrayLike, T_d: ArrayLike, dt_obs: float, refresh: bool
+                         ) -> TemSample:
+        law = self.law
+        has_prev = law._t_prev is not None
+        dt_law = t - law._t_prev if has_prev else 0.0
+        self._T_meas[:] = T_meas
+        self._T_d[:] = T_d
+        command = self.command_V.copy()
+        status = tem_kernel.control_sample(self.observer[0], self._rate, self._T_d_prev, self._rng, command,
+                                           self._flags, self._T_meas, self._T_d, dt_obs, dt_law, has_prev, refresh,
+                                           self._coef, self._cfg, self._candidates)
+        if status != tem_kernel.OK:
+            if status == tem_kernel.BAD_STATE:
+                check_finite('thermal state', self.observer, 'degC')
+            if status == tem_kernel.BAD_TARGET:
+                check_finite('desired temperature', self._T_d, 'degC')
+            raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
+        if not has_prev:  # the law's state, seen where the numpy path keeps it
+            law._T_d_prev, law._rate = self._T_d_prev[None], self._rate[None]
+        law._t_prev = t
+        if refresh:
+            self.command_range = (self._rng[0][None].copy(), self._rng[1][None].copy())
+            self.range_t = t
+        self.command_V = command
+        f = self._flags
+        return TemSample(command, (f & (tem_kernel.SATURATED | tem_kernel.LIMITED)) != 0, (f & tem_kernel.HOT) != 0)

@@ -17,7 +17,8 @@ import numpy as np
 
 from sma_wrist.core.plant_kernel import AVAILABLE, _jit, thermal_rk4
 
-__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range', 'warm_up']
+__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range', 'control_sample',
+           'CONFIG_FIELDS', 'warm_up']
 
 
 @_jit
@@ -110,6 +111,82 @@ def held_command_range(x, candidates, horizon_s, n_sub, face_min, face_max, th_c
             hi[l] = least[l]
 
 
+#: layout of control_sample's ``cfg`` (tem_control.TemLoop packs it once per parameter set)
+CONFIG_FIELDS = ('gain_per_s', 'rate_filter_s', 'h1', 'h2', 'law_u_min_V', 'law_u_max_V', 'predictive',
+                 'horizon_s', 'n_sub', 'face_min_C', 'face_max_C', 'protect_above_C', 'boost_min_V', 'boost_max_V',
+                 'hold_min_V', 'hold_max_V', 'max_muscle_C')
+
+#: control_sample's return codes; flags bits per layer
+OK, BAD_STATE, BAD_TARGET, BAD_COMMAND = 0, 1, 2, 3
+SATURATED, LIMITED, HOT = 1, 2, 4
+
+
+@_jit
+def control_sample(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh,
+                   th_coef, cfg, candidates):  # pragma: no cover - compiled
+    """One tem_controller sample (tem_control.TemLoop.sample) in one call, state in place.
+
+    x (2, 2) observer faces [degC]: stepped dt_obs [s] (if > 0) under ``command`` (2,) [V], the
+    command in force, then its muscle faces set to T_meas (2,). rate, T_d_prev (2, 2): the law's
+    filtered dT_d/dt and previous target (TemController.estimate_rate; ``has_prev`` False: rate 0),
+    dt_law [s] since that target. T_d (2,) muscle targets, also used on the exchanger faces (weight 0).
+    rng (2, 2): predictive command range (rows lo, hi), recomputed first if ``refresh``.
+    Writes the new command into ``command`` and per-layer bits SATURATED | LIMITED | HOT into flags.
+    Returns OK, or BAD_STATE / BAD_TARGET / BAD_COMMAND (non-finite) leaving ``command`` as it was.
+    """
+    if dt_obs > 0:
+        observer_step(x, command, dt_obs, th_coef)
+    for l in range(2):
+        x[l, 0] = T_meas[l]
+    for l in range(2):
+        for f in range(2):
+            if not math.isfinite(x[l, f]):
+                return BAD_STATE
+    Td = np.empty((2, 2))
+    for l in range(2):
+        if not math.isfinite(T_d[l]):
+            return BAD_TARGET
+        Td[l, 0] = T_d[l]
+        Td[l, 1] = T_d[l]
+    for l in range(2):  # Eq. 5.41's dT_d/dt: filtered backward difference
+        for f in range(2):
+            if has_prev:
+                raw = (Td[l, f] - T_d_prev[l, f]) / dt_law
+                rate[l, f] = rate[l, f] + dt_law / (cfg[1] + dt_law) * (raw - rate[l, f])
+            else:
+                rate[l, f] = 0.0
+            T_d_prev[l, f] = Td[l, f]
+    h = cfg[2:4]
+    u = np.empty(2)
+    face = np.empty((2, 2))
+    no_root = np.empty((2, 2), np.bool_)
+    sat = np.empty(2, np.bool_)
+    if not linearising_command(x, Td, rate, th_coef, cfg[0], h, cfg[4], cfg[5], u, face, no_root, sat):
+        return BAD_COMMAND
+    predictive = cfg[6] != 0.0
+    if predictive and refresh:
+        held_command_range(x, candidates, cfg[7], int(cfg[8]), cfg[9], cfg[10], th_coef, rng[0], rng[1])
+    hold_lo, hold_hi = max(cfg[14], cfg[12]), min(cfg[15], cfg[13])
+    for l in range(2):  # tem_control.protected_command
+        if predictive:
+            v = min(max(u[l], rng[0, l]), rng[1, l])
+            if not (cfg[9] <= x[l, 0] <= cfg[10] and cfg[9] <= x[l, 1] <= cfg[10]):
+                v = min(max(v, hold_lo), hold_hi)
+        elif x[l, 0] > cfg[11] or x[l, 1] > cfg[11]:
+            v = min(max(u[l], hold_lo), hold_hi)
+        else:
+            v = min(max(u[l], cfg[12]), cfg[13])
+        bits = SATURATED if sat[l] else 0
+        if v != u[l]:
+            bits |= LIMITED
+        if T_meas[l] > cfg[16]:  # too hot a muscle may only be cooled
+            bits |= HOT
+            v = min(v, 0.0)
+        command[l] = v
+        flags[l] = bits
+    return OK
+
+
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel here on dummy data.
 
@@ -126,3 +203,7 @@ def warm_up() -> None:
     linearising_command(x, x, np.zeros((2, 2)), coef, 1.0, np.array([1.0, 0.0]), -1.0, 1.0, two.copy(),
                         np.empty((2, 2)), np.empty((2, 2), np.bool_), np.empty(2, np.bool_))
     held_command_range(x, np.linspace(-1.0, 1.0, 3), 1.0, 1, 0.0, 80.0, coef, two.copy(), two.copy())
+    cfg = np.zeros(len(CONFIG_FIELDS))
+    cfg[[0, 2, 5, 7, 8, 10]] = 1.0
+    control_sample(x, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)), two.copy(), np.zeros(2, np.int64),
+                   two + 30.0, two + 30.0, 0.01, 0.01, True, True, coef, cfg, np.linspace(-1.0, 1.0, 3))

@@ -28,15 +28,11 @@ from std_msgs.msg import Float64
 from sma_wrist.core import tem_kernel
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.tem_control import TemController as TemLaw
-from sma_wrist.core.tem_control import (DriveLimits, TemControlParams, observer_step, protected_command,
-                                        safe_command_range)
+from sma_wrist.core.tem_control import DriveLimits, TemControlParams, TemLoop
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
 DRIVE = DriveLimits()
-#: how often the predicted safe command range is recomputed [s] (the faces move over seconds)
-RANGE_REFRESH_S = 0.1
 
 
 class TemController(WristNode):
@@ -63,14 +59,12 @@ class TemController(WristNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('tem_controller', **kwargs)
         tem_kernel.warm_up()  # compile before the first sample, not inside the loop
-        self._build()
-        self.observer = th.rest_state(self.thermal, 1)  # (1, 2 layers, 2 faces)
+        self.loop = self._build_loop(None)
         self.T_meas = np.full(2, np.nan)
         self.T_d = np.full(2, np.nan)
         self.t_meas = [0.0, 0.0]  # stamp [s] of the latest measurement per muscle
         self.new_meas = [False, False]
-        self.command_V = np.zeros(2)
-        self.t_last: float | None = None
+        self._status: tuple[bool, bool, bool] | None = None  # (hot, saturated, fresh) last diagnosed
         self.meas = Freshness(self, ('muscle_1', 'muscle_2'))
         self.targets = Freshness(self, ('target_1', 'target_2'))
         self.pub_cmd = [self.publisher(f'/wrist/tem_{i}/command') for i in (1, 2)]
@@ -79,24 +73,35 @@ class TemController(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature_desired', lambda m, i=i: self._on_target(i, m))
         self.watchdog = self.create_timer(0.05, self._check_stale)
 
+    @property
+    def observer(self) -> np.ndarray:
+        """(1, 2 layers, 2 faces) observed TEM faces [degC]."""
+        return self.loop.observer
+
+    @property
+    def command_V(self) -> np.ndarray:
+        """(2,) commands in force [V]."""
+        return self.loop.command_V
+
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
         if problem is None and not values['face_min_C'] < values['face_max_C']:
             problem = f'face_min_C = {values["face_min_C"]} must be below face_max_C = {values["face_max_C"]}'
         return problem
 
-    def _build(self) -> None:
+    def _build_loop(self, old: TemLoop | None) -> TemLoop:
         p = self.p
-        self.drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'], p['predictive_protection'],
-                                 p['face_min_C'], p['face_max_C'], p['protection_horizon_s'])
-        self.command_range = None
-        self.range_t: float | None = None
-        self.thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
-        self.law = TemLaw(self.thermal, TemControlParams(gain_per_s=p['gain_per_s'],
-                                                         rate_filter_s=p['rate_filter_s']))
+        drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'], p['predictive_protection'],
+                            p['face_min_C'], p['face_max_C'], p['protection_horizon_s'])
+        thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
+        loop = TemLoop(thermal, TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s']),
+                       drive, LIMITS, p['max_muscle_temperature_C'])
+        if old is not None:  # new gains and limits act on the same observed TEMs and command in force
+            loop.observer, loop.command_V, loop.t_last = old.observer, old.command_V, old.t_last
+        return loop
 
     def apply(self, changed: Mapping[str, Any]) -> None:
-        self._build()
+        self.loop = self._build_loop(self.loop)
 
     # -- inputs ------------------------------------------------------------------
     def _on_temperature(self, i: int, msg: Any) -> None:
@@ -122,52 +127,41 @@ class TemController(WristNode):
 
     # -- control -----------------------------------------------------------------
     def _control(self) -> None:
-        t = max(self.t_meas)
-        dt = None if self.t_last is None else t - self.t_last
-        if dt is not None and dt <= 0:
-            return  # a repeated or out-of-order sample: the command in force stays
-        if dt is not None and dt > 0:
-            # observer: propagate with the commands in force since the last sample
-            self.observer = observer_step(self.thermal, self.observer, self.command_V[None, :],
-                                          min(dt, self.thermal.dt_max_s))
-        self.t_last = t
-        self.observer[0, :, 0] = self.T_meas
-        if self.targets.stale(self.p['stale_timeout_s']):
-            self._send(np.zeros(2))
-            return
-        T_d = np.stack([self.T_d, self.T_d], axis=-1)[None]  # exchanger targets unused with weights (1, 0)
+        fresh = not self.targets.stale(self.p['stale_timeout_s'])
         try:
-            res = self.law.update(t, self.observer, T_d)
+            res = self.loop.sample(max(self.t_meas), self.T_meas, self.T_d if fresh else None)
         except SmaWristError as e:
             self.diagnose('law', DiagnosticStatus.ERROR, f'TEM law failed, TEMs off: {e}')
-            self._send(np.zeros(2))
+            self._send(self.loop.off())
             return
-        if self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S):
-            self.command_range = safe_command_range(LIMITS, self.drive, self.observer)
-            self.range_t = t
-        u_prot, limited = protected_command(LIMITS, self.drive, self.observer, res.command_V, self.command_range)
-        u = u_prot[0].copy()
-        hot = self.T_meas > self.p['max_muscle_temperature_C']
-        u = np.where(hot, np.minimum(u, 0.0), u)
-        sat = res.saturated[0] | limited[0]
-        self.diagnose('over_temperature', DiagnosticStatus.ERROR if hot.any() else DiagnosticStatus.OK,
-                      'muscle above limit: heating blocked' if hot.any() else 'muscle temperatures below limit',
+        if res is None:
+            return  # a repeated or out-of-order sample: the command in force stays
+        if fresh:
+            self._report(bool(res.hot.any()), bool(res.saturated.any()))
+        self._send(res.command_V)
+
+    def _report(self, hot: bool, sat: bool) -> None:
+        # diagnose publishes on change only; skip building its arguments while nothing changed
+        if self._status == (hot, sat):
+            return
+        self._status = (hot, sat)
+        self.diagnose('over_temperature', DiagnosticStatus.ERROR if hot else DiagnosticStatus.OK,
+                      'muscle above limit: heating blocked' if hot else 'muscle temperatures below limit',
                       {'T_1_C': f'{self.T_meas[0]:.2f}', 'T_2_C': f'{self.T_meas[1]:.2f}'})
-        self.diagnose('saturation', DiagnosticStatus.WARN if sat.any() else DiagnosticStatus.OK,
-                      'command clipped to the drive limits' if sat.any() else 'commands within limits')
+        self.diagnose('saturation', DiagnosticStatus.WARN if sat else DiagnosticStatus.OK,
+                      'command clipped to the drive limits' if sat else 'commands within limits')
         self.diagnose('watchdog', DiagnosticStatus.OK, 'measurements and targets fresh')
-        self._send(u)
 
     def _check_stale(self) -> None:
         stale = self.meas.stale(self.p['stale_timeout_s'])
         if stale and self.meas.seen_all():
+            self._status = None  # the next good sample reports the recovery
             self.diagnose('watchdog', DiagnosticStatus.ERROR, f'no fresh {", ".join(stale)} temperature: TEMs off')
-            self._send(np.zeros(2))
+            self._send(self.loop.off())
 
     def _send(self, u: np.ndarray) -> None:
-        self.command_V = np.asarray(u, dtype=float)
         for i in range(2):
-            self.pub_cmd[i].publish(Float64(data=float(self.command_V[i])))
+            self.pub_cmd[i].publish(Float64(data=float(u[i])))
 
 
 def main(args: list[str] | None = None) -> int:
