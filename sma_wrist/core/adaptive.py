@@ -246,17 +246,20 @@ class AdaptiveController:
             raise ModelInputError('dt', dt, '(0, inf)', 's')
         names = (('q', 'rad'), ('qdot', 'rad/s'), ('q_d', 'rad'), ('qdot_d', 'rad/s'), ('qddot_d', 'rad/s^2'))
         raw = (q, qdot, q_d, qdot_d, qddot_d)
-        try:
-            stacked = np.empty((5, self.n))
-            for i, x in enumerate(raw):
-                stacked[i] = x  # broadcasts scalars and (n,) arrays alike
-        except (ValueError, TypeError):
-            shapes = [np.shape(x) for x in raw]
-            raise ModelInputError('shapes of (q, qdot, q_d, qdot_d, qddot_d)', shapes,
-                                  f'broadcastable to ({self.n},)') from None
-        if not np.isfinite(stacked).all():
-            for (name, unit), x in zip(names, raw):
-                check_finite(name, x, unit)  # raises, naming the first non-finite input
+        if self.n == 1 and all(type(x) is float and math.isfinite(x) for x in raw):
+            stacked = np.array(raw).reshape(5, 1)  # one wrist, finite floats: the node's every sample
+        else:
+            try:
+                stacked = np.empty((5, self.n))
+                for i, x in enumerate(raw):
+                    stacked[i] = x  # broadcasts scalars and (n,) arrays alike
+            except (ValueError, TypeError):
+                shapes = [np.shape(x) for x in raw]
+                raise ModelInputError('shapes of (q, qdot, q_d, qdot_d, qddot_d)', shapes,
+                                      f'broadcastable to ({self.n},)') from None
+            if not np.isfinite(stacked).all():
+                for (name, unit), x in zip(names, raw):
+                    check_finite(name, x, unit)  # raises, naming the first non-finite input
         # Eqs. 5.24, 5.32, 5.37 per scenario (adaptive_kernel: compiled with numba, else plain Python)
         st = self.state
         if self._k is None or self._k[0] is not p:

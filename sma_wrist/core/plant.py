@@ -85,6 +85,18 @@ class PlantState:
                           self.payload_kg.copy(), {k: v.copy() for k, v in self.flags.items()})
 
 
+def _within(u: FloatArray, lo: float, hi: float) -> bool:
+    """Every element of u in [lo, hi] (False for NaN). A wrist's two commands are checked as
+    floats: numpy's min and max cost ~3 us on two numbers, called every tick."""
+    if u.size <= 8:
+        return all(lo <= v <= hi for v in u.ravel().tolist())
+    return bool(u.min() >= lo and u.max() <= hi)  # NaN propagates into both
+
+
+#: PlantState arrays plant_kernel.step_many advances in place, in its argument order
+KERNEL_STATE = ('thermal', 'q', 'qd', 'w', 'heating', 'T_prev', 'load_kgf', 'compliance', 'payload_kg')
+
+
 class WristPlant:
     """N simulated wrists stepped together. See the module docstring for the step."""
 
@@ -97,6 +109,7 @@ class WristPlant:
         self.n = payload.size
         self.muscles = MuscleModel(self.params.hysteresis, self.params.muscle)
         self._kernel_constants: tuple[PlantParams, tuple[np.ndarray, ...]] | None = None
+        self._kernel_arrays: tuple[np.ndarray, ...] | None = None  # state arrays checked for the kernel
         self.state = self.rest_state(payload)
         if plant_kernel.AVAILABLE and self.params.engine == 'auto':
             # the first compiled step loads (or compiles) the kernel: 0.1-0.3 s from numba's cache.
@@ -156,12 +169,16 @@ class WristPlant:
         return self._torque_and_stiffness(sol.load_kgf, sol.compliance_mm_per_kgf) + (
             sol.slack[: self.n] | sol.slack[self.n:], sol.overload[: self.n] | sol.overload[self.n:])
 
+    def _torque(self, load: FloatArray) -> FloatArray:
+        """(N,) net muscle torque [N m] of the stacked (2N,) wire loads [kgf]: N g R_eff (m1 - m2)."""
+        p = self.params
+        return p.muscle.n_wires * G * p.joint.r_eff_m * (load[: self.n] - load[self.n:])
+
     def _torque_and_stiffness(self, load: FloatArray, compliance: FloatArray) -> tuple[FloatArray, FloatArray]:
         p = self.params
         n_g_r = p.muscle.n_wires * G * p.joint.r_eff_m
-        m1, m2 = load[: self.n], load[self.n:]
         c1, c2 = compliance[: self.n], compliance[self.n:]
-        torque = n_g_r * (m1 - m2)
+        torque = self._torque(load)
         # d tau/dq = -N g R_eff (R_mm / c1 + R_mm / c2) with R_mm = dx/dq in mm/rad
         stiffness = n_g_r * 1e3 * p.joint.r_eff_m * (1.0 / c1 + 1.0 / c2)
         return torque, stiffness
@@ -178,8 +195,7 @@ class WristPlant:
         u = np.asarray(command_V, dtype=float)
         if u.shape != (self.n, 2):
             u = np.broadcast_to(u, (self.n, 2))
-        lo, hi = u.min(), u.max()  # NaN propagates into both, so the checks below catch it
-        if lo >= tp.u_min_V and hi <= tp.u_max_V:
+        if _within(u, tp.u_min_V, tp.u_max_V):
             clipped = None
         else:
             check_finite('TEM command', u, 'V')
@@ -211,19 +227,26 @@ class WristPlant:
             return s
         tp = p.thermal
         s = self.state
-        u = np.array(np.broadcast_to(np.asarray(command_V, dtype=float), (self.n, 2)))
-        check_finite('TEM command', u, 'V')
-        uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
-        clipped = (uc != u).any(axis=1)
+        u = np.asarray(command_V, dtype=float)
+        if u.shape != (self.n, 2):
+            u = np.broadcast_to(u, (self.n, 2))
+        if _within(u, tp.u_min_V, tp.u_max_V):
+            uc, clipped = np.ascontiguousarray(u), np.zeros(self.n, bool)
+        else:
+            check_finite('TEM command', u, 'V')
+            uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
+            clipped = (uc != u).any(axis=1)
         if self._kernel_constants is None or self._kernel_constants[0] is not p:
             self._kernel_constants = (p, plant_kernel.pack_constants(p))
-        for name in ('thermal', 'q', 'qd', 'w', 'heating', 'T_prev', 'load_kgf', 'compliance', 'payload_kg'):
-            a = getattr(s, name)
-            if not (a.flags.c_contiguous and a.flags.writeable):
-                setattr(s, name, np.ascontiguousarray(a).copy())
+        arrays = (s.thermal, s.q, s.qd, s.w, s.heating, s.T_prev, s.load_kgf, s.compliance, s.payload_kg)
+        if self._kernel_arrays is None or any(a is not b for a, b in zip(arrays, self._kernel_arrays)):
+            # the kernel writes the state in place: it needs its own writeable, C-ordered arrays
+            for name, a in zip(KERNEL_STATE, arrays):
+                if not (a.flags.c_contiguous and a.flags.writeable):
+                    setattr(s, name, np.ascontiguousarray(a).copy())
+            self._kernel_arrays = arrays = tuple(getattr(s, name) for name in KERNEL_STATE)
         flags = np.zeros((self.n, 4), bool)
-        plant_kernel.step_many(int(n_steps), uc, s.thermal, s.q, s.qd, s.w, s.heating, s.T_prev, s.load_kgf,
-                               s.compliance, s.payload_kg, flags, *self._kernel_constants[1])
+        plant_kernel.step_many(int(n_steps), uc, *arrays, flags, *self._kernel_constants[1])
         s.t += n_steps * p.dt
         s.flags = {'command_saturated': clipped, 'over_temperature': flags[:, 0], 'slack': flags[:, 1],
                    'overload': flags[:, 2], 'at_stop': flags[:, 3]}
@@ -285,7 +308,7 @@ class WristPlant:
     @property
     def muscle_torque_Nm(self) -> FloatArray:
         """(N,) net muscle torque at the output shaft."""
-        return self._torque_and_stiffness(self.state.load_kgf, self.state.compliance)[0]
+        return self._torque(self.state.load_kgf)
 
     def simulate(self, commands_V: ArrayLike, record_every: int = 1) -> dict[str, FloatArray]:
         """Open-loop run under a command history of shape (K, N, 2) or (K, 2); returns recorded arrays."""

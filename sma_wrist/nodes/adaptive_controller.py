@@ -22,7 +22,7 @@ from typing import Any, Mapping
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Header
 
 from sma_wrist.core import adaptive_kernel
 from sma_wrist.core.adaptive import AdaptiveParams
@@ -31,7 +31,7 @@ from sma_wrist.core.joint_controller import JointController as JointLaw
 from sma_wrist.core.joint_controller import JointControllerParams
 from sma_wrist.core.muscle import MuscleGeometry
 from sma_wrist.core.pid import PIDParams
-from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 
 DEFAULTS = JointControllerParams()
 NONNEGATIVE_PREFIXES = ('c1', 'c2', 'gamma', 'kp', 'ki', 'kd', 'boundary', 'tracking', 'derivative_filter', 'reversal')
@@ -119,6 +119,7 @@ class AdaptiveController(WristNode):
         self.reference: tuple[float, float, float] | None = None
         self.T_meas = np.full(2, np.nan)
         self.t_last: float | None = None
+        self._saturated: bool | None = None  # last diagnosed
         self.fresh = Freshness(self, ('reference', 'joint_states'))
         self.pub_strain = [self.publisher(f'/wrist/muscle_{i}/strain_desired') for i in (1, 2)]
         self.pub_stress = [self.publisher(f'/wrist/muscle_{i}/stress_desired') for i in (1, 2)]
@@ -194,26 +195,29 @@ class AdaptiveController(WristNode):
         except SmaWristError as e:
             self.diagnose('law', DiagnosticStatus.ERROR, f'control law failed, output stopped: {e}')
             return
-        self.diagnose('saturation', DiagnosticStatus.WARN if cmd.saturated else DiagnosticStatus.OK,
-                      'command saturated: reference beyond what the muscles can reach' if cmd.saturated
-                      else 'command within limits', {k: f'{v:.4g}' for k, v in cmd.info.items()})
+        if cmd.saturated != self._saturated:  # diagnose publishes on change only: skip building its values
+            self._saturated = cmd.saturated
+            self.diagnose('saturation', DiagnosticStatus.WARN if cmd.saturated else DiagnosticStatus.OK,
+                          'command saturated: reference beyond what the muscles can reach' if cmd.saturated
+                          else 'command within limits', {k: f'{v:.4g}' for k, v in cmd.info.items()})
         self._publish(cmd)
 
     def _publish(self, cmd: Any) -> None:
+        strain = cmd.strain_desired.tolist()
         for i in range(2):
-            self.pub_strain[i].publish(Float64(data=float(cmd.strain_desired[i])))
+            self.pub_strain[i].publish(Float64(data=strain[i]))
         if cmd.force_N is not None:
             # one wire's stress: the bundle force is shared by its parallel wires
             stress = self.geometry.stress_Pa(np.asarray(cmd.force_N) / (self.geometry.n_wires * 9.81))
+            stress = stress.tolist()
             for i in range(2):
-                self.pub_stress[i].publish(Float64(data=float(stress[i])))
+                self.pub_stress[i].publish(Float64(data=stress[i]))
         if cmd.temperature_desired_C is not None:
             stamp = self.get_clock().now().to_msg()
+            T = cmd.temperature_desired_C.tolist()
             for i in range(2):
-                m = Temperature(temperature=float(cmd.temperature_desired_C[i]), variance=0.0)
-                m.header.stamp = stamp
-                m.header.frame_id = f'muscle_{i + 1}'
-                self.pub_T[i].publish(m)
+                self.pub_T[i].publish(Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]),
+                                                  temperature=T[i], variance=0.0))
 
     def _check_stale(self) -> None:
         stale = self.fresh.stale(self.p['stale_timeout_s'])

@@ -29,6 +29,8 @@ from sma_wrist.core.errors import SmaWristError
 
 #: a /diagnostics condition that keeps changing is logged at most this often per key [s]
 LOG_THROTTLE_S = 10.0
+#: header.frame_id of the per-muscle temperature messages (measured and desired)
+MUSCLE_FRAMES = ('muscle_1', 'muscle_2')
 
 
 @dataclass(frozen=True)

@@ -25,16 +25,15 @@ from typing import Any, Mapping
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
-from rclpy.time import Time
+from builtin_interfaces.msg import Time as TimeMsg
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, Temperature
-from std_msgs.msg import Float64
+from std_msgs.msg import Float64, Header
 
 from sma_wrist.core import model_extensions as mx
-from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import PlantParams, WristPlant
-from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 
 
 #: window over which plant_sim compares simulated time with its clock [s of node clock]
@@ -106,7 +105,7 @@ class PlantSim(WristNode):
         self.steps_per_tick = max(1, int(round(1.0 / (p['publish_rate_hz'] * p['dt_s']))))
         self.command_V = np.zeros((1, 2))
         self.fresh = Freshness(self, ('tem_1', 'tem_2'))
-        self._tick_count = 0
+        self._status: tuple[Any, ...] | None = None  # (stale, saturated, hot, faces outside) last diagnosed
         self.real_time = RealTimeMonitor()
         self._slow_message: str | None = None
 
@@ -144,37 +143,47 @@ class PlantSim(WristNode):
 
     # -- simulation ------------------------------------------------------------
     def _tick(self) -> None:
-        stale = [n for n in self.fresh.stale(self.p['command_timeout_s']) if self.fresh.stamp_ns[n] is not None]
-        u = self.command_V.copy()
-        for n in stale:
-            u[0, int(n[-1]) - 1] = 0.0
-        self.diagnose('command', DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
-                      f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh')
+        now_ns = self.get_clock().now().nanoseconds
+        timeout_ns = self.p['command_timeout_s'] * 1e9
+        stale = tuple(n for n, t in self.fresh.stamp_ns.items() if t is not None and now_ns - t > timeout_ns)
+        u = self.command_V
+        if stale:
+            u = u.copy()
+            for n in stale:
+                u[0, int(n[-1]) - 1] = 0.0
         try:
             s = self.plant.advance(u, self.steps_per_tick)
-            saturated = bool(s.flags['command_saturated'][0])
-            hot = bool(s.flags['over_temperature'][0])
         except SmaWristError as e:
             self.diagnose('model', DiagnosticStatus.ERROR, f'simulation stopped: {e}')
             self.timer.cancel()
             return
+        # the TEMs' own operating window (docs/thermal.md), sampled at the tick: faces move over seconds
+        lo, hi = self.sim_params.thermal.window_C
+        faces = s.thermal[0].ravel().tolist()
+        outside = not all(lo <= f <= hi for f in faces)  # NaN counts as outside
+        status = (stale, bool(s.flags['command_saturated'][0]), bool(s.flags['over_temperature'][0]), outside)
+        if status != self._status:  # diagnose publishes on change only: skip building its arguments
+            self._status = status
+            self._diagnose_tick(*status, faces)
+        self._publish_measurements()
+        self._check_real_time(now_ns)
+
+    def _diagnose_tick(self, stale: tuple[str, ...], saturated: bool, hot: bool, outside: bool,
+                       faces: list[float]) -> None:
+        self.diagnose('command', DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
+                      f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh')
         self.diagnose('saturation', DiagnosticStatus.WARN if saturated else DiagnosticStatus.OK,
                       'TEM command clipped to the drive limits' if saturated else 'commands within limits',
                       {'u_min_V': self.sim_params.thermal.u_min_V, 'u_max_V': self.sim_params.thermal.u_max_V})
         self.diagnose('temperature', DiagnosticStatus.ERROR if hot else DiagnosticStatus.OK,
                       f'muscle above {self.p["max_muscle_temperature_C"]} degC' if hot else 'temperatures normal')
-        # the TEMs' own operating window (docs/thermal.md), sampled at the tick: faces move over seconds
         lo, hi = self.sim_params.thermal.window_C
-        faces = s.thermal[0]
-        outside = bool(th.out_of_window(self.sim_params.thermal, faces).any())
         self.diagnose('tem_faces', DiagnosticStatus.ERROR if outside else DiagnosticStatus.OK,
                       f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
-                      {'hottest_C': f'{faces.max():.2f}', 'coldest_C': f'{faces.min():.2f}'} if outside else None)
-        self._publish_measurements()
-        self._check_real_time()
+                      {'hottest_C': f'{max(faces):.2f}', 'coldest_C': f'{min(faces):.2f}'} if outside else None)
 
-    def _check_real_time(self) -> None:
-        achieved = self.real_time.update(self.plant.state.t, self.get_clock().now().nanoseconds * 1e-9)
+    def _check_real_time(self, now_ns: int) -> None:
+        achieved = self.real_time.update(self.plant.state.t, now_ns * 1e-9)
         if achieved is None:
             return
         wanted = self.p['real_time_factor']
@@ -190,29 +199,28 @@ class PlantSim(WristNode):
                       {'achieved': f'{achieved:.3f}', 'real_time_factor': f'{wanted:g}'})
 
     def _stamp(self) -> Any:
-        return Time(nanoseconds=int(round(self.plant.state.t * 1e9))).to_msg()
+        ns = int(round(self.plant.state.t * 1e9))
+        return TimeMsg(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
     def _publish_measurements(self) -> None:
         stamp = self._stamp()
         self.pub_clock.publish(Clock(clock=stamp))
-        T = self.plant.muscle_temperature_C[0]
-        stress = self.plant.wire_stress_Pa[0]
-        s = self.plant.state
+        plant = self.plant
+        s = plant.state
+        T = plant.muscle_temperature_C[0]
         q_meas = float(s.q[0])
         if not self.sensors.identity:
             T = self.sensors.temperatures(T)
             q_meas = self.sensors.angle(q_meas)
+        T = T.tolist()
+        stress = plant.wire_stress_Pa[0].tolist()
         for i in range(2):
-            msg = Temperature(temperature=float(T[i]), variance=0.0)
-            msg.header.stamp = stamp
-            msg.header.frame_id = f'muscle_{i + 1}'
-            self.pub_temp[i].publish(msg)
-            self.pub_stress[i].publish(Float64(data=float(stress[i])))
-        js = JointState(name=[self.contract.joint_name], position=[q_meas], velocity=[float(s.qd[0])],
-                        effort=[float(self.plant.muscle_torque_Nm[0])])
-        js.header.stamp = stamp
-        js.header.frame_id = self.contract.frame_id
-        self.pub_joint.publish(js)
+            self.pub_temp[i].publish(Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]),
+                                                 temperature=T[i], variance=0.0))
+            self.pub_stress[i].publish(Float64(data=stress[i]))
+        self.pub_joint.publish(JointState(header=Header(stamp=stamp, frame_id=self.contract.frame_id),
+                                          name=[self.contract.joint_name], position=[q_meas],
+                                          velocity=[float(s.qd[0])], effort=[float(plant.muscle_torque_Nm[0])]))
 
     def _publish_payload(self) -> None:
         self.pub_payload.publish(Float64(data=float(self.p['payload_kg'])))
