@@ -41,6 +41,9 @@ class Trajectory(Protocol):
 
 def _time(t: ArrayLike) -> FloatArray:
     """Time as a float array; NaN/inf raise ModelInputError (an input, not a parameter)."""
+    if type(t) is float:  # the node's every sample: check the float, not a 0-d array (~2 us)
+        check_finite('t', t, 's')
+        return np.asarray(t)
     arr = np.asarray(t, dtype=float)
     check_finite('t', arr, 's')
     return arr

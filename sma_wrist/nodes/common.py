@@ -225,7 +225,11 @@ class WristNode(Node):
 
 
 def finite(*values: float) -> bool:
-    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)
+    """Every value a finite int or float."""
+    for v in values:  # a loop, not all(<generator>): called for every incoming sample
+        if not (isinstance(v, (int, float)) and math.isfinite(v)):
+            return False
+    return True
 
 
 class Freshness:

@@ -13,6 +13,7 @@ import dataclasses
 from typing import Any, Mapping
 
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.trajectory import GENERATORS, Trajectory, make_trajectory
@@ -71,15 +72,13 @@ class TrajectoryGenerator(WristNode):
         self.trajectory = self._build(self.p)
 
     def _tick(self) -> None:
-        now = self.now_ns()
+        now = self.get_clock().now()
         if self.t0_ns is None:
-            self.t0_ns = now
-        t = (now - self.t0_ns) * 1e-9
+            self.t0_ns = now.nanoseconds
+        t = (now.nanoseconds - self.t0_ns) * 1e-9
         q, qd, qdd = (float(x) for x in self.trajectory(t))
-        msg = JointState(name=[self.contract.joint_name], position=[q], velocity=[qd], effort=[qdd])
-        msg.header.stamp = self.get_clock().now().to_msg()
-        msg.header.frame_id = self.contract.frame_id
-        self.pub.publish(msg)
+        self.pub.publish(JointState(header=Header(stamp=now.to_msg(), frame_id=self.contract.frame_id),
+                                    name=[self.contract.joint_name], position=[q], velocity=[qd], effort=[qdd]))
 
 
 def main(args: list[str] | None = None) -> int:
