@@ -47,7 +47,7 @@ class Executor:
         self._cache_version = -1
         self._timers: list[Any] = []
         self._subs: list[Any] = []
-        self._entities: list[tuple[bool, Any]] = []
+        self._groups: list[tuple[list[Any], list[Any]]] = []  # per node: (timers, subscriptions)
         self.callbacks_run = 0
 
     @property
@@ -88,28 +88,26 @@ class Executor:
         version = self._context.graph.version
         if version == self._cache_version:
             return
-        ents: list[tuple[bool, Any]] = []
         timers: list[Any] = []
+        groups: list[tuple[list[Any], list[Any]]] = []
         for node in self._nodes:
-            for t in node._timers:
-                ents.append((True, t))
-                timers.append(t)
-            for s in node._subscriptions:
-                ents.append((False, s))
-        self._entities = ents
+            groups.append((list(node._timers), list(node._subscriptions)))
+            timers.extend(node._timers)
+        self._groups = groups
         self._timers = timers
         self._cache_version = version
 
     def _collect(self) -> list[tuple[bool, Any]]:
-        """One 'wait': every ready entity, in execution order."""
+        """One 'wait': every ready entity, in execution order (per node: timers, then subscriptions)."""
         self._refresh()
         ready = []
-        for is_timer, e in self._entities:
-            if is_timer:
-                if not e._canceled and e._clock._now_ns() >= e._next_call:
-                    ready.append((True, e))
-            elif e._queue:
-                ready.append((False, e))
+        for timers, subs in self._groups:
+            for t in timers:
+                if not t._canceled and t._clock._now_ns() >= t._next_call:
+                    ready.append((True, t))
+            for s in subs:
+                if s._queue:
+                    ready.append((False, s))
         return ready
 
     def _next_deadline(self) -> int:
