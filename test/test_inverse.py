@@ -178,6 +178,48 @@ def test_compiled_observe_and_solve_agree_with_the_numpy_path(seed: int, S: int)
         np.testing.assert_array_equal(comps[1].state.T_prev, comps[0].state.T_prev)
 
 
+@pytest.mark.skipif(not plant_kernel.AVAILABLE, reason='numba is not installed: there is only the numpy path')
+def test_compiled_observe_and_solve_compute_the_floats_of_their_python_source() -> None:
+    """The compiled one-wrist path (the residual inlined into the root search) is its own Python
+    source run by the interpreter, to the bit: compiling changes no operation and no order (no
+    fast-math, no fused multiply-add), so an inlining or a restructuring of calls that keeps the
+    source's operations keeps the node's numbers."""
+    from contextlib import ExitStack
+
+    from sma_wrist.core import inverse
+
+    P = default_sdgpi()
+    m_lo, m_hi = P.load_range
+
+    def run(interpreted: bool) -> np.ndarray:
+        out = []
+        with ExitStack() as stack:
+            if interpreted:
+                for module, names in ((inverse, ('_residual', '_refine', '_argmin_abs', '_nearest_root',
+                                                 '_invert_frozen', '_observe_step')), (plant_kernel, ('_envelopes',))):
+                    for name in names:
+                        stack.enter_context(mock.patch.object(module, name, getattr(module, name).py_func))
+            for seed in range(6):
+                rng = np.random.default_rng(seed)
+                T, m = rng.uniform(25.0, 70.0, 2), rng.uniform(m_lo, m_hi, 2)
+                comp = InverseCompensator(P, T_range=(20.0, 80.0))
+                comp.reset(T, m)
+                for k in range(40):
+                    T = T + rng.normal(0.0, 2.0, 2)
+                    m = m + rng.normal(0.0, 0.03, 2)  # some outside the range: observe clips
+                    comp.observe(T, m)
+                    m_in = np.clip(m, m_lo, m_hi)
+                    y_d = comp.output(m_in) + rng.normal(0.0, [0.05, 0.5, 3.0][k % 3], 2)  # some unreachable
+                    res = comp.solve(y_d, m_in, commit=False)
+                    st_ = comp.state
+                    out.append(np.concatenate([res.T, res.saturated, res.achieved_mm, st_.w.ravel(), st_.T_prev,
+                                               st_.heating]))
+        return np.concatenate(out)
+
+    compiled, interpreted = run(False), run(True)
+    assert np.array_equal(compiled, interpreted), f'{np.sum(compiled != interpreted)} of {compiled.size} differ'
+
+
 @pytest.mark.parametrize('numpy_path', [True, False])
 def test_bad_measurements_and_targets_raise_and_leave_the_memory(numpy_path: bool) -> None:
     P = default_sdgpi()
