@@ -34,44 +34,45 @@ from sma_wrist.core.pid import PIDParams
 from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 
 DEFAULTS = JointControllerParams()
-NONNEGATIVE_PREFIXES = ('c1', 'c2', 'gamma', 'kp', 'ki', 'kd', 'boundary', 'tracking', 'derivative_filter', 'reversal')
 
 
-#: what ``ros2 param describe`` says of each dataclass-derived parameter: (description, unit)
-FIELD_DOCS: dict[str, tuple[str, str]] = {
+#: what ``ros2 param describe`` says of each dataclass-derived parameter: (description, unit[, range]).
+#: Ranges are what a user may try on this wrist (well beyond the tuned values); the core dataclasses
+#: still check what ranges cannot say (c1 > 0, force_min_N <= preload_N <= force_max_N, ...).
+FIELD_DOCS: dict[str, tuple[Any, ...]] = {
     'mode': ('joint controller: inverse_adaptive (law + inverse SD-GPI compensator), direct_adaptive '
              '(law, force mapped to temperature) or pid (Sec. 6.1); docs/control.md', ''),
     'robust': ('robust term of Eq. 5.32: tanh boundary layer or sgn', ''),
     'p_mode': ('PID proportional term on the error, or error times its rate', ''),
     'derivative_on': ('PID derivative of the measurement (no kick on reference steps) or of the error', ''),
     'anti_windup': ('PID integrator anti-windup scheme', ''),
-    'c1': ('back-stepping gain C1 of z2 = e_dot + C1 e (Eq. 5.24)', '1/s'),
-    'c2': ('back-stepping gain C2 on z2 (Eq. 5.32)', '1/s'),
-    'gamma_a': ('adaptation gain of the payload estimate theta_hat (Eq. 5.37)', 'kg s^2/rad'),
-    'gamma_b1': ('adaptation gain of beta_hat_01, muscle 1 force gain (Eq. 5.37)', ''),
-    'gamma_b2': ('adaptation gain of beta_hat_02, muscle 2 force gain (Eq. 5.37)', ''),
-    'gamma_d1': ('adaptation gain of D_hat_b1, compensation error bound (Eq. 5.37)', ''),
-    'gamma_d2': ('adaptation gain of D_hat_b2, compensation error bound (Eq. 5.37)', ''),
-    'boundary_layer_rad_s': ('width of the tanh boundary layer replacing sgn(z2) in Eq. 5.32', 'rad/s'),
-    'theta0_kg': ('initial payload estimate theta_hat', 'kg'),
-    'beta0': ('initial force-gain estimates beta_hat_0i', ''),
-    'd0_rad_s2': ('initial compensation-error bounds D_hat_bi', 'rad/s^2'),
-    'preload_N': ('muscle pre-load force F_pre around which the commands act', 'N'),
-    'force_min_N': ('least desired muscle force', 'N'),
-    'force_max_N': ('largest desired muscle force', 'N'),
-    'kp': ('PID proportional gain (output in degC of differential temperature per rad)', 'degC/rad'),
-    'ki': ('PID integral gain', 'degC/(rad s)'),
-    'kd': ('PID derivative gain', 'degC s/rad'),
-    'derivative_filter_s': ('time constant of the PID derivative filter', 's'),
-    'output_min': ('lowest PID output (differential temperature)', 'degC'),
-    'output_max': ('highest PID output (differential temperature)', 'degC'),
-    'tracking_time_s': ('back-calculation anti-windup time constant', 's'),
-    'temperature_mid_C': ('centre of the muscles\' working band (direct and PID modes)', 'degC'),
-    'temperature_min_C': ('lowest desired muscle temperature', 'degC'),
-    'temperature_max_C': ('highest desired muscle temperature', 'degC'),
-    'force_per_degC_N': ('direct mode: force request per degC of temperature request', 'N/degC'),
+    'c1': ('back-stepping gain C1 of z2 = e_dot + C1 e (Eq. 5.24)', '1/s', (0.0, 5000.0)),
+    'c2': ('back-stepping gain C2 on z2 (Eq. 5.32)', '1/s', (0.0, 5000.0)),
+    'gamma_a': ('adaptation gain of the payload estimate theta_hat (Eq. 5.37)', 'kg s^2/rad', (0.0, 10.0)),
+    'gamma_b1': ('adaptation gain of beta_hat_01, muscle 1 force gain (Eq. 5.37)', '', (0.0, 10.0)),
+    'gamma_b2': ('adaptation gain of beta_hat_02, muscle 2 force gain (Eq. 5.37)', '', (0.0, 10.0)),
+    'gamma_d1': ('adaptation gain of D_hat_b1, compensation error bound (Eq. 5.37)', '', (0.0, 10.0)),
+    'gamma_d2': ('adaptation gain of D_hat_b2, compensation error bound (Eq. 5.37)', '', (0.0, 10.0)),
+    'boundary_layer_rad_s': ('width of the tanh boundary layer replacing sgn(z2) in Eq. 5.32', 'rad/s', (0.0, 10.0)),
+    'theta0_kg': ('initial payload estimate theta_hat', 'kg', (0.0, 1.5)),
+    'beta0': ('initial force-gain estimates beta_hat_0i', '', (0.2, 5.0)),
+    'd0_rad_s2': ('initial compensation-error bounds D_hat_bi', 'rad/s^2', (0.0, 1000.0)),
+    'preload_N': ('muscle pre-load force F_pre around which the commands act', 'N', (0.0, 3000.0)),
+    'force_min_N': ('least desired muscle force', 'N', (0.0, 3000.0)),
+    'force_max_N': ('largest desired muscle force', 'N', (0.0, 3000.0)),
+    'kp': ('PID proportional gain (output in degC of differential temperature per rad)', 'degC/rad', (0.0, 10000.0)),
+    'ki': ('PID integral gain', 'degC/(rad s)', (0.0, 10000.0)),
+    'kd': ('PID derivative gain', 'degC s/rad', (0.0, 1000.0)),
+    'derivative_filter_s': ('time constant of the PID derivative filter', 's', (0.0, 10.0)),
+    'output_min': ('lowest PID output (differential temperature)', 'degC', (-60.0, 0.0)),
+    'output_max': ('highest PID output (differential temperature)', 'degC', (0.0, 60.0)),
+    'tracking_time_s': ('back-calculation anti-windup time constant', 's', (0.0, 100.0)),
+    'temperature_mid_C': ('centre of the muscles\' working band (direct and PID modes)', 'degC', (0.0, 120.0)),
+    'temperature_min_C': ('lowest desired muscle temperature', 'degC', (0.0, 120.0)),
+    'temperature_max_C': ('highest desired muscle temperature', 'degC', (0.0, 120.0)),
+    'force_per_degC_N': ('direct mode: force request per degC of temperature request', 'N/degC', (0.0, 100.0)),
     'reversal_lead_s': ('inverse mode: start crossing the hysteresis gap this long before the joint must '
-                        'reverse (docs/control.md; 0 = Eq. 5.5 as composed in the seed)', 's'),
+                        'reverse (docs/control.md; 0 = Eq. 5.5 as composed in the seed)', 's', (0.0, 30.0)),
 }
 
 
@@ -88,7 +89,7 @@ def _fields_as_params(cls: type, prefix: str, skip: tuple[str, ...] = (), defaul
             continue
         v = getattr(default, f.name)
         name = prefix + f.name
-        text, unit = FIELD_DOCS.get(f.name, ('', ''))
+        text, unit, *limits = FIELD_DOCS.get(f.name, ('', ''))
         doc = f'{text} ({cls.__name__}.{f.name})' if text else f'{cls.__name__}.{f.name} (sma_wrist.core)'
         choices = typing.get_args(hints[f.name]) if typing.get_origin(hints[f.name]) is typing.Literal else ()
         if choices:
@@ -96,8 +97,9 @@ def _fields_as_params(cls: type, prefix: str, skip: tuple[str, ...] = (), defaul
         elif isinstance(v, bool):
             out.append(Param(name, v, doc))
         elif isinstance(v, (int, float)):
-            lo = 0.0 if f.name.startswith(NONNEGATIVE_PREFIXES) else -1e9
-            out.append(Param(name, float(v), doc, unit, (lo, 1e9)))
+            if not limits:
+                raise ValueError(f'{cls.__name__}.{f.name} has no range in FIELD_DOCS: give it one')
+            out.append(Param(name, float(v), doc, unit, limits[0]))
     return tuple(out)
 
 
