@@ -8,6 +8,7 @@ from sma_wrist.core.compensation import MuscleCompensator
 from sma_wrist.core.default_params import default_sdgpi
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.hysteresis import initial_state
+from sma_wrist.core.inverse import InverseCompensator
 from sma_wrist.core.muscle import MuscleGeometry, MuscleModel
 
 
@@ -40,3 +41,68 @@ def test_unreachable_target_saturates_and_out_of_range_load_is_flagged():
     assert res.load_clipped.tolist() == [False, True]
     with pytest.raises(ModelInputError):
         comp(np.array([np.nan, 0.02]), g.stress_Pa(np.array([0.8, 0.8])))
+
+
+def _wrist_sequence(n: int = 300) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(measured T, measured stress, desired strain, desired stress) of two muscles along a slow
+    antagonistic swing, loads partly outside the SD-GPI's range (below, above, zero)."""
+    g = MuscleGeometry()
+    t = np.arange(n)[:, None] * 0.01
+    phase = np.array([0.0, np.pi])
+    T = 45.0 + 20.0 * np.sin(0.7 * t + phase)
+    load = 0.85 + 0.5 * np.sin(1.3 * t + phase)  # kgf, 0.35-1.35: the range is narrower
+    load[::37] = 0.0
+    strain = (2.0 + 1.2 * np.sin(0.9 * t + phase)) / g.wire_length_mm
+    return T, g.stress_Pa(load), strain, g.stress_Pa(load * 1.01)
+
+
+def test_wrist_coordinates_are_the_muscle_geometry_to_the_bit() -> None:
+    """Load m = sigma A / g clipped to the SD-GPI's range (MuscleGeometry.load_kgf) and the SD-GPI
+    target (eps L_wire - c_el m) / (L_wire / L_model), as the node gets them, equal the geometry's
+    numpy expressions bit for bit, and so does the memory observe leaves."""
+    params, g = default_sdgpi(), MuscleGeometry()
+    lo, hi = params.load_range
+    comp = MuscleCompensator(params, g)
+    ref = InverseCompensator(params, T_range=(20.0, 80.0))
+    T, sigma, strain, sigma_d = _wrist_sequence()
+    comp.reset(T[0], sigma[0])
+    ref.reset(T[0], np.clip(g.load_kgf(sigma[0]), lo, hi))
+    clipped_seen = False
+    for k in range(1, len(T)):
+        comp.observe(T[k], sigma[k])
+        ref.observe(T[k], np.clip(g.load_kgf(sigma[k]), lo, hi))
+        res = comp(strain[k], sigma_d[k], commit=False)
+        m = g.load_kgf(sigma_d[k])
+        np.testing.assert_array_equal(res.load_kgf, np.clip(m, lo, hi))
+        np.testing.assert_array_equal(res.load_clipped, (m < lo) | (m > hi))
+        y = (strain[k] * g.wire_length_mm - g.elastic_mm_per_kgf * res.load_kgf) / g.length_scale
+        np.testing.assert_array_equal(res.sdgpi_elongation_mm, y)
+        np.testing.assert_array_equal(res.temperature_C, ref.solve(y, res.load_kgf, commit=False).T)
+        clipped_seen |= bool(res.load_clipped.any())
+    np.testing.assert_array_equal(comp.inverse.state.w, ref.state.w)
+    np.testing.assert_array_equal(comp.inverse.state.T_prev, ref.state.T_prev)
+    assert clipped_seen
+    # one stress for both muscles (broadcast): the same numbers, the load in the stress's shape
+    res = comp(strain[5], sigma_d[5, 0], commit=False)
+    assert res.load_kgf.shape == res.load_clipped.shape == () and res.sdgpi_elongation_mm.shape == (2,)
+    np.testing.assert_array_equal(res.sdgpi_elongation_mm, comp(strain[5], sigma_d[5, [0, 0]], commit=False)
+                                  .sdgpi_elongation_mm)
+
+
+@pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
+def test_non_finite_strain_or_stress_is_rejected_and_leaves_the_memory(bad: float) -> None:
+    params, g = default_sdgpi(), MuscleGeometry()
+    comp = MuscleCompensator(params, g)
+    stress = g.stress_Pa(np.array([0.8, 0.9]))
+    comp.reset(np.array([40.0, 45.0]), stress)
+    before = comp.inverse.state.copy()
+    with pytest.raises(ModelInputError, match='measured stress'):
+        comp.observe(np.array([41.0, 41.0]), np.array([stress[0], bad]))
+    with pytest.raises(ModelInputError, match='desired strain'):
+        comp(np.array([bad, 0.02]), stress, commit=False)
+    with pytest.raises(ModelInputError, match='desired stress'):
+        comp(np.array([0.02, 0.02]), np.array([bad, stress[1]]), commit=False)
+    with pytest.raises(ModelInputError, match='desired stress'):  # more wires than the few-float test covers
+        MuscleCompensator(params, g)(np.full(12, 0.02), np.r_[np.full(11, stress[0]), bad])
+    np.testing.assert_array_equal(comp.inverse.state.w, before.w)
+    np.testing.assert_array_equal(comp.inverse.state.T_prev, before.T_prev)

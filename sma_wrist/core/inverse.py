@@ -132,10 +132,13 @@ class InverseResult:
     achieved_mm: FloatArray
 
 
+_F64 = np.dtype(np.float64)  # the dtype of every native float64 array (an identity test, not a comparison)
+
+
 def _per_wire(x: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
     """x as a float array of the memory's shape: x itself when it already is one (the node's call:
     no broadcast, no copy, the kernels only read it), else a broadcast copy."""
-    if type(x) is np.ndarray and x.shape == shape and x.dtype == np.float64 and x.flags.c_contiguous:
+    if type(x) is np.ndarray and x.shape == shape and x.dtype is _F64 and x.flags.c_contiguous:
         return x
     return np.broadcast_to(np.asarray(x, float), shape).copy()
 
@@ -334,6 +337,7 @@ class InverseCompensator:
                                np.ascontiguousarray(params.thresholds, f64), np.ascontiguousarray(params.weights, f64),
                                np.ascontiguousarray(params.c, f64), np.ascontiguousarray(params.d, f64),
                                float(params.p0), float(params.k_f))
+        self._observe_params = (*params.T_valid, *params.load_range, *self._kernel_params[:3])  # _observe_step's
 
     # -- memory
     def reset(self, T0: ArrayLike, load_kgf: ArrayLike, *, branch: str = 'cooling') -> None:
@@ -350,17 +354,16 @@ class InverseCompensator:
         temperature chatters between branches). Observing the measurement keeps the memory true.
         """
         st_ = self._require_state()
-        lo, hi = self.params.T_valid
-        lo_m, hi_m = self.params.load_range
         T = _per_wire(T, st_.T_prev.shape)
         m = _per_wire(load_kgf, st_.T_prev.shape)
         if _pk.AVAILABLE:  # the node calls this at 100 Hz: ~100 us of numpy per call -> a few us
-            stacked, edges, r = self._kernel_params[:3]
             heating = st_.heating.copy()
-            if _observe_step(T, m, lo, hi, lo_m, hi_m, stacked, edges, r, st_.w, heating, st_.T_prev):
+            if _observe_step(T, m, *self._observe_params, st_.w, heating, st_.T_prev):
                 st_.heating = heating
                 self._w_hat = None
                 return
+        lo, hi = self.params.T_valid
+        lo_m, hi_m = self.params.load_range
         T = np.clip(T, lo, hi)  # NaN stays NaN and is reported below
         m = np.clip(m, lo_m, hi_m)
         check_finite('measured wire temperature', T, 'degC')
