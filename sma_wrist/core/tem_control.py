@@ -479,7 +479,7 @@ class TemLoop:
             raise ParameterError(f'TemLoop runs two layers, weights {TWO_LAYER_WEIGHTS}; got {params.weights!r}')
         self.thermal, self.params, self.drive, self.hold = thermal, params, drive, hold
         self.max_muscle_C = float(max_muscle_C)
-        self.compiled = tem_kernel.AVAILABLE if compiled is None else bool(compiled) and tem_kernel.AVAILABLE
+        self.compiled = tem_kernel.AVAILABLE if compiled is None else bool(compiled)  # True without numba: plain Python
         self.law = TemController(thermal, params)
         self.observer = th.rest_state(thermal, 1)  # (1, 2 layers, 2 faces)
         self.command_V = np.zeros(2)  # in force since the last sample
