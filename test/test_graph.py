@@ -163,3 +163,16 @@ def test_cli_bad_input_is_a_clear_error_not_a_traceback(args, message):
     r = _cli(*args)
     assert r.returncode == 2
     assert message in r.stderr and 'Traceback' not in r.stderr
+
+
+def test_floor_benchmark_runs_the_contracts_topology_every_tick():
+    """The benchmark's ceiling graph has what the contract says: every periodic topic published
+    once per tick and delivered to each of its subscribers (the /clock ones through sim time),
+    plus the two timers (plant, trajectory) -- so its speed is the runtime's cost of this graph."""
+    from sma_wrist.contract import load_contract
+    from sma_wrist.runtime.bench import bench_contract_floor
+    periodic = [t for t in load_contract().topics.values() if t.rate_hz > 0]
+    r = bench_contract_floor(0.5)
+    assert r['published_per_tick'] == len(periodic) == 16
+    assert r['deliveries_per_tick'] == sum(len(t.subscribers) for t in periodic) == 20
+    assert r['callbacks_per_tick'] == 2 + r['deliveries_per_tick']
