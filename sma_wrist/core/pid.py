@@ -34,6 +34,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sma_wrist.core import pid_kernel
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, format_choices
 
 FloatArray = NDArray[np.float64]
@@ -107,56 +108,38 @@ class PID:
 
     def reset(self) -> None:
         self.integral = np.zeros(self.n)
-        self._e_prev: FloatArray | None = None
-        self._y_prev: FloatArray | None = None
+        self._has_prev = False
+        self._e_prev = np.zeros(self.n)
+        self._y_prev = np.zeros(self.n)
         self._edot = np.zeros(self.n)
         self._ydot = np.zeros(self.n)
-
-    def _filtered_rate(self, x: FloatArray, prev: FloatArray | None, d: FloatArray, dt: float) -> FloatArray:
-        if prev is None:
-            return np.zeros(self.n)
-        tau = self.params.derivative_filter_s
-        return (tau * d + (x - prev)) / (tau + dt)
+        self._k: tuple[PIDParams, FloatArray] | None = None
 
     def update(self, q: ArrayLike, q_d: ArrayLike, dt: float) -> PIDOutput:
-        """One control step: measured angle q, reference q_d (rad), step dt (s)."""
+        """One control step: measured angle q, reference q_d (rad), step dt (s).
+
+        The law above runs as one loop over the scenarios (:mod:`sma_wrist.core.pid_kernel`,
+        compiled with numba when installed).
+        """
         p = self.params
         if not (isinstance(dt, (int, float, np.integer, np.floating)) and math.isfinite(dt) and dt > 0):
             raise ModelInputError('dt', dt, '(0, inf)', 's')
         check_finite('q', q, 'rad')
         check_finite('q_d', q_d, 'rad')
         try:
-            y = np.broadcast_to(np.asarray(q, float), (self.n,)).copy()
-            r = np.broadcast_to(np.asarray(q_d, float), (self.n,))
+            y = np.ascontiguousarray(np.broadcast_to(np.asarray(q, float), (self.n,)))
+            r = np.ascontiguousarray(np.broadcast_to(np.asarray(q_d, float), (self.n,)))
         except ValueError:
             raise ModelInputError('q.shape, q_d.shape', (np.shape(q), np.shape(q_d)),
                                   f'broadcastable to ({self.n},)') from None
-        e = r - y
-        self._edot = self._filtered_rate(e, self._e_prev, self._edot, dt)
-        self._ydot = self._filtered_rate(y, self._y_prev, self._ydot, dt)
-        self._e_prev, self._y_prev = e, y
-
-        if p.p_mode == 'plain':
-            P = p.kp * e
-        elif p.p_mode == 'p_times_rate':
-            P = p.kp * e * self._edot
-        else:
-            P = p.kp * e * np.abs(self._edot)
-        D = -p.kd * self._ydot if p.derivative_on == 'measurement' else p.kd * self._edot
-        I = self.integral.copy()
-        u = P + I + D
-        u_out = np.clip(u, p.output_min, p.output_max)
-        sat = u != u_out
-
-        di = p.ki * e * dt
-        if p.anti_windup == 'conditional':
-            # freeze only when integrating would push further into the active limit
-            winding = ((u > p.output_max) & (di > 0)) | ((u < p.output_min) & (di < 0))
-            di = np.where(winding, 0.0, di)
-        elif p.anti_windup == 'back_calculation':
-            di = di + (u_out - u) * dt / p.tracking_time_s
-        self.integral = I + di
-        return PIDOutput(u=u_out, u_unsat=u, saturated=sat, error=e, p_term=P, i_term=I, d_term=D)
+        if self._k is None or self._k[0] is not p:
+            self._k = (p, pid_kernel.pack(p))
+        out = np.empty((self.n, len(pid_kernel.OUT_FIELDS)))
+        pid_kernel.update(y, r, float(dt), self._has_prev, self.integral, self._e_prev, self._y_prev, self._edot,
+                          self._ydot, self._k[1], out)
+        self._has_prev = True
+        return PIDOutput(u=out[:, 0], u_unsat=out[:, 1], saturated=out[:, 2] != 0.0, error=out[:, 3],
+                         p_term=out[:, 4], i_term=out[:, 5], d_term=out[:, 6])
 
 
 __all__ = ['PIDParams', 'PIDOutput', 'PID']

@@ -24,7 +24,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
 from std_msgs.msg import Float64, Header
 
-from sma_wrist.core import adaptive_kernel
+from sma_wrist.core import adaptive_kernel, pid_kernel
 from sma_wrist.core.adaptive import AdaptiveParams
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.joint_controller import JointController as JointLaw
@@ -116,6 +116,7 @@ class AdaptiveController(WristNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('adaptive_controller', **kwargs)
         adaptive_kernel.warm_up()  # compile before the first sample, not inside the loop
+        pid_kernel.warm_up()
         self.law = JointLaw(self._core_params(self.p))
         self.geometry = MuscleGeometry()
         self.reference: tuple[float, float, float] | None = None
