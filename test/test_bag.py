@@ -196,6 +196,7 @@ def test_unclosed_recording_is_salvageable(tmp_path):
     with pytest.raises(BagError, match='metadata.yaml is missing') as err:
         read_bag(bag)
     assert len(err.value.salvaged['/wrist/joint_states'][1]) == 100
+    rec._writer.storage.bio.close()  # what the OS does with a killed process's file
 
 
 def test_missing_bag_and_garbage_are_typed_errors(tmp_path):
