@@ -246,6 +246,7 @@ def test_cli_emulator_on_a_pty(tmp_path):
     finally:
         proc.terminate()
         proc.wait(10)
+        proc.stdout.close()
 
 
 #: tolerance of the hardware-in-the-loop run vs the simulator, percentage points of the reference range.
@@ -273,6 +274,7 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     finally:
         proc.terminate()
         proc.wait(10)
+        proc.stdout.close()
     sim = run_closed_loop('direct_adaptive', 0.3, 126.0, tmp_path / 'sim')
     run = load_run(tmp_path / 'hw')
     m = run_metrics(run)
