@@ -214,8 +214,8 @@ def bench_experiment(quick: bool = False) -> dict:
     ctrls = ['inverse_adaptive', 'direct_adaptive', 'pid']
     loads = [0.1, 0.6] if quick else [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
     duration = 10.0 if quick else 4 * math.pi / 0.1
-    with tempfile.TemporaryDirectory() as d:
-        t = run_experiment(ctrls, loads, d, duration_s=duration, workers=2, plots=False, log=open(os.devnull, 'w'))
+    with tempfile.TemporaryDirectory() as d, open(os.devnull, 'w') as log:
+        t = run_experiment(ctrls, loads, d, duration_s=duration, workers=2, plots=False, log=log)
     return {'runs': len(t['runs']), 'sim_time_per_run_s': duration, 'wall_s_total': t['wall_s'], 'workers': 2}
 
 

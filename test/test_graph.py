@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -26,9 +27,10 @@ def experiment_dir(tmp_path_factory):
     """Two periods of the Sec. 6.1 reference per controller and payload, in parallel processes."""
     from sma_wrist.experiment import run_experiment
     out = tmp_path_factory.mktemp('ch6')
-    kw = dict(duration_s=4 * math.pi / 0.1, workers=2, plots=False, log=open('/dev/null', 'w'))
-    run_experiment(['direct_adaptive'], DIRECT_LOADS, out / 'direct', **kw)
-    run_experiment(['inverse_adaptive', 'pid'], PID_LOADS, out / 'main', **kw)  # report of both at six loads
+    with open(os.devnull, 'w') as log:
+        kw = dict(duration_s=4 * math.pi / 0.1, workers=2, plots=False, log=log)
+        run_experiment(['direct_adaptive'], DIRECT_LOADS, out / 'direct', **kw)
+        run_experiment(['inverse_adaptive', 'pid'], PID_LOADS, out / 'main', **kw)  # report of both at six loads
     return out
 
 
