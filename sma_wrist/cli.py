@@ -12,6 +12,7 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
+from sma_wrist.cli_options import diagnose_arguments, emulator_arguments
 from sma_wrist.core.errors import SmaWristError
 
 
@@ -207,14 +208,12 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument('--json', action='store_true')
     i.set_defaults(func=cmd_info)
 
-    from sma_wrist.diagnose import add_arguments as diagnose_arguments
     d = diagnose_arguments(sub.add_parser(
         'diagnose', help='what the model gets wrong in a recorded run: locate, name, extend, measure (docs/diagnose.md)'))
     d.set_defaults(func=cmd_diagnose)
 
-    from sma_wrist.hw.emulator import add_arguments as _emulator_arguments
     d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (docs/protocol.md)')
-    _emulator_arguments(d)
+    emulator_arguments(d)
     d.set_defaults(func=cmd_emulate_device)
 
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')

@@ -25,6 +25,7 @@ import numpy as np
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
+from sma_wrist.cli_options import diagnose_arguments as add_arguments
 from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
 __all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main']
@@ -261,16 +262,6 @@ def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out:
     """Diagnose the bag at `path`; raises DiagnoseInputError for unusable input."""
     run = load_run(path)
     return diagnose_run(run, report_dir, params_out, candidates)
-
-
-def add_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """The ``diagnose`` options (shared by ``sma-wrist diagnose`` and ``python -m sma_wrist.diagnose``)."""
-    ap.add_argument('bag', help='rosbag2 directory (or .mcap) recorded per msg_defs/topics.yaml')
-    ap.add_argument('--json', action='store_true', help='print one JSON object instead of text')
-    ap.add_argument('--report', metavar='DIR', help='write diagnosis.md, PNG plots and extended_params.yaml here')
-    ap.add_argument('--params', metavar='FILE', help='write the extended model as a plant_sim params file')
-    ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
-    return ap
 
 
 def run_cli(args: argparse.Namespace) -> int:

@@ -27,6 +27,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from sma_wrist.cli_options import emulator_arguments as add_arguments
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration, quantise
 
@@ -328,27 +329,6 @@ class DeviceEmulator:
 
 
 # --------------------------------------------------------------------------- command line
-def add_arguments(ap: argparse.ArgumentParser) -> None:
-    """Options of ``sma-wrist emulate-device`` (also ``python -m sma_wrist.hw.emulator``)."""
-    ap.add_argument('--port', default=None, help='create a symlink to the pty here (default: print the pty path)')
-    ap.add_argument('--rate-hz', type=float, default=1000.0, help='sample rate in device time [Hz] (default 1000)')
-    ap.add_argument('--time-scale', type=float, default=1.0, help='device seconds per wall second (default 1)')
-    ap.add_argument('--payload-kg', type=float, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
-    ap.add_argument('--noise-counts', type=float, default=2.0, help='ADC noise, std dev [counts] (default 2)')
-    ap.add_argument('--latency-ms', type=float, default=1.0, help='command -> drive delay, device time [ms]')
-    ap.add_argument('--watchdog-s', type=float, default=0.5, help='zero drive without commands [device s]')
-    ap.add_argument('--seed', type=int, default=0)
-    ap.add_argument('--thermocouple-offsets-C', default='0,0,0,0',
-                    help='sensor errors of muscle 1, muscle 2, TEM face 1, TEM face 2 [degC]')
-    ap.add_argument('--garbage-rate', type=float, default=0.0, help='probability of garbage before a line')
-    ap.add_argument('--checksum-error-rate', type=float, default=0.0, help='probability of a wrong CRC per line')
-    ap.add_argument('--partial-rate', type=float, default=0.0, help='probability of a cut line')
-    ap.add_argument('--reset-every-s', type=float, default=0.0, help='device reset period [device s] (0: never)')
-    ap.add_argument('--unplug-every-s', type=float, default=0.0, help='unplug period [device s] (0: never)')
-    ap.add_argument('--unplug-wall-s', type=float, default=0.5, help='how long an unplug lasts [wall s]')
-    ap.add_argument('--duration', type=float, default=None, help='stop after this many wall seconds')
-
-
 def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
     offsets = tuple(float(x) for x in a.thermocouple_offsets_C.split(','))
     if len(offsets) != 4:

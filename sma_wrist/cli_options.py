@@ -1,0 +1,40 @@
+"""Options of the sub-commands whose implementations are slow to import.
+
+``sma-wrist`` builds its whole parser for every command; defining these options next to their
+implementations made every command import scipy.signal and the plant (~1.5 s) before it did
+anything. The implementations import them from here for their own ``python -m`` entry points.
+"""
+from __future__ import annotations
+
+import argparse
+
+
+def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``diagnose`` options (shared by ``sma-wrist diagnose`` and ``python -m sma_wrist.diagnose``)."""
+    ap.add_argument('bag', help='rosbag2 directory (or .mcap) recorded per msg_defs/topics.yaml')
+    ap.add_argument('--json', action='store_true', help='print one JSON object instead of text')
+    ap.add_argument('--report', metavar='DIR', help='write diagnosis.md, PNG plots and extended_params.yaml here')
+    ap.add_argument('--params', metavar='FILE', help='write the extended model as a plant_sim params file')
+    ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
+    return ap
+
+
+def emulator_arguments(ap: argparse.ArgumentParser) -> None:
+    """Options of ``sma-wrist emulate-device`` (also ``python -m sma_wrist.hw.emulator``)."""
+    ap.add_argument('--port', default=None, help='create a symlink to the pty here (default: print the pty path)')
+    ap.add_argument('--rate-hz', type=float, default=1000.0, help='sample rate in device time [Hz] (default 1000)')
+    ap.add_argument('--time-scale', type=float, default=1.0, help='device seconds per wall second (default 1)')
+    ap.add_argument('--payload-kg', type=float, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
+    ap.add_argument('--noise-counts', type=float, default=2.0, help='ADC noise, std dev [counts] (default 2)')
+    ap.add_argument('--latency-ms', type=float, default=1.0, help='command -> drive delay, device time [ms]')
+    ap.add_argument('--watchdog-s', type=float, default=0.5, help='zero drive without commands [device s]')
+    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--thermocouple-offsets-C', default='0,0,0,0',
+                    help='sensor errors of muscle 1, muscle 2, TEM face 1, TEM face 2 [degC]')
+    ap.add_argument('--garbage-rate', type=float, default=0.0, help='probability of garbage before a line')
+    ap.add_argument('--checksum-error-rate', type=float, default=0.0, help='probability of a wrong CRC per line')
+    ap.add_argument('--partial-rate', type=float, default=0.0, help='probability of a cut line')
+    ap.add_argument('--reset-every-s', type=float, default=0.0, help='device reset period [device s] (0: never)')
+    ap.add_argument('--unplug-every-s', type=float, default=0.0, help='unplug period [device s] (0: never)')
+    ap.add_argument('--unplug-wall-s', type=float, default=0.5, help='how long an unplug lasts [wall s]')
+    ap.add_argument('--duration', type=float, default=None, help='stop after this many wall seconds')
