@@ -178,3 +178,12 @@ def test_floor_benchmark_runs_the_contracts_topology_every_tick():
     assert r['published_per_tick'] == len(periodic) == 16
     assert r['deliveries_per_tick'] == sum(len(t.subscribers) for t in periodic) == 20
     assert r['callbacks_per_tick'] == 2 + r['deliveries_per_tick']
+
+
+def test_cli_parser_does_not_import_the_heavy_subcommands():
+    """Every sma-wrist command builds the whole parser: it must not import scipy.signal (diagnose)
+    or the plant (emulator), ~1.5 s of start-up for a command that needs neither."""
+    code = ('import sys; from sma_wrist import cli; cli.build_parser(); '
+            'print(sorted(m for m in ("scipy.signal", "sma_wrist.diagnose", "sma_wrist.core.plant") if m in sys.modules))')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == '[]'
