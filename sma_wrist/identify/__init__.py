@@ -1,0 +1,1 @@
+"""Identification of the wrist's models from measured data (seed Chapter 4): ``sma-wrist identify``."""
