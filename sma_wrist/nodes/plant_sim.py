@@ -33,6 +33,7 @@ from std_msgs.msg import Float64, Header
 from sma_wrist.core import model_extensions as mx
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import PlantParams, WristPlant
+from sma_wrist.core.thermal_file import load_thermal_file
 from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 
 
@@ -80,6 +81,8 @@ class PlantSim(WristNode):
         Param('command_timeout_s', 0.5, 'a TEM command older than this is replaced by 0 V', 's', (0.01, 60.0)),
         Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature threshold (reported)', 'degC',
               (30.0, 120.0)),
+        Param('thermal_file', '', 'identified TEM heat balance (sma-wrist identify thermal; empty: Table 4.9)',
+              runtime=False),
     ) + tuple(
         # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
         Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
@@ -89,8 +92,11 @@ class PlantSim(WristNode):
         super().__init__('plant_sim', **kwargs)
         p = self.p
         ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
-        self.sim_params = mx.plant_params(ext, PlantParams(dt=p['dt_s'],
-                                                           max_muscle_temperature_C=p['max_muscle_temperature_C']))
+        base = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'])
+        if p['thermal_file']:  # identified TEMs; the plant still clips at the driver rating
+            lim = base.thermal
+            base = replace(base, thermal=load_thermal_file(p['thermal_file']).with_limits(lim.u_min_V, lim.u_max_V))
+        self.sim_params = mx.plant_params(ext, base)
         # /wrist/payload publishes payload_kg (what the user believes); the joint carries the true mass
         self.payload_err_kg = ext['payload_err_kg']
         true_payload = max(p['payload_kg'] + self.payload_err_kg, 0.0)

@@ -29,6 +29,7 @@ from sma_wrist.core import tem_kernel
 from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.tem_control import DriveLimits, TemControlParams, TemLoop
+from sma_wrist.core.thermal_file import load_thermal_file
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
@@ -54,10 +55,14 @@ class TemController(WristNode):
               f'[{LIMITS.u_min_V:g}, {LIMITS.u_max_V:g}] V', 'degC', (30.0, 80.0)),
         Param('max_muscle_temperature_C', 85.0, 'above this a muscle is only cooled', 'degC', (30.0, 120.0)),
         Param('stale_timeout_s', 0.25, 'measurement/target age that switches the TEMs off', 's', (0.01, 10.0)),
+        Param('thermal_file', '', 'identified TEM heat balance for the law, observer and protection '
+              '(sma-wrist identify thermal; empty: Table 4.9)', runtime=False),
     )
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('tem_controller', **kwargs)
+        # the model of the TEMs (law, observer, protection) with its own hold limits
+        self.hold = load_thermal_file(self.p['thermal_file']) if self.p['thermal_file'] else LIMITS
         tem_kernel.warm_up()  # compile before the first sample, not inside the loop
         self.loop = self._build_loop(None)
         self.T_meas = np.full(2, np.nan)
@@ -93,9 +98,9 @@ class TemController(WristNode):
         p = self.p
         drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'], p['predictive_protection'],
                             p['face_min_C'], p['face_max_C'], p['protection_horizon_s'])
-        thermal = replace(LIMITS, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
+        thermal = replace(self.hold, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
         loop = TemLoop(thermal, TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s']),
-                       drive, LIMITS, p['max_muscle_temperature_C'])
+                       drive, self.hold, p['max_muscle_temperature_C'])
         if old is not None:  # new gains and limits act on the same observed TEMs and command in force
             loop.observer, loop.command_V, loop.t_last = old.observer, old.command_V, old.t_last
         return loop

@@ -1,0 +1,114 @@
+"""The thermal params file: an identified TEM heat balance (Table 4.9 layout) the wrist loads.
+
+``sma-wrist identify thermal`` writes it; ``plant_sim`` and ``tem_controller`` read it through
+their ``thermal_file`` parameter with :func:`load_thermal_file` (the one loader), so the
+simulated TEMs, the controller's feedback-linearising law (Eqs. 5.38-5.47), its observer and
+its face protection all use the same identified model. Format (YAML, version 1)::
+
+    format: sma_wrist/thermal
+    version: 1
+    input_per_volt: 0.4          # I = -input_per_volt * u (u [V], positive heats the muscle face)
+    muscle_face:                 # T1 column of Table 4.9, Eq. 4.13 [1/(s I), 1/s, degC/(s I^2), degC/s]
+      K_alpha_tau: -0.004472
+      K_tau: -0.004207
+      K_T_inf: 0.052345
+      K_T: 0.028312
+      K_R: 0.012524
+      K_inf: 0.615142
+    exchanger_face: {...}        # T2 column, Eq. 4.14
+    hold_limits_V: [-12.0, 13.0] # commands held forever keep every face in window_C (docs/thermal.md)
+    window_C: [0.0, 80.0]
+    identification: {...}        # provenance and held-out errors; informative only
+
+Unknown top-level keys are rejected (a typo must not silently fall back to a default).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any, Mapping
+
+from sma_wrist.core import thermal as th
+from sma_wrist.core.errors import ParameterError
+
+FORMAT = 'sma_wrist/thermal'
+VERSION = 1
+FACE_KEYS = tuple(f.name for f in dataclasses.fields(th.FaceCoefficients))
+_KEYS = {'format', 'version', 'input_per_volt', 'muscle_face', 'exchanger_face', 'hold_limits_V', 'window_C',
+         'identification'}
+
+
+def thermal_file_dict(params: th.ThermalParams, identification: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The file's content for ``params`` (effective K_inf, i.e. with ambient_C folded in)."""
+    k_inf = params.K_inf
+    faces = {}
+    for i, (key, face) in enumerate((('muscle_face', params.muscle_face), ('exchanger_face', params.exchanger_face))):
+        row = {k: float(getattr(face, k)) for k in FACE_KEYS}
+        row['K_inf'] = float(k_inf[i])
+        faces[key] = row
+    return {'format': FORMAT, 'version': VERSION, 'input_per_volt': float(params.input_per_volt), **faces,
+            'hold_limits_V': [float(params.u_min_V), float(params.u_max_V)],
+            'window_C': [float(params.window_C[0]), float(params.window_C[1])],
+            'identification': dict(identification or {})}
+
+
+def write_thermal_file(path: str | Path, params: th.ThermalParams,
+                       identification: Mapping[str, Any] | None = None, header: str = '') -> Path:
+    """Write ``params`` as a version-1 thermal file (YAML) with an optional comment header."""
+    import yaml
+    p = Path(path)
+    text = ''.join(f'# {line}\n' if line else '#\n' for line in header.splitlines())
+    text += yaml.safe_dump(thermal_file_dict(params, identification), sort_keys=False, default_flow_style=False)
+    p.write_text(text)
+    return p
+
+
+def _number(path: Path, where: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ParameterError(f'{path}: {where} = {value!r} must be a finite number')
+    return float(value)
+
+
+def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) -> th.ThermalParams:
+    """ThermalParams from a thermal file; other fields (dt_max_s, coupling) from ``base``.
+
+    The command limits of the result are the file's hold limits. Raises ParameterError naming
+    the file and what is wrong (missing, not YAML, wrong format/version, a missing, unknown or
+    non-finite key, an inconsistent heat balance).
+    """
+    import yaml
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except OSError as e:
+        raise ParameterError(f'{p}: cannot read the thermal file ({e.strerror or e}); write one with '
+                             '`sma-wrist identify thermal ... --out DIR`') from None
+    except yaml.YAMLError as e:
+        raise ParameterError(f'{p}: not a YAML thermal file ({str(e).splitlines()[0]})') from None
+    if not isinstance(data, dict) or data.get('format') != FORMAT:
+        raise ParameterError(f'{p}: not a thermal file (need `format: {FORMAT}` at the top level)')
+    if data.get('version') != VERSION:
+        raise ParameterError(f'{p}: thermal file version {data.get("version")!r} is not supported (need {VERSION})')
+    unknown = sorted(set(data) - _KEYS)
+    if unknown:
+        raise ParameterError(f'{p}: unknown key(s) {", ".join(map(str, unknown))}; known: {", ".join(sorted(_KEYS))}')
+    faces = []
+    for key in ('muscle_face', 'exchanger_face'):
+        row = data.get(key)
+        if not isinstance(row, dict) or set(row) != set(FACE_KEYS):
+            raise ParameterError(f'{p}: {key} must map exactly {", ".join(FACE_KEYS)} to numbers')
+        faces.append(th.FaceCoefficients(**{k: _number(p, f'{key}.{k}', row[k]) for k in FACE_KEYS}))
+    limits = data.get('hold_limits_V', [None, None])
+    window = data.get('window_C', list((base or th.ThermalParams()).window_C))
+    if not (isinstance(limits, list) and len(limits) == 2 and isinstance(window, list) and len(window) == 2):
+        raise ParameterError(f'{p}: hold_limits_V and window_C must be [low, high] lists')
+    base = base or th.ThermalParams()
+    try:
+        return dataclasses.replace(
+            base, muscle_face=faces[0], exchanger_face=faces[1], ambient_C=None,
+            input_per_volt=_number(p, 'input_per_volt', data.get('input_per_volt')),
+            u_min_V=_number(p, 'hold_limits_V[0]', limits[0]), u_max_V=_number(p, 'hold_limits_V[1]', limits[1]),
+            window_C=(_number(p, 'window_C[0]', window[0]), _number(p, 'window_C[1]', window[1])))
+    except ParameterError as e:
+        raise ParameterError(f'{p}: {e}') from None

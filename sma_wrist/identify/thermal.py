@@ -1,0 +1,652 @@
+"""``sma-wrist identify thermal INPUT...``: Table 4.9 from measured drive voltage and temperatures.
+
+Inputs (seed Sec. 4.3.1: one TEM driven by 12 V sines at 1/128-1 Hz, both faces logged):
+
+* a **text table** (CSV, TSV, semicolon or whitespace separated; ``#`` comments; header
+  optional) with a time column, the drive voltage and the T1 (muscle) face temperature,
+  optionally the T2 (exchanger) face and a frequency column (one file holding several runs
+  is split by it). Columns are found by header name (``time``/``t``, ``u``/``voltage``,
+  ``T1``/``muscle``, ``T2``/``exchanger``, ``frequency``) or given with ``--columns``; units
+  in brackets (``time [ms]``, ``T1 [K]``, ``u [mV]``) or ``--*-unit`` options, else detected
+  with a warning (Kelvin temperatures);
+* a **rosbag2** recorded per msg_defs/topics.yaml (plant_sim or hardware_bridge): each
+  muscle is one run, ``/wrist/tem_i/command`` [V] with ``/wrist/muscle_i/temperature``
+  [degC]; only the muscle face is published, so only the T1 column is fitted.
+
+Cleaning (counted in the report): rows with NaN/unparseable cells dropped, unsorted stamps
+sorted, duplicate stamps removed (last kept), gaps longer than 2 s cut (longest stretch
+kept); then every run is put on one grid (``--dt``, default 0.1 s): temperatures linearly
+interpolated, the voltage sampled at the middle of each interval and held over it.
+
+The fit and its validation are :mod:`sma_wrist.core.thermal_identification`; this module
+reads, reports (markdown + PNG), and writes the params file (:mod:`sma_wrist.core.thermal_file`).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+from sma_wrist.core.errors import SmaWristError
+
+ROLES = ('time', 'u', 'T1', 'T2', 'frequency')
+_NAMES = {
+    'time': ('t', 'time', 'times', 'timestamp', 'sec', 'secs', 'seconds', 'time_s', 'elapsed', 't_s'),
+    'u': ('u', 'v', 'voltage', 'volt', 'volts', 'command', 'drive', 'input', 'u_v', 'tem_voltage', 'tem_command'),
+    'T1': ('t1', 'temp1', 'temperature1', 'temperature_1', 'temp_1', 'muscle', 'muscle_1', 'nitinol1', 'nitinol_1',
+           'face1', 'face_1', 't_1', 'muscle_temperature', 'tem_face_1'),
+    'T2': ('t2', 'temp2', 'temperature2', 'temperature_2', 'temp_2', 'exchanger', 'nitinol2', 'nitinol_2',
+           'face2', 'face_2', 't_2', 'exchanger_temperature', 'tem_face_2'),
+    'frequency': ('f', 'freq', 'frequency', 'f_hz', 'frequency_hz'),
+}
+TIME_UNITS = {'s': 1.0, 'sec': 1.0, 'ms': 1e-3, 'us': 1e-6, 'min': 60.0}
+VOLT_UNITS = {'v': 1.0, 'mv': 1e-3}
+TEMP_UNITS = ('degc', 'c', 'k', 'degf', 'f')
+MAX_GAP_S = 2.0
+MIN_DURATION_S = 30.0
+MAX_VOLTS = 50.0
+
+
+class ThermalInputError(SmaWristError):
+    """An input cannot be used; the message names the file and what is needed."""
+
+
+@dataclass
+class Cleaning:
+    """What cleaning did to one input file (counts)."""
+
+    rows: int = 0
+    dropped_nan: int = 0
+    unsorted: int = 0
+    duplicates: int = 0
+    gap_cut_s: float = 0.0
+    warnings: list[str] = field(default_factory=list)
+
+
+# ------------------------------------------------------------------------------ reading
+
+def _norm(name: str) -> tuple[str, str]:
+    """(normalised name, unit) of a header cell: 'Time [ms]' -> ('time', 'ms')."""
+    m = re.search(r'[\[(]\s*([^\])]*)\s*[\])]', name)
+    unit = m.group(1).strip().lower().replace('°', 'deg').replace(' ', '') if m else ''
+    base = re.sub(r'[\[(].*?[\])]', '', name).strip().lower()
+    base = re.sub(r'[^a-z0-9]+', '_', base).strip('_')
+    for suffix, u in (('_ms', 'ms'), ('_degc', 'degc'), ('_mv', 'mv'), ('_k', 'k')):
+        if base.endswith(suffix) and not unit and base[:-len(suffix)]:
+            base, unit = base[:-len(suffix)], u
+    return base, unit
+
+
+def _split(line: str, delim: str | None) -> list[str]:
+    return [c.strip() for c in (line.split(delim) if delim else line.split())]
+
+
+def read_table(path: Path) -> tuple[list[str] | None, list[list[str]]]:
+    """(header or None, rows of cells) of a delimited text file; '#' lines are comments."""
+    try:
+        text = path.read_text(errors='replace')
+    except IsADirectoryError:
+        raise ThermalInputError(f'{path}: is a directory but not a rosbag2 (no metadata.yaml or .mcap)') from None
+    except OSError as e:
+        raise ThermalInputError(f'{path}: cannot read ({e.strerror or e})') from None
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith('#')]
+    if not lines:
+        raise ThermalInputError(f'{path}: empty file (need a table: time, voltage, T1[, T2] per row)')
+    first = lines[0]
+    delim = next((d for d in ('\t', ',', ';') if d in first), None)
+    cells = _split(first, delim)
+
+    def numeric(c: str) -> bool:
+        try:
+            float(c)
+            return True
+        except ValueError:
+            return False
+    header = None if all(numeric(c) for c in cells) else cells
+    rows = [_split(ln, delim) for ln in (lines[1:] if header else lines)]
+    return header, rows
+
+
+def _roles(path: Path, header: list[str] | None, columns: dict[str, str] | None, ncol: int
+           ) -> tuple[dict[str, int], dict[str, str], list[str]]:
+    """Column index and header unit per role."""
+    warnings: list[str] = []
+    idx: dict[str, int] = {}
+    units: dict[str, str] = {}
+    normed = [_norm(h) for h in header] if header else []
+    if columns:
+        for role, ref in columns.items():
+            if ref.lstrip('-').isdigit():
+                i = int(ref)
+            elif header:
+                match = [k for k, h in enumerate(header) if h == ref or normed[k][0] == _norm(ref)[0]]
+                if not match:
+                    raise ThermalInputError(f'{path}: --columns {role}={ref}: no such column; header: {", ".join(header)}')
+                i = match[0]
+            else:
+                raise ThermalInputError(f'{path}: --columns {role}={ref}: the file has no header; give column numbers')
+            if not 0 <= i < ncol:
+                raise ThermalInputError(f'{path}: --columns {role}={ref}: column {i} does not exist ({ncol} columns)')
+            idx[role] = i
+    if header:
+        for k, (base, unit) in enumerate(normed):
+            for role in ROLES:
+                if role not in idx and k not in idx.values() and base in _NAMES[role]:
+                    idx[role] = k
+        for role in ('u', 'T1', 'T2'):  # looser: a column mentioning the role
+            if role in idx:
+                continue
+            key = {'u': 'volt', 'T1': 'muscle', 'T2': 'exchanger'}[role]
+            for k, (base, _) in enumerate(normed):
+                if key in base and k not in idx.values():
+                    idx[role] = k
+                    break
+        units = {role: normed[i][1] for role, i in idx.items()}
+    elif not columns:
+        if ncol < 3:
+            raise ThermalInputError(f'{path}: {ncol} column(s) and no header; need time, voltage, T1[, T2] '
+                                    '(or a header naming them, or --columns)')
+        idx = {'time': 0, 'u': 1, 'T1': 2, **({'T2': 3} if ncol >= 4 else {})}
+        warnings.append(f'{path.name}: no header; columns taken as time [s], u [V], T1 [degC]'
+                        + (', T2 [degC]' if ncol >= 4 else '') + ' (name them or use --columns)')
+    missing = [r for r in ('time', 'u', 'T1') if r not in idx]
+    if missing:
+        raise ThermalInputError(
+            f'{path}: no column for {", ".join(missing)}'
+            + (f' in header {", ".join(header)}' if header else '')
+            + '; need time [s], drive voltage u [V] and the T1 (muscle face) temperature [degC] (T2 optional); '
+              'name them in the header (time, u, T1, T2) or give --columns time=0,u=1,T1=2,T2=3')
+    return idx, units, warnings
+
+
+def _convert_time(path: Path, t: Any, unit: str) -> Any:
+    if unit and unit not in TIME_UNITS:
+        raise ThermalInputError(f'{path}: time unit {unit!r} is not one of {", ".join(TIME_UNITS)}')
+    return t * TIME_UNITS.get(unit or 's', 1.0)
+
+
+def _convert_temperature(path: Path, name: str, T: Any, unit: str, warnings: list[str]) -> Any:
+    import numpy as np
+    unit = unit.replace('deg', 'deg') if unit else ''
+    if unit in ('k', 'kelvin'):
+        return T - 273.15
+    if unit in ('degf', 'f'):
+        return (T - 32.0) * 5.0 / 9.0
+    if unit and unit not in ('degc', 'c', 'celsius'):
+        raise ThermalInputError(f'{path}: temperature unit {unit!r} of {name} is not one of degC, K, degF')
+    med = float(np.median(T)) if T.size else float('nan')
+    if not unit and 200.0 < med < 450.0:
+        warnings.append(f'{path.name}: {name} median {med:.1f} looks like Kelvin; converted to degC '
+                        '(say so with a [K] header unit or --temperature-unit K)')
+        return T - 273.15
+    if not -40.0 < med < 150.0:
+        raise ThermalInputError(f'{path}: {name} median {med:g} is not a TEM face temperature in degC (expected '
+                                'about 0-90 degC); give the unit with --temperature-unit (degC, K, degF)')
+    return T
+
+
+@dataclass
+class Series:
+    """One cleaned run before resampling (time [s], u [V], T1/T2 [degC])."""
+
+    name: str
+    t: Any
+    u: Any
+    T: Any  # (n, 2), NaN column when T2 is absent
+    frequency_Hz: float | None
+    source: str
+
+
+def load_table(path: Path, columns: dict[str, str] | None = None, units: dict[str, str] | None = None
+               ) -> tuple[list[Series], Cleaning]:
+    """Read, convert and clean one table; split by its frequency column if it has one."""
+    import numpy as np
+    header, rows = read_table(path)
+    ncol = max((len(r) for r in rows), default=0)
+    if header:
+        ncol = max(ncol, len(header))
+    idx, hdr_units, warnings = _roles(path, header, columns, ncol)
+    cl = Cleaning(rows=len(rows), warnings=warnings)
+    data = np.full((len(rows), ncol), np.nan)
+    short = 0
+    for i, r in enumerate(rows):
+        if len(r) < ncol:
+            short += 1
+        for j, c in enumerate(r[:ncol]):
+            try:
+                data[i, j] = float(c)
+            except ValueError:
+                pass
+    units = dict(units or {})
+    need = [idx['time'], idx['u'], idx['T1']] + ([idx['T2']] if 'T2' in idx else [])
+    bad = ~np.isfinite(data[:, need]).all(axis=1)
+    cl.dropped_nan = int(bad.sum())
+    if cl.dropped_nan:
+        cl.warnings.append(f'{path.name}: {cl.dropped_nan} of {len(rows)} rows with NaN, empty or unparseable cells '
+                           f'dropped' + (f' ({short} short rows)' if short else ''))
+    data = data[~bad]
+    if data.shape[0] < 10:
+        raise ThermalInputError(f'{path}: only {data.shape[0]} complete rows; need a run of at least '
+                                f'{MIN_DURATION_S:g} s with time, voltage and T1 in every row')
+    t = _convert_time(path, data[:, idx['time']], units.get('time') or hdr_units.get('time', ''))
+    vu = (units.get('u') or hdr_units.get('u', '') or 'v').lower()
+    if vu not in VOLT_UNITS:
+        raise ThermalInputError(f'{path}: voltage unit {vu!r} is not one of V, mV')
+    u = data[:, idx['u']] * VOLT_UNITS[vu]
+    if np.abs(u).max() > MAX_VOLTS:
+        raise ThermalInputError(f'{path}: drive voltages up to {np.abs(u).max():g} are not volts (a TEM drive is '
+                                f'within +-{MAX_VOLTS:g} V); give --voltage-unit mV, or convert a duty cycle to volts')
+    T = np.full((data.shape[0], 2), np.nan)
+    for f, role in enumerate(('T1', 'T2')):
+        if role in idx:
+            T[:, f] = _convert_temperature(path, role, data[:, idx[role]],
+                                           (units.get('temperature') or hdr_units.get(role, '')).lower(), cl.warnings)
+    freq = data[:, idx['frequency']] if 'frequency' in idx else None
+    groups = [None] if freq is None else sorted(set(np.round(freq, 9).tolist()))
+    out = []
+    for g in groups:
+        sel = np.ones(t.size, bool) if g is None else np.round(freq, 9) == g
+        ts, us, Ts = t[sel], u[sel], T[sel]
+        back = int((np.diff(ts) < 0).sum())
+        if back:
+            o = np.argsort(ts, kind='stable')
+            ts, us, Ts = ts[o], us[o], Ts[o]
+            cl.unsorted += back
+        dup = np.r_[np.diff(ts) == 0, False]
+        if dup.any():
+            cl.duplicates += int(dup.sum())
+            ts, us, Ts = ts[~dup], us[~dup], Ts[~dup]
+        label = path.name if g is None else f'{path.name} f={g:g} Hz'
+        out.append(Series(label, ts, us, Ts, None if g is None else float(g), str(path)))
+    if cl.unsorted:
+        cl.warnings.append(f'{path.name}: {cl.unsorted} time steps back; rows sorted by time')
+    if cl.duplicates:
+        cl.warnings.append(f'{path.name}: {cl.duplicates} duplicate time stamps removed (last kept)')
+    return out, cl
+
+
+def estimate_frequency(t: Any, u: Any) -> float | None:
+    """Dominant frequency of the drive [Hz] when it is a clear sine (>= 50 % of the AC power), else None.
+
+    Snapped to the seed's frequencies (1/128-1 Hz) when within 3 %.
+    """
+    import numpy as np
+    from sma_wrist.core.thermal import SEED_SINE_FREQUENCIES_HZ
+    if t.size < 16:
+        return None
+    dt = float(np.median(np.diff(t)))
+    x = u - u.mean()
+    p = np.abs(np.fft.rfft(x * np.hanning(x.size))) ** 2
+    if p[1:].sum() <= 0:
+        return None
+    k = int(np.argmax(p[1:])) + 1
+    if p[max(1, k - 2):k + 3].sum() < 0.5 * p[1:].sum():
+        return None
+    f = k / (x.size * dt)
+    for s in SEED_SINE_FREQUENCIES_HZ:
+        if abs(f - s) <= 0.03 * s:
+            return float(s)
+    return float(f)
+
+
+def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning) -> list[Any]:
+    """Resample cleaned runs onto the grid ``dt`` (module docstring) as ThermalRecords."""
+    import numpy as np
+    from sma_wrist.core.thermal_identification import ThermalRecord
+    out = []
+    for s in series:
+        t, u, T = s.t, s.u, s.T
+        gaps = np.flatnonzero(np.diff(t) > max(MAX_GAP_S, 5 * dt))
+        if gaps.size:
+            edges = np.r_[0, gaps + 1, t.size]
+            lengths = [t[b - 1] - t[a] for a, b in zip(edges[:-1], edges[1:])]
+            i = int(np.argmax(lengths))
+            a, b = edges[i], edges[i + 1]
+            cut = float(t[-1] - t[0] - (t[b - 1] - t[a]))
+            cleaning.gap_cut_s += cut
+            cleaning.warnings.append(f'{s.name}: {gaps.size} gap(s) longer than {max(MAX_GAP_S, 5 * dt):g} s; the '
+                                     f'longest gap-free stretch ({t[a] - t[0]:.1f}-{t[b - 1] - t[0]:.1f} s) is used')
+            t, u, T = t[a:b], u[a:b], T[a:b]
+        if t[-1] - t[0] < MIN_DURATION_S:
+            raise ThermalInputError(f'{s.source}: {s.name} covers only {t[-1] - t[0]:.1f} s; need at least '
+                                    f'{MIN_DURATION_S:g} s (the seed ran each frequency for several periods)')
+        grid = np.arange(t[0], t[-1] + 1e-9, dt)
+        src_dt = float(np.median(np.diff(t)))
+        at = grid + 0.5 * dt if src_dt < 0.75 * dt else grid  # mid-interval sample of a faster log
+        iu = np.clip(np.searchsorted(t, at + 1e-9, side='right') - 1, 0, t.size - 1)
+        Tg = np.stack([np.interp(grid, t, T[:, f]) if np.isfinite(T[:, f]).all() else np.full(grid.size, np.nan)
+                       for f in range(2)], axis=1)
+        freq = s.frequency_Hz if s.frequency_Hz is not None else estimate_frequency(t, u)
+        out.append(ThermalRecord(s.name, dt, u[iu], Tg, freq, source=s.source))
+    return out
+
+
+def _is_bag(p: Path) -> bool:
+    return p.suffix == '.mcap' or (p.is_dir() and ((p / 'metadata.yaml').exists() or any(p.glob('*.mcap'))))
+
+
+def load_bag(path: Path, dt: float) -> tuple[list[Any], Cleaning]:
+    """Both muscles of a recorded bag as muscle-face-only runs on the grid dt."""
+    import numpy as np
+    from sma_wrist.core.thermal_identification import ThermalRecord
+    from sma_wrist.diagnose.data import load_run
+    run = load_run(path, max_rate_hz=1.0 / dt)
+    if run.u is None or run.T is None:
+        raise ThermalInputError(f'{path}: need /wrist/tem_1/command, /wrist/tem_2/command (V) and '
+                                '/wrist/muscle_1/temperature, /wrist/muscle_2/temperature (degC) for identify thermal')
+    if abs(run.dt - dt) > 1e-6 * dt:
+        raise ThermalInputError(f'{path}: measurements every {run.dt:g} s cannot be put on the {dt:g} s grid; '
+                                f'use --dt {run.dt:g}')
+    cl = Cleaning(rows=run.n, warnings=list(run.warnings))
+    recs = []
+    for i in range(2):
+        T = np.stack([run.T[:, i], np.full(run.n, np.nan)], axis=1)
+        recs.append(ThermalRecord(f'{path.name} muscle {i + 1}', run.dt, run.u[:, i], T,
+                                  estimate_frequency(run.t, run.u[:, i]), valid=run.valid, source=str(path)))
+    return recs, cl
+
+
+def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None, units: dict[str, str]
+                ) -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
+    """Records from every input, the cleaning counts per file, and all warnings."""
+    records: list[Any] = []
+    cleaning: dict[str, dict[str, Any]] = {}
+    warnings: list[str] = []
+    for name in paths:
+        p = Path(name)
+        if not p.exists():
+            raise ThermalInputError(f'{p}: no such file (need a text table or a rosbag2 directory)')
+        if _is_bag(p):
+            recs, cl = load_bag(p, dt)
+        else:
+            series, cl = load_table(p, columns, units)
+            recs = to_records(series, dt, cl)
+        records += recs
+        cleaning[str(p)] = {'rows': cl.rows, 'dropped_nan': cl.dropped_nan, 'unsorted': cl.unsorted,
+                            'duplicates': cl.duplicates, 'gap_cut_s': round(cl.gap_cut_s, 3), 'runs': len(recs)}
+        warnings += cl.warnings
+    return records, cleaning, warnings
+
+
+# ------------------------------------------------------------------------------ report
+
+def _params_json(params: Any) -> dict[str, dict[str, float]]:
+    from sma_wrist.core.thermal_identification import FACE_KEYS, FACE_NAMES, table_of
+    tab = table_of(params)
+    return {FACE_NAMES[f]: {k: float(tab[f, j]) for j, k in enumerate(FACE_KEYS)} for f in range(2)}
+
+
+def _freq_label(f: float | None) -> str:
+    if f is None:
+        return 'n/a'
+    return f'1/{1 / f:g} Hz' if f < 1 else f'{f:g} Hz'
+
+
+def plot_record(path: Path, rec: Any, identified: Any, default: Any, title: str) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    import numpy as np
+    t = np.arange(rec.n) * rec.dt
+    faces = rec.faces
+    fig, axes = plt.subplots(len(faces) + 1, 1, figsize=(9, 2.4 * (len(faces) + 1)), sharex=True)
+    for ax, f in zip(axes, faces):
+        ax.plot(t, rec.T[:, f], 'k', lw=0.8, label='measured')
+        ax.plot(t, identified.simulated[:, f], 'C0', lw=1.0, label=f'identified ({identified.mode})')
+        ax.plot(t, default.simulated[:, f], 'C3--', lw=0.8, label='default (Table 4.9)')
+        if not identified.evaluated.all():
+            ev = identified.evaluated
+            ax.axvspan(t[np.argmax(ev)], t[ev.size - 1 - np.argmax(ev[::-1])], color='C0', alpha=0.06,
+                       label='scored samples')
+        ax.set_ylabel(f'{("T1 muscle", "T2 exchanger")[f]} [degC]')
+        ax.legend(loc='upper right', fontsize=7)
+    axes[-1].plot(t, rec.u, 'C2', lw=0.6)
+    axes[-1].set_ylabel('u [V]')
+    axes[-1].set_xlabel('t [s]')
+    axes[0].set_title(title, fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_summary(path: Path, holdout: Sequence[Any], before: dict[str, Any]) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    for i, e in enumerate(holdout):
+        for k, (face, st) in enumerate(e.faces.items()):
+            b = before[e.record].faces[face]['rms_C']
+            ax.bar(i + 0.2 * k - 0.1, st['rms_C'], 0.18, color=('C0', 'C1')[k], label=f'{face} held out' if i == 0 else None)
+            ax.plot(i + 0.2 * k - 0.1, b, 'rv', label='default model' if i == 0 and k == 0 else None)
+    ax.set_xticks(range(len(holdout)))
+    ax.set_xticklabels([_freq_label(e.frequency_Hz) if e.frequency_Hz else e.record[-12:] for e in holdout],
+                       fontsize=7, rotation=30)
+    ax.set_yscale('log')
+    ax.set_ylabel('RMS error [degC]')
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _stat_row(e: Any, face: str, st: dict[str, float], default_rms: float | None) -> str:
+    d = f'{default_rms:.3f}' if default_rms is not None else 'n/a'
+    return (f'| {e.record} | {_freq_label(e.frequency_Hz)} | {face} | {e.mode} | {st["max_pct"]:.2f} | {st["min_pct"]:.2f} | '
+            f'{st["mean_pct"]:.2f} | {st["std_pct"]:.2f} | {st["rms_C"]:.3f} | {st["max_abs_C"]:.3f} | {d} |')
+
+
+def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: Sequence[Any], summary: dict[str, Any],
+                 plots: bool = True) -> Path:
+    """thermal_identification.md with the tables and PNG plots in ``out``."""
+    from sma_wrist.core.thermal_identification import FACE_KEYS, FACE_NAMES, table_of
+    out.mkdir(parents=True, exist_ok=True)
+    before = {e.record: e for e in result.before}
+    lines = ['# TEM heat balance identified from measurements (seed Sec. 4.3, Tables 4.9-4.10)', '',
+             f'Inputs: {", ".join(summary["inputs"])}' + (f'; held-out files: {", ".join(summary["holdout_inputs"])}'
+                                                         if summary['holdout_inputs'] else ''),
+             f'Runs: {len(records)} fitted, {len(holdout_recs)} held-out files; grid {summary["dt_s"]:g} s; '
+             f'columns fitted: {", ".join(FACE_NAMES[f] for f in result.fit.faces)}; start: {result.fit.start}; '
+             f'{result.fit.nfev} simulations; wall {summary["wall_s"]:.1f} s.', '',
+             f'Params file: `{summary["params_file"]}` (hold limits {summary["hold_limits_V"]} V).', '']
+    if summary['warnings']:
+        lines += ['## Cleaning and warnings', ''] + [f'- {w}' for w in summary['warnings']] + ['']
+    lines += ['| file | rows | NaN rows dropped | steps back (sorted) | duplicate stamps | gap cut [s] | runs |',
+              '|---|---|---|---|---|---|---|']
+    for f, c in summary['cleaning'].items():
+        lines.append(f'| {f} | {c["rows"]} | {c["dropped_nan"]} | {c["unsorted"]} | {c["duplicates"]} | '
+                     f'{c["gap_cut_s"]} | {c["runs"]} |')
+    ident, default = table_of(result.fit.params), table_of(result.base)
+    lines += ['', '## Table 4.9: identified vs default', '',
+              '| parameter | T1 identified | T1 default | T2 identified | T2 default |', '|---|---|---|---|---|']
+    for j, k in enumerate(FACE_KEYS):
+        lines.append(f'| {k} | {ident[0, j]:.6g} | {default[0, j]:.6g} | {ident[1, j]:.6g} | {default[1, j]:.6g} |')
+    lines += ['', f'## Held-out errors (form of Table 4.10; validation: {result.validation})', '',
+              'e = measured - simulated, free-run from the measured start; % of the face\'s measured range in that '
+              'run (Eq. 4.3). "default RMS" is Table 4.9 on the same samples.', '',
+              '| run | frequency | face | how held out | max % | min % | mean % | std % | RMS degC | max abs degC | '
+              'default RMS degC |', '|---|---|---|---|---|---|---|---|---|---|---|']
+    for e in result.holdout:
+        for face, st in e.faces.items():
+            lines.append(_stat_row(e, face, st, before[e.record].faces[face]['rms_C'] if e.record in before else None))
+    lines += ['', '## In-sample fit (all runs, final parameters)', '',
+              '| run | frequency | face | mode | max % | min % | mean % | std % | RMS degC | max abs degC | '
+              'default RMS degC |', '|---|---|---|---|---|---|---|---|---|---|---|']
+    for e in result.in_sample:
+        for face, st in e.faces.items():
+            lines.append(_stat_row(e, face, st, before[e.record].faces[face]['rms_C']))
+    if plots:
+        by_name = {e.record: e for e in result.holdout}
+        ins = {e.record: e for e in result.in_sample}
+        lines += ['', '## Plots', '']
+        if result.holdout:
+            plot_summary(out / 'thermal_holdout_rms.png', result.holdout, before)
+            lines += ['![held-out RMS per run](thermal_holdout_rms.png)', '']
+        for i, rec in enumerate(list(records) + list(holdout_recs)):
+            ev = by_name.get(rec.name) or ins[rec.name]
+            name = f'thermal_run_{i + 1}.png'
+            plot_record(out / name, rec, ev, before[rec.name], f'{rec.name} ({_freq_label(rec.frequency_Hz)}): '
+                        f'{ev.mode} prediction vs measured')
+            lines += [f'![{rec.name}]({name})', '']
+    lines += ['## Use it in the wrist', '',
+              f'Set `thermal_file: {summary["params_file"]}` for **both** `plant_sim` and `tem_controller` '
+              '(a ROS params file passed with `--params-file`); docs/identification_thermal.md.', '']
+    path = out / 'thermal_identification.md'
+    path.write_text('\n'.join(lines))
+    return path
+
+
+# ------------------------------------------------------------------------------ command
+
+def _columns(text: str) -> dict[str, str]:
+    out = {}
+    for item in text.split(','):
+        if '=' not in item:
+            raise argparse.ArgumentTypeError(f'{item!r}: use ROLE=COLUMN, e.g. time=0,u=1,T1=2,T2=3')
+        role, ref = (x.strip() for x in item.split('=', 1))
+        if role not in ROLES:
+            raise argparse.ArgumentTypeError(f'{role!r} is not one of {", ".join(ROLES)}')
+        out[role] = ref
+    return out
+
+
+def _dt(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+    if not (math.isfinite(v) and 0.001 <= v <= 1.0):
+        raise argparse.ArgumentTypeError(f'--dt {text} must be in [0.001, 1] s (RK4 step limit of the model)')
+    return v
+
+
+def register(subparsers: Any) -> argparse.ArgumentParser:
+    """Add ``thermal`` to the ``identify`` sub-commands."""
+    ap = subparsers.add_parser(
+        'thermal', help='Table 4.9 heat balance from measured voltage and TEM/muscle temperatures (seed Sec. 4.3)',
+        description=__doc__.split('\n\n')[0])
+    ap.add_argument('inputs', nargs='+', metavar='BAG|FILE', help='text tables (one run or a frequency column) or bags')
+    ap.add_argument('--holdout', nargs='+', default=[], metavar='BAG|FILE', help='runs never fitted, only predicted')
+    ap.add_argument('--out', default=None, metavar='DIR', help='report (markdown, PNG) and thermal.yaml here')
+    ap.add_argument('--params-out', default=None, metavar='FILE', help='params file (default DIR/thermal.yaml)')
+    ap.add_argument('--base', default=None, metavar='FILE', help='thermal file to start from (default Table 4.9)')
+    ap.add_argument('--columns', type=_columns, default=None, help='ROLE=COLUMN,... roles time, u, T1, T2, frequency')
+    ap.add_argument('--time-unit', choices=sorted(TIME_UNITS), default=None)
+    ap.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'), default=None)
+    ap.add_argument('--voltage-unit', choices=('V', 'mV'), default=None)
+    ap.add_argument('--dt', type=_dt, default=0.1, help='fit grid [s] (default 0.1)')
+    ap.add_argument('--faces', choices=('auto', 'both', 'muscle'), default='auto',
+                    help='Table 4.9 columns to fit (auto: both when T2 is measured in every run)')
+    ap.add_argument('--validation', choices=('auto', 'leave-one-out', 'time-split', 'none'), default='auto')
+    ap.add_argument('--train-fraction', type=float, default=0.6, help='time-split: fitted share of every run')
+    ap.add_argument('--no-plots', action='store_true')
+    ap.add_argument('--json', action='store_true', help='print one JSON object')
+    ap.add_argument('--quiet', action='store_true')
+    ap.set_defaults(func=run_cli)
+    return ap
+
+
+def run_cli(a: argparse.Namespace) -> int:
+    """Handler of ``sma-wrist identify thermal``: exit 0, or 2 with ``error: ...`` / ``{"error": ...}``."""
+    try:
+        summary = identify(a)
+    except (SmaWristError, ValueError) as e:
+        msg = str(e)
+        if a.json:
+            print(json.dumps({'error': msg}))
+        else:
+            print(f'error: {msg}', file=sys.stderr)
+        return 2
+    if a.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(format_text(summary))
+    return 0
+
+
+def identify(a: argparse.Namespace) -> dict[str, Any]:
+    """Run the whole identification for parsed arguments; returns the JSON summary."""
+    t0 = time.perf_counter()
+    from sma_wrist.core import thermal as th
+    from sma_wrist.core import thermal_identification as ti
+    from sma_wrist.core.thermal_file import load_thermal_file, write_thermal_file
+    say = (lambda s: None) if (a.json or a.quiet) else (lambda s: print(f'[identify thermal] {s}', file=sys.stderr))
+    units = {'time': a.time_unit, 'temperature': a.temperature_unit, 'u': a.voltage_unit}
+    units = {k: v.lower() for k, v in units.items() if v}
+    base = load_thermal_file(a.base) if a.base else th.ThermalParams()
+    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units)
+    hold_recs, hold_clean, hold_warn = load_inputs(a.holdout, a.dt, a.columns, units) if a.holdout else ([], {}, [])
+    names = [r.name for r in records + hold_recs]
+    if len(set(names)) != len(names):
+        raise ThermalInputError('two runs have the same name (the same file given twice?): '
+                                + ', '.join(sorted({n for n in names if names.count(n) > 1})))
+    say(f'{len(records)} run(s) to fit, {len(hold_recs)} hold-out run(s), grid {a.dt:g} s')
+    result = ti.identify_thermal(records, hold_recs, base, faces=a.faces, validation=a.validation,
+                                 train_fraction=a.train_fraction, progress=say)
+    say('characterising the hold limits of the identified model')
+    lo, hi = ti.hold_limits(result.fit.params)
+    params = result.fit.params.with_limits(lo, hi)
+    params_path: Path | None = Path(a.params_out) if a.params_out else (Path(a.out) / 'thermal.yaml' if a.out else None)
+    held = [{'run': e.record, 'frequency_Hz': e.frequency_Hz, 'mode': e.mode,
+             **{f'{face}_rms_C': round(st['rms_C'], 4) for face, st in e.faces.items()},
+             **{f'{face}_std_pct': round(st['std_pct'], 3) for face, st in e.faces.items()}} for e in result.holdout]
+    if params_path is not None:
+        params_path.parent.mkdir(parents=True, exist_ok=True)
+        write_thermal_file(params_path, params, {
+            'tool': 'sma-wrist identify thermal', 'date': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
+            'inputs': [str(x) for x in a.inputs], 'holdout_inputs': [str(x) for x in a.holdout],
+            'grid_s': a.dt, 'faces_fitted': [ti.FACE_NAMES[f] for f in result.fit.faces],
+            'validation': result.validation, 'in_sample_rms_C': round(result.fit.rms_C, 4), 'holdout': held},
+            header='sma_wrist thermal params file (TEM heat balance, seed Eqs. 4.13-4.15, Table 4.9 layout).\n'
+                   'Written by `sma-wrist identify thermal`. Load it in the wrist by setting the parameter\n'
+                   'thermal_file to this path for BOTH plant_sim and tem_controller (docs/identification_thermal.md).')
+    summary: dict[str, Any] = {
+        'fit': {'faces_fitted': [ti.FACE_NAMES[f] for f in result.fit.faces], 'start': result.fit.start,
+                'rms_C': result.fit.rms_C, 'simulations': result.fit.nfev, 'message': result.fit.message,
+                'params': _params_json(params), 'default_params': _params_json(base),
+                'runs': [e.as_dict() for e in result.in_sample]},
+        'holdout': [e.as_dict() for e in result.holdout],
+        'before': [e.as_dict() for e in result.before],
+        'validation': result.validation,
+        'hold_limits_V': [lo, hi],
+        'params_file': str(params_path) if params_path else None,
+        'report': None,
+        'inputs': [str(x) for x in a.inputs], 'holdout_inputs': [str(x) for x in a.holdout],
+        'cleaning': {**cleaning, **hold_clean}, 'warnings': warnings + hold_warn, 'dt_s': a.dt,
+    }
+    summary['wall_s'] = time.perf_counter() - t0
+    if a.out:
+        say('writing the report')
+        rep = write_report(Path(a.out), result, records, hold_recs, summary, plots=not a.no_plots)
+        summary['report'] = str(rep)
+    summary['wall_s'] = time.perf_counter() - t0
+    return summary
+
+
+def format_text(s: dict[str, Any]) -> str:
+    out = [f'identified {", ".join(s["fit"]["faces_fitted"])} column(s) of Table 4.9 from '
+           f'{len(s["fit"]["runs"])} run(s): in-sample RMS {s["fit"]["rms_C"]:.3f} degC '
+           f'({s["fit"]["simulations"]} simulations, start {s["fit"]["start"]}), {s["wall_s"]:.1f} s']
+    for w in s['warnings']:
+        out.append(f'warning: {w}')
+    before = {e['record']: e for e in s['before']}
+    if s['holdout']:
+        out.append(f'held out ({s["validation"]}): run, frequency, face: RMS degC, std %, max|e| % '
+                   '(default model RMS degC)')
+    for e in s['holdout']:
+        for face, st in e['faces'].items():
+            b = before.get(e['record'], {}).get('faces', {}).get(face, {}).get('rms_C')
+            out.append(f'  {e["record"]:<30s} {_freq_label(e["frequency_Hz"]):>10s} {face}: {st["rms_C"]:.3f}, '
+                       f'{st["std_pct"]:.2f} %, {st["max_abs_pct"]:.2f} %' + (f'  ({b:.3f})' if b is not None else ''))
+    out.append(f'hold limits of the identified model: {s["hold_limits_V"][0]:+g} .. {s["hold_limits_V"][1]:+g} V')
+    if s['params_file']:
+        out.append(f'params file: {s["params_file"]} (set thermal_file for plant_sim and tem_controller)')
+    if s['report']:
+        out.append(f'report: {s["report"]}')
+    return '\n'.join(out)
