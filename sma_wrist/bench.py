@@ -235,6 +235,13 @@ def bench_bridge(quick: bool = False) -> dict:
 
 # -------------------------------------------------------------------------------- driver
 
+@section('identify_thermal')
+def bench_identify_thermal(quick: bool = False) -> dict:
+    """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (docs/identification_thermal.md)."""
+    from sma_wrist.identify.thermal_testplant import holdout_table
+    return holdout_table(quick)
+
+
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     """Run the named sections (all registered ones by default) and return their results."""
     names = list(SECTIONS) if not sections else list(sections)

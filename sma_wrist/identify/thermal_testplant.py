@@ -132,3 +132,38 @@ def sine_runs(plant: str | PeltierPlant = 'peltier', frequencies_Hz: Sequence[fl
     u = amplitude_V * np.sin(2 * np.pi * t[:, None] * f[None, :])
     return [ThermalRecord(f'{name} 1/{1 / fj:g} Hz', sample_dt, u[:, j], meas[:, j], float(fj))
             for j, fj in enumerate(f)]
+
+
+def holdout_table(quick: bool = False, seed: int = 0) -> dict:
+    """Held-out errors per frequency on own-model and off-model data, side by side (bench 'identify_thermal').
+
+    The seed's experiment (12 V sines, 8 frequencies, both faces logged at 10 Hz) on four
+    sources: the project's model (continuous drive, noise-free), the same with the sensor
+    effects (thermocouple lag 0.15 s, noise 0.2 degC), the independent Peltier plant
+    noise-free, and the Peltier plant with the sensor effects. Leave-one-frequency-out:
+    every frequency is predicted by the fit on the other seven.
+    """
+    import time as _time
+    from sma_wrist.core.thermal_identification import identify_thermal
+    freqs = (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ
+    duration = 128.0 if quick else 512.0
+    sources = {'own, noise-free': ('own', 0.0, 0.0), 'own + sensor': ('own', 0.15, 0.2),
+               'peltier, noise-free': ('peltier', 0.0, 0.0), 'peltier + sensor': ('peltier', 0.15, 0.2)}
+    out: dict = {'frequencies_Hz': list(freqs), 'duration_s': duration, 'sources': {}}
+    for label, (plant, lag, noise) in sources.items():
+        recs = sine_runs(plant, freqs, duration_s=duration, lag_s=lag, noise_C=noise, seed=seed)
+        t0 = _time.perf_counter()
+        res = identify_thermal(recs)
+        wall = _time.perf_counter() - t0
+        before = {e.record: e for e in res.before}
+        rows = []
+        for e in res.holdout:
+            rows.append({'frequency_Hz': e.frequency_Hz,
+                         **{f'{face}_rms_C': round(st['rms_C'], 4) for face, st in e.faces.items()},
+                         **{f'{face}_std_pct': round(st['std_pct'], 3) for face, st in e.faces.items()},
+                         **{f'{face}_max_abs_pct': round(st['max_abs_pct'], 3) for face, st in e.faces.items()},
+                         **{f'{face}_default_rms_C': round(before[e.record].faces[face]['rms_C'], 4)
+                            for face in e.faces}})
+        out['sources'][label] = {'in_sample_rms_C': round(res.fit.rms_C, 4), 'wall_s': round(wall, 2),
+                                 'fits': len(recs) + 1, 'holdout': rows}
+    return out
