@@ -99,7 +99,7 @@ def test_off_model_peltier_plant_held_out_per_frequency(peltier_runs: list[ti.Th
 
 def test_fit_needs_an_exciting_input_and_t2_for_both_columns() -> None:
     r = sine_runs('own', frequencies_Hz=(1 / 32,), duration_s=60.0, sample_dt=0.2, noise_C=0.0, lag_s=0.0)[0]
-    flat = dataclasses.replace(r, u=np.full(r.n, 3.0))
+    flat = dataclasses.replace(r, u=np.full(r.n, 3.0), u2=None)
     with pytest.raises(ti.ThermalIdentificationError, match='exciting input'):
         ti.fit_thermal([flat])
     no_t2 = dataclasses.replace(r, T=np.c_[r.T[:, 0], np.full(r.n, np.nan)])

@@ -16,7 +16,9 @@ Inputs (seed Sec. 4.3.1: one TEM driven by 12 V sines at 1/128-1 Hz, both faces 
 Cleaning (counted in the report): rows with NaN/unparseable cells dropped, unsorted stamps
 sorted, duplicate stamps removed (last kept), gaps longer than 2 s cut (longest stretch
 kept); then every run is put on one grid (``--dt``, default 0.1 s): temperatures linearly
-interpolated, the voltage sampled at the middle of each interval and held over it.
+interpolated, the drive as its mean and mean square over each interval
+(:func:`~sma_wrist.core.thermal_identification.interval_means`; ``--input-hold linear`` for a
+logged continuous drive, the tables' default, ``zoh`` for held commands, the bags' default).
 
 The fit and its validation are :mod:`sma_wrist.core.thermal_identification`; this module
 reads, reports (markdown + PNG), and writes the params file (:mod:`sma_wrist.core.thermal_file`).
@@ -295,10 +297,10 @@ def estimate_frequency(t: Any, u: Any) -> float | None:
     return float(f)
 
 
-def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning) -> list[Any]:
+def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning, hold: str = 'linear') -> list[Any]:
     """Resample cleaned runs onto the grid ``dt`` (module docstring) as ThermalRecords."""
     import numpy as np
-    from sma_wrist.core.thermal_identification import ThermalRecord
+    from sma_wrist.core.thermal_identification import ThermalRecord, interval_means
     out = []
     for s in series:
         t, u, T = s.t, s.u, s.T
@@ -317,13 +319,11 @@ def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning) -> list[
             raise ThermalInputError(f'{s.source}: {s.name} covers only {t[-1] - t[0]:.1f} s; need at least '
                                     f'{MIN_DURATION_S:g} s (the seed ran each frequency for several periods)')
         grid = np.arange(t[0], t[-1] + 1e-9, dt)
-        src_dt = float(np.median(np.diff(t)))
-        at = grid + 0.5 * dt if src_dt < 0.75 * dt else grid  # mid-interval sample of a faster log
-        iu = np.clip(np.searchsorted(t, at + 1e-9, side='right') - 1, 0, t.size - 1)
+        um, u2 = interval_means(t, u, grid, dt, hold)
         Tg = np.stack([np.interp(grid, t, T[:, f]) if np.isfinite(T[:, f]).all() else np.full(grid.size, np.nan)
                        for f in range(2)], axis=1)
         freq = s.frequency_Hz if s.frequency_Hz is not None else estimate_frequency(t, u)
-        out.append(ThermalRecord(s.name, dt, u[iu], Tg, freq, source=s.source))
+        out.append(ThermalRecord(s.name, dt, um, Tg, freq, source=s.source, u2=u2))
     return out
 
 
@@ -331,29 +331,36 @@ def _is_bag(p: Path) -> bool:
     return p.suffix == '.mcap' or (p.is_dir() and ((p / 'metadata.yaml').exists() or any(p.glob('*.mcap'))))
 
 
-def load_bag(path: Path, dt: float) -> tuple[list[Any], Cleaning]:
-    """Both muscles of a recorded bag as muscle-face-only runs on the grid dt."""
+def load_bag(path: Path, dt: float, hold: str = 'zoh') -> tuple[list[Any], Cleaning]:
+    """Both muscles of a recorded bag as muscle-face-only runs on the grid dt.
+
+    The bag is read on its measurement grid (sma_wrist.diagnose.data.load_run: cleaning, gaps,
+    units) and the held commands averaged over each interval of the fit grid.
+    """
     import numpy as np
-    from sma_wrist.core.thermal_identification import ThermalRecord
+    from sma_wrist.core.thermal_identification import ThermalRecord, interval_means
     from sma_wrist.diagnose.data import load_run
-    run = load_run(path, max_rate_hz=1.0 / dt)
+    run = load_run(path, max_rate_hz=1000.0)
     if run.u is None or run.T is None:
         raise ThermalInputError(f'{path}: need /wrist/tem_1/command, /wrist/tem_2/command (V) and '
                                 '/wrist/muscle_1/temperature, /wrist/muscle_2/temperature (degC) for identify thermal')
-    if abs(run.dt - dt) > 1e-6 * dt:
-        raise ThermalInputError(f'{path}: measurements every {run.dt:g} s cannot be put on the {dt:g} s grid; '
+    if run.dt > dt * (1 + 1e-6):
+        raise ThermalInputError(f'{path}: measurements every {run.dt:g} s are coarser than the {dt:g} s grid; '
                                 f'use --dt {run.dt:g}')
     cl = Cleaning(rows=run.n, warnings=list(run.warnings))
+    grid = np.arange(run.t[0], run.t[-1] - dt + 1e-9, dt)
+    valid = np.interp(grid, run.t, run.valid.astype(float)) > 0.999
     recs = []
     for i in range(2):
-        T = np.stack([run.T[:, i], np.full(run.n, np.nan)], axis=1)
-        recs.append(ThermalRecord(f'{path.name} muscle {i + 1}', run.dt, run.u[:, i], T,
-                                  estimate_frequency(run.t, run.u[:, i]), valid=run.valid, source=str(path)))
+        um, u2 = interval_means(run.t, run.u[:, i], grid, dt, hold)
+        T = np.stack([np.interp(grid, run.t, run.T[:, i]), np.full(grid.size, np.nan)], axis=1)
+        recs.append(ThermalRecord(f'{path.name} muscle {i + 1}', dt, um, T, estimate_frequency(run.t, run.u[:, i]),
+                                  valid=valid, source=str(path), u2=u2))
     return recs, cl
 
 
-def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None, units: dict[str, str]
-                ) -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
+def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None, units: dict[str, str],
+                hold: str = 'auto') -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
     """Records from every input, the cleaning counts per file, and all warnings."""
     records: list[Any] = []
     cleaning: dict[str, dict[str, Any]] = {}
@@ -363,10 +370,10 @@ def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None,
         if not p.exists():
             raise ThermalInputError(f'{p}: no such file (need a text table or a rosbag2 directory)')
         if _is_bag(p):
-            recs, cl = load_bag(p, dt)
+            recs, cl = load_bag(p, dt, 'zoh' if hold == 'auto' else hold)
         else:
             series, cl = load_table(p, columns, units)
-            recs = to_records(series, dt, cl)
+            recs = to_records(series, dt, cl, 'linear' if hold == 'auto' else hold)
         records += recs
         cleaning[str(p)] = {'rows': cl.rows, 'dropped_nan': cl.dropped_nan, 'unsorted': cl.unsorted,
                             'duplicates': cl.duplicates, 'gap_cut_s': round(cl.gap_cut_s, 3), 'runs': len(recs)}
@@ -516,16 +523,6 @@ def _columns(text: str) -> dict[str, str]:
     return out
 
 
-def _dt(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
-    if not (math.isfinite(v) and 0.001 <= v <= 1.0):
-        raise argparse.ArgumentTypeError(f'--dt {text} must be in [0.001, 1] s (RK4 step limit of the model)')
-    return v
-
-
 def register(subparsers: Any) -> argparse.ArgumentParser:
     """Add ``thermal`` to the ``identify`` sub-commands."""
     ap = subparsers.add_parser(
@@ -540,7 +537,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     ap.add_argument('--time-unit', choices=sorted(TIME_UNITS), default=None)
     ap.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'), default=None)
     ap.add_argument('--voltage-unit', choices=('V', 'mV'), default=None)
-    ap.add_argument('--dt', type=_dt, default=0.1, help='fit grid [s] (default 0.1)')
+    ap.add_argument('--dt', type=float, default=0.1, help='fit grid [s] (default 0.1; at most 1, the RK4 limit)')
+    ap.add_argument('--input-hold', choices=('auto', 'zoh', 'linear'), default='auto',
+                    help='how the logged voltage drove the TEM between samples (auto: linear for tables, zoh for bags)')
     ap.add_argument('--faces', choices=('auto', 'both', 'muscle'), default='auto',
                     help='Table 4.9 columns to fit (auto: both when T2 is measured in every run)')
     ap.add_argument('--validation', choices=('auto', 'leave-one-out', 'time-split', 'none'), default='auto')
@@ -579,9 +578,12 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     say = (lambda s: None) if (a.json or a.quiet) else (lambda s: print(f'[identify thermal] {s}', file=sys.stderr))
     units = {'time': a.time_unit, 'temperature': a.temperature_unit, 'u': a.voltage_unit}
     units = {k: v.lower() for k, v in units.items() if v}
+    if not (math.isfinite(a.dt) and 0.001 <= a.dt <= 1.0):
+        raise ThermalInputError(f'--dt {a.dt} must be in [0.001, 1] s (the RK4 step limit of the model)')
     base = load_thermal_file(a.base) if a.base else th.ThermalParams()
-    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units)
-    hold_recs, hold_clean, hold_warn = load_inputs(a.holdout, a.dt, a.columns, units) if a.holdout else ([], {}, [])
+    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold)
+    hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold) if a.holdout
+                                        else ([], {}, []))
     names = [r.name for r in records + hold_recs]
     if len(set(names)) != len(names):
         raise ThermalInputError('two runs have the same name (the same file given twice?): '

@@ -23,7 +23,7 @@ from typing import Sequence
 import numpy as np
 
 from sma_wrist.core import thermal as th
-from sma_wrist.core.thermal_identification import ThermalRecord
+from sma_wrist.core.thermal_identification import ThermalRecord, interval_means
 
 KELVIN = 273.15
 
@@ -129,9 +129,12 @@ def sine_runs(plant: str | PeltierPlant = 'peltier', frequencies_Hz: Sequence[fl
         meas = meas + noise_C * rng.standard_normal(meas.shape)
     t = np.arange(meas.shape[0]) * sample_dt
     name = plant if isinstance(plant, str) else 'peltier'
-    u = amplitude_V * np.sin(2 * np.pi * t[:, None] * f[None, :])
-    return [ThermalRecord(f'{name} 1/{1 / fj:g} Hz', sample_dt, u[:, j], meas[:, j], float(fj))
-            for j, fj in enumerate(f)]
+    u = amplitude_V * np.sin(2 * np.pi * t[:, None] * f[None, :])  # what the DAQ logged
+    out = []
+    for j, fj in enumerate(f):  # as `identify thermal` reads a logged analog drive (--input-hold linear)
+        um, u2 = interval_means(t, u[:, j], t, sample_dt, 'linear')
+        out.append(ThermalRecord(f'{name} 1/{1 / fj:g} Hz', sample_dt, um, meas[:, j], float(fj), u2=u2))
+    return out
 
 
 def holdout_table(quick: bool = False, seed: int = 0) -> dict:
