@@ -238,8 +238,8 @@ def bench_bridge(quick: bool = False) -> dict:
 @section('identify_thermal')
 def bench_identify_thermal(quick: bool = False) -> dict:
     """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (docs/identification_thermal.md)."""
-    from sma_wrist.identify.thermal_testplant import holdout_table
-    return holdout_table(quick)
+    from sma_wrist.identify.thermal_testplant import holdout_table, speed
+    return {'speed': speed(quick), **holdout_table(quick)}
 
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:

@@ -468,10 +468,10 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, lo: FloatArray, hi: Floa
             lam *= 4.0
             if lam > 1e12:
                 return x, cost, nfev, 'converged (no decreasing step left)'
-        done = cost - c_new <= 1e-10 * cost or np.all(np.abs(x_new - x) <= 1e-9 * (np.abs(x) + 1e-9))
+        done = cost - c_new <= 1e-8 * cost or np.all(np.abs(x_new - x) <= 1e-9 * (np.abs(x) + 1e-9))
         x, cost, lam = x_new, c_new, max(lam / 3.0, 1e-12)
         if done:
-            return x, cost, nfev, 'converged (relative decrease below 1e-10)'
+            return x, cost, nfev, 'converged (relative decrease below 1e-8)'
         r, J = prob._run(x)
         nfev += 1
     return x, cost, nfev, f'stopped after {max_iter} iterations'

@@ -474,6 +474,9 @@ def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: S
               '| parameter | T1 identified | T1 default | T2 identified | T2 default |', '|---|---|---|---|---|']
     for j, k in enumerate(FACE_KEYS):
         lines.append(f'| {k} | {ident[0, j]:.6g} | {default[0, j]:.6g} | {ident[1, j]:.6g} | {default[1, j]:.6g} |')
+    if 1 not in result.fit.faces:
+        lines += ['', 'The T2 (exchanger face) column is not fitted: no run measured T2, so the base values are kept '
+                      'and the T1 column is identified given them (docs/identification_thermal.md, "Limits").']
     lines += ['', f'## Held-out errors (form of Table 4.10; validation: {result.validation})', '',
               'e = measured - simulated, free-run from the measured start; % of the face\'s measured range in that '
               'run (Eq. 4.3). "default RMS" is Table 4.9 on the same samples.', '',
@@ -553,10 +556,11 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
 
 def run_cli(a: argparse.Namespace) -> int:
     """Handler of ``sma-wrist identify thermal``: exit 0, or 2 with ``error: ...`` / ``{"error": ...}``."""
+    import numpy as np
     try:
         summary = identify(a)
-    except (SmaWristError, ValueError) as e:
-        msg = str(e)
+    except (SmaWristError, ValueError, np.linalg.LinAlgError, FloatingPointError, OverflowError) as e:
+        msg = str(e) if isinstance(e, SmaWristError) else f'cannot identify from these inputs: {type(e).__name__}: {e}'
         if a.json:
             print(json.dumps({'error': msg}))
         else:

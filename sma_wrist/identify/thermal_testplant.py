@@ -170,3 +170,50 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
         out['sources'][label] = {'in_sample_rms_C': round(res.fit.rms_C, 4), 'wall_s': round(wall, 2),
                                  'fits': len(recs) + 1, 'holdout': rows}
     return out
+
+
+def speed(quick: bool = False) -> dict:
+    """Side by side on the same runs: the batched complex-step Jacobian vs forward differences with
+    :func:`sma_wrist.core.thermal.simulate` (the plant's RK4, one parameter set per call), and the
+    normal-equation Levenberg-Marquardt vs scipy's ``least_squares`` (trf) from the same start."""
+    import dataclasses as dc
+    import time as _time
+    from scipy.optimize import least_squares
+    from sma_wrist.core import thermal_identification as ti
+    recs = sine_runs('peltier', (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ,
+                     duration_s=128.0 if quick else 512.0)
+    base = th.ThermalParams()
+    prob = ti._Problem(recs, base, (0, 1), None, 30.0)
+    x0 = ti._free_from_table(ti.table_of(base), (0, 1))
+    t0 = _time.perf_counter()
+    prob._cache = None
+    prob.jacobian(x0)
+    t_cs = _time.perf_counter() - t0
+    # forward differences through the plant's own integrator: 1 + 12 simulations of all runs
+    u = np.stack([r.u for r in recs], axis=1)[:-1, :, None]
+    T0 = ti.start_states(recs, base)[:, None, :]
+    wide = base.with_limits(-30.0, 30.0)
+    t0 = _time.perf_counter()
+    for j in range(x0.size + 1):
+        x = x0.copy()
+        if j:
+            x[j - 1] += 1e-7 * max(abs(x[j - 1]), 1e-3)
+        p = dc.replace(ti.params_from_table(ti._table_from_free(x[None], prob.base_table, (0, 1))[0], wide),
+                       u_min_V=-30.0, u_max_V=30.0)
+        th.simulate(p, u, recs[0].dt, T0, layers=1, validate=False)
+    t_fd = _time.perf_counter() - t0
+    t0 = _time.perf_counter()
+    fit = ti.fit_thermal(recs, base)
+    t_lm = _time.perf_counter() - t0
+    lo, hi = np.tile(ti._LOWER, 2), np.tile(ti._UPPER, 2)
+    ee = ti._free_from_table(ti.equation_error_table(recs, base.input_per_volt), (0, 1))
+    start = np.clip(ee if fit.start == 'equation_error' else x0, lo, hi)
+    t0 = _time.perf_counter()
+    sol = least_squares(prob.residuals, start, jac=prob.jacobian, bounds=(lo, hi), method='trf', x_scale='jac')
+    t_trf = _time.perf_counter() - t0
+    return {'runs': len(recs), 'samples_per_run': recs[0].n,
+            'jacobian_complex_step_batched_s': round(t_cs, 3), 'jacobian_forward_diff_thermal_simulate_s': round(t_fd, 3),
+            'jacobian_speedup': round(t_fd / t_cs, 1),
+            'fit_lm_s': round(t_lm, 2), 'fit_lm_rms_C': round(fit.rms_C, 5),
+            'fit_scipy_trf_s': round(t_trf, 2), 'fit_scipy_trf_rms_C': round(float(np.sqrt(2 * sol.cost)), 5),
+            'fit_speedup': round(t_trf / t_lm, 1)}
