@@ -375,8 +375,12 @@ def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None,
             series, cl = load_table(p, columns, units)
             recs = to_records(series, dt, cl, 'linear' if hold == 'auto' else hold)
         records += recs
-        cleaning[str(p)] = {'rows': cl.rows, 'dropped_nan': cl.dropped_nan, 'unsorted': cl.unsorted,
-                            'duplicates': cl.duplicates, 'gap_cut_s': round(cl.gap_cut_s, 3), 'runs': len(recs)}
+        if _is_bag(p):  # cleaned per topic by diagnose.data.load_run; it reports what it did as warnings
+            cleaning[str(p)] = {'rows': cl.rows, 'dropped_nan': None, 'unsorted': None, 'duplicates': None,
+                                'gap_cut_s': None, 'runs': len(recs), 'counts': 'per topic, in warnings'}
+        else:
+            cleaning[str(p)] = {'rows': cl.rows, 'dropped_nan': cl.dropped_nan, 'unsorted': cl.unsorted,
+                                'duplicates': cl.duplicates, 'gap_cut_s': round(cl.gap_cut_s, 3), 'runs': len(recs)}
         warnings += cl.warnings
     return records, cleaning, warnings
 
@@ -467,8 +471,9 @@ def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: S
     lines += ['| file | rows | NaN rows dropped | steps back (sorted) | duplicate stamps | gap cut [s] | runs |',
               '|---|---|---|---|---|---|---|']
     for f, c in summary['cleaning'].items():
-        lines.append(f'| {f} | {c["rows"]} | {c["dropped_nan"]} | {c["unsorted"]} | {c["duplicates"]} | '
-                     f'{c["gap_cut_s"]} | {c["runs"]} |')
+        cells = [c[k] if c[k] is not None else 'see warnings' for k in ('dropped_nan', 'unsorted', 'duplicates',
+                                                                       'gap_cut_s')]
+        lines.append(f'| {f} | {c["rows"]} | ' + ' | '.join(map(str, cells)) + f' | {c["runs"]} |')
     ident, default = table_of(result.fit.params), table_of(result.base)
     lines += ['', '## Table 4.9: identified vs default', '',
               '| parameter | T1 identified | T1 default | T2 identified | T2 default |', '|---|---|---|---|---|']
