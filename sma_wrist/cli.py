@@ -216,6 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
     emulator_arguments(d)
     d.set_defaults(func=cmd_emulate_device)
 
+    from sma_wrist.identify import add_parser as add_identify_parser
+    add_identify_parser(sub)  # identify hysteresis / thermal: each sub-command registers its own options
+
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')
     b.add_argument('--json', action='store_true')
     b.add_argument('--quick', action='store_true', help='short runs (smoke test of the benchmark itself)')

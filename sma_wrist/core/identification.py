@@ -399,18 +399,21 @@ def sdgpi_gpi_vectors(x: FloatArray, edges: FloatArray, loads: FloatArray) -> Fl
 
 def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: ArrayLike, *, n: int = 15,
               k_f: float = 6.0, p0: float = 1.0, max_nfev: int = 200, per_load_starts: int = 1,
-              method: str = 'exact') -> FitResult:
+              method: str = 'exact', branches: list[str] | None = None,
+              degrees: ArrayLike = (2, 2, 2, 2)) -> FitResult:
     """Fit an SD-GPI (Eqs. 4.4-4.6) to loops at several loads, Sec. 4.2.2.
 
     ``T``, ``y``: (N, L) samples, one column per load, or L 1-D arrays (loads measured with
     different sample counts). Starting point: a GPI per load (:func:`fit_gpi`), a_i and b_i
     fitted by quadratics per section, shared sets averaged; then all quadratics and shared
     parameters jointly. Residual statistics pool all loads; the % is relative to the mean
-    per-load range. ``method`` as in :func:`fit_gpi`.
+    per-load range. ``method`` as in :func:`fit_gpi`; ``branches``: initial memory per load
+    (default 'cooling' for all, see :func:`simulate_batch`).
     """
     loads = np.asarray(loads_kgf, dtype=float)
     edges = np.asarray(edges_kgf, dtype=float)
     Ts_all, ys_all = _columns(T, y, loads.size)
+    br = list(branches) if branches is not None else ['cooling'] * loads.size
     Ts, ys = Ts_all, ys_all
     if method == 'exact':  # long records are fitted on thinned loops (see thin_indices), scored on all
         keep = [thin_indices(t) for t in Ts_all]
@@ -424,24 +427,41 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     # load (so a_i, b_i of different loads are comparable: the rho-amplitude trade-off is fixed).
     i_mid = int(np.argsort(loads)[loads.size // 2])
     base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=per_load_starts, max_nfev=max_nfev,
-                   method=method).theta
+                   method=method, branch=br[i_mid]).theta
     lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
-    G = np.empty((loads.size, N_GPI))
-    for i in range(loads.size):
-        solve_i, _ = _solver(method, Ts[i], ys[i], n, k_f, 'cooling')
-        G[i], _, _ = solve_i(base, np.r_[0:8], lo1, hi1, max_nfev)
-    sa = np.zeros((n_sec, 4, 3))
-    sb = np.zeros((n_sec, 4, 3))
-    for k in range(n_sec):
-        sel = sec == k
-        for i in range(4):
-            sa[k, i] = np.polyfit(loads[sel], G[sel, i], 2)
-            sb[k, i] = np.polyfit(loads[sel], G[sel, 4 + i], 2)
-    best_single = base
-    x0 = np.concatenate([sa.ravel(), sb.ravel(), best_single[8:20]])
+    order = np.argsort(loads)
+    mid = int(np.nonzero(order == i_mid)[0][0])
+    deg = np.broadcast_to(np.asarray(degrees, dtype=int), (4,))
+
+    def start_vector(continuation: bool) -> FloatArray:
+        """Envelopes fitted per load (from the middle load's fit, or each from its neighbour's:
+        continuation keeps neighbouring loads in one basin), then polynomials of the load."""
+        G = np.empty((loads.size, N_GPI))
+        for path in (order[mid:], order[mid::-1]):
+            start = base
+            for i in path:
+                solve_i, _ = _solver(method, Ts[i], ys[i], n, k_f, br[i])
+                G[i], _, _ = solve_i(start if continuation else base, np.r_[0:8], lo1, hi1, max_nfev)
+                start = G[i]
+        sa = np.zeros((n_sec, 4, 3))
+        sb = np.zeros((n_sec, 4, 3))
+        for k in range(n_sec):
+            sel = sec == k
+            for q in range(4):  # polynomial of degree deg[q] in the load; higher terms stay zero
+                sa[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, q], deg[q])
+                sb[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, 4 + q], deg[q])
+        return np.concatenate([sa.ravel(), sb.ravel(), base[8:20]])
+
+    # the earlier code ('fd') starts from the middle load's fit only; 'exact' also tries continuation
+    starts = [start_vector(False)] + ([start_vector(True)] if method == 'exact' else [])
+    x0 = starts[0]
     P = x0.size
     mask_free = np.ones(P, bool)
     mask_free[-1] = False  # p0 fixed
+    sa_sl, sb_sl, rest = _sd_layout(n_sec)
+    term = np.arange(3)
+    for sl in (sa_sl, sb_sl):
+        mask_free[sl] = np.tile((term[None, :] >= 2 - deg[:, None]).ravel(), n_sec)
     big = 1e6
     lo = np.full(P, -big)
     hi = np.full(P, big)
@@ -456,10 +476,10 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         th = _sd_to_gpi(X, edges, loads)  # (B, L, 20)
         out = np.empty((offsets[-1], X.shape[0]))
         for i in range(loads.size):
-            out[offsets[i]:offsets[i + 1]] = simulate_batch(Ts[i], th[:, i], n=n, k_f=k_f) - ys[i][:, None]
+            out[offsets[i]:offsets[i + 1]] = simulate_batch(Ts[i], th[:, i], n=n, k_f=k_f, branch=br[i]) - ys[i][:, None]
         return out
 
-    heats = [heating_mask(t) for t in Ts]
+    heats = [heating_mask(t, b) for t, b in zip(Ts, br)]
 
     def fun_jac(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         th = _sd_to_gpi(x[None], edges, loads)[0]
@@ -467,7 +487,7 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         J = np.zeros((offsets[-1], P))
         for i in range(loads.size):
             rows = slice(offsets[i], offsets[i + 1])
-            yi, Ji = simulate_jac(Ts[i], th[i], n=n, k_f=k_f, heat=heats[i])
+            yi, Ji = simulate_jac(Ts[i], th[i], n=n, k_f=k_f, branch=br[i], heat=heats[i])
             res[rows] = yi - ys[i]
             powers = np.array([loads[i] ** 2, loads[i], 1.0])  # d a_q / d s_aq (Eqs. 4.4-4.5)
             for sl, cols in ((sa_sl, IDX_A), (sb_sl, IDX_B)):
@@ -480,9 +500,10 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         x, cost, ok = _solve(fun_batch, x0, free, lo, hi, max_nfev)
         resid = fun_batch(x[None])[:, 0]
     else:  # the joint stage gets twice the budget, as fit_gpi's last stage (cheap with the exact Jacobian)
-        x, cost, ok = _solve_exact(fun_jac, x0, free, lo, hi, 2 * max_nfev)
+        x, cost, ok = min((_solve_exact(fun_jac, s0, free, lo, hi, 2 * max_nfev) for s0 in starts),
+                          key=lambda t: t[1])
         th = _sd_to_gpi(x[None], edges, loads)[0]
-        resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f)[:, 0] - v
+        resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
                                 for i, (t, v) in enumerate(zip(Ts_all, ys_all))])
     sd = float(np.std(resid))
     mean_range = float(np.mean([np.ptp(v) for v in ys_all]))

@@ -32,6 +32,7 @@ from std_msgs.msg import Float64, Header
 
 from sma_wrist.core import model_extensions as mx
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.hysteresis_file import hysteresis_params
 from sma_wrist.core.plant import PlantParams, WristPlant
 from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 
@@ -80,6 +81,8 @@ class PlantSim(WristNode):
         Param('command_timeout_s', 0.5, 'a TEM command older than this is replaced by 0 V', 's', (0.01, 60.0)),
         Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature threshold (reported)', 'degC',
               (30.0, 120.0)),
+        Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
+              '(empty: the built-in set)', runtime=False),
     ) + tuple(
         # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
         Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
@@ -90,7 +93,8 @@ class PlantSim(WristNode):
         p = self.p
         ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
         self.sim_params = mx.plant_params(ext, PlantParams(dt=p['dt_s'],
-                                                           max_muscle_temperature_C=p['max_muscle_temperature_C']))
+                                                           max_muscle_temperature_C=p['max_muscle_temperature_C'],
+                                                           hysteresis=hysteresis_params(p['hysteresis_file'])))
         # /wrist/payload publishes payload_kg (what the user believes); the joint carries the true mass
         self.payload_err_kg = ext['payload_err_kg']
         true_payload = max(p['payload_kg'] + self.payload_err_kg, 0.0)
