@@ -221,3 +221,56 @@ def test_synthetic_round_trip_recovers_the_wire(synthetic: tuple[dict, SDGPIPara
         assert 100 * np.sqrt(np.mean((y1 - y0) ** 2)) / np.ptp(y0) < 1.0  # measured 0.21 and 0.43 %
     tr = doc['transitions']['measured']
     assert all(60 < t['A_50'] < 125 for t in tr)  # a wire transforming at 60-120 degC
+
+
+# ----------------------------------------------------------------------------- the identified wire in the wrist
+
+def test_nodes_load_the_identified_wire(synthetic: tuple[dict, SDGPIParams], probe_factory) -> None:  # type: ignore[no-untyped-def]
+    from sma_wrist.runtime.launch import Runtime
+
+    f = synthetic[0]['params_file']
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    from sma_wrist.nodes.plant_sim import PlantSim
+    with Runtime(params={'/plant_sim': {'hysteresis_file': f},
+                         '/hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': 50.0,
+                                                     'temperature_max_C': 125.0}}) as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature', '/wrist/joint_states'))
+        plant = rt.add(PlantSim)
+        comp = rt.add(HysteresisCompensator)
+        rt.run_until(1.0, until='steady')
+    assert plant.sim_params.hysteresis.name == 'identified SD-GPI'
+    assert comp.comp is not None and plant.sim_params.hysteresis.T_valid[1] > 140.0
+    assert np.isfinite(probe.got['/wrist/joint_states'][-1].position[0])
+
+
+def test_a_window_outside_the_wire_model_or_a_bad_file_is_refused(synthetic: tuple[dict, SDGPIParams],
+                                                                  tmp_path: Path) -> None:
+    from sma_wrist.core.errors import SmaWristError
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    from sma_wrist.nodes.plant_sim import PlantSim
+    from sma_wrist.runtime.launch import Runtime
+
+    f = synthetic[0]['params_file']
+    with Runtime(params={'/hysteresis_compensator': {'hysteresis_file': f, 'temperature_max_C': 300.0}}) as rt:
+        with pytest.raises(SmaWristError, match='valid range'):
+            rt.add(HysteresisCompensator)
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('format: sma_wrist.hysteresis\nversion: 7\n')
+    with Runtime(params={'/plant_sim': {'hysteresis_file': str(bad)}}) as rt:
+        with pytest.raises(SmaWristError, match='version 7'):
+            rt.add(PlantSim)
+
+
+def test_closed_loop_runs_on_the_identified_wire(synthetic: tuple[dict, SDGPIParams], tmp_path: Path) -> None:
+    """All nodes on the embedded runtime with the identified 60-120 degC wire (docs/identification.md)."""
+    from sma_wrist import runtime
+    runtime.activate()
+    from sma_wrist.closed_loop import run_closed_loop
+
+    f = synthetic[0]['params_file']
+    s = run_closed_loop('inverse_adaptive', 0.3, 3.0, bag=tmp_path / 'bag', extra_params={
+        '/plant_sim': {'hysteresis_file': f, 'max_muscle_temperature_C': 120.0},
+        '/hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': 50.0, 'temperature_max_C': 125.0},
+        '/tem_controller': {'max_muscle_temperature_C': 120.0}})
+    assert not s.interrupted and s.sim_time_s == pytest.approx(3.0, abs=0.02)
+    assert s.metrics['n_samples'] > 200 and np.isfinite(s.metrics['rms_error_pct'])
