@@ -121,7 +121,8 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
 
     def predict(theta: Any, edges: Any, loops: list[Any]) -> list[Any]:
         _, _, loads, br = arrays(loops)
-        th = sdgpi_gpi_vectors(theta, edges, loads)
+        # outside the fitted loads the envelopes are frozen at the range edge, as the plant does
+        th = sdgpi_gpi_vectors(theta, edges, np.clip(loads, edges[0], edges[-1]))
         return [simulate_batch(lp.T_C, th[i][None], branch=br[i])[:, 0] for i, lp in enumerate(loops)]
 
     def fit(loops: list[Any]) -> tuple[Any, Any]:
