@@ -13,13 +13,14 @@ import pytest
 
 from sma_wrist.cli import main as cli_main
 from sma_wrist.core.default_params import default_sdgpi
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams, simulate
+from sma_wrist.core.hysteresis import SDGPIParams, simulate
 from sma_wrist.core.hysteresis_file import load_hysteresis, params_from_dict, params_to_dict
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.identify.hysteresis import Options, run
 from sma_wrist.identify.io import (IdentifyInputError, Units, load_kgf_to_stress, read_measurement,
                                    stress_to_load_kgf)
 from sma_wrist.identify.segment import loops_of
+from test_identification import two_section_default
 
 DATA = Path(__file__).parent / 'data' / 'sma_react'
 HF = DATA / 'NiTiHf'
@@ -161,29 +162,6 @@ def test_identified_file_widens_the_valid_range_and_loads(nitihf: dict) -> None:
 
 # ----------------------------------------------------------------------------- synthetic round trip
 
-def shifted_wire(dT: float) -> SDGPIParams:
-    """The 2-section SD-GPI of the default set (0.65-1.05 kgf) moved up by dT degC.
-
-    tanh(a1 (T - dT) + a2): a2 -> a2 - a1 dT, per quadratic coefficient.
-    """
-    D = default_sdgpi()
-    edges = np.array([0.65, 0.8, 1.05])
-    sa, sb = np.zeros((2, 4, 3)), np.zeros((2, 4, 3))
-    for k in range(2):
-        mm = np.linspace(edges[k], edges[k + 1], 7)
-        a, b = D.envelopes.coefficients(mm)
-        for i in range(4):
-            sa[k, i] = np.polyfit(mm, a[:, i], 2)
-            sb[k, i] = np.polyfit(mm, b[:, i], 2)
-    sa[:, 2] -= dT * sa[:, 1]
-    sb[:, 2] -= dT * sb[:, 1]
-    c, d = D.c.copy(), D.d.copy()
-    c[2] -= dT * c[1]
-    d[2] -= dT * d[1]
-    return SDGPIParams(EnvelopeSections(edges, sa, sb), c, d, D.rho, D.tau, D.c_thr, p0=1.0, T_valid=(-10, 200),
-                       name='default moved up 30 degC')
-
-
 def write_synthetic(d: Path, truth: SDGPIParams, loads: list[float], noise: float = 0.005) -> list[str]:
     """One 40 -> 140 -> 40 degC loop per load as T [degC], strain [%], stress [MPa] files."""
     T = np.r_[np.linspace(40, 140, 150), np.linspace(140, 40, 150)]
@@ -203,7 +181,7 @@ def write_synthetic(d: Path, truth: SDGPIParams, loads: list[float], noise: floa
 @pytest.fixture(scope='module')
 def synthetic(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, SDGPIParams]:
     d = tmp_path_factory.mktemp('synthetic')
-    truth = shifted_wire(30.0)
+    truth = two_section_default(30.0)
     train = write_synthetic(d, truth, [0.65, 0.7, 0.75, 0.85, 0.95, 1.05])
     hold = write_synthetic(d, truth, [0.8], noise=0.0)
     return run(Options(train, hold, out=str(d / 'out'), loo=False, plots=False), progress=_quiet), truth

@@ -2,49 +2,18 @@
 
 Eq. 3.19: w_j(k) = min(max(w_j(k-1), gamma_l(T_k) - r_j), gamma_r(T_k) + r_j). Every state is
 therefore a copy of the bound that last clamped it, so its derivative with respect to any
-parameter is that bound's derivative at that sample: :func:`play_sources` returns the states
+parameter is that bound's derivative at that sample: :func:`play_sources_numpy` returns the states
 and, per state, ``+(k+1)`` (set by the upper bound at sample k), ``-(k+1)`` (lower bound) or the
-initial source. Compiled by numba when installed (extra ``fast``); otherwise the numpy loop
-(vectorised over operators) of :func:`play_sources_numpy` gives the same numbers.
+initial source. :func:`play_jacobian` accumulates the derivatives in the same pass, compiled
+by numba when installed (extra ``fast``); otherwise the numpy loop (vectorised over
+operators) of :func:`play_sources_numpy` and numpy gathers give the same numbers.
 """
 from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
 
-try:  # numba is optional: the compiled loop is ~50x faster than the numpy one at n = 15
-    import numba as _numba
-
-    AVAILABLE = True
-    _jit = _numba.njit(cache=True, nogil=True)
-except ImportError:  # pragma: no cover - exercised where numba is absent
-    AVAILABLE = False
-
-    def _jit(f):  # type: ignore[no-untyped-def]
-        f.py_func = f
-        return f
-
-
-@_jit
-def _play_sources_compiled(lower, upper, w0, s0):  # pragma: no cover - compiled
-    N, n = lower.shape
-    W = np.empty((N, n))
-    src = np.empty((N, n), np.int64)
-    w = w0.copy()
-    s = s0.copy()
-    for k in range(N):
-        for j in range(n):
-            v = w[j]
-            if v < lower[k, j]:
-                v = lower[k, j]
-                s[j] = -(k + 1)
-            if v > upper[k, j]:  # min(max(w, lo), up), as Eq. 3.19 is written
-                v = upper[k, j]
-                s[j] = k + 1
-            w[j] = v
-            W[k, j] = v
-            src[k, j] = s[j]
-    return W, src
+from sma_wrist.core.plant_kernel import AVAILABLE, _jit  # the project's one optional-numba switch
 
 
 def play_sources_numpy(lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64],
@@ -65,15 +34,6 @@ def play_sources_numpy(lower: NDArray[np.float64], upper: NDArray[np.float64], w
         W[k] = w
         src[k] = s
     return W, src
-
-
-def play_sources(lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64],
-                 s0: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """States and sources (see the module docstring); compiled when numba is installed."""
-    if AVAILABLE:
-        return _play_sources_compiled(np.ascontiguousarray(lower), np.ascontiguousarray(upper),
-                                      np.ascontiguousarray(w0, dtype=np.float64), np.ascontiguousarray(s0, dtype=np.int64))
-    return play_sources_numpy(lower, upper, w0, s0)
 
 
 @_jit
