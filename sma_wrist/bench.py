@@ -233,6 +233,13 @@ def bench_bridge(quick: bool = False) -> dict:
     return run_bridge(5.0 if quick else 600.0)
 
 
+@section('identify')
+def bench_identify(quick: bool = False) -> dict:
+    """GPI / SD-GPI fit time and quality, exact Jacobian vs the earlier finite differences, one core."""
+    from sma_wrist.identify.bench import bench_identify as run_identify
+    return run_identify(quick)
+
+
 # -------------------------------------------------------------------------------- driver
 
 @section('identify_thermal')

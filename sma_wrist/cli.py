@@ -216,10 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     emulator_arguments(d)
     d.set_defaults(func=cmd_emulate_device)
 
-    ident = sub.add_parser('identify', help='identify the models from measured data (seed Chapter 4)')
-    ident_sub = ident.add_subparsers(dest='identify_command', required=True, metavar='MODEL')
-    from sma_wrist.identify import thermal as identify_thermal
-    identify_thermal.register(ident_sub)
+    from sma_wrist.identify import add_parser as add_identify_parser
+    add_identify_parser(sub)  # identify hysteresis / thermal: each sub-command registers its own options
 
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')
     b.add_argument('--json', action='store_true')

@@ -16,6 +16,8 @@ def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument('--report', metavar='DIR', help='write diagnosis.md, PNG plots and extended_params.yaml here')
     ap.add_argument('--params', metavar='FILE', help='write the extended model as a plant_sim params file')
     ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
+    ap.add_argument('--hysteresis-file', metavar='FILE',
+                    help='the wire model to replay: hysteresis.yaml from sma-wrist identify (default: built-in set)')
     return ap
 
 

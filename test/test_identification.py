@@ -30,7 +30,11 @@ def test_fit_gpi_recovers_loop() -> None:
     assert 100 * np.std(y_fit - y0) / np.ptp(y0) < 0.5  # the loop itself, not just the noisy data
 
 
-def test_fit_sdgpi_recovers_loops_across_loads() -> None:
+def two_section_default(dT: float = 0.0) -> SDGPIParams:
+    """The default set as the seed's form: two quadratic sections on 0.65-0.8-1.05 kgf, moved up dT degC.
+
+    tanh(a1 (T - dT) + a2): a2 -> a2 - a1 dT per quadratic coefficient (likewise c2, d2).
+    """
     D = default_sdgpi()
     edges = np.array([0.65, 0.8, 1.05])
     sa, sb = np.zeros((2, 4, 3)), np.zeros((2, 4, 3))
@@ -40,7 +44,18 @@ def test_fit_sdgpi_recovers_loops_across_loads() -> None:
         for i in range(4):
             sa[k, i] = np.polyfit(mm, a[:, i], 2)
             sb[k, i] = np.polyfit(mm, b[:, i], 2)
-    truth = SDGPIParams(EnvelopeSections(edges, sa, sb), D.c, D.d, D.rho, D.tau, D.c_thr, p0=1.0)
+    sa[:, 2] -= dT * sa[:, 1]
+    sb[:, 2] -= dT * sb[:, 1]
+    c, d = D.c.copy(), D.d.copy()
+    c[2] -= dT * c[1]
+    d[2] -= dT * d[1]
+    return SDGPIParams(EnvelopeSections(edges, sa, sb), c, d, D.rho, D.tau, D.c_thr, p0=1.0,
+                       T_valid=(-10.0, 110.0 + max(dT, 0.0)), name=f'default, 2 sections, +{dT:g} degC')
+
+
+def test_fit_sdgpi_recovers_loops_across_loads() -> None:
+    truth = two_section_default()
+    edges = truth.envelopes.edges_kg
     _, T, _, _ = sawtooth_input(dt=4.0, n_periods=2)
     loads = np.array([0.65, 0.7, 0.75, 0.8, 0.85, 0.95, 1.05])
     TT = np.repeat(T[:, None], loads.size, 1)
@@ -52,3 +67,37 @@ def test_fit_sdgpi_recovers_loops_across_loads() -> None:
     assert r.residual_std_pct < 1.0
     Yf = simulate(r.params, TT, mm)
     assert 100 * np.std(Yf - Y) / np.mean(np.ptp(Y, axis=0)) < 0.5
+
+
+def test_exact_jacobian_matches_central_differences_and_numpy_path() -> None:
+    from sma_wrist.core import identification_kernel as K
+    from sma_wrist.core.identification import IDX_P0, simulate_jac
+    _, T, _, _ = sawtooth_input(dt=2.0, n_periods=2)
+    th = gpi_vector(default_sdgpi(), 0.8)
+    th[IDX_P0] = 1.0
+    th[8:16] = [0.1, 0.02, -1.0, 0.3, -0.2, 0.03, -1.5, 0.1]  # c != d so both memoryless sets matter
+    for branch in ('cooling', 'heating'):
+        y, J = simulate_jac(T, th, branch=branch)
+        np.testing.assert_allclose(y, simulate_batch(T, th[None], branch=branch)[:, 0], atol=1e-12)
+        for i in range(th.size):
+            h = 1e-6 * max(abs(th[i]), 1e-3)
+            tp, tm = th.copy(), th.copy()
+            tp[i] += h
+            tm[i] -= h
+            fd = (simulate_batch(T, tp[None], branch=branch)[:, 0] - simulate_batch(T, tm[None], branch=branch)[:, 0]) / (2 * h)
+            np.testing.assert_allclose(J[:, i], fd, atol=1e-6 * max(np.abs(fd).max(), 1e-9), err_msg=f'column {i}')
+    lo, up = np.sort(np.random.default_rng(0).normal(size=(2, 50, 15)), axis=0)
+    args = (lo, up, up[0].copy(), np.ones(15, np.int64), np.linspace(1, 0.1, 15), np.arange(1.0, 16.0), 2.0,
+            np.random.default_rng(1).normal(size=(50, 4)), np.random.default_rng(2).normal(size=(50, 4)))
+    for a, b in zip(K.play_jacobian(*args), K.play_jacobian_numpy(*args)):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+
+
+def test_exact_and_finite_difference_fits_agree() -> None:
+    """The earlier method='fd' stays callable for the benchmark; both reach the same fit quality."""
+    _, T, _, _ = sawtooth_input(dt=4.0, n_periods=2)
+    y0 = simulate(default_sdgpi(), T, 0.8)
+    y = y0 + np.random.default_rng(4).normal(0, 0.005 * np.ptp(y0), T.size)
+    a = fit_gpi(T, y, n_starts=1, method='exact')
+    b = fit_gpi(T, y, n_starts=1, method='fd')
+    assert abs(a.residual_std_pct - b.residual_std_pct) < 0.1 and a.residual_std_pct < 1.0

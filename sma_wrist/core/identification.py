@@ -8,8 +8,12 @@ levels and 50 % temperatures of the data. :func:`fit_sdgpi` fits the SD-GPI (Eqs
 quadratics of the load per section for a_i, b_i, shared c, d, rho, tau, c, starting from
 quadratic fits of per-load GPI fits (Sec. 4.2.2).
 
-The model is simulated by :func:`simulate_batch`, the play recursion vectorised over many
-parameter sets at once, so a finite-difference Jacobian costs one batched simulation.
+The fits use the exact Jacobian (:func:`simulate_jac`): every play state equals the bound
+that last clamped it, so one simulation that records which sample and which bound set each
+operator gives all derivatives (the play kernel is compiled by numba when installed,
+:mod:`sma_wrist.core.identification_kernel`). ``method='fd'`` keeps the earlier forward-difference
+Jacobian (:func:`simulate_batch`, one batched simulation of 20 perturbed vectors) for the
+side-by-side benchmark (``sma-wrist bench --section identify``).
 Conventions are those of :mod:`sma_wrist.core.hysteresis` (b set = gamma_l followed while
 heating; elongation y = k_f - y_m).
 """
@@ -23,6 +27,7 @@ from scipy.optimize import least_squares
 
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams
+from sma_wrist.core.identification_kernel import play_jacobian
 
 FloatArray = NDArray[np.float64]
 
@@ -67,6 +72,63 @@ def simulate_batch(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 
         heat[k] = h
     mem = np.where(heat, _tanh(th[None, :, IDX_C], Tb), _tanh(th[None, :, IDX_D], Tb))
     return k_f - (th[:, IDX_P0] * mem + S)
+
+
+def heating_mask(T: FloatArray, branch: str = 'cooling') -> NDArray[np.bool_]:
+    """Direction of the memoryless part per sample (Eq. 3.22): set by the last non-zero dT."""
+    dT = np.diff(T, prepend=T[:1])
+    last = np.maximum.accumulate(np.where(dT != 0, np.arange(T.size), 0))
+    return np.where(last > 0, dT[last] > 0, branch == 'heating')
+
+
+def _tanh_and_grad(k: FloatArray, T: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """k0 tanh(k1 T + k2) + k3 and its gradient (N, 4) over (k0, k1, k2, k3)."""
+    t = np.tanh(k[1] * T + k[2])
+    s = k[0] * (1.0 - t * t)
+    return k[0] * t + k[3], np.stack([t, s * T, s, np.ones_like(T)], axis=1)
+
+
+def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.0, branch: str = 'cooling',
+                 heat: NDArray[np.bool_] | None = None) -> tuple[FloatArray, FloatArray]:
+    """Elongation y (N,) [mm] of one GPI vector (layout IDX_*) and its exact Jacobian (N, 20).
+
+    Same model as :func:`simulate_batch` (Eqs. 3.19-3.24, 4.1, 4.2). Each play state w_j is the
+    bound that last clamped it (gamma_r(T_s) + r_j or gamma_l(T_s) - r_j at a sample s), so
+    dw_j/dtheta is that bound's gradient at s; y = k_f - p0 gamma(T) - sum_j p_j w_j with
+    p_j = rho exp(-tau c j) (Eq. 3.23) differentiates in closed form. Piecewise exact: a state
+    that sits exactly on a switch has one-sided derivatives, which least squares tolerates.
+    """
+    T = np.asarray(T, dtype=float)
+    th = np.asarray(theta, dtype=float)
+    jj = np.arange(1, n + 1, dtype=float)
+    r = th[IDX_CTHR] * jj
+    e = np.exp(-th[IDX_TAU] * r)
+    p = th[IDX_RHO] * e
+    gr, Ga = _tanh_and_grad(th[IDX_A], T)
+    gl, Gb = _tanh_and_grad(th[IDX_B], T)
+    lower = gl[:, None] - r
+    upper = gr[:, None] + r
+    if branch == 'cooling':
+        w0, s0 = upper[0], np.ones(n, np.int64)
+    else:
+        w0, s0 = lower[0], -np.ones(n, np.int64)
+    S, dS_da, dS_db, dS_dc, Wjp = play_jacobian(lower, upper, w0, s0, p, jj, th[IDX_TAU], Ga, Gb)
+    h = heating_mask(T, branch) if heat is None else heat
+    mc, Gc = _tanh_and_grad(th[IDX_C], T)
+    md, Gd = _tanh_and_grad(th[IDX_D], T)
+    mem = np.where(h, mc, md)
+    p0 = th[IDX_P0]
+    y = k_f - (p0 * mem + S)
+    J = np.empty((T.size, N_GPI))
+    J[:, IDX_A] = -dS_da
+    J[:, IDX_B] = -dS_db
+    J[:, IDX_C] = -p0 * h[:, None] * Gc
+    J[:, IDX_D] = -p0 * (~h)[:, None] * Gd
+    J[:, IDX_RHO] = -S / th[IDX_RHO] if th[IDX_RHO] != 0 else -play_jacobian(lower, upper, w0, s0, e, jj, th[IDX_TAU], Ga, Gb)[0]
+    J[:, IDX_TAU] = th[IDX_CTHR] * Wjp
+    J[:, IDX_CTHR] = -dS_dc
+    J[:, IDX_P0] = -mem
+    return y, J
 
 
 def gpi_vector(params: SDGPIParams, load_kgf: float) -> FloatArray:
@@ -183,12 +245,81 @@ def _solve(fun_batch, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi
     return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
 
+def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,
+                 max_nfev: int) -> tuple[FloatArray, float, bool]:
+    """As :func:`_solve` with the exact Jacobian: ``fun_jac(x) -> (residual, J over all of x)``.
+
+    The same trust-region-reflective solver and tolerances as the finite-difference path (a
+    bounded Levenberg-Marquardt on the normal equations was tried: it settles in the first of
+    the loop's many local minima, 6x the cost TRF reaches). least_squares asks for the
+    Jacobian at the point whose residual it just computed, so one simulation serves both.
+    """
+    x = np.clip(x0, lo, hi)
+    cache: dict[str, object] = {}
+
+    def both(z: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if cache.get('z') is None or not np.array_equal(cache['z'], z):  # type: ignore[arg-type]
+            xx = x.copy()
+            xx[free] = z
+            cache['z'] = z.copy()
+            cache['rj'] = fun_jac(xx)
+        return cache['rj']  # type: ignore[return-value]
+
+    z0 = np.clip(x[free], lo[free] + 1e-12, hi[free] - 1e-12)
+    res = least_squares(lambda z: both(z)[0], z0, jac=lambda z: both(z)[1][:, free], bounds=(lo[free], hi[free]),
+                        x_scale='jac', max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    x[free] = res.x
+    return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))
+
+
+def _solver(method: str, T: FloatArray, y: FloatArray, n: int, k_f: float, branch: str):  # type: ignore[no-untyped-def]
+    """(solve(x0, free, lo, hi, nfev), residual(x)) for one loop with the Jacobian ``method``."""
+    if method == 'fd':
+        def fun_batch(X: FloatArray) -> FloatArray:
+            return simulate_batch(T, X, n=n, k_f=k_f, branch=branch) - y[:, None]
+        return (lambda x0, free, lo, hi, nfev: _solve(fun_batch, x0, free, lo, hi, nfev),
+                lambda x: fun_batch(x[None])[:, 0])
+    if method != 'exact':
+        raise ParameterError(f"identification method must be 'exact' or 'fd', got {method!r}")
+    heat = heating_mask(T, branch)
+
+    def fun_jac(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        ys, J = simulate_jac(T, x, n=n, k_f=k_f, branch=branch, heat=heat)
+        return ys - y, J
+    return (lambda x0, free, lo, hi, nfev: _solve_exact(fun_jac, x0, free, lo, hi, nfev),
+            lambda x: fun_jac(x)[0])
+
+
+#: Samples per load above which the fits run on a thinned copy (the play model is rate
+#: independent: a thinned loop with the same temperature extrema has the same memory).
+MAX_FIT_SAMPLES = 1000
+
+
+def thin_indices(T: ArrayLike, max_n: int = MAX_FIT_SAMPLES) -> NDArray[np.intp]:
+    """Indices of at most ~``max_n`` samples: evenly spaced ones plus every turning point of T.
+
+    Turning points (local extrema of T) are what the play operators remember (Eq. 3.19), so
+    the thinned series drives the model through the same memory states.
+    """
+    T = np.asarray(T, dtype=float)
+    if T.size <= max_n:
+        return np.arange(T.size)
+    d = np.sign(np.diff(T))
+    nz = np.nonzero(d)[0]
+    turns = nz[1:][d[nz[1:]] != d[nz[:-1]]]  # first sample after a direction change = the extremum
+    keep = np.union1d(np.linspace(0, T.size - 1, max_n).round().astype(np.intp), turns)
+    return keep
+
+
 def fit_gpi(T: ArrayLike, y: ArrayLike, *, n: int = 15, k_f: float = 6.0, p0: float | None = 1.0,
-            n_starts: int = 4, max_nfev: int = 60, seed: int = 0, branch: str = 'cooling') -> FitResult:
+            n_starts: int = 4, max_nfev: int = 60, seed: int = 0, branch: str = 'cooling',
+            method: str = 'exact') -> FitResult:
     """Fit a GPI at one load to a measured loop (T [degC], elongation y [mm]), Sec. 4.1.1.
 
     ``p0=None`` fits p0 too (it trades off against the c, d amplitudes; the seed never prints
-    it). The staged fit runs from each start; the lowest final cost wins.
+    it). The staged fit runs from each start; the lowest final cost wins. ``method``: 'exact'
+    (Jacobian of :func:`simulate_jac`) or 'fd' (the earlier finite differences, kept for the
+    benchmark's side-by-side ratio).
     """
     T = np.asarray(T, dtype=float)
     y = np.asarray(y, dtype=float)
@@ -199,22 +330,26 @@ def fit_gpi(T: ArrayLike, y: ArrayLike, *, n: int = 15, k_f: float = 6.0, p0: fl
     rng_y = float(np.ptp(y))
     lo, hi = _bounds(rng_y)
 
-    def fun_batch(X: FloatArray) -> FloatArray:
-        return simulate_batch(T, X, n=n, k_f=k_f, branch=branch) - y[:, None]
-
+    solve, residual = _solver(method, T, y, n, k_f, branch)
+    if method == 'exact' and T.size > MAX_FIT_SAMPLES:  # starts and stages on a thinned loop, polish on all
+        keep = thin_indices(T)
+        solve_all = solve
+        solve, _ = _solver(method, T[keep], y[keep], n, k_f, branch)
     env_dens = np.r_[0:8, IDX_RHO, IDX_TAU, IDX_CTHR]
     mem = np.r_[8:16] if p0 is None else np.r_[8:16]
     every = np.r_[0:19] if p0 is not None else np.r_[0:20]
     best: tuple[float, FloatArray, bool] | None = None
     for x0 in initial_guesses(T, y, n=n, k_f=k_f, p0=1.0 if p0 is None else p0, n_starts=n_starts, seed=seed):
-        x, _, _ = _solve(fun_batch, x0, env_dens, lo, hi, max_nfev)  # stage 1: memory part
-        x, _, _ = _solve(fun_batch, x, mem, lo, hi, max_nfev)  # stage 2: memoryless part
-        x, cost, ok = _solve(fun_batch, x, every, lo, hi, 2 * max_nfev)  # stage 3: all
+        x, _, _ = solve(x0, env_dens, lo, hi, max_nfev)  # stage 1: memory part
+        x, _, _ = solve(x, mem, lo, hi, max_nfev)  # stage 2: memoryless part
+        x, cost, ok = solve(x, every, lo, hi, 2 * max_nfev)  # stage 3: all
         if best is None or cost < best[0]:
             best = (cost, x, ok)
     assert best is not None
     cost, x, ok = best
-    resid = fun_batch(x[None])[:, 0]
+    if method == 'exact' and T.size > MAX_FIT_SAMPLES:
+        x, cost, ok = solve_all(x, every, lo, hi, max_nfev)
+    resid = residual(x)
     sd = float(np.std(resid))
     return FitResult(vector_to_params(x, n=n, k_f=k_f), sd, 100 * sd / max(rng_y, 1e-12), cost, n_starts, ok, x)
 
@@ -242,21 +377,47 @@ def _sd_to_gpi(X: FloatArray, edges: FloatArray, loads: FloatArray) -> FloatArra
     return np.concatenate([a, b, tail], axis=-1)
 
 
+def _columns(T: ArrayLike, y: ArrayLike, n_loads: int) -> tuple[list[FloatArray], list[FloatArray]]:
+    """Per-load (T, y) sample lists from (N, L) arrays or from sequences of 1-D arrays (ragged)."""
+    if isinstance(T, np.ndarray) and T.ndim == 2:
+        Ta, ya = np.asarray(T, dtype=float), np.asarray(y, dtype=float)
+        if Ta.shape != ya.shape or Ta.shape[1] != n_loads:
+            raise ModelInputError('SD-GPI identification samples', Ta.shape, f'(N, {n_loads}) for T and y')
+        return [Ta[:, i] for i in range(n_loads)], [ya[:, i] for i in range(n_loads)]
+    Ts = [np.asarray(t, dtype=float) for t in T]  # type: ignore[union-attr]
+    ys = [np.asarray(v, dtype=float) for v in y]  # type: ignore[union-attr]
+    if len(Ts) != n_loads or len(ys) != n_loads or any(a.shape != b.shape or a.ndim != 1 for a, b in zip(Ts, ys)):
+        raise ModelInputError('SD-GPI identification samples', [a.shape for a in Ts], f'{n_loads} pairs of equal 1-D arrays')
+    return Ts, ys
+
+
+def sdgpi_gpi_vectors(x: FloatArray, edges: FloatArray, loads: FloatArray) -> FloatArray:
+    """(L, 20) GPI vectors of one SD-GPI vector (layout of :func:`_sd_layout`) at each load."""
+    return _sd_to_gpi(np.asarray(x, dtype=float)[None], np.asarray(edges, dtype=float),
+                      np.asarray(loads, dtype=float))[0]
+
+
 def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: ArrayLike, *, n: int = 15,
-              k_f: float = 6.0, p0: float = 1.0, max_nfev: int = 200, per_load_starts: int = 1) -> FitResult:
+              k_f: float = 6.0, p0: float = 1.0, max_nfev: int = 200, per_load_starts: int = 1,
+              method: str = 'exact', branches: list[str] | None = None,
+              degrees: ArrayLike = (2, 2, 2, 2)) -> FitResult:
     """Fit an SD-GPI (Eqs. 4.4-4.6) to loops at several loads, Sec. 4.2.2.
 
-    ``T``, ``y``: (N, L) samples, one column per load. Starting point: a GPI per load
-    (:func:`fit_gpi`), a_i and b_i fitted by quadratics per section, shared sets averaged; then
-    all quadratics and shared parameters jointly. Residual statistics pool all loads; the %
-    is relative to the mean per-load range.
+    ``T``, ``y``: (N, L) samples, one column per load, or L 1-D arrays (loads measured with
+    different sample counts). Starting point: a GPI per load (:func:`fit_gpi`), a_i and b_i
+    fitted by quadratics per section, shared sets averaged; then all quadratics and shared
+    parameters jointly. Residual statistics pool all loads; the % is relative to the mean
+    per-load range. ``method`` as in :func:`fit_gpi`; ``branches``: initial memory per load
+    (default 'cooling' for all, see :func:`simulate_batch`).
     """
-    T = np.asarray(T, dtype=float)
-    y = np.asarray(y, dtype=float)
     loads = np.asarray(loads_kgf, dtype=float)
     edges = np.asarray(edges_kgf, dtype=float)
-    if T.shape != y.shape or T.ndim != 2 or T.shape[1] != loads.size:
-        raise ModelInputError('SD-GPI identification samples', T.shape, f'(N, {loads.size}) for T and y')
+    Ts_all, ys_all = _columns(T, y, loads.size)
+    br = list(branches) if branches is not None else ['cooling'] * loads.size
+    Ts, ys = Ts_all, ys_all
+    if method == 'exact':  # long records are fitted on thinned loops (see thin_indices), scored on all
+        keep = [thin_indices(t) for t in Ts_all]
+        Ts, ys = [t[k] for t, k in zip(Ts_all, keep)], [v[k] for v, k in zip(ys_all, keep)]
     n_sec = edges.size - 1
     sec = np.clip(np.searchsorted(edges, loads, side='right') - 1, 0, n_sec - 1)
     for k in range(n_sec):
@@ -265,47 +426,87 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     # Shared c, d, rho, tau, c from a full GPI fit at the middle load, then only the envelopes per
     # load (so a_i, b_i of different loads are comparable: the rho-amplitude trade-off is fixed).
     i_mid = int(np.argsort(loads)[loads.size // 2])
-    base = fit_gpi(T[:, i_mid], y[:, i_mid], n=n, k_f=k_f, p0=p0, n_starts=per_load_starts, max_nfev=max_nfev).theta
-    lo1, hi1 = _bounds(float(np.ptp(y)))
-    G = np.empty((loads.size, N_GPI))
-    for i in range(loads.size):
-        yi, Ti = y[:, i], T[:, i]
-        fb = lambda X, Ti=Ti, yi=yi: simulate_batch(Ti, X, n=n, k_f=k_f) - yi[:, None]  # noqa: E731
-        G[i], _, _ = _solve(fb, base, np.r_[0:8], lo1, hi1, max_nfev)
-    sa = np.zeros((n_sec, 4, 3))
-    sb = np.zeros((n_sec, 4, 3))
-    for k in range(n_sec):
-        sel = sec == k
-        for i in range(4):
-            sa[k, i] = np.polyfit(loads[sel], G[sel, i], 2)
-            sb[k, i] = np.polyfit(loads[sel], G[sel, 4 + i], 2)
-    best_single = base
-    x0 = np.concatenate([sa.ravel(), sb.ravel(), best_single[8:20]])
+    base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=per_load_starts, max_nfev=max_nfev,
+                   method=method, branch=br[i_mid]).theta
+    lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
+    order = np.argsort(loads)
+    mid = int(np.nonzero(order == i_mid)[0][0])
+    deg = np.broadcast_to(np.asarray(degrees, dtype=int), (4,))
+
+    def start_vector(continuation: bool) -> FloatArray:
+        """Envelopes fitted per load (from the middle load's fit, or each from its neighbour's:
+        continuation keeps neighbouring loads in one basin), then polynomials of the load."""
+        G = np.empty((loads.size, N_GPI))
+        for path in (order[mid:], order[mid::-1]):
+            start = base
+            for i in path:
+                solve_i, _ = _solver(method, Ts[i], ys[i], n, k_f, br[i])
+                G[i], _, _ = solve_i(start if continuation else base, np.r_[0:8], lo1, hi1, max_nfev)
+                start = G[i]
+        sa = np.zeros((n_sec, 4, 3))
+        sb = np.zeros((n_sec, 4, 3))
+        for k in range(n_sec):
+            sel = sec == k
+            for q in range(4):  # polynomial of degree deg[q] in the load; higher terms stay zero
+                sa[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, q], deg[q])
+                sb[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, 4 + q], deg[q])
+        return np.concatenate([sa.ravel(), sb.ravel(), base[8:20]])
+
+    # the earlier code ('fd') starts from the middle load's fit only; 'exact' also tries continuation
+    starts = [start_vector(False)] + ([start_vector(True)] if method == 'exact' else [])
+    x0 = starts[0]
     P = x0.size
     mask_free = np.ones(P, bool)
     mask_free[-1] = False  # p0 fixed
+    sa_sl, sb_sl, rest = _sd_layout(n_sec)
+    term = np.arange(3)
+    for sl in (sa_sl, sb_sl):
+        mask_free[sl] = np.tile((term[None, :] >= 2 - deg[:, None]).ravel(), n_sec)
     big = 1e6
     lo = np.full(P, -big)
     hi = np.full(P, big)
-    _, _, rest = _sd_layout(n_sec)
+    sa_sl, sb_sl, rest = _sd_layout(n_sec)
     r0 = rest.start
     lo[r0 + 8:r0 + 11] = [1e-4, 0.0, 1e-4]
     hi[r0 + 8:r0 + 11] = [1e2, 2e2, 5.0]
     free = np.nonzero(mask_free)[0]
+    offsets = np.cumsum([0] + [t.size for t in Ts])
 
     def fun_batch(X: FloatArray) -> FloatArray:
         th = _sd_to_gpi(X, edges, loads)  # (B, L, 20)
-        B = X.shape[0]
-        out = np.empty((T.shape[0] * loads.size, B))
+        out = np.empty((offsets[-1], X.shape[0]))
         for i in range(loads.size):
-            out[i * T.shape[0]:(i + 1) * T.shape[0]] = simulate_batch(T[:, i], th[:, i], n=n, k_f=k_f) - y[:, i, None]
+            out[offsets[i]:offsets[i + 1]] = simulate_batch(Ts[i], th[:, i], n=n, k_f=k_f, branch=br[i]) - ys[i][:, None]
         return out
 
-    x, cost, ok = _solve(fun_batch, x0, free, lo, hi, max_nfev)
-    resid = fun_batch(x[None])[:, 0]
+    heats = [heating_mask(t, b) for t, b in zip(Ts, br)]
+
+    def fun_jac(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        th = _sd_to_gpi(x[None], edges, loads)[0]
+        res = np.empty(offsets[-1])
+        J = np.zeros((offsets[-1], P))
+        for i in range(loads.size):
+            rows = slice(offsets[i], offsets[i + 1])
+            yi, Ji = simulate_jac(Ts[i], th[i], n=n, k_f=k_f, branch=br[i], heat=heats[i])
+            res[rows] = yi - ys[i]
+            powers = np.array([loads[i] ** 2, loads[i], 1.0])  # d a_q / d s_aq (Eqs. 4.4-4.5)
+            for sl, cols in ((sa_sl, IDX_A), (sb_sl, IDX_B)):
+                base_col = sl.start + sec[i] * 12
+                J[rows, base_col:base_col + 12] = (Ji[:, cols, None] * powers).reshape(-1, 12)
+            J[rows, rest] = Ji[:, 8:20]
+        return res, J
+
+    if method == 'fd':
+        x, cost, ok = _solve(fun_batch, x0, free, lo, hi, max_nfev)
+        resid = fun_batch(x[None])[:, 0]
+    else:  # the joint stage gets twice the budget, as fit_gpi's last stage (cheap with the exact Jacobian)
+        x, cost, ok = min((_solve_exact(fun_jac, s0, free, lo, hi, 2 * max_nfev) for s0 in starts),
+                          key=lambda t: t[1])
+        th = _sd_to_gpi(x[None], edges, loads)[0]
+        resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
+                                for i, (t, v) in enumerate(zip(Ts_all, ys_all))])
     sd = float(np.std(resid))
-    mean_range = float(np.mean(np.ptp(y, axis=0)))
-    sa_sl, sb_sl, rest = _sd_layout(n_sec)
+    mean_range = float(np.mean([np.ptp(v) for v in ys_all]))
     env = EnvelopeSections(edges, x[sa_sl].reshape(n_sec, 4, 3), x[sb_sl].reshape(n_sec, 4, 3))
     tail = x[rest]
     params = SDGPIParams(env, tail[0:4], tail[4:8], float(tail[8]), float(tail[9]), float(tail[10]), n=n,

@@ -26,6 +26,7 @@ from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
 from sma_wrist.cli_options import diagnose_arguments as add_arguments
+from sma_wrist.core.errors import ParameterError
 from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
 __all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main']
@@ -111,10 +112,15 @@ def _regressors(ev: ft.Evaluator, q_model: np.ndarray | None, load: np.ndarray |
 
 
 def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str | Path | None = None,
-                 candidates: Sequence[str] | None = None) -> DiagnosisResult:
-    """Diagnose an aligned run (see :func:`diagnose` for a bag)."""
+                 candidates: Sequence[str] | None = None, hysteresis_file: str | None = None) -> DiagnosisResult:
+    """Diagnose an aligned run (see :func:`diagnose` for a bag); ``hysteresis_file``: the wire's SD-GPI."""
     t_start = time.perf_counter()
-    model = fx.ExtendedModel(run)
+    base = None
+    if hysteresis_file:
+        from sma_wrist.core.hysteresis_file import hysteresis_params
+        from sma_wrist.core.plant import PlantParams
+        base = PlantParams(dt=min(run.dt, 0.01), hysteresis=hysteresis_params(hysteresis_file))
+    model = fx.ExtendedModel(run, base)
     ev = ft.Evaluator(model)
     if not ev.channels:
         raise DiagnoseInputError('no channel can be replayed: need commands + temperatures, temperatures + angle, '
@@ -258,10 +264,10 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run) -> Path:
 
 
 def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out: str | Path | None = None,
-             candidates: Sequence[str] | None = None) -> DiagnosisResult:
+             candidates: Sequence[str] | None = None, hysteresis_file: str | None = None) -> DiagnosisResult:
     """Diagnose the bag at `path`; raises DiagnoseInputError for unusable input."""
     run = load_run(path)
-    return diagnose_run(run, report_dir, params_out, candidates)
+    return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file)
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -272,8 +278,8 @@ def run_cli(args: argparse.Namespace) -> int:
             unknown = [c for c in cands if c not in fx.EFFECTS]
             if unknown:
                 raise DiagnoseInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
-        res = diagnose(args.bag, args.report, args.params, cands)
-    except DiagnoseInputError as exc:
+        res = diagnose(args.bag, args.report, args.params, cands, getattr(args, 'hysteresis_file', None))
+    except (DiagnoseInputError, ParameterError) as exc:
         if args.json:
             print(json.dumps({'error': str(exc)}))
         else:

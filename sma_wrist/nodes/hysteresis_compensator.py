@@ -15,7 +15,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
 
 from sma_wrist.core.compensation import MuscleCompensator
-from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.hysteresis_file import hysteresis_params
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
@@ -24,8 +24,12 @@ INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 
 class HysteresisCompensator(WristNode):
     PARAMS = (
-        Param('temperature_min_C', 20.0, 'lowest temperature the compensator asks for', 'degC', (-10.0, 110.0)),
-        Param('temperature_max_C', 80.0, 'highest temperature the compensator asks for', 'degC', (-10.0, 110.0)),
+        Param('temperature_min_C', 20.0, 'lowest temperature the compensator asks for (inside the wire '
+              "model's valid range)", 'degC', (-60.0, 400.0)),
+        Param('temperature_max_C', 80.0, 'highest temperature the compensator asks for (inside the wire '
+              "model's valid range)", 'degC', (-60.0, 400.0)),
+        Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
+              '(empty: the built-in set)', runtime=False),
         Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
               choices=('numerical', 'analytic', 'auto')),
         Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
@@ -57,16 +61,26 @@ class HysteresisCompensator(WristNode):
         if problem is None and not values['temperature_min_C'] < values['temperature_max_C']:
             problem = (f'temperature_min_C = {values["temperature_min_C"]} must be below '
                        f'temperature_max_C = {values["temperature_max_C"]}')
+        if problem is None:
+            try:
+                lo, hi = hysteresis_params(values['hysteresis_file']).T_valid
+            except SmaWristError as e:
+                return str(e)
+            if values['temperature_min_C'] < lo or values['temperature_max_C'] > hi:
+                problem = (f'temperature window {values["temperature_min_C"]:g}-{values["temperature_max_C"]:g} degC '
+                           f'leaves the wire model\'s valid range {lo:g}-{hi:g} degC')
         return problem
 
     def _build(self) -> None:
         window = (self.p['temperature_min_C'], self.p['temperature_max_C'])
-        self.comp = MuscleCompensator(default_sdgpi(), T_range_C=window, method=self.p['method'])
+        wire = hysteresis_params(self.p['hysteresis_file'])
+        self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'])
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
-        warm = MuscleCompensator(default_sdgpi(), T_range_C=window, method=self.p['method'])
-        warm.reset(np.full(2, 40.0), np.full(2, 1.2e8))
-        warm.observe(np.full(2, 41.0), np.full(2, 1.2e8))
+        warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'])
+        T_mid = 0.5 * (window[0] + window[1])
+        warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
+        warm.observe(np.full(2, T_mid + 1.0), np.full(2, 1.2e8))
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
         self.started = False  # re-seed the memory from the next measurement
 

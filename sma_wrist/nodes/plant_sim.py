@@ -32,6 +32,7 @@ from std_msgs.msg import Float64, Header
 
 from sma_wrist.core import model_extensions as mx
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.hysteresis_file import hysteresis_params
 from sma_wrist.core.plant import PlantParams, WristPlant
 from sma_wrist.core.thermal_file import load_thermal_file
 from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
@@ -83,6 +84,8 @@ class PlantSim(WristNode):
               (30.0, 120.0)),
         Param('thermal_file', '', 'identified TEM heat balance (sma-wrist identify thermal; empty: Table 4.9)',
               runtime=False),
+        Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
+              '(empty: the built-in set)', runtime=False),
     ) + tuple(
         # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
         Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
@@ -92,7 +95,8 @@ class PlantSim(WristNode):
         super().__init__('plant_sim', **kwargs)
         p = self.p
         ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
-        base = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'])
+        base = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'],
+                           hysteresis=hysteresis_params(p['hysteresis_file']))
         if p['thermal_file']:  # identified TEMs; the plant still clips at the driver rating
             lim = base.thermal
             base = replace(base, thermal=load_thermal_file(p['thermal_file']).with_limits(lim.u_min_V, lim.u_max_V))
