@@ -101,3 +101,15 @@ def test_exact_and_finite_difference_fits_agree() -> None:
     a = fit_gpi(T, y, n_starts=1, method='exact')
     b = fit_gpi(T, y, n_starts=1, method='fd')
     assert abs(a.residual_std_pct - b.residual_std_pct) < 0.1 and a.residual_std_pct < 1.0
+
+
+def test_lower_degrees_keep_the_higher_load_terms_at_zero() -> None:
+    truth = two_section_default()
+    _, T, _, _ = sawtooth_input(dt=6.0, n_periods=1)
+    loads = np.array([0.65, 0.7, 0.75, 0.85, 0.95, 1.05])
+    TT = np.repeat(T[:, None], loads.size, 1)
+    Y = simulate(truth, TT, np.broadcast_to(loads, TT.shape))
+    r = fit_sdgpi(TT, Y, loads, truth.envelopes.edges_kg, degrees=(1, 0, 1, 1), max_nfev=30)
+    for env in (r.params.envelopes.a, r.params.envelopes.b):
+        assert np.all(env[:, :, 0] == 0.0) and np.all(env[:, 1, :2] == 0.0)
+        assert np.any(env[:, 0, 1] != 0.0)  # linear terms are fitted

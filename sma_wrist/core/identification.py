@@ -408,7 +408,11 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     fitted by quadratics per section, shared sets averaged; then all quadratics and shared
     parameters jointly. Residual statistics pool all loads; the % is relative to the mean
     per-load range. ``method`` as in :func:`fit_gpi`; ``branches``: initial memory per load
-    (default 'cooling' for all, see :func:`simulate_batch`).
+    (default 'cooling' for all, see :func:`simulate_batch`); ``degrees``: polynomial degree
+    in the load of (k0, k1, k2, k3) of both envelopes (Eqs. 4.4-4.5 use 2 throughout; lower
+    degrees regularise, docs/identification.md). With 'exact' the per-load envelope fits also
+    run as a continuation in load (each from its neighbour's fit) and the joint fit starts
+    from both starting points, keeping the lower cost.
     """
     loads = np.asarray(loads_kgf, dtype=float)
     edges = np.asarray(edges_kgf, dtype=float)

@@ -56,10 +56,11 @@ def _plots(out: Path, doc: dict[str, Any], train: list[Any], hold: list[Any], y_
     for key, col in (('A_50', 'C3'), ('M_50', 'C0'), ('A_f', 'C1'), ('M_f', 'C2')):
         ax.plot(s, [t[key] for t in tr['measured']], 'o', color=col, label=f'{key} measured')
         ax.plot(s_tr, [t[key] for t in tr['fitted']], '-', color=col, label=f'{key} SD-GPI')
-        ax.plot(s, [t[key] for t in tr['before']], 'x:', color=col, alpha=0.6, label=f'{key} {before_name}')
+        ax.plot(s, [t[key] for t in tr['before']], 'x:', color=col, alpha=0.6, label=f'{key} before')
     ax.set_xlabel('stress [MPa]')
     ax.set_ylabel('transition temperature [degC]')
-    ax.legend(fontsize=6, ncol=3)
+    ax.set_title(f'measured (dots), identified SD-GPI (lines), before = {before_name} (x)', fontsize=8)
+    ax.legend(fontsize=6, ncol=3, loc='best')
     fig.tight_layout()
     fig.savefig(out / 'transitions.png', dpi=110)
     plt.close(fig)
