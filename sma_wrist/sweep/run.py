@@ -114,9 +114,9 @@ class Progress:
     def __call__(self, done_loops: float) -> None:
         f = min(done_loops / self.total, 1.0)
         wall = time.perf_counter() - self.t0
-        eta = wall * (1 - f) / f if f > 0 else float('nan')
+        eta = f'{wall * (1 - f) / f:6.1f} s' if f > 0 else '     ?'
         bar = '#' * int(30 * f)
-        text = f'[sweep] |{bar:<30}| {100 * f:5.1f} % of {self.total} loops, {wall:6.1f} s, eta {eta:6.1f} s'
+        text = f'[sweep] |{bar:<30}| {100 * f:5.1f} % of {self.total} loops, {wall:6.1f} s, eta {eta}'
         if self.stream.isatty():
             self.stream.write('\r' + text + ('\n' if f >= 1 else ''))
         elif int(10 * f) != self._last:

@@ -110,6 +110,13 @@ def loop_metrics(t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArr
     return out
 
 
+def _stamp_s(t: float) -> float:
+    """Plant time [s] as the nodes see it: a header stamp (integer ns) read back as sec + 1e-9 nanosec.
+    The laws' decisions on time differences (TEM range refresh every 0.1 s, dt) then match the graph's."""
+    ns = int(round(t * 1e9))
+    return ns // 1_000_000_000 + 1e-9 * (ns % 1_000_000_000)
+
+
 def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
              base: PlantParams | None = None, record: bool = False,
              on_tick: Callable[[float], None] | None = None) -> tuple[list[dict[str, Any]], Trace | None]:
@@ -141,19 +148,23 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
     qd_rec = np.empty(k_total)
     T_d: FloatArray | None = None
+    t_last = 0.0
+    t_ref0 = int(round(TICK_S * 1e9))
     for k in range(k_total):
-        t = k * TICK_S
         s = wrists.state
+        t = _stamp_s(s.t)
+        dt_law, t_last = t - t_last, t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
         stress = wrists.wire_stress_Pa
         q_rec[k], qm_rec[k] = s.q, q_m
         u = tem.sample(t, T_m, T_d)
-        q_d, qdot_d, qddot_d = (float(x) for x in traj(t - TICK_S))
+        # trajectory_generator: node-clock ns since its first tick (one tick in)
+        q_d, qdot_d, qddot_d = (float(x) for x in traj((int(round(s.t * 1e9)) - t_ref0) * 1e-9))
         qd_rec[k] = q_d
         if k >= 1:  # the controller needs two joint states for its dt
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():
-                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, TICK_S)
+                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law)
                 if T_g is not None:
                     T_new[idx] = T_g
                     continue
