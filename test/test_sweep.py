@@ -142,6 +142,7 @@ def test_dask_cluster_gives_the_single_process_numbers(tmp_path) -> None:
     distributed = pytest.importorskip('distributed')
     cfg = SweepConfig(n_plants=2, controllers=('pid', 'direct_adaptive'), duration_s=2.0, chunk=3, nominal=False)
     local = run_sweep(cfg)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as lc:
+    # in-process workers: the scheduler, task graph and transfer are the real ones, start-up ~1 s
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as lc:
         remote = run_sweep(cfg, tmp_path, scheduler=lc.scheduler_address)
     assert remote.rows == local.rows

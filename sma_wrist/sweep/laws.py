@@ -122,11 +122,12 @@ class TemLoopBank:
 
     @classmethod
     def like_node(cls, n: int) -> 'TemLoopBank':
-        """With tem_controller's defaults (nodes/tem_controller.py: driver rating, hold limits, 85 degC)."""
+        """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
+        0.05 s, driver rating, hold limits, 85 degC); test_sweep's graph agreement checks they still are."""
         hold = th.ThermalParams()
         drive = DriveLimits()
-        return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V), TemControlParams(),
-                   drive, hold, 85.0)
+        return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
+                   TemControlParams(gain_per_s=1.0, rate_filter_s=0.05), drive, hold, 85.0)
 
     def sample(self, t: float, T_meas: FloatArray, T_d: FloatArray | None) -> FloatArray:
         """Commands (n, 2) [V] in force after a sample at t [s] (TemLoop.sample; T_d None: TEMs off)."""

@@ -6,15 +6,19 @@ order the graph's messages flow (sma_wrist/nodes):
 1. the plant's state is measured (:class:`~sma_wrist.plants.spread.SensorBank`: thermocouple
    lag and noise, potentiometer noise);
 2. the TEM loops sample the measured temperatures with the desired temperatures of the
-   previous tick (tem_controller, :class:`~sma_wrist.sweep.laws.TemLoopBank`); the reference
-   is trajectory_generator's, whose clock starts at its first tick (t = TICK_S);
+   previous tick (tem_controller, :class:`~sma_wrist.sweep.laws.TemLoopBank`);
 3. the joint controllers (adaptive_controller, :class:`~sma_wrist.sweep.laws.JointControllerBank`)
    and, in inverse_adaptive mode, the inverse compensator (hysteresis_compensator:
    :class:`~sma_wrist.core.compensation.MuscleCompensator` over all its wrists, memory
    observing the measured temperatures and stresses) give the next desired temperatures;
-4. the plant advances to t_k+1 under the commands of the previous tick (plant_sim's timer runs
-   before this tick's commands arrive: matched sample by sample against the graph, test_sweep),
-   all wrists in one compiled call (:func:`sma_wrist.plants.make_plant`).
+4. the plant advances to t_k+1 under these commands, all wrists in one compiled call
+   (:func:`sma_wrist.plants.make_plant`).
+
+The nodes see plant_sim's first measurements at t_1 (t_0 is published before they subscribe),
+so the TEM loops start at t_1 and the joint controllers, which difference two joint states,
+at t_2, with the reference of the previous tick (trajectory_generator's clock starts at t_1).
+With this order a loop is the graph's sample by sample (test_sweep: same commands and
+angles to the last bit on the nominal and a perturbed plant).
 
 Metrics per loop as ``sma-wrist run`` reports them (sma_wrist.runs.run_metrics): max and RMS
 angle error over the last full reference cycle in % of the reference range, on the true angle
@@ -144,24 +148,28 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     comp_started = False
     tem = TemLoopBank.like_node(n)
     k_total = int(round(duration_s / TICK_S)) + 1
-    t_rec = np.arange(k_total) * TICK_S
+    t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
     qd_rec = np.empty(k_total)
     T_d: FloatArray | None = None
     t_last = 0.0
-    t_ref0 = int(round(TICK_S * 1e9))
+    tick_ns = int(round(TICK_S * 1e9))
     for k in range(k_total):
         s = wrists.state
         t = _stamp_s(s.t)
         dt_law, t_last = t - t_last, t
+        t_rec[k] = t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
         stress = wrists.wire_stress_Pa
         q_rec[k], qm_rec[k] = s.q, q_m
-        u = tem.sample(t, T_m, T_d)
-        # trajectory_generator: node-clock ns since its first tick (one tick in)
-        q_d, qdot_d, qddot_d = (float(x) for x in traj((int(round(s.t * 1e9)) - t_ref0) * 1e-9))
-        qd_rec[k] = q_d
-        if k >= 1:  # the controller needs two joint states for its dt
+        # plant_sim publishes t = 0 before the others subscribe: the TEM loop starts at the first tick
+        u = tem.sample(t, T_m, T_d) if k >= 1 else np.zeros((n, 2))
+        # trajectory_generator's clock starts at its first tick (t_1): the reference stamped t_k is
+        # q_d(t_k - t_1); the controller at t_k still holds the one stamped t_k-1
+        now_ns = int(round(s.t * 1e9))
+        qd_rec[k] = float(traj((now_ns - tick_ns) * 1e-9)[0])
+        q_d, qdot_d, qddot_d = (float(x) for x in traj((now_ns - 2 * tick_ns) * 1e-9))
+        if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():
                 force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law)
@@ -178,10 +186,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                 T_new[idx] = comp(strain.ravel(), stress_g, commit=False).temperature_C.reshape(-1, 2)
             T_d = T_new
         u_rec[k] = u
-        wrists.advance(u_rec[k - 1] if k else u_rec[0] * 0.0, steps)
+        wrists.advance(u, steps)
         if on_tick is not None and k % 100 == 0:
             on_tick(t)
-    rows = loop_metrics(t_rec, qd_rec, q_rec, qm_rec, u_rec)
+    # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on
+    rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:])
     out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m}
            for c, m in zip(cases, rows)]
     trace = Trace(t_rec, qd_rec, q_rec, qm_rec, u_rec) if record else None
