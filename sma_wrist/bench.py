@@ -233,6 +233,13 @@ def bench_bridge(quick: bool = False) -> dict:
     return run_bridge(5.0 if quick else 600.0)
 
 
+@section('sweep')
+def bench_sweep(quick: bool = False) -> dict:
+    """Closed loops per second: the vectorised sweep vs the node graph, side by side (docs/sweep.md)."""
+    from sma_wrist.sweep.bench import bench_sweep as run_sweep_bench
+    return run_sweep_bench(quick)
+
+
 # -------------------------------------------------------------------------------- driver
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:

@@ -140,6 +140,7 @@ def test_hysteresis_file_seam_gives_a_clear_error_until_the_loader_exists(tmp_pa
 def test_registry_lists_the_spread_family() -> None:
     assert 'sdgpi' in PLANTS
     assert {p.name for p in VALIDITY} == {f.name for f in dataclasses.fields(Scenario)} - {'noise_seed'}
+    assert all(getattr(Scenario(), p.name) == p.nominal for p in VALIDITY)
 
 
 @pytest.mark.parametrize('mode', ['pid', 'inverse_adaptive'])
