@@ -13,7 +13,7 @@ import pytest
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.joint_controller import MODES, JointController, JointControllerParams
 from sma_wrist.core.tem_control import TemLoop
-from sma_wrist.plants.spread import Scenario, sample
+from sma_wrist.plants.spread import sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 from sma_wrist.sweep.run import SweepConfig, make_cases, parse_perturbations, run_sweep
 from sma_wrist.sweep.simulate import Case, sign_changes_per_s, simulate

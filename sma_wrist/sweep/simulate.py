@@ -41,7 +41,7 @@ from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant import PlantParams
 from sma_wrist.core.trajectory import make_trajectory
 from sma_wrist.plants import make_plant
-from sma_wrist.plants.spread import Scenario
+from sma_wrist.plants.spread import Scenario, SensorBank
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 
 FloatArray = NDArray[np.float64]
@@ -134,7 +134,6 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     scen = [c.scenario for c in cases]
     wrists = make_plant(plant, scen, base)
     steps = max(1, int(round(TICK_S / base.dt)))
-    from sma_wrist.plants.spread import SensorBank
     sensors = SensorBank(scen, TICK_S)
     traj = make_trajectory('sine', ANGLE_LIMITS_RAD)
     groups = {}
