@@ -54,6 +54,11 @@ def test_scenario_file_round_trip_and_bad_file(tmp_path: Path) -> None:
     import json
     f.write_text(json.dumps(PERTURBED.to_dict()))
     assert Scenario.from_file(f) == PERTURBED
+    row = {**PERTURBED.to_dict(), 'index': 4, 'controller': 'pid', 'max_error_pct': 12.0}  # a results.jsonl line
+    f.write_text(json.dumps(row))
+    assert Scenario.from_file(f) == PERTURBED
+    f.write_text(json.dumps({'stroke_scale': 0.8}))
+    assert Scenario.from_file(f, {'payload_kg': 0.5}) == Scenario(stroke_scale=0.8, payload_kg=0.5)
     f.write_text('[1, 2]')
     with pytest.raises(ParameterError, match='JSON object'):
         Scenario.from_file(f)

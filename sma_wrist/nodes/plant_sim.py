@@ -152,7 +152,7 @@ class PlantSim(WristNode):
             raise SmaWristError(f'plant {p["plant"]!r} takes its perturbations from scenario.* / scenario_file: '
                                 'leave model.* nominal and initial_angle_rad negative')
         if p['scenario_file']:
-            sc = Scenario.from_file(p['scenario_file'])
+            sc = Scenario.from_file(p['scenario_file'], {'payload_kg': payload})
         else:
             sc = Scenario.from_mapping({'payload_kg': payload, 'noise_seed': int(p['scenario.noise_seed']),
                                         **{a.name: p[f'scenario.{a.name}'] for a in SCENARIO_AXES

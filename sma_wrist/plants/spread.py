@@ -124,15 +124,20 @@ class Scenario:
         return cls(**{k: (int(v) if k == 'noise_seed' else float(v)) for k, v in values.items()})
 
     @classmethod
-    def from_file(cls, path: str | Path) -> 'Scenario':
-        """A scenario from a JSON file {name: value} (what ``sma-wrist sweep`` writes per scenario)."""
+    def from_file(cls, path: str | Path, defaults: Mapping[str, Any] | None = None) -> 'Scenario':
+        """A scenario from a JSON file {name: value} (a row of ``sma-wrist sweep``'s results.jsonl has them);
+        axes the file does not name come from ``defaults``, then the nominal values."""
         try:
             data = json.loads(Path(path).read_text())
         except (OSError, ValueError) as e:
             raise ParameterError(f'scenario file {path}: {e}') from None
         if not isinstance(data, dict):
             raise ParameterError(f'scenario file {path}: expected a JSON object {{name: value}}')
-        return cls.from_mapping(data)
+        known = {f.name for f in dataclasses.fields(cls)}
+        extra = {'index', 'group', 'controller', 'plant', 'max_error_pct', 'rms_error_pct', 'max_error_measured_pct',
+                 'sign_changes_per_s', 'window'}  # a results.jsonl row carries its metrics too
+        data = {k: v for k, v in data.items() if k in known or k not in extra}
+        return cls.from_mapping({**(defaults or {}), **data})
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
