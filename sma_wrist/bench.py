@@ -239,6 +239,12 @@ def bench_identify(quick: bool = False) -> dict:
     from sma_wrist.identify.bench import bench_identify as run_identify
     return run_identify(quick)
 
+@section('sweep')
+def bench_sweep(quick: bool = False) -> dict:
+    """Closed loops per second: the vectorised sweep vs the node graph, side by side (docs/sweep.md)."""
+    from sma_wrist.sweep.bench import bench_sweep as run_sweep_bench
+    return run_sweep_bench(quick)
+
 
 # -------------------------------------------------------------------------------- driver
 

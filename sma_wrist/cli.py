@@ -12,7 +12,7 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import diagnose_arguments, emulator_arguments
+from sma_wrist.cli_options import diagnose_arguments, emulator_arguments, sweep_arguments
 from sma_wrist.core.errors import SmaWristError
 
 
@@ -169,6 +169,35 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     return run_cli(a)
 
 
+def cmd_sweep(a: argparse.Namespace) -> int:
+    from sma_wrist.core.errors import ParameterError
+    from sma_wrist.plants.spread import FAMILY
+    from sma_wrist.sweep.run import Progress, SweepConfig, format_table, make_cases, parse_perturbations, run_sweep
+    ranges = parse_perturbations(a.perturb)
+    try:
+        payloads = tuple(float(x) for x in a.payloads.split(',')) if a.payloads else None
+    except ValueError:
+        raise ParameterError(f'--payloads {a.payloads!r}: comma separated numbers [kg]') from None
+    axes = tuple(x.strip() for x in a.heatmap_axes.split(','))
+    if len(axes) != 2:
+        raise ParameterError(f'--heatmap-axes {a.heatmap_axes!r}: give two perturbation names')
+    cfg = SweepConfig(n_plants=a.plants, seed=a.seed, controllers=tuple(x.strip() for x in a.controllers.split(',')),
+                      payloads=payloads, duration_s=a.duration, plant=a.plant,
+                      ranges=ranges if a.only else {**FAMILY, **ranges}, chunk=a.chunk, nominal=not a.no_nominal,
+                      heatmap_axes=axes)  # type: ignore[arg-type]
+    progress = None if a.quiet else Progress(len(make_cases(cfg)))
+    res = run_sweep(cfg, a.out, a.scheduler, progress)
+    if a.json:
+        print(json.dumps({k: v for k, v in res.to_json().items() if k != 'rows'}, indent=2))
+    else:
+        print(format_table(res.summary))
+        print(f'{len(res.rows)} closed loops in {res.wall_s:.1f} s wall; ' + ', '.join(f'{k}: {v}' for k, v in res.files.items()))
+    if res.interrupted:
+        print(f'interrupted: {len(res.rows)} finished loops kept in {a.out}', file=sys.stderr)
+        return 130
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog='sma-wrist', description='SMA wrist simulation, recording and analysis tools.')
     sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
@@ -218,6 +247,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     from sma_wrist.identify import add_parser as add_identify_parser
     add_identify_parser(sub)  # identify hysteresis / thermal: each sub-command registers its own options
+
+    w = sweep_arguments(sub.add_parser('sweep', help='closed loops over sampled plants x controllers x payloads '
+                                                     '(vectorised; --scheduler: Dask), docs/sweep.md'))
+    w.set_defaults(func=cmd_sweep)
 
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')
     b.add_argument('--json', action='store_true')

@@ -40,3 +40,26 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--unplug-every-s', type=float, default=0.0, help='unplug period [device s] (0: never)')
     ap.add_argument('--unplug-wall-s', type=float, default=0.5, help='how long an unplug lasts [wall s]')
     ap.add_argument('--duration', type=float, default=None, help='stop after this many wall seconds')
+
+
+def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Options of ``sma-wrist sweep`` (docs/sweep.md)."""
+    p.add_argument('--plants', type=int, default=20, help='number of sampled plants N (default 20)')
+    p.add_argument('--seed', type=int, default=0, help='seed of the plant sample and the sensor noise (default 0)')
+    p.add_argument('--controllers', default='inverse_adaptive,direct_adaptive,pid', help='comma separated')
+    p.add_argument('--payloads', default=None,
+                   help='kg, comma separated: every plant at each (default: each plant\'s sampled 0.1-0.6 kg)')
+    p.add_argument('--duration', type=float, default=126.0, help='simulated seconds per loop (default 126)')
+    p.add_argument('--plant', default='sdgpi', help='registered plant (sma_wrist.plants.PLANTS; default sdgpi)')
+    p.add_argument('--perturb', action='append', default=[], metavar='NAME=LO:HI',
+                   help='replace a perturbation range of the family (NAME=VALUE fixes it); repeatable')
+    p.add_argument('--only', action='store_true', help='sample only the --perturb axes (others nominal)')
+    p.add_argument('--no-nominal', action='store_true', help='skip the nominal-plant loops run side by side')
+    p.add_argument('--chunk', type=int, default=48, help='loops per vectorised simulation / Dask task (default 48)')
+    p.add_argument('--heatmap-axes', default='transition_shift_C,stroke_scale', help='two perturbation names')
+    p.add_argument('--scheduler', default=None, metavar='ADDRESS',
+                   help='run the chunks on this Dask distributed scheduler (pip install "sma_wrist[dask]")')
+    p.add_argument('--out', default='runs/sweep', help='output directory (results.jsonl, sweep.json, table, PNGs)')
+    p.add_argument('--json', action='store_true', help='print the summary as JSON')
+    p.add_argument('--quiet', action='store_true', help='no progress bar')
+    return p

@@ -13,6 +13,11 @@ CPU allows and the result does not depend on the machine.
 ``sma-wrist diagnose`` writes as a params file (sma_wrist.core.model_extensions): thermal
 and joint deviations inside the plant, sensor effects on what is published.
 
+``plant`` selects another registered plant (:data:`sma_wrist.plants.PLANTS`: ``sdgpi`` is the
+project's wire with a parameter spread, ``phase_fraction`` a structurally different wire),
+perturbed by ``scenario.*`` (or a ``scenario_file``, JSON as ``sma-wrist sweep`` writes); its
+sensor effects (thermocouple noise and lag, potentiometer noise) act on what is published.
+
 Safety: commands beyond the TEM limits are clipped (flagged on /diagnostics), NaN/inf
 commands are rejected (last good command kept), a command older than
 ``command_timeout_s`` is replaced by 0 V (TEMs off), and a muscle above
@@ -36,6 +41,8 @@ from sma_wrist.core.hysteresis_file import hysteresis_params
 from sma_wrist.core.plant import PlantParams, WristPlant
 from sma_wrist.core.thermal_file import load_thermal_file
 from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
+from sma_wrist.plants import PLANTS
+from sma_wrist.plants.spread import VALIDITY as SCENARIO_AXES
 
 
 #: window over which plant_sim compares simulated time with its clock [s of node clock]
@@ -89,7 +96,16 @@ class PlantSim(WristNode):
     ) + tuple(
         # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
         Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
-        for e in mx.PARAMS)
+        for e in mx.PARAMS) + (
+        # a plant that is not the controllers' model (sma_wrist.plants); 'model' = the one above
+        Param('plant', 'model', 'simulated plant: the model (with model.*) or a registered test plant '
+              '(sma_wrist.plants)', choices=('model',) + tuple(PLANTS), runtime=False),
+        Param('scenario_file', '', 'JSON {perturbation: value} for a registered plant (overrides scenario.*)',
+              runtime=False),
+        Param('scenario.noise_seed', 0, 'seed of the scenario\'s sensor noise', '', (0, 2 ** 31 - 1), runtime=False),
+    ) + tuple(
+        Param(f'scenario.{a.name}', float(a.nominal), a.description, a.unit, (a.lower, a.upper), runtime=False)
+        for a in SCENARIO_AXES if a.name != 'payload_kg')
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('plant_sim', **kwargs)
@@ -105,8 +121,12 @@ class PlantSim(WristNode):
         self.payload_err_kg = ext['payload_err_kg']
         true_payload = max(p['payload_kg'] + self.payload_err_kg, 0.0)
         q0 = None if p['initial_angle_rad'] < 0 else p['initial_angle_rad']
-        self.plant = WristPlant(self.sim_params, payload_kg=true_payload)
-        if q0 is not None:
+        self.scenario_sensors = None
+        if p['plant'] != 'model':
+            self.plant, self.scenario_sensors = self._test_plant(p, ext, true_payload, q0)
+        else:
+            self.plant = WristPlant(self.sim_params, payload_kg=true_payload)
+        if q0 is not None and self.scenario_sensors is None:
             self.plant.state = self.plant.rest_state(np.array([true_payload]), q0=q0)
         self.sensors = mx.SensorChain(ext, 1.0 / p['publish_rate_hz'], self.sim_params.joint.q_neutral_rad)
         if ext != mx.NOMINAL:
@@ -133,6 +153,22 @@ class PlantSim(WristNode):
         self.get_logger().info(
             f'plant_sim: payload {p["payload_kg"]} kg, dt {p["dt_s"]} s, {self.steps_per_tick} steps per '
             f'{1.0 / p["publish_rate_hz"]:g} s tick, start angle {float(self.plant.state.q[0]):.3f} rad')
+
+    def _test_plant(self, p: Mapping[str, Any], ext: Mapping[str, float], payload: float, q0: float | None) -> Any:
+        """A registered plant (sma_wrist.plants) of the scenario given by scenario.* or scenario_file."""
+        from sma_wrist.plants import make_plant
+        from sma_wrist.plants.spread import Scenario, SensorBank
+        if ext != mx.NOMINAL or q0 is not None:
+            raise SmaWristError(f'plant {p["plant"]!r} takes its perturbations from scenario.* / scenario_file: '
+                                'leave model.* nominal and initial_angle_rad negative')
+        if p['scenario_file']:
+            sc = Scenario.from_file(p['scenario_file'], {'payload_kg': payload})
+        else:
+            sc = Scenario.from_mapping({'payload_kg': payload, 'noise_seed': int(p['scenario.noise_seed']),
+                                        **{a.name: p[f'scenario.{a.name}'] for a in SCENARIO_AXES
+                                           if a.name != 'payload_kg'}})
+        self.get_logger().info(f'plant {p["plant"]}: ' + ', '.join(f'{k} = {v:g}' for k, v in sc.to_dict().items()))
+        return make_plant(p['plant'], [sc], self.sim_params), SensorBank([sc], 1.0 / p['publish_rate_hz'])
 
     # -- parameters ------------------------------------------------------------
     def apply(self, changed: Mapping[str, Any]) -> None:
@@ -219,7 +255,11 @@ class PlantSim(WristNode):
         s = plant.state
         T = plant.muscle_temperature_C[0]
         q_meas = float(s.q[0])
-        if not self.sensors.identity:
+        qd_meas = float(s.qd[0])
+        if self.scenario_sensors is not None:
+            T2, q2, qd2 = self.scenario_sensors.measure(T[None], s.q, s.qd)
+            T, q_meas, qd_meas = T2[0], float(q2[0]), float(qd2[0])
+        elif not self.sensors.identity:
             T = self.sensors.temperatures(T)
             q_meas = self.sensors.angle(q_meas)
         T = T.tolist()
@@ -230,7 +270,7 @@ class PlantSim(WristNode):
             self.pub_stress[i].publish(Float64(data=stress[i]))
         self.pub_joint.publish(JointState(header=Header(stamp=stamp, frame_id=self.contract.frame_id),
                                           name=[self.contract.joint_name], position=[q_meas],
-                                          velocity=[float(s.qd[0])], effort=[float(plant.muscle_torque_Nm[0])]))
+                                          velocity=[qd_meas], effort=[float(plant.muscle_torque_Nm[0])]))
 
     def _publish_payload(self) -> None:
         self.pub_payload.publish(Float64(data=float(self.p['payload_kg'])))

@@ -1,0 +1,70 @@
+"""Plants that are not the controllers' model: for tests, benchmarks, plant_sim and ``sma-wrist sweep``.
+
+Registry :data:`PLANTS`: name -> factory. A factory takes the scenarios (one
+:class:`~sma_wrist.plants.spread.Scenario` per wrist: payload and perturbations) and the base
+:class:`~sma_wrist.core.plant.PlantParams` (dt, limits), and returns a plant with the interface
+plant_sim and the sweep use: ``advance(command (N, 2) [V], n_steps)``, ``state`` (t, q, qd,
+thermal, payload_kg, flags), ``muscle_temperature_C`` (N, 2), ``wire_stress_Pa`` (N, 2),
+``muscle_torque_Nm`` (N,), ``params`` (thermal limits and window, dt). Sensor effects are not
+the plant's: :class:`~sma_wrist.plants.spread.SensorBank` applies them to what is published.
+
+* ``sdgpi``: the project's plant (SD-GPI wire, Eqs. 3.19-4.6) with the scenario's parameter
+  spread (:mod:`sma_wrist.plants.spread`); at the nominal scenario it is the plain plant.
+* ``phase_fraction``: a structurally different wire (sma_wrist/plants/phase_fraction.py, when
+  present; it registers itself below).
+
+Wires identified from real data: ``hysteresis_file`` (:func:`load_hysteresis`) replaces the
+SD-GPI set the ``sdgpi`` plant perturbs.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.hysteresis import SDGPIParams
+from sma_wrist.core.plant import PlantParams
+
+PlantFactory = Callable[..., Any]
+
+
+def _sdgpi(scenarios: Sequence[Any], base: PlantParams | None = None, hysteresis_file: str | None = None) -> Any:
+    from sma_wrist.plants.spread import build_plant
+    return build_plant(scenarios, base, load_hysteresis(hysteresis_file) if hysteresis_file else None)
+
+
+#: name -> factory(scenarios, base PlantParams, **options) -> plant (see the module docstring)
+PLANTS: dict[str, PlantFactory] = {'sdgpi': _sdgpi}
+
+try:  # the structurally different wire (issue 14, 1(b)); absent: the registry works without it
+    from sma_wrist.plants import phase_fraction as _phase_fraction
+except ImportError:  # pragma: no cover - depends on the checkout
+    _phase_fraction = None  # type: ignore[assignment]
+if _phase_fraction is not None and hasattr(_phase_fraction, 'factory'):
+    PLANTS['phase_fraction'] = _phase_fraction.factory
+
+
+def make_plant(name: str, scenarios: Sequence[Any], base: PlantParams | None = None, **options: Any) -> Any:
+    """The registered plant ``name`` for the scenarios; unknown names raise ParameterError."""
+    if name not in PLANTS:
+        raise ParameterError(f'unknown plant {name!r}; registered: {", ".join(sorted(PLANTS))}')
+    return PLANTS[name](scenarios, base, **options)
+
+
+def load_hysteresis(path: str | Path) -> SDGPIParams:
+    """SD-GPI parameters identified from measured data (a ``hysteresis_file``).
+
+    SEAM: the identification helper (branch identhyst) adds the file format and its loader;
+    until it is merged this raises a clear error. Wire its loader in here, e.g.
+    ``from sma_wrist.core.identification import load_hysteresis_file; return load_hysteresis_file(path)``.
+    """
+    try:
+        from sma_wrist.core.identification import load_hysteresis_file  # type: ignore[attr-defined]
+    except ImportError:
+        raise ParameterError(f'hysteresis_file {path}: this build has no loader for identified wires yet '
+                             '(sma_wrist.core.identification.load_hysteresis_file, added by the identification '
+                             'work); use the default SD-GPI set') from None
+    return load_hysteresis_file(path)
+
+
+__all__ = ['PLANTS', 'PlantFactory', 'make_plant', 'load_hysteresis']

@@ -1,0 +1,159 @@
+"""N-scenario paths of the per-wrist compositions the nodes run: the joint controller and the TEM loop.
+
+The laws themselves are vectorised in core (AdaptiveController, PID, InverseCompensator, the
+plant); the two compositions around them run one wrist per object. These are the same
+computations for N wrists in lockstep (same reference, same sample times), checked against the
+one-wrist objects by test_sweep (``JointControllerBank`` == ``JointController``,
+``TemLoopBank`` == ``TemLoop``, sample by sample).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sma_wrist.core import tem_kernel
+from sma_wrist.core import thermal as th
+from sma_wrist.core.adaptive import AdaptiveController
+from sma_wrist.core.errors import ModelInputError
+from sma_wrist.core.joint_controller import REVERSAL_STEP_RAD, JointControllerParams, time_to_meet
+from sma_wrist.core.pid import PID
+from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.tem_control import RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step
+
+FloatArray = NDArray[np.float64]
+
+def _reversal_lead_many(q: list[float], q_d: float, qdot_d: float, qddot_d: float, lead_s: float, step: float,
+                        hold_on: list[bool], hold_q: list[float], hold_after: list[float], target: list[float]) -> None:
+    """JointController._reversal_lead for each wrist (Python floats: time_to_meet is scalar code):
+    target[j] = the angle whose strain is asked for; hold_* the latch per wrist, in place."""
+    for j in range(len(q)):
+        e = q_d - q[j]
+        s_meet, after = time_to_meet(e, qdot_d, qddot_d)
+        turns = after != math.copysign(1.0, qdot_d) or (abs(e) > step and after != math.copysign(1.0, e))
+        if not hold_on[j] and s_meet < 2.0 * lead_s and turns:
+            hold_on[j] = True
+            hold_q[j] = q[j] + after * step
+            hold_after[j] = after
+        target[j] = q_d
+        if hold_on[j]:
+            turned = qdot_d * hold_after[j] > 0
+            if (turned and (q_d - hold_q[j]) * hold_after[j] >= 0) or (not turned and after != hold_after[j]):
+                hold_on[j] = False
+            else:
+                target[j] = hold_q[j]
+
+
+class JointControllerBank:
+    """:class:`sma_wrist.core.joint_controller.JointController` for n wrists of one mode.
+
+    ``update`` returns (force (n, 2) [N] or None, strain (n, 2), T_d (n, 2) [degC] or None,
+    saturated (n,)), what the one-wrist object returns per wrist.
+    """
+
+    def __init__(self, params: JointControllerParams, n: int, plant: PlantParams | None = None) -> None:
+        self.params = params
+        self.plant = plant or PlantParams()
+        self.n = n
+        p = params
+        self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode), n) if p.mode != 'pid' else None
+        self.pid = PID(p.pid, n) if p.mode == 'pid' else None
+        self.hold_on = [False] * n
+        self.hold_q = [0.0] * n
+        self.hold_after = [0.0] * n
+        self._target = [0.0] * n
+
+    def strain_at(self, q: FloatArray) -> FloatArray:
+        """(n, 2) bundle strains at angles q (Eq. 4.17)."""
+        x = self.plant.joint.chain_displacement_mm(np.asarray(q, float))
+        e0 = self.plant.preload_elongation_mm
+        return np.stack([e0 - x, e0 + x], axis=-1) / self.plant.muscle.wire_length_mm
+
+    def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float
+               ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
+        p = self.params
+        lo, hi = p.temperature_min_C, p.temperature_max_C
+        if self.pid is not None:
+            o = self.pid.update(q, q_d, dt)
+            T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
+            Tc = np.clip(T, lo, hi)
+            return None, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
+        assert self.adaptive is not None
+        o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
+        force = np.stack([o.force_1_N, o.force_2_N], axis=-1)
+        if p.mode == 'inverse_adaptive':
+            _reversal_lead_many(np.asarray(q, float).tolist(), float(q_d), float(qdot_d), float(qddot_d),
+                                float(p.reversal_lead_s), REVERSAL_STEP_RAD, self.hold_on, self.hold_q,
+                                self.hold_after, self._target)
+            return force, self.strain_at(np.array(self._target)), None, o.saturated
+        T = p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N
+        Tc = np.clip(T, lo, hi)
+        return force, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
+
+
+@tem_kernel._jit
+def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
+                  cfg, candidates, status):  # pragma: no cover - compiled
+    """tem_kernel.control_sample for each wrist j (row j of every state array)."""
+    for j in range(x.shape[0]):
+        status[j] = tem_kernel.control_sample(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j], T_meas[j],
+                                              T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef, cfg, candidates)
+
+
+class TemLoopBank:
+    """:class:`sma_wrist.core.tem_control.TemLoop` (tem_controller's per-sample work) for n wrists
+    sampled together. The constants are a one-wrist TemLoop's, built as the node builds them."""
+
+    def __init__(self, n: int, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
+                 hold: th.ThermalParams, max_muscle_C: float) -> None:
+        one = TemLoop(thermal, params, drive, hold, max_muscle_C, compiled=True)
+        self.n, self.thermal, self.drive = n, thermal, drive
+        self._coef, self._cfg, self._candidates = one._coef, one._cfg, one._candidates
+        self.observer = np.repeat(one.observer, n, axis=0)  # (n, 2 layers, 2 faces)
+        self.rate, self.T_d_prev, self.rng = np.zeros((n, 2, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2, 2))
+        self.command_V = np.zeros((n, 2))
+        self.flags = np.zeros((n, 2), np.int64)
+        self.status = np.zeros(n, np.int64)
+        self.t_last: float | None = None
+        self.t_law: float | None = None
+        self.range_t: float | None = None
+
+    @classmethod
+    def like_node(cls, n: int) -> 'TemLoopBank':
+        """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
+        0.05 s, driver rating, hold limits, 85 degC); test_sweep's graph agreement checks they still are."""
+        hold = th.ThermalParams()
+        drive = DriveLimits()
+        return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
+                   TemControlParams(gain_per_s=1.0, rate_filter_s=0.05), drive, hold, 85.0)
+
+    def sample(self, t: float, T_meas: FloatArray, T_d: FloatArray | None) -> FloatArray:
+        """Commands (n, 2) [V] in force after a sample at t [s] (TemLoop.sample; T_d None: TEMs off)."""
+        dt = None if self.t_last is None else t - self.t_last
+        if dt is not None and dt <= 0:
+            return self.command_V
+        self.t_last = t
+        dt_obs = 0.0 if dt is None else min(dt, self.thermal.dt_max_s)
+        if T_d is None:
+            if dt_obs > 0:
+                self.observer = observer_step(self.thermal, self.observer, self.command_V, dt_obs, compiled=True)
+            self.observer[:, :, 0] = T_meas
+            self.command_V = np.zeros((self.n, 2))
+            return self.command_V
+        refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
+        has_prev = self.t_law is not None
+        dt_law = t - self.t_law if has_prev else 0.0
+        _control_many(self.observer, self.rate, self.T_d_prev, self.rng, self.command_V, self.flags,
+                      np.ascontiguousarray(T_meas, float), np.ascontiguousarray(T_d, float), dt_obs, dt_law, has_prev,
+                      refresh, self._coef, self._cfg, self._candidates, self.status)
+        if self.status.any():
+            raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
+        self.t_law = t
+        if refresh:
+            self.range_t = t
+        return self.command_V
+
+
+__all__ = ['JointControllerBank', 'TemLoopBank']

@@ -1,0 +1,321 @@
+"""``sma-wrist sweep``: closed loops over sampled plants x controllers x payloads, in chunks.
+
+Each chunk is one vectorised simulation (:func:`sma_wrist.sweep.simulate.simulate`); a loop's
+result depends only on its own case (seeded scenario, own noise stream), so the chunking, the
+order and the machine (``--scheduler``: a Dask distributed cluster) do not change any number.
+Results are appended to ``results.jsonl`` as each chunk finishes, so Ctrl-C keeps them; the
+summary (``sweep.json``, ``table.txt``, ``cdf.png``, ``heatmap.png``) is written from whatever
+finished.
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from sma_wrist.core.errors import ParameterError, SmaWristError
+from sma_wrist.core.joint_controller import MODES
+from sma_wrist.plants import PLANTS
+from sma_wrist.plants.spread import BY_NAME, FAMILY, Scenario, check_ranges, sample
+from sma_wrist.sweep.simulate import Case, simulate
+
+#: the seed's requirement and issue 14's targets over the family
+LIMIT_PCT = 15.0
+SHARE = 0.95
+NOMINAL_PAYLOADS = (0.1, 0.3, 0.6)
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """What to sweep. ``payloads`` None: each plant's sampled payload; else every plant at each."""
+
+    n_plants: int = 20
+    seed: int = 0
+    controllers: tuple[str, ...] = MODES
+    payloads: tuple[float, ...] | None = None
+    duration_s: float = 126.0
+    plant: str = 'sdgpi'
+    ranges: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(FAMILY))
+    chunk: int = 48
+    nominal: bool = True  # also the nominal plant per controller at NOMINAL_PAYLOADS, side by side
+    heatmap_axes: tuple[str, str] = ('transition_shift_C', 'stroke_scale')
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.n_plants, int) and self.n_plants >= 1):
+            raise ParameterError(f'number of plants N = {self.n_plants!r} must be an integer >= 1')
+        bad = [c for c in self.controllers if c not in MODES]
+        if bad or not self.controllers:
+            raise ParameterError(f'controllers {bad or "(none)"}: choose from {", ".join(MODES)}')
+        if self.plant not in PLANTS:
+            raise ParameterError(f'unknown plant {self.plant!r}; registered: {", ".join(sorted(PLANTS))}')
+        if not (math.isfinite(self.duration_s) and self.duration_s >= 1.0):
+            raise ParameterError(f'duration {self.duration_s!r} s must be >= 1 s')
+        if not (isinstance(self.chunk, int) and self.chunk >= 1):
+            raise ParameterError(f'chunk = {self.chunk!r} must be an integer >= 1')
+        check_ranges(self.ranges)
+        lo, hi = BY_NAME['payload_kg'].lower, BY_NAME['payload_kg'].upper
+        for m in self.payloads or ():
+            if not (math.isfinite(m) and lo <= m <= hi):
+                raise ParameterError(f'payload {m!r} kg is outside the model\'s validity [{lo:g}, {hi:g}] kg')
+        for a in self.heatmap_axes:
+            if a not in BY_NAME:
+                raise ParameterError(f'heat-map axis {a!r} is not a perturbation; known: {", ".join(BY_NAME)}')
+
+
+def parse_perturbations(items: Sequence[str]) -> dict[str, tuple[float, float]]:
+    """``name=lo:hi`` or ``name=value`` items -> ranges (validated by check_ranges)."""
+    out: dict[str, tuple[float, float]] = {}
+    for item in items:
+        name, sep, rng = item.partition('=')
+        if not sep:
+            raise ParameterError(f'perturbation {item!r}: write name=lo:hi or name=value')
+        parts = rng.split(':')
+        try:
+            vals = [float(x) for x in parts]
+        except ValueError:
+            raise ParameterError(f'perturbation {item!r}: {rng!r} is not a number or lo:hi') from None
+        if len(vals) not in (1, 2):
+            raise ParameterError(f'perturbation {item!r}: write name=lo:hi or name=value')
+        out[name.strip()] = (vals[0], vals[-1])
+    return check_ranges(out)
+
+
+def make_cases(cfg: SweepConfig) -> list[Case]:
+    """The sweep's closed loops, in a fixed order: sampled plants x payloads x controllers, then nominal ones."""
+    cases: list[Case] = []
+    for sc in sample(cfg.n_plants, cfg.seed, cfg.ranges):
+        for m in (cfg.payloads or (sc.payload_kg,)):
+            for c in cfg.controllers:
+                cases.append(Case(len(cases), c, replace(sc, payload_kg=float(m))))
+    if cfg.nominal:
+        for m in (cfg.payloads or NOMINAL_PAYLOADS):
+            for c in cfg.controllers:
+                cases.append(Case(len(cases), c, Scenario(payload_kg=float(m)), 'nominal'))
+    return cases
+
+
+def run_chunk(cases: Sequence[Case], duration_s: float, plant: str) -> list[dict[str, Any]]:
+    """One chunk: what a local loop or a Dask worker runs."""
+    return simulate(cases, duration_s, plant)[0]
+
+
+class Progress:
+    """A progress bar on stderr: in place on a terminal, a line per 10 % in a log."""
+
+    def __init__(self, total_loops: int, stream: Any = None) -> None:
+        self.total, self.stream, self.t0, self._last = total_loops, stream or sys.stderr, time.perf_counter(), -1
+
+    def __call__(self, done_loops: float) -> None:
+        f = min(done_loops / self.total, 1.0)
+        wall = time.perf_counter() - self.t0
+        eta = f'{wall * (1 - f) / f:6.1f} s' if f > 0 else '     ?'
+        bar = '#' * int(30 * f)
+        text = f'[sweep] |{bar:<30}| {100 * f:5.1f} % of {self.total} loops, {wall:6.1f} s, eta {eta}'
+        if self.stream.isatty():
+            self.stream.write('\r' + text + ('\n' if f >= 1 else ''))
+        elif int(10 * f) != self._last:
+            self._last = int(10 * f)
+            self.stream.write(text + '\n')
+        self.stream.flush()
+
+
+@dataclass
+class SweepResult:
+    config: SweepConfig
+    rows: list[dict[str, Any]]
+    interrupted: bool
+    wall_s: float
+    summary: list[dict[str, Any]] = field(default_factory=list)
+    files: dict[str, str] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        cfg = asdict(self.config)
+        return {'config': cfg, 'interrupted': self.interrupted, 'wall_s': self.wall_s,
+                'loops': len(self.rows), 'summary': self.summary, 'files': self.files, 'rows': self.rows}
+
+
+def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: str | None = None,
+              progress: Callable[[float], None] | None = None) -> SweepResult:
+    """Run the sweep (locally, or on the Dask cluster at ``scheduler``); Ctrl-C keeps finished chunks."""
+    cases = make_cases(cfg)
+    chunks = [cases[i:i + cfg.chunk] for i in range(0, len(cases), cfg.chunk)]
+    out = Path(out_dir) if out_dir is not None else None
+    jsonl = None
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        jsonl = (out / 'results.jsonl').open('w')
+    rows: list[dict[str, Any]] = []
+    t0 = time.perf_counter()
+    interrupted = False
+
+    def keep(chunk_rows: list[dict[str, Any]]) -> None:
+        rows.extend(chunk_rows)
+        if jsonl is not None:
+            for r in chunk_rows:
+                jsonl.write(json.dumps(r) + '\n')
+            jsonl.flush()
+
+    try:
+        if scheduler:
+            _run_dask(scheduler, chunks, cfg, keep, progress)
+        else:
+            done = 0
+            for chunk in chunks:
+                tick = None if progress is None else (
+                    lambda t, d=done, n=len(chunk): progress(d + n * min(t / cfg.duration_s, 1.0)))
+                keep(simulate(chunk, cfg.duration_s, cfg.plant, on_tick=tick)[0])
+                done += len(chunk)
+                if progress is not None:
+                    progress(done)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        if jsonl is not None:
+            jsonl.close()
+    rows.sort(key=lambda r: r['index'])
+    res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0)
+    res.summary = summarise(rows)
+    if out is not None:
+        res.files = write_outputs(res, out)
+    return res
+
+
+def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Callable[[list[dict[str, Any]]], None],
+              progress: Callable[[float], None] | None) -> None:
+    try:
+        from dask.distributed import Client, as_completed
+    except ImportError:
+        raise SmaWristError('--scheduler needs Dask: pip install "sma_wrist[dask]"') from None
+    try:
+        client = Client(address, timeout='10s')
+    except (OSError, TimeoutError, ValueError) as e:
+        raise SmaWristError(f'cannot reach the Dask scheduler at {address}: {e}') from None
+    try:
+        futures = [client.submit(run_chunk, ch, cfg.duration_s, cfg.plant, pure=False) for ch in chunks]
+        done = 0
+        try:
+            for fut in as_completed(futures):
+                rows = fut.result()
+                keep(rows)
+                done += len(rows)
+                if progress is not None:
+                    progress(done)
+        except KeyboardInterrupt:
+            client.cancel(futures)
+            raise
+    finally:
+        client.close()
+
+
+def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per (group, controller): loops, median / 95th percentile / worst max error, share under 15 %,
+    median and worst TEM sign changes per second."""
+    out = []
+    for group in ('nominal', 'spread'):
+        for c in MODES:
+            sel = [r for r in rows if r['group'] == group and r['controller'] == c]
+            if not sel:
+                continue
+            e = np.array([r['max_error_pct'] for r in sel])
+            ch = np.array([r['sign_changes_per_s'] for r in sel])
+            out.append({'group': group, 'controller': c, 'loops': len(sel),
+                        'median_max_error_pct': float(np.median(e)), 'p95_max_error_pct': float(np.percentile(e, 95)),
+                        'worst_max_error_pct': float(e.max()),
+                        'share_under_15_pct': float(np.mean(e < LIMIT_PCT)),
+                        'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
+                        'median_sign_changes_per_s': float(np.median(ch)), 'worst_sign_changes_per_s': float(ch.max())})
+    return out
+
+
+def format_table(summary: Sequence[dict[str, Any]]) -> str:
+    head = (f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"worst":>7} {"<15%":>6} '
+            f'{"flips/s":>8}')
+    lines = [head, '-' * len(head)]
+    for s in summary:
+        lines.append(f'{s["group"]:8} {s["controller"]:17} {s["loops"]:5d} {s["median_max_error_pct"]:6.2f}% '
+                     f'{s["p95_max_error_pct"]:6.2f}% {s["worst_max_error_pct"]:6.2f}% '
+                     f'{100 * s["share_under_15_pct"]:5.0f}% {s["median_sign_changes_per_s"]:8.2f}')
+    lines.append('max error over the last reference cycle, % of the reference range (true angle); '
+                 'flips/s: median TEM command sign changes per second')
+    return '\n'.join(lines)
+
+
+def write_outputs(res: SweepResult, out: Path) -> dict[str, str]:
+    files = {'results': str(out / 'results.jsonl'), 'json': str(out / 'sweep.json'), 'table': str(out / 'table.txt')}
+    (out / 'table.txt').write_text(format_table(res.summary) + '\n')
+    try:
+        files.update(plot(res, out))
+    except ImportError:
+        pass  # matplotlib is the 'plot' extra: the text and JSON are written regardless
+    (out / 'sweep.json').write_text(json.dumps(res.to_json(), indent=1))
+    return files
+
+
+def plot(res: SweepResult, out: Path) -> dict[str, str]:
+    """cdf.png (CDF of max error per controller, spread vs nominal) and heatmap.png (median max error
+    over the two heat-map axes, one panel per controller)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    rows = res.rows
+    ctrls = [c for c in MODES if any(r['controller'] == c for r in rows)]
+    if not rows:
+        return {}
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for k, c in enumerate(ctrls):
+        e = np.sort([r['max_error_pct'] for r in rows if r['controller'] == c and r['group'] == 'spread'])
+        if e.size:
+            ax.step(e, np.arange(1, e.size + 1) / e.size, where='post', color=f'C{k}', label=f'{c} (spread, {e.size})')
+        nom = [r['max_error_pct'] for r in rows if r['controller'] == c and r['group'] == 'nominal']
+        if nom:
+            ax.plot(nom, np.full(len(nom), 1.02), 'v', color=f'C{k}', label=f'{c} nominal plant')
+    ax.axvline(LIMIT_PCT, color='k', ls='--', lw=1, label='15 % (seed requirement)')
+    ax.axhline(SHARE, color='grey', ls=':', lw=1)
+    ax.set_xscale('log')
+    ax.set_xlabel('max error over the last cycle [% of reference range]')
+    ax.set_ylabel('share of plants')
+    ax.set_title(f'sma-wrist sweep: {res.config.plant}, {res.config.n_plants} plants, seed {res.config.seed}')
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc='lower right')
+    fig.tight_layout()
+    fig.savefig(out / 'cdf.png', dpi=110)
+    plt.close(fig)
+    xa, ya = res.config.heatmap_axes
+    spread = [r for r in rows if r['group'] == 'spread']
+    fig, axes = plt.subplots(1, max(len(ctrls), 1), figsize=(4.2 * max(len(ctrls), 1), 3.8), squeeze=False)
+    for ax, c in zip(axes[0], ctrls):
+        sel = [r for r in spread if r['controller'] == c]
+        x = np.array([r[xa] for r in sel])
+        y = np.array([r[ya] for r in sel])
+        e = np.array([r['max_error_pct'] for r in sel])
+        if x.size == 0:
+            continue
+        nb = 5
+        xe = np.linspace(x.min(), x.max() + 1e-12, nb + 1)
+        ye = np.linspace(y.min(), y.max() + 1e-12, nb + 1)
+        grid = np.full((nb, nb), np.nan)
+        ix, iy = np.clip(np.digitize(x, xe) - 1, 0, nb - 1), np.clip(np.digitize(y, ye) - 1, 0, nb - 1)
+        for i in range(nb):
+            for j in range(nb):
+                m = (ix == i) & (iy == j)
+                if m.any():
+                    grid[j, i] = np.median(e[m])
+        im = ax.pcolormesh(xe, ye, grid, cmap='viridis_r', vmin=0, vmax=max(30.0, float(np.nanmax(grid))))
+        ax.set_xlabel(f'{xa} [{BY_NAME[xa].unit}]')
+        ax.set_ylabel(f'{ya} [{BY_NAME[ya].unit}]')
+        ax.set_title(f'{c}: median max error [%]', fontsize=9)
+        fig.colorbar(im, ax=ax)
+    fig.tight_layout()
+    fig.savefig(out / 'heatmap.png', dpi=110)
+    plt.close(fig)
+    return {'cdf': str(out / 'cdf.png'), 'heatmap': str(out / 'heatmap.png')}
+
+
+__all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'parse_perturbations', 'summarise',
+           'format_table', 'Progress']

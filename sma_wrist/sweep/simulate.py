@@ -1,0 +1,199 @@
+"""N closed loops in one vectorised simulation: the node graph's computation, wrists in lockstep.
+
+Per 100 Hz tick t_k (the graph's publish rate; plant_sim's dt_s steps in between), in the
+order the graph's messages flow (sma_wrist/nodes):
+
+1. the plant's state is measured (:class:`~sma_wrist.plants.spread.SensorBank`: thermocouple
+   lag and noise, potentiometer noise);
+2. the TEM loops sample the measured temperatures with the desired temperatures of the
+   previous tick (tem_controller, :class:`~sma_wrist.sweep.laws.TemLoopBank`);
+3. the joint controllers (adaptive_controller, :class:`~sma_wrist.sweep.laws.JointControllerBank`)
+   and, in inverse_adaptive mode, the inverse compensator (hysteresis_compensator:
+   :class:`~sma_wrist.core.compensation.MuscleCompensator` over all its wrists, memory
+   observing the measured temperatures and stresses) give the next desired temperatures;
+4. the plant advances to t_k+1 under these commands, all wrists in one compiled call
+   (:func:`sma_wrist.plants.make_plant`).
+
+The nodes see plant_sim's first measurements at t_1 (t_0 is published before they subscribe),
+so the TEM loops start at t_1 and the joint controllers, which difference two joint states,
+at t_2, with the reference of the previous tick (trajectory_generator's clock starts at t_1).
+With this order a loop is the graph's sample by sample (test_sweep: same commands and
+angles to the last bit on the nominal and a perturbed plant).
+
+Metrics per loop as ``sma-wrist run`` reports them (sma_wrist.runs.run_metrics): max and RMS
+angle error over the last full reference cycle in % of the reference range, on the true angle
+and on the measured one (what a bag holds), and the TEM commands' sign changes per second.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sma_wrist.core.compensation import MuscleCompensator
+from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.joint_controller import MODES, JointControllerParams
+from sma_wrist.core.metrics import SEED_PERIOD_S
+from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.trajectory import make_trajectory
+from sma_wrist.plants import make_plant
+from sma_wrist.plants.spread import Scenario, SensorBank
+from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
+
+FloatArray = NDArray[np.float64]
+
+TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
+ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
+
+
+@dataclass(frozen=True)
+class Case:
+    """One closed loop: a plant scenario under one controller mode."""
+
+    index: int
+    controller: str
+    scenario: Scenario
+    group: str = 'spread'  # 'spread' (sampled plant) or 'nominal' (the controllers' own model)
+
+    def __post_init__(self) -> None:
+        if self.controller not in MODES:
+            raise ParameterError(f'controller {self.controller!r} is not one of {", ".join(MODES)}')
+
+
+@dataclass
+class Trace:
+    """Recorded series of a chunk (for the agreement test and plots): (K,) times, (K, n) angles."""
+
+    t: FloatArray
+    q_d: FloatArray
+    q: FloatArray
+    q_measured: FloatArray
+    command_V: FloatArray  # (K, n, 2)
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+#: commands within +-this [V] carry the previous sign in :func:`sign_changes_per_s`: a law settling
+#: about 0 V flips sign without moving heat; chattering is the driver swinging between heating and cooling
+CHATTER_DEADBAND_V = 1.0
+
+
+def sign_changes_per_s(u: FloatArray, dt: float, deadband: float = CHATTER_DEADBAND_V) -> FloatArray:
+    """Sign changes per second of each command column of u (K, ...) sampled every dt [s].
+
+    Commands within +-deadband carry the previous sign (a + 0 - sequence is one change): TEM chattering.
+    """
+    s = np.where(np.abs(u) > deadband, np.sign(u), 0.0)
+    # carry the last nonzero sign forward through zeros
+    idx = np.where(s != 0, np.arange(s.shape[0]).reshape((-1,) + (1,) * (s.ndim - 1)), 0)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    carried = np.take_along_axis(s, idx, axis=0)
+    changes = (carried[1:] * carried[:-1] < 0).sum(axis=0)
+    return changes / (dt * max(s.shape[0] - 1, 1))
+
+
+def loop_metrics(t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArray, u: FloatArray,
+                 period_s: float = SEED_PERIOD_S) -> list[dict[str, float]]:
+    """Per loop: run_metrics' figures over the last full cycle (whole run if shorter)."""
+    rng = float(q_d.max() - q_d.min())
+    if rng <= 0:
+        raise ParameterError('the reference does not move: no error in % of its range')
+    last = t >= t[-1] - period_s if t[-1] - t[0] >= period_s else np.ones(t.size, bool)
+    e = np.abs(q[last] - q_d[last, None]) * (100.0 / rng)
+    em = np.abs(q_meas[last] - q_d[last, None]) * (100.0 / rng)
+    chat = sign_changes_per_s(u[last], t[1] - t[0])  # (n, 2)
+    out = []
+    for j in range(q.shape[1]):
+        out.append({'max_error_pct': float(e[:, j].max()), 'rms_error_pct': float(np.sqrt(np.mean(e[:, j] ** 2))),
+                    'max_error_measured_pct': float(em[:, j].max()),
+                    'sign_changes_per_s': float(chat[j].max()),
+                    'window': 'last_cycle' if last.sum() < t.size else 'whole_run'})
+    return out
+
+
+def _stamp_s(t: float) -> float:
+    """Plant time [s] as the nodes see it: a header stamp (integer ns) read back as sec + 1e-9 nanosec.
+    The laws' decisions on time differences (TEM range refresh every 0.1 s, dt) then match the graph's."""
+    ns = int(round(t * 1e9))
+    return ns // 1_000_000_000 + 1e-9 * (ns % 1_000_000_000)
+
+
+def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
+             base: PlantParams | None = None, record: bool = False,
+             on_tick: Callable[[float], None] | None = None) -> tuple[list[dict[str, Any]], Trace | None]:
+    """Run the closed loops of ``cases`` together; returns one result row per case (and the traces)."""
+    if not cases:
+        raise ParameterError('no closed loops to simulate (N = 0)')
+    if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
+        raise ParameterError(f'duration {duration_s!r} s must be >= {2 * TICK_S} s')
+    base = base or PlantParams()
+    n = len(cases)
+    scen = [c.scenario for c in cases]
+    wrists = make_plant(plant, scen, base)
+    steps = max(1, int(round(TICK_S / base.dt)))
+    sensors = SensorBank(scen, TICK_S)
+    traj = make_trajectory('sine', ANGLE_LIMITS_RAD)
+    groups = {}
+    for mode in MODES:
+        idx = np.array([i for i, c in enumerate(cases) if c.controller == mode], dtype=np.intp)
+        if idx.size:
+            groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode), idx.size, base))
+    comp = None
+    if 'inverse_adaptive' in groups:
+        comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0))
+    comp_started = False
+    tem = TemLoopBank.like_node(n)
+    k_total = int(round(duration_s / TICK_S)) + 1
+    t_rec = np.empty(k_total)
+    q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
+    qd_rec = np.empty(k_total)
+    T_d: FloatArray | None = None
+    t_last = 0.0
+    tick_ns = int(round(TICK_S * 1e9))
+    for k in range(k_total):
+        s = wrists.state
+        t = _stamp_s(s.t)
+        dt_law, t_last = t - t_last, t
+        t_rec[k] = t
+        T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
+        stress = wrists.wire_stress_Pa
+        q_rec[k], qm_rec[k] = s.q, q_m
+        # plant_sim publishes t = 0 before the others subscribe: the TEM loop starts at the first tick
+        u = tem.sample(t, T_m, T_d) if k >= 1 else np.zeros((n, 2))
+        # trajectory_generator's clock starts at its first tick (t_1): the reference stamped t_k is
+        # q_d(t_k - t_1); the controller at t_k still holds the one stamped t_k-1
+        now_ns = int(round(s.t * 1e9))
+        qd_rec[k] = float(traj((now_ns - tick_ns) * 1e-9)[0])
+        q_d, qdot_d, qddot_d = (float(x) for x in traj((now_ns - 2 * tick_ns) * 1e-9))
+        if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
+            T_new = np.empty((n, 2))
+            for mode, (idx, bank) in groups.items():
+                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law)
+                if T_g is not None:
+                    T_new[idx] = T_g
+                    continue
+                assert comp is not None and force is not None
+                # the compensator's compiled paths take flat wire arrays: (n, 2) -> (2n,)
+                stress_g, T_g = stress[idx].ravel(), T_m[idx].ravel()
+                if not comp_started:
+                    comp.reset(T_g, stress_g)
+                    comp_started = True
+                comp.observe(T_g, stress_g)
+                T_new[idx] = comp(strain.ravel(), stress_g, commit=False).temperature_C.reshape(-1, 2)
+            T_d = T_new
+        u_rec[k] = u
+        wrists.advance(u, steps)
+        if on_tick is not None and k % 100 == 0:
+            on_tick(t)
+    # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on
+    rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:])
+    out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m}
+           for c, m in zip(cases, rows)]
+    trace = Trace(t_rec, qd_rec, q_rec, qm_rec, u_rec) if record else None
+    return out, trace
+
+
+__all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S']

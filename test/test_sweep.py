@@ -1,0 +1,148 @@
+"""sma-wrist sweep: the N-wrist compositions equal the one-wrist ones, the vectorised loops agree with
+the node graph, chunking and Dask change nothing, bad input and Ctrl-C (docs/sweep.md)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.joint_controller import MODES, JointController, JointControllerParams
+from sma_wrist.core.tem_control import TemLoop
+from sma_wrist.plants.spread import sample
+from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
+from sma_wrist.sweep.run import SweepConfig, make_cases, parse_perturbations, run_sweep
+from sma_wrist.sweep.simulate import Case, sign_changes_per_s, simulate
+
+
+@pytest.mark.parametrize('mode', MODES)
+def test_joint_controller_bank_equals_one_wrist_objects(mode: str) -> None:
+    rng = np.random.default_rng(1)
+    n = 4
+    bank = JointControllerBank(JointControllerParams(mode=mode), n)
+    ones = [JointController(JointControllerParams(mode=mode)) for _ in range(n)]
+    q = 0.5 + 0.2 * rng.standard_normal(n)
+    for k in range(400):  # 4 s at 100 Hz around a reversal of the Sec. 6.1 sine
+        t = 14.0 + 0.01 * k
+        q_d, qd_d, qdd_d = 0.524 + 0.524 * np.sin(0.1 * t), 0.0524 * np.cos(0.1 * t), -0.00524 * np.sin(0.1 * t)
+        q = q + 0.003 * rng.standard_normal(n)
+        qdot = rng.standard_normal(n) * 0.05
+        force, strain, T, sat = bank.update(q, qdot, q_d, qd_d, qdd_d, 0.01)
+        for j, c in enumerate(ones):
+            cmd = c.update(float(q[j]), float(qdot[j]), q_d, qd_d, qdd_d, 0.01)
+            np.testing.assert_array_equal(strain[j], cmd.strain_desired)
+            assert sat[j] == cmd.saturated
+            if mode == 'inverse_adaptive':
+                np.testing.assert_array_equal(force[j], cmd.force_N)
+            else:
+                np.testing.assert_array_equal(T[j], cmd.temperature_desired_C)
+
+
+def test_tem_loop_bank_equals_one_wrist_loops() -> None:
+    rng = np.random.default_rng(2)
+    n = 3
+    bank = TemLoopBank.like_node(n)
+    ref = TemLoopBank.like_node(1)  # the constants as the node builds them
+    ones = [TemLoop(ref.thermal, _params(), ref.drive, _hold(), 85.0, compiled=True)
+            for _ in range(n)]
+    T = np.full((n, 2), 30.0)
+    for k in range(600):
+        t = 0.01 * k
+        T = T + 0.05 * rng.standard_normal((n, 2))
+        T_d = None if k < 3 else np.clip(45.0 + 20.0 * np.sin(0.2 * t + np.arange(n)[:, None]) + 0.0 * T, 20, 80)
+        u = bank.sample(t, T, T_d).copy()
+        for j, loop in enumerate(ones):
+            res = loop.sample(t, T[j], None if T_d is None else T_d[j])
+            np.testing.assert_array_equal(u[j], res.command_V)
+
+
+def _params():  # the node's TemControlParams (defaults)
+    from sma_wrist.core.tem_control import TemControlParams
+    return TemControlParams()
+
+
+def _hold():
+    from sma_wrist.core.thermal import ThermalParams
+    return ThermalParams()
+
+
+def test_sign_changes_count_flips_outside_the_deadband() -> None:
+    u = np.array([5.0, 5.0, -5.0, 0.5, -0.5, 5.0, 5.0, -5.0, 0.0, 0.0, 5.0])[:, None]
+    # + + - (0.5 -0.5 carry -) + + - (0 0 carry -) +: 4 flips over 10 intervals of 0.1 s
+    assert sign_changes_per_s(u, 0.1)[0] == pytest.approx(4.0)
+    assert sign_changes_per_s(np.full((10, 1), 3.0), 0.1)[0] == 0.0
+
+
+def test_loops_do_not_depend_on_their_chunk() -> None:
+    sc = sample(3, seed=4)
+    cases = [Case(i, m, s) for i, (s, m) in enumerate(zip(sc, MODES))]
+    together, _ = simulate(cases, 3.0)
+    alone = [simulate([c], 3.0)[0][0] for c in cases]
+    for a, b in zip(together, alone):
+        assert a == b
+
+
+def test_bad_input_gives_clear_errors() -> None:
+    with pytest.raises(ParameterError, match='N = 0'):
+        SweepConfig(n_plants=0)
+    with pytest.raises(ParameterError, match="unknown perturbation 'stiffness'"):
+        parse_perturbations(['stiffness=1:2'])
+    with pytest.raises(ParameterError, match='outside the model'):
+        parse_perturbations(['stroke_scale=0.1:1.2'])
+    with pytest.raises(ParameterError, match='controllers'):
+        SweepConfig(controllers=('bang_bang',))
+    with pytest.raises(ParameterError, match='no closed loops'):
+        simulate([], 1.0)
+
+
+def test_cli_reports_bad_input_without_traceback() -> None:
+    env = {**os.environ, 'PYTHONPATH': os.getcwd()}
+    for args, text in ((['--plants', '0'], 'N = 0'), (['--perturb', 'foo=1'], "unknown perturbation 'foo'"),
+                       (['--perturb', 'temp_lag_s=0:5'], 'outside the model')):
+        p = subprocess.run([sys.executable, '-m', 'sma_wrist', 'sweep', *args], capture_output=True, text=True,
+                           env=env, timeout=120)
+        assert p.returncode == 2 and text in p.stderr and 'Traceback' not in p.stderr
+
+
+def test_ctrl_c_keeps_finished_chunks(tmp_path) -> None:
+    cfg = SweepConfig(n_plants=2, controllers=('pid',), duration_s=2.0, chunk=2, nominal=True)
+    calls = []
+
+    def progress(done: float) -> None:
+        calls.append(done)
+        if done > 2:  # the first chunk (2 loops) is written: Ctrl-C during the second
+            raise KeyboardInterrupt
+
+    res = run_sweep(cfg, tmp_path, progress=progress)
+    assert res.interrupted
+    lines = (tmp_path / 'results.jsonl').read_text().splitlines()
+    assert len(lines) == 2 == len(res.rows)
+    assert json.loads((tmp_path / 'sweep.json').read_text())['interrupted'] is True
+
+
+def test_sweep_writes_table_json_and_plots(tmp_path) -> None:
+    cfg = SweepConfig(n_plants=3, controllers=('direct_adaptive', 'pid'), duration_s=2.0, chunk=4)
+    res = run_sweep(cfg, tmp_path)
+    n = len(make_cases(cfg))
+    assert len(res.rows) == n == 3 * 2 + 3 * 2
+    assert [r['index'] for r in res.rows] == list(range(n))
+    data = json.loads((tmp_path / 'sweep.json').read_text())
+    assert {s['group'] for s in data['summary']} == {'nominal', 'spread'}
+    assert 'spread' in (tmp_path / 'table.txt').read_text()
+    pytest.importorskip('matplotlib')
+    for f in ('cdf.png', 'heatmap.png'):
+        assert (tmp_path / f).stat().st_size > 1000
+
+
+def test_dask_cluster_gives_the_single_process_numbers(tmp_path) -> None:
+    distributed = pytest.importorskip('distributed')
+    cfg = SweepConfig(n_plants=2, controllers=('pid', 'direct_adaptive'), duration_s=2.0, chunk=3, nominal=False)
+    local = run_sweep(cfg)
+    # in-process workers: the scheduler, task graph and transfer are the real ones, start-up ~1 s
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as lc:
+        remote = run_sweep(cfg, tmp_path, scheduler=lc.scheduler_address)
+    assert remote.rows == local.rows
