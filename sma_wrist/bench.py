@@ -239,6 +239,7 @@ def bench_identify(quick: bool = False) -> dict:
     from sma_wrist.identify.bench import bench_identify as run_identify
     return run_identify(quick)
 
+
 @section('sweep')
 def bench_sweep(quick: bool = False) -> dict:
     """Closed loops per second: the vectorised sweep vs the node graph, side by side (docs/sweep.md)."""
@@ -246,14 +247,14 @@ def bench_sweep(quick: bool = False) -> dict:
     return run_sweep_bench(quick)
 
 
-# -------------------------------------------------------------------------------- driver
-
 @section('identify_thermal')
 def bench_identify_thermal(quick: bool = False) -> dict:
     """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (docs/identification_thermal.md)."""
     from sma_wrist.identify.thermal_testplant import holdout_table, speed
     return {'speed': speed(quick), **holdout_table(quick)}
 
+
+# -------------------------------------------------------------------------------- driver
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     """Run the named sections (all registered ones by default) and return their results."""
