@@ -130,16 +130,19 @@ def test_sensors_act_on_the_measurement_not_the_plant() -> None:
     assert np.array_equal(again.measure(T, np.array([0.5]), np.zeros(1))[0][0], got[0, :2])
 
 
-def test_hysteresis_file_seam_gives_a_clear_error_until_the_loader_exists(tmp_path: Path) -> None:
-    try:
-        from sma_wrist.core.identification import load_hysteresis_file  # noqa: F401
-    except ImportError:
-        with pytest.raises(ParameterError, match='no loader for identified wires'):
-            load_hysteresis(tmp_path / 'wire.json')
-        with pytest.raises(ParameterError, match='no loader'):
-            make_plant('sdgpi', [Scenario()], hysteresis_file=str(tmp_path / 'wire.json'))
-    else:  # pragma: no cover - once merged the loader's own tests cover it
-        pytest.skip('identified-wire loader present')
+def test_identified_wire_is_the_plant_s_wire_and_a_bad_file_is_refused(tmp_path: Path) -> None:
+    """``hysteresis_file`` (issue 14, 1(c)): the family perturbs the identified wire, not the default."""
+    from sma_wrist.core.hysteresis_file import save_hysteresis
+    from sma_wrist.plants.spread import perturbed_hysteresis
+    hot = perturbed_hysteresis(default_sdgpi(), 25.0, 1.0)  # a wire transforming 25 degC higher
+    path = save_hysteresis(tmp_path / 'hysteresis.yaml', hot)
+    got = make_plant('sdgpi', [Scenario()], hysteresis_file=str(path))
+    plain = make_plant('sdgpi', [Scenario()])
+    assert not np.allclose(got.params.hysteresis.envelopes.a, plain.params.hysteresis.envelopes.a)
+    assert np.allclose(got.params.hysteresis.envelopes.a, hot.envelopes.a)
+    assert np.allclose(load_hysteresis(path).envelopes.b, hot.envelopes.b)
+    with pytest.raises(ParameterError, match='missing.yaml'):
+        make_plant('sdgpi', [Scenario()], hysteresis_file=str(tmp_path / 'missing.yaml'))
 
 
 def test_registry_lists_the_spread_family() -> None:

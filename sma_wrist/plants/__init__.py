@@ -21,7 +21,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis import SDGPIParams
 from sma_wrist.core.plant import PlantParams
 
@@ -52,19 +51,10 @@ def make_plant(name: str, scenarios: Sequence[Any], base: PlantParams | None = N
 
 
 def load_hysteresis(path: str | Path) -> SDGPIParams:
-    """SD-GPI parameters identified from measured data (a ``hysteresis_file``).
-
-    SEAM: the identification helper (branch identhyst) adds the file format and its loader;
-    until it is merged this raises a clear error. Wire its loader in here, e.g.
-    ``from sma_wrist.core.identification import load_hysteresis_file; return load_hysteresis_file(path)``.
-    """
-    try:
-        from sma_wrist.core.identification import load_hysteresis_file  # type: ignore[attr-defined]
-    except ImportError:
-        raise ParameterError(f'hysteresis_file {path}: this build has no loader for identified wires yet '
-                             '(sma_wrist.core.identification.load_hysteresis_file, added by the identification '
-                             'work); use the default SD-GPI set') from None
-    return load_hysteresis_file(path)
+    """SD-GPI parameters identified from measured data (a ``hysteresis.yaml`` from ``sma-wrist identify
+    hysteresis``); ParameterError names the file and what is wrong."""
+    from sma_wrist.core.hysteresis_file import load_hysteresis as load
+    return load(path)
 
 
 __all__ = ['PLANTS', 'PlantFactory', 'make_plant', 'load_hysteresis']
