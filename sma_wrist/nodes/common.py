@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import importlib
 import math
+import signal
+import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
@@ -250,11 +252,70 @@ class Freshness:
         return all(t is not None for t in self.stamp_ns.values())
 
 
+class _ShutdownRequest:
+    """Remembers that SIGINT arrived, for the duration of :func:`main_for`.
+
+    Installed before ``rclpy.init``, so Humble's rclpy signal handler chains to it (it calls
+    the handler it replaced). rclpy shuts the context down on a separate thread, so right
+    after a Ctrl-C ``rclpy.ok()`` can still be true while a callback or rclpy's own
+    ``take_message`` already failed on the interrupted call (seen 1 launch in 6 on Humble:
+    ``RuntimeError: Unable to convert call argument '0'``). Raises KeyboardInterrupt like
+    Python's default handler.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+        self._installed = False
+
+    def install(self) -> '_ShutdownRequest':
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+            self._installed = True
+        return self
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        self.requested = True
+        raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        if self._installed:
+            signal.signal(signal.SIGINT, self._previous)
+            self._installed = False
+
+
+def _teardown(node: Any) -> None:
+    """Destroy the node and shut rclpy down, each step even if a further Ctrl-C interrupts one.
+
+    A second SIGINT lands here whenever a user presses Ctrl-C twice or a supervisor signals
+    the process group as well as launch (``timeout -s INT``): it is the same request to stop,
+    not an error, so it must not turn a clean exit into a traceback.
+    """
+    steps = ([node.destroy_node] if node is not None else []) + [rclpy.try_shutdown]
+    for step in steps:
+        try:
+            step()
+        except KeyboardInterrupt:
+            pass
+
+
+def _parameter_reason(e: Exception) -> str:
+    """rclpy's parameter exceptions pass (message, parameter) to Exception: name the parameter first."""
+    if len(e.args) >= 2:
+        return f'invalid parameter {e.args[1]}: {e.args[0]}'
+    return f'invalid parameter: {e.args[0] if e.args else e}'
+
+
 def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
-    """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks."""
-    rclpy.init(args=args)
+    """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks.
+
+    Returns 0 after Ctrl-C / an external shutdown (also when a second Ctrl-C interrupts the
+    teardown), 2 when the node refuses its parameters.
+    """
+    shutdown = _ShutdownRequest().install()
     node = None
     try:
+        rclpy.init(args=args)
         node = node_class()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
@@ -265,19 +326,18 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     except ParameterException as e:
         # an override of the wrong type (payload_kg:=1 for a double: write 1.0) or out of
         # its descriptor's range, from --params-file or -p: rclpy refuses it in declare_parameter
-        reason = e.args[0] if len(e.args) == 1 else ' '.join(str(a) for a in e.args)
-        print(f'error: {getattr(node_class, "__name__", "node")}: invalid parameter: {reason}', flush=True)
+        print(f'error: {getattr(node_class, "__name__", "node")}: {_parameter_reason(e)}', flush=True)
         return 2
     except Exception:
         # Ctrl-C: rclpy's signal handler shuts the context down, and a callback that is
         # publishing at that moment raises (Humble: RCLError "publisher's context is
-        # invalid"). That is the shutdown that was asked for, not a failure.
-        if rclpy.ok():
+        # invalid", or take_message's RuntimeError). That is the shutdown that was asked
+        # for, not a failure.
+        if rclpy.ok() and not shutdown.requested:
             raise
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        _teardown(node)
+        shutdown.restore()
     return 0
 
 
