@@ -306,6 +306,20 @@ def _parameter_reason(e: Exception) -> str:
     return f'invalid parameter: {e.args[0] if e.args else e}'
 
 
+def start_up_refusal(e: BaseException, node_class: type) -> str | None:
+    """The one-line reason a node refuses to start (its process exits 2), or None if ``e`` is none.
+
+    A ParameterException is an override of the wrong type (payload_kg:=1 for a double: write
+    1.0) or out of its descriptor's range, from --params-file or -p: rclpy refuses it in
+    declare_parameter.
+    """
+    if isinstance(e, SmaWristError):
+        return f'error: {e}'
+    if isinstance(e, ParameterException):
+        return f'error: {getattr(node_class, "__name__", "node")}: {_parameter_reason(e)}'
+    return None
+
+
 def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks.
 
@@ -320,13 +334,8 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except SmaWristError as e:
-        print(f'error: {e}', flush=True)
-        return 2
-    except ParameterException as e:
-        # an override of the wrong type (payload_kg:=1 for a double: write 1.0) or out of
-        # its descriptor's range, from --params-file or -p: rclpy refuses it in declare_parameter
-        print(f'error: {getattr(node_class, "__name__", "node")}: {_parameter_reason(e)}', flush=True)
+    except (SmaWristError, ParameterException) as e:
+        print(start_up_refusal(e, node_class), flush=True)
         return 2
     except Exception:
         # Ctrl-C: rclpy's signal handler shuts the context down, and a callback that is
@@ -341,4 +350,4 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     return 0
 
 
-__all__ = ['Param', 'WristNode', 'Freshness', 'finite', 'main_for', 'message_class', 'qos_for']
+__all__ = ['Param', 'WristNode', 'Freshness', 'finite', 'main_for', 'message_class', 'qos_for', 'start_up_refusal']

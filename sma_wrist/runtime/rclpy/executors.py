@@ -221,7 +221,7 @@ class Executor:
                         return 'max_callbacks'
                 continue
             deadline = self._next_deadline()
-            if deadline > end:
+            if deadline > end or deadline == NEVER:  # NEVER: nothing can become ready (with end NEVER too)
                 if end != NEVER:
                     VCLOCK.advance_to(end)
                     return 'time'
