@@ -135,6 +135,38 @@ def test_faults_drive_zero_volts(emulator, graph, fault):
     assert levels(probe, 'safety')[-1] == 0 and bridge.command_to_send() == (8.0, 8.0)
 
 
+@pytest.mark.parametrize('fault', ['angle_adc_full_scale', 'angle_out_of_range', 'temperature_adc_full_scale'])
+def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulator, graph, tmp_path, fault):
+    """Issue 15 item 7: the faulty reading cut the TEMs but reached joint_states, the bag and the metrics."""
+    from sma_wrist.bag import read_bag
+    emu = emulator(noise_counts=0.0)
+    rt, bridge, probe = graph(emu, (6.0, 0.0))
+    rec = rt.record(tmp_path / 'bag', ['/wrist/joint_states', '/wrist/muscle_2/temperature'])
+    rt.run_until(0.3, until='sim')
+    ch, counts = {'angle_adc_full_scale': (4, P.ADC_MAX),
+                  'angle_out_of_range': (4, int(Calibration().to_counts(np.zeros(4), 1.7)[4])),
+                  'temperature_adc_full_scale': (1, P.ADC_MAX)}[fault]
+    n_js = len(probe.got['/wrist/joint_states'])
+    emu.inject('force', (ch, counts))
+    rt.spin_for(0.4, until='sim')
+    assert bridge.command_to_send() == (0.0, 0.0)  # the safety cut-off, as before
+    assert bridge.counters['windows_withheld'] >= 20
+    assert len(probe.got['/wrist/joint_states']) < n_js + 10  # only the windows before the fault reached the device
+    emu.inject('force', (ch, None))
+    rt.spin_for(0.3, until='sim')
+    assert len(probe.got['/wrist/joint_states']) > n_js + 10  # measurements resume when the reading is sane
+    clock = [c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']]
+    assert np.all(np.diff(clock) > 0) and clock[-1] > 0.95  # device time kept running through the fault
+    rec.close()
+    for got in (probe.got, {k: v[1] for k, v in read_bag(tmp_path / 'bag').items()}):  # what consumers and the bag got
+        q = np.array([m.position[0] for m in got['/wrist/joint_states']])
+        qd = np.array([m.velocity[0] for m in got['/wrist/joint_states']])
+        T2 = np.array([m.temperature for m in got['/wrist/muscle_2/temperature']])
+        assert np.all(np.abs(q - float(emu.plant.state.q[0])) < 0.05), q.max()
+        assert np.all(np.abs(qd) < 1.0), np.abs(qd).max()
+        assert np.all(T2 < 60.0), T2.max()
+
+
 def test_non_finite_command_turns_that_tem_off(emulator, graph):
     emu = emulator()
     rt, bridge, probe = graph(emu, (4.0, 4.0))

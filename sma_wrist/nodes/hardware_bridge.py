@@ -121,8 +121,9 @@ class HardwareBridge(WristNode):
         self.estimator = StressEstimator(payload_kg=p['payload_kg'])
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
-                         'safe_ticks': 0}
-        self._window: list[tuple[float, tuple[float, ...], float, int]] = []  # (sim t [s], temps (4,), q, max/min count)
+                         'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}
+        # (sim t [s], temps (4,), q, usable): a sample rejected for safety keeps time but is no measurement
+        self._window: list[tuple[float, tuple[float, ...], float, bool]] = []
         self._last_t_us: int | None = None
         self._anchor: tuple[int, float] | None = None  # (device t_us, sim s) of the time base
         self._last_pub_s: float | None = None
@@ -262,7 +263,11 @@ class HardwareBridge(WristNode):
             self._anchor = (s.t_us, start)
             self._next_pub_s = start
         t = self._anchor[1] + (s.t_us - self._anchor[0]) * 1e-6
-        self._window.append((t, temps, q, int(rail)))
+        # the safety check sees every sample (_latest); a railed channel or an angle outside the safe
+        # range is a faulty reading, never published as a measurement (issue 15 item 7)
+        usable = not rail and self.p['angle_min_rad'] <= q <= self.p['angle_max_rad']
+        self.counters['rejected_samples'] += not usable
+        self._window.append((t, temps, q, usable))
         self._latest = (temps, q, rail)
         self._last_valid_wall = wall
         self.counters['samples'] += 1
@@ -304,12 +309,25 @@ class HardwareBridge(WristNode):
         skipped = int((t_end - self._next_pub_s) / self.period_s + 1e-9)
         self.counters['windows_skipped'] += max(0, skipped)
         self._window.clear()
+        first = self._last_pub_s is None
+        self._last_pub_s = t_end
+        self._next_pub_s = t_end + self.period_s
+        stamp = Time(nanoseconds=int(round(t_end * 1e9))).to_msg()
+        self.pub_clock.publish(Clock(clock=stamp))  # device time goes on: the graph's clock keeps running
+        w = [x for x in w if x[3]]
+        if not w:
+            self.counters['windows_withheld'] += 1
+            self.diagnose('measurement', ERROR, 'every sample of the window was rejected for safety '
+                          '(ADC at 0 or full scale, or angle outside the safe range): nothing published',
+                          {'rejected_samples': self.counters['rejected_samples'],
+                           'windows_withheld': self.counters['windows_withheld']})
+            return
         t = np.array([x[0] for x in w])
         temps = np.array([x[1] for x in w])
         qs = np.array([x[2] for x in w])
         q, qd_raw = slope(t, qs)
         tau = self.p['velocity_filter_s']
-        a = 1.0 if tau <= 0 or self._last_pub_s is None else self.period_s / (tau + self.period_s)
+        a = 1.0 if tau <= 0 or first else self.period_s / (tau + self.period_s)
         self._qd += a * (qd_raw - self._qd)
         T = temps.mean(axis=0)
         var = temps.var(axis=0) if len(w) > 1 else np.zeros(4)
@@ -319,11 +337,8 @@ class HardwareBridge(WristNode):
             self.counters['invalid_samples'] += len(w)
             self.diagnose('estimate', ERROR, 'non-finite value in a window: not published')
             return
-        self._last_pub_s = t_end
-        self._next_pub_s = t_end + self.period_s
+        self.diagnose('measurement', OK, 'published')
         self.counters['windows'] += 1
-        stamp = Time(nanoseconds=int(round(t_end * 1e9))).to_msg()
-        self.pub_clock.publish(Clock(clock=stamp))
         for i in range(2):
             msg = Temperature(temperature=float(T[i]), variance=float(var[i]))
             msg.header.stamp = stamp
