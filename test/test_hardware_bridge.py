@@ -220,6 +220,46 @@ def test_unplug_reconnects_with_backoff_and_recovers(emulator, graph):
     assert np.all(np.diff(clock) > 0) and probe.got['/clock'][-1].clock != t_before
 
 
+@pytest.mark.parametrize('reminder_s', [None, 0.02])
+def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(emulator, graph, monkeypatch,
+                                                                                reminder_s):
+    """Issue 15 item 4: an ERROR every ~54 ms while the link was down (the text carried a changing age)."""
+    import rclpy.logging
+
+    from sma_wrist.nodes import hardware_bridge
+    if reminder_s is not None:
+        monkeypatch.setattr(hardware_bridge, 'FAULT_REMINDER_S', reminder_s)
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (3.0, 3.0))
+    rt.run_until(0.3, until='sim')
+    lines: list[tuple[str, str, int]] = []
+    remove = rclpy.logging.add_sink(lambda sev, name, msg, t: lines.append((str(sev), msg, t))
+                                    if name == 'hardware_bridge' else None)
+    try:
+        t0 = rt.steady_ns
+        emu.inject('unplug', 1.0)
+        run_wall(rt, 0.8)
+        t_down = rt.steady_ns - t0
+        down = list(lines)
+        run_wall(rt, 3.0, stop_when=lambda: levels(probe, 'safety')[-1] == 0 and levels(probe, 'link')[-1] == 0)
+    finally:
+        remove()
+    assert levels(probe, 'safety')[-1] == 0
+    going = [m for _, m, _ in down if not m.startswith('TEMs still off')]
+    reminders = [m for _, m, _ in down if m.startswith('TEMs still off')]
+    assert len([m for m in going if m.startswith('link: serial link lost')]) == 1, going
+    assert len([m for m in going if m.startswith('safety: TEMs off')]) == 1, going
+    assert len(going) <= 3, going  # (+ at most the line-statistics warning)
+    if reminder_s is None:
+        assert reminders == [] and t_down < 10e9  # nothing more within the first LOG_THROTTLE_S
+    else:
+        assert 1 <= len(reminders) <= t_down / (reminder_s * 1e9) + 1, (len(reminders), t_down)
+        assert 'sensor timeout' in reminders[0]
+    back = [m for _, m, _ in lines[len(down):]]
+    assert any(m.startswith('safety: normal operation') for m in back), back
+    assert len(back) <= 6, back
+
+
 def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, probe_factory):
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.launch import Runtime

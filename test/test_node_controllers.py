@@ -242,8 +242,13 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
         node.diagnose('flap', DiagnosticStatus.WARN, 'state 0')
         node.diagnose('fault', DiagnosticStatus.ERROR, 'e1')
         node.diagnose('fault', DiagnosticStatus.ERROR, 'e2')
-        rt.run_until(2.1 + LOG_THROTTLE_S, until='steady')
+        node.diagnose('fault', DiagnosticStatus.ERROR, 'e3')
+        rt.run_until(2.2 + LOG_THROTTLE_S, until='steady')
+        node.diagnose('fault', DiagnosticStatus.OK, 'clear')
+        rt.run_until(2.3 + LOG_THROTTLE_S, until='steady')
     flap = [s for s in probe.diagnostics() if s[0].endswith('flap')]
     assert len(flap) == 21  # /diagnostics sees every change
+    assert len([s for s in probe.diagnostics() if s[0].endswith('fault')]) == 4
     assert logged[0] == 'flap: state 0' and logged[1].startswith('flap: state 0 (19 more changes')
-    assert logged[2:] == ['fault: e1', 'fault: e2']  # errors are never throttled
+    # an error's onset and its end are always logged, the changing text in between is not (issue 15 item 4)
+    assert logged[2:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']

@@ -201,11 +201,14 @@ class WristNode(Node):
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(arr)
-        # the log follows /diagnostics, but a condition that flaps (a command touching its
-        # limit every few ticks) is logged at most once per LOG_THROTTLE_S per key; errors always
+        # the log follows /diagnostics: an error's onset and its end are always logged; any other
+        # change (a command touching its limit every few ticks, an error text carrying a measured
+        # value) at most once per LOG_THROTTLE_S per key, with the count of changes not logged
         now = self.get_clock().now().nanoseconds
         t_last, quiet = self._diag_logged.get(key, (None, 0))
-        if level != DiagnosticStatus.ERROR and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
+        was_error = last is not None and last[0] == DiagnosticStatus.ERROR
+        edge = was_error != (level == DiagnosticStatus.ERROR)
+        if not edge and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
             self._diag_logged[key] = (t_last, quiet + 1)
             return
         self._diag_logged[key] = (now, 0)

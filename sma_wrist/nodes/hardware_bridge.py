@@ -57,8 +57,10 @@ from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.estimate import StressEstimator, slope
 from sma_wrist.hw.link import SerialLink
-from sma_wrist.nodes.common import Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import LOG_THROTTLE_S, Param, WristNode, finite, main_for
 
+#: while the TEMs are off for a fault, a reminder is logged this often (wall time) [s]
+FAULT_REMINDER_S = LOG_THROTTLE_S
 HELLO_WAIT_S = 0.5  # after connecting, samples before the device's hello (or this long, wall) are stale
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -359,8 +361,8 @@ class HardwareBridge(WristNode):
         out = []
         now = time.monotonic()
         if self._last_valid_wall is None or now - self._last_valid_wall > p['sensor_timeout_s']:
-            age = 'never' if self._last_valid_wall is None else f'{now - self._last_valid_wall:.3f} s ago'
-            out.append(f'sensor timeout (last valid sample {age})')
+            # a fixed text: the age is in the status values (a text changing every tick was one log line per tick)
+            out.append(f'sensor timeout (no valid sample for more than {p["sensor_timeout_s"]:g} s)')
             return out
         assert self._latest is not None
         temps, q, rail = self._latest
@@ -384,6 +386,9 @@ class HardwareBridge(WristNode):
         if self._faults:
             self.counters['safe_ticks'] += 1
             self.diagnose('safety', ERROR, 'TEMs off: ' + '; '.join(self._faults), self.status_values())
+            # the onset and the recovery are logged by diagnose; while the fault lasts, a reminder
+            self.get_logger().error(f'TEMs still off: {"; ".join(self._faults)} (details on /diagnostics)',
+                                    throttle_duration_sec=FAULT_REMINDER_S, skip_first=True)
         else:
             self.diagnose('safety', OK, 'normal operation')
 
@@ -408,7 +413,8 @@ class HardwareBridge(WristNode):
 
     def status_values(self) -> dict[str, Any]:
         st = self.link.parser.stats
-        return {**self.counters, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
+        age = None if self._last_valid_wall is None else round(time.monotonic() - self._last_valid_wall, 3)
+        return {**self.counters, 'last_valid_sample_age_s': age, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
                 'partial_lines': st.partial_lines, 'malformed': st.malformed, 'garbage_bytes': st.garbage_bytes,
                 'version_mismatch': st.version_mismatch, 'connects': self.link.stats.connects,
                 'open_failures': self.link.stats.open_failures, 'device': self._device,
