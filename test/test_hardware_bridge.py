@@ -260,6 +260,33 @@ def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(e
     assert len(back) <= 6, back
 
 
+@pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
+def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
+                                                                      source):
+    """Issue 15 item 8: the bridge stamped /diagnostics with its steady/system clock (52.7 s) while its
+    measurements and /clock carried device time (118 s). The system clock here starts in 2023."""
+    from sma_wrist.runtime.launch import Runtime
+    params = {}
+    if source == 'hardware_bridge':
+        from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
+        params = {'/hardware_bridge': {'port': emulator().link}}
+    else:
+        from sma_wrist.nodes.plant_sim import PlantSim as Source
+    with Runtime(params=params, system_epoch_ns=1_700_000_000 * 10**9) as rt:
+        rt.add(Source)
+        probe = probe_factory(rt, ('/wrist/joint_states',), sim_time=True)
+        rt.run_until(0.3, until='sim')
+        probe.publish('/wrist/tem_1/command', data=float('nan'))  # rejected: a WARN on /diagnostics
+        rt.spin_for(0.2, until='sim')
+
+    def s(stamp) -> float:
+        return stamp.sec + stamp.nanosec * 1e-9
+    diag = [s(a.header.stamp) for a in probe.got['/diagnostics'] if a.status[0].name.startswith(source)]
+    clock = [s(m.header.stamp) for m in probe.got['/wrist/joint_states']]
+    assert diag and clock
+    assert all(0.25 <= t <= clock[-1] for t in diag), (diag, clock[-1])
+
+
 def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, probe_factory):
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.launch import Runtime

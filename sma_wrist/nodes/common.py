@@ -182,6 +182,10 @@ class WristNode(Node):
         return self.now_ns() * 1e-9
 
     # -- diagnostics ---------------------------------------------------------------
+    def diagnostics_stamp(self) -> Any:
+        """Stamp of /diagnostics: the node clock; a node that owns /clock overrides it with that time base."""
+        return self.get_clock().now().to_msg()
+
     def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None) -> None:
         """Publish one DiagnosticStatus when ``key``'s level or message changes, and log it.
 
@@ -199,7 +203,7 @@ class WristNode(Node):
                                   hardware_id='sma_wrist',
                                   values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()])
         arr = DiagnosticArray(status=[status])
-        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.header.stamp = self.diagnostics_stamp()
         self._diag_pub.publish(arr)
         # the log follows /diagnostics: an error's onset and its end are always logged; any other
         # change (a command touching its limit every few ticks, an error text carrying a measured

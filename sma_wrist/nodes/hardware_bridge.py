@@ -354,6 +354,12 @@ class HardwareBridge(WristNode):
         js.header.frame_id = self.contract.frame_id
         self.pub_joint.publish(js)
 
+    def diagnostics_stamp(self) -> Any:
+        """Device time of the last published window, as the measurements and /clock (issue 15 item 8:
+        the steady clock the bridge polls on is another time base)."""
+        t = getattr(self, '_last_pub_s', None)
+        return Time(nanoseconds=int(round((t or 0.0) * 1e9))).to_msg()
+
     # -- safety ----------------------------------------------------------------
     def faults(self) -> list[str]:
         """Reasons the TEMs must be off now (empty: normal operation)."""
