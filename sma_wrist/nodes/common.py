@@ -290,6 +290,18 @@ class _ShutdownRequest:
             signal.signal(signal.SIGINT, self._previous)
             self._installed = False
 
+    def finish(self) -> None:
+        """Before the teardown: after a SIGINT, further ones are the same request and are only
+        recorded (under ros2 launch a node gets the terminal's Ctrl-C twice and launch's own: one
+        arriving after main_for returned killed the exiting process, exit -2); else restore."""
+        if self._installed and self.requested:
+            signal.signal(signal.SIGINT, self._record)
+        else:
+            self.restore()
+
+    def _record(self, signum: int, frame: Any) -> None:
+        self.requested = True
+
 
 def _teardown(node: Any) -> None:
     """Destroy the node and shut rclpy down, each step even if a further Ctrl-C interrupts one.
@@ -352,8 +364,8 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
         if rclpy.ok() and not shutdown.requested:
             raise
     finally:
+        shutdown.finish()
         _teardown(node)
-        shutdown.restore()
     return 0
 
 
