@@ -291,16 +291,14 @@ class _ShutdownRequest:
             self._installed = False
 
     def finish(self) -> None:
-        """Before the teardown: after a SIGINT, further ones are the same request and are only
-        recorded (under ros2 launch a node gets the terminal's Ctrl-C twice and launch's own: one
-        arriving after main_for returned killed the exiting process, exit -2); else restore."""
+        """Before the teardown: after a SIGINT, further ones are the same request and are ignored
+        (under ros2 launch a node gets the terminal's Ctrl-C twice and launch's own; one arriving
+        while the interpreter finalises, which resets Python handlers to the default, killed the
+        exiting node: exit -2, seen under Humble). SIG_IGN survives finalisation. Else restore."""
         if self._installed and self.requested:
-            signal.signal(signal.SIGINT, self._record)
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
         else:
             self.restore()
-
-    def _record(self, signum: int, frame: Any) -> None:
-        self.requested = True
 
 
 def _teardown(node: Any) -> None:
