@@ -13,7 +13,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from sma_wrist.launch_support import graph_specs, node_params_file
+from sma_wrist.launch_support import graph_specs, node_params_file, on_exit_actions
 
 
 def _graph(context) -> list:
@@ -23,7 +23,7 @@ def _graph(context) -> list:
     extra = LaunchConfiguration('params_file').perform(context)
 
     return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
-                 parameters=[defaults, extra, node_params_file(exe, values)])
+                 parameters=[defaults, extra, node_params_file(exe, values)], on_exit=on_exit_actions(exe))
             for exe, values in graph_specs('plant_sim', {'payload_kg': payload}, controller)]
 
 

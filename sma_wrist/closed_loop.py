@@ -102,7 +102,7 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
                     bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
                     extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
                     progress: Callable[[float, float, float], None] | None = None,
-                    hardware: bool = False) -> RunSummary:
+                    hardware: bool = False, delivery: Any = None) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
 
     ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops
@@ -114,7 +114,8 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     interrupted = stalled = False
     recorded = 0
     sim_s = 0.0
-    with Runtime(ros_args(params_files), params=overrides(controller, payload_kg, source, extra_params)) as rt:
+    with Runtime(ros_args(params_files), params=overrides(controller, payload_kg, source, extra_params),
+                 delivery=delivery) as rt:
         if bag is not None:
             rec = rt.record(bag, topics)
         rt.add_nodes(nodes)

@@ -27,6 +27,24 @@ def node_params_file(node_name: str, values: Mapping[str, Any]) -> str:
     return path
 
 
+#: nodes whose exit leaves the rest of the graph meaningless (no plant or device, no /clock: every
+#: other node would wait forever); each launch file gives them ``on_exit`` = log + Shutdown with
+#: this reason, and the embedded launcher (sma_wrist.runtime.launch_file) honours the same actions
+REQUIRED_EXIT_REASONS = {
+    'plant_sim': 'plant_sim exited: the graph has no plant and no /clock, shutting the launch down',
+    'hardware_bridge': 'hardware_bridge exited: the graph has no device and no /clock, shutting the launch down',
+}
+
+
+def on_exit_actions(executable: str) -> list | None:
+    """``on_exit`` of a launch_ros Node: for a required node, log the reason and shut the launch down."""
+    reason = REQUIRED_EXIT_REASONS.get(executable)
+    if reason is None:
+        return None
+    from launch.actions import LogInfo, Shutdown  # only launch files call this
+    return [LogInfo(msg=reason), Shutdown(reason=reason)]
+
+
 def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str
                 ) -> list[tuple[str, dict[str, Any]]]:
     """(executable, its own parameter overrides) of every node of the wrist graph, in start order.
@@ -43,4 +61,4 @@ def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: st
     return specs
 
 
-__all__ = ['node_params_file', 'graph_specs']
+__all__ = ['REQUIRED_EXIT_REASONS', 'node_params_file', 'graph_specs', 'on_exit_actions']

@@ -135,6 +135,38 @@ def test_faults_drive_zero_volts(emulator, graph, fault):
     assert levels(probe, 'safety')[-1] == 0 and bridge.command_to_send() == (8.0, 8.0)
 
 
+@pytest.mark.parametrize('fault', ['angle_adc_full_scale', 'angle_out_of_range', 'temperature_adc_full_scale'])
+def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulator, graph, tmp_path, fault):
+    """Issue 15 item 7: the faulty reading cut the TEMs but reached joint_states, the bag and the metrics."""
+    from sma_wrist.bag import read_bag
+    emu = emulator(noise_counts=0.0)
+    rt, bridge, probe = graph(emu, (6.0, 0.0))
+    rec = rt.record(tmp_path / 'bag', ['/wrist/joint_states', '/wrist/muscle_2/temperature'])
+    rt.run_until(0.3, until='sim')
+    ch, counts = {'angle_adc_full_scale': (4, P.ADC_MAX),
+                  'angle_out_of_range': (4, int(Calibration().to_counts(np.zeros(4), 1.7)[4])),
+                  'temperature_adc_full_scale': (1, P.ADC_MAX)}[fault]
+    n_js = len(probe.got['/wrist/joint_states'])
+    emu.inject('force', (ch, counts))
+    rt.spin_for(0.4, until='sim')
+    assert bridge.command_to_send() == (0.0, 0.0)  # the safety cut-off, as before
+    assert bridge.counters['windows_withheld'] >= 20
+    assert len(probe.got['/wrist/joint_states']) < n_js + 10  # only the windows before the fault reached the device
+    emu.inject('force', (ch, None))
+    rt.spin_for(0.3, until='sim')
+    assert len(probe.got['/wrist/joint_states']) > n_js + 10  # measurements resume when the reading is sane
+    clock = [c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']]
+    assert np.all(np.diff(clock) > 0) and clock[-1] > 0.95  # device time kept running through the fault
+    rec.close()
+    for got in (probe.got, {k: v[1] for k, v in read_bag(tmp_path / 'bag').items()}):  # what consumers and the bag got
+        q = np.array([m.position[0] for m in got['/wrist/joint_states']])
+        qd = np.array([m.velocity[0] for m in got['/wrist/joint_states']])
+        T2 = np.array([m.temperature for m in got['/wrist/muscle_2/temperature']])
+        assert np.all(np.abs(q - float(emu.plant.state.q[0])) < 0.05), q.max()
+        assert np.all(np.abs(qd) < 1.0), np.abs(qd).max()
+        assert np.all(T2 < 60.0), T2.max()
+
+
 def test_non_finite_command_turns_that_tem_off(emulator, graph):
     emu = emulator()
     rt, bridge, probe = graph(emu, (4.0, 4.0))
@@ -186,6 +218,73 @@ def test_unplug_reconnects_with_backoff_and_recovers(emulator, graph):
     rt.spin_for(0.2, until='sim')
     clock = [c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']]
     assert np.all(np.diff(clock) > 0) and probe.got['/clock'][-1].clock != t_before
+
+
+@pytest.mark.parametrize('reminder_s', [None, 0.02])
+def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(emulator, graph, monkeypatch,
+                                                                                reminder_s):
+    """Issue 15 item 4: an ERROR every ~54 ms while the link was down (the text carried a changing age)."""
+    import rclpy.logging
+
+    from sma_wrist.nodes import hardware_bridge
+    if reminder_s is not None:
+        monkeypatch.setattr(hardware_bridge, 'FAULT_REMINDER_S', reminder_s)
+    emu = emulator()
+    rt, bridge, probe = graph(emu, (3.0, 3.0))
+    rt.run_until(0.3, until='sim')
+    lines: list[tuple[str, str, int]] = []
+    remove = rclpy.logging.add_sink(lambda sev, name, msg, t: lines.append((str(sev), msg, t))
+                                    if name == 'hardware_bridge' else None)
+    try:
+        t0 = rt.steady_ns
+        emu.inject('unplug', 1.0)
+        run_wall(rt, 0.8)
+        t_down = rt.steady_ns - t0
+        down = list(lines)
+        run_wall(rt, 3.0, stop_when=lambda: levels(probe, 'safety')[-1] == 0 and levels(probe, 'link')[-1] == 0)
+    finally:
+        remove()
+    assert levels(probe, 'safety')[-1] == 0
+    going = [m for _, m, _ in down if not m.startswith('TEMs still off')]
+    reminders = [m for _, m, _ in down if m.startswith('TEMs still off')]
+    assert len([m for m in going if m.startswith('link: serial link lost')]) == 1, going
+    assert len([m for m in going if m.startswith('safety: TEMs off')]) == 1, going
+    assert len(going) <= 3, going  # (+ at most the line-statistics warning)
+    if reminder_s is None:
+        assert reminders == [] and t_down < 10e9  # nothing more within the first LOG_THROTTLE_S
+    else:
+        assert 1 <= len(reminders) <= t_down / (reminder_s * 1e9) + 1, (len(reminders), t_down)
+        assert 'sensor timeout' in reminders[0]
+    back = [m for _, m, _ in lines[len(down):]]
+    assert any(m.startswith('safety: normal operation') for m in back), back
+    assert len(back) <= 6, back
+
+
+@pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
+def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
+                                                                      source):
+    """Issue 15 item 8: the bridge stamped /diagnostics with its steady/system clock (52.7 s) while its
+    measurements and /clock carried device time (118 s). The system clock here starts in 2023."""
+    from sma_wrist.runtime.launch import Runtime
+    params = {}
+    if source == 'hardware_bridge':
+        from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
+        params = {'/hardware_bridge': {'port': emulator().link}}
+    else:
+        from sma_wrist.nodes.plant_sim import PlantSim as Source
+    with Runtime(params=params, system_epoch_ns=1_700_000_000 * 10**9) as rt:
+        rt.add(Source)
+        probe = probe_factory(rt, ('/wrist/joint_states',), sim_time=True)
+        rt.run_until(0.3, until='sim')
+        probe.publish('/wrist/tem_1/command', data=float('nan'))  # rejected: a WARN on /diagnostics
+        rt.spin_for(0.2, until='sim')
+
+    def s(stamp) -> float:
+        return stamp.sec + stamp.nanosec * 1e-9
+    diag = [s(a.header.stamp) for a in probe.got['/diagnostics'] if a.status[0].name.startswith(source)]
+    clock = [s(m.header.stamp) for m in probe.got['/wrist/joint_states']]
+    assert diag and clock
+    assert all(0.25 <= t <= clock[-1] for t in diag), (diag, clock[-1])
 
 
 def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, probe_factory):

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import importlib
 import math
+import signal
+import threading
 from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Sequence
 
@@ -180,6 +182,10 @@ class WristNode(Node):
         return self.now_ns() * 1e-9
 
     # -- diagnostics ---------------------------------------------------------------
+    def diagnostics_stamp(self) -> Any:
+        """Stamp of /diagnostics: the node clock; a node that owns /clock overrides it with that time base."""
+        return self.get_clock().now().to_msg()
+
     def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None) -> None:
         """Publish one DiagnosticStatus when ``key``'s level or message changes, and log it.
 
@@ -197,13 +203,16 @@ class WristNode(Node):
                                   hardware_id='sma_wrist',
                                   values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()])
         arr = DiagnosticArray(status=[status])
-        arr.header.stamp = self.get_clock().now().to_msg()
+        arr.header.stamp = self.diagnostics_stamp()
         self._diag_pub.publish(arr)
-        # the log follows /diagnostics, but a condition that flaps (a command touching its
-        # limit every few ticks) is logged at most once per LOG_THROTTLE_S per key; errors always
+        # the log follows /diagnostics: an error's onset and its end are always logged; any other
+        # change (a command touching its limit every few ticks, an error text carrying a measured
+        # value) at most once per LOG_THROTTLE_S per key, with the count of changes not logged
         now = self.get_clock().now().nanoseconds
         t_last, quiet = self._diag_logged.get(key, (None, 0))
-        if level != DiagnosticStatus.ERROR and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
+        was_error = last is not None and last[0] == DiagnosticStatus.ERROR
+        edge = was_error != (level == DiagnosticStatus.ERROR)
+        if not edge and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
             self._diag_logged[key] = (t_last, quiet + 1)
             return
         self._diag_logged[key] = (now, 0)
@@ -250,35 +259,112 @@ class Freshness:
         return all(t is not None for t in self.stamp_ns.values())
 
 
+class _ShutdownRequest:
+    """Remembers that SIGINT arrived, for the duration of :func:`main_for`.
+
+    Installed before ``rclpy.init``, so Humble's rclpy signal handler chains to it (it calls
+    the handler it replaced). rclpy shuts the context down on a separate thread, so right
+    after a Ctrl-C ``rclpy.ok()`` can still be true while a callback or rclpy's own
+    ``take_message`` already failed on the interrupted call (seen 1 launch in 6 on Humble:
+    ``RuntimeError: Unable to convert call argument '0'``). Raises KeyboardInterrupt like
+    Python's default handler.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: Any = None
+        self._installed = False
+
+    def install(self) -> '_ShutdownRequest':
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._on_sigint)
+            self._installed = True
+        return self
+
+    def _on_sigint(self, signum: int, frame: Any) -> None:
+        self.requested = True
+        raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        if self._installed:
+            signal.signal(signal.SIGINT, self._previous)
+            self._installed = False
+
+    def finish(self) -> None:
+        """Before the teardown: after a SIGINT, further ones are the same request and are ignored
+        (under ros2 launch a node gets the terminal's Ctrl-C twice and launch's own; one arriving
+        while the interpreter finalises, which resets Python handlers to the default, killed the
+        exiting node: exit -2, seen under Humble). SIG_IGN survives finalisation. Else restore."""
+        if self._installed and self.requested:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        else:
+            self.restore()
+
+
+def _teardown(node: Any) -> None:
+    """Destroy the node and shut rclpy down, each step even if a further Ctrl-C interrupts one.
+
+    A second SIGINT lands here whenever a user presses Ctrl-C twice or a supervisor signals
+    the process group as well as launch (``timeout -s INT``): it is the same request to stop,
+    not an error, so it must not turn a clean exit into a traceback.
+    """
+    steps = ([node.destroy_node] if node is not None else []) + [rclpy.try_shutdown]
+    for step in steps:
+        try:
+            step()
+        except KeyboardInterrupt:
+            pass
+
+
+def _parameter_reason(e: Exception) -> str:
+    """rclpy's parameter exceptions pass (message, parameter) to Exception: name the parameter first."""
+    if len(e.args) >= 2:
+        return f'invalid parameter {e.args[1]}: {e.args[0]}'
+    return f'invalid parameter: {e.args[0] if e.args else e}'
+
+
+def start_up_refusal(e: BaseException, node_class: type) -> str | None:
+    """The one-line reason a node refuses to start (its process exits 2), or None if ``e`` is none.
+
+    A ParameterException is an override of the wrong type (payload_kg:=1 for a double: write
+    1.0) or out of its descriptor's range, from --params-file or -p: rclpy refuses it in
+    declare_parameter.
+    """
+    if isinstance(e, SmaWristError):
+        return f'error: {e}'
+    if isinstance(e, ParameterException):
+        return f'error: {getattr(node_class, "__name__", "node")}: {_parameter_reason(e)}'
+    return None
+
+
 def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
-    """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks."""
-    rclpy.init(args=args)
+    """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks.
+
+    Returns 0 after Ctrl-C / an external shutdown (also when a second Ctrl-C interrupts the
+    teardown), 2 when the node refuses its parameters.
+    """
+    shutdown = _ShutdownRequest().install()
     node = None
     try:
+        rclpy.init(args=args)
         node = node_class()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except SmaWristError as e:
-        print(f'error: {e}', flush=True)
-        return 2
-    except ParameterException as e:
-        # an override of the wrong type (payload_kg:=1 for a double: write 1.0) or out of
-        # its descriptor's range, from --params-file or -p: rclpy refuses it in declare_parameter
-        reason = e.args[0] if len(e.args) == 1 else ' '.join(str(a) for a in e.args)
-        print(f'error: {getattr(node_class, "__name__", "node")}: invalid parameter: {reason}', flush=True)
+    except (SmaWristError, ParameterException) as e:
+        print(start_up_refusal(e, node_class), flush=True)
         return 2
     except Exception:
         # Ctrl-C: rclpy's signal handler shuts the context down, and a callback that is
         # publishing at that moment raises (Humble: RCLError "publisher's context is
-        # invalid"). That is the shutdown that was asked for, not a failure.
-        if rclpy.ok():
+        # invalid", or take_message's RuntimeError). That is the shutdown that was asked
+        # for, not a failure.
+        if rclpy.ok() and not shutdown.requested:
             raise
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        shutdown.finish()
+        _teardown(node)
     return 0
 
 
-__all__ = ['Param', 'WristNode', 'Freshness', 'finite', 'main_for', 'message_class', 'qos_for']
+__all__ = ['Param', 'WristNode', 'Freshness', 'finite', 'main_for', 'message_class', 'qos_for', 'start_up_refusal']

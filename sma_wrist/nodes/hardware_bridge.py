@@ -57,8 +57,10 @@ from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.estimate import StressEstimator, slope
 from sma_wrist.hw.link import SerialLink
-from sma_wrist.nodes.common import Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import LOG_THROTTLE_S, Param, WristNode, finite, main_for
 
+#: while the TEMs are off for a fault, a reminder is logged this often (wall time) [s]
+FAULT_REMINDER_S = LOG_THROTTLE_S
 HELLO_WAIT_S = 0.5  # after connecting, samples before the device's hello (or this long, wall) are stale
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -121,8 +123,9 @@ class HardwareBridge(WristNode):
         self.estimator = StressEstimator(payload_kg=p['payload_kg'])
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
-                         'safe_ticks': 0}
-        self._window: list[tuple[float, tuple[float, ...], float, int]] = []  # (sim t [s], temps (4,), q, max/min count)
+                         'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}
+        # (sim t [s], temps (4,), q, usable): a sample rejected for safety keeps time but is no measurement
+        self._window: list[tuple[float, tuple[float, ...], float, bool]] = []
         self._last_t_us: int | None = None
         self._anchor: tuple[int, float] | None = None  # (device t_us, sim s) of the time base
         self._last_pub_s: float | None = None
@@ -262,7 +265,11 @@ class HardwareBridge(WristNode):
             self._anchor = (s.t_us, start)
             self._next_pub_s = start
         t = self._anchor[1] + (s.t_us - self._anchor[0]) * 1e-6
-        self._window.append((t, temps, q, int(rail)))
+        # the safety check sees every sample (_latest); a railed channel or an angle outside the safe
+        # range is a faulty reading, never published as a measurement (issue 15 item 7)
+        usable = not rail and self.p['angle_min_rad'] <= q <= self.p['angle_max_rad']
+        self.counters['rejected_samples'] += not usable
+        self._window.append((t, temps, q, usable))
         self._latest = (temps, q, rail)
         self._last_valid_wall = wall
         self.counters['samples'] += 1
@@ -304,12 +311,25 @@ class HardwareBridge(WristNode):
         skipped = int((t_end - self._next_pub_s) / self.period_s + 1e-9)
         self.counters['windows_skipped'] += max(0, skipped)
         self._window.clear()
+        first = self._last_pub_s is None
+        self._last_pub_s = t_end
+        self._next_pub_s = t_end + self.period_s
+        stamp = Time(nanoseconds=int(round(t_end * 1e9))).to_msg()
+        self.pub_clock.publish(Clock(clock=stamp))  # device time goes on: the graph's clock keeps running
+        w = [x for x in w if x[3]]
+        if not w:
+            self.counters['windows_withheld'] += 1
+            self.diagnose('measurement', ERROR, 'every sample of the window was rejected for safety '
+                          '(ADC at 0 or full scale, or angle outside the safe range): nothing published',
+                          {'rejected_samples': self.counters['rejected_samples'],
+                           'windows_withheld': self.counters['windows_withheld']})
+            return
         t = np.array([x[0] for x in w])
         temps = np.array([x[1] for x in w])
         qs = np.array([x[2] for x in w])
         q, qd_raw = slope(t, qs)
         tau = self.p['velocity_filter_s']
-        a = 1.0 if tau <= 0 or self._last_pub_s is None else self.period_s / (tau + self.period_s)
+        a = 1.0 if tau <= 0 or first else self.period_s / (tau + self.period_s)
         self._qd += a * (qd_raw - self._qd)
         T = temps.mean(axis=0)
         var = temps.var(axis=0) if len(w) > 1 else np.zeros(4)
@@ -319,11 +339,8 @@ class HardwareBridge(WristNode):
             self.counters['invalid_samples'] += len(w)
             self.diagnose('estimate', ERROR, 'non-finite value in a window: not published')
             return
-        self._last_pub_s = t_end
-        self._next_pub_s = t_end + self.period_s
+        self.diagnose('measurement', OK, 'published')
         self.counters['windows'] += 1
-        stamp = Time(nanoseconds=int(round(t_end * 1e9))).to_msg()
-        self.pub_clock.publish(Clock(clock=stamp))
         for i in range(2):
             msg = Temperature(temperature=float(T[i]), variance=float(var[i]))
             msg.header.stamp = stamp
@@ -337,6 +354,12 @@ class HardwareBridge(WristNode):
         js.header.frame_id = self.contract.frame_id
         self.pub_joint.publish(js)
 
+    def diagnostics_stamp(self) -> Any:
+        """Device time of the last published window, as the measurements and /clock (issue 15 item 8:
+        the steady clock the bridge polls on is another time base)."""
+        t = getattr(self, '_last_pub_s', None)
+        return Time(nanoseconds=int(round((t or 0.0) * 1e9))).to_msg()
+
     # -- safety ----------------------------------------------------------------
     def faults(self) -> list[str]:
         """Reasons the TEMs must be off now (empty: normal operation)."""
@@ -344,8 +367,8 @@ class HardwareBridge(WristNode):
         out = []
         now = time.monotonic()
         if self._last_valid_wall is None or now - self._last_valid_wall > p['sensor_timeout_s']:
-            age = 'never' if self._last_valid_wall is None else f'{now - self._last_valid_wall:.3f} s ago'
-            out.append(f'sensor timeout (last valid sample {age})')
+            # a fixed text: the age is in the status values (a text changing every tick was one log line per tick)
+            out.append(f'sensor timeout (no valid sample for more than {p["sensor_timeout_s"]:g} s)')
             return out
         assert self._latest is not None
         temps, q, rail = self._latest
@@ -369,6 +392,9 @@ class HardwareBridge(WristNode):
         if self._faults:
             self.counters['safe_ticks'] += 1
             self.diagnose('safety', ERROR, 'TEMs off: ' + '; '.join(self._faults), self.status_values())
+            # the onset and the recovery are logged by diagnose; while the fault lasts, a reminder
+            self.get_logger().error(f'TEMs still off: {"; ".join(self._faults)} (details on /diagnostics)',
+                                    throttle_duration_sec=FAULT_REMINDER_S, skip_first=True)
         else:
             self.diagnose('safety', OK, 'normal operation')
 
@@ -393,7 +419,8 @@ class HardwareBridge(WristNode):
 
     def status_values(self) -> dict[str, Any]:
         st = self.link.parser.stats
-        return {**self.counters, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
+        age = None if self._last_valid_wall is None else round(time.monotonic() - self._last_valid_wall, 3)
+        return {**self.counters, 'last_valid_sample_age_s': age, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
                 'partial_lines': st.partial_lines, 'malformed': st.malformed, 'garbage_bytes': st.garbage_bytes,
                 'version_mismatch': st.version_mismatch, 'connects': self.link.stats.connects,
                 'open_failures': self.link.stats.open_failures, 'device': self._device,

@@ -8,6 +8,7 @@ Targets the window cannot reach give the nearest reachable temperature, reported
 """
 from __future__ import annotations
 
+from collections import deque
 from typing import Any, Mapping
 
 import numpy as np
@@ -20,6 +21,8 @@ from sma_wrist.core.errors import SmaWristError
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
+#: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
+MAX_PENDING_CYCLES = 5
 
 
 class HysteresisCompensator(WristNode):
@@ -44,7 +47,9 @@ class HysteresisCompensator(WristNode):
         super().__init__('hysteresis_compensator', **kwargs)
         self._build()
         self.values = dict.fromkeys(INPUTS, np.nan)
-        self.fresh = dict.fromkeys(INPUTS, False)
+        # per input, the targets not yet used, oldest first: adaptive_controller publishes one of each
+        # per cycle and each topic arrives in order, so the k-th of every queue are one cycle's set
+        self.pending: dict[str, deque[float | None]] = {k: deque() for k in INPUTS}
         self.T_meas = np.full(2, np.nan)
         self.stress_meas = np.full(2, np.nan)
         self.started = False
@@ -96,15 +101,29 @@ class HysteresisCompensator(WristNode):
             self.stress_meas[i - 1] = msg.data
 
     def _on_target(self, key: str, msg: Any) -> None:
+        """Collect one cycle's four targets, paired by their order on each topic, not by arrival.
+
+        Under ROS the four topics of one cycle arrive in any order, and the next cycle's first
+        targets can arrive before this cycle's last: taking 'the latest of each' mixed two cycles
+        (strain of one muscle from cycle k+1 with the other's from cycle k), which at a reversal
+        of the sine moved the joint (issue 15 item 6). A rejected target still fills its slot,
+        so the cycles stay aligned, and that cycle is skipped.
+        """
         v = msg.data
-        if not finite(v) or (key.startswith('stress') and v < 0):
+        valid = finite(v) and not (key.startswith('stress') and v < 0)
+        if not valid:
             self.reject_input(key + '_desired', f'{v!r} is not a valid target')
+        q = self.pending[key]
+        q.append(v if valid else None)
+        if len(q) > MAX_PENDING_CYCLES:  # a lost message misaligned the cycles: restart from the newest
+            for other in self.pending.values():
+                other.clear()
             return
-        self.values[key] = v
-        self.fresh[key] = True
-        if all(self.fresh.values()):
-            self.fresh = dict.fromkeys(INPUTS, False)
-            self._compensate()
+        if all(self.pending.values()):
+            cycle = {k: self.pending[k].popleft() for k in INPUTS}
+            if None not in cycle.values():
+                self.values.update(cycle)
+                self._compensate()
 
     def _compensate(self) -> None:
         # Python floats and bools where numpy would be called on (2,) arrays: each such call

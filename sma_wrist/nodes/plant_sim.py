@@ -244,6 +244,10 @@ class PlantSim(WristNode):
         self.diagnose('real_time', DiagnosticStatus.WARN, self._slow_message,
                       {'achieved': f'{achieved:.3f}', 'real_time_factor': f'{wanted:g}'})
 
+    def diagnostics_stamp(self) -> Any:
+        """Sim time, as the measurements and /clock (its own clock is the system clock)."""
+        return self._stamp()
+
     def _stamp(self) -> Any:
         ns = int(round(self.plant.state.t * 1e9))
         return TimeMsg(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)

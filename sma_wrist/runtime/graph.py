@@ -39,6 +39,7 @@ class Graph:
         self.nodes: list[Any] = []
         self._taps: list[_TapEntry] = []
         self.version = 0  # bumped whenever entities are added/removed (executor caches)
+        self.delivery: Any = None  # a runtime.delivery.DeliveryModel: latency/jitter; None = at once
 
     def topic(self, name: str, msg_type: type) -> Topic:
         t = self.topics.get(name)

@@ -63,11 +63,14 @@ class Runtime:
         (patterns as in params files: ``/**``, ``/plant_sim``, ``plant_sim``).
     system_epoch_ns:
         SYSTEM time at virtual time 0.
+    delivery:
+        A :class:`sma_wrist.runtime.delivery.DeliveryModel` (per-topic latency and seeded jitter,
+        as DDS shows); None (default) delivers every message at once, deterministically.
     """
 
     def __init__(self, args: Optional[Sequence[str]] = None, *,
                  params: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                 system_epoch_ns: int = 0) -> None:
+                 system_epoch_ns: int = 0, delivery: Any = None) -> None:
         rclpy = _rclpy()
         from .rclpy.context import Context
         from .rclpy.executors import SingleThreadedExecutor
@@ -79,6 +82,8 @@ class Runtime:
         if params:
             tree = {node: {'ros__parameters': dict(values)} for node, values in params.items()}
             self.context.args.params.extend(params_from_tree(tree, 'Runtime(params=...)'))
+        # delivery: a runtime.delivery.DeliveryModel (latency/jitter per topic); None delivers at once
+        self.context.graph.delivery = delivery
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list[Any] = []
         self.recorders: list[Any] = []

@@ -68,11 +68,11 @@ class InvalidParameterException(ParameterException):
 
 class InvalidParameterTypeException(ParameterException):
     def __init__(self, desired_parameter: Any, expected_type: str, *args: Any) -> None:
-        ParameterException.__init__(
+        Exception.__init__(
             self,
             f"Trying to set parameter '{desired_parameter._name}' to '{desired_parameter._value}'"
             f" of type '{desired_parameter._type_.name}', expecting type '{expected_type}'",
-            desired_parameter._name, *args)
+            *args)  # Humble: the message alone (no parameter name appended)
 
 
 class InvalidParameterValueException(ParameterException):

@@ -100,6 +100,9 @@ class Executor:
     def _collect(self) -> list[tuple[bool, Any]]:
         """One 'wait': every ready entity, in execution order (per node: timers, then subscriptions)."""
         self._refresh()
+        delivery = self._context.graph.delivery
+        if delivery is not None:
+            delivery.deliver_due(VCLOCK.steady_ns)
         ready = []
         for timers, subs in self._groups:
             for t in timers:
@@ -123,7 +126,9 @@ class Executor:
             d = t._next_call - clock._virtual_offset_ns()
             if d < best:
                 best = d
-        return best
+        delivery = self._context.graph.delivery
+        due = delivery.next_due_ns() if delivery is not None else None
+        return best if due is None else min(best, due)
 
     def _execute(self, entry: tuple[bool, Any]) -> None:
         is_timer, e = entry
@@ -221,7 +226,7 @@ class Executor:
                         return 'max_callbacks'
                 continue
             deadline = self._next_deadline()
-            if deadline > end:
+            if deadline > end or deadline == NEVER:  # NEVER: nothing can become ready (with end NEVER too)
                 if end != NEVER:
                     VCLOCK.advance_to(end)
                     return 'time'

@@ -4,6 +4,7 @@ from __future__ import annotations
 from collections import deque
 from typing import Any, Optional
 
+from ..vclock import VCLOCK
 from .qos import QoSProfile
 
 
@@ -20,6 +21,7 @@ class Publisher:
         self._history: Optional[deque[Any]] = (
             deque(maxlen=qos_profile._queue_len()) if qos_profile._is_transient_local() else None)
         self._clock = node._clock
+        self._graph = node._context.graph
         self._destroyed = False
 
     @property
@@ -40,8 +42,14 @@ class Publisher:
             t = self._clock._now_ns()
             for tap in topic.taps:
                 tap(topic, msg, t)
-        for sub in self._matched:
-            sub._queue.append(msg._copy())
+        delivery = self._graph.delivery
+        if delivery is None:
+            for sub in self._matched:
+                sub._queue.append(msg._copy())
+        else:
+            now = VCLOCK.steady_ns
+            for sub in self._matched:
+                delivery.send(self, sub, msg._copy(), now)
         if self._history is not None:
             self._history.append(msg._copy())
 

@@ -1,0 +1,39 @@
+"""The launch files run on the embedded launcher, and a required node's exit ends the launch (issue 15 item 3)."""
+from __future__ import annotations
+
+import pytest
+
+from sma_wrist.runtime.launch_file import LaunchFileError, run_launch_file
+from sma_wrist.share import share_path
+
+
+def _launch(name: str) -> str:
+    return str(share_path(f'launch/{name}'))
+
+
+@pytest.mark.parametrize('launch, source, arguments', [
+    ('wrist_sim.launch.py', 'plant_sim', {'payload_kg': 5.0}),
+    ('wrist_hw.launch.py', 'hardware_bridge', {'payload_kg': 5.0, 'port': '/nonexistent/wrist'}),
+])
+def test_a_refusing_plant_or_bridge_shuts_the_launch_down_with_the_reason(launch, source, arguments):
+    printed: list[str] = []
+    r = run_launch_file(_launch(launch), arguments, 2.0, print_fn=printed.append)
+    assert r.reason == 'shutdown'
+    assert r.shutdown_reason.startswith(f'{source} exited') and 'no /clock' in r.shutdown_reason
+    assert r.exits == {source: 2}
+    assert r.run is None  # nothing was left spinning without its clock
+    assert 'trajectory_generator' in r.started  # the others were up, as under ros2 launch
+    assert any('invalid parameter payload_kg' in line for line in printed)
+    assert any(line.startswith('[INFO] [launch.user]: ' + source) for line in printed)
+
+
+def test_nominal_launch_runs_every_node_of_the_graph_on_its_clock():
+    r = run_launch_file(_launch('wrist_sim.launch.py'), {'controller': 'pid'}, 0.3)
+    assert r.reason == 'time' and r.exits == {}
+    assert r.started == ['plant_sim', 'trajectory_generator', 'adaptive_controller', 'tem_controller']
+    assert r.run.sim_ns >= 300_000_000
+
+
+def test_launch_argument_choices_are_enforced():
+    with pytest.raises(LaunchFileError, match="Argument 'controller' provided value 'bogus' is not valid"):
+        run_launch_file(_launch('wrist_sim.launch.py'), {'controller': 'bogus'}, 0.1)
