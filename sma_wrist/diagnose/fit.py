@@ -33,8 +33,8 @@ MAX_FIT_SAMPLES = 12000  # residual samples per channel in a fit (evenly subsamp
 REPLAY_RESOLUTION = 1e-3
 
 THERMAL_EFFECT_PARAMS = {'command_delay_s', 'tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C',
-                         'ambient_drift_C_per_h', 'coupling_per_s'}
-TEMP_SENSOR_PARAMS = {'temp_offset_C', 'temp_lag_s'}
+                         'ambient_drift_C_per_h', 'coupling_per_s', 'tem_dead_zone_V', 'tem_headroom_V'}
+TEMP_SENSOR_PARAMS = {'temp_offset_C', 'temp_lag_s'} | set(fx.TEMP_CHANNEL_KEYS[1]) | set(fx.TEMP_CHANNEL_KEYS[2])
 
 
 def channels_of(effect: fx.Effect, available: list[str]) -> list[str]:
