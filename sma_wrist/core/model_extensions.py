@@ -9,13 +9,15 @@ data can be run in the closed loop. At the nominal values the plant is the plain
 Where each effect acts (docs/diagnose.md has the equations)::
 
     commands --delay--> TEM heat balance (gain, loss, Joule, coupling, ambient)--> T_true
-    T_true --thermocouple (first-order lag, offset)--> T_measured
+    commands --TEM driver (dead zone, saturation below the rating)--> applied drive
+    T_true --thermocouple i (lag, delay, gain, offset, drift; per channel)--> T_measured
     T_true --wire lag, cycle drift--> T_wire --SD-GPI + joint (payload, friction, pre-load)--> q
-    q --backlash (play), potentiometer (delay, offset, gain)--> q_measured
+    q --backlash (play), potentiometer (delay, lag, offset, gain, drift)--> q_measured
 
 :func:`plant_params` folds the thermal and joint parameters into a
 :class:`~sma_wrist.core.plant.PlantParams`; :class:`SensorChain` is the measurement part.
-The command delay, wire lag, cycle drift and ambient drift are not simulated by the plant
+The command delay, TEM driver dead zone and saturation, wire lag, cycle drift and ambient
+drift are not simulated by the plant
 (:data:`REPLAY_ONLY`): the diagnosis' replay models them, plant_sim refuses them.
 """
 from __future__ import annotations
@@ -81,7 +83,7 @@ PARAMS: tuple[ExtensionParam, ...] = (
     # actuator: what the TEM driver makes of a command
     ExtensionParam('tem_dead_zone_V', 'V', 0.0, 0.0, 10.0, 0.5,
                    'TEM driver dead zone: |command| below it gives 0 V, above it the output is |command| - dead zone'),
-    ExtensionParam('tem_headroom_V', 'V', 0.0, 0.0, 20.0, 1.0,
+    ExtensionParam('tem_headroom_V', 'V', 0.0, 0.0, 20.0, 2.0,
                    'the TEM driver saturates this far below the nominal drive limit'),
 )
 BY_NAME = {p.name: p for p in PARAMS}

@@ -188,14 +188,21 @@ SWEEP: dict[tuple[str, str], tuple[tuple[float, ...], str, frozenset[str]]] = {
     ('u', 'command_delay'): ((0.2, 0.5), 's', frozenset({'actuator_delay'})),
     ('plant', 'thermal_physics'): ((0.6, 1.0), 'x', frozenset({'recalibrate_thermal', 'tem_mismatch'})),
 }
-#: the parameter each sweep entry's magnitude should come back as (None: not comparable)
-PARAMETER_OF: dict[tuple[str, str], str | None] = {
-    ('T1', 'offset'): 'temp_offset_1_C', ('T', 'offset'): None, ('T2', 'gain'): 'temp_gain_err_2',
-    ('T', 'delay'): None, ('T1', 'lag'): 'temp_lag_1_s', ('T', 'drift'): None, ('T2', 'drift'): 'temp_drift_2_C_per_h',
-    ('q', 'offset'): 'angle_offset_rad', ('q', 'gain'): 'angle_gain_err', ('q', 'delay'): 'angle_delay_s',
-    ('q', 'lag'): 'angle_lag_s', ('q', 'drift'): 'angle_drift_rad_per_h', ('u', 'dead_zone'): 'tem_dead_zone_V',
-    ('u', 'saturation'): 'tem_headroom_V', ('u', 'command_delay'): 'command_delay_s', ('plant', 'thermal_physics'): None,
-}
+def parameters_of(d: Distortion, cause: str | None) -> list[str]:
+    """Catalogue parameters that should come back as the distortion's magnitude under `cause`."""
+    ch = {'T1': ('1',), 'T2': ('2',), 'T': ('1', '2')}.get(d.channel, ())
+    per = {'offset': 'temp_offset_{}_C', 'gain': 'temp_gain_err_{}', 'delay': 'temp_delay_{}_s', 'lag': 'temp_lag_{}_s',
+           'drift': 'temp_drift_{}_C_per_h'}
+    if d.channel in ('T1', 'T2', 'T'):
+        if cause == 'temp_sensor_offset':
+            return ['temp_offset_C']
+        if cause == 'sensor_lag':
+            return ['temp_lag_s']
+        return [per[d.kind].format(i) for i in ch] if d.kind in per else []
+    return {('q', 'offset'): ['angle_offset_rad'], ('q', 'gain'): ['angle_gain_err'], ('q', 'delay'): ['angle_delay_s'],
+            ('q', 'lag'): ['angle_lag_s'], ('q', 'drift'): ['angle_drift_rad_per_h'],
+            ('u', 'dead_zone'): ['tem_dead_zone_V'], ('u', 'saturation'): ['tem_headroom_V'],
+            ('u', 'command_delay'): ['command_delay_s']}.get((d.channel, d.kind), [])
 
 
 def sweep(magnitude: int | None = None) -> list[Distortion]:
