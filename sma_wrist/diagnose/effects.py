@@ -38,6 +38,8 @@ SMOOTH_ABOVE_C = 0.01
 SMOOTH_WINDOW_S = 0.3
 #: candidate windows of the noise-matched smoothing [s] (input_noise_angle picks one)
 SMOOTH_WINDOWS_S = (0.1, 0.2, 0.3, 0.6)
+#: window of the local fit that gives a noisy run's initial temperatures [s]
+START_WINDOW_S = 0.5
 #: realisations of the input-noise propagation (:meth:`ExtendedModel.input_noise_angle`)
 INPUT_NOISE_REALISATIONS = 2
 #: one "cycle" of the hysteresis-drift effect: this much temperature travel (40 degC up and down)
@@ -267,6 +269,10 @@ class ExtendedModel:
                 # transitions (6x the replay error on a plant_sim run)
                 self.T_s = run.T.copy()
             self.cycles = cycle_count(run.T, run.dt)
+            # the thermal replay starts from the first reading: of a noisy one, the start of a
+            # local quadratic fit (a single noisy sample offsets the replay for tens of seconds)
+            self.T_start = run.T[0].copy() if self.T_noise < SMOOTH_ABOVE_C else \
+                smooth_and_rate(run.T[:max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)[0][0]
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
 
@@ -290,7 +296,7 @@ class ExtendedModel:
                 coefs.append(c)
                 drifts.append(drift)
                 kv = dict(zip(THERMAL_KEYS, key[1:]))
-                T0 = self.temp_inverse_static(run.T[0], kv, 0.0) if run.T is not None else self._rest[:, 0]
+                T0 = self.temp_inverse_static(self.T_start, kv, 0.0) if run.T is not None else self._rest[:, 0]
                 x0 = self._rest.copy()
                 x0[:, 1] += off  # exchanger face starts at its rest state, shifted by the ambient offset
                 x0[:, 1] += (T0 - self._rest[:, 0])
