@@ -48,27 +48,25 @@ def test_ordinary_sensor_noise_is_no_false_alarm(clean_run, noise_T, noise_q):
     assert res.confidence >= 0.9
 
 
-def test_thermocouple_delay_is_a_sensor_fault_not_a_late_drive(clean_run):
-    """Before: actuator_delay (command_delay_s = 1 s): the thermal channel alone cannot tell."""
-    res = _diagnose(clean_run, 'delay', 'T', 1.0)
-    assert res.subsystem == 'sensor' and res.cause == 'temp_sensor_delay', res.summary
-    for k in ('temp_delay_1_s', 'temp_delay_2_s'):
-        assert _values(res)[k] == pytest.approx(1.0, rel=0.15)
+NAMED = [
+    # before: actuator_delay (90 s run) / sensor_lag (60 s run); the thermal channel alone cannot tell
+    ('thermocouple delay', ('delay', 'T', 1.0), 'sensor', 'temp_sensor_delay', ('temp_delay_1_s', 'temp_delay_2_s')),
+    # the mirror case: commands applied late (plant re-simulated) are not blamed on the sensors
+    ('late drive', ('command_delay', 'u', 0.4), 'actuator', 'actuator_delay', ('command_delay_s',)),
+    # before: hysteresis_drift (wire fatigue) with 84-87 % held-out gain
+    ('thermocouple drift', ('drift', 'T', 30.0), 'sensor', 'temp_sensor_drift',
+     ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h')),
+    # an actuator effect shows in the thermal channel but not between temperatures and angle
+    ('driver dead zone', ('dead_zone', 'u', 2.0), 'actuator', 'tem_dead_zone', ('tem_dead_zone_V',)),
+]
 
 
-def test_late_drive_is_still_the_actuator(clean_run):
-    """The mirror case: commands applied late (plant re-simulated) are not blamed on the sensors."""
-    res = _diagnose(clean_run, 'command_delay', 'u', 0.4)
-    assert res.subsystem == 'actuator' and res.cause == 'actuator_delay', res.summary
-    assert _values(res)['command_delay_s'] == pytest.approx(0.4, rel=0.15)
-
-
-def test_thermocouple_drift_is_a_sensor_fault_not_wire_fatigue(clean_run):
-    """Before: hysteresis_drift with ~87 % held-out gain."""
-    res = _diagnose(clean_run, 'drift', 'T', 30.0)
-    assert res.subsystem == 'sensor' and res.cause == 'temp_sensor_drift', res.summary
-    for k in ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h'):
-        assert _values(res)[k] == pytest.approx(30.0, rel=0.15)
+@pytest.mark.parametrize('effect,subsystem,cause,params', [c[1:] for c in NAMED], ids=[c[0] for c in NAMED])
+def test_sensor_and_actuator_effects_are_named_in_their_subsystem(clean_run, effect, subsystem, cause, params):
+    res = _diagnose(clean_run, *effect)
+    assert res.subsystem == subsystem and res.cause == cause, res.summary
+    for k in params:
+        assert _values(res)[k] == pytest.approx(effect[2], rel=0.15), k
 
 
 def test_offset_on_one_thermocouple_is_named_on_that_channel(clean_run):
@@ -89,13 +87,6 @@ def test_a_fit_on_its_bound_is_never_reported_as_the_value(clean_run):
         i = fx.INDEX[k]
         span = fx.UPPER[i] - fx.LOWER[i]
         assert min(abs(v['value'] - fx.LOWER[i]), abs(v['value'] - fx.UPPER[i])) > BOUND_FRACTION * span, k
-
-
-def test_driver_dead_zone_is_the_actuator(clean_run):
-    """An actuator effect shows in the thermal channel but not between temperatures and angle."""
-    res = _diagnose(clean_run, 'dead_zone', 'u', 2.0)
-    assert res.subsystem == 'actuator' and res.cause == 'tem_dead_zone', res.summary
-    assert _values(res)['tem_dead_zone_V'] == pytest.approx(2.0, rel=0.15)
 
 
 def test_generator_reproduces_the_recording_and_does_not_use_the_extension_code(clean_run):
