@@ -9,6 +9,7 @@ clean run reported as a discrepancy.
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -189,8 +190,13 @@ def independent(controllers: tuple[str, ...] = CONTROLLERS, duration_s: float = 
             for nT, nq in clean_noise:
                 for s in range(clean_seeds):
                     cases.append((c, bags[c], None, nT, nq, 500 + s))
+        rows = []
         with ProcessPoolExecutor(max_workers=workers) as ex:
-            rows = list(ex.map(_independent_case, cases))
+            for row in ex.map(_independent_case, cases):
+                rows.append(row)
+                if len(rows) % 10 == 0 or len(rows) == len(cases):  # long work shows progress
+                    print(f'diagnose bench: {len(rows)}/{len(cases)} independent cases, '
+                          f'{time.perf_counter() - t_start:.0f} s', file=sys.stderr, flush=True)
     eff = [r for r in rows if r['effect'] != 'clean']
     clean = [r for r in rows if r['effect'] == 'clean']
     in_cat = [r for r in eff if r['subsystem_true'] != 'thermal']
@@ -253,12 +259,12 @@ def plot_independent(rows: list[dict[str, Any]], path: str) -> None:
     ax[0].bar(x + 0.2, cau, 0.4, label='right cause')
     ax[0].set_xticks(x, keys, rotation=60, ha='right', fontsize=8)
     ax[0].set_ylim(0, 1.05)
-    ax[0].legend(fontsize=8)
+    ax[0].legend(fontsize=8, loc='lower left')
     ax[0].set_title('effects written into clean closed-loop recordings')
     clean = [r for r in rows if r['effect'] == 'clean']
     levels = sorted({r['noise_T_C'] for r in clean})
     ax[1].plot(levels, [np.mean([r['false_alarm'] for r in clean if r['noise_T_C'] == n]) for n in levels], 'o-')
-    ax[1].set_xlabel('thermocouple noise [degC] (pot noise 10 mrad/degC)')
+    ax[1].set_xlabel('thermocouple noise [degC]\n(potentiometer: 10 mrad per degC)')
     ax[1].set_ylabel('false-alarm rate')
     ax[1].set_ylim(-0.05, 1.05)
     fig.tight_layout()
