@@ -226,6 +226,13 @@ def bench_diagnose(quick: bool = False) -> dict:
     return run_diagnose(quick)
 
 
+@section('diagnose_full')
+def bench_diagnose_full(quick: bool = False) -> dict:
+    """The diagnose section at full size: independent effects at three noise levels (issue 13)."""
+    from sma_wrist.diagnose.bench import bench_diagnose as run_diagnose
+    return run_diagnose(quick, full=True)
+
+
 @section('bridge')
 def bench_bridge(quick: bool = False) -> dict:
     """1 kHz sample streaming emulator -> pty -> bridge link: loss, reordering, latency percentiles."""

@@ -9,13 +9,15 @@ data can be run in the closed loop. At the nominal values the plant is the plain
 Where each effect acts (docs/diagnose.md has the equations)::
 
     commands --delay--> TEM heat balance (gain, loss, Joule, coupling, ambient)--> T_true
-    T_true --thermocouple (first-order lag, offset)--> T_measured
+    commands --TEM driver (dead zone, saturation below the rating)--> applied drive
+    T_true --thermocouple i (lag, delay, gain, offset, drift; per channel)--> T_measured
     T_true --wire lag, cycle drift--> T_wire --SD-GPI + joint (payload, friction, pre-load)--> q
-    q --backlash (play), potentiometer (delay, offset, gain)--> q_measured
+    q --backlash (play), potentiometer (delay, lag, offset, gain, drift)--> q_measured
 
 :func:`plant_params` folds the thermal and joint parameters into a
 :class:`~sma_wrist.core.plant.PlantParams`; :class:`SensorChain` is the measurement part.
-The command delay, wire lag, cycle drift and ambient drift are not simulated by the plant
+The command delay, TEM driver dead zone and saturation, wire lag, cycle drift and ambient
+drift are not simulated by the plant
 (:data:`REPLAY_ONLY`): the diagnosis' replay models them, plant_sim refuses them.
 """
 from __future__ import annotations
@@ -65,13 +67,49 @@ PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('angle_delay_s', 's', 0.0, 0.0, 3.0, 0.2, 'potentiometer / acquisition delay'),
     ExtensionParam('angle_offset_rad', 'rad', 0.0, -0.5, 0.5, 0.02, 'potentiometer offset'),
     ExtensionParam('angle_gain_err', '1', 0.0, -0.5, 0.5, 0.03, 'potentiometer gain error about q_neutral'),
+    # per-channel sensor chain (issue 13): each thermocouple on its own, the potentiometer's lag and drift
+    ExtensionParam('temp_offset_1_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple 1 offset (muscle 1 only)'),
+    ExtensionParam('temp_offset_2_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple 2 offset (muscle 2 only)'),
+    ExtensionParam('temp_gain_err_1', '1', 0.0, -0.3, 0.3, 0.02, 'thermocouple 1 gain error about TEMP_GAIN_REF_C'),
+    ExtensionParam('temp_gain_err_2', '1', 0.0, -0.3, 0.3, 0.02, 'thermocouple 2 gain error about TEMP_GAIN_REF_C'),
+    ExtensionParam('temp_delay_1_s', 's', 0.0, 0.0, 3.0, 0.2, 'thermocouple 1 reading is the temperature this long ago'),
+    ExtensionParam('temp_delay_2_s', 's', 0.0, 0.0, 3.0, 0.2, 'thermocouple 2 reading is the temperature this long ago'),
+    ExtensionParam('temp_lag_1_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple 1 first-order time constant'),
+    ExtensionParam('temp_lag_2_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple 2 first-order time constant'),
+    ExtensionParam('temp_drift_1_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'thermocouple 1 reading drifts linearly'),
+    ExtensionParam('temp_drift_2_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'thermocouple 2 reading drifts linearly'),
+    ExtensionParam('angle_lag_s', 's', 0.0, 0.0, 3.0, 0.2, 'potentiometer first-order time constant (RC filter)'),
+    ExtensionParam('angle_drift_rad_per_h', 'rad/h', 0.0, -1.0, 1.0, 0.05, 'potentiometer reading drifts linearly'),
+    # actuator: what the TEM driver makes of a command
+    ExtensionParam('tem_dead_zone_V', 'V', 0.0, 0.0, 10.0, 0.5,
+                   'TEM driver dead zone: |command| below it gives 0 V, above it the output is |command| - dead zone'),
+    ExtensionParam('tem_headroom_V', 'V', 0.0, 0.0, 20.0, 2.0,
+                   'the TEM driver saturates this far below the nominal drive limit'),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 NOMINAL = {p.name: p.nominal for p in PARAMS}
 #: the nominal joint's static / Coulomb friction ratio (0.006 / 0.004 N m)
 STATIC_PER_COULOMB = 1.5
 #: effects the diagnosis replays but the plant does not simulate
-REPLAY_ONLY = ('hyst_lag_s', 'hyst_drift_C_per_cycle', 'ambient_drift_C_per_h', 'command_delay_s')
+REPLAY_ONLY = ('hyst_lag_s', 'hyst_drift_C_per_cycle', 'ambient_drift_C_per_h', 'command_delay_s', 'tem_dead_zone_V',
+               'tem_headroom_V')
+#: thermocouple gain errors scale the reading about this temperature [degC] (the cold junction, room)
+TEMP_GAIN_REF_C = 25.0
+#: the per-channel sensor parameters of thermocouple i: offset, gain error, delay, lag, drift
+TEMP_CHANNEL_KEYS = {i: (f'temp_offset_{i}_C', f'temp_gain_err_{i}', f'temp_delay_{i}_s', f'temp_lag_{i}_s',
+                         f'temp_drift_{i}_C_per_h') for i in (1, 2)}
+SENSOR_KEYS = ('temp_lag_s', 'temp_offset_C', 'backlash_rad', 'angle_delay_s', 'angle_offset_rad', 'angle_gain_err',
+               'angle_lag_s', 'angle_drift_rad_per_h') + TEMP_CHANNEL_KEYS[1] + TEMP_CHANNEL_KEYS[2]
+
+
+def drive(u: np.ndarray, dead_zone_V: float, headroom_V: float, u_max_V: float) -> np.ndarray:
+    """What a TEM driver with a dead zone and an early saturation applies for commands u [V]."""
+    if dead_zone_V > 0:
+        u = np.sign(u) * np.maximum(np.abs(u) - dead_zone_V, 0.0)
+    if headroom_V > 0:
+        lim = max(u_max_V - headroom_V, 0.0)
+        u = np.clip(u, -lim, lim)
+    return u
 
 
 def check(values: Mapping[str, float]) -> dict[str, float]:
@@ -121,9 +159,13 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
 class SensorChain:
     """What the sensors make of the true state, sampled every ``dt`` [s] (plant_sim's publish tick).
 
-    Thermocouples: first-order lag ``temp_lag_s`` (exact discretisation) plus ``temp_offset_C``.
+    Thermocouple i: first-order lag ``temp_lag_s`` then ``temp_lag_i_s`` (exact
+    discretisation), delay ``temp_delay_i_s``, gain error ``temp_gain_err_i`` about
+    :data:`TEMP_GAIN_REF_C`, offset ``temp_offset_C + temp_offset_i_C`` and drift
+    ``temp_drift_i_C_per_h`` x time since the first sample.
     Potentiometer: backlash (play of width ``backlash_rad``), delay ``angle_delay_s`` (linear
-    interpolation between ticks), then ``q + angle_offset_rad + angle_gain_err (q - q_neutral)``.
+    interpolation between ticks), first-order lag ``angle_lag_s``, then
+    ``q + angle_offset_rad + angle_gain_err (q - q_neutral)`` plus ``angle_drift_rad_per_h`` x time.
     """
 
     def __init__(self, values: Mapping[str, float], dt: float, q_neutral_rad: float) -> None:
@@ -131,32 +173,64 @@ class SensorChain:
         self.v = v
         self.dt = float(dt)
         self.q_neutral = float(q_neutral_rad)
-        self.a_T = float(np.exp(-dt / v['temp_lag_s'])) if v['temp_lag_s'] > 0 else 0.0
-        s = v['angle_delay_s'] / dt
-        self.delay_i, self.delay_f = int(np.floor(s)), float(s - np.floor(s))
-        self._buf = np.zeros(self.delay_i + 2)
+        self.a_T = _lag_factor(v['temp_lag_s'], dt)
+        self.a_Ti = np.array([_lag_factor(v[f'temp_lag_{i}_s'], dt) for i in (1, 2)])
+        self.a_q = _lag_factor(v['angle_lag_s'], dt)
+        self._q_delay = _Delay(v['angle_delay_s'], dt)
+        self._T_delay = [_Delay(v[f'temp_delay_{i}_s'], dt) for i in (1, 2)]
+        self._gain = np.array([v[f'temp_gain_err_{i}'] for i in (1, 2)])
+        self._offset = v['temp_offset_C'] + np.array([v[f'temp_offset_{i}_C'] for i in (1, 2)])
+        self._drift = np.array([v[f'temp_drift_{i}_C_per_h'] for i in (1, 2)]) / 3600.0
         self._T: np.ndarray | None = None
+        self._Ti: np.ndarray | None = None
         self._play: float | None = None
-        self._n = 0
+        self._q_lag: float | None = None
+        self._n_T = 0
+        self._n_q = 0
 
     @property
     def identity(self) -> bool:
-        return all(self.v[k] == NOMINAL[k] for k in
-                   ('temp_lag_s', 'temp_offset_C', 'backlash_rad', 'angle_delay_s', 'angle_offset_rad', 'angle_gain_err'))
+        return all(self.v[k] == NOMINAL[k] for k in SENSOR_KEYS)
 
     def temperatures(self, T_true: np.ndarray) -> np.ndarray:
         T = np.asarray(T_true, float)
         self._T = T.copy() if self._T is None else self.a_T * self._T + (1.0 - self.a_T) * T
-        return self._T + self.v['temp_offset_C']
+        self._Ti = self._T.copy() if self._Ti is None else self.a_Ti * self._Ti + (1.0 - self.a_Ti) * self._T
+        y = np.array([d.push(x) for d, x in zip(self._T_delay, self._Ti)])
+        t = self._n_T * self.dt
+        self._n_T += 1
+        return TEMP_GAIN_REF_C + (1.0 + self._gain) * (y - TEMP_GAIN_REF_C) + self._offset + self._drift * t
 
     def angle(self, q_true: float) -> float:
         h = 0.5 * self.v['backlash_rad']
         self._play = q_true if self._play is None else min(max(self._play, q_true - h), q_true + h)
-        b = self._buf
-        if self._n == 0:
-            b[:] = self._play
+        y = self._q_delay.push(self._play)
+        self._q_lag = y if self._q_lag is None else self.a_q * self._q_lag + (1.0 - self.a_q) * y
+        y = self._q_lag
+        t = self._n_q * self.dt
+        self._n_q += 1
+        return float(y + self.v['angle_offset_rad'] + self.v['angle_gain_err'] * (y - self.q_neutral)
+                     + self.v['angle_drift_rad_per_h'] / 3600.0 * t)
+
+
+def _lag_factor(tau: float, dt: float) -> float:
+    return float(np.exp(-dt / tau)) if tau > 0 else 0.0
+
+
+class _Delay:
+    """x(t - delay) of a sampled signal, linear interpolation between ticks, held at the first value."""
+
+    def __init__(self, delay: float, dt: float) -> None:
+        s = delay / dt
+        self.i, self.f = int(np.floor(s)), float(s - np.floor(s))
+        self.buf = np.zeros(self.i + 2)
+        self.n = 0
+
+    def push(self, x: float) -> float:
+        b = self.buf
+        if self.n == 0:
+            b[:] = x
         b[1:] = b[:-1].copy()
-        b[0] = self._play
-        self._n += 1
-        y = (1.0 - self.delay_f) * b[self.delay_i] + self.delay_f * b[self.delay_i + 1]
-        return float(y + self.v['angle_offset_rad'] + self.v['angle_gain_err'] * (y - self.q_neutral))
+        b[0] = x
+        self.n += 1
+        return float((1.0 - self.f) * b[self.i] + self.f * b[self.i + 1])

@@ -39,6 +39,41 @@ MIN_GAIN_P05 = 2.0
 PARSIMONY_LOG = 0.1
 #: residual structure: RMS / white-noise sigma above this with a Ljung-Box rejection (p < 0.01)
 STRUCTURE_RATIO = 1.6
+#: cross-channel consistency: a cause may not make any channel it touches worse on held-out data
+#: by more than this (log SSE; 0.02 ~ 1 % RMS)
+CONSISTENT_LOG = 0.02
+#: a fitted value within this fraction of its range from a bound (that is not its nominal
+#: value) has hit the bound: the fit says "at least this much", not "this much"
+BOUND_FRACTION = 0.005
+#: causes of other subsystems scoring within this (log SSE) of the named one make the verdict ambiguous
+AMBIGUITY_LOG = 0.3
+#: a verdict that names two subsystems is given at most this confidence
+AMBIGUOUS_CONFIDENCE = 0.5
+#: a cause that leaves its main channel's held-out RMS above PARTIAL_RATIO x the noise level and
+#: removes less than PARTIAL_GAIN_PCT of it explains only part of the run: it is listed, not named
+PARTIAL_RATIO = 3.0
+PARTIAL_GAIN_PCT = 80.0
+#: bootstrap resamples of the held-out segments for the confidence
+N_CONFIDENCE = 500
+#: the measurement that separates two subsystems that explain a run almost equally well
+SEPARATING_MEASUREMENT = {
+    frozenset({'sensor', 'actuator'}): 'a command step test with the TEM-face temperatures (or the drive current) '
+                                       'recorded: a late or weak drive shows at the TEM faces, a faulty thermocouple does not',
+    frozenset({'sensor', 'thermal'}): 'a reference thermometer on the bundle (or an ice-point / warm-bath check of '
+                                      'the thermocouples) against the recorded readings',
+    frozenset({'sensor', 'hysteresis'}): 'a slow, nearly isothermal temperature sweep with a reference thermometer: '
+                                         'wire physics moves the angle, a sensor fault only the reading',
+    frozenset({'sensor', 'joint'}): 'a static check of the angle against a protractor or second encoder at a few '
+                                    'positions, with and without the payload',
+    frozenset({'actuator', 'thermal'}): 'a command step test with the TEM-face temperatures and the drive current '
+                                        'recorded: the driver and the heat balance act at different points',
+    frozenset({'actuator', 'hysteresis'}): 'a command step test with the TEM-face temperatures recorded',
+    frozenset({'thermal', 'hysteresis'}): 'slow and fast temperature cycles: rate-dependent wires and heat-balance '
+                                          'errors scale differently with the heating rate',
+    frozenset({'hysteresis', 'joint'}): 'slow and fast cycles at two payloads: rate and load dependence separate them',
+    frozenset({'thermal', 'joint'}): 'a payload step at constant temperatures',
+    frozenset({'actuator', 'joint'}): 'a payload step at constant temperatures',
+}
 
 
 @dataclass
@@ -58,6 +93,14 @@ class DiagnosisResult:
     channels: dict[str, dict[str, float]]
     residual_stats: dict[str, dict[str, Any]]
     summary: str
+    #: probability that the named subsystem (or "no discrepancy") is right: the fraction of
+    #: bootstrap resamples of the held-out segments that reach the same verdict (capped when ambiguous)
+    confidence: float = 0.0
+    #: causes of other subsystems that explain the run almost as well (then the verdict names them too)
+    ambiguous_with: list[dict[str, Any]] = field(default_factory=list)
+    separating_measurement: str | None = None
+    #: candidates whose fit ended on a bound of the catalogue: {cause, parameter, value, bound}
+    bound_hits: list[dict[str, Any]] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     source: str = ''
     duration_s: float = 0.0
@@ -133,14 +176,19 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
             continue
         fits.append(ev.fit(e))
     fits.sort(key=lambda f: f.score)
+    # a cause is named only if its fit is an interior value that explains every channel it
+    # touches (cross-channel consistency); the rest stay ranked, flagged
+    bounds = {id(f): at_bound(f) for f in fits}
+    consistent = {id(f): all(f.log_ratio[c] <= CONSISTENT_LOG for c in ft.channels_of(f.effect, ev.channels))
+                  for f in fits}
+    eligible = [f for f in fits if consistent[id(f)] and not bounds[id(f)]]
     # parsimony: among candidates within PARSIMONY_LOG of the best held-out score, the one
     # with the fewest parameters (a recalibration of three numbers always polishes a little
     # more than the one physical effect that explains the data)
-    near = [f for f in fits if f.score <= fits[0].score + PARSIMONY_LOG] if fits else []
+    near = [f for f in eligible if f.score <= eligible[0].score + PARSIMONY_LOG] if eligible else []
     best = min(near, key=lambda f: (len(f.effect.params), f.score)) if near else None
-    if best is not None:
-        fits.remove(best)
-        fits.insert(0, best)
+    fits = ([best] if best is not None else []) + [f for f in eligible if f is not best] + \
+        [f for f in fits if f not in eligible]
 
     def main_channel(f: ft.Fit) -> str:
         return min(f.log_ratio, key=lambda c: f.log_ratio[c])
@@ -151,13 +199,19 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         g = ev.gain(f, c)
         alternatives.append({'cause': f.effect.id, 'subsystem': f.effect.subsystem, 'score': round(f.score, 4),
                              'channel': c, 'gain_pct': round(g['gain_pct'], 2),
-                             'parameters': _param_dict(f.row, f.effect.params)})
+                             'parameters': _param_dict(f.row, f.effect.params),
+                             'at_bound': [h['parameter'] for h in bounds[id(f)]],
+                             'consistent': consistent[id(f)]})
     channel = main_channel(best) if best else ev.channels[0]
     g_best = ev.gain(best, channel) if best else None
     # significant: beats nominal on held-out data, reliably, and the nominal misfit itself is
     # beyond the noise / replay resolution (else a fit only polishes numerical error)
     significant = bool(best is not None and best.score < -MIN_SCORE and g_best['gain_pct_p05'] > MIN_GAIN_P05
                        and g_best['rmse_before'] > STRUCTURE_RATIO * ev.sigma[channel])
+    partial = bool(significant and g_best['rmse_after'] > PARTIAL_RATIO * ev.sigma[channel]
+                   and g_best['gain_pct'] < PARTIAL_GAIN_PCT)
+    if partial:
+        significant = False
     final_row = best.row if significant else fx.NOMINAL
     final_fit = best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), fx.NOMINAL.copy()))
 
@@ -190,23 +244,63 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
     corr = [{'channel': c, **x} for c in structure for x in stats[c]['extended']['correlates'][:3]]
 
     chan_gains = {c: ev.gain(final_fit, c) for c in ev.channels}
+    ambiguous: list[dict[str, Any]] = []
+    separating = None
+    if significant:
+        seen = {best.effect.subsystem}
+        for f in eligible:
+            if f.score <= best.score + AMBIGUITY_LOG and f.effect.subsystem not in seen and f.score < -MIN_SCORE:
+                seen.add(f.effect.subsystem)
+                ambiguous.append({'cause': f.effect.id, 'subsystem': f.effect.subsystem, 'score': round(f.score, 4)})
+        if ambiguous:
+            separating = '; '.join(SEPARATING_MEASUREMENT.get(frozenset({best.effect.subsystem, a['subsystem']}),
+                                                              'a dedicated excitation run of the subsystems involved')
+                                   for a in ambiguous)
+    # fits that ended on a bound and would otherwise have been named: never reported as the value
+    top_bound = [f for f in fits if bounds[id(f)] and f.score < -MIN_SCORE
+                 and f.score <= (best.score if significant else 0.0) - PARSIMONY_LOG]
+    hits = [{'cause': f.effect.id, **h} for f in top_bound[:3] for h in bounds[id(f)]]
+    hit_text = ''
+    if top_bound:
+        hit_text = ('; '.join(f'{h["cause"]} would need {h["parameter"]} beyond its catalogue bound {h["bound"]:g}'
+                              for h in hits)
+                    + ': the effect is larger than the catalogue allows, or another cause is at work (not reported as a value)')
     if significant:
         e = best.effect
         ps = ', '.join(f'{k} = {v["value"]:.4g} {v["unit"]}' for k, v in _param_dict(best.row, e.params).items())
         summary = (f'{e.subsystem} discrepancy: {e.name} ({e.id}; {ps}); held-out {channel} RMS '
                    f'{g_best["rmse_before"]:.4g} -> {g_best["rmse_after"]:.4g} ({g_best["gain_pct"]:.1f} % better)')
-        rivals = [f.effect.id for f in fits[1:] if f.score <= best.score + PARSIMONY_LOG]
+        rivals = [f.effect.id for f in eligible if f is not best and f.score <= best.score + PARSIMONY_LOG
+                  and f.effect.subsystem == best.effect.subsystem]
         if rivals:
             summary += (f'; {", ".join(rivals)} explain(s) this run almost as well (held-out score within '
                         f'{PARSIMONY_LOG}): a longer run or larger excitation would separate them')
+        if ambiguous:
+            names = ', '.join(f'{a["cause"]} ({a["subsystem"]})' for a in ambiguous)
+            summary += f'; AMBIGUOUS: {names} explain(s) it almost as well; to separate them: {separating}'
         if unexplained:
             summary += f'; structure remains in {", ".join(structure)}'
     elif unexplained:
         top = ', '.join(f'{x["regressor"]} ({x["r"]:+.2f})' for x in corr[:3])
         summary = (f'unexplained discrepancy in {", ".join(structure)}: no catalogue effect explains it '
-                   f'(best {best.effect.id if best else "-"}, score {best.score if best else 0:.3f}); correlates: {top}')
+                   f'(best {best.effect.id if best else "-"}, score {best.score if best else 0:.3f}'
+                   + (f', removes only {g_best["gain_pct"]:.0f} % of the {channel} misfit' if partial else '')
+                   + f'); correlates: {top}')
     else:
         summary = 'no significant discrepancy: the nominal model explains the run to the sensor noise and the replay resolution'
+    if hit_text:
+        summary += '; ' + hit_text
+    if top_bound and not significant and not unexplained:
+        # a cause would explain the run only beyond its range: a discrepancy, but not a named one
+        unexplained = True
+        structure = [main_channel(top_bound[0])]
+        summary = f'unexplained discrepancy in {structure[0]}: no catalogue effect explains it within its range; ' + hit_text
+        hit_text = ''
+    unnamed = unexplained and not significant
+    confidence = ft.verdict_confidence(ev, fits if unnamed else eligible, best if significant else None, MIN_SCORE,
+                                       N_CONFIDENCE, unexplained=unnamed)
+    if ambiguous:
+        confidence = min(confidence, AMBIGUOUS_CONFIDENCE)
     if significant:
         subsystem = best.effect.subsystem
     elif unexplained:
@@ -222,7 +316,8 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         gain_pct=g_best['gain_pct'] if significant else 0.0,
         gain_ci=(g_best['gain_pct_p05'], g_best['gain_pct_p95']) if significant else (0.0, 0.0),
         alternatives=alternatives, unexplained=unexplained, correlates=corr, channels=chan_gains,
-        residual_stats=stats, summary=summary, warnings=list(run.warnings), source=run.source,
+        residual_stats=stats, summary=summary, confidence=round(float(confidence), 3), ambiguous_with=ambiguous,
+        separating_measurement=separating, bound_hits=hits, warnings=list(run.warnings), source=run.source,
         duration_s=run.duration)
     if params_out is not None:
         res.params_file = str(write_params(res, params_out, run))
@@ -239,6 +334,19 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         rp.write_report(res, d, traces)
     res.wall_s = time.perf_counter() - t_start
     return res
+
+
+def at_bound(f: ft.Fit) -> list[dict[str, Any]]:
+    """The fitted parameters of `f` that ended on a catalogue bound other than their nominal value."""
+    out = []
+    for k in f.effect.params:
+        i = fx.INDEX[k]
+        v, lo, hi, nom = f.row[i], fx.LOWER[i], fx.UPPER[i], fx.NOMINAL[i]
+        tol = BOUND_FRACTION * (hi - lo)
+        for b in (lo, hi):
+            if abs(v - b) <= tol and abs(nom - b) > tol:
+                out.append({'parameter': k, 'value': float(v), 'bound': float(b)})
+    return out
 
 
 def write_params(res: DiagnosisResult, path: str | Path, run: Run) -> Path:

@@ -8,11 +8,12 @@ kernel call (candidate grids, finite-difference Jacobians, bootstrap).
 
 Signal chain of the extended model (docs/diagnose.md has the equations)::
 
-    commands u --TEM heat balance (gain, loss, Joule, coupling, ambient offset + drift)--> T_true
-    T_true --thermocouple (first-order lag, offset)--> T_measured
+    commands u --delay, TEM driver (dead zone, saturation)--> applied drive
+    drive --TEM heat balance (gain, loss, Joule, coupling, ambient offset + drift)--> T_true
+    T_true --thermocouple i (lag, delay, gain, offset, drift; per channel)--> T_measured
     T_measured --inverse sensor--> T_true^ --wire lag, cycle drift--> T_wire
     T_wire + payload --SD-GPI + joint (payload, Coulomb/static, viscous, pre-load)--> q
-    q --chain backlash (play), potentiometer (delay, offset, gain)--> q_measured
+    q --chain backlash (play), potentiometer (delay, lag, offset, gain, drift)--> q_measured
 """
 from __future__ import annotations
 
@@ -22,7 +23,7 @@ import numpy as np
 from scipy.signal import savgol_filter
 
 from sma_wrist.core import thermal as th
-from sma_wrist.core.model_extensions import PARAMS, STATIC_PER_COULOMB
+from sma_wrist.core.model_extensions import PARAMS, STATIC_PER_COULOMB, TEMP_CHANNEL_KEYS, TEMP_GAIN_REF_C, drive
 from sma_wrist.core.plant import PlantParams
 from sma_wrist.diagnose.kernels import Constants, _jit
 
@@ -33,14 +34,27 @@ UPPER = np.array([p.upper for p in PARAMS])
 TYPICAL = np.array([p.typical for p in PARAMS])
 #: temperatures noisier than this [degC] are smoothed before the hysteresis replay
 SMOOTH_ABOVE_C = 0.01
+#: smoothing window of the measured temperatures that drive the hysteresis replay [s]
+SMOOTH_WINDOW_S = 0.3
+#: candidate windows of the noise-matched smoothing [s] (input_noise_angle picks one)
+SMOOTH_WINDOWS_S = (0.1, 0.2, 0.3, 0.6)
+#: window of the local fit that gives a noisy run's initial temperatures [s]
+START_WINDOW_S = 0.5
+#: realisations of the input-noise propagation (:meth:`ExtendedModel.input_noise_angle`)
+INPUT_NOISE_REALISATIONS = 2
 #: one "cycle" of the hysteresis-drift effect: this much temperature travel (40 degC up and down)
 CYCLE_TRAVEL_C = 80.0
 
 THERMAL_KEYS = ('tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C', 'ambient_drift_C_per_h',
-                'coupling_per_s', 'temp_offset_C', 'command_delay_s')
+                'coupling_per_s', 'temp_offset_C', 'command_delay_s', 'tem_dead_zone_V', 'tem_headroom_V',
+                'temp_offset_1_C', 'temp_offset_2_C', 'temp_gain_err_1', 'temp_gain_err_2')
+#: parameters that change the drive the heat balance sees (one kernel call per distinct combination)
+DRIVE_KEYS = ('command_delay_s', 'tem_dead_zone_V', 'tem_headroom_V')
 MECH_KEYS = ('temp_offset_C', 'temp_lag_s', 'hyst_lag_s', 'hyst_drift_C_per_cycle', 'payload_err_kg', 'coulomb_Nm',
-             'viscous_Nms', 'preload_err_mm')
+             'viscous_Nms', 'preload_err_mm') + TEMP_CHANNEL_KEYS[1] + TEMP_CHANNEL_KEYS[2]
 _TH_IDX = [INDEX[k] for k in THERMAL_KEYS]
+#: per thermocouple: indices of (offset, gain error, delay, lag, drift)
+CHANNEL_IDX = tuple(tuple(INDEX[k] for k in TEMP_CHANNEL_KEYS[i]) for i in (1, 2))
 _ME_IDX = [INDEX[k] for k in MECH_KEYS]
 
 
@@ -81,6 +95,26 @@ CATALOGUE: tuple[Effect, ...] = (
            'the wires lag the measured temperature, loops widen with the heating rate'),
     Effect('hysteresis_drift', 'hysteresis drift over cycles', 'hysteresis', ('hyst_drift_C_per_cycle',),
            'transition temperatures move with the number of cycles (functional fatigue)'),
+    # per-channel sensor chain and TEM driver (issue 13): what a real sensor, driver or wire does
+    Effect('temp_sensor_offsets', 'thermocouple offsets (per channel)', 'sensor', ('temp_offset_1_C', 'temp_offset_2_C'),
+           'each thermocouple reads high/low by its own amount (one bad junction, a cold-junction error on one input)'),
+    Effect('temp_sensor_gain', 'thermocouple gain errors (per channel)', 'sensor', ('temp_gain_err_1', 'temp_gain_err_2'),
+           'a thermocouple amplifier scales the reading about 25 degC (wrong type, wrong gain resistor)'),
+    Effect('temp_sensor_delay', 'thermocouple delays (per channel)', 'sensor', ('temp_delay_1_s', 'temp_delay_2_s'),
+           'a thermocouple reading is the temperature some time ago (filter, slow acquisition, buffered link)'),
+    Effect('temp_sensor_lags', 'thermocouple lags (per channel)', 'sensor', ('temp_lag_1_s', 'temp_lag_2_s'),
+           'each thermocouple responds with its own time constant (one junction loose in the bundle)'),
+    Effect('temp_sensor_drift', 'thermocouple drift (per channel)', 'sensor',
+           ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h'),
+           'a thermocouple reading drifts linearly in time (cold-junction warming, amplifier drift)'),
+    Effect('angle_sensor_lag', 'potentiometer lag', 'sensor', ('angle_lag_s',),
+           'the angle reading responds with a first-order time constant (RC anti-alias filter)'),
+    Effect('angle_sensor_drift', 'potentiometer drift', 'sensor', ('angle_drift_rad_per_h',),
+           'the angle reading drifts linearly in time (reference voltage, temperature of the pot)'),
+    Effect('tem_dead_zone', 'TEM driver dead zone', 'actuator', ('tem_dead_zone_V',),
+           'the TEM driver gives nothing below a threshold and |command| - threshold above it'),
+    Effect('tem_saturation', 'TEM driver saturation', 'actuator', ('tem_headroom_V',),
+           'the TEM driver saturates below the nominal drive limit (weak supply, current limit)'),
     Effect('recalibrate_thermal', 'thermal parameter recalibration', 'thermal',
            ('tem_gain_err', 'loss_scale_err', 'ambient_offset_C'),
            'no new physics: Table 4.9 drive gain, heat loss and ambient refitted'),
@@ -138,6 +172,13 @@ def _play_1d(x, h):  # pragma: no cover - compiled
     return y
 
 
+def advanced(x: np.ndarray, lead: float, dt: float) -> np.ndarray:
+    """x(t + lead) with linear interpolation, held at x[-1] after the end (inverse of :func:`delayed`)."""
+    if lead <= 0:
+        return x
+    return delayed(x[::-1], lead, dt)[::-1]
+
+
 def delayed(x: np.ndarray, delay: float, dt: float) -> np.ndarray:
     """x(t - delay) with linear interpolation, held at x[0] before the start."""
     if delay <= 0:
@@ -159,13 +200,26 @@ def cycle_count(T: np.ndarray, dt: float) -> np.ndarray:
     return travel / CYCLE_TRAVEL_C
 
 
-def smooth_and_rate(T: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """Zero-phase smoothed temperature (0.3 s window) and its rate (1 s window) [degC, degC/s]."""
-    w_s = max(5, int(round(0.3 / dt)) | 1)
+def smooth_and_rate(T: np.ndarray, dt: float, window_s: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-phase smoothed temperature (`window_s` window) and its rate (1 s window) [degC, degC/s]."""
+    w_s = max(5, int(round(window_s / dt)) | 1)
     w_r = max(5, int(round(1.0 / dt)) | 1)
     if T.shape[0] <= w_r:
         return T.copy(), np.gradient(T, dt, axis=0)
     return savgol_filter(T, w_s, 2, axis=0), savgol_filter(T, w_r, 2, deriv=1, delta=dt, axis=0)
+
+
+def thermocouples(T: np.ndarray, r: np.ndarray, dt: float) -> np.ndarray:
+    """Readings (K, 2) of the thermocouples for true temperatures T (K, 2) under a parameter row:
+    common lag, per-channel lag, delay, gain about TEMP_GAIN_REF_C, offsets, drift (SensorChain's order)."""
+    out = np.empty_like(T)
+    t = np.arange(T.shape[0]) * dt
+    y = first_order(T, r[INDEX['temp_lag_s']], dt)
+    for c, (ko, kg, kd, kl, kr) in enumerate(CHANNEL_IDX):
+        yc = delayed(first_order(y[:, c], r[kl], dt), r[kd], dt)
+        out[:, c] = (TEMP_GAIN_REF_C + (1.0 + r[kg]) * (yc - TEMP_GAIN_REF_C) + r[INDEX['temp_offset_C']]
+                     + r[ko] + r[kr] / 3600.0 * t)
+    return out
 
 
 # ----------------------------------------------------------------------------- model
@@ -206,13 +260,19 @@ class ExtendedModel:
         self.substeps = max(1, int(np.ceil(run.dt / 0.01 - 1e-9)))
         tp = self.consts.params.thermal
         self._rest = th.rest_state(tp, 1)[0]  # (2 layers, 2 faces)
+        self.T_noise = 0.0
         if run.T is not None:
-            self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt)
-            if noise_sigma(run.T) < SMOOTH_ABOVE_C:
+            self.T_noise = noise_sigma(run.T)
+            self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOW_S)
+            if self.T_noise < SMOOTH_ABOVE_C:
                 # noise-free (simulated) temperatures: smoothing would only distort the steep
                 # transitions (6x the replay error on a plant_sim run)
                 self.T_s = run.T.copy()
             self.cycles = cycle_count(run.T, run.dt)
+            # the thermal replay starts from the first reading: of a noisy one, the start of a
+            # local quadratic fit (a single noisy sample offsets the replay for tens of seconds)
+            self.T_start = run.T[0].copy() if self.T_noise < SMOOTH_ABOVE_C else \
+                smooth_and_rate(run.T[:max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)[0][0]
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
 
@@ -235,18 +295,20 @@ class ExtendedModel:
                 c, drift, off = self.thermal_coef(np.array(key[1:]))
                 coefs.append(c)
                 drifts.append(drift)
-                T0 = run.T[0] - key[1 + THERMAL_KEYS.index('temp_offset_C')] if run.T is not None else self._rest[:, 0]
+                kv = dict(zip(THERMAL_KEYS, key[1:]))
+                T0 = self.temp_inverse_static(self.T_start, kv, 0.0) if run.T is not None else self._rest[:, 0]
                 x0 = self._rest.copy()
                 x0[:, 1] += off  # exchanger face starts at its rest state, shifted by the ambient offset
                 x0[:, 1] += (T0 - self._rest[:, 0])
                 x0[:, 0] = T0
                 x0s.append(x0)
-            # one kernel call per distinct command delay (the delay changes the input itself)
-            i_delay = 1 + THERMAL_KEYS.index('command_delay_s')
+            # one kernel call per distinct drive (delay, dead zone, saturation change the input itself)
+            i_drive = [1 + THERMAL_KEYS.index(k) for k in DRIVE_KEYS]
             T = np.empty((K, len(missing), 2))
-            for d in sorted({key[i_delay] for key in missing}):
-                sel = [i for i, key in enumerate(missing) if key[i_delay] == d]
-                T[:, sel], _ = self.consts.thermal(delayed(run.u, d, self.dt)[:K], self.dt, np.array(coefs)[sel],
+            for dk in sorted({tuple(key[i] for i in i_drive) for key in missing}):
+                sel = [i for i, key in enumerate(missing) if tuple(key[i] for i in i_drive) == dk]
+                u = drive(delayed(run.u, dk[0], self.dt), dk[1], dk[2], self.consts.u_limits[1])
+                T[:, sel], _ = self.consts.thermal(u[:K], self.dt, np.array(coefs)[sel],
                                                    np.array(x0s)[sel], np.array(drifts)[sel], self.substeps)
             if len(self._th_cache) > 200:  # bound memory; never evict what this call returns
                 for k in [k for k in self._th_cache if k not in todo][:100]:
@@ -258,18 +320,39 @@ class ExtendedModel:
         return out
 
     def thermal_measured(self, rows: np.ndarray, upto: int | None = None) -> np.ndarray:
-        """Predicted thermocouple readings (K, N, 2)."""
+        """Predicted thermocouple readings (K, N, 2): the sensor chain of model_extensions.SensorChain."""
         T = self.thermal_true(rows, upto)
         out = np.empty_like(T)
         for j, r in enumerate(rows):
-            out[:, j] = first_order(T[:, j], r[INDEX['temp_lag_s']], self.dt) + r[INDEX['temp_offset_C']]
+            out[:, j] = thermocouples(T[:, j], r, self.dt)
+        return out
+
+    @staticmethod
+    def temp_inverse_static(T_meas: np.ndarray, v: dict, t: float | np.ndarray) -> np.ndarray:
+        """True temperatures from readings through the static part of the sensor chain (offset, gain, drift)."""
+        out = np.empty_like(np.asarray(T_meas, float))
+        for c in (0, 1):
+            ko, kg = TEMP_CHANNEL_KEYS[c + 1][:2]
+            kr = TEMP_CHANNEL_KEYS[c + 1][4]
+            off = v['temp_offset_C'] + v[ko] + v.get(kr, 0.0) / 3600.0 * t
+            out[..., c] = (T_meas[..., c] - off - TEMP_GAIN_REF_C) / (1.0 + v[kg]) + TEMP_GAIN_REF_C
         return out
 
     # -- mechanics ----------------------------------------------------------------------
     def wire_temperature(self, r: np.ndarray, T_meas_s: np.ndarray, T_rate: np.ndarray, cycles: np.ndarray
                          ) -> np.ndarray:
-        """Wire temperatures from (smoothed) measured ones under a parameter row."""
-        T = T_meas_s - r[INDEX['temp_offset_C']] + r[INDEX['temp_lag_s']] * T_rate
+        """Wire temperatures from (smoothed) measured ones under a parameter row: the inverse
+        sensor chain (drift, offset, gain; delay undone by a lead; lags by y + tau dy/dt), then
+        the wire's own lag and cycle drift."""
+        t = np.arange(T_meas_s.shape[0]) * self.dt
+        T = np.empty_like(T_meas_s)
+        for c, (ko, kg, kd, kl, kr) in enumerate(CHANNEL_IDX):
+            g = 1.0 + r[kg]
+            y = (T_meas_s[:, c] - r[INDEX['temp_offset_C']] - r[ko] - r[kr] / 3600.0 * t - TEMP_GAIN_REF_C) / g \
+                + TEMP_GAIN_REF_C
+            y_rate = (T_rate[:, c] - r[kr] / 3600.0) / g
+            y, y_rate = advanced(y, r[kd], self.dt), advanced(y_rate, r[kd], self.dt)
+            T[:, c] = y + (r[INDEX['temp_lag_s']] + r[kl]) * y_rate
         T = first_order(T, r[INDEX['hyst_lag_s']], self.dt)
         return T - r[INDEX['hyst_drift_C_per_cycle']] * cycles
 
@@ -326,12 +409,52 @@ class ExtendedModel:
             load[:, js] = c[:, None]
         return q, qd, load
 
+    def input_noise_angle(self, i0: int = 0, seed: int = 0) -> float:
+        """Noise-matched smoothing of the driving temperatures; returns the RMS angle error
+        [rad] that the thermocouple noise still puts into the mechanics replay.
+
+        The replay is driven by the *measured* temperatures, so their noise passes through
+        the hysteresis (branch switches on noisy sign changes of the rate, steep loads in the
+        transitions, memory) and comes out as a structured angle residual: errors in the
+        input variables, not model error. Smoothing trades that against the distortion of
+        the transitions. Both are measured by simulation: the smoothed temperatures stand
+        in for the truth (the shortest window), fresh noise of the estimated level per channel is added and
+        smoothed with each window of :data:`SMOOTH_WINDOWS_S`, and the nominal replays are
+        compared with the replay of the stand-in. The window with the smallest error drives
+        the replay from here on (``self.T_s``, ``self.T_rate``, ``self.smooth_window_s``).
+        """
+        run = self.run
+        self.smooth_window_s = 0.0 if self.T_noise < SMOOTH_ABOVE_C else SMOOTH_WINDOW_S
+        if run.T is None or self.T_noise < SMOOTH_ABOVE_C:
+            return 0.0
+        rng = np.random.default_rng(seed)
+        sig = np.array([noise_sigma(run.T[:, c]) for c in (0, 1)])
+        r = NOMINAL
+        # the stand-in for the truth: the least smoothed (a smoother one hides the transitions'
+        # distortion by smoothing: the error of a 0.3 s window came out 2x too small)
+        ref, ref_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOWS_S[0])
+        Ts = [self.wire_temperature(r, ref, ref_rate, self.cycles)]
+        noise = [rng.normal(0.0, 1.0, run.T.shape) * sig for _ in range(INPUT_NOISE_REALISATIONS)]
+        for w in SMOOTH_WINDOWS_S:
+            for e in noise:
+                T_s, T_rate = smooth_and_rate(ref + e, run.dt, w)
+                Ts.append(self.wire_temperature(r, T_s, T_rate, self.cycles))
+        q, _, _ = self.consts.mechanics(np.stack(Ts, axis=1), self.dt, self.joint_row(r), self.substeps)
+        err = ((q[i0:, 1:] - q[i0:, :1]) ** 2).mean(axis=0).reshape(len(SMOOTH_WINDOWS_S), -1).mean(axis=1)
+        k = int(np.argmin(err))
+        self.smooth_window_s = SMOOTH_WINDOWS_S[k]
+        self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, self.smooth_window_s)
+        self._mech_cache.clear()
+        return float(np.sqrt(err[k]))
+
     def angle_sensor(self, q: np.ndarray, r: np.ndarray) -> np.ndarray:
         """Measured angle from the true one (K,) under a parameter row."""
         y = play(q, r[INDEX['backlash_rad']])
         y = delayed(y, r[INDEX['angle_delay_s']], self.dt)
+        y = first_order(y, r[INDEX['angle_lag_s']], self.dt)
         qn = self.consts.params.joint.q_neutral_rad
-        return y + r[INDEX['angle_offset_rad']] + r[INDEX['angle_gain_err']] * (y - qn)
+        drift = r[INDEX['angle_drift_rad_per_h']] / 3600.0 * np.arange(y.shape[0]) * self.dt if r[INDEX['angle_drift_rad_per_h']] else 0.0
+        return y + r[INDEX['angle_offset_rad']] + r[INDEX['angle_gain_err']] * (y - qn) + drift
 
     def angle_measured(self, rows: np.ndarray, upto: int | None = None, source: str = 'measured') -> np.ndarray:
         q, _, _ = self.mechanics(rows, upto, source)

@@ -33,8 +33,8 @@ MAX_FIT_SAMPLES = 12000  # residual samples per channel in a fit (evenly subsamp
 REPLAY_RESOLUTION = 1e-3
 
 THERMAL_EFFECT_PARAMS = {'command_delay_s', 'tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C',
-                         'ambient_drift_C_per_h', 'coupling_per_s'}
-TEMP_SENSOR_PARAMS = {'temp_offset_C', 'temp_lag_s'}
+                         'ambient_drift_C_per_h', 'coupling_per_s', 'tem_dead_zone_V', 'tem_headroom_V'}
+TEMP_SENSOR_PARAMS = {'temp_offset_C', 'temp_lag_s'} | set(fx.TEMP_CHANNEL_KEYS[1]) | set(fx.TEMP_CHANNEL_KEYS[2])
 
 
 def channels_of(effect: fx.Effect, available: list[str]) -> list[str]:
@@ -91,9 +91,14 @@ class Evaluator:
         self.sigma = {}
         if run.T is not None:
             self.sigma['thermal'] = max(fx.noise_sigma(run.T, 200.0 / 2 ** 16), REPLAY_RESOLUTION * float(np.ptp(run.T)))
+        self.input_noise = 0.0
         if run.q is not None:
             self.sigma['mechanics'] = self.sigma['chain'] = max(fx.noise_sigma(run.q, 2 * np.pi / 2 ** 16),
                                                                 REPLAY_RESOLUTION * float(np.ptp(run.q)))
+            if run.T is not None and 'mechanics' in ch:
+                # errors in the input variables: the thermocouple noise the replay is driven by
+                self.input_noise = model.input_noise_angle(self.i0)
+                self.sigma['mechanics'] = float(np.hypot(self.sigma['mechanics'], self.input_noise))
         self.nominal = fx.NOMINAL.copy()
         ntr = self.i_train - self.i0
         self.sub = max(1, ntr // MAX_FIT_SAMPLES)
@@ -271,3 +276,35 @@ class Evaluator:
         return {'rmse_before': before, 'rmse_after': after, 'gain_pct': 100.0 * (1.0 - after / before) if before else 0.0,
                 'gain_pct_p05': float(np.percentile(g, 5)), 'gain_pct_p95': float(np.percentile(g, 95)),
                 'gain_pct_std': float(np.std(g))}
+
+
+def verdict_confidence(ev: Evaluator, candidates: list[Fit], named: Fit | None, min_score: float,
+                       n_boot: int = 500, seed: int = 1, unexplained: bool = False) -> float:
+    """Fraction of bootstrap resamples of the held-out segments that reach the same verdict.
+
+    In each resample every candidate's held-out score is recomputed from its per-segment
+    SSE; the verdict of a resample is the subsystem of the best-scoring candidate when that
+    score is below ``-min_score``, else "no discrepancy". `named` is the run's verdict (None:
+    no named cause); for an `unexplained` verdict it is the fraction of resamples in which
+    some candidate still beats the nominal model (there is a discrepancy). What this cannot see: a cause outside the catalogue that all
+    candidates mimic; the benchmark checks how well it is calibrated (docs/diagnose.md).
+    """
+    if not candidates:
+        return 1.0 if named is None else 0.0
+    rng = np.random.default_rng(seed)
+    n_seg = N_SEGMENTS
+    idx = rng.integers(0, n_seg, (n_boot, n_seg))
+    S = np.zeros((len(candidates), n_boot))
+    for c in ev.channels:
+        floor = ev.sigma[c] ** 2 * ev.n_test(c)
+        nom = np.maximum(ev.sse_nom[c][idx].sum(axis=1), floor)
+        for j, f in enumerate(candidates):
+            S[j] += np.log(np.maximum(f.sse_test[c][idx].sum(axis=1), floor) / nom)
+    S += LAMBDA * np.array([len(f.effect.params) for f in candidates])[:, None]
+    win = np.argmin(S, axis=0)
+    subs = np.array([f.effect.subsystem for f in candidates])[win]
+    verdict = np.where(S[win, np.arange(n_boot)] < -min_score, subs, 'none')
+    if unexplained:
+        return float(np.mean(verdict != 'none'))
+    target = named.effect.subsystem if named is not None else 'none'
+    return float(np.mean(verdict == target))

@@ -159,7 +159,13 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
               f'| cause | {result.cause} |', f'| unexplained structure left | {result.unexplained} |',
               f'| held-out RMS before / after ({result.channel}) | {result.rmse_before:.4g} / {result.rmse_after:.4g} |',
               f'| gain | {result.gain_pct:.1f} % (bootstrap 5-95 %: {result.gain_ci[0]:.1f} .. {result.gain_ci[1]:.1f}) |',
-              '']
+              f'| confidence | {result.confidence:.2f} |']
+    if result.ambiguous_with:
+        lines += [f'| explain(s) it almost as well | {", ".join(a["cause"] + " (" + a["subsystem"] + ")" for a in result.ambiguous_with)} |',
+                  f'| measurement that would separate them | {result.separating_measurement} |']
+    for h in result.bound_hits:
+        lines.append(f'| on its bound (not a value) | {h["cause"]}: {h["parameter"]} = {h["bound"]:g} |')
+    lines.append('')
     if result.parameters:
         lines += ['## Fitted parameters', '', '| parameter | value | unit | nominal |', '|---|---|---|---|']
         for k, v in result.parameters.items():

@@ -49,6 +49,16 @@ RANGES: dict[str, dict[str, tuple[float, float, bool]]] = {
     'hysteresis_drift': {'hyst_drift_C_per_cycle': (1.5, 4.0, True)},
     'recalibrate_thermal': {'loss_scale_err': (0.12, 0.25, True)},
     'recalibrate_mechanics': {'preload_err_mm': (0.08, 0.2, True)},
+    # per-channel sensors and the TEM driver (issue 13)
+    'temp_sensor_offsets': {'temp_offset_1_C': (1.5, 3.0, True), 'temp_offset_2_C': (0.5, 1.2, True)},
+    'temp_sensor_gain': {'temp_gain_err_1': (0.04, 0.1, True), 'temp_gain_err_2': (0.04, 0.1, True)},
+    'temp_sensor_delay': {'temp_delay_1_s': (0.4, 1.5, False), 'temp_delay_2_s': (0.4, 1.5, False)},
+    'temp_sensor_lags': {'temp_lag_1_s': (2.0, 5.0, False), 'temp_lag_2_s': (0.5, 1.0, False)},
+    'temp_sensor_drift': {'temp_drift_1_C_per_h': (8.0, 25.0, True), 'temp_drift_2_C_per_h': (8.0, 25.0, True)},
+    'angle_sensor_lag': {'angle_lag_s': (0.15, 0.5, False)},
+    'angle_sensor_drift': {'angle_drift_rad_per_h': (0.1, 0.4, True)},
+    'tem_dead_zone': {'tem_dead_zone_V': (1.0, 3.0, False)},
+    'tem_saturation': {'tem_headroom_V': (12.0, 13.0, False)},  # the commands reach 13.5 V of the 24 V rating
 }
 NOISE_T_C = 0.05
 NOISE_Q_RAD = 5e-4
@@ -127,7 +137,8 @@ def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, par
     coef, drift, off = fx.thermal_coef(consts, r[[fx.INDEX[k] for k in fx.THERMAL_KEYS]])
     x0 = th.rest_state(consts.params.thermal, 1)
     x0 = x0 + off  # the ambient offset moves the rest state by exactly off
-    u_applied = fx.delayed(u, r[fx.INDEX['command_delay_s']], dt)
+    u_applied = fx.drive(fx.delayed(u, r[fx.INDEX['command_delay_s']], dt), r[fx.INDEX['tem_dead_zone_V']],
+                         r[fx.INDEX['tem_headroom_V']], consts.u_limits[1])
     T_true, _ = consts.thermal(u_applied, dt, coef, x0, np.array([drift]), SUBSTEPS)
     T_true = T_true[:, 0]
     T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) \
@@ -145,7 +156,7 @@ def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, par
     model.dt = dt
     model.consts = consts
     q_meas = fx.ExtendedModel.angle_sensor(model, q_true, r)
-    T_meas = fx.first_order(T_true, r[fx.INDEX['temp_lag_s']], dt) + r[fx.INDEX['temp_offset_C']]
+    T_meas = fx.thermocouples(T_true, r, dt)
     q_meas = quantise(q_meas + rng.normal(0.0, NOISE_Q_RAD, K), Q_SPAN_RAD)
     T_meas = quantise(T_meas + rng.normal(0.0, NOISE_T_C, (K, 2)), T_SPAN_C)
     t = np.arange(K) * dt
