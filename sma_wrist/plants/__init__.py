@@ -21,6 +21,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis import SDGPIParams
 from sma_wrist.core.plant import PlantParams
 
