@@ -9,6 +9,18 @@ SD-GPI's coordinates (elongation of the 80 mm model wire, per-wire load). The mu
 
 so the SD-GPI target is y_SDGPI = (eps L_wire - c_el m) / (L_wire / L_model). Loads outside
 the SD-GPI's calibrated range are clipped to it and reported (the inverse is undefined there).
+
+Temperature-axis adaptation (issue 14, docs/control.md "Feedback off-model"). The inverse is
+a feed-forward at the desired strain: any difference between the SD-GPI and the wire
+(transition temperatures, stroke, the heat balance behind the measured temperature) goes
+straight to the joint. :meth:`MuscleCompensator.track` brings the measured angle in: each
+bundle's strain is measured through the chain (Eq. 4.17, measured angle); the SD-GPI, observed
+at T_measured - shift, predicts it; the shift follows the prediction error along the model's
+own temperature slope (a normalised gradient step, ``shift_gain_per_s``), so the memory and the
+inverse work on the temperature axis that explains the wire, and the answer is shifted back,
+T_d = T_inv + shift. Where the model's loop is flat (inside the hysteresis gap) its slope is ~0
+and the shift holds. Each wire has its own shift: the common mode, which the angle alone
+cannot see (both wires move it the same way), is seen by each wire's strain prediction.
 """
 from __future__ import annotations
 
@@ -18,9 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core.errors import check_finite
+from sma_wrist.core.errors import ParameterError, check_finite
 from sma_wrist.core.hysteresis import SDGPIParams
-from sma_wrist.core.inverse import InverseCompensator
+from sma_wrist.core.inverse import InverseCompensator, _output_frozen
 from sma_wrist.core.muscle import G, MuscleGeometry
 
 FloatArray = NDArray[np.float64]
@@ -39,8 +51,18 @@ class MuscleCompensator:
     """Desired temperature of each muscle from its desired strain and wire stress (Eqs. 5.5-5.8)."""
 
     def __init__(self, params: SDGPIParams, geometry: MuscleGeometry | None = None,
-                 T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical') -> None:
+                 T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical',
+                 shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0) -> None:
         self.params = params
+        self.T_range_C = T_range_C
+        if not (math.isfinite(shift_gain_per_s) and shift_gain_per_s >= 0):
+            raise ParameterError(f'shift_gain_per_s = {shift_gain_per_s!r} must be >= 0')
+        if not (math.isfinite(shift_limit_C) and shift_limit_C >= 0):
+            raise ParameterError(f'shift_limit_C = {shift_limit_C!r} must be >= 0')
+        self.shift_gain_per_s = float(shift_gain_per_s)
+        self.shift_limit_C = float(shift_limit_C)
+        #: per wire: the wire's temperature minus the model's that explains its strain [degC]
+        self.shift_C = np.zeros(2)  # the node's two wires; reset() sizes it to its wires
         self.geometry = geometry or MuscleGeometry()
         self.inverse = InverseCompensator(params, T_range=T_range_C, method=method)
         g = self.geometry
@@ -53,6 +75,7 @@ class MuscleCompensator:
         """Start the inverse's memory at measured temperatures and stresses."""
         m = self._load(np.asarray(stress_Pa, float))[0]
         self.inverse.reset(np.asarray(T0_C, float), m, branch=branch)
+        self.shift_C = np.zeros(np.shape(m))
 
     def observe(self, T_C: ArrayLike, stress_Pa: ArrayLike) -> None:
         """Advance the memory with measured temperatures and stresses (InverseCompensator.observe)."""
@@ -94,7 +117,48 @@ class MuscleCompensator:
         else:  # broadcast shapes: the same expression on arrays
             y = self._target(eps, m)  # type: ignore[arg-type]
         res = self.inverse.solve(y, m, commit=commit)
-        return CompensationResult(res.T, res.saturated, clipped, m, y)
+        T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
+        return CompensationResult(T, res.saturated, clipped, m, y)
+
+
+    def track(self, T_C: ArrayLike, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float) -> None:
+        """:meth:`observe` on the adapted temperature axis, then one adaptation step of the shift
+        (module docstring) from the bundles' strains at the measured angle (2,) over dt [s]. Without
+        adaptation (``shift_gain_per_s`` 0) the same as observe.
+
+        Step: shift += gain dt (y_model - y_meas) s / (s^2 + s_0^2), s = dy_model/dT [mm/degC] of the
+        loop the memory is on (central difference, heating up / cooling down), y in the SD-GPI's
+        coordinates (:meth:`_target`), s_0 = SLOPE_FLOOR_MM_PER_C; clipped to +-shift_limit_C.
+        A model predicting a longer wire than measured is too cold: its axis moves up."""
+        T = np.asarray(T_C, float)
+        self.observe(T - self.shift_C, stress_Pa)
+        if self.shift_gain_per_s <= 0.0:
+            return
+        inv = self.inverse
+        st = inv.state
+        assert st is not None
+        m = self._load(np.asarray(stress_Pa, float))[0]
+        eps = np.asarray(strain_measured, float)
+        y_meas = (eps * self._wire_mm - self._c_el * m) / self._scale
+        h = SLOPE_STEP_C
+        up, down = np.ones_like(st.heating), np.zeros_like(st.heating)
+        y = _output_frozen(self.params, st.w, st.T_prev + np.array([0.0, h, -h]).reshape((3,) + (1,) * st.T_prev.ndim),
+                           m, np.stack([st.heating, up, down]))
+        slope = (y[1] - y[2]) / (2.0 * h)  # mm/degC of the loop the wire is on, ~0 inside the gap
+        err = y[0] - y_meas
+        step = self.shift_gain_per_s * dt * err * slope / (slope * slope + SLOPE_FLOOR_MM_PER_C ** 2)
+        self.shift_C = np.clip(self.shift_C + step, -self.shift_limit_C, self.shift_limit_C)
+
+    def clip_T(self, temperature_C: FloatArray) -> FloatArray:
+        """Temperatures clipped to the compensator's window [degC]."""
+        lo, hi = self.T_range_C
+        return np.minimum(np.maximum(temperature_C, lo), hi)
+
+
+#: temperature step of the model's loop slope in :meth:`MuscleCompensator.track` [degC]
+SLOPE_STEP_C = 0.5
+#: slope below which the shift adapts ever more slowly (the flat inside of the loop) [mm/degC]
+SLOPE_FLOOR_MM_PER_C = 0.05
 
 
 def _check_finite(name: str, x: FloatArray, unit: str = '') -> None:

@@ -92,6 +92,14 @@ def time_to_meet(error: float, qdot_d: float, qddot_d: float) -> tuple[float, fl
     return s, math.copysign(1.0, qdot_d + qddot_d * s)
 
 
+def bundle_strain(plant: PlantParams, q: float) -> FloatArray:
+    """Strains (elongation / wire length) of the two bundles at angle q [rad] (Eq. 4.17, muscle.py):
+    y_1 = e0 - x, y_2 = e0 + x with x the chain travel from q_neutral and e0 the pre-load elongation."""
+    x = float(plant.joint.chain_displacement_mm(q))
+    e0 = plant.preload_elongation_mm
+    return np.array([e0 - x, e0 + x]) / plant.muscle.wire_length_mm
+
+
 @dataclass(frozen=True)
 class JointControllerParams:
     """Mode, the laws' parameters and the temperature map of the modes without an inverse."""
@@ -150,10 +158,8 @@ class JointController:
         self.hold: tuple[float, float] | None = None  # (held angle, direction after the turn)
 
     def strain_at(self, q: float) -> FloatArray:
-        """Bundle strains (elongation / wire length) at angle q (Eq. 4.17, muscle.py)."""
-        x = float(self.plant.joint.chain_displacement_mm(q))
-        e0 = self.plant.preload_elongation_mm
-        return np.array([e0 - x, e0 + x]) / self.plant.muscle.wire_length_mm
+        """Bundle strains (elongation / wire length) at angle q (:func:`bundle_strain`)."""
+        return bundle_strain(self.plant, q)
 
     def _reversal_lead(self, strain: FloatArray, q: float, q_d: float, qdot_d: float, qddot_d: float,
                        info: dict[str, float]) -> FloatArray:
@@ -222,4 +228,4 @@ class JointController:
         return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)
 
 
-__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES']
+__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES', 'bundle_strain']

@@ -162,6 +162,37 @@ def thermal_rk4(x, u, dt, th_coef, y0, xs, kk, acc):  # pragma: no cover - compi
 
 
 @_jit
+def joint_step_one(qj, qdj, torque, stiffness, payload, dt, joint):  # pragma: no cover - compiled
+    """One wrist's joint step, linearly implicit Euler of Eq. 4.18 (joint.joint_step): (q, q').
+
+    torque: net muscle torque [N m]; stiffness: -d torque / dq [N m/rad]; joint (10,) as in
+    :func:`step_many`. Shared by every plant whose muscles drive this joint.
+    """
+    I_w, lever, coulomb, viscous, static, stick_v = joint[0], joint[1], joint[2], joint[3], joint[4], joint[5]
+    q_min, q_max, g = joint[7], joint[8], joint[9]
+    inertia = I_w + payload * lever * lever
+    tau_drive = torque - payload * g * lever * math.cos(qj)
+    at_rest = abs(qdj) < stick_v
+    stuck = at_rest and abs(tau_drive) <= static
+    if at_rest:
+        direction = 1.0 if tau_drive > 0 else (-1.0 if tau_drive < 0 else 0.0)
+    else:
+        direction = 1.0 if qdj > 0 else -1.0
+    h_over_i = dt / inertia
+    qd_new = (qdj + h_over_i * (tau_drive - direction * coulomb)) / (1.0 + h_over_i * (viscous + dt * stiffness))
+    s_new = 1.0 if qd_new > 0 else (-1.0 if qd_new < 0 else 0.0)
+    s_old = 1.0 if qdj > 0 else (-1.0 if qdj < 0 else 0.0)
+    reversed_ = (not at_rest) and s_new != s_old and abs(tau_drive) <= static + coulomb
+    if stuck or reversed_:
+        qd_new = 0.0
+    q_new = qj + dt * qd_new
+    if q_new < q_min or q_new > q_max:
+        q_new = min(max(q_new, q_min), q_max)
+        qd_new = 0.0
+    return q_new, qd_new
+
+
+@_jit
 def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags,
               th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
     """Advance N wrists by n_steps plant steps under held commands u (N, 2) [V], in place.
@@ -180,8 +211,7 @@ def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, 
     scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
     max_it = int(mech[8])
     p0, T_lo, T_hi, T_hot, e0, n_g_r, r_eff = mech[9], mech[10], mech[11], mech[12], mech[13], mech[14], mech[15]
-    I_w, lever, coulomb, viscous, static, stick_v = joint[0], joint[1], joint[2], joint[3], joint[4], joint[5]
-    q_neutral, q_min, q_max, g = joint[6], joint[7], joint[8], joint[9]
+    q_neutral, q_min, q_max = joint[6], joint[7], joint[8]
     w_now = np.empty(w.shape[1])
     y0 = np.empty((2, 2))
     xs = np.empty((2, 2))
@@ -224,31 +254,8 @@ def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, 
                 torque += n_g_r * m if side == 0 else -n_g_r * m
                 inv_c += 1.0 / dy
             stiffness = n_g_r * 1e3 * r_eff * inv_c
-            # joint, linearly implicit Euler (joint.joint_step)
-            inertia = I_w + payload[j] * lever * lever
-            qj = q[j]
-            qdj = qd[j]
-            tau_drive = torque - payload[j] * g * lever * math.cos(qj)
-            at_rest = abs(qdj) < stick_v
-            stuck = at_rest and abs(tau_drive) <= static
-            if at_rest:
-                direction = 1.0 if tau_drive > 0 else (-1.0 if tau_drive < 0 else 0.0)
-            else:
-                direction = 1.0 if qdj > 0 else -1.0
-            h_over_i = dt / inertia
-            qd_new = (qdj + h_over_i * (tau_drive - direction * coulomb)) / (1.0 + h_over_i * (viscous + dt * stiffness))
-            s_new = 1.0 if qd_new > 0 else (-1.0 if qd_new < 0 else 0.0)
-            s_old = 1.0 if qdj > 0 else (-1.0 if qdj < 0 else 0.0)
-            reversed_ = (not at_rest) and s_new != s_old and abs(tau_drive) <= static + coulomb
-            if stuck or reversed_:
-                qd_new = 0.0
-            q_new = qj + dt * qd_new
-            if q_new < q_min or q_new > q_max:
-                q_new = min(max(q_new, q_min), q_max)
-                qd_new = 0.0
-            q[j] = q_new
-            qd[j] = qd_new
-            if q_new <= q_min or q_new >= q_max:
+            q[j], qd[j] = joint_step_one(q[j], qd[j], torque, stiffness, payload[j], dt, joint)
+            if q[j] <= q_min or q[j] >= q_max:
                 flags[j, 3] = True
 
 

@@ -59,11 +59,20 @@ class TemControlParams:
     weights: (h1, h2) of Eq. 5.47 on the (muscle/T1, exchanger/T2) faces; (1, 0) = two layers.
     rate_filter_s: time constant of the first-order filter on the estimated dT_d/dt [s]
         (only :class:`TemController` estimates; 0 = raw backward difference).
+    target_filter_s: 1 / omega of a prefilter on the desired temperatures [s] (only
+        :class:`TemLoop`; 0 = none): the critically damped tracking filter
+        (2 omega s + omega^2) / (s + omega)^2, which follows a ramp without lag (a first-order
+        filter of the same time constant lags it by that time, 2.5 % of the sine's range at
+        0.5 s). The muscle follows its target with the error dynamics' time constant
+        1 / gain_per_s; target content faster than that (sensor noise amplified by the joint
+        law, the inverse's jumps between branches) cannot move the muscle, only reverse the
+        TEM (docs/control.md, "Chattering").
     """
 
     gain_per_s: float = 1.0
     weights: tuple[float, float] = TWO_LAYER_WEIGHTS
     rate_filter_s: float = 0.0
+    target_filter_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.gain_per_s) and self.gain_per_s > 0):
@@ -72,6 +81,8 @@ class TemControlParams:
             raise ParameterError(f'weights = {self.weights!r} must be two finite numbers, not both 0')
         if not (np.isfinite(self.rate_filter_s) and self.rate_filter_s >= 0):
             raise ParameterError(f'rate_filter_s = {self.rate_filter_s!r} must be finite and >= 0')
+        if not (np.isfinite(self.target_filter_s) and self.target_filter_s >= 0):
+            raise ParameterError(f'target_filter_s = {self.target_filter_s!r} must be finite and >= 0')
 
 
 @dataclass
@@ -486,6 +497,8 @@ class TemLoop:
         self.t_last: float | None = None
         self.command_range: tuple[FloatArray, FloatArray] | None = None
         self.range_t: float | None = None
+        self.T_d_filtered: FloatArray | None = None  # target prefilter (target_filter_s): output ...
+        self.T_d_slope = np.zeros(2)  # ... and its integrator [degC/s]
         # compiled path: the law's rate state as arrays the kernel updates in place
         self._rate, self._T_d_prev, self._rng = np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2))
         self._flags = np.zeros(2, np.int64)
@@ -516,7 +529,9 @@ class TemLoop:
         dt_obs = 0.0 if dt is None else min(dt, self.thermal.dt_max_s)
         if T_d is None:
             self._observe(T_meas, dt_obs)
+            self.T_d_filtered = None
             return TemSample(self.off(), np.zeros(2, bool), np.zeros(2, bool))
+        T_d = self._prefilter(T_d, dt)
         refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
         if self.compiled:
             return self._sample_compiled(t, T_meas, T_d, dt_obs, refresh)
@@ -529,6 +544,24 @@ class TemLoop:
         hot = np.asarray(T_meas, dtype=float) > self.max_muscle_C
         self.command_V = np.where(hot, np.minimum(u_prot[0], 0.0), u_prot[0])
         return TemSample(self.command_V, res.saturated[0] | limited[0], hot)
+
+    def _prefilter(self, T_d: ArrayLike, dt: float | None) -> FloatArray:
+        """The desired temperatures through the tracking prefilter (TemControlParams.target_filter_s):
+        e = T_d - y, y' = v + 2 omega e, v' = omega^2 e, explicit Euler over the sample's dt; its
+        first sample passes unchanged. Both paths get the filtered target."""
+        tau = self.params.target_filter_s
+        T_d = np.asarray(T_d, dtype=float)
+        if tau <= 0.0:
+            return T_d
+        if self.T_d_filtered is None or dt is None or not np.isfinite(self.T_d_filtered).all():
+            self.T_d_filtered, self.T_d_slope = T_d.copy(), np.zeros_like(T_d)
+            return self.T_d_filtered
+        w = 1.0 / tau
+        h = min(dt, 0.5 * tau)  # a long gap does not make the explicit step unstable
+        e = T_d - self.T_d_filtered
+        self.T_d_filtered = self.T_d_filtered + h * (self.T_d_slope + 2.0 * w * e)
+        self.T_d_slope = self.T_d_slope + h * w * w * e
+        return self.T_d_filtered
 
     def _observe(self, T_meas: ArrayLike, dt_obs: float) -> None:
         if dt_obs > 0:

@@ -4,7 +4,9 @@ Inverse SD-GPI (Eqs. 5.5-5.8) in the wrist's coordinates (:mod:`sma_wrist.core.c
 Computes when a fresh set of all four targets (strain and stress of both muscles) has arrived
 from adaptive_controller; its memory starts from the measured temperatures and stresses.
 Targets the window cannot reach give the nearest reachable temperature, reported on
-/diagnostics; malformed targets are rejected and counted.
+/diagnostics; malformed targets are rejected and counted. With the measured memory, the
+measured joint angle adapts each wire's temperature axis (``shift_gain_per_s``,
+:meth:`~sma_wrist.core.compensation.MuscleCompensator.track`, docs/control.md "Feedback off-model").
 """
 from __future__ import annotations
 
@@ -18,6 +20,8 @@ from sensor_msgs.msg import Temperature
 from sma_wrist.core.compensation import MuscleCompensator
 from sma_wrist.core.hysteresis_file import hysteresis_params
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.joint_controller import bundle_strain
+from sma_wrist.core.plant import PlantParams
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
@@ -41,6 +45,10 @@ class HysteresisCompensator(WristNode):
         Param('memory_source', 'measured', "the inverse's hysteresis memory follows the measured temperatures "
               '(default: the plant lags its command, docs/control.md) or the commanded ones (Eq. 5.5 as written)',
               choices=('measured', 'commanded')),
+        Param('shift_gain_per_s', 1.0, "memory_source measured: rate at which each wire's temperature axis follows "
+              "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
+              '"Feedback off-model")', '1/s', (0.0, 20.0)),
+        Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -52,6 +60,9 @@ class HysteresisCompensator(WristNode):
         self.pending: dict[str, deque[float | None]] = {k: deque() for k in INPUTS}
         self.T_meas = np.full(2, np.nan)
         self.stress_meas = np.full(2, np.nan)
+        self.q_meas = float('nan')
+        self.t_track: float | None = None  # node-clock time of the last adaptation step [s]
+        self.plant = PlantParams()  # chain geometry of the measured strains
         self.started = False
         self._saturated: bool | None = None  # last state reported on /diagnostics
         self.pub_T = [self.publisher(f'/wrist/muscle_{i}/temperature_desired') for i in (1, 2)]
@@ -60,6 +71,7 @@ class HysteresisCompensator(WristNode):
             self.subscription(f'/wrist/muscle_{i}/stress_desired', lambda m, i=i: self._on_target(f'stress_{i}', m))
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_measured_T(i, m))
             self.subscription(f'/wrist/muscle_{i}/stress', lambda m, i=i: self._on_measured_stress(i, m))
+        self.subscription('/wrist/joint_states', self._on_joint_state)
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
@@ -79,7 +91,8 @@ class HysteresisCompensator(WristNode):
     def _build(self) -> None:
         window = (self.p['temperature_min_C'], self.p['temperature_max_C'])
         wire = hysteresis_params(self.p['hysteresis_file'])
-        self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'])
+        self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'],
+                                      shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'])
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
         warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'])
@@ -99,6 +112,10 @@ class HysteresisCompensator(WristNode):
     def _on_measured_stress(self, i: int, msg: Any) -> None:
         if finite(msg.data) and msg.data >= 0:
             self.stress_meas[i - 1] = msg.data
+
+    def _on_joint_state(self, msg: Any) -> None:
+        if msg.position and finite(msg.position[0]):
+            self.q_meas = msg.position[0]
 
     def _on_target(self, key: str, msg: Any) -> None:
         """Collect one cycle's four targets, paired by their order on each topic, not by arrival.
@@ -141,7 +158,12 @@ class HysteresisCompensator(WristNode):
             self.started = True
         observed = self.p['memory_source'] == 'measured'
         try:
-            if observed:
+            if observed and finite(self.q_meas):
+                now = self.get_clock().now().nanoseconds * 1e-9
+                dt = 0.0 if self.t_track is None else max(now - self.t_track, 0.0)
+                self.t_track = now
+                self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, self.q_meas), dt)
+            elif observed:
                 self.comp.observe(self.T_meas, self.stress_meas)
             res = self.comp(strain, stress, commit=not observed)
         except SmaWristError as e:

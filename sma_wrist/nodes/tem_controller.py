@@ -41,6 +41,8 @@ class TemController(WristNode):
         Param('gain_per_s', 1.0, 'k of the temperature error dynamics de/dt + k e = 0 (Eq. 5.42)', '1/s',
               (0.01, 50.0)),
         Param('rate_filter_s', 0.05, 'time constant of the filter on the estimated dT_d/dt', 's', (0.0, 10.0)),
+        Param('target_filter_s', 0.5, 'time constant of the prefilter on the desired temperatures (no TEM '
+              'chattering on noise and target jumps; docs/control.md "Chattering")', 's', (0.0, 10.0)),
         Param('u_min_V', DRIVE.boost_min_V, 'most negative (cooling) drive command: driver rating', 'V', (-29.0, -1.0)),
         Param('u_max_V', DRIVE.boost_max_V, 'most positive (heating) drive command: driver rating', 'V', (1.0, 34.0)),
         Param('predictive_protection', DRIVE.predictive,
@@ -99,7 +101,8 @@ class TemController(WristNode):
         drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'], p['predictive_protection'],
                             p['face_min_C'], p['face_max_C'], p['protection_horizon_s'])
         thermal = replace(self.hold, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
-        loop = TemLoop(thermal, TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s']),
+        loop = TemLoop(thermal, TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s'],
+                                                    target_filter_s=p['target_filter_s']),
                        drive, self.hold, p['max_muscle_temperature_C'])
         if old is not None:  # new gains and limits act on the same observed TEMs and command in force
             loop.observer, loop.command_V, loop.t_last = old.observer, old.command_V, old.t_last
