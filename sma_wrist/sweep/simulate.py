@@ -10,7 +10,9 @@ order the graph's messages flow (sma_wrist/nodes):
 3. the joint controllers (adaptive_controller, :class:`~sma_wrist.sweep.laws.JointControllerBank`)
    and, in inverse_adaptive mode, the inverse compensator (hysteresis_compensator:
    :class:`~sma_wrist.core.compensation.MuscleCompensator` over all its wrists, memory
-   observing the measured temperatures and stresses) give the next desired temperatures;
+   observing the measured temperatures and stresses, each wire's temperature axis tracking the
+   strain at the measured angle) give the next desired temperatures, which the TEM loops
+   prefilter (tem_controller's target_filter_s) at their next sample;
 4. the plant advances to t_k+1 under these commands, all wrists in one compiled call
    (:func:`sma_wrist.plants.make_plant`).
 
@@ -143,8 +145,10 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode), idx.size, base))
     comp = None
     if 'inverse_adaptive' in groups:
-        comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0))
+        # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
+        comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=1.0, shift_limit_C=15.0)
     comp_started = False
+    t_track: float | None = None  # the compensator's node-clock time of its last adaptation step [s]
     tem = TemLoopBank.like_node(n)
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
@@ -181,7 +185,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                 if not comp_started:
                     comp.reset(T_g, stress_g)
                     comp_started = True
-                comp.observe(T_g, stress_g)
+                # its clock reads /clock as integer ns * 1e-9; the first step has no dt
+                now = now_ns * 1e-9
+                dt_track = 0.0 if t_track is None else max(now - t_track, 0.0)
+                t_track = now
+                comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), dt_track)
                 T_new[idx] = comp(strain.ravel(), stress_g, commit=False).temperature_C.reshape(-1, 2)
             T_d = T_new
         u_rec[k] = u
