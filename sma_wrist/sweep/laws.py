@@ -124,14 +124,15 @@ class TemLoopBank:
         self.range_t: float | None = None
 
     @classmethod
-    def like_node(cls, n: int) -> 'TemLoopBank':
+    def like_node(cls, n: int, params: TemControlParams | None = None) -> 'TemLoopBank':
         """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
         0.05 s, target prefilter 0.5 s, driver rating, hold limits, 85 degC); test_plants' graph agreement
-        checks they still are."""
+        checks they still are. ``params`` replaces the law's parameters (gain, filters)."""
         hold = th.ThermalParams()
         drive = DriveLimits()
         return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
-                   TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold, 85.0)
+                   params or TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold,
+                   85.0)
 
     def sample(self, t: float, T_meas: FloatArray, T_d: FloatArray | None) -> FloatArray:
         """Commands (n, 2) [V] in force after a sample at t [s] (TemLoop.sample; T_d None: TEMs off)."""
