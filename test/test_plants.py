@@ -172,3 +172,32 @@ def test_graph_runs_a_perturbed_plant_and_the_sweep_is_the_graph(mode: str) -> N
     with tempfile.TemporaryDirectory() as d:
         nominal = run_closed_loop(mode, sc.payload_kg, 12.0, Path(d) / 'bag').run
     assert np.max(np.abs(nominal.q - run.q)) > 1e-3  # the perturbations reached the graph
+
+
+def test_graph_runs_the_phase_fraction_wrist_and_the_sweep_is_the_graph() -> None:
+    """plant_sim ``plant:=phase_fraction`` (the structurally different wire, its own thermocouple lag
+    plus the scenario's sensor noise) in the node graph for 4 s; the sweep's loop on the same plant and
+    scenario gives the same measured angles and TEM commands to the last bit."""
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.plants import make_plant
+    from sma_wrist.sweep.simulate import Case, simulate
+    sc = Scenario(payload_kg=0.3, transition_shift_C=-3.0, temp_noise_C=0.1, angle_noise_rad=0.002, noise_seed=3)
+    extra = {'/plant_sim': {'plant': 'phase_fraction', 'scenario.noise_seed': sc.noise_seed,
+                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}}}
+    with tempfile.TemporaryDirectory() as d:
+        run = run_closed_loop('inverse_adaptive', sc.payload_kg, 4.0, Path(d) / 'bag', extra_params=extra).run
+    assert run.t[-1] >= 3.9 and np.isfinite(run.q).all()
+    rows, tr = simulate([Case(0, 'inverse_adaptive', sc)], 4.0, plant='phase_fraction', record=True)
+    k = np.rint(run.t / 0.01).astype(int)
+    assert np.max(np.abs(run.q - tr.q_measured[k, 0])) <= 1e-12
+    kc = np.rint(run.command_t / 0.01).astype(int)
+    np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
+    # not the project's plant: the same scenario on the SD-GPI wrist moves differently
+    _, sd = simulate([Case(0, 'inverse_adaptive', sc)], 4.0, plant='sdgpi', record=True)
+    assert np.max(np.abs(sd.q[:, 0] - tr.q[:, 0])) > 1e-2
+    # the scenario's plant axes reach this wire's own parameters
+    pf = make_plant('phase_fraction', [sc, Scenario()])
+    assert pf.params.dt == 1e-3
+    assert pf.pf_params[0].wire.A_s_C == pf.pf_params[1].wire.A_s_C - 3.0
+    with pytest.raises(ParameterError, match='unknown option'):
+        make_plant('phase_fraction', [sc], None, bogus=1)

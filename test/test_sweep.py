@@ -47,7 +47,8 @@ def test_tem_loop_bank_equals_one_wrist_loops() -> None:
     n = 3
     bank = TemLoopBank.like_node(n)
     ref = TemLoopBank.like_node(1)  # the constants as the node builds them
-    ones = [TemLoop(ref.thermal, _params(), ref.drive, _hold(), 85.0, compiled=True)
+    assert ref.params.target_filter_s > 0  # the node's prefilter is part of what is compared
+    ones = [TemLoop(ref.thermal, ref.params, ref.drive, ref.hold, 85.0, compiled=True)
             for _ in range(n)]
     T = np.full((n, 2), 30.0)
     for k in range(600):
@@ -58,16 +59,6 @@ def test_tem_loop_bank_equals_one_wrist_loops() -> None:
         for j, loop in enumerate(ones):
             res = loop.sample(t, T[j], None if T_d is None else T_d[j])
             np.testing.assert_array_equal(u[j], res.command_V)
-
-
-def _params():  # the node's TemControlParams (defaults)
-    from sma_wrist.core.tem_control import TemControlParams
-    return TemControlParams()
-
-
-def _hold():
-    from sma_wrist.core.thermal import ThermalParams
-    return ThermalParams()
 
 
 def test_sign_changes_count_flips_outside_the_deadband() -> None:

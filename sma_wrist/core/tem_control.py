@@ -465,6 +465,23 @@ class TemSample:
     hot: BoolArray  # (2,) the muscle is above max_muscle_C: heating blocked
 
 
+def target_prefilter(tau: float, y: FloatArray | None, v: FloatArray, T_d: ArrayLike, dt: float | None
+                     ) -> tuple[FloatArray, FloatArray]:
+    """One sample of the desired temperatures' tracking prefilter (TemControlParams.target_filter_s
+    = tau [s]): e = T_d - y, y' = v + 2 omega e, v' = omega^2 e, explicit Euler over the sample's
+    dt [s]; its first sample (y None) passes unchanged. Returns (y [degC], v [degC/s]), any shape
+    (one wrist's (2,), a sweep's (n, 2)); tau 0: T_d unchanged."""
+    T_d = np.asarray(T_d, dtype=float)
+    if tau <= 0.0:
+        return T_d, v
+    if y is None or dt is None or not np.isfinite(y).all():
+        return T_d.copy(), np.zeros_like(T_d)
+    w = 1.0 / tau
+    h = min(dt, 0.5 * tau)  # a long gap does not make the explicit step unstable
+    e = T_d - y
+    return y + h * (v + 2.0 * w * e), v + h * w * w * e
+
+
 class TemLoop:
     """One wrist's TEM control per measurement, as tem_controller runs it (two layers, h = (1, 0)).
 
@@ -546,21 +563,10 @@ class TemLoop:
         return TemSample(self.command_V, res.saturated[0] | limited[0], hot)
 
     def _prefilter(self, T_d: ArrayLike, dt: float | None) -> FloatArray:
-        """The desired temperatures through the tracking prefilter (TemControlParams.target_filter_s):
-        e = T_d - y, y' = v + 2 omega e, v' = omega^2 e, explicit Euler over the sample's dt; its
-        first sample passes unchanged. Both paths get the filtered target."""
-        tau = self.params.target_filter_s
-        T_d = np.asarray(T_d, dtype=float)
-        if tau <= 0.0:
-            return T_d
-        if self.T_d_filtered is None or dt is None or not np.isfinite(self.T_d_filtered).all():
-            self.T_d_filtered, self.T_d_slope = T_d.copy(), np.zeros_like(T_d)
-            return self.T_d_filtered
-        w = 1.0 / tau
-        h = min(dt, 0.5 * tau)  # a long gap does not make the explicit step unstable
-        e = T_d - self.T_d_filtered
-        self.T_d_filtered = self.T_d_filtered + h * (self.T_d_slope + 2.0 * w * e)
-        self.T_d_slope = self.T_d_slope + h * w * w * e
+        """The desired temperatures through the tracking prefilter (:func:`target_prefilter`);
+        both paths get the filtered target."""
+        self.T_d_filtered, self.T_d_slope = target_prefilter(self.params.target_filter_s, self.T_d_filtered,
+                                                             self.T_d_slope, T_d, dt)
         return self.T_d_filtered
 
     def _observe(self, T_meas: ArrayLike, dt_obs: float) -> None:

@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -515,5 +515,91 @@ class PhaseFractionPlant:
         return T, q
 
 
+# ----------------------------------------------------------------------------- the registry's adapter
+class ScenarioPhaseFraction(PhaseFractionPlant):
+    """The phase-fraction wrists of N scenarios with the interface plant_sim and the sweep use
+    (:mod:`sma_wrist.plants`): ``advance``, ``state`` (t, q, qd, thermal, payload_kg, flags incl.
+    ``over_temperature`` and ``command_saturated``), ``muscle_temperature_C``, ``wire_stress_Pa``,
+    ``muscle_torque_Nm``, ``params`` (the base PlantParams: limits, window, dt).
+
+    Sensors: the wire's own thermocouple is part of this plant: ``muscle_temperature_C`` is what
+    its junction reads, the muscle node through its first-order lag (``SensorParams.tc_lag_s``,
+    0.2 s unless ``tc_lag_s`` is given), integrated at the plant step. The scenario's sensor
+    fields then act on what is published, as for every registered plant
+    (:class:`~sma_wrist.plants.spread.SensorBank`): ``temp_lag_s`` a further lag in series,
+    ``temp_noise_C`` / ``angle_noise_rad`` the only noise (this plant's own noise is off here, so
+    a scenario's ``noise_seed`` is the one stream). The true node temperature is
+    :attr:`node_temperature_C`.
+
+    The scenario's plant axes map onto this wire's own parameters (not the SD-GPI's):
+    ``transition_shift_C`` adds to M_f, M_s, A_s, A_f; ``stroke_scale`` scales eps_L;
+    ``tem_gain_scale`` the Peltier coefficient (Seebeck S: heat pumped per ampere);
+    ``heat_loss_scale`` the muscle node's loss to ambient; ``ambient_offset_C`` the ambient and
+    coolant temperatures; ``payload_kg`` the joint's load.
+    """
+
+    def __init__(self, scenarios: Sequence[Any], base: Any = None, tc_lag_s: float | None = None) -> None:
+        from sma_wrist.core.plant import PlantParams
+        from dataclasses import replace
+        base = base or PlantParams()
+        one = PhaseFractionParams(dt=base.dt)
+        lag = one.sensor.tc_lag_s if tc_lag_s is None else float(tc_lag_s)
+        plist = []
+        for sc in scenarios:
+            w, t = one.wire, one.tem
+            d = sc.transition_shift_C
+            wire = replace(w, M_f_C=w.M_f_C + d, M_s_C=w.M_s_C + d, A_s_C=w.A_s_C + d, A_f_C=w.A_f_C + d,
+                           eps_L=w.eps_L * sc.stroke_scale)
+            tem = replace(t, seebeck_V_per_K=t.seebeck_V_per_K * sc.tem_gain_scale,
+                          muscle_loss_W_per_K=t.muscle_loss_W_per_K * sc.heat_loss_scale,
+                          ambient_C=t.ambient_C + sc.ambient_offset_C, coolant_C=t.coolant_C + sc.ambient_offset_C)
+            plist.append(replace(one, wire=wire, tem=tem, sensor=SensorParams(tc_lag_s=lag, tc_noise_C=0.0,
+                                                                                pot_noise_rad=0.0)))
+        if not plist:
+            raise ParameterError('no scenarios: the phase-fraction plant needs at least one wrist')
+        self.base = base
+        super().__init__(plist, payload_kg=[sc.payload_kg for sc in scenarios])
+        self.state.flags = self._with_limits(self.state.flags)
+
+    @property
+    def params(self) -> Any:  # type: ignore[override]
+        """The base PlantParams (limits, TEM window, dt) plant_sim reads and may replace."""
+        return self.base
+
+    @params.setter
+    def params(self, value: Any) -> None:
+        if isinstance(value, list):  # PhaseFractionPlant.__init__ stores its parameter sets here
+            self.pf_params = value
+        else:
+            self.base = value
+
+    def _with_limits(self, flags: dict[str, NDArray[np.bool_]]) -> dict[str, NDArray[np.bool_]]:
+        hot = (self.state.thermal[:, :, 0] > self.base.max_muscle_temperature_C).any(axis=1)
+        return {**flags, 'over_temperature': hot, 'overload': np.zeros(self.n, bool)}
+
+    def advance(self, command_V: ArrayLike, n_steps: int = 1) -> PhaseFractionState:
+        s = super().advance(command_V, n_steps)
+        s.flags = self._with_limits(s.flags)
+        return s
+
+    @property
+    def muscle_temperature_C(self) -> FloatArray:
+        """(N, 2) what the thermocouple junctions read (lagged muscle nodes, no noise) [degC]."""
+        return self.state.thermocouple.copy()
+
+    @property
+    def node_temperature_C(self) -> FloatArray:
+        """(N, 2) the true muscle node temperatures [degC]."""
+        return self.state.thermal[:, :, 0].copy()
+
+
+def factory(scenarios: Sequence[Any], base: Any = None, **options: Any) -> ScenarioPhaseFraction:
+    """The registry's factory (:data:`sma_wrist.plants.PLANTS` ``phase_fraction``); option ``tc_lag_s``."""
+    bad = set(options) - {'tc_lag_s'}
+    if bad:
+        raise ParameterError(f'phase_fraction plant: unknown option(s) {", ".join(sorted(bad))}; known: tc_lag_s')
+    return ScenarioPhaseFraction(scenarios, base, **options)
+
+
 __all__ = ['WireParams', 'PeltierParams', 'SensorParams', 'PhaseFractionParams', 'PhaseFractionPlant',
-           'PhaseFractionState', 'fraction_path', 'major_heating', 'major_cooling', 'fraction', 'strain', 'solve_stress']
+           'ScenarioPhaseFraction', 'factory', 'PhaseFractionState', 'fraction_path', 'major_heating', 'major_cooling', 'fraction', 'strain', 'solve_stress']

@@ -21,7 +21,8 @@ from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.joint_controller import REVERSAL_STEP_RAD, JointControllerParams, time_to_meet
 from sma_wrist.core.pid import PID
 from sma_wrist.core.plant import PlantParams
-from sma_wrist.core.tem_control import RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step
+from sma_wrist.core.tem_control import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
+                                        target_prefilter)
 
 FloatArray = NDArray[np.float64]
 
@@ -109,11 +110,13 @@ class TemLoopBank:
     def __init__(self, n: int, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
                  hold: th.ThermalParams, max_muscle_C: float) -> None:
         one = TemLoop(thermal, params, drive, hold, max_muscle_C, compiled=True)
-        self.n, self.thermal, self.drive = n, thermal, drive
+        self.n, self.thermal, self.drive, self.params, self.hold = n, thermal, drive, params, hold
         self._coef, self._cfg, self._candidates = one._coef, one._cfg, one._candidates
         self.observer = np.repeat(one.observer, n, axis=0)  # (n, 2 layers, 2 faces)
         self.rate, self.T_d_prev, self.rng = np.zeros((n, 2, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2, 2))
         self.command_V = np.zeros((n, 2))
+        self.T_d_filtered: FloatArray | None = None  # target prefilter (TemLoop._prefilter), (n, 2)
+        self.T_d_slope = np.zeros((n, 2))
         self.flags = np.zeros((n, 2), np.int64)
         self.status = np.zeros(n, np.int64)
         self.t_last: float | None = None
@@ -121,13 +124,15 @@ class TemLoopBank:
         self.range_t: float | None = None
 
     @classmethod
-    def like_node(cls, n: int) -> 'TemLoopBank':
+    def like_node(cls, n: int, params: TemControlParams | None = None) -> 'TemLoopBank':
         """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
-        0.05 s, driver rating, hold limits, 85 degC); test_sweep's graph agreement checks they still are."""
+        0.05 s, target prefilter 0.5 s, driver rating, hold limits, 85 degC); test_plants' graph agreement
+        checks they still are. ``params`` replaces the law's parameters (gain, filters)."""
         hold = th.ThermalParams()
         drive = DriveLimits()
         return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
-                   TemControlParams(gain_per_s=1.0, rate_filter_s=0.05), drive, hold, 85.0)
+                   params or TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold,
+                   85.0)
 
     def sample(self, t: float, T_meas: FloatArray, T_d: FloatArray | None) -> FloatArray:
         """Commands (n, 2) [V] in force after a sample at t [s] (TemLoop.sample; T_d None: TEMs off)."""
@@ -141,7 +146,11 @@ class TemLoopBank:
                 self.observer = observer_step(self.thermal, self.observer, self.command_V, dt_obs, compiled=True)
             self.observer[:, :, 0] = T_meas
             self.command_V = np.zeros((self.n, 2))
+            self.T_d_filtered = None
             return self.command_V
+        self.T_d_filtered, self.T_d_slope = target_prefilter(self.params.target_filter_s, self.T_d_filtered,
+                                                             self.T_d_slope, T_d, dt)
+        T_d = self.T_d_filtered
         refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
         has_prev = self.t_law is not None
         dt_law = t - self.t_law if has_prev else 0.0

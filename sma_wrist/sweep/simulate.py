@@ -10,7 +10,9 @@ order the graph's messages flow (sma_wrist/nodes):
 3. the joint controllers (adaptive_controller, :class:`~sma_wrist.sweep.laws.JointControllerBank`)
    and, in inverse_adaptive mode, the inverse compensator (hysteresis_compensator:
    :class:`~sma_wrist.core.compensation.MuscleCompensator` over all its wrists, memory
-   observing the measured temperatures and stresses) give the next desired temperatures;
+   observing the measured temperatures and stresses, each wire's temperature axis tracking the
+   strain at the measured angle) give the next desired temperatures, which the TEM loops
+   prefilter (tem_controller's target_filter_s) at their next sample;
 4. the plant advances to t_k+1 under these commands, all wrists in one compiled call
    (:func:`sma_wrist.plants.make_plant`).
 
@@ -39,6 +41,7 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.tem_control import TemControlParams
 from sma_wrist.core.trajectory import make_trajectory
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
@@ -48,6 +51,7 @@ FloatArray = NDArray[np.float64]
 
 TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
+SHIFT_GAIN_PER_S = 1.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
 
 
 @dataclass(frozen=True)
@@ -123,8 +127,15 @@ def _stamp_s(t: float) -> float:
 
 def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
              base: PlantParams | None = None, record: bool = False,
-             on_tick: Callable[[float], None] | None = None) -> tuple[list[dict[str, Any]], Trace | None]:
-    """Run the closed loops of ``cases`` together; returns one result row per case (and the traces)."""
+             on_tick: Callable[[float], None] | None = None, window_s: float = SEED_PERIOD_S,
+             tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S
+             ) -> tuple[list[dict[str, Any]], Trace | None]:
+    """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
+
+    Metrics over the last ``window_s`` [s]. The laws are the nodes' defaults; ``tem_params``
+    (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
+    (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
+    controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``)."""
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
     if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
@@ -143,9 +154,12 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode), idx.size, base))
     comp = None
     if 'inverse_adaptive' in groups:
-        comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0))
+        # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
+        comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=shift_gain_per_s,
+                                 shift_limit_C=15.0)
     comp_started = False
-    tem = TemLoopBank.like_node(n)
+    t_track: float | None = None  # the compensator's node-clock time of its last adaptation step [s]
+    tem = TemLoopBank.like_node(n, tem_params)
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
@@ -181,7 +195,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                 if not comp_started:
                     comp.reset(T_g, stress_g)
                     comp_started = True
-                comp.observe(T_g, stress_g)
+                # its clock reads /clock as integer ns * 1e-9; the first step has no dt
+                now = now_ns * 1e-9
+                dt_track = 0.0 if t_track is None else max(now - t_track, 0.0)
+                t_track = now
+                comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), dt_track)
                 T_new[idx] = comp(strain.ravel(), stress_g, commit=False).temperature_C.reshape(-1, 2)
             T_d = T_new
         u_rec[k] = u
@@ -189,11 +207,12 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         if on_tick is not None and k % 100 == 0:
             on_tick(t)
     # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on
-    rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:])
+    rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:], window_s)
     out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m}
            for c, m in zip(cases, rows)]
     trace = Trace(t_rec, qd_rec, q_rec, qm_rec, u_rec) if record else None
     return out, trace
 
 
-__all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S']
+__all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S', 'CHATTER_DEADBAND_V',
+           'SHIFT_GAIN_PER_S']
