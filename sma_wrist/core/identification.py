@@ -397,6 +397,24 @@ def sdgpi_gpi_vectors(x: FloatArray, edges: FloatArray, loads: FloatArray) -> Fl
                       np.asarray(loads, dtype=float))[0]
 
 
+def _per_load_envelopes(Ts: list[FloatArray], ys: list[FloatArray], br: list[str], base: FloatArray,
+                        order: NDArray[np.intp], mid: int, continuation: bool, n: int, k_f: float,
+                        lo: FloatArray, hi: FloatArray, max_nfev: int, method: str) -> FloatArray:
+    """(L, 20) GPI vectors: only the a, b envelopes fitted per load, the rest held at ``base``.
+
+    From the middle load's fit, or each from its neighbour's (continuation keeps neighbouring
+    loads in one basin, so the coefficients vary smoothly with the load), Sec. 4.2.2.
+    """
+    G = np.empty((len(Ts), N_GPI))
+    for path in (order[mid:], order[mid::-1]):
+        start = base
+        for i in path:
+            solve_i, _ = _solver(method, Ts[i], ys[i], n, k_f, br[i])
+            G[i], _, _ = solve_i(start if continuation else base, np.r_[0:8], lo, hi, max_nfev)
+            start = G[i]
+    return G
+
+
 def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: ArrayLike, *, n: int = 15,
               k_f: float = 6.0, p0: float = 1.0, max_nfev: int = 200, per_load_starts: int = 1,
               method: str = 'exact', branches: list[str] | None = None,
@@ -438,15 +456,8 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     deg = np.broadcast_to(np.asarray(degrees, dtype=int), (4,))
 
     def start_vector(continuation: bool) -> FloatArray:
-        """Envelopes fitted per load (from the middle load's fit, or each from its neighbour's:
-        continuation keeps neighbouring loads in one basin), then polynomials of the load."""
-        G = np.empty((loads.size, N_GPI))
-        for path in (order[mid:], order[mid::-1]):
-            start = base
-            for i in path:
-                solve_i, _ = _solver(method, Ts[i], ys[i], n, k_f, br[i])
-                G[i], _, _ = solve_i(start if continuation else base, np.r_[0:8], lo1, hi1, max_nfev)
-                start = G[i]
+        """Envelopes fitted per load, then polynomials of the load."""
+        G = _per_load_envelopes(Ts, ys, br, base, order, mid, continuation, n, k_f, lo1, hi1, max_nfev, method)
         sa = np.zeros((n_sec, 4, 3))
         sb = np.zeros((n_sec, 4, 3))
         for k in range(n_sec):
@@ -516,3 +527,145 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     params = SDGPIParams(env, tail[0:4], tail[4:8], float(tail[8]), float(tail[9]), float(tail[10]), n=n,
                          p0=float(tail[11]), k_f=k_f, name='fitted SD-GPI')
     return FitResult(params, sd, 100 * sd / max(mean_range, 1e-12), cost, per_load_starts, ok, x)
+
+
+# ----------------------------------------------------------------------------- Clausius-Clapeyron load law
+
+#: Parameters per envelope set of the Clausius-Clapeyron load law (:func:`cc_coefficients`).
+N_CC = 10
+#: Indices of the quadratic terms of amplitude and offset in one set's CC vector.
+CC_QUADRATIC = (2, 9)
+
+
+def cc_coefficients(z: ArrayLike, u: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Envelope coefficients (L, 4) and their Jacobian (L, 4, 10) over z at load offsets u [kgf].
+
+    The load shifts the transformation temperatures linearly (Clausius-Clapeyron: the tanh
+    centre -k2/k1 of Eq. 3.21 moves by C [degC/kgf] per kgf), the tanh slope changes linearly,
+    amplitude and offset at most quadratically: with u = m - m_ref and
+    z = (k0, dk0, ddk0, k1, dk1, T_c, C, k3, dk3, ddk3),
+    k0 = z0 + z1 u + z2 u^2, k1 = z3 + z4 u, k2 = -k1 (T_c + C u), k3 = z7 + z8 u + z9 u^2.
+    Every k_i is a polynomial of degree <= 2 in the load, i.e. exactly one section of Eqs.
+    4.4-4.5 (:func:`cc_to_quadratic`), so the plant and the inverse evaluate it as any SD-GPI.
+    """
+    z = np.asarray(z, dtype=float)
+    u = np.atleast_1d(np.asarray(u, dtype=float))
+    one, u2 = np.ones_like(u), u * u
+    k1 = z[3] + z[4] * u
+    centre = z[5] + z[6] * u
+    k = np.stack([z[0] + z[1] * u + z[2] * u2, k1, -k1 * centre, z[7] + z[8] * u + z[9] * u2], axis=1)
+    J = np.zeros((u.size, 4, N_CC))
+    J[:, 0, 0], J[:, 0, 1], J[:, 0, 2] = one, u, u2
+    J[:, 1, 3], J[:, 1, 4] = one, u
+    J[:, 2, 3], J[:, 2, 4], J[:, 2, 5], J[:, 2, 6] = -centre, -u * centre, -k1, -k1 * u
+    J[:, 3, 7], J[:, 3, 8], J[:, 3, 9] = one, u, u2
+    return k, J
+
+
+def cc_to_quadratic(z: ArrayLike, m_ref: float) -> FloatArray:
+    """(4, 3) quadratic-in-load coefficients (s_i0 m^2 + s_i1 m + s_i2, Eqs. 4.4-4.5) of a CC law.
+
+    Exact: every coefficient of :func:`cc_coefficients` is a polynomial of degree <= 2 in m.
+    """
+    m = m_ref + np.array([-1.0, 0.0, 1.0])
+    k, _ = cc_coefficients(z, m - m_ref)
+    return np.stack([np.polyfit(m, k[:, q], 2) for q in range(4)])
+
+
+def _cc_from_per_load(G: FloatArray, u: FloatArray, w: FloatArray, amp_deg: int) -> FloatArray:
+    """Start of one envelope set's CC law: weighted polynomials through per-load fits (L, 4)."""
+    def poly(v: FloatArray, deg: int, n_terms: int) -> list[float]:
+        c = list(np.polyfit(u, v, deg, w=w)[::-1])
+        return c + [0.0] * (n_terms - len(c))
+    centre = -G[:, 2] / G[:, 1]
+    return np.array(poly(G[:, 0], amp_deg, 3) + poly(G[:, 1], 1, 2) + poly(centre, 1, 2) + poly(G[:, 3], amp_deg, 3))
+
+
+def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 15, k_f: float = 6.0,
+                 p0: float = 1.0, max_nfev: int = 200, branches: list[str] | None = None,
+                 amplitude_degree: int = 1) -> FitResult:
+    """SD-GPI whose load dependence is the Clausius-Clapeyron law of :func:`cc_coefficients`.
+
+    Against the seed's free quadratics per section (Eqs. 4.4-4.5, :func:`fit_sdgpi`): the tanh
+    centres move linearly with the load (a shift of the transformation temperatures, a
+    physical law that stays sane between and beyond the fitted loads), slopes linearly,
+    amplitudes and offsets with ``amplitude_degree`` (1 or 2); one section over all loads.
+    Shared sets from the middle load's GPI as in :func:`fit_sdgpi`; two starts: polynomials
+    through per-load envelope fits (continued in load, weighted by each loop's stroke: a loop
+    that hardly transforms says little about its centre), and the middle load's envelopes
+    shifted along those fits' centre line; joint bounded least squares with the exact
+    Jacobian from both, the lower cost kept. The result is an ordinary one-section SD-GPI (``theta`` in the layout of
+    :func:`sdgpi_gpi_vectors` with edges [min, max] load).
+    """
+    loads = np.asarray(loads_kgf, dtype=float)
+    Ts_all, ys_all = _columns(T, y, loads.size)
+    if amplitude_degree not in (1, 2):
+        raise ParameterError(f'amplitude_degree must be 1 or 2, got {amplitude_degree}')
+    if np.unique(loads).size < 3:
+        raise ParameterError('the Clausius-Clapeyron SD-GPI needs >= 3 loads')
+    br = list(branches) if branches is not None else ['cooling'] * loads.size
+    keep = [thin_indices(t) for t in Ts_all]
+    Ts, ys = [t[k] for t, k in zip(Ts_all, keep)], [v[k] for v, k in zip(ys_all, keep)]
+    order = np.argsort(loads)
+    i_mid = int(order[loads.size // 2])
+    mid = loads.size // 2
+    m_ref = float(np.mean(loads))
+    u = loads - m_ref
+    base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=1, max_nfev=max_nfev,
+                   branch=br[i_mid]).theta
+    lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
+    stroke = np.array([np.ptp(v) for v in ys])
+    # Per-load amplitudes and offsets trade off (a tanh seen on one tail only: a0 ~ a3 ~ 80 at
+    # one load, 0.3 at the next), their centres do not: start from the per-load fits' polynomials
+    # and from the middle load's envelopes moved along the per-load centres' straight line.
+    G = _per_load_envelopes(Ts, ys, br, base, order, mid, True, n, k_f, lo1, hi1, max_nfev, 'exact')
+    starts = [np.concatenate([_cc_from_per_load(G[:, IDX_A], u, stroke, amplitude_degree),
+                              _cc_from_per_load(G[:, IDX_B], u, stroke, amplitude_degree), base[8:20]])]
+    shifted = []
+    for sl in (IDX_A, IDX_B):
+        z = _cc_from_per_load(np.broadcast_to(base[sl], G[:, sl].shape).copy(), u, stroke, amplitude_degree)
+        z[5:7] = _cc_from_per_load(G[:, sl], u, stroke, 1)[5:7]
+        z[5] = -base[sl][2] / base[sl][1] - z[6] * u[i_mid]  # through the middle load's own centre
+        shifted.append(z)
+    starts.append(np.concatenate(shifted + [base[8:20]]))
+    P = 2 * N_CC + 12
+    lo, hi = np.full(P, -1e6), np.full(P, 1e6)
+    lo[2 * N_CC + 8:2 * N_CC + 11] = [1e-4, 0.0, 1e-4]
+    hi[2 * N_CC + 8:2 * N_CC + 11] = [1e2, 2e2, 5.0]
+    fixed = [P - 1]  # p0
+    if amplitude_degree == 1:
+        fixed += [s * N_CC + q for s in (0, 1) for q in CC_QUADRATIC]
+    free = np.setdiff1d(np.arange(P), fixed)
+    offsets = np.cumsum([0] + [t.size for t in Ts])
+    heats = [heating_mask(t, b) for t, b in zip(Ts, br)]
+    za, zb, rest = slice(0, N_CC), slice(N_CC, 2 * N_CC), slice(2 * N_CC, P)
+
+    def fun_jac(x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        ka, Ja = cc_coefficients(x[za], u)
+        kb, Jb = cc_coefficients(x[zb], u)
+        res = np.empty(offsets[-1])
+        J = np.zeros((offsets[-1], P))
+        for i in range(loads.size):
+            rows = slice(offsets[i], offsets[i + 1])
+            th = np.concatenate([ka[i], kb[i], x[rest]])
+            yi, Ji = simulate_jac(Ts[i], th, n=n, k_f=k_f, branch=br[i], heat=heats[i])
+            res[rows] = yi - ys[i]
+            J[rows, za] = Ji[:, IDX_A] @ Ja[i]
+            J[rows, zb] = Ji[:, IDX_B] @ Jb[i]
+            J[rows, rest] = Ji[:, 8:20]
+        return res, J
+
+    x, cost, ok = min((_solve_exact(fun_jac, s0, free, lo, hi, 2 * max_nfev) for s0 in starts), key=lambda t: t[1])
+    edges = np.array([loads.min(), loads.max()])
+    sa, sb = cc_to_quadratic(x[za], m_ref), cc_to_quadratic(x[zb], m_ref)
+    theta = np.concatenate([sa.ravel(), sb.ravel(), x[rest]])
+    th = _sd_to_gpi(theta[None], edges, loads)[0]
+    resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
+                            for i, (t, v) in enumerate(zip(Ts_all, ys_all))])
+    sd = float(np.std(resid))
+    tail = x[rest]
+    params = SDGPIParams(EnvelopeSections(edges, sa[None], sb[None]), tail[0:4], tail[4:8], float(tail[8]),
+                         float(tail[9]), float(tail[10]), n=n, p0=float(tail[11]), k_f=k_f,
+                         name='fitted SD-GPI (Clausius-Clapeyron load law)')
+    mean_range = float(np.mean([np.ptp(v) for v in ys_all]))
+    return FitResult(params, sd, 100 * sd / max(mean_range, 1e-12), cost, 1, ok, theta)

@@ -81,7 +81,11 @@ def write_report(out: Path, doc: dict[str, Any], train: list[Any], hold: list[An
          f'Held out: {", ".join(sorted({lp.source for lp in hold})) or "none"}  ',
          f'Load sections: {", ".join(_f(v, ".4g") for v in doc["fit"]["sections_MPa"])} MPa '
          f'({", ".join(_f(v, ".4g") for v in doc["fit"]["sections_kgf"])} kgf per 0.25 mm wire)  ',
-         f'Identified model: `{doc["params_file"]}`', '',
+         f'Identified model: `{doc["params_file"]}`  ',
+         f'Load law of the envelopes: {doc["model"]} ({doc["model_selection"]["reason"]}; mean interior '
+         f'leave-one-load-out RMS per law: '
+         f'{", ".join(f"{k} {v:.2f} %" for k, v in doc["model_selection"]["interior_loo_rms_pct"].items()) or "not run"})',
+         '',
          '## Before fitting: the current model against the data', '',
          f'Model: {before_model.name}; {doc["before"]["note"]}.', '',
          '| file | stress [MPa] | RMS [% stroke] | max [% stroke] | T outside model range [%] | load clipped |',
