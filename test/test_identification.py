@@ -86,11 +86,10 @@ def test_exact_jacobian_matches_central_differences_and_numpy_path() -> None:
             tm[i] -= h
             fd = (simulate_batch(T, tp[None], branch=branch)[:, 0] - simulate_batch(T, tm[None], branch=branch)[:, 0]) / (2 * h)
             np.testing.assert_allclose(J[:, i], fd, atol=1e-6 * max(np.abs(fd).max(), 1e-9), err_msg=f'column {i}')
-    lo, up = np.sort(np.random.default_rng(0).normal(size=(2, 50, 15)), axis=0)
-    args = (lo, up, up[0].copy(), np.ones(15, np.int64), np.linspace(1, 0.1, 15), np.arange(1.0, 16.0), 2.0,
-            np.random.default_rng(1).normal(size=(50, 4)), np.random.default_rng(2).normal(size=(50, 4)))
-    for a, b in zip(K.play_jacobian(*args), K.play_jacobian_numpy(*args)):
-        np.testing.assert_allclose(a, b, atol=1e-12)
+        if K.AVAILABLE:  # the compiled one-pass kernel and the numpy path give the same numbers
+            yn, Jn = simulate_jac(T, th, branch=branch, compiled=False)
+            np.testing.assert_allclose(y, yn, atol=1e-12)
+            np.testing.assert_allclose(J, Jn, atol=1e-10 * np.abs(Jn).max())
 
 
 def test_exact_and_finite_difference_fits_agree() -> None:

@@ -27,7 +27,7 @@ from scipy.optimize import least_squares
 
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams
-from sma_wrist.core.identification_kernel import play_jacobian
+from sma_wrist.core.identification_kernel import gpi_jacobian, play_jacobian_numpy
 
 FloatArray = NDArray[np.float64]
 
@@ -89,7 +89,7 @@ def _tanh_and_grad(k: FloatArray, T: FloatArray) -> tuple[FloatArray, FloatArray
 
 
 def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.0, branch: str = 'cooling',
-                 heat: NDArray[np.bool_] | None = None) -> tuple[FloatArray, FloatArray]:
+                 heat: NDArray[np.bool_] | None = None, compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """Elongation y (N,) [mm] of one GPI vector (layout IDX_*) and its exact Jacobian (N, 20).
 
     Same model as :func:`simulate_batch` (Eqs. 3.19-3.24, 4.1, 4.2). Each play state w_j is the
@@ -97,9 +97,16 @@ def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.
     dw_j/dtheta is that bound's gradient at s; y = k_f - p0 gamma(T) - sum_j p_j w_j with
     p_j = rho exp(-tau c j) (Eq. 3.23) differentiates in closed form. Piecewise exact: a state
     that sits exactly on a switch has one-sided derivatives, which least squares tolerates.
+    ``compiled``: one numba pass (:func:`~sma_wrist.core.identification_kernel.gpi_jacobian`)
+    when numba is installed; False forces the numpy path (tests compare both).
     """
     T = np.asarray(T, dtype=float)
     th = np.asarray(theta, dtype=float)
+    h = heating_mask(T, branch) if heat is None else heat
+    if compiled:
+        out = gpi_jacobian(T, th, n, k_f, branch != 'cooling', h)
+        if out is not None:
+            return out
     jj = np.arange(1, n + 1, dtype=float)
     r = th[IDX_CTHR] * jj
     e = np.exp(-th[IDX_TAU] * r)
@@ -112,8 +119,7 @@ def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.
         w0, s0 = upper[0], np.ones(n, np.int64)
     else:
         w0, s0 = lower[0], -np.ones(n, np.int64)
-    S, dS_da, dS_db, dS_dc, Wjp = play_jacobian(lower, upper, w0, s0, p, jj, th[IDX_TAU], Ga, Gb)
-    h = heating_mask(T, branch) if heat is None else heat
+    S, dS_da, dS_db, dS_dc, Wjp = play_jacobian_numpy(lower, upper, w0, s0, p, jj, th[IDX_TAU], Ga, Gb)
     mc, Gc = _tanh_and_grad(th[IDX_C], T)
     md, Gd = _tanh_and_grad(th[IDX_D], T)
     mem = np.where(h, mc, md)
@@ -124,7 +130,7 @@ def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.
     J[:, IDX_B] = -dS_db
     J[:, IDX_C] = -p0 * h[:, None] * Gc
     J[:, IDX_D] = -p0 * (~h)[:, None] * Gd
-    J[:, IDX_RHO] = -S / th[IDX_RHO] if th[IDX_RHO] != 0 else -play_jacobian(lower, upper, w0, s0, e, jj, th[IDX_TAU], Ga, Gb)[0]
+    J[:, IDX_RHO] = -S / th[IDX_RHO] if th[IDX_RHO] != 0 else -play_jacobian_numpy(lower, upper, w0, s0, e, jj, th[IDX_TAU], Ga, Gb)[0]
     J[:, IDX_TAU] = th[IDX_CTHR] * Wjp
     J[:, IDX_CTHR] = -dS_dc
     J[:, IDX_P0] = -mem
