@@ -278,6 +278,18 @@ def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray
     return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))
 
 
+def _solve_best(fun_jac, starts: list[FloatArray], free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,  # type: ignore[no-untyped-def]
+                max_nfev: int, probe: float = 0.2) -> tuple[FloatArray, float, bool]:
+    """:func:`_solve_exact` from the best of several starts: each probed with ``probe`` of the
+    budget, the lowest cost continued with the rest (instead of every start to the full budget).
+    """
+    if len(starts) == 1:
+        return _solve_exact(fun_jac, starts[0], free, lo, hi, max_nfev)
+    n_probe = max(10, int(probe * max_nfev))
+    x, _, _ = min((_solve_exact(fun_jac, s0, free, lo, hi, n_probe) for s0 in starts), key=lambda t: t[1])
+    return _solve_exact(fun_jac, x, free, lo, hi, max_nfev - n_probe)
+
+
 def _solver(method: str, T: FloatArray, y: FloatArray, n: int, k_f: float, branch: str):  # type: ignore[no-untyped-def]
     """(solve(x0, free, lo, hi, nfev), residual(x)) for one loop with the Jacobian ``method``."""
     if method == 'fd':
@@ -521,8 +533,7 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         x, cost, ok = _solve(fun_batch, x0, free, lo, hi, max_nfev)
         resid = fun_batch(x[None])[:, 0]
     else:  # the joint stage gets twice the budget, as fit_gpi's last stage (cheap with the exact Jacobian)
-        x, cost, ok = min((_solve_exact(fun_jac, s0, free, lo, hi, 2 * max_nfev) for s0 in starts),
-                          key=lambda t: t[1])
+        x, cost, ok = _solve_best(fun_jac, starts, free, lo, hi, 2 * max_nfev)
         th = _sd_to_gpi(x[None], edges, loads)[0]
         resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
                                 for i, (t, v) in enumerate(zip(Ts_all, ys_all))])
@@ -661,7 +672,7 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
             J[rows, rest] = Ji[:, 8:20]
         return res, J
 
-    x, cost, ok = min((_solve_exact(fun_jac, s0, free, lo, hi, 2 * max_nfev) for s0 in starts), key=lambda t: t[1])
+    x, cost, ok = _solve_best(fun_jac, starts, free, lo, hi, 2 * max_nfev)
     edges = np.array([loads.min(), loads.max()])
     sa, sb = cc_to_quadratic(x[za], m_ref), cc_to_quadratic(x[zb], m_ref)
     theta = np.concatenate([sa.ravel(), sb.ravel(), x[rest]])

@@ -12,7 +12,9 @@ fits this replaced) side by side in that process, on the same data:
 
 ``quick`` skips the old SD-GPI fit (minutes).
 
-Quality is the residual in % of the stroke (and, on synthetic data, the error against the
+Each time is given as wall seconds (``*_s``) and this process's CPU seconds (``*_cpu_s``:
+what one core costs while other jobs share the machine; the load average at start and end
+is recorded). Quality is the residual in % of the stroke (and, on synthetic data, the error against the
 known loop); a faster fit that fits worse would show here.
 """
 from __future__ import annotations
@@ -49,10 +51,11 @@ def _real(stresses: tuple[int, ...]) -> tuple[list[Any], list[Any], Any, list[st
             np.array([stress_to_load_kgf(lp.stress_MPa) for lp in loops]), [lp.init_branch for lp in loops])
 
 
-def _timed(fn: Any) -> tuple[Any, float]:
-    t0 = time.perf_counter()
+def _timed(fn: Any) -> tuple[Any, float, float]:
+    """Result, wall seconds and this process's CPU seconds (the one-core figure when others load the machine)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     r = fn()
-    return r, time.perf_counter() - t0
+    return r, time.perf_counter() - t0, time.process_time() - c0
 
 
 def measure(quick: bool) -> dict[str, Any]:
@@ -60,20 +63,20 @@ def measure(quick: bool) -> dict[str, Any]:
     from sma_wrist.core.identification import fit_gpi, fit_sdgpi, simulate_batch
     from sma_wrist.identify.hysteresis import choose_edges
 
-    out: dict[str, Any] = {}
+    out: dict[str, Any] = {'loadavg_start': list(os.getloadavg())}
     fit_gpi(*_synthetic(60)[:2], n_starts=1, max_nfev=2)  # compile the numba kernel outside the timings
 
     def gpi_case(T: Any, y: Any, y0: Any | None, branch: str, methods: tuple[str, ...]) -> dict[str, Any]:
         row: dict[str, Any] = {'samples': int(T.size)}
         for m in methods:
-            r, dt = _timed(lambda: fit_gpi(T, y, branch=branch, method=m))
-            row[f'{m}_s'] = dt
+            r, dt, cpu = _timed(lambda: fit_gpi(T, y, branch=branch, method=m))
+            row[f'{m}_s'], row[f'{m}_cpu_s'] = dt, cpu
             row[f'{m}_residual_pct'] = r.residual_std_pct
             if y0 is not None:
                 ys = simulate_batch(T, r.theta[None], branch=branch)[:, 0]
                 row[f'{m}_error_vs_truth_pct'] = float(100 * np.std(ys - y0) / np.ptp(y0))
         if 'fd' in methods:
-            row['speedup'] = row['fd_s'] / row['exact_s']
+            row['speedup'], row['speedup_cpu'] = row['fd_s'] / row['exact_s'], row['fd_cpu_s'] / row['exact_cpu_s']
         return row
 
     both = ('exact', 'fd')
@@ -88,11 +91,11 @@ def measure(quick: bool) -> dict[str, Any]:
         edges = choose_edges(loads)
         row: dict[str, Any] = {'loads': int(loads.size), 'samples_per_load': int(np.mean([t.size for t in Ts]))}
         for m in methods:
-            r, dt = _timed(lambda: fit_sdgpi(Ts, ys, loads, edges, branches=br, method=m))
-            row[f'{m}_s'] = dt
+            r, dt, cpu = _timed(lambda: fit_sdgpi(Ts, ys, loads, edges, branches=br, method=m))
+            row[f'{m}_s'], row[f'{m}_cpu_s'] = dt, cpu
             row[f'{m}_residual_pct'] = r.residual_std_pct
         if 'fd' in methods:
-            row['speedup'] = row['fd_s'] / row['exact_s']
+            row['speedup'], row['speedup_cpu'] = row['fd_s'] / row['exact_s'], row['fd_cpu_s'] / row['exact_cpu_s']
         return row
 
     Ts, ys, loads, br = _real((50, 100, 200, 300, 400))
@@ -105,6 +108,7 @@ def measure(quick: bool) -> dict[str, Any]:
         yl.append(np.interp(s, np.arange(T.size), y))
     out['sdgpi_5x1e4'] = sd_case(Tl, yl, loads, br, ('exact',))
     out['targets_s'] = {'gpi_500': 2.0, 'sdgpi_5': 10.0, 'per_load_1e4': 5.0}
+    out['loadavg_end'] = list(os.getloadavg())
     return out
 
 
