@@ -7,6 +7,7 @@ from sma_wrist.core.default_params import default_sdgpi
 from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams, simulate
 from sma_wrist.core.identification import fit_gpi, fit_sdgpi, gpi_vector, simulate_batch
 from sma_wrist.core.seed_params import sawtooth_input
+from sma_wrist.identify.wrist import shifted_wire
 
 
 def test_batch_simulation_matches_model() -> None:
@@ -33,7 +34,7 @@ def test_fit_gpi_recovers_loop() -> None:
 def two_section_default(dT: float = 0.0) -> SDGPIParams:
     """The default set as the seed's form: two quadratic sections on 0.65-0.8-1.05 kgf, moved up dT degC.
 
-    tanh(a1 (T - dT) + a2): a2 -> a2 - a1 dT per quadratic coefficient (likewise c2, d2).
+    The shift is :func:`sma_wrist.identify.wrist.shifted_wire` (a2 -> a2 - a1 dT, likewise c2, d2).
     """
     D = default_sdgpi()
     edges = np.array([0.65, 0.8, 1.05])
@@ -44,13 +45,9 @@ def two_section_default(dT: float = 0.0) -> SDGPIParams:
         for i in range(4):
             sa[k, i] = np.polyfit(mm, a[:, i], 2)
             sb[k, i] = np.polyfit(mm, b[:, i], 2)
-    sa[:, 2] -= dT * sa[:, 1]
-    sb[:, 2] -= dT * sb[:, 1]
-    c, d = D.c.copy(), D.d.copy()
-    c[2] -= dT * c[1]
-    d[2] -= dT * d[1]
-    return SDGPIParams(EnvelopeSections(edges, sa, sb), c, d, D.rho, D.tau, D.c_thr, p0=1.0,
-                       T_valid=(-10.0, 110.0 + max(dT, 0.0)), name=f'default, 2 sections, +{dT:g} degC')
+    two = SDGPIParams(EnvelopeSections(edges, sa, sb), D.c, D.d, D.rho, D.tau, D.c_thr, p0=1.0,
+                      T_valid=(-10.0, 110.0), name='default, 2 sections')
+    return shifted_wire(two, dT)
 
 
 def test_fit_sdgpi_recovers_loops_across_loads() -> None:

@@ -163,7 +163,7 @@ def test_identified_file_widens_the_valid_range_and_loads(nitihf: dict) -> None:
 
 def test_real_nitihf_interior_held_out_load_needs_the_clausius_clapeyron_law() -> None:
     """300 MPa held out, trained on 7, 50, 100, 200, 400 MPa: the seed's quadratics of the load
-    (one section over 7-400 MPa) run away between 200 and 400 MPa; the Clausius-Clapeyron law
+    (one section over 7-400 MPa) swing between 200 and 400 MPa; the Clausius-Clapeyron law
     (transition temperatures shift linearly with stress) interpolates."""
     from sma_wrist.core.identification import fit_sdgpi, fit_sdgpi_cc, sdgpi_gpi_vectors, simulate_batch
     from sma_wrist.identify.hysteresis import choose_edges
@@ -187,8 +187,10 @@ def test_real_nitihf_interior_held_out_load_needs_the_clausius_clapeyron_law() -
             edges = r.params.envelopes.edges_kg
         th = sdgpi_gpi_vectors(r.theta, edges, m[4:5])
         err[law] = errors_pct(simulate_batch(T[4], th, branch=br[4])[:, 0], y[4])[0]
-    assert err['quadratic'] > 100.0, err  # measured 708 % of stroke
+    # measured 43.3 % (708 % before the joint fit continued only its best start: another local minimum)
+    assert err['quadratic'] > 30.0, err
     assert err['clausius-clapeyron'] < 8.0, err  # measured 6.9 %
+    assert err['quadratic'] > 5 * err['clausius-clapeyron'], err
 
 
 # ----------------------------------------------------------------------------- synthetic round trip
@@ -278,13 +280,58 @@ def test_closed_loop_runs_on_the_identified_wire(synthetic: tuple[dict, SDGPIPar
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
 
-    f = synthetic[0]['params_file']
-    s = run_closed_loop('inverse_adaptive', 0.3, 3.0, bag=tmp_path / 'bag', extra_params={
-        '/plant_sim': {'hysteresis_file': f, 'max_muscle_temperature_C': 120.0},
-        '/hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': 50.0, 'temperature_max_C': 125.0},
-        '/tem_controller': {'max_muscle_temperature_C': 120.0}})
+    wp = synthetic[0]['wrist_params']  # every node's window for this wire, written by identify
+    s = run_closed_loop('inverse_adaptive', 0.3, 3.0, bag=tmp_path / 'bag', params_files=[wp['file']])
     assert not s.interrupted and s.sim_time_s == pytest.approx(3.0, abs=0.02)
     assert s.metrics['n_samples'] > 200 and np.isfinite(s.metrics['rms_error_pct'])
+
+
+def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
+        synthetic: tuple[dict, SDGPIParams]) -> None:
+    """identify/wrist.py: the built-in wire gives today's defaults; a hotter wire moves every window."""
+    import yaml
+
+    from sma_wrist.identify.wrist import operating_window, shifted_wire, wrist_params
+    assert operating_window(default_sdgpi()) == pytest.approx((20.0, 80.0), abs=1e-6)
+    hot = shifted_wire(default_sdgpi(), 20.0)  # transforms at 55-98 degC at 0.8 kgf
+    lo, hi = operating_window(hot)
+    assert lo == pytest.approx(40.5, abs=0.5) and hi == pytest.approx(100.4, abs=0.5)
+    nodes, problems = wrist_params('wire.yaml', hot)  # the seed's TEMs: 0-80 degC
+    assert len(problems) == 1 and 'TEMs work only up to 80' in problems[0]
+    nodes, problems = wrist_params('wire.yaml', hot, 'tems.yaml', (0.0, 120.0))
+    assert problems == []
+    assert nodes['hysteresis_compensator']['temperature_max_C'] == pytest.approx(hi, abs=0.05)
+    assert nodes['adaptive_controller']['temperature_min_C'] == pytest.approx(lo, abs=0.05)
+    assert nodes['tem_controller']['max_muscle_temperature_C'] == pytest.approx(hi + 5.0, abs=0.05)
+    assert nodes['tem_controller']['face_max_C'] == 120.0 and nodes['plant_sim']['thermal_file'] == 'tems.yaml'
+    # identify wrote the file for the synthetic +30 degC wire (A_f 108 degC): seed TEMs cannot, and it says so
+    wp = synthetic[0]['wrist_params']
+    doc = yaml.safe_load(Path(wp['file']).read_text())
+    assert doc['hysteresis_compensator']['ros__parameters']['temperature_max_C'] > 105.0
+    assert any('TEMs work only up to 80' in p for p in wp['problems'])
+
+
+def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_does_not() -> None:
+    """Targets along the hot wire's own loop at 0.8 kgf: reachable in the derived window, not in 20-80 degC."""
+    from sma_wrist.core.inverse import InverseCompensator
+    from sma_wrist.identify.wrist import operating_window, shifted_wire
+    hot = shifted_wire(default_sdgpi(), 20.0)
+    T = np.r_[np.linspace(55.0, 98.0, 60), np.linspace(98.0, 55.0, 60)]
+    y = simulate(hot, T, 0.8)
+    saturated = {}
+    for name, window in (('derived', operating_window(hot)), ('default', (20.0, 80.0))):
+        inv = InverseCompensator(hot, T_range=window)
+        inv.reset(np.array([55.0]), np.array([0.8]), branch='cooling')
+        sat, err = [], []
+        for yk in y:
+            r = inv.solve(np.array([yk]), np.array([0.8]))
+            sat.append(bool(r.saturated[0]))
+            err.append(abs(float(r.achieved_mm[0]) - yk))
+        saturated[name] = float(np.mean(sat))
+        if name == 'derived':
+            assert max(err) < 0.01 * np.ptp(y)  # every elongation of the loop is reached
+    assert saturated['derived'] == 0.0
+    assert saturated['default'] > 0.2  # everything above 80 degC is out of reach
 
 
 def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(

@@ -49,6 +49,9 @@ def register(sub: Any) -> None:
                    help="load law of the envelopes: the seed's quadratics per section, the Clausius-Clapeyron "
                         'shift, or auto (default: the lower leave-one-load-out error; without it quadratic)')
     p.add_argument('--no-plots', action='store_true')
+    p.add_argument('--thermal-file', metavar='FILE',
+                   help="the TEMs the wire will run with (sma-wrist identify thermal); default the seed's (0-80 degC): "
+                        'wrist_params.yaml says what they cannot reach')
     p.set_defaults(func=run_cli)
 
 
@@ -69,6 +72,7 @@ class Options:
     loo: bool = True
     plots: bool = True
     model: str = 'auto'
+    thermal_file: str | None = None
 
 
 def _progress(msg: str) -> None:
@@ -246,7 +250,8 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
                                              'leave_one_load_out': loo_by},
         'before': {'model': before_model.name, 'per_load': before,
                    'note': 'constant offset removed per loop; T and load clipped to the model range'},
-        'transitions': trans, 'params_file': None, 'report': None, 'warnings': warnings, 'cleaning': cleaning,
+        'transitions': trans, 'params_file': None, 'report': None, 'wrist_params': None, 'warnings': warnings,
+        'cleaning': cleaning,
     }
     ident = {'tool': 'sma-wrist identify hysteresis', 'files': list(o.files), 'holdout': list(o.holdout),
              'stresses_MPa': stresses, 'model': chosen, 'fit_rms_pct': float(res.residual_std_pct),
@@ -262,15 +267,36 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
         doc['report'] = str(write_report(out, doc, train, hold, y_fit, predict(res.theta, edges, hold),
                                          before_model, plots=o.plots))
         progress(f'wrote {doc["params_file"]} and {doc["report"]}')
+        doc['wrist_params'] = _wrist_params(out, params, o.thermal_file, progress)
     doc['wall_s'] = time.perf_counter() - t0
     return doc
+
+
+def _wrist_params(out: Any, params: Any, thermal_file: str | None, progress: Any) -> dict[str, Any]:
+    """wrist_params.yaml beside hysteresis.yaml: every node's temperature window for this wire (identify/wrist.py)."""
+    from pathlib import Path
+
+    from sma_wrist.core.errors import ParameterError
+    from sma_wrist.core.thermal_file import load_thermal_file
+    from sma_wrist.identify.wrist import operating_window, wrist_params, write_wrist_params
+
+    tems = load_thermal_file(thermal_file).window_C if thermal_file else None
+    hf = (out / 'hysteresis.yaml').resolve()
+    try:
+        nodes, problems = wrist_params(hf, params, thermal_file and str(Path(thermal_file).resolve()), tems)
+    except ParameterError as e:
+        progress(f'no wrist parameters: {e}')
+        return {'file': None, 'window_C': None, 'problems': [str(e)]}
+    f = write_wrist_params(out / 'wrist_params.yaml', nodes, problems)
+    progress(f'wrote {f} (sma-wrist run --params-file {f})' + ''.join(f'\nPROBLEM: {p}' for p in problems))
+    return {'file': str(f), 'window_C': list(operating_window(params)), 'problems': problems}
 
 
 def options_from_args(a: argparse.Namespace) -> Options:
     cols = [c.strip() for c in a.columns.split(',')] if a.columns else None
     return Options(list(a.files), list(a.holdout), a.out, a.params, cols, a.temperature_unit, a.strain_unit,
                    a.stress_unit, a.length_mm, a.wire_diameter_mm, a.stress_mpa, a.cycle, not a.no_loo, not a.no_plots,
-                   a.model)
+                   a.model, a.thermal_file)
 
 
 def run_cli(a: argparse.Namespace) -> int:

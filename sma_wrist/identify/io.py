@@ -91,16 +91,22 @@ def _is_numeric(cells: list[str]) -> bool:
     return len(cells) >= 2 and all(_NUM.match(c) for c in cells if c != '') and any(c != '' for c in cells)
 
 
-def read_table(path: str | Path) -> Table:
-    """Parse a CSV / TSV / whitespace table; metadata and header lines before the numbers are skipped."""
+def read_table(path: str | Path, need: str = 'temperature, strain and stress', error: type = IdentifyInputError) -> Table:
+    """Parse a CSV / TSV / whitespace table; metadata, comment and header lines before the numbers are skipped.
+
+    The one table reader of ``sma-wrist identify`` (hysteresis and thermal inputs): ``need``
+    names the columns in its error messages, ``error`` is the exception raised. Rows that
+    are not all numbers (or have another column count) become NaN rows, counted as
+    ``unreadable_rows``; the caller drops and counts what it cannot use.
+    """
     p = Path(path)
     try:
         text = p.read_text(encoding='utf-8', errors='replace')
     except OSError as e:
-        raise IdentifyInputError(f'{p}: cannot read the file ({e.strerror or e}); give a readable text table') from None
+        raise error(f'{p}: cannot read the file ({e.strerror or e}); give a readable text table') from None
     lines = [ln for ln in text.splitlines() if ln.strip()]
     if not lines:
-        raise IdentifyInputError(f'{p}: the file is empty; a table with temperature, strain and stress columns is needed')
+        raise error(f'{p}: empty file; a table with {need} columns is needed')
     sample = [ln for ln in lines if any(ch.isdigit() for ch in ln)][-20:]
     delim: str | None = None
     for d in ('\t', ',', ';'):
@@ -110,14 +116,17 @@ def read_table(path: str | Path) -> Table:
     rows = [_split(ln, delim) for ln in lines]
     first = next((i for i, r in enumerate(rows) if _is_numeric(r)), None)
     if first is None:
-        raise IdentifyInputError(f'{p}: no numeric rows found; a table of numbers (temperature, strain, stress) is needed')
+        raise error(f'{p}: no numeric rows found; a table of numbers ({need}) is needed')
     ncol = len(rows[first])
     header = None
-    if first > 0 and len(rows[first - 1]) == ncol and not _is_numeric(rows[first - 1]):
-        header = rows[first - 1]
-    data = np.full((len(rows) - first, ncol), np.nan)
+    if first > 0:  # the line above the numbers, also as a '# a b c' comment (numpy.savetxt's default)
+        above = _split(lines[first - 1].lstrip().lstrip('#'), delim)
+        if len(above) == ncol and not _is_numeric(above):
+            header = above
+    body = [r for r, ln in zip(rows[first:], lines[first:]) if not ln.lstrip().startswith('#')]  # comments
+    data = np.full((len(body), ncol), np.nan)
     bad = 0
-    for i, r in enumerate(rows[first:]):
+    for i, r in enumerate(body):
         if len(r) != ncol or not _is_numeric(r):
             bad += 1
             continue

@@ -85,34 +85,13 @@ def _norm(name: str) -> tuple[str, str]:
     return base, unit
 
 
-def _split(line: str, delim: str | None) -> list[str]:
-    return [c.strip() for c in (line.split(delim) if delim else line.split())]
-
-
-def read_table(path: Path) -> tuple[list[str] | None, list[list[str]]]:
-    """(header or None, rows of cells) of a delimited text file; '#' lines are comments."""
-    try:
-        text = path.read_text(errors='replace')
-    except IsADirectoryError:
-        raise ThermalInputError(f'{path}: is a directory but not a rosbag2 (no metadata.yaml or .mcap)') from None
-    except OSError as e:
-        raise ThermalInputError(f'{path}: cannot read ({e.strerror or e})') from None
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith('#')]
-    if not lines:
-        raise ThermalInputError(f'{path}: empty file (need a table: time, voltage, T1[, T2] per row)')
-    first = lines[0]
-    delim = next((d for d in ('\t', ',', ';') if d in first), None)
-    cells = _split(first, delim)
-
-    def numeric(c: str) -> bool:
-        try:
-            float(c)
-            return True
-        except ValueError:
-            return False
-    header = None if all(numeric(c) for c in cells) else cells
-    rows = [_split(ln, delim) for ln in (lines[1:] if header else lines)]
-    return header, rows
+def read_table(path: Path) -> tuple[list[str] | None, Any]:
+    """(header or None, (rows, columns) numbers with NaN for unreadable rows) by :func:`io.read_table`."""
+    from sma_wrist.identify import io
+    if path.is_dir():
+        raise ThermalInputError(f'{path}: is a directory but not a rosbag2 (no metadata.yaml or .mcap)')
+    t = io.read_table(path, need='time, voltage, T1[, T2]', error=ThermalInputError)
+    return t.header, t.data
 
 
 def _roles(path: Path, header: list[str] | None, columns: dict[str, str] | None, ncol: int
@@ -209,29 +188,17 @@ def load_table(path: Path, columns: dict[str, str] | None = None, units: dict[st
                ) -> tuple[list[Series], Cleaning]:
     """Read, convert and clean one table; split by its frequency column if it has one."""
     import numpy as np
-    header, rows = read_table(path)
-    ncol = max((len(r) for r in rows), default=0)
-    if header:
-        ncol = max(ncol, len(header))
+    header, data = read_table(path)
+    ncol = data.shape[1]
     idx, hdr_units, warnings = _roles(path, header, columns, ncol)
-    cl = Cleaning(rows=len(rows), warnings=warnings)
-    data = np.full((len(rows), ncol), np.nan)
-    short = 0
-    for i, r in enumerate(rows):
-        if len(r) < ncol:
-            short += 1
-        for j, c in enumerate(r[:ncol]):
-            try:
-                data[i, j] = float(c)
-            except ValueError:
-                pass
+    cl = Cleaning(rows=data.shape[0], warnings=warnings)
     units = dict(units or {})
     need = [idx['time'], idx['u'], idx['T1']] + ([idx['T2']] if 'T2' in idx else [])
     bad = ~np.isfinite(data[:, need]).all(axis=1)
     cl.dropped_nan = int(bad.sum())
     if cl.dropped_nan:
-        cl.warnings.append(f'{path.name}: {cl.dropped_nan} of {len(rows)} rows with NaN, empty or unparseable cells '
-                           f'dropped' + (f' ({short} short rows)' if short else ''))
+        cl.warnings.append(f'{path.name}: {cl.dropped_nan} of {cl.rows} rows with NaN, empty or unparseable cells '
+                           'dropped')
     data = data[~bad]
     if data.shape[0] < 10:
         raise ThermalInputError(f'{path}: only {data.shape[0]} complete rows; need a run of at least '
