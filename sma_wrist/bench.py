@@ -261,6 +261,15 @@ def bench_identify_thermal(quick: bool = False) -> dict:
     return {'speed': speed(quick), **holdout_table(quick)}
 
 
+@section('identify_wrist')
+def bench_identify_wrist(quick: bool = False) -> dict:
+    """A wire transforming at 55-98 degC, windows from identify/wrist.py: seed TEMs vs TEMs rated 120 degC (docs/identification.md)."""
+    from sma_wrist.identify.wrist import hot_wire_runs
+    return hot_wire_runs(('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
+                         progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
+                         png=os.path.join(os.environ.get('SMA_WRIST_BENCH_DIR', '.'), 'identify_wrist.png'))
+
+
 # -------------------------------------------------------------------------------- driver
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:

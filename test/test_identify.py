@@ -295,7 +295,7 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     assert operating_window(default_sdgpi()) == pytest.approx((20.0, 80.0), abs=1e-6)
     hot = shifted_wire(default_sdgpi(), 20.0)  # transforms at 55-98 degC at 0.8 kgf
     lo, hi = operating_window(hot)
-    assert lo == pytest.approx(40.5, abs=0.5) and hi == pytest.approx(100.4, abs=0.5)
+    assert lo == pytest.approx(40.1, abs=0.2) and hi == pytest.approx(100.0, abs=0.2)  # defaults + 20 degC
     nodes, problems = wrist_params('wire.yaml', hot)  # the seed's TEMs: 0-80 degC
     assert len(problems) == 1 and 'TEMs work only up to 80' in problems[0]
     nodes, problems = wrist_params('wire.yaml', hot, 'tems.yaml', (0.0, 120.0))
@@ -318,7 +318,7 @@ def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_do
     hot = shifted_wire(default_sdgpi(), 20.0)
     T = np.r_[np.linspace(55.0, 98.0, 60), np.linspace(98.0, 55.0, 60)]
     y = simulate(hot, T, 0.8)
-    saturated = {}
+    saturated, worst = {}, {}
     for name, window in (('derived', operating_window(hot)), ('default', (20.0, 80.0))):
         inv = InverseCompensator(hot, T_range=window)
         inv.reset(np.array([55.0]), np.array([0.8]), branch='cooling')
@@ -328,10 +328,9 @@ def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_do
             sat.append(bool(r.saturated[0]))
             err.append(abs(float(r.achieved_mm[0]) - yk))
         saturated[name] = float(np.mean(sat))
-        if name == 'derived':
-            assert max(err) < 0.01 * np.ptp(y)  # every elongation of the loop is reached
-    assert saturated['derived'] == 0.0
-    assert saturated['default'] > 0.2  # everything above 80 degC is out of reach
+        worst[name] = max(err) / np.ptp(y)
+    assert saturated['derived'] == 0.0 and worst['derived'] < 0.01  # every elongation of the loop is reached
+    assert saturated['default'] > 0.5 and worst['default'] > 0.5  # measured 70 % saturated, the whole stroke off
 
 
 def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(

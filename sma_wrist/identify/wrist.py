@@ -155,13 +155,14 @@ def rated_tems(top_C: float) -> Any:
 
 def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_adaptive', 'pid'), dT_C: float = 20.0,
                   duration_s: float = 126.0, tem_tops_C: tuple[float, ...] = (80.0, 120.0),
-                  progress: Any = None) -> dict[str, Any]:
+                  progress: Any = None, png: str | None = None) -> dict[str, Any]:
     """Closed loops (embedded runtime) on the built-in wire moved up ``dT_C`` with :func:`wrist_params`.
 
     For each TEM rating in ``tem_tops_C`` (80 degC: the seed's TEMs) and each controller:
     max and RMS tracking error over the last reference cycle in % of the reference range
     (runs.run_metrics), the hottest measured muscle temperature and the problems
     :func:`wrist_params` reported. Also the built-in wire with the defaults, for reference.
+    ``png``: angle and reference over the last cycle, one panel per case and controller.
     """
     import tempfile
 
@@ -176,6 +177,7 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
     tr = wire_transitions(wire)
     out: dict[str, Any] = {'wire': {'dT_C': dT_C, 'M_f_C': tr['M_f'], 'A_f_C': tr['A_f'], 'load_kgf': tr['load_kgf'],
                                     'window_C': list(operating_window(wire))}, 'runs': []}
+    traces: list[tuple[str, Any, Any, Any]] = []
     with tempfile.TemporaryDirectory(prefix='sma_hot_wire_') as d:
         hf = save_hysteresis(Path(d) / 'hysteresis.yaml', wire)
         cases: list[tuple[str, Any, list[str]]] = [('built-in wire, defaults', None, [])]
@@ -194,7 +196,34 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
                        'rms_error_pct': m['rms_error_pct'], 'window': m['window'], 'wall_s': s.wall_s,
                        'hottest_muscle_C': float(np.nanmax(r.temperature_C)), 'problems': problems}
                 out['runs'].append(row)
+                last = r.t >= r.t[-1] - min(duration_s, 2 * np.pi / 0.1)
+                traces.append((f'{label}, {ctrl}', r.t[last], r.q[last], r.q_d[last]))
                 if progress is not None:
                     progress(f'{label}, {ctrl}: max {row["max_error_pct"]:.1f} %, RMS {row["rms_error_pct"]:.1f} % '
                              f'(last cycle), hottest muscle {row["hottest_muscle_C"]:.1f} degC')
+    if png:
+        _plot(png, traces)
+        out['png'] = png
     return out
+
+
+def _plot(png: str, traces: list[tuple[str, Any, Any, Any]]) -> None:
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    n = len(traces)
+    cols = 3 if n % 3 == 0 else 1
+    fig, axes = plt.subplots((n + cols - 1) // cols, cols, figsize=(5 * cols, 2.2 * ((n + cols - 1) // cols)),
+                             sharex=True, sharey=True, squeeze=False)
+    for ax, (title, t, q, qd) in zip(axes.ravel(), traces):
+        ax.plot(t, qd, 'k--', lw=1, label='reference')
+        ax.plot(t, q, 'C0', lw=1.2, label='angle')
+        ax.set_title(title, fontsize=8)
+    axes[0, 0].legend(fontsize=7)
+    for ax in axes[-1]:
+        ax.set_xlabel('t [s] (last cycle)')
+    for ax in axes[:, 0]:
+        ax.set_ylabel('q [rad]')
+    fig.tight_layout()
+    fig.savefig(png, dpi=90)
+    plt.close(fig)
