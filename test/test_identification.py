@@ -126,6 +126,23 @@ def test_clausius_clapeyron_law_is_one_exact_quadratic_section_with_exact_jacobi
     np.testing.assert_allclose(J, fd, atol=1e-6)
 
 
+def test_saturating_stroke_law_has_an_exact_jacobian_and_sections_that_follow_it() -> None:
+    from sma_wrist.core.identification import sat_coefficients, sat_to_sections
+
+    z = np.array([0.2, 1.1, 6.0, 0.25, 0.04, 60.0, 25.0, 0.1, 0.7, 0.05])
+    m = np.linspace(0.03, 2.0, 41)
+    k, J = sat_coefficients(z, m, 0.9)
+    np.testing.assert_allclose(k[:, 0], 0.2 + 1.1 * (1 - np.exp(-6.0 * m)) + 0.05 * (m - 0.9))  # saturates
+    np.testing.assert_allclose(-k[:, 2] / k[:, 1], 60.0 + 25.0 * (m - 0.9))  # centres shift linearly (CC)
+    h = 1e-6
+    fd = np.stack([(sat_coefficients(z + h * e, m, 0.9)[0] - sat_coefficients(z - h * e, m, 0.9)[0]) / (2 * h)
+                   for e in np.eye(z.size)], axis=-1)
+    np.testing.assert_allclose(J, fd, atol=1e-6)
+    edges = np.linspace(m[0], m[-1], 17)  # the written form: quadratics per section, continuous
+    env = EnvelopeSections(edges, sat_to_sections(z, 0.9, edges), sat_to_sections(z, 0.9, edges))
+    np.testing.assert_allclose(env.coefficients(m)[0], k, atol=2e-3 * np.abs(k).max())
+
+
 def test_fit_sdgpi_cc_recovers_a_wire_whose_transitions_shift_with_load() -> None:
     """Truth: the default wire at 0.8 kgf, transitions moved 30 degC per kgf (CC law); fit on 4 loads,
     predict a fifth between them."""

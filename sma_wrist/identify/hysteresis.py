@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 #: Load laws of the SD-GPI envelopes: the seed's free quadratics per section (Eqs. 4.4-4.5,
-#: core.identification.fit_sdgpi) and the Clausius-Clapeyron shift (core.identification.fit_sdgpi_cc).
-MODELS = ('quadratic', 'clausius-clapeyron')
+#: core.identification.fit_sdgpi), the Clausius-Clapeyron shift (core.identification.fit_sdgpi_cc)
+#: and the same shift with a saturating stroke (fit_sdgpi_cc(amplitude_law='saturating')).
+MODELS = ('quadratic', 'clausius-clapeyron', 'saturating')
 
 HELP = 'identify the SD-GPI hysteresis of a wire from measured isobaric loops (docs/identification.md)'
 
@@ -47,7 +48,8 @@ def register(sub: Any) -> None:
     p.add_argument('--no-loo', action='store_true', help='skip the leave-one-load-out validation')
     p.add_argument('--model', choices=MODELS + ('auto',), default='auto',
                    help="load law of the envelopes: the seed's quadratics per section, the Clausius-Clapeyron "
-                        'shift, or auto (default: the lower leave-one-load-out error; without it quadratic)')
+                        'shift, that shift with a saturating stroke, or auto (default: the lowest leave-one-load-out '
+                        'error; without it quadratic)')
     p.add_argument('--no-plots', action='store_true')
     p.add_argument('--thermal-file', metavar='FILE',
                    help="the TEMs the wire will run with (sma-wrist identify thermal); default the seed's (0-80 degC): "
@@ -142,6 +144,9 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
         Ts, ys, loads, br = arrays(loops)
         if model == 'clausius-clapeyron':  # one section; amplitudes quadratic once 5 loads pin them down
             r = fit_sdgpi_cc(Ts, ys, loads, branches=br, amplitude_degree=2 if np.unique(loads).size >= 5 else 1)
+            return r, r.params.envelopes.edges_kg
+        if model == 'saturating':
+            r = fit_sdgpi_cc(Ts, ys, loads, branches=br, amplitude_law='saturating')
             return r, r.params.envelopes.edges_kg
         edges = choose_edges(loads)
         return fit_sdgpi(Ts, ys, loads, edges, branches=br), edges

@@ -162,7 +162,7 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
     max and RMS tracking error over the last reference cycle in % of the reference range
     (runs.run_metrics), the hottest measured muscle temperature and the problems
     :func:`wrist_params` reported. Also the built-in wire with the defaults, for reference.
-    ``png``: angle and reference over the last cycle, one panel per case and controller.
+    ``png``: angle, reference and error per case (``<png stem>_<case>.png``, controllers overlaid).
     """
     import tempfile
 
@@ -177,7 +177,7 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
     tr = wire_transitions(wire)
     out: dict[str, Any] = {'wire': {'dT_C': dT_C, 'M_f_C': tr['M_f'], 'A_f_C': tr['A_f'], 'load_kgf': tr['load_kgf'],
                                     'window_C': list(operating_window(wire))}, 'runs': []}
-    traces: list[tuple[str, Any, Any, Any]] = []
+    traces: list[tuple[str, Any]] = []
     with tempfile.TemporaryDirectory(prefix='sma_hot_wire_') as d:
         hf = save_hysteresis(Path(d) / 'hysteresis.yaml', wire)
         cases: list[tuple[str, Any, list[str]]] = [('built-in wire, defaults', None, [])]
@@ -196,34 +196,17 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
                        'rms_error_pct': m['rms_error_pct'], 'window': m['window'], 'wall_s': s.wall_s,
                        'hottest_muscle_C': float(np.nanmax(r.temperature_C)), 'problems': problems}
                 out['runs'].append(row)
-                last = r.t >= r.t[-1] - min(duration_s, 2 * np.pi / 0.1)
-                traces.append((f'{label}, {ctrl}', r.t[last], r.q[last], r.q_d[last]))
+                traces.append((f'{label}, {ctrl}', r))
                 if progress is not None:
                     progress(f'{label}, {ctrl}: max {row["max_error_pct"]:.1f} %, RMS {row["rms_error_pct"]:.1f} % '
                              f'(last cycle), hottest muscle {row["hottest_muscle_C"]:.1f} degC')
-    if png:
-        _plot(png, traces)
-        out['png'] = png
+    if png:  # one figure per case, its controllers overlaid (runs.plot_runs)
+        from sma_wrist.runs import plot_runs
+        out['png'] = []
+        for k, (label, _, _) in enumerate(cases):
+            path = f'{Path(png).with_suffix("")}_{k}.png'
+            plot_runs([t[1] for t in traces[k * len(controllers):(k + 1) * len(controllers)]], list(controllers),
+                      path, label)
+            out['png'].append(path)
     return out
 
-
-def _plot(png: str, traces: list[tuple[str, Any, Any, Any]]) -> None:
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-    n = len(traces)
-    cols = 3 if n % 3 == 0 else 1
-    fig, axes = plt.subplots((n + cols - 1) // cols, cols, figsize=(5 * cols, 2.2 * ((n + cols - 1) // cols)),
-                             sharex=True, sharey=True, squeeze=False)
-    for ax, (title, t, q, qd) in zip(axes.ravel(), traces):
-        ax.plot(t, qd, 'k--', lw=1, label='reference')
-        ax.plot(t, q, 'C0', lw=1.2, label='angle')
-        ax.set_title(title, fontsize=8)
-    axes[0, 0].legend(fontsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel('t [s] (last cycle)')
-    for ax in axes[:, 0]:
-        ax.set_ylabel('q [rad]')
-    fig.tight_layout()
-    fig.savefig(png, dpi=90)
-    plt.close(fig)
