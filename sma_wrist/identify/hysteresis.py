@@ -195,7 +195,7 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
                 for lp, yp in zip(out, predict(r_s.theta, e_s, out)):
                     rms, mx = errors_pct(yp, lp.strain * REF_LENGTH_MM)
                     loo_by[model].append({'file': lp.source, 'stress_MPa': lp.stress_MPa, 'rms_pct': rms, 'max_pct': mx,
-                                          'extrapolated': bool(s < min(stresses[0], stresses[1]) or s > stresses[-2])})
+                                          'extrapolated': bool(s < stresses[1] or s > stresses[-2])})
                     progress(f'{model}: leave-one-load-out {s:g} MPa: RMS {rms:.2f} %, max {mx:.2f} % of stroke')
 
     def interior_mean(rows: list[dict[str, Any]]) -> float:
