@@ -111,14 +111,15 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
         problems.append(f'the window top {hi:.0f} degC + {TEM_MUSCLE_MARGIN_C:g} exceeds the nodes\' limit '
                         f'{NODE_MAX_C:g} degC')
     f = str(hysteresis_file)
+    lo_a, hi_a = float(np.clip(lo, 0.0, NODE_MAX_C)), float(np.clip(hi, 0.0, NODE_MAX_C))  # the node's bounds
     out: dict[str, dict[str, Any]] = {
         # the plant only reports above its threshold: capped at the parameter's bound, not a problem
         'plant_sim': {'hysteresis_file': f,
                       'max_muscle_temperature_C': round(min(hi + PLANT_MUSCLE_MARGIN_C, NODE_MAX_C), 1)},
         'hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': round(lo, 1),
                                    'temperature_max_C': round(hi, 1)},
-        'adaptive_controller': {'temperature_min_C': round(max(lo, 0.0), 1), 'temperature_max_C': round(min(hi, NODE_MAX_C), 1),
-                                'temperature_mid_C': round(0.5 * (lo + hi), 1)},
+        'adaptive_controller': {'temperature_min_C': round(lo_a, 1), 'temperature_max_C': round(hi_a, 1),
+                                'temperature_mid_C': round(0.5 * (lo_a + hi_a), 1)},
         'tem_controller': {'max_muscle_temperature_C': round(min(hi + TEM_MUSCLE_MARGIN_C, NODE_MAX_C), 1)},
     }
     if thermal_file is not None:
