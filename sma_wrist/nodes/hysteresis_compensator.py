@@ -36,7 +36,7 @@ MAX_PENDING_CYCLES = 5
 #: measurement ticks waiting for a missing part (a lost temperature or angle): beyond this the oldest
 #: goes on without it (temperatures without the angle: the memory still follows) or is dropped
 MAX_PENDING_TICKS = 5
-T1, T2, ANGLE = 0, 1, 2  # slots of one tick's measurements
+ANGLE = 2  # slot of the angle in one tick's [T_1, T_2, angle]
 
 
 class HysteresisCompensator(WristNode):
