@@ -106,3 +106,36 @@ def test_non_finite_strain_or_stress_is_rejected_and_leaves_the_memory(bad: floa
         MuscleCompensator(params, g)(np.full(12, 0.02), np.r_[np.full(11, stress[0]), bad])
     np.testing.assert_array_equal(comp.inverse.state.w, before.w)
     np.testing.assert_array_equal(comp.inverse.state.T_prev, before.T_prev)
+
+
+@pytest.mark.parametrize('seed', [0, 1])
+def test_compiled_track_step_is_the_numpy_step(seed: int) -> None:
+    """MuscleCompensator.track's adaptation step compiled (the node's 100 Hz call, where numba is
+    installed) against its numpy reference, over random heating/cooling histories whose strains
+    the model does not predict (the shift moves, some steps hit the limit)."""
+    from unittest import mock
+
+    from sma_wrist.core import plant_kernel
+    if not plant_kernel.AVAILABLE:
+        pytest.skip('numba is not installed: there is only the numpy path')
+    g = MuscleGeometry()
+    rng = np.random.default_rng(seed)
+    comps = [MuscleCompensator(default_sdgpi(), shift_gain_per_s=5.0, shift_limit_C=4.0) for _ in range(2)]
+    T = np.array([35.0, 60.0])
+    stress = g.stress_Pa(np.array([0.8, 0.6]))
+    for c in comps:
+        c.reset(T, stress)
+    shifts = []
+    for k in range(400):
+        T = np.clip(T + rng.normal(0.0, 1.5, 2), 20.0, 80.0)
+        stress = stress * (1.0 + rng.normal(0.0, 0.01, 2))
+        strain = rng.uniform(0.02, 0.05, 2)
+        for c, numpy_path in zip(comps, (True, False)):
+            with mock.patch.object(plant_kernel, 'AVAILABLE', not numpy_path):
+                c.track(T, stress, strain, 0.01)
+        np.testing.assert_allclose(comps[1].shift_C, comps[0].shift_C, rtol=0, atol=1e-12)
+        # not bit-equal: math.tanh and a sequential sum against numpy's tanh and matmul (~1e-14 degC)
+        np.testing.assert_allclose(comps[1].inverse.state.T_prev, comps[0].inverse.state.T_prev, rtol=0, atol=1e-12)
+        shifts.append(comps[0].shift_C.copy())
+    shifts = np.array(shifts)
+    assert np.ptp(shifts) > 1.0 and np.abs(shifts).max() == pytest.approx(4.0)  # it adapted, up to the limit

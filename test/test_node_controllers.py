@@ -289,3 +289,68 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
     assert logged[0] == 'flap: state 0' and logged[1].startswith('flap: state 0 (19 more changes')
     # an error's onset and its end are always logged, the changing text in between is not (issue 15 item 4)
     assert logged[2:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']
+
+
+@pytest.mark.parametrize('order', ['in_order', 'shuffled'])
+def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arrival_order(probe_factory, order):
+    """Issue 15 item 6: the memory and the adapted axis follow the measured ticks (temperatures + angle
+    paired by header stamp) one by one: the same answers as the core tracking every tick, when a
+    tick's parts arrive in any order, the next tick's first part overtakes this cycle's targets, and
+    an old sample arrives late (taking 'the latest' at each cycle's targets mixed ticks)."""
+    from builtin_interfaces.msg import Time
+    from std_msgs.msg import Header
+
+    from sma_wrist.core.compensation import MuscleCompensator
+    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.joint_controller import bundle_strain
+    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.core.plant import PlantParams
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    g, plant = MuscleGeometry(), PlantParams()
+    stress = g.stress_Pa(np.array([0.8, 0.7]))
+    n = 30
+    k = np.arange(n)
+    T = np.stack([45.0 + 25.0 * np.sin(np.pi * k / 20), 60.0 - 15.0 * np.sin(np.pi * k / 20)], axis=1)  # turns at k = 10
+    q = 0.5 + 0.3 * np.sin(np.pi * k / 20)
+    strain = np.stack([bundle_strain(plant, x + 0.02) for x in q])
+
+    def stamp(j: int) -> Header:
+        return Header(stamp=Time(sec=1 + j // 100, nanosec=(j % 100) * 10_000_000))
+
+    def T_msg(j: int, i: int) -> tuple[str, dict]:
+        return f'/wrist/muscle_{i}/temperature', {'header': stamp(j), 'temperature': float(T[j, i - 1])}
+
+    def q_msg(j: int) -> tuple[str, dict]:
+        return '/wrist/joint_states', {'header': stamp(j), 'name': ['wrist'], 'position': [float(q[j])],
+                                       'velocity': [0.0], 'effort': [0.0]}
+
+    def targets(j: int) -> list[tuple[str, dict]]:
+        return [(f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
+                for kind in ('strain', 'stress') for i in (1, 2)]
+    msgs: list[tuple[str, dict]] = []
+    for j in range(n):
+        if order == 'in_order':
+            msgs += [T_msg(j, 1), T_msg(j, 2), q_msg(j)] + targets(j)
+        else:  # the angle first, T_1 of this tick overtaken by the next one's, an old T_2 late
+            msgs += [q_msg(j), T_msg(j, 2)] + ([T_msg(0, 1)] if j == 0 else []) + \
+                ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
+        rt.add(HysteresisCompensator)
+        for i in (1, 2):
+            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
+        rt.spin_for(0.001, until='steady')
+        for topic, fields in msgs:
+            probe.publish(topic, **fields)
+            rt.spin_for(0.0005, until='steady')
+    got = np.array([[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]).T
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
+    ref.reset(T[0], stress)
+    expected = []
+    for j in range(n):
+        if j:
+            ref.track(T[j], stress, bundle_strain(plant, q[j]), 0.01)
+        expected.append(ref(strain[j], stress, commit=False).temperature_C)
+    assert got.shape == (n, 2)
+    assert np.ptp(got[:, 0]) > 5.0  # the answers move (the test would see a mixed tick)
+    np.testing.assert_allclose(got, expected, atol=1e-9)

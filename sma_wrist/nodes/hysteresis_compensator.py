@@ -7,9 +7,15 @@ Targets the window cannot reach give the nearest reachable temperature, reported
 /diagnostics; malformed targets are rejected and counted. With the measured memory, the
 measured joint angle adapts each wire's temperature axis (``shift_gain_per_s``,
 :meth:`~sma_wrist.core.compensation.MuscleCompensator.track`, docs/control.md "Feedback off-model").
+
+The memory and the axis follow the measurements sample by sample, in the order of their header
+stamps: the temperatures and the angle of one plant tick are paired by stamp and advance the
+memory once, whatever order they arrive in and whenever the targets arrive (issue 15 item 6,
+docs/runtime.md "Message timing").
 """
 from __future__ import annotations
 
+import math
 from collections import deque
 from typing import Any, Mapping
 
@@ -27,6 +33,10 @@ from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 #: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
 MAX_PENDING_CYCLES = 5
+#: measurement ticks waiting for a missing part (a lost temperature or angle): beyond this the oldest
+#: goes on without it (temperatures without the angle: the memory still follows) or is dropped
+MAX_PENDING_TICKS = 5
+ANGLE = 2  # slot of the angle in one tick's [T_1, T_2, angle]
 
 
 class HysteresisCompensator(WristNode):
@@ -60,8 +70,10 @@ class HysteresisCompensator(WristNode):
         self.pending: dict[str, deque[float | None]] = {k: deque() for k in INPUTS}
         self.T_meas = np.full(2, np.nan)
         self.stress_meas = np.full(2, np.nan)
-        self.q_meas = float('nan')
-        self.t_track: float | None = None  # node-clock time of the last adaptation step [s]
+        # per header stamp [ns], one plant tick's [T_1, T_2, angle] not yet taken into the memory
+        self.ticks: dict[int, list[float]] = {}
+        self.t_tick_ns: int | None = None  # stamp of the last tick the memory took
+        self.angle_seen = False  # joint_states arrive: a tick waits for its angle
         self.plant = PlantParams()  # chain geometry of the measured strains
         self.started = False
         self._saturated: bool | None = None  # last state reported on /diagnostics
@@ -95,10 +107,10 @@ class HysteresisCompensator(WristNode):
                                       shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'])
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
-        warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'])
+        warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'], shift_gain_per_s=1.0)
         T_mid = 0.5 * (window[0] + window[1])
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
-        warm.observe(np.full(2, T_mid + 1.0), np.full(2, 1.2e8))
+        warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
         self.started = False  # re-seed the memory from the next measurement
 
@@ -107,15 +119,66 @@ class HysteresisCompensator(WristNode):
 
     def _on_measured_T(self, i: int, msg: Any) -> None:
         if finite(msg.temperature):
-            self.T_meas[i - 1] = msg.temperature
+            self._measured(msg, i - 1, msg.temperature)
 
     def _on_measured_stress(self, i: int, msg: Any) -> None:
         if finite(msg.data) and msg.data >= 0:
             self.stress_meas[i - 1] = msg.data
+            if not self.started:
+                self._start()
 
     def _on_joint_state(self, msg: Any) -> None:
         if msg.position and finite(msg.position[0]):
-            self.q_meas = msg.position[0]
+            self.angle_seen = True
+            self._measured(msg, ANGLE, msg.position[0])
+
+    def _stamp_ns(self, msg: Any) -> int:
+        st = msg.header.stamp
+        return st.sec * 1_000_000_000 + st.nanosec if st.sec or st.nanosec else self.now_ns()
+
+    def _measured(self, msg: Any, slot: int, value: float) -> None:
+        """File one measurement under its tick's stamp; take every complete tick into the memory in
+        stamp order. Under ROS the temperatures, the angle and the targets of a tick arrive in any
+        order: taking 'the latest' at each cycle's targets paired an angle of one tick with the
+        temperatures of another and skipped the samples replaced meanwhile (a temperature reversal
+        among them: a missed turning point), so the memory depended on the arrival order."""
+        t = self._stamp_ns(msg)
+        if self.t_tick_ns is not None and t <= self.t_tick_ns:
+            return  # later than a newer tick already taken: the memory does not go back
+        self.ticks.setdefault(t, [math.nan, math.nan, math.nan])[slot] = value
+        while self.ticks:
+            t0 = min(self.ticks)
+            T_1, T_2, q = tick = self.ticks[t0]
+            complete = T_1 == T_1 and T_2 == T_2 and (q == q or not self.angle_seen)  # x == x: not NaN
+            if not complete and len(self.ticks) <= MAX_PENDING_TICKS:
+                return
+            del self.ticks[t0]
+            if T_1 == T_1 and T_2 == T_2:
+                self._take_tick(t0, tick)
+
+    def _start(self) -> None:
+        """Start the memory at the last measured tick once the loads are known too."""
+        if finite(*self.T_meas.tolist(), *self.stress_meas.tolist()):
+            self.comp.reset(self.T_meas, self.stress_meas)
+            self.started = True
+
+    def _take_tick(self, t_ns: int, tick: list[float]) -> None:
+        """Advance the memory (and the adapted axis) by one measured tick."""
+        self.T_meas = np.array(tick[:2])
+        dt = 0.0 if self.t_tick_ns is None else (t_ns - self.t_tick_ns) * 1e-9
+        self.t_tick_ns = t_ns
+        if not self.started:
+            self._start()
+            return
+        if self.p['memory_source'] != 'measured':
+            return
+        try:
+            if tick[ANGLE] == tick[ANGLE]:
+                self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, tick[ANGLE]), dt)
+            else:
+                self.comp.observe(self.T_meas, self.stress_meas)
+        except SmaWristError as e:
+            self.diagnose('inverse', DiagnosticStatus.ERROR, f'memory update failed: {e}')
 
     def _on_target(self, key: str, msg: Any) -> None:
         """Collect one cycle's four targets, paired by their order on each topic, not by arrival.
@@ -152,20 +215,9 @@ class HysteresisCompensator(WristNode):
         else:
             stress = np.array([v['stress_1'], v['stress_2']])
         if not self.started:
-            if not finite(*self.T_meas.tolist(), *self.stress_meas.tolist()):
-                return  # memory needs a measured starting point
-            self.comp.reset(self.T_meas, self.stress_meas)
-            self.started = True
-        observed = self.p['memory_source'] == 'measured'
+            return  # memory needs a measured starting point (_take_tick)
         try:
-            if observed and finite(self.q_meas):
-                now = self.get_clock().now().nanoseconds * 1e-9
-                dt = 0.0 if self.t_track is None else max(now - self.t_track, 0.0)
-                self.t_track = now
-                self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, self.q_meas), dt)
-            elif observed:
-                self.comp.observe(self.T_meas, self.stress_meas)
-            res = self.comp(strain, stress, commit=not observed)
+            res = self.comp(strain, stress, commit=self.p['memory_source'] != 'measured')
         except SmaWristError as e:
             self.diagnose('inverse', DiagnosticStatus.ERROR, f'inverse failed: {e}')
             return

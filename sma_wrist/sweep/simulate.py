@@ -158,7 +158,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=shift_gain_per_s,
                                  shift_limit_C=15.0)
     comp_started = False
-    t_track: float | None = None  # the compensator's node-clock time of its last adaptation step [s]
+    t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     tem = TemLoopBank.like_node(n, tem_params)
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
@@ -182,6 +182,17 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         now_ns = int(round(s.t * 1e9))
         qd_rec[k] = float(traj((now_ns - tick_ns) * 1e-9)[0])
         q_d, qdot_d, qddot_d = (float(x) for x in traj((now_ns - 2 * tick_ns) * 1e-9))
+        if comp is not None and k >= 1:
+            # hysteresis_compensator's memory and axis take every measured tick (its first, t_1, starts
+            # them), dt from the stamps, before the cycle's targets arrive
+            idx, bank = groups['inverse_adaptive']
+            stress_g, T_g = stress[idx].ravel(), T_m[idx].ravel()
+            if not comp_started:
+                comp.reset(T_g, stress_g)
+                comp_started = True
+            else:
+                comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), (now_ns - t_track_ns) * 1e-9)
+            t_track_ns = now_ns
         if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():
@@ -191,16 +202,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                     continue
                 assert comp is not None and force is not None
                 # the compensator's compiled paths take flat wire arrays: (n, 2) -> (2n,)
-                stress_g, T_g = stress[idx].ravel(), T_m[idx].ravel()
-                if not comp_started:
-                    comp.reset(T_g, stress_g)
-                    comp_started = True
-                # its clock reads /clock as integer ns * 1e-9; the first step has no dt
-                now = now_ns * 1e-9
-                dt_track = 0.0 if t_track is None else max(now - t_track, 0.0)
-                t_track = now
-                comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), dt_track)
-                T_new[idx] = comp(strain.ravel(), stress_g, commit=False).temperature_C.reshape(-1, 2)
+                T_new[idx] = comp(strain.ravel(), stress[idx].ravel(), commit=False).temperature_C.reshape(-1, 2)
             T_d = T_new
         u_rec[k] = u
         wrists.advance(u, steps)
