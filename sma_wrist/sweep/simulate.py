@@ -52,6 +52,8 @@ FloatArray = NDArray[np.float64]
 TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
 SHIFT_GAIN_PER_S = 1.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
+#: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
+TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 
 
 @dataclass(frozen=True)
@@ -128,14 +130,23 @@ def _stamp_s(t: float) -> float:
 def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
              base: PlantParams | None = None, record: bool = False,
              on_tick: Callable[[float], None] | None = None, window_s: float = SEED_PERIOD_S,
-             tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S
-             ) -> tuple[list[dict[str, Any]], Trace | None]:
+             tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
+             true_temperature: Sequence[str] = ()) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
     Metrics over the last ``window_s`` [s]. The laws are the nodes' defaults; ``tem_params``
     (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
     (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
-    controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``)."""
+    controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``).
+
+    ``true_temperature``: a diagnosis, not a controller -- the named consumers (``'compensator'``,
+    ``'tem'``) read the plant's true muscle temperatures instead of the thermocouples' (lag,
+    noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a perfect temperature observer in that place could give
+    (docs/control.md, "Where the thermocouple error acts")."""
+    bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
+    if bad:
+        raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
+                             f'{", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
     if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
@@ -173,10 +184,15 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         dt_law, t_last = t - t_last, t
         t_rec[k] = t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
+        T_tem = T_comp = T_m
+        if true_temperature:  # a plant with its own thermocouple (phase fraction) also has the node's
+            T_true = getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
+            T_tem = T_true if 'tem' in true_temperature else T_m
+            T_comp = T_true if 'compensator' in true_temperature else T_m
         stress = wrists.wire_stress_Pa
         q_rec[k], qm_rec[k] = s.q, q_m
         # plant_sim publishes t = 0 before the others subscribe: the TEM loop starts at the first tick
-        u = tem.sample(t, T_m, T_d) if k >= 1 else np.zeros((n, 2))
+        u = tem.sample(t, T_tem, T_d) if k >= 1 else np.zeros((n, 2))
         # trajectory_generator's clock starts at its first tick (t_1): the reference stamped t_k is
         # q_d(t_k - t_1); the controller at t_k still holds the one stamped t_k-1
         now_ns = int(round(s.t * 1e9))
@@ -191,7 +207,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                     continue
                 assert comp is not None and force is not None
                 # the compensator's compiled paths take flat wire arrays: (n, 2) -> (2n,)
-                stress_g, T_g = stress[idx].ravel(), T_m[idx].ravel()
+                stress_g, T_g = stress[idx].ravel(), T_comp[idx].ravel()
                 if not comp_started:
                     comp.reset(T_g, stress_g)
                     comp_started = True
@@ -215,4 +231,4 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
 
 __all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S', 'CHATTER_DEADBAND_V',
-           'SHIFT_GAIN_PER_S']
+           'SHIFT_GAIN_PER_S', 'TRUE_TEMPERATURE_CONSUMERS']
