@@ -6,6 +6,8 @@ about a third; docs/control.md has the full 126 s table.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -16,7 +18,8 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis import initial_state, step
 from sma_wrist.core.muscle import MuscleGeometry
 from sma_wrist.core.tem_control import DriveLimits, TemControlParams, TemLoop
-from sma_wrist.plants.loop import CASES, REVERSAL_BAND_V, reversals_per_s, run_loop, shifted_sdgpi
+from sma_wrist.plants.loop import (CASES, REVERSAL_BAND_V, LoopResult, reversals_per_s, run_cases, run_loop,
+                                  shifted_sdgpi)
 
 #: TEM command sign changes per second allowed (docs/control.md "Chattering"): one heating/cooling
 #: cycle per time constant 1 / gain_per_s = 1 s of the TEM loop's error dynamics
@@ -119,10 +122,18 @@ def test_target_prefilter_removes_chattering_on_noisy_sensors() -> None:
     assert raw.reversals_per_s > 15.0
 
 
+@functools.lru_cache(maxsize=None)
+def _one_cycle_all(case: str, modes: tuple[str, ...]) -> dict[str, LoopResult]:
+    """:func:`_one_cycle` for several modes in one vectorised run (a loop does not depend on its
+    neighbours, test_sweep), computed once for the parametrised tests that read it."""
+    res = run_cases([(CASES[case](0.3), m) for m in modes], 62.83, window_s=31.4)
+    return dict(zip(modes, res))
+
+
 @pytest.mark.parametrize('mode, bound', [('direct_adaptive', 10.0), ('pid', 10.0)])
 def test_modes_without_inverse_hold_on_other_heat_losses(mode: str, bound: float) -> None:
     """Muscle-face losses +30 %: measured 7.2 % (direct) and 7.7 % (pid), 1.1 and 1.5 sign changes a second."""
-    r = _one_cycle('losses +30%', mode)
+    r = _one_cycle_all('losses +30%', ('direct_adaptive', 'pid'))[mode]
     assert r.max_error_pct < bound and r.reversals_per_s < REVERSALS_LIMIT_PER_S
 
 
@@ -143,7 +154,7 @@ _SHORT = {'inverse_adaptive': 'inverse on the phase-fraction wrist: 58 % > 50 % 
 @pytest.mark.parametrize('mode', [pytest.param(m, marks=pytest.mark.xfail(strict=True, reason=_SHORT[m]))
                                   if m in _SHORT else m for m in PHASE_FRACTION])
 def test_each_mode_on_the_phase_fraction_wrist(mode: str) -> None:
-    r = _one_cycle('phase_fraction', mode)
+    r = _one_cycle_all('phase_fraction', tuple(PHASE_FRACTION))[mode]
     assert r.max_error_pct < PHASE_FRACTION[mode]
     assert r.reversals_per_s < REVERSALS_LIMIT_PER_S
 

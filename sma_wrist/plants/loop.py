@@ -180,7 +180,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw['true_temperature'] = tuple(a.true_temperature.split(','))
         unknown = sorted(set(kw['true_temperature']) - set(TRUE_TEMPERATURE_CONSUMERS))
         if unknown:
-            ap.error(f'--true-temperature: unknown {", ".join(unknown)}; known: {", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
+            ap.error(f'--true-temperature: unknown {", ".join(unknown)}; '
+                     f'known: {", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
     names = a.cases.split(',')
     bad = [c for c in names if c not in CASES]
     if bad:

@@ -141,8 +141,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
     ``true_temperature``: a diagnosis, not a controller -- the named consumers (``'compensator'``,
     ``'tem'``) read the plant's true muscle temperatures instead of the thermocouples' (lag,
-    noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a perfect temperature observer in that place could give
-    (docs/control.md, "Where the thermocouple error acts")."""
+    noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a
+    perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts")."""
     bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
     if bad:
         raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
