@@ -14,10 +14,11 @@ import pytest
 from sma_wrist.core import thermal as th
 from sma_wrist.core.compensation import MuscleCompensator
 from sma_wrist.core.default_params import default_sdgpi
-from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.core.hysteresis import initial_state, step
 from sma_wrist.core.muscle import MuscleGeometry
-from sma_wrist.core.tem_control import DriveLimits, TemControlParams, TemLoop
+from sma_wrist.core.tem_control import (DriveLimits, MuscleTemperatureObserver, TemControlParams, TemLoop,
+                                        TemperatureObserverParams)
 from sma_wrist.plants.loop import (CASES, REVERSAL_BAND_V, LoopResult, reversals_per_s, run_cases, run_loop,
                                   shifted_sdgpi)
 
@@ -173,3 +174,45 @@ def test_thermocouple_error_acts_through_the_inverse_compensator() -> None:
 def test_true_temperature_names_known_consumers_only() -> None:
     with pytest.raises(ParameterError, match="unknown consumer.*thermostat"):
         run_loop(CASES['nominal'](0.3), 'pid', 1.0, true_temperature=('thermostat',))
+
+
+def test_observer_follows_the_muscle_through_noise_and_lag() -> None:
+    """The heat balance under a heating/cooling command sequence; the thermocouple lags 0.2 s and
+    adds 0.3 degC noise. The observer's error is a tenth of the raw measurement's (measured RMS
+    0.040 vs 0.394 degC, lag included) and has no bias (mean 0.004 degC); exact measurements on its
+    own model are reproduced exactly."""
+    thermal = th.ThermalParams()
+    rng = np.random.default_rng(4)
+    dt, n = 0.01, 3000
+    u = np.where((np.arange(n) // 500) % 2 == 0, 12.0, -12.0)[:, None] * np.array([1.0, -1.0])
+    x = th.rest_state(thermal, 1)
+    junction = x[0, :, 0].copy()
+    obs = MuscleTemperatureObserver(thermal, TemperatureObserverParams(correction_s=0.33, tc_lag_s=0.2))
+    exact = MuscleTemperatureObserver(thermal, TemperatureObserverParams(correction_s=0.33, tc_lag_s=0.0))
+    err_obs, err_raw, err_exact = [], [], []
+    for k in range(n):
+        meas = junction + 0.3 * rng.standard_normal(2)
+        est = obs.update(meas[None], u[k - 1][None] if k else np.zeros((1, 2)), dt)
+        est_exact = exact.update(x[0, :, 0][None], u[k - 1][None] if k else np.zeros((1, 2)), dt)
+        if k > 200:
+            err_obs.append(est[0] - x[0, :, 0])
+            err_raw.append(meas - x[0, :, 0])
+            err_exact.append(est_exact[0] - x[0, :, 0])
+        x = th.step(thermal, x, u[k][None], dt)
+        junction = junction + dt / (0.2 + dt) * (x[0, :, 0] - junction)
+    rms = lambda e: float(np.sqrt(np.mean(np.square(e))))  # noqa: E731
+    assert rms(err_obs) < 0.15 * rms(err_raw)
+    assert abs(float(np.mean(err_obs))) < 0.02
+    assert rms(err_exact) < 1e-9
+    with pytest.raises(ModelInputError):
+        obs.update(np.array([[np.nan, 30.0]]), np.zeros((1, 2)), dt)
+    with pytest.raises(ParameterError):
+        TemperatureObserverParams(correction_s=-1.0)
+
+
+def test_observer_in_front_of_the_compensator_recovers_the_inverse_on_noisy_sensors() -> None:
+    """One cycle, sensors case: measured 13.9 % with the thermocouples, 3.5 % with the true
+    temperature (test above), 2.87 % (2.2 sign changes a second) with MuscleTemperatureObserver
+    (0.33 s, 0.2 s) in front of the compensator."""
+    r = _one_cycle('sensors', 'inverse_adaptive', compensator_observer=TemperatureObserverParams())
+    assert r.max_error_pct < 4.0

@@ -41,7 +41,7 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant import PlantParams
-from sma_wrist.core.tem_control import TemControlParams
+from sma_wrist.core.tem_control import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
 from sma_wrist.core.trajectory import make_trajectory
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
@@ -131,7 +131,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              base: PlantParams | None = None, record: bool = False,
              on_tick: Callable[[float], None] | None = None, window_s: float = SEED_PERIOD_S,
              tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
-             true_temperature: Sequence[str] = ()) -> tuple[list[dict[str, Any]], Trace | None]:
+             true_temperature: Sequence[str] = (), compensator_observer: TemperatureObserverParams | None = None
+             ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
     Metrics over the last ``window_s`` [s]. The laws are the nodes' defaults; ``tem_params``
@@ -142,7 +143,10 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     ``true_temperature``: a diagnosis, not a controller -- the named consumers (``'compensator'``,
     ``'tem'``) read the plant's true muscle temperatures instead of the thermocouples' (lag,
     noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a
-    perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts")."""
+    perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts").
+    ``compensator_observer``: the compensator reads a :class:`MuscleTemperatureObserver` of the
+    thermocouples driven by the TEM commands -- the measured design for hysteresis_compensator,
+    not yet in the node graph (so runs with it are not the graph's)."""
     bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
     if bad:
         raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
@@ -171,6 +175,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     comp_started = False
     t_track: float | None = None  # the compensator's node-clock time of its last adaptation step [s]
     tem = TemLoopBank.like_node(n, tem_params)
+    # the TEM loops' heat-balance model, the one tem_controller's observer integrates
+    observer = None if compensator_observer is None else MuscleTemperatureObserver(tem.thermal, compensator_observer)
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
@@ -185,10 +191,13 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         t_rec[k] = t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
         T_tem = T_comp = T_m
+        if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
+            T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)), TICK_S)
         if true_temperature:  # a plant with its own thermocouple (phase fraction) also has the node's
             T_true = getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
             T_tem = T_true if 'tem' in true_temperature else T_m
-            T_comp = T_true if 'compensator' in true_temperature else T_m
+            if 'compensator' in true_temperature:
+                T_comp = T_true
         stress = wrists.wire_stress_Pa
         q_rec[k], qm_rec[k] = s.q, q_m
         # plant_sim publishes t = 0 before the others subscribe: the TEM loop starts at the first tick
