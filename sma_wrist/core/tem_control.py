@@ -199,6 +199,77 @@ def observer_step(thermal: th.ThermalParams, state: ArrayLike, command_V: ArrayL
     return th.step(thermal, T, command_V, dt, validate=False)
 
 
+@dataclass(frozen=True)
+class TemperatureObserverParams:
+    """:class:`MuscleTemperatureObserver`'s parameters.
+
+    correction_s: time constant with which the estimate is pulled toward the measurement [s]
+        (the innovation gain per sample is dt / (correction_s + dt)); between samples the heat
+        balance under the commands in force carries it.
+    tc_lag_s: first-order lag of the thermocouple the observer assumes [s] (0: none); the
+        estimate is of the muscle, the measurement of the junction behind it.
+    """
+
+    correction_s: float = 0.33
+    tc_lag_s: float = 0.2
+
+    def __post_init__(self) -> None:
+        for name in ('correction_s', 'tc_lag_s'):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and 0.0 <= v <= 10.0):
+                raise ParameterError(f'{name} = {v!r} s must be in [0, 10] s')
+
+
+class MuscleTemperatureObserver:
+    """Muscle temperatures of N wrists estimated from noisy, lagged thermocouples (Luenberger).
+
+    State: the faces (N, 2 layers, 2) of the heat balance (Eqs. 4.13-4.14, the controllers'
+    ThermalParams) and the junction temperature z (N, 2). Per sample, with the commands (N, 2) [V]
+    in force since the previous one held for dt [s]:
+
+        x <- RK4 step of the heat balance (:func:`observer_step`),
+        z <- z + dt / (tc_lag_s + dt) (x_muscle - z),                 (thermocouple lag)
+        r = T_meas - z,  x_muscle += L r,  z += L r,  L = dt / (correction_s + dt).
+
+    Unlike a filter of the measurement alone it neither lags the muscle nor overshoots it: the
+    motion between samples is the heat balance's, driven by the commands, so the path the SD-GPI
+    memory observes is one a wire can take (docs/control.md, "Where the thermocouple error acts").
+    The first sample initialises it at the measurement (exchanger faces at rest).
+    """
+
+    def __init__(self, thermal: th.ThermalParams, params: TemperatureObserverParams = TemperatureObserverParams()
+                 ) -> None:
+        self.thermal = thermal
+        self.params = params
+        self.faces: FloatArray | None = None  # (N, 2, 2) degC
+        self.junction: FloatArray | None = None  # (N, 2) degC
+
+    def update(self, T_meas: ArrayLike, command_V: ArrayLike, dt: float) -> FloatArray:
+        """One sample: measured junction temperatures (N, 2) [degC], commands (N, 2) [V] held over the
+        last dt [s]; returns the estimated muscle temperatures (N, 2) [degC]. Raises ModelInputError on
+        a non-finite measurement or command (the estimate is then unchanged)."""
+        T = np.asarray(T_meas, dtype=float)
+        u = np.asarray(command_V, dtype=float)
+        check_finite('measured muscle temperature', T, 'degC')
+        check_finite('TEM command', u, 'V')
+        if self.faces is None or self.junction is None or self.faces.shape[0] != T.shape[0]:
+            self.faces = th.rest_state(self.thermal, T.shape[0])
+            self.faces[:, :, th.MUSCLE_FACE] = T
+            self.junction = T.copy()
+            return T.copy()
+        if not (np.isfinite(dt) and dt > 0):
+            raise ModelInputError('observer time step', dt, '(0, inf)', 's')
+        faces = observer_step(self.thermal, self.faces, u, min(dt, self.thermal.dt_max_s), compiled=False)
+        muscle = faces[:, :, th.MUSCLE_FACE]
+        p = self.params
+        z = self.junction + dt / (p.tc_lag_s + dt) * (muscle - self.junction)
+        gain = dt / (p.correction_s + dt)
+        r = T - z
+        muscle += gain * r
+        self.faces, self.junction = faces, z + gain * r
+        return muscle.copy()
+
+
 def two_layer_command(thermal: th.ThermalParams, state: ArrayLike, T_d_muscle: ArrayLike, T_d_rate: ArrayLike,
                       gain_per_s: float = 1.0) -> TemControlResult:
     """Two layers (Fig. 5.26): one controller per layer on its muscle face, h = (1, 0).

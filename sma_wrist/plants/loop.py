@@ -20,9 +20,10 @@ import numpy as np
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant import WristPlant
-from sma_wrist.core.tem_control import TemControlParams
+from sma_wrist.core.tem_control import TemControlParams, TemperatureObserverParams
 from sma_wrist.plants.spread import Scenario, perturbed_hysteresis, scenario_params
-from sma_wrist.sweep.simulate import CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, Case, Trace, sign_changes_per_s, simulate
+from sma_wrist.sweep.simulate import (CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, TRUE_TEMPERATURE_CONSUMERS, Case, Trace,
+                                      sign_changes_per_s, simulate)
 
 #: a command counts as heating above +REVERSAL_BAND_V and as cooling below -REVERSAL_BAND_V
 REVERSAL_BAND_V = CHATTER_DEADBAND_V
@@ -92,14 +93,17 @@ def _result(row: dict[str, Any], trace: Trace | None = None) -> LoopResult:
 
 def run_cases(cases: Sequence[tuple[OffModelCase, str]], duration_s: float = 126.0, window_s: float = SEED_PERIOD_S,
               tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
-              on_tick: Callable[[float], None] | None = None) -> list[LoopResult]:
-    """(case, mode) pairs as closed loops of the sweep engine, one vectorised run per plant; results in order."""
+              on_tick: Callable[[float], None] | None = None, true_temperature: Sequence[str] = (),
+              compensator_observer: TemperatureObserverParams | None = None) -> list[LoopResult]:
+    """(case, mode) pairs as closed loops of the sweep engine, one vectorised run per plant; results in order.
+    ``true_temperature``, ``compensator_observer``: as in :func:`~sma_wrist.sweep.simulate.simulate`."""
     out: list[LoopResult | None] = [None] * len(cases)
     for plant in dict.fromkeys(c.plant for c, _ in cases):
         idx = [i for i, (c, _) in enumerate(cases) if c.plant == plant]
         rows, _ = simulate([Case(i, cases[i][1], cases[i][0].scenario) for i in idx], duration_s, plant,
                            on_tick=on_tick, window_s=window_s, tem_params=tem_params,
-                           shift_gain_per_s=shift_gain_per_s)
+                           shift_gain_per_s=shift_gain_per_s, true_temperature=true_temperature,
+                           compensator_observer=compensator_observer)
         for i, row in zip(idx, rows):
             out[i] = _result(row)
     return [r for r in out if r is not None]
@@ -107,12 +111,16 @@ def run_cases(cases: Sequence[tuple[OffModelCase, str]], duration_s: float = 126
 
 def run_loop(case: OffModelCase, mode: str, duration_s: float = 126.0, window_s: float = SEED_PERIOD_S,
              tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
-             record: bool = False, on_tick: Callable[[float], None] | None = None) -> LoopResult:
+             record: bool = False, on_tick: Callable[[float], None] | None = None,
+             true_temperature: Sequence[str] = (), compensator_observer: TemperatureObserverParams | None = None
+             ) -> LoopResult:
     """One case under one mode (the node graph's loop, :mod:`sma_wrist.sweep.simulate`) for ``duration_s``;
     metrics over the last ``window_s`` (the last full cycle of the Sec. 6.1 sine). ``tem_params`` /
-    ``shift_gain_per_s``: the laws' parameters (default: the nodes')."""
+    ``shift_gain_per_s``: the laws' parameters (default: the nodes'); ``true_temperature``,
+    ``compensator_observer``: as in :func:`~sma_wrist.sweep.simulate.simulate`."""
     rows, trace = simulate([Case(0, mode, case.scenario)], duration_s, case.plant, record=record, on_tick=on_tick,
-                           window_s=window_s, tem_params=tem_params, shift_gain_per_s=shift_gain_per_s)
+                           window_s=window_s, tem_params=tem_params, shift_gain_per_s=shift_gain_per_s,
+                           true_temperature=true_temperature, compensator_observer=compensator_observer)
     return _result(rows[0], trace)
 
 
@@ -162,11 +170,28 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     ap.add_argument('--duration', type=float, default=126.0)
     ap.add_argument('--legacy', action='store_true',
                     help='the controllers before issue 14: no target prefilter, no temperature-axis adaptation')
+    ap.add_argument('--true-temperature', default='', metavar='CONSUMERS',
+                    help='diagnosis: comma list of compensator,tem that read the true muscle temperature instead '
+                         'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
+    ap.add_argument('--observer', default='', metavar='CORRECTION_S,LAG_S',
+                    help='the compensator reads a heat-balance observer of the thermocouples (not yet in the node '
+                         'graph; docs/control.md), e.g. 0.33,0.2')
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
     if a.legacy:
         kw = {'tem_params': TemControlParams(rate_filter_s=0.05), 'shift_gain_per_s': 0.0}
+    if a.true_temperature:
+        kw['true_temperature'] = tuple(a.true_temperature.split(','))
+        unknown = sorted(set(kw['true_temperature']) - set(TRUE_TEMPERATURE_CONSUMERS))
+        if unknown:
+            ap.error(f'--true-temperature: unknown {", ".join(unknown)}; '
+                     f'known: {", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
+    if a.observer:
+        try:
+            kw['compensator_observer'] = TemperatureObserverParams(*(float(x) for x in a.observer.split(',')))
+        except (ValueError, TypeError, ParameterError) as e:
+            ap.error(f'--observer {a.observer!r}: {e}')
     names = a.cases.split(',')
     bad = [c for c in names if c not in CASES]
     if bad:

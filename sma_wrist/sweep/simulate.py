@@ -41,7 +41,7 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant import PlantParams
-from sma_wrist.core.tem_control import TemControlParams
+from sma_wrist.core.tem_control import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
 from sma_wrist.core.trajectory import make_trajectory
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
@@ -52,6 +52,8 @@ FloatArray = NDArray[np.float64]
 TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
 SHIFT_GAIN_PER_S = 1.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
+#: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
+TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 
 
 @dataclass(frozen=True)
@@ -128,14 +130,27 @@ def _stamp_s(t: float) -> float:
 def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
              base: PlantParams | None = None, record: bool = False,
              on_tick: Callable[[float], None] | None = None, window_s: float = SEED_PERIOD_S,
-             tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S
+             tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
+             true_temperature: Sequence[str] = (), compensator_observer: TemperatureObserverParams | None = None
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
     Metrics over the last ``window_s`` [s]. The laws are the nodes' defaults; ``tem_params``
     (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
     (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
-    controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``)."""
+    controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``).
+
+    ``true_temperature``: a diagnosis, not a controller -- the named consumers (``'compensator'``,
+    ``'tem'``) read the plant's true muscle temperatures instead of the thermocouples' (lag,
+    noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a
+    perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts").
+    ``compensator_observer``: the compensator reads a :class:`MuscleTemperatureObserver` of the
+    thermocouples driven by the TEM commands -- the measured design for hysteresis_compensator,
+    not yet in the node graph (so runs with it are not the graph's)."""
+    bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
+    if bad:
+        raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
+                             f'{", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
     if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
@@ -160,6 +175,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     tem = TemLoopBank.like_node(n, tem_params)
+    # the TEM loops' heat-balance model, the one tem_controller's observer integrates
+    observer = None if compensator_observer is None else MuscleTemperatureObserver(tem.thermal, compensator_observer)
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
@@ -173,10 +190,18 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         dt_law, t_last = t - t_last, t
         t_rec[k] = t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
+        T_tem = T_comp = T_m
+        if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
+            T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)), TICK_S)
+        if true_temperature:  # a plant with its own thermocouple (phase fraction) also has the node's
+            T_true = getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
+            T_tem = T_true if 'tem' in true_temperature else T_m
+            if 'compensator' in true_temperature:
+                T_comp = T_true
         stress = wrists.wire_stress_Pa
         q_rec[k], qm_rec[k] = s.q, q_m
         # plant_sim publishes t = 0 before the others subscribe: the TEM loop starts at the first tick
-        u = tem.sample(t, T_m, T_d) if k >= 1 else np.zeros((n, 2))
+        u = tem.sample(t, T_tem, T_d) if k >= 1 else np.zeros((n, 2))
         # trajectory_generator's clock starts at its first tick (t_1): the reference stamped t_k is
         # q_d(t_k - t_1); the controller at t_k still holds the one stamped t_k-1
         now_ns = int(round(s.t * 1e9))
@@ -186,7 +211,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             # hysteresis_compensator's memory and axis take every measured tick (its first, t_1, starts
             # them), dt from the stamps, before the cycle's targets arrive
             idx, bank = groups['inverse_adaptive']
-            stress_g, T_g = stress[idx].ravel(), T_m[idx].ravel()
+            stress_g, T_g = stress[idx].ravel(), T_comp[idx].ravel()
             if not comp_started:
                 comp.reset(T_g, stress_g)
                 comp_started = True
@@ -217,4 +242,4 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
 
 __all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S', 'CHATTER_DEADBAND_V',
-           'SHIFT_GAIN_PER_S']
+           'SHIFT_GAIN_PER_S', 'TRUE_TEMPERATURE_CONSUMERS']
