@@ -358,3 +358,12 @@ def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(
     except SmaWristError:
         pass  # the replay may refuse a run recorded with another wire; what matters is which wire it replays
     assert seen and seen[0].hysteresis.name == 'identified SD-GPI'
+    # the extended model it writes runs the wire it replayed, not silently the built-in one
+    import yaml
+
+    from sma_wrist.core.hysteresis_file import save_hysteresis
+    wire = save_hysteresis(tmp_path / 'wire.yaml', default_sdgpi())  # a wire this run was recorded with
+    dg.diagnose_run(load_run(bag), params_out=tmp_path / 'ext.yaml', candidates=['friction'], hysteresis_file=str(wire))
+    ros = yaml.safe_load((tmp_path / 'ext.yaml').read_text())['plant_sim']['ros__parameters']
+    assert ros['hysteresis_file'] == str(wire.resolve())
+    assert load_hysteresis(ros['hysteresis_file']).envelopes.a.shape == default_sdgpi().envelopes.a.shape

@@ -320,12 +320,12 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         separating_measurement=separating, bound_hits=hits, warnings=list(run.warnings), source=run.source,
         duration_s=run.duration)
     if params_out is not None:
-        res.params_file = str(write_params(res, params_out, run))
+        res.params_file = str(write_params(res, params_out, run, hysteresis_file))
     if report_dir is not None:
         d = Path(report_dir)
         d.mkdir(parents=True, exist_ok=True)
         if res.params_file is None:
-            res.params_file = str(write_params(res, d / 'extended_params.yaml', run))
+            res.params_file = str(write_params(res, d / 'extended_params.yaml', run, hysteresis_file))
         traces = {'t': run.t[sl], 'i_train': ev.i_train - ev.i0, 'regressors': reg,
                   'meas': {c: ev.measured(c)[sl] for c in ev.channels},
                   'nominal': {c: ev.pred_nom[c][sl, 0] for c in ev.channels},
@@ -349,14 +349,20 @@ def at_bound(f: ft.Fit) -> list[dict[str, Any]]:
     return out
 
 
-def write_params(res: DiagnosisResult, path: str | Path, run: Run) -> Path:
-    """The extended model as a ROS 2 params file for plant_sim (schema: docs/diagnose.md)."""
+def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_file: str | Path | None = None) -> Path:
+    """The extended model as a ROS 2 params file for plant_sim (schema: docs/diagnose.md).
+
+    ``hysteresis_file``: the wire the diagnosis replayed; carried (absolute) so that the file
+    runs the same wire instead of silently falling back to the built-in one.
+    """
     import yaml
 
     from sma_wrist.core import model_extensions as mx
     # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
     # model.payload_err_kg the joint carries on top of it
     params: dict[str, Any] = {'payload_kg': float(run.payload_kg)}
+    if hysteresis_file:
+        params['hysteresis_file'] = str(Path(hysteresis_file).resolve())
     params.update({f'model.{k}': float(d['value']) for k, d in res.parameters.items()})
     replay_only = [k for k in res.parameters if k in mx.REPLAY_ONLY]
     doc = {'plant_sim': {'ros__parameters': params}}

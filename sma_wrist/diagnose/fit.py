@@ -92,6 +92,7 @@ class Evaluator:
         if run.T is not None:
             self.sigma['thermal'] = max(fx.noise_sigma(run.T, 200.0 / 2 ** 16), REPLAY_RESOLUTION * float(np.ptp(run.T)))
         self.input_noise = 0.0
+        self.step_error = 0.0
         if run.q is not None:
             self.sigma['mechanics'] = self.sigma['chain'] = max(fx.noise_sigma(run.q, 2 * np.pi / 2 ** 16),
                                                                 REPLAY_RESOLUTION * float(np.ptp(run.q)))
@@ -99,6 +100,8 @@ class Evaluator:
                 # errors in the input variables: the thermocouple noise the replay is driven by
                 self.input_noise = model.input_noise_angle(self.i0)
                 self.sigma['mechanics'] = float(np.hypot(self.sigma['mechanics'], self.input_noise))
+            # the replay's own step error must not pass for a discrepancy (or be fitted by one)
+            self.step_error = model.choose_mechanics_step(self.sigma['mechanics'], self.i0)
         self.nominal = fx.NOMINAL.copy()
         ntr = self.i_train - self.i0
         self.sub = max(1, ntr // MAX_FIT_SAMPLES)

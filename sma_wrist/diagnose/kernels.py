@@ -157,7 +157,7 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
     n_op = r.size
     h = dt / substeps
     p0, T_lo, T_hi = mech[9], mech[10], mech[11]
-    I_w, lever, stick_v = joint[0], joint[1], joint[5]
+    lever = joint[1]
     q_min, q_max, g = joint[7], joint[8], joint[9]
     w = np.empty((2, n_op))
     w_now = np.empty(n_op)
@@ -167,6 +167,11 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
     compliance = np.ones(2)
     for j in range(N):
         coulomb, viscous, static, preload, payload = jrow[j, 0], jrow[j, 1], jrow[j, 2], jrow[j, 3], jrow[j, 4]
+        # this scenario's joint for the plant's own step (plant_kernel.joint_step_one)
+        jj = joint.copy()
+        jj[2] = coulomb
+        jj[3] = viscous
+        jj[4] = static
         # --- rest state: memory at the upper bound (cooled from hot) at m = 0.8 kgf
         for side in range(2):
             T0 = min(max(T[0, j, side], T_lo), T_hi)
@@ -199,7 +204,6 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
         out_qd[0, j] = 0.0
         out_load[0, j, 0] = load[0]
         out_load[0, j, 1] = load[1]
-        inertia = I_w + payload * lever * lever
         for k in range(1, K):
             for s in range(substeps):
                 frac = (s + 1.0) / substeps
@@ -218,26 +222,7 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
                 ym2 = _memoryless(Ts1, heating[1], mem_c, mem_d, p0)
                 torque, stiffness = _loads(Ts0, Ts1, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2,
                                            preload, 2, True, stacked, edges, r, p, mech)
-                tau_drive = torque - payload * g * lever * math.cos(q)
-                at_rest = abs(qd) < stick_v
-                stuck = at_rest and abs(tau_drive) <= static
-                if at_rest:
-                    direction = 1.0 if tau_drive > 0 else (-1.0 if tau_drive < 0 else 0.0)
-                else:
-                    direction = 1.0 if qd > 0 else -1.0
-                h_over_i = h / inertia
-                qd_new = (qd + h_over_i * (tau_drive - direction * coulomb)) / (1.0 + h_over_i * (viscous + h * stiffness))
-                s_new = 1.0 if qd_new > 0 else (-1.0 if qd_new < 0 else 0.0)
-                s_old = 1.0 if qd > 0 else (-1.0 if qd < 0 else 0.0)
-                reversed_ = (not at_rest) and s_new != s_old and abs(tau_drive) <= static + coulomb
-                if stuck or reversed_:
-                    qd_new = 0.0
-                q_new = q + h * qd_new
-                if q_new < q_min or q_new > q_max:
-                    q_new = min(max(q_new, q_min), q_max)
-                    qd_new = 0.0
-                q = q_new
-                qd = qd_new
+                q, qd = pk.joint_step_one(q, qd, torque, stiffness, payload, h, jj)
             out_q[k, j] = q
             out_qd[k, j] = qd
             out_load[k, j, 0] = load[0]
