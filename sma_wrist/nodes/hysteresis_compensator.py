@@ -117,6 +117,9 @@ class HysteresisCompensator(WristNode):
         if problem is None and not values['temperature_min_C'] < values['temperature_max_C']:
             problem = (f'temperature_min_C = {values["temperature_min_C"]} must be below '
                        f'temperature_max_C = {values["temperature_max_C"]}')
+        if problem is None and values['temperature_source'] == 'observer' and values['memory_source'] != 'measured':
+            problem = ("temperature_source 'observer' feeds the measured memory: it needs memory_source 'measured' "
+                       f"(is {values['memory_source']!r})")
         if problem is None:
             try:
                 lo, hi = hysteresis_params(values['hysteresis_file']).T_valid
