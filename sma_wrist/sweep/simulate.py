@@ -145,8 +145,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a
     perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts").
     ``compensator_observer``: the compensator reads a :class:`MuscleTemperatureObserver` of the
-    thermocouples driven by the TEM commands -- the measured design for hysteresis_compensator,
-    not yet in the node graph (so runs with it are not the graph's)."""
+    thermocouples driven by the TEM commands: the node graph with hysteresis_compensator's
+    ``temperature_source: observer`` and the same ``observer.*`` parameters."""
     bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
     if bad:
         raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
