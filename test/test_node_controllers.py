@@ -291,6 +291,25 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
     assert logged[2:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']
 
 
+def _compensator_answers(probe_factory, stress: np.ndarray, msgs: list[tuple[str, dict]], overrides=()
+                         ) -> tuple[np.ndarray, int]:
+    """hysteresis_compensator fed the measured stresses, then msgs one by one: its answers (n, 2) [degC]
+    and its count of rejected inputs."""
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
+        node = rt.add(HysteresisCompensator, parameter_overrides=list(overrides))
+        for i in (1, 2):
+            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
+        rt.spin_for(0.001, until='steady')
+        for topic, fields in msgs:
+            probe.publish(topic, **fields)
+            rt.spin_for(0.0005, until='steady')
+        rejected = node.rejected_inputs
+    got = np.array([[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]).T
+    return got, rejected
+
+
 @pytest.mark.parametrize('order', ['in_order', 'shuffled'])
 def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arrival_order(probe_factory, order):
     """Issue 15 item 6: the memory and the adapted axis follow the measured ticks (temperatures + angle
@@ -305,7 +324,6 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
     from sma_wrist.core.joint_controller import bundle_strain
     from sma_wrist.core.muscle import MuscleGeometry
     from sma_wrist.core.plant import PlantParams
-    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     n = 30
@@ -334,16 +352,7 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
         else:  # the angle first, T_1 of this tick overtaken by the next one's, an old T_2 late
             msgs += [q_msg(j), T_msg(j, 2)] + ([T_msg(0, 1)] if j == 0 else []) + \
                 ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
-    with Runtime() as rt:
-        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
-        rt.add(HysteresisCompensator)
-        for i in (1, 2):
-            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
-        rt.spin_for(0.001, until='steady')
-        for topic, fields in msgs:
-            probe.publish(topic, **fields)
-            rt.spin_for(0.0005, until='steady')
-    got = np.array([[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]).T
+    got, _ = _compensator_answers(probe_factory, stress, msgs)
     ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
     ref.reset(T[0], stress)
     expected = []
@@ -371,7 +380,7 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
     from sma_wrist.core.muscle import MuscleGeometry
     from sma_wrist.core.plant import PlantParams
     from sma_wrist.core.tem_control import MuscleTemperatureObserver, TemperatureObserverParams
-    from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL, HysteresisCompensator
+    from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     n = 25
@@ -395,17 +404,7 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
         targets = [(f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
                    for kind in ('strain', 'stress') for i in (1, 2)]
         msgs += temps + (angle + cmds if order == 'in_order' else cmds + angle) + targets
-    with Runtime() as rt:
-        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
-        node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('temperature_source', value='observer')])
-        for i in (1, 2):
-            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
-        rt.spin_for(0.001, until='steady')
-        for topic, fields in msgs:
-            probe.publish(topic, **fields)
-            rt.spin_for(0.0005, until='steady')
-        rejected = node.rejected_inputs
-    got = np.array([[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]).T
+    got, rejected = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')])
     obs = MuscleTemperatureObserver(OBSERVER_THERMAL, TemperatureObserverParams())
     raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
     ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
