@@ -26,6 +26,12 @@ def _declared(node: str) -> set[str]:
     return {p.name for p in getattr(importlib.import_module(mod), cls).PARAMS} | {'use_sim_time'}
 
 
+def _flat_keys(tree: dict, prefix: str = '') -> list[str]:
+    """Parameter names of a params-file map: nested maps are dotted names, as rcl reads them."""
+    return [k for key, sub in tree.items()
+            for k in (_flat_keys(sub, f'{prefix}{key}.') if isinstance(sub, dict) else [f'{prefix}{key}'])]
+
+
 @pytest.mark.parametrize('path', sorted((ROOT / 'config').glob('*.yaml')), ids=lambda p: p.name)
 def test_every_params_file_key_is_a_declared_parameter(path):
     tree = yaml.safe_load(path.read_text())
@@ -33,7 +39,7 @@ def test_every_params_file_key_is_a_declared_parameter(path):
         assert set(body) == {'ros__parameters'}, f'{path.name}: {node} must hold only ros__parameters'
         if node == '/**' or node not in NODE_CLASSES:
             continue
-        unknown = set(body['ros__parameters']) - _declared(node)
+        unknown = set(_flat_keys(body['ros__parameters'])) - _declared(node)
         assert not unknown, f'{path.name}: {node} has undeclared parameters {sorted(unknown)} (typo?)'
 
 

@@ -291,6 +291,25 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
     assert logged[2:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']
 
 
+def _compensator_answers(probe_factory, stress: np.ndarray, msgs: list[tuple[str, dict]], overrides=()
+                         ) -> tuple[np.ndarray, int]:
+    """hysteresis_compensator fed the measured stresses, then msgs one by one: its answers (n, 2) [degC]
+    and its count of rejected inputs."""
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    with Runtime() as rt:
+        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
+        node = rt.add(HysteresisCompensator, parameter_overrides=list(overrides))
+        for i in (1, 2):
+            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
+        rt.spin_for(0.001, until='steady')
+        for topic, fields in msgs:
+            probe.publish(topic, **fields)
+            rt.spin_for(0.0005, until='steady')
+        rejected = node.rejected_inputs
+    got = np.array([[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]).T
+    return got, rejected
+
+
 @pytest.mark.parametrize('order', ['in_order', 'shuffled'])
 def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arrival_order(probe_factory, order):
     """Issue 15 item 6: the memory and the adapted axis follow the measured ticks (temperatures + angle
@@ -305,7 +324,6 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
     from sma_wrist.core.joint_controller import bundle_strain
     from sma_wrist.core.muscle import MuscleGeometry
     from sma_wrist.core.plant import PlantParams
-    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     n = 30
@@ -334,16 +352,7 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
         else:  # the angle first, T_1 of this tick overtaken by the next one's, an old T_2 late
             msgs += [q_msg(j), T_msg(j, 2)] + ([T_msg(0, 1)] if j == 0 else []) + \
                 ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
-    with Runtime() as rt:
-        probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
-        rt.add(HysteresisCompensator)
-        for i in (1, 2):
-            probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
-        rt.spin_for(0.001, until='steady')
-        for topic, fields in msgs:
-            probe.publish(topic, **fields)
-            rt.spin_for(0.0005, until='steady')
-    got = np.array([[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]).T
+    got, _ = _compensator_answers(probe_factory, stress, msgs)
     ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
     ref.reset(T[0], stress)
     expected = []
@@ -354,3 +363,80 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
     assert got.shape == (n, 2)
     assert np.ptp(got[:, 0]) > 5.0  # the answers move (the test would see a mixed tick)
     np.testing.assert_allclose(got, expected, atol=1e-9)
+
+
+@pytest.mark.parametrize('order', ['in_order', 'command_overtakes_the_angle'])
+def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_factory, order):
+    """temperature_source observer: the memory follows MuscleTemperatureObserver's estimate, driven over
+    each tick by the (unstamped) command tem_controller sent after the previous tick, also when that
+    command arrives before the tick's angle; a NaN command is rejected and changes nothing."""
+    from builtin_interfaces.msg import Time
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Header
+
+    from sma_wrist.core.compensation import MuscleCompensator
+    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.joint_controller import bundle_strain
+    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.core.plant import PlantParams
+    from sma_wrist.core.tem_control import MuscleTemperatureObserver, TemperatureObserverParams
+    from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL
+    g, plant = MuscleGeometry(), PlantParams()
+    stress = g.stress_Pa(np.array([0.8, 0.7]))
+    n = 25
+    k = np.arange(n)
+    T = np.stack([45.0 + 20.0 * np.sin(np.pi * k / 20), 60.0 - 15.0 * np.sin(np.pi * k / 20)], axis=1)
+    u = np.stack([12.0 * np.cos(np.pi * k / 10), -8.0 + 0.5 * k], axis=1)  # [V], sent after tick k
+    q = 0.5 + 0.3 * np.sin(np.pi * k / 20)
+    strain = np.stack([bundle_strain(plant, x + 0.02) for x in q])
+
+    def stamp(j: int) -> Header:
+        return Header(stamp=Time(sec=1 + j // 100, nanosec=(j % 100) * 10_000_000))
+
+    msgs: list[tuple[str, dict]] = []
+    for j in range(n):
+        temps = [(f'/wrist/muscle_{i}/temperature', {'header': stamp(j), 'temperature': float(T[j, i - 1])}) for i in (1, 2)]
+        angle = [('/wrist/joint_states', {'header': stamp(j), 'name': ['wrist'], 'position': [float(q[j])],
+                                          'velocity': [0.0], 'effort': [0.0]})]
+        cmds = [(f'/wrist/tem_{i}/command', {'data': float(u[j, i - 1])}) for i in (1, 2)]
+        if j == 5:
+            cmds.insert(0, ('/wrist/tem_1/command', {'data': float('nan')}))
+        targets = [(f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
+                   for kind in ('strain', 'stress') for i in (1, 2)]
+        msgs += temps + (angle + cmds if order == 'in_order' else cmds + angle) + targets
+    got, rejected = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')])
+    obs = MuscleTemperatureObserver(OBSERVER_THERMAL, TemperatureObserverParams())
+    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
+    expected, thermocouple = [], []
+    for j in range(n):
+        est = obs.update(T[j:j + 1], u[j - 1:j] if j else np.zeros((1, 2)), 0.01)[0]
+        if j:
+            ref.track(est, stress, bundle_strain(plant, q[j]), 0.01)
+            raw.track(T[j], stress, bundle_strain(plant, q[j]), 0.01)
+        else:
+            ref.reset(est, stress)
+            raw.reset(T[j], stress)
+        expected.append(ref(strain[j], stress, commit=False).temperature_C)
+        thermocouple.append(raw(strain[j], stress, commit=False).temperature_C)
+    assert got.shape == (n, 2) and rejected == 1
+    assert np.max(np.abs(np.array(expected) - thermocouple)) > 0.5  # the estimate is not the thermocouple
+    np.testing.assert_allclose(got, expected, atol=1e-9)
+
+
+def test_compensator_observer_parameters_are_validated_with_a_reason():
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    with Runtime() as rt:
+        node = rt.add(HysteresisCompensator)
+        name, = node.set_parameters([Parameter('temperature_source', value='kalman')])
+        negative, = node.set_parameters([Parameter('observer.correction_s', value=-0.1)])
+        ok = node.set_parameters([Parameter('temperature_source', value='observer'),
+                                  Parameter('observer.tc_lag_s', value=0.1)])
+        on = node.observer is not None and node.observer.params.tc_lag_s == 0.1
+        commanded, = node.set_parameters([Parameter('memory_source', value='commanded')])
+    assert not name.successful and 'not one of' in name.reason
+    assert not negative.successful and 'correction_s' in negative.reason
+    assert all(r.successful for r in ok) and on
+    assert not commanded.successful and "needs memory_source 'measured'" in commanded.reason

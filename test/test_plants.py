@@ -174,6 +174,29 @@ def test_graph_runs_a_perturbed_plant_and_the_sweep_is_the_graph(mode: str) -> N
     assert np.max(np.abs(nominal.q - run.q)) > 1e-3  # the perturbations reached the graph
 
 
+def test_graph_with_the_temperature_observer_is_the_sweep_with_it() -> None:
+    """hysteresis_compensator ``temperature_source: observer`` (its observer paired with the unstamped TEM
+    commands by arrival) runs what ``simulate(..., compensator_observer=...)`` runs: same measured angles and
+    TEM commands to the last bit on the perturbed plant, and not the thermocouple-fed loop (they part at
+    3.5 s on this plant: 5 s here)."""
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.core.tem_control import TemperatureObserverParams
+    from sma_wrist.sweep.simulate import Case, simulate
+    sc, obs = PERTURBED, TemperatureObserverParams(correction_s=0.25, tc_lag_s=0.15)
+    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
+                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}},
+             '/hysteresis_compensator': {'temperature_source': 'observer', 'observer.correction_s': obs.correction_s,
+                                         'observer.tc_lag_s': obs.tc_lag_s}}
+    with tempfile.TemporaryDirectory() as d:
+        run = run_closed_loop('inverse_adaptive', sc.payload_kg, 5.0, Path(d) / 'bag', extra_params=extra).run
+    _, tr = simulate([Case(0, 'inverse_adaptive', sc)], 5.0, record=True, compensator_observer=obs)
+    k, kc = np.rint(run.t / 0.01).astype(int), np.rint(run.command_t / 0.01).astype(int)
+    assert np.max(np.abs(run.q - tr.q_measured[k, 0])) <= 1e-12
+    np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
+    _, raw = simulate([Case(0, 'inverse_adaptive', sc)], 5.0, record=True)
+    assert np.max(np.abs(run.q - raw.q_measured[k, 0])) > 1e-5  # the observer reached the memory
+
+
 def test_graph_runs_the_phase_fraction_wrist_and_the_sweep_is_the_graph() -> None:
     """plant_sim ``plant:=phase_fraction`` (the structurally different wire, its own thermocouple lag
     plus the scenario's sensor noise) in the node graph for 4 s; the sweep's loop on the same plant and

@@ -12,11 +12,20 @@ The memory and the axis follow the measurements sample by sample, in the order o
 stamps: the temperatures and the angle of one plant tick are paired by stamp and advance the
 memory once, whatever order they arrive in and whenever the targets arrive (issue 15 item 6,
 docs/runtime.md "Message timing").
+
+``temperature_source: observer`` feeds the memory and the axis with a
+:class:`~sma_wrist.core.tem_control.MuscleTemperatureObserver` of the thermocouples (heat balance
+Eqs. 4.13-4.14 driven by the TEM commands) instead of the raw thermocouple, as the sweep's
+``compensator_observer`` does (docs/control.md "The observer in the node graph"). The commands carry
+no stamp: each is filed at its arrival (the node clock, or the newest measurement stamp seen if
+later) and a tick stamped t_k takes the newest command filed before t_k, the one tem_controller
+computed from the previous tick.
 """
 from __future__ import annotations
 
 import math
 from collections import deque
+from dataclasses import replace
 from typing import Any, Mapping
 
 import numpy as np
@@ -28,6 +37,8 @@ from sma_wrist.core.hysteresis_file import hysteresis_params
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.joint_controller import bundle_strain
 from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.tem_control import DriveLimits, MuscleTemperatureObserver, TemperatureObserverParams
+from sma_wrist.core.thermal import ThermalParams
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
@@ -37,6 +48,10 @@ MAX_PENDING_CYCLES = 5
 #: goes on without it (temperatures without the angle: the memory still follows) or is dropped
 MAX_PENDING_TICKS = 5
 ANGLE = 2  # slot of the angle in one tick's [T_1, T_2, angle]
+#: TEM commands kept per layer for the observer: enough for MAX_PENDING_TICKS ticks waiting, with slack
+MAX_COMMANDS = 4 * MAX_PENDING_TICKS
+#: the observer's heat balance: tem_controller's defaults (Table 4.9, saturation at the driver rating)
+OBSERVER_THERMAL = replace(ThermalParams(), u_min_V=DriveLimits().boost_min_V, u_max_V=DriveLimits().boost_max_V)
 
 
 class HysteresisCompensator(WristNode):
@@ -59,6 +74,13 @@ class HysteresisCompensator(WristNode):
               "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
               '"Feedback off-model")', '1/s', (0.0, 20.0)),
         Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
+        Param('temperature_source', 'thermocouple', 'temperature the memory and the axis follow: the thermocouple '
+              'as measured (default) or the muscle-temperature observer driven by the TEM commands (docs/control.md '
+              '"The observer in the node graph")', choices=('thermocouple', 'observer')),
+        Param('observer.correction_s', TemperatureObserverParams.correction_s, 'temperature_source observer: time '
+              'constant pulling the estimate toward the thermocouple', 's', (0.0, 10.0)),
+        Param('observer.tc_lag_s', TemperatureObserverParams.tc_lag_s, 'temperature_source observer: first-order lag '
+              'of the thermocouple the observer assumes (0: none)', 's', (0.0, 10.0)),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -77,6 +99,9 @@ class HysteresisCompensator(WristNode):
         self.plant = PlantParams()  # chain geometry of the measured strains
         self.started = False
         self._saturated: bool | None = None  # last state reported on /diagnostics
+        # per TEM layer, (filed at [ns], command [V]) received, oldest first (the observer's inputs)
+        self.commands: list[deque[tuple[int, float]]] = [deque(maxlen=MAX_COMMANDS) for _ in (1, 2)]
+        self.t_seen_ns = 0  # newest measurement stamp received
         self.pub_T = [self.publisher(f'/wrist/muscle_{i}/temperature_desired') for i in (1, 2)]
         for i in (1, 2):
             self.subscription(f'/wrist/muscle_{i}/strain_desired', lambda m, i=i: self._on_target(f'strain_{i}', m))
@@ -84,12 +109,17 @@ class HysteresisCompensator(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_measured_T(i, m))
             self.subscription(f'/wrist/muscle_{i}/stress', lambda m, i=i: self._on_measured_stress(i, m))
         self.subscription('/wrist/joint_states', self._on_joint_state)
+        for i in (1, 2):
+            self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m))
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
         if problem is None and not values['temperature_min_C'] < values['temperature_max_C']:
             problem = (f'temperature_min_C = {values["temperature_min_C"]} must be below '
                        f'temperature_max_C = {values["temperature_max_C"]}')
+        if problem is None and values['temperature_source'] == 'observer' and values['memory_source'] != 'measured':
+            problem = ("temperature_source 'observer' feeds the measured memory: it needs memory_source 'measured' "
+                       f"(is {values['memory_source']!r})")
         if problem is None:
             try:
                 lo, hi = hysteresis_params(values['hysteresis_file']).T_valid
@@ -112,7 +142,9 @@ class HysteresisCompensator(WristNode):
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
-        self.started = False  # re-seed the memory from the next measurement
+        self.observer = None if self.p['temperature_source'] != 'observer' else MuscleTemperatureObserver(
+            OBSERVER_THERMAL, TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
+        self.started = False  # re-seed the memory (and the observer) from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:
         self._build()
@@ -132,6 +164,25 @@ class HysteresisCompensator(WristNode):
             self.angle_seen = True
             self._measured(msg, ANGLE, msg.position[0])
 
+    def _on_command(self, i: int, msg: Any) -> None:
+        """File one TEM command for the observer. Unstamped: it is in force from its arrival, on the
+        node clock or, if the clock lags the data (sim time), after the newest measurement stamp seen."""
+        if not finite(msg.data):
+            self.reject_input(f'tem_{i}/command', f'non-finite command {msg.data!r} V')
+            return
+        self.commands[i - 1].append((max(self.now_ns(), self.t_seen_ns), msg.data))
+
+    def _command_before(self, t_ns: int) -> np.ndarray:
+        """(1, 2) commands [V] in force over the tick ending at t_ns: per layer the newest filed
+        before t_ns (0 V before the first: plant_sim starts with the TEMs off)."""
+        u = np.zeros((1, 2))
+        for j, q in enumerate(self.commands):
+            while len(q) > 1 and q[1][0] < t_ns:  # older ones are never in force again: stamps only grow
+                q.popleft()
+            if q and q[0][0] < t_ns:
+                u[0, j] = q[0][1]
+        return u
+
     def _stamp_ns(self, msg: Any) -> int:
         st = msg.header.stamp
         return st.sec * 1_000_000_000 + st.nanosec if st.sec or st.nanosec else self.now_ns()
@@ -143,6 +194,7 @@ class HysteresisCompensator(WristNode):
         temperatures of another and skipped the samples replaced meanwhile (a temperature reversal
         among them: a missed turning point), so the memory depended on the arrival order."""
         t = self._stamp_ns(msg)
+        self.t_seen_ns = max(self.t_seen_ns, t)
         if self.t_tick_ns is not None and t <= self.t_tick_ns:
             return  # later than a newer tick already taken: the memory does not go back
         self.ticks.setdefault(t, [math.nan, math.nan, math.nan])[slot] = value
@@ -164,9 +216,16 @@ class HysteresisCompensator(WristNode):
 
     def _take_tick(self, t_ns: int, tick: list[float]) -> None:
         """Advance the memory (and the adapted axis) by one measured tick."""
-        self.T_meas = np.array(tick[:2])
         dt = 0.0 if self.t_tick_ns is None else (t_ns - self.t_tick_ns) * 1e-9
         self.t_tick_ns = t_ns
+        if self.observer is None:
+            self.T_meas = np.array(tick[:2])
+        else:
+            try:
+                self.T_meas = self.observer.update(np.array([tick[:2]]), self._command_before(t_ns), dt)[0]
+            except SmaWristError as e:  # the estimate stays; this tick is not taken
+                self.reject_input('observer', f'tick skipped: {e}')  # constant text: one report per fault
+                return
         if not self.started:
             self._start()
             return

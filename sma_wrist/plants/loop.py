@@ -174,8 +174,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                     help='diagnosis: comma list of compensator,tem that read the true muscle temperature instead '
                          'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
     ap.add_argument('--observer', default='', metavar='CORRECTION_S,LAG_S',
-                    help='the compensator reads a heat-balance observer of the thermocouples (not yet in the node '
-                         'graph; docs/control.md), e.g. 0.33,0.2')
+                    help='the compensator reads a heat-balance observer of the thermocouples (the graph\'s '
+                         'hysteresis_compensator temperature_source observer; docs/control.md), e.g. 0.33,0.2')
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}

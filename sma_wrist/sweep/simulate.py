@@ -145,8 +145,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a
     perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts").
     ``compensator_observer``: the compensator reads a :class:`MuscleTemperatureObserver` of the
-    thermocouples driven by the TEM commands -- the measured design for hysteresis_compensator,
-    not yet in the node graph (so runs with it are not the graph's)."""
+    thermocouples driven by the TEM commands: the node graph with hysteresis_compensator's
+    ``temperature_source: observer`` and the same ``observer.*`` parameters."""
     bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
     if bad:
         raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
@@ -174,6 +174,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                                  shift_limit_C=15.0)
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
+    t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]
     tem = TemLoopBank.like_node(n, tem_params)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
     observer = None if compensator_observer is None else MuscleTemperatureObserver(tem.thermal, compensator_observer)
@@ -192,7 +193,10 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
         T_tem = T_comp = T_m
         if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
-            T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)), TICK_S)
+            # dt from the stamps, as hysteresis_compensator's observer takes it
+            T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)),
+                                     (int(round(s.t * 1e9)) - t_obs_ns) * 1e-9)
+            t_obs_ns = int(round(s.t * 1e9))
         if true_temperature:  # a plant with its own thermocouple (phase fraction) also has the node's
             T_true = getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
             T_tem = T_true if 'tem' in true_temperature else T_m
