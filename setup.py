@@ -47,7 +47,7 @@ setup(
         'test': ['pytest>=7', 'hypothesis>=6', 'dask[distributed]>=2023.1'],
         # Reports write PNG plots; optional so a headless robot install stays small.
         'plot': ['matplotlib>=3.5'],
-        # Compiles the per-sample plant step (sma_wrist/core/plant_kernel.py): ~1 us instead of
+        # Compiles the per-sample plant step (sma_wrist/core/plant/kernel.py): ~1 us instead of
         # ~0.3 ms per 1 kHz step, which is what makes the node graph run faster than real time.
         'fast': ['numba>=0.57'],
         # sma-wrist sweep --scheduler ADDRESS: the chunks run on a Dask distributed cluster

@@ -8,7 +8,7 @@ module and register it here, importing lazily inside it so a section costs nothi
 
 Section 'plant' measures, in one run, the plant's steps per second:
 
-* ``per_sample``: :class:`sma_wrist.core.plant.WristPlant` with one wrist (the node's path);
+* ``per_sample``: :class:`sma_wrist.core.plant.wrist.WristPlant` with one wrist (the node's path);
 * ``batched``: the same class with >= 256 wrists (plant-steps/s = wrists x steps / s);
 * ``plain``: :class:`PlainWrist`, the plant kernel's scalar-loop source run as plain Python
   (uncompiled): the textbook four-stage RK4, the same bracketed Newton load solve, the same
@@ -48,7 +48,7 @@ def section(name: str) -> Callable[[SectionFn], SectionFn]:
 class PlainWrist:
     """One wrist stepped by plain Python: the uncompiled source of the plant kernel.
 
-    :func:`sma_wrist.core.plant_kernel.step_many` is written as scalar loops; its
+    :func:`sma_wrist.core.plant.kernel.step_many` is written as scalar loops; its
     ``py_func`` (the function before numba compiles it, or the function itself without
     numba) is the plain per-sample Python reference loop: same equations, no numpy
     vectorisation, no compilation. Set-up (parameters, initial state) comes from
@@ -56,8 +56,8 @@ class PlainWrist:
     """
 
     def __init__(self, params: object | None = None, payload_kg: float = 0.3) -> None:
-        from sma_wrist.core import plant_kernel
-        from sma_wrist.core.plant import PlantParams, WristPlant
+        from sma_wrist.core.plant import kernel as plant_kernel
+        from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 
         p = params or PlantParams()
         s = WristPlant(p, payload_kg=payload_kg).state  # type: ignore[arg-type]
@@ -107,7 +107,7 @@ def _time_steps(step: Callable[[int], None], n_steps: int, repeats: int) -> floa
 @section('plant')
 def bench_plant(quick: bool = False) -> dict:
     """Plant steps per second: per-sample, batched (>= 256 wrists) and the plain reference."""
-    from sma_wrist.core.plant import PlantParams, WristPlant
+    from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 
     params = PlantParams()
     dt = params.dt
@@ -168,10 +168,10 @@ def bench_plant(quick: bool = False) -> dict:
 
 def _bench_compiled(params: object, n_steps: int, repeats: int) -> dict:
     """WristPlant.advance through the optional numba kernel (plant_kernel), when installed."""
-    from sma_wrist.core import plant_kernel
-    from sma_wrist.core.plant import WristPlant
+    from sma_wrist.core import jit
+    from sma_wrist.core.plant.wrist import WristPlant
 
-    if not plant_kernel.AVAILABLE:
+    if not jit.AVAILABLE:
         return {'compiled_available': False}
     dt = params.dt  # type: ignore[attr-defined]
     out: dict = {'compiled_available': True}

@@ -18,6 +18,7 @@ import yaml
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.share import ShareFileNotFound, share_path
 
+
 class ContractError(SmaWristError):
     """The contract file is missing or inconsistent, or a topic is not in it."""
 

@@ -207,8 +207,8 @@ def tem_story_plot(path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from sma_wrist.core import thermal as th
-    from sma_wrist.core.tem_control import _story
+    from sma_wrist.core.control.tem import _story
+    from sma_wrist.core.thermal import heat_balance as th
     p = th.ThermalParams()
     fig, axes = plt.subplots(2, 2, figsize=(10, 6), sharex=True)
     for row, mode in enumerate(('one module', 'two layers')):

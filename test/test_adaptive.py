@@ -1,4 +1,4 @@
-"""Back-stepping adaptive law (Eqs. 5.24, 5.32, 5.37 as corrected in sma_wrist.core.adaptive)."""
+"""Back-stepping adaptive law (Eqs. 5.24, 5.32, 5.37 as corrected in sma_wrist.core.control.adaptive)."""
 from __future__ import annotations
 
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from sma_wrist.core.adaptive import AdaptiveController, AdaptiveParams
+from sma_wrist.core.control.adaptive import AdaptiveController, AdaptiveParams
 from sma_wrist.core.errors import ModelInputError, ParameterError
 
 WIDE = dict(force_min_N=0.0, force_max_N=1e6, preload_N=500.0)
@@ -78,7 +78,7 @@ def test_table_6_1_presets_and_validation():
 def test_compiled_law_equals_its_plain_python_source(mode, robust):
     """adaptive_kernel.update runs compiled under numba and as plain Python without it: both give
     the same forces, flags and estimates over a random sample sequence (saturating ones included)."""
-    from sma_wrist.core import adaptive_kernel
+    from sma_wrist.core.control import adaptive_kernel
     rng = np.random.default_rng(3)
     p = AdaptiveParams(mode=mode, robust=robust, c1=50.0, c2=80.0, gamma_a=0.5, gamma_b1=0.3, gamma_d1=0.2)
     k = adaptive_kernel.pack(p)

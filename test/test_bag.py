@@ -10,9 +10,9 @@ from sma_wrist import runtime
 runtime.activate()
 
 import rclpy  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.time import Time  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue  # noqa: E402
 from rosgraph_msgs.msg import Clock as ClockMsg  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64  # noqa: E402
@@ -218,8 +218,8 @@ def test_record_topic_subset(tmp_path):
 
 
 # ------------------------------------------------------------------ direct CDR of the high-rate types
-from hypothesis import given, settings, strategies as st  # noqa: E402
-
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st
 from sensor_msgs.msg import Temperature  # noqa: E402
 from std_msgs.msg import Header  # noqa: E402
 

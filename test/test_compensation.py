@@ -4,12 +4,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sma_wrist.core.compensation import MuscleCompensator
-from sma_wrist.core.default_params import default_sdgpi
 from sma_wrist.core.errors import ModelInputError
-from sma_wrist.core.hysteresis import initial_state
-from sma_wrist.core.inverse import InverseCompensator
-from sma_wrist.core.muscle import MuscleGeometry, MuscleModel
+from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.inverse import InverseCompensator
+from sma_wrist.core.hysteresis.muscle import MuscleGeometry, MuscleModel
+from sma_wrist.core.hysteresis.sdgpi import initial_state
 
 
 @pytest.mark.parametrize('load_kgf', [0.75, 0.8, 0.9])  # the superelastic plateau, strokes > 3 mm
@@ -115,8 +115,8 @@ def test_compiled_track_step_is_the_numpy_step(seed: int) -> None:
     the model does not predict (the shift moves, some steps hit the limit)."""
     from unittest import mock
 
-    from sma_wrist.core import plant_kernel
-    if not plant_kernel.AVAILABLE:
+    from sma_wrist.core import jit
+    if not jit.AVAILABLE:
         pytest.skip('numba is not installed: there is only the numpy path')
     g = MuscleGeometry()
     rng = np.random.default_rng(seed)
@@ -131,7 +131,7 @@ def test_compiled_track_step_is_the_numpy_step(seed: int) -> None:
         stress = stress * (1.0 + rng.normal(0.0, 0.01, 2))
         strain = rng.uniform(0.02, 0.05, 2)
         for c, numpy_path in zip(comps, (True, False)):
-            with mock.patch.object(plant_kernel, 'AVAILABLE', not numpy_path):
+            with mock.patch.object(jit, 'AVAILABLE', not numpy_path):
                 c.track(T, stress, strain, 0.01)
         np.testing.assert_allclose(comps[1].shift_C, comps[0].shift_C, rtol=0, atol=1e-12)
         # not bit-equal: math.tanh and a sequential sum against numpy's tanh and matmul (~1e-14 degC)

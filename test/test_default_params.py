@@ -15,10 +15,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sma_wrist.core.default_params import default_sdgpi, loop_descriptors
-from sma_wrist.core.hysteresis import play_bounds
-from sma_wrist.core.muscle import MuscleModel
-from sma_wrist.core.seed_params import elongation, sawtooth_input
+from sma_wrist.core.hysteresis.default_params import default_sdgpi, loop_descriptors
+from sma_wrist.core.hysteresis.muscle import MuscleModel
+from sma_wrist.core.hysteresis.sdgpi import play_bounds
+from sma_wrist.core.hysteresis.seed_params import elongation, sawtooth_input
 
 
 def loop(load_g: float) -> tuple[float, float, float]:

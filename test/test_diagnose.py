@@ -18,8 +18,8 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 import pytest
 
-from sma_wrist.core import model_extensions as mx
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.plant import extensions as mx
 from sma_wrist.diagnose import DiagnoseInputError, diagnose, diagnose_run
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import testdata as td
@@ -232,7 +232,7 @@ def test_effect_hidden_in_closed_loop_data_is_found_and_its_params_file_reproduc
 # ------------------------------------------------------------------------- the extension parameters
 
 def test_nominal_extension_is_the_plain_plant():
-    from sma_wrist.core.plant import PlantParams
+    from sma_wrist.core.plant.wrist import PlantParams
     base = PlantParams()
     assert mx.plant_params({}, base) is base
     assert mx.plant_params(dict(mx.NOMINAL), base) is base

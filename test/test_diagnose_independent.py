@@ -101,7 +101,7 @@ def test_generator_reproduces_the_recording_and_does_not_use_the_extension_code(
 
 
 def test_sensor_chain_per_channel_matches_the_replay():
-    from sma_wrist.core import model_extensions as mx
+    from sma_wrist.core.plant import extensions as mx
     dt = 0.01
     t = np.arange(3000) * dt
     T = np.stack([40 + 20 * np.sin(0.1 * t), 40 - 20 * np.sin(0.13 * t)], axis=1)

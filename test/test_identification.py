@@ -3,10 +3,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from sma_wrist.core.default_params import default_sdgpi
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams, simulate
-from sma_wrist.core.identification import fit_gpi, fit_sdgpi, gpi_vector, simulate_batch
-from sma_wrist.core.seed_params import sawtooth_input
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.identification import (
+    fit_gpi,
+    fit_sdgpi,
+    gpi_vector,
+    simulate_batch,
+)
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, simulate
+from sma_wrist.core.hysteresis.seed_params import sawtooth_input
 from sma_wrist.identify.wrist import shifted_wire
 
 
@@ -67,8 +72,8 @@ def test_fit_sdgpi_recovers_loops_across_loads() -> None:
 
 
 def test_exact_jacobian_matches_central_differences_and_numpy_path() -> None:
-    from sma_wrist.core import identification_kernel as K
-    from sma_wrist.core.identification import IDX_P0, simulate_jac
+    from sma_wrist.core.hysteresis import identification_kernel as K
+    from sma_wrist.core.hysteresis.identification import IDX_P0, simulate_jac
     _, T, _, _ = sawtooth_input(dt=2.0, n_periods=2)
     th = gpi_vector(default_sdgpi(), 0.8)
     th[IDX_P0] = 1.0
@@ -112,7 +117,10 @@ def test_lower_degrees_keep_the_higher_load_terms_at_zero() -> None:
 
 
 def test_clausius_clapeyron_law_is_one_exact_quadratic_section_with_exact_jacobian() -> None:
-    from sma_wrist.core.identification import cc_coefficients, cc_to_quadratic
+    from sma_wrist.core.hysteresis.identification import (
+        cc_coefficients,
+        cc_to_quadratic,
+    )
 
     z = np.array([1.2, 0.3, -0.1, 0.25, 0.04, 60.0, 25.0, 0.8, 0.1, 0.05])
     m = np.linspace(0.1, 2.0, 9)
@@ -127,7 +135,10 @@ def test_clausius_clapeyron_law_is_one_exact_quadratic_section_with_exact_jacobi
 
 
 def test_saturating_stroke_law_has_an_exact_jacobian_and_sections_that_follow_it() -> None:
-    from sma_wrist.core.identification import sat_coefficients, sat_to_sections
+    from sma_wrist.core.hysteresis.identification import (
+        sat_coefficients,
+        sat_to_sections,
+    )
 
     z = np.array([0.2, 1.1, 6.0, 0.25, 0.04, 60.0, 25.0, 0.1, 0.7, 0.05])
     m = np.linspace(0.03, 2.0, 41)
@@ -146,7 +157,7 @@ def test_saturating_stroke_law_has_an_exact_jacobian_and_sections_that_follow_it
 def test_fit_sdgpi_cc_recovers_a_wire_whose_transitions_shift_with_load() -> None:
     """Truth: the default wire at 0.8 kgf, transitions moved 30 degC per kgf (CC law); fit on 4 loads,
     predict a fifth between them."""
-    from sma_wrist.core.identification import cc_to_quadratic, fit_sdgpi_cc
+    from sma_wrist.core.hysteresis.identification import cc_to_quadratic, fit_sdgpi_cc
 
     D = default_sdgpi()
     a, b = D.envelopes.coefficients(np.array(0.8))

@@ -10,17 +10,26 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_identification import two_section_default
 
 from sma_wrist.cli import main as cli_main
-from sma_wrist.core.default_params import default_sdgpi
-from sma_wrist.core.hysteresis import SDGPIParams, simulate
-from sma_wrist.core.hysteresis_file import load_hysteresis, params_from_dict, params_to_dict
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.params_file import (
+    load_hysteresis,
+    params_from_dict,
+    params_to_dict,
+)
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, simulate
 from sma_wrist.identify.hysteresis import Options, run
-from sma_wrist.identify.io import (IdentifyInputError, Units, load_kgf_to_stress, read_measurement,
-                                   stress_to_load_kgf)
+from sma_wrist.identify.io import (
+    IdentifyInputError,
+    Units,
+    load_kgf_to_stress,
+    read_measurement,
+    stress_to_load_kgf,
+)
 from sma_wrist.identify.segment import loops_of
-from test_identification import two_section_default
 
 DATA = Path(__file__).parent / 'data' / 'sma_react'
 HF = DATA / 'NiTiHf'
@@ -165,7 +174,12 @@ def test_real_nitihf_interior_held_out_load_needs_the_clausius_clapeyron_law() -
     """300 MPa held out, trained on 7, 50, 100, 200, 400 MPa: the seed's quadratics of the load
     (one section over 7-400 MPa) swing between 200 and 400 MPa; the Clausius-Clapeyron law
     (transition temperatures shift linearly with stress) interpolates."""
-    from sma_wrist.core.identification import fit_sdgpi, fit_sdgpi_cc, sdgpi_gpi_vectors, simulate_batch
+    from sma_wrist.core.hysteresis.identification import (
+        fit_sdgpi,
+        fit_sdgpi_cc,
+        sdgpi_gpi_vectors,
+        simulate_batch,
+    )
     from sma_wrist.identify.hysteresis import choose_edges
     from sma_wrist.identify.io import REF_LENGTH_MM
     from sma_wrist.identify.loops import errors_pct
@@ -315,7 +329,7 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
 
 def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_does_not() -> None:
     """Targets along the hot wire's own loop at 0.8 kgf: reachable in the derived window, not in 20-80 degC."""
-    from sma_wrist.core.inverse import InverseCompensator
+    from sma_wrist.core.hysteresis.inverse import InverseCompensator
     from sma_wrist.identify.wrist import operating_window, shifted_wire
     hot = shifted_wire(default_sdgpi(), 20.0)
     T = np.r_[np.linspace(55.0, 98.0, 60), np.linspace(98.0, 55.0, 60)]
@@ -361,7 +375,7 @@ def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(
     # the extended model it writes runs the wire it replayed, not silently the built-in one
     import yaml
 
-    from sma_wrist.core.hysteresis_file import save_hysteresis
+    from sma_wrist.core.hysteresis.params_file import save_hysteresis
     wire = save_hysteresis(tmp_path / 'wire.yaml', default_sdgpi())  # a wire this run was recorded with
     dg.diagnose_run(load_run(bag), params_out=tmp_path / 'ext.yaml', candidates=['friction'], hysteresis_file=str(wire))
     ros = yaml.safe_load((tmp_path / 'ext.yaml').read_text())['plant_sim']['ros__parameters']

@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sma_wrist.core import thermal as th
-from sma_wrist.core import thermal_identification as ti
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.thermal_file import load_thermal_file, write_thermal_file
+from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal import identification as ti
+from sma_wrist.core.thermal.params_file import load_thermal_file, write_thermal_file
 from sma_wrist.identify.thermal_testplant import sine_runs
 
 FREQS = (1 / 128, 1 / 32, 1 / 8)
@@ -168,9 +168,10 @@ def identified(peltier_runs: list[ti.ThermalRecord], tmp_path_factory: pytest.Te
     lines.insert(40, lines[39])
     lines[60], lines[61] = lines[61], lines[60]
     files[0].write_text('\n'.join(lines) + '\n')
-    from sma_wrist.cli import main
     import contextlib
     import io
+
+    from sma_wrist.cli import main
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
         code = main(['identify', 'thermal', str(files[0]), str(files[1]), '--holdout', str(files[2]), '--dt', '0.2',
@@ -239,6 +240,7 @@ def _tem_loop(plant_file: str | None, controller_file: str | None, bag: Path | N
     """plant_sim + tem_controller on the embedded runtime, muscle targets held per phase; returns
     the measured muscle temperatures (100 Hz) and records a bag when asked."""
     from conftest import Probe  # type: ignore[import-not-found]
+
     from sma_wrist.nodes.plant_sim import PlantSim
     from sma_wrist.nodes.tem_controller import TemController
     from sma_wrist.runtime.launch import Runtime

@@ -8,12 +8,21 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sma_wrist.core import plant_kernel
-from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core import jit
 from sma_wrist.core.errors import ModelInputError
-from sma_wrist.core.hysteresis import SDGPIParams, initial_state, simulate, step
-from sma_wrist.core.inverse import (InverseCompensator, LinearCorrection, composition_error, inverse_table_parameters,
-                                    pi_inverse_params, pi_inverse_state, pi_series, table_5_1_correction)
+from sma_wrist.core.hysteresis import kernel as hysteresis_kernel
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.inverse import (
+    InverseCompensator,
+    LinearCorrection,
+    composition_error,
+    inverse_table_parameters,
+    pi_inverse_params,
+    pi_inverse_state,
+    pi_series,
+    table_5_1_correction,
+)
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, initial_state, simulate, step
 
 
 def _piecewise_monotone(rng: np.random.Generator, n_seg: int = 30) -> np.ndarray:
@@ -133,10 +142,10 @@ def test_solve_without_commit_leaves_the_memory_and_reports_what_the_answer_give
 
 def _numpy_path(on: bool) -> mock._patch:
     """The compensator's numpy reference (on) or, where numba is installed, its compiled path."""
-    return mock.patch.object(plant_kernel, 'AVAILABLE', plant_kernel.AVAILABLE and not on)
+    return mock.patch.object(jit, 'AVAILABLE', jit.AVAILABLE and not on)
 
 
-@pytest.mark.skipif(not plant_kernel.AVAILABLE, reason='numba is not installed: there is only the numpy path')
+@pytest.mark.skipif(not jit.AVAILABLE, reason='numba is not installed: there is only the numpy path')
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.sampled_from([1, 2, 3]))
 def test_compiled_observe_and_solve_agree_with_the_numpy_path(seed: int, S: int) -> None:
@@ -178,7 +187,7 @@ def test_compiled_observe_and_solve_agree_with_the_numpy_path(seed: int, S: int)
         np.testing.assert_array_equal(comps[1].state.T_prev, comps[0].state.T_prev)
 
 
-@pytest.mark.skipif(not plant_kernel.AVAILABLE, reason='numba is not installed: there is only the numpy path')
+@pytest.mark.skipif(not jit.AVAILABLE, reason='numba is not installed: there is only the numpy path')
 def test_compiled_observe_and_solve_compute_the_floats_of_their_python_source() -> None:
     """The compiled one-wrist path (the residual inlined into the root search) is its own Python
     source run by the interpreter, to the bit: compiling changes no operation and no order (no
@@ -186,7 +195,7 @@ def test_compiled_observe_and_solve_compute_the_floats_of_their_python_source() 
     source's operations keeps the node's numbers."""
     from contextlib import ExitStack
 
-    from sma_wrist.core import inverse
+    from sma_wrist.core.hysteresis import inverse
 
     P = default_sdgpi()
     m_lo, m_hi = P.load_range
@@ -196,7 +205,7 @@ def test_compiled_observe_and_solve_compute_the_floats_of_their_python_source() 
         with ExitStack() as stack:
             if interpreted:
                 for module, names in ((inverse, ('_residual', '_refine', '_argmin_abs', '_nearest_root',
-                                                 '_invert_frozen', '_observe_step')), (plant_kernel, ('_envelopes',))):
+                                                 '_invert_frozen', '_observe_step')), (hysteresis_kernel, ('_envelopes',))):
                     for name in names:
                         stack.enter_context(mock.patch.object(module, name, getattr(module, name).py_func))
             for seed in range(6):

@@ -152,9 +152,9 @@ def test_tem_controller_rejects_implausible_temperatures(probe_factory):
 
 
 def test_compensator_node_matches_the_core_inverse(probe_factory):
-    from sma_wrist.core.compensation import MuscleCompensator
-    from sma_wrist.core.default_params import default_sdgpi
-    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     g = MuscleGeometry()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
@@ -184,7 +184,7 @@ def test_compensator_pairs_one_cycles_targets_whatever_their_arrival_order(probe
     cycle's first ones can overtake this cycle's last; the inverse must see each cycle's own set."""
     from rclpy.parameter import Parameter
 
-    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     g = MuscleGeometry()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
@@ -207,8 +207,8 @@ def test_compensator_pairs_one_cycles_targets_whatever_their_arrival_order(probe
         rt.run_until(0.05, until='steady')
     got = [[m.temperature for m in probe.got[f'/wrist/muscle_{i}/temperature_desired']] for i in (1, 2)]
     assert len(got[0]) == len(got[1]) == 2  # one output per cycle
-    from sma_wrist.core.compensation import MuscleCompensator
-    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
     ref = MuscleCompensator(default_sdgpi())
     ref.reset(np.array([40.0, 40.0]), stress)
     expected = [ref(c, stress).temperature_C for c in cycles]
@@ -220,9 +220,9 @@ def test_compensator_memory_follows_the_measured_or_the_commanded_temperature(pr
     """A wire that did not follow its first command: the second answer differs by where the memory is."""
     from rclpy.parameter import Parameter
 
-    from sma_wrist.core.compensation import MuscleCompensator
-    from sma_wrist.core.default_params import default_sdgpi
-    from sma_wrist.core.muscle import MuscleGeometry
+    from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     g = MuscleGeometry()
     stress = g.stress_Pa(np.array([0.8, 0.8]))
@@ -319,11 +319,11 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
     from builtin_interfaces.msg import Time
     from std_msgs.msg import Header
 
-    from sma_wrist.core.compensation import MuscleCompensator
-    from sma_wrist.core.default_params import default_sdgpi
-    from sma_wrist.core.joint_controller import bundle_strain
-    from sma_wrist.core.muscle import MuscleGeometry
-    from sma_wrist.core.plant import PlantParams
+    from sma_wrist.core.control.joint_controller import bundle_strain
+    from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+    from sma_wrist.core.plant.wrist import PlantParams
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     n = 30
@@ -374,12 +374,15 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
     from rclpy.parameter import Parameter
     from std_msgs.msg import Header
 
-    from sma_wrist.core.compensation import MuscleCompensator
-    from sma_wrist.core.default_params import default_sdgpi
-    from sma_wrist.core.joint_controller import bundle_strain
-    from sma_wrist.core.muscle import MuscleGeometry
-    from sma_wrist.core.plant import PlantParams
-    from sma_wrist.core.tem_control import MuscleTemperatureObserver, TemperatureObserverParams
+    from sma_wrist.core.control.joint_controller import bundle_strain
+    from sma_wrist.core.control.tem import (
+        MuscleTemperatureObserver,
+        TemperatureObserverParams,
+    )
+    from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+    from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))

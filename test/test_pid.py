@@ -4,10 +4,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sma_wrist.core.control.pid import PID, PIDParams
+from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.core.metrics import tracking_metrics
-from sma_wrist.core.pid import PID, PIDParams
-from sma_wrist.core.trajectory import make_trajectory
 
 DT = 1e-3
 WIDE = dict(output_min=-1e9, output_max=1e9)

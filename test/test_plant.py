@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import ModelInputError
-from sma_wrist.core.plant import PlantParams, WristPlant
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+from sma_wrist.core.thermal import heat_balance as th
 
 Q_LOW, Q_HIGH = 0.0, 1.048  # q_d = 0.524 +- 0.524 rad (Sec. 6.1)
 

@@ -6,9 +6,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sma_wrist.core import plant_kernel
+from sma_wrist.core import jit
 from sma_wrist.core.errors import ModelInputError
-from sma_wrist.core.plant import PlantParams, WristPlant
+from sma_wrist.core.plant import kernel as plant_kernel
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 
 
 def _pair(payload, **kw):
@@ -50,5 +51,5 @@ def test_advance_rejects_non_finite_commands():
 
 def test_kernel_is_compiled_where_numba_is_installed():
     pytest.importorskip('numba')
-    assert plant_kernel.AVAILABLE
+    assert jit.AVAILABLE
     assert hasattr(plant_kernel.step_many, 'py_func')

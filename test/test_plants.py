@@ -10,12 +10,19 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sma_wrist.core.default_params import default_sdgpi
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis import initial_state, mirrored_output
-from sma_wrist.core.plant import WristPlant
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.sdgpi import initial_state, mirrored_output
+from sma_wrist.core.plant.wrist import WristPlant
 from sma_wrist.plants import PLANTS, load_hysteresis, make_plant
-from sma_wrist.plants.spread import FAMILY, VALIDITY, Scenario, SensorBank, perturbed_hysteresis, sample
+from sma_wrist.plants.spread import (
+    FAMILY,
+    VALIDITY,
+    Scenario,
+    SensorBank,
+    perturbed_hysteresis,
+    sample,
+)
 
 #: a plant inside issue 14's spread, away from nominal on every axis
 PERTURBED = Scenario(payload_kg=0.4, transition_shift_C=4.0, stroke_scale=0.9, tem_gain_scale=1.1,
@@ -132,7 +139,7 @@ def test_sensors_act_on_the_measurement_not_the_plant() -> None:
 
 def test_identified_wire_is_the_plant_s_wire_and_a_bad_file_is_refused(tmp_path: Path) -> None:
     """``hysteresis_file`` (issue 14, 1(c)): the family perturbs the identified wire, not the default."""
-    from sma_wrist.core.hysteresis_file import save_hysteresis
+    from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.plants.spread import perturbed_hysteresis
     hot = perturbed_hysteresis(default_sdgpi(), 25.0, 1.0)  # a wire transforming 25 degC higher
     path = save_hysteresis(tmp_path / 'hysteresis.yaml', hot)
@@ -180,7 +187,7 @@ def test_graph_with_the_temperature_observer_is_the_sweep_with_it() -> None:
     TEM commands to the last bit on the perturbed plant, and not the thermocouple-fed loop (they part at
     3.5 s on this plant: 5 s here)."""
     from sma_wrist.closed_loop import run_closed_loop
-    from sma_wrist.core.tem_control import TemperatureObserverParams
+    from sma_wrist.core.control.tem import TemperatureObserverParams
     from sma_wrist.sweep.simulate import Case, simulate
     sc, obs = PERTURBED, TemperatureObserverParams(correction_s=0.25, tc_lag_s=0.15)
     extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,

@@ -2,11 +2,16 @@
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from sma_wrist.core.hysteresis import SDGPIParams, play_bounds, simulate
-from sma_wrist.core.inverse import pi_inverse_params, pi_inverse_state, pi_series
-from sma_wrist.core.play import play_series, stop_series
+from sma_wrist.core.hysteresis.inverse import (
+    pi_inverse_params,
+    pi_inverse_state,
+    pi_series,
+)
+from sma_wrist.core.hysteresis.play import play_series, stop_series
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, play_bounds, simulate
 
 R = 0.3 * np.arange(1, 8)
 finite = st.floats(-10, 10, allow_nan=False)
@@ -27,7 +32,7 @@ def test_play_output_within_bounds(v: list[float]) -> None:
 
 @given(temps)
 def test_gpi_play_states_within_envelope_band(T: list[float]) -> None:
-    from sma_wrist.core.hysteresis import initial_state, step
+    from sma_wrist.core.hysteresis.sdgpi import initial_state, step
     s = initial_state(GPI, T[0], 0.0)
     for t in T:
         step(GPI, s, np.array([t]), np.array([0.0]))

@@ -8,15 +8,21 @@ from sma_wrist import runtime
 runtime.activate()
 
 import rclpy  # noqa: E402
+from rcl_interfaces.msg import (  # noqa: E402
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterEvent,
+    SetParametersResult,
+)
 from rclpy.exceptions import (  # noqa: E402
-    InvalidParameterTypeException, InvalidParameterValueException, ParameterAlreadyDeclaredException,
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterAlreadyDeclaredException,
     ParameterNotDeclaredException,
 )
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rcl_interfaces.msg import (  # noqa: E402
-    FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterEvent, SetParametersResult,
-)
 
 
 @pytest.fixture
@@ -31,6 +37,7 @@ def test_embedded_is_active():
     assert runtime.using_embedded()
     assert getattr(rclpy, '__embedded__', False)
     import rclpy.node as rn
+
     from sma_wrist.runtime.rclpy import node as en
     assert rn.Node is en.Node
 

@@ -260,6 +260,7 @@ def test_logger_filters():
 def test_force_activation_refused_when_real_rclpy_imported(monkeypatch):
     import sys
     import types
+
     from sma_wrist.runtime.errors import ActivationError
     fake = types.ModuleType('rclpy')
     monkeypatch.setattr(runtime, '_finder', None)

@@ -98,7 +98,7 @@ def test_row_helpers() -> None:
 
 # ----------------------------------------------------------------------------- what the tables give (measured)
 
-from sma_wrist.core import seed_params as sp  # noqa: E402
+from sma_wrist.core.hysteresis import seed_params as sp  # noqa: E402
 
 
 def test_literal_750g_row_has_no_hysteresis_and_is_not_sma_like() -> None:

@@ -10,9 +10,13 @@ import sys
 import numpy as np
 import pytest
 
+from sma_wrist.core.control.joint_controller import (
+    MODES,
+    JointController,
+    JointControllerParams,
+)
+from sma_wrist.core.control.tem import TemLoop
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.joint_controller import MODES, JointController, JointControllerParams
-from sma_wrist.core.tem_control import TemLoop
 from sma_wrist.plants.spread import sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 from sma_wrist.sweep.run import SweepConfig, make_cases, parse_perturbations, run_sweep

@@ -8,9 +8,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sma_wrist.core import tem_control as tc
-from sma_wrist.core import thermal as th
+from sma_wrist.core.control import tem as tc
 from sma_wrist.core.errors import ModelInputError, ParameterError
+from sma_wrist.core.thermal import heat_balance as th
 
 P = th.ThermalParams()
 WIDE = P.with_limits(-30.0, 30.0)  # the seed's Simulink runs had no limits; +-30 V is I = +-12, still stable
@@ -224,7 +224,7 @@ def test_typed_errors() -> None:
 def test_safe_command_range_keeps_every_face_in_the_window_over_the_horizon():
     """Held for the horizon (checked with 0.05 s steps, the range was found with 1 s RK4 steps),
     the range's ends keep every face inside 0-80 degC; one volt further leaves it."""
-    from sma_wrist.core.tem_control import DriveLimits, safe_command_range
+    from sma_wrist.core.control.tem import DriveLimits, safe_command_range
     P = th.ThermalParams()
     D = DriveLimits()
     wide = th.ThermalParams().with_limits(D.boost_min_V, D.boost_max_V)
@@ -252,7 +252,7 @@ def test_safe_command_range_keeps_every_face_in_the_window_over_the_horizon():
 
 
 def test_predictive_protection_passes_a_safe_request_and_reports_a_clipped_one():
-    from sma_wrist.core.tem_control import DriveLimits, protected_command
+    from sma_wrist.core.control.tem import DriveLimits, protected_command
     P = th.ThermalParams()
     x = th.rest_state(P, 1)
     x[0, :, 0] = [40.0, 79.0]
@@ -269,7 +269,11 @@ def test_one_wrist_kernels_agree_with_the_numpy_path(seed):
     """tem_controller's per-sample path (tem_kernel, compiled with numba) against the numpy
     reference: observer step, linearising law (roots, vertex, flags, saturation) and the
     predictive command range, on random faces, targets and rates."""
-    from sma_wrist.core.tem_control import DriveLimits, observer_step, safe_command_range
+    from sma_wrist.core.control.tem import (
+        DriveLimits,
+        observer_step,
+        safe_command_range,
+    )
     rng = np.random.default_rng(seed)
     x = th.rest_state(P, 1) + rng.uniform(-20.0, 55.0, (1, 2, 2))
     T_d = rng.uniform(0.0, 90.0, (1, 2, 2))
@@ -307,7 +311,7 @@ def test_tem_loop_compiled_sample_matches_the_numpy_functions(seed, predictive):
     """TemLoop's one-call kernel (observer, rate estimate, law, protection, hot muscle) against
     the numpy functions it fuses, over 300 samples of a loop closed through the heat balance:
     irregular sample times, targets that jump, stale stretches, a muscle above the limit."""
-    from sma_wrist.core.tem_control import DriveLimits, TemLoop
+    from sma_wrist.core.control.tem import DriveLimits, TemLoop
     rng = np.random.default_rng(seed)
     drive = DriveLimits(predictive=predictive, protect_above_C=float(rng.uniform(40.0, 75.0)))
     params = tc.TemControlParams(gain_per_s=float(rng.uniform(0.3, 3.0)), rate_filter_s=float(rng.uniform(0.0, 0.2)))

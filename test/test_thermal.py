@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import expm
 
-from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import ModelInputError, ParameterError
+from sma_wrist.core.thermal import heat_balance as th
 
 P = th.ThermalParams()
 _SEED = '000_e2c907079a974115.txt'

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from sma_wrist.core import trajectory as tj
+from sma_wrist.core.control import trajectory as tj
 from sma_wrist.core.errors import ModelInputError, ParameterError
 
 CASES = [

@@ -22,11 +22,11 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from sma_wrist.cli_options import diagnose_arguments as add_arguments
+from sma_wrist.core.errors import ParameterError
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
-from sma_wrist.cli_options import diagnose_arguments as add_arguments
-from sma_wrist.core.errors import ParameterError
 from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
 __all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main']
@@ -160,8 +160,8 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
     t_start = time.perf_counter()
     base = None
     if hysteresis_file:
-        from sma_wrist.core.hysteresis_file import hysteresis_params
-        from sma_wrist.core.plant import PlantParams
+        from sma_wrist.core.hysteresis.params_file import hysteresis_params
+        from sma_wrist.core.plant.wrist import PlantParams
         base = PlantParams(dt=min(run.dt, 0.01), hysteresis=hysteresis_params(hysteresis_file))
     model = fx.ExtendedModel(run, base)
     ev = ft.Evaluator(model)
@@ -357,7 +357,7 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
     """
     import yaml
 
-    from sma_wrist.core import model_extensions as mx
+    from sma_wrist.core.plant import extensions as mx
     # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
     # model.payload_err_kg the joint carries on top of it
     params: dict[str, Any] = {'payload_kg': float(run.payload_kg)}
@@ -370,7 +370,7 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
     out.parent.mkdir(parents=True, exist_ok=True)
     head = (f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
             f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
-            f'# schema: docs/diagnose.md "Params file": plant_sim parameters, model.* as in sma_wrist/core/model_extensions.py\n'
+            f'# schema: docs/diagnose.md "Params file": plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
             + (f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
                f'which refuses this file\n' if replay_only else ''))
     out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))

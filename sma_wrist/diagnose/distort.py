@@ -4,7 +4,7 @@ would distort it (issue 13).
 The diagnosis' own test data (:mod:`.testdata`) inject effects through the extended model
 the diagnosis fits, with the noise it assumes: a model checked against itself. This module
 is written apart from that code on purpose: it imports neither
-:mod:`sma_wrist.core.model_extensions` nor :mod:`.effects`, and works on what a recording
+:mod:`sma_wrist.core.plant.extensions` nor :mod:`.effects`, and works on what a recording
 holds.
 
 * **Sensor effects** rewrite the recorded topics of a clean closed-loop run sample by
@@ -14,7 +14,7 @@ holds.
 * **Actuator effects** (TEM driver dead zone, saturation below the rated limit, late
   commands) change what heats the wires, so the plant is re-simulated open loop at its
   1 kHz step on the recorded commands passed through a model of the driver
-  (:func:`resimulate`, :class:`sma_wrist.core.plant.WristPlant`).
+  (:func:`resimulate`, :class:`sma_wrist.core.plant.wrist.WristPlant`).
 * **Plant effects outside the catalogue** re-simulate with other physics: the heat
   balance's Peltier, Joule and exchanger-face loss coefficients changed by 20-40 %
   (:data:`OFF_MODEL_THERMAL`), none of which a catalogue entry frees.
@@ -31,7 +31,7 @@ from typing import Callable
 
 import numpy as np
 
-from sma_wrist.core.plant import PlantParams, WristPlant
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 from sma_wrist.diagnose.data import Run
 
 #: cold-junction (room) temperature about which a thermocouple gain error scales [degC]

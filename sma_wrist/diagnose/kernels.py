@@ -1,7 +1,7 @@
 """Compiled replay kernels for the diagnosis: thermal and mechanics of the wrist plant,
 vectorised over N parameter scenarios with per-scenario parameters.
 
-The arithmetic is that of :mod:`sma_wrist.core.plant_kernel` (thermal RK4 of Eqs. 4.13-4.14,
+The arithmetic is that of :mod:`sma_wrist.core.plant.kernel` (thermal RK4 of Eqs. 4.13-4.14,
 the SD-GPI wire-load solve, the joint of Eq. 4.18); its private load solve is reused so
 the numbers are the plant's. What the plant kernel cannot do and this module adds:
 
@@ -9,7 +9,7 @@ the numbers are the plant's. What the plant kernel cannot do and this module add
 * per-scenario thermal coefficients, ambient drift, joint friction, payload and pre-load,
   so candidate effects and finite-difference Jacobians are one call.
 
-test_diagnose checks both kernels against :class:`sma_wrist.core.plant.WristPlant`.
+test_diagnose checks both kernels against :class:`sma_wrist.core.plant.wrist.WristPlant`.
 """
 from __future__ import annotations
 
@@ -17,12 +17,15 @@ import math
 
 import numpy as np
 
-from sma_wrist.core import plant_kernel as pk
-from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.hysteresis import kernel as hk
+from sma_wrist.core.jit import _jit as _jit_switch
+from sma_wrist.core.joint.kernel import joint_step_one
+from sma_wrist.core.plant.kernel import pack_constants
+from sma_wrist.core.plant.wrist import PlantParams
 
-_jit = pk._jit  # numba.njit(cache=True, nogil=True) when numba is installed
-_solve_load = pk._solve_load
-_envelopes = pk._envelopes
+_jit = _jit_switch  # numba.njit(cache=True, nogil=True) when numba is installed
+_solve_load = hk._solve_load
+_envelopes = hk._envelopes
 
 #: indices in the per-scenario thermal coefficient rows (pack_thermal)
 TH_IPV, TH_COUPLING = 0, 1
@@ -222,7 +225,7 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
                 ym2 = _memoryless(Ts1, heating[1], mem_c, mem_d, p0)
                 torque, stiffness = _loads(Ts0, Ts1, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2,
                                            preload, 2, True, stacked, edges, r, p, mech)
-                q, qd = pk.joint_step_one(q, qd, torque, stiffness, payload, h, jj)
+                q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
             out_q[k, j] = q
             out_qd[k, j] = qd
             out_load[k, j, 0] = load[0]
@@ -234,7 +237,7 @@ class Constants:
 
     def __init__(self, params: PlantParams | None = None) -> None:
         self.params = params or PlantParams()
-        th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint = pk.pack_constants(self.params)
+        th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint = pack_constants(self.params)
         self.th_coef = th_coef
         self.mech = np.concatenate([mech, [self.params.joint.q_neutral_rad]])
         self.stacked, self.edges, self.r, self.p = stacked, edges, r, p

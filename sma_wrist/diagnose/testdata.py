@@ -23,8 +23,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy.signal import lfilter
 
-from sma_wrist.core import thermal as th
-from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose.kernels import Constants
 

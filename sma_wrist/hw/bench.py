@@ -21,7 +21,6 @@ from sma_wrist.hw import protocol as P
 from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig
 from sma_wrist.hw.link import SerialLink
 
-
 WARMUP_S = 1.0  # latency is not counted for the first second (bytes written before the port opened)
 
 

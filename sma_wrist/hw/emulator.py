@@ -3,7 +3,7 @@
 ``sma-wrist emulate-device --port /tmp/wrist`` opens a pty, links its slave end at
 ``--port`` and behaves like the firmware of docs/protocol.md: boot notice and hello,
 then ``$S`` samples at ``--rate-hz`` (1 kHz) of device time with 16-bit ADC quantisation
-and Gaussian noise of the plant :class:`sma_wrist.core.plant.WristPlant`; ``$C`` commands
+and Gaussian noise of the plant :class:`sma_wrist.core.plant.wrist.WristPlant`; ``$C`` commands
 take effect ``--latency-ms`` after they arrive; no command for ``--watchdog-s`` of device
 time -> zero drive (flag ``FLAG_WATCHDOG``). Device time runs ``--time-scale`` times
 faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
@@ -76,7 +76,7 @@ class DeviceEmulator:
     """
 
     def __init__(self, config: EmulatorConfig | None = None, link: str | None = None, log_sent: bool = False) -> None:
-        from sma_wrist.core.plant import PlantParams, WristPlant
+        from sma_wrist.core.plant.wrist import PlantParams, WristPlant
         self.cfg = c = config or EmulatorConfig()
         if not (c.rate_hz > 0 and c.time_scale > 0):
             raise ValueError('rate_hz and time_scale must be > 0')

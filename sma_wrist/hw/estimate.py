@@ -2,7 +2,7 @@
 
 The device measures temperatures and the angle only. The per-wire stress (what
 plant_sim publishes from its state) is **estimated** here with the plant's own
-SD-GPI wire-load solve (sma_wrist.core.muscle.MuscleModel) at the measured muscle
+SD-GPI wire-load solve (sma_wrist.core.hysteresis.muscle.MuscleModel) at the measured muscle
 temperatures and the bundle elongations the measured angle implies (Eq. 4.17), with the
 play memory tracked across calls exactly as WristPlant does. The estimate is as good as
 the model (docs/model.md); on the emulator it reproduces the plant's stress up to sensor
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sma_wrist.core.joint import G
-from sma_wrist.core.plant import PlantParams, WristPlant
+from sma_wrist.core.joint.dynamics import G
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 
 
 class StressEstimator:

@@ -33,8 +33,8 @@ DATA = Path(__file__).resolve().parents[2] / 'test' / 'data' / 'sma_react' / 'Ni
 
 
 def _synthetic(n: int, load: float = 0.85) -> tuple[Any, Any, Any]:
-    from sma_wrist.core.default_params import default_sdgpi
-    from sma_wrist.core.hysteresis import simulate
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.sdgpi import simulate
 
     T = np.r_[np.linspace(20, 90, n // 2), np.linspace(90, 20, n - n // 2)]
     y0 = simulate(default_sdgpi(), T, load)
@@ -43,7 +43,11 @@ def _synthetic(n: int, load: float = 0.85) -> tuple[Any, Any, Any]:
 
 
 def _real(stresses: tuple[int, ...]) -> tuple[list[Any], list[Any], Any, list[str]]:
-    from sma_wrist.identify.io import REF_LENGTH_MM, read_measurement, stress_to_load_kgf
+    from sma_wrist.identify.io import (
+        REF_LENGTH_MM,
+        read_measurement,
+        stress_to_load_kgf,
+    )
     from sma_wrist.identify.segment import loops_of
 
     loops = [loops_of(read_measurement(DATA / f'{s}MPa.txt'))[0] for s in stresses]
@@ -60,7 +64,11 @@ def _timed(fn: Any) -> tuple[Any, float, float]:
 
 def measure(quick: bool) -> dict[str, Any]:
     """All cases in this process (call through :func:`bench_identify` for the one-core set-up)."""
-    from sma_wrist.core.identification import fit_gpi, fit_sdgpi, simulate_batch
+    from sma_wrist.core.hysteresis.identification import (
+        fit_gpi,
+        fit_sdgpi,
+        simulate_batch,
+    )
     from sma_wrist.identify.hysteresis import choose_edges
 
     out: dict[str, Any] = {'loadavg_start': list(os.getloadavg())}

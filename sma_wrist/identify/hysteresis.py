@@ -3,9 +3,9 @@
 The seed's Sec. 4.1.1 / 4.2.2 workflow on a user's wire: read and segment the files
 (:mod:`sma_wrist.identify.io`, :mod:`sma_wrist.identify.segment`), say what the current model
 gets wrong before fitting, fit a GPI per stress and the SD-GPI across stresses
-(:mod:`sma_wrist.core.identification`), validate on data the fit did not see (``--holdout``
+(:mod:`sma_wrist.core.hysteresis.identification`), validate on data the fit did not see (``--holdout``
 files and leave-one-load-out over the training stresses), write ``hysteresis.yaml``
-(:mod:`sma_wrist.core.hysteresis_file`) and a markdown report with plots.
+(:mod:`sma_wrist.core.hysteresis.params_file`) and a markdown report with plots.
 
 This module's top level imports only argparse: building the CLI parser must stay cheap.
 """
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 #: Load laws of the SD-GPI envelopes: the seed's free quadratics per section (Eqs. 4.4-4.5,
-#: core.identification.fit_sdgpi), the Clausius-Clapeyron shift (core.identification.fit_sdgpi_cc)
+#: core.hysteresis.identification.fit_sdgpi), the Clausius-Clapeyron shift (core.hysteresis.identification.fit_sdgpi_cc)
 #: and the same shift with a saturating stroke (fit_sdgpi_cc(amplitude_law='saturating')).
 MODELS = ('quadratic', 'clausius-clapeyron', 'saturating')
 
@@ -98,11 +98,23 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
 
     import numpy as np
 
-    from sma_wrist.core.hysteresis_file import hysteresis_params, save_hysteresis
-    from sma_wrist.core.identification import (fit_gpi, fit_sdgpi, fit_sdgpi_cc, gpi_vector, sdgpi_gpi_vectors,
-                                               simulate_batch)
-    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, load_kgf_to_stress, read_measurement,
-                                      stress_to_load_kgf)
+    from sma_wrist.core.hysteresis.identification import (
+        fit_gpi,
+        fit_sdgpi,
+        fit_sdgpi_cc,
+        gpi_vector,
+        sdgpi_gpi_vectors,
+        simulate_batch,
+    )
+    from sma_wrist.core.hysteresis.params_file import hysteresis_params, save_hysteresis
+    from sma_wrist.identify.io import (
+        REF_LENGTH_MM,
+        IdentifyInputError,
+        Units,
+        load_kgf_to_stress,
+        read_measurement,
+        stress_to_load_kgf,
+    )
     from sma_wrist.identify.loops import errors_pct, slope, transitions
     from sma_wrist.identify.segment import loops_of
 
@@ -282,8 +294,12 @@ def _wrist_params(out: Any, params: Any, thermal_file: str | None, progress: Any
     from pathlib import Path
 
     from sma_wrist.core.errors import ParameterError
-    from sma_wrist.core.thermal_file import load_thermal_file
-    from sma_wrist.identify.wrist import operating_window, wrist_params, write_wrist_params
+    from sma_wrist.core.thermal.params_file import load_thermal_file
+    from sma_wrist.identify.wrist import (
+        operating_window,
+        wrist_params,
+        write_wrist_params,
+    )
 
     tems = load_thermal_file(thermal_file).window_C if thermal_file else None
     hf = (out / 'hysteresis.yaml').resolve()

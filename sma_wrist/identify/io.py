@@ -7,7 +7,7 @@ are found by header name (temperature, strain/extension, stress/load, time) or g
 says what was assumed. Rows with unreadable or NaN cells, duplicated rows and out-of-order
 time stamps are removed and counted, never silently.
 
-Mapping to the model (:mod:`sma_wrist.core.hysteresis`): the SD-GPI is written for the seed's
+Mapping to the model (:mod:`sma_wrist.core.hysteresis.sdgpi`): the SD-GPI is written for the seed's
 test wire, elongation y in mm of an 80 mm wire (:data:`REF_LENGTH_MM`) and load m in kgf per
 0.25 mm wire (:data:`REF_DIAMETER_MM`). Strain maps to y = strain * 80 mm and stress to
 m = sigma * A(0.25 mm) / g, so a wire of another diameter or length is described by its

@@ -17,11 +17,11 @@ Cleaning (counted in the report): rows with NaN/unparseable cells dropped, unsor
 sorted, duplicate stamps removed (last kept), gaps longer than 2 s cut (longest stretch
 kept); then every run is put on one grid (``--dt``, default 0.1 s): temperatures linearly
 interpolated, the drive as its mean and mean square over each interval
-(:func:`~sma_wrist.core.thermal_identification.interval_means`; ``--input-hold linear`` for a
+(:func:`~sma_wrist.core.thermal.identification.interval_means`; ``--input-hold linear`` for a
 logged continuous drive, the tables' default, ``zoh`` for held commands, the bags' default).
 
-The fit and its validation are :mod:`sma_wrist.core.thermal_identification`; this module
-reads, reports (markdown + PNG), and writes the params file (:mod:`sma_wrist.core.thermal_file`).
+The fit and its validation are :mod:`sma_wrist.core.thermal.identification`; this module
+reads, reports (markdown + PNG), and writes the params file (:mod:`sma_wrist.core.thermal.params_file`).
 """
 from __future__ import annotations
 
@@ -246,7 +246,8 @@ def estimate_frequency(t: Any, u: Any) -> float | None:
     Snapped to the seed's frequencies (1/128-1 Hz) when within 3 %.
     """
     import numpy as np
-    from sma_wrist.core.thermal import SEED_SINE_FREQUENCIES_HZ
+
+    from sma_wrist.core.thermal.heat_balance import SEED_SINE_FREQUENCIES_HZ
     if t.size < 16:
         return None
     dt = float(np.median(np.diff(t)))
@@ -267,7 +268,8 @@ def estimate_frequency(t: Any, u: Any) -> float | None:
 def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning, hold: str = 'linear') -> list[Any]:
     """Resample cleaned runs onto the grid ``dt`` (module docstring) as ThermalRecords."""
     import numpy as np
-    from sma_wrist.core.thermal_identification import ThermalRecord, interval_means
+
+    from sma_wrist.core.thermal.identification import ThermalRecord, interval_means
     out = []
     for s in series:
         t, u, T = s.t, s.u, s.T
@@ -305,7 +307,8 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh') -> tuple[list[Any], Clean
     units) and the held commands averaged over each interval of the fit grid.
     """
     import numpy as np
-    from sma_wrist.core.thermal_identification import ThermalRecord, interval_means
+
+    from sma_wrist.core.thermal.identification import ThermalRecord, interval_means
     from sma_wrist.diagnose.data import load_run
     run = load_run(path, max_rate_hz=1000.0)
     if run.u is None or run.T is None:
@@ -355,7 +358,7 @@ def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None,
 # ------------------------------------------------------------------------------ report
 
 def _params_json(params: Any) -> dict[str, dict[str, float]]:
-    from sma_wrist.core.thermal_identification import FACE_KEYS, FACE_NAMES, table_of
+    from sma_wrist.core.thermal.identification import FACE_KEYS, FACE_NAMES, table_of
     tab = table_of(params)
     return {FACE_NAMES[f]: {k: float(tab[f, j]) for j, k in enumerate(FACE_KEYS)} for f in range(2)}
 
@@ -423,7 +426,7 @@ def _stat_row(e: Any, face: str, st: dict[str, float], default_rms: float | None
 def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: Sequence[Any], summary: dict[str, Any],
                  plots: bool = True) -> Path:
     """thermal_identification.md with the tables and PNG plots in ``out``."""
-    from sma_wrist.core.thermal_identification import FACE_KEYS, FACE_NAMES, table_of
+    from sma_wrist.core.thermal.identification import FACE_KEYS, FACE_NAMES, table_of
     out.mkdir(parents=True, exist_ok=True)
     before = {e.record: e for e in result.before}
     lines = ['# TEM heat balance identified from measurements (seed Sec. 4.3, Tables 4.9-4.10)', '',
@@ -548,9 +551,9 @@ def run_cli(a: argparse.Namespace) -> int:
 def identify(a: argparse.Namespace) -> dict[str, Any]:
     """Run the whole identification for parsed arguments; returns the JSON summary."""
     t0 = time.perf_counter()
-    from sma_wrist.core import thermal as th
-    from sma_wrist.core import thermal_identification as ti
-    from sma_wrist.core.thermal_file import load_thermal_file, write_thermal_file
+    from sma_wrist.core.thermal import heat_balance as th
+    from sma_wrist.core.thermal import identification as ti
+    from sma_wrist.core.thermal.params_file import load_thermal_file, write_thermal_file
     say = (lambda s: None) if (a.json or a.quiet) else (lambda s: print(f'[identify thermal] {s}', file=sys.stderr))
     units = {'time': a.time_unit, 'temperature': a.temperature_unit, 'u': a.voltage_unit}
     units = {k: v.lower() for k, v in units.items() if v}

@@ -22,8 +22,8 @@ from typing import Sequence
 
 import numpy as np
 
-from sma_wrist.core import thermal as th
-from sma_wrist.core.thermal_identification import ThermalRecord, interval_means
+from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal.identification import ThermalRecord, interval_means
 
 KELVIN = 273.15
 
@@ -147,7 +147,8 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
     every frequency is predicted by the fit on the other seven.
     """
     import time as _time
-    from sma_wrist.core.thermal_identification import identify_thermal
+
+    from sma_wrist.core.thermal.identification import identify_thermal
     freqs = (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ
     duration = 128.0 if quick else 512.0
     sources = {'own, noise-free': ('own', 0.0, 0.0), 'own + sensor': ('own', 0.15, 0.2),
@@ -174,12 +175,14 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
 
 def speed(quick: bool = False) -> dict:
     """Side by side on the same runs: the batched complex-step Jacobian vs forward differences with
-    :func:`sma_wrist.core.thermal.simulate` (the plant's RK4, one parameter set per call), and the
+    :func:`sma_wrist.core.thermal.heat_balance.simulate` (the plant's RK4, one parameter set per call), and the
     normal-equation Levenberg-Marquardt vs scipy's ``least_squares`` (trf) from the same start."""
     import dataclasses as dc
     import time as _time
+
     from scipy.optimize import least_squares
-    from sma_wrist.core import thermal_identification as ti
+
+    from sma_wrist.core.thermal import identification as ti
     recs = sine_runs('peltier', (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ,
                      duration_s=128.0 if quick else 512.0)
     base = th.ThermalParams()

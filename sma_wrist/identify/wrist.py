@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams, simulate
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, simulate
 from sma_wrist.identify.loops import transitions
 
 #: load [kgf] per wire at which the windows are placed: the seed's working band is 0.75-0.9 kgf
@@ -72,7 +72,7 @@ def wire_transitions(params: SDGPIParams, load_kgf: float = WRIST_LOAD_KGF) -> d
 
 
 def _margins() -> tuple[float, float]:
-    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
     tr = wire_transitions(default_sdgpi())
     return tr['M_f'] - DEFAULT_WINDOW_C[0], DEFAULT_WINDOW_C[1] - tr['A_f']
 
@@ -97,7 +97,7 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     the seed's 0-80 degC). A problem is any window the TEMs or the nodes cannot give; the
     parameters are still returned so the user sees what would be needed.
     """
-    from sma_wrist.core.thermal import ThermalParams
+    from sma_wrist.core.thermal.heat_balance import ThermalParams
     lo, hi = operating_window(params)
     face = tem_window_C if tem_window_C is not None else ThermalParams().window_C
     problems = []
@@ -148,7 +148,7 @@ def rated_tems(top_C: float) -> Any:
     set-up gives its own identified thermal file. The hold limits are the largest constant
     commands that keep every face inside the window (thermal.characterise_constant_commands).
     """
-    from sma_wrist.core import thermal as th
+    from sma_wrist.core.thermal import heat_balance as th
     p = dataclasses.replace(th.ThermalParams(), window_C=(0.0, float(top_C)))
     ch = th.characterise_constant_commands(p, span_V=30.0, resolution_V=0.05, horizon_s=1500.0, dt=1.0)
     return p.with_limits(float(np.ceil(2 * ch.cooling_max_V) / 2), float(np.floor(2 * ch.heating_max_V) / 2))
@@ -168,9 +168,9 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
     import tempfile
 
     from sma_wrist import runtime
-    from sma_wrist.core.default_params import default_sdgpi
-    from sma_wrist.core.hysteresis_file import save_hysteresis
-    from sma_wrist.core.thermal_file import write_thermal_file
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.params_file import save_hysteresis
+    from sma_wrist.core.thermal.params_file import write_thermal_file
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
 

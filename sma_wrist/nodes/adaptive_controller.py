@@ -1,10 +1,10 @@
 """adaptive_controller: joint angle tracking (back-stepping adaptive law, or the Sec. 6.1 PID).
 
-Thin adapter over :class:`sma_wrist.core.joint_controller.JointController`. Every scalar
+Thin adapter over :class:`sma_wrist.core.control.joint_controller.JointController`. Every scalar
 field of the core parameter dataclasses is a declared ROS parameter with the dataclass
 default: ``mode``, the composition's own fields, ``adaptive.<field>``
-(:class:`~sma_wrist.core.adaptive.AdaptiveParams`, Eqs. 5.24, 5.32, 5.37) and
-``pid.<field>`` (:class:`~sma_wrist.core.pid.PIDParams`). The paper's Table 6.1 gains are
+(:class:`~sma_wrist.core.control.adaptive.AdaptiveParams`, Eqs. 5.24, 5.32, 5.37) and
+``pid.<field>`` (:class:`~sma_wrist.core.control.pid.PIDParams`). The paper's Table 6.1 gains are
 the params file ``config/paper_table_6_1.yaml``.
 
 Computes on each measured joint state (100 Hz with the default plant) with the latest
@@ -24,14 +24,21 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
 from std_msgs.msg import Float64, Header
 
-from sma_wrist.core import adaptive_kernel, pid_kernel
-from sma_wrist.core.adaptive import AdaptiveParams
+from sma_wrist.core.control import adaptive_kernel, pid_kernel
+from sma_wrist.core.control.adaptive import AdaptiveParams
+from sma_wrist.core.control.joint_controller import JointController as JointLaw
+from sma_wrist.core.control.joint_controller import JointControllerParams
+from sma_wrist.core.control.pid import PIDParams
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.joint_controller import JointController as JointLaw
-from sma_wrist.core.joint_controller import JointControllerParams
-from sma_wrist.core.muscle import MuscleGeometry
-from sma_wrist.core.pid import PIDParams
-from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
+from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+from sma_wrist.nodes.common import (
+    MUSCLE_FRAMES,
+    Freshness,
+    Param,
+    WristNode,
+    finite,
+    main_for,
+)
 
 DEFAULTS = JointControllerParams()
 

@@ -1,12 +1,12 @@
 """hysteresis_compensator: desired muscle strain + stress -> desired muscle temperature.
 
-Inverse SD-GPI (Eqs. 5.5-5.8) in the wrist's coordinates (:mod:`sma_wrist.core.compensation`).
+Inverse SD-GPI (Eqs. 5.5-5.8) in the wrist's coordinates (:mod:`sma_wrist.core.hysteresis.compensation`).
 Computes when a fresh set of all four targets (strain and stress of both muscles) has arrived
 from adaptive_controller; its memory starts from the measured temperatures and stresses.
 Targets the window cannot reach give the nearest reachable temperature, reported on
 /diagnostics; malformed targets are rejected and counted. With the measured memory, the
 measured joint angle adapts each wire's temperature axis (``shift_gain_per_s``,
-:meth:`~sma_wrist.core.compensation.MuscleCompensator.track`, docs/control.md "Feedback off-model").
+:meth:`~sma_wrist.core.hysteresis.compensation.MuscleCompensator.track`, docs/control.md "Feedback off-model").
 
 The memory and the axis follow the measurements sample by sample, in the order of their header
 stamps: the temperatures and the angle of one plant tick are paired by stamp and advance the
@@ -14,7 +14,7 @@ memory once, whatever order they arrive in and whenever the targets arrive (issu
 docs/runtime.md "Message timing").
 
 ``temperature_source: observer`` feeds the memory and the axis with a
-:class:`~sma_wrist.core.tem_control.MuscleTemperatureObserver` of the thermocouples (heat balance
+:class:`~sma_wrist.core.control.tem.MuscleTemperatureObserver` of the thermocouples (heat balance
 Eqs. 4.13-4.14 driven by the TEM commands) instead of the raw thermocouple, as the sweep's
 ``compensator_observer`` does (docs/control.md "The observer in the node graph"). The commands carry
 no stamp: each is filed at its arrival (the node clock, or the newest measurement stamp seen if
@@ -32,13 +32,17 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
 
-from sma_wrist.core.compensation import MuscleCompensator
-from sma_wrist.core.hysteresis_file import hysteresis_params
+from sma_wrist.core.control.joint_controller import bundle_strain
+from sma_wrist.core.control.tem import (
+    DriveLimits,
+    MuscleTemperatureObserver,
+    TemperatureObserverParams,
+)
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.joint_controller import bundle_strain
-from sma_wrist.core.plant import PlantParams
-from sma_wrist.core.tem_control import DriveLimits, MuscleTemperatureObserver, TemperatureObserverParams
-from sma_wrist.core.thermal import ThermalParams
+from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+from sma_wrist.core.hysteresis.params_file import hysteresis_params
+from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')

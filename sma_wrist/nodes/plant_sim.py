@@ -1,6 +1,6 @@
 """plant_sim: the simulated wrist (TEM heat balance + SD-GPI muscles + joint), and the clock.
 
-Subscribes the TEM drive commands, integrates :class:`sma_wrist.core.plant.WristPlant`
+Subscribes the TEM drive commands, integrates :class:`sma_wrist.core.plant.wrist.WristPlant`
 at ``dt_s`` (1 kHz), and every ``1 / publish_rate_hz`` of simulated time publishes
 ``/clock`` and the measurements (temperatures, per-wire stresses, joint state) stamped
 with simulated time. It runs on its own (steady/system) clock with ``use_sim_time``
@@ -10,7 +10,7 @@ On the embedded runtime the steady clock is virtual, so the graph runs as fast a
 CPU allows and the result does not depend on the machine.
 
 ``model.*`` parameters (nominal by default) run the extended model that
-``sma-wrist diagnose`` writes as a params file (sma_wrist.core.model_extensions): thermal
+``sma-wrist diagnose`` writes as a params file (sma_wrist.core.plant.extensions): thermal
 and joint deviations inside the plant, sensor effects on what is published.
 
 ``plant`` selects another registered plant (:data:`sma_wrist.plants.PLANTS`: ``sdgpi`` is the
@@ -29,21 +29,27 @@ from dataclasses import replace
 from typing import Any, Mapping
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
 from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticStatus
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64, Header
 
-from sma_wrist.core import model_extensions as mx
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.hysteresis_file import hysteresis_params
-from sma_wrist.core.plant import PlantParams, WristPlant
-from sma_wrist.core.thermal_file import load_thermal_file
-from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
+from sma_wrist.core.hysteresis.params_file import hysteresis_params
+from sma_wrist.core.plant import extensions as mx
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+from sma_wrist.core.thermal.params_file import load_thermal_file
+from sma_wrist.nodes.common import (
+    MUSCLE_FRAMES,
+    Freshness,
+    Param,
+    WristNode,
+    finite,
+    main_for,
+)
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import VALIDITY as SCENARIO_AXES
-
 
 #: window over which plant_sim compares simulated time with its clock [s of node clock]
 REAL_TIME_WINDOW_S = 5.0

@@ -14,7 +14,7 @@ an ERROR on /diagnostics until data returns; no desired temperature yet or a sta
 0 V; a muscle above ``max_muscle_temperature_C`` may only be cooled; every command is
 clipped to the driver rating [``u_min_V``, ``u_max_V``], and to what keeps every (measured or
 observed) face of its layer inside the TEM's window over the protection horizon, predicted by
-the heat balance (:class:`~sma_wrist.core.tem_control.DriveLimits`); every clip is reported.
+the heat balance (:class:`~sma_wrist.core.control.tem.DriveLimits`); every clip is reported.
 """
 from __future__ import annotations
 
@@ -25,11 +25,11 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from std_msgs.msg import Float64
 
-from sma_wrist.core import tem_kernel
-from sma_wrist.core import thermal as th
+from sma_wrist.core.control import tem_kernel
+from sma_wrist.core.control.tem import DriveLimits, TemControlParams, TemLoop
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.tem_control import DriveLimits, TemControlParams, TemLoop
-from sma_wrist.core.thermal_file import load_thermal_file
+from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal.params_file import load_thermal_file
 from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
 
 LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)

@@ -1,7 +1,7 @@
 """trajectory_generator: publishes the desired wrist angle q_d(t), its rate and acceleration.
 
 Default: the Sec. 6.1 experiment q_d = 0.524 + 0.524 sin(0.1 t) rad. Other shapes: step,
-ramp, sine_sweep, constant (:mod:`sma_wrist.core.trajectory`). Time is the node clock
+ramp, sine_sweep, constant (:mod:`sma_wrist.core.control.trajectory`). Time is the node clock
 (simulated time under ``use_sim_time``), measured from the first tick, so a run starts
 at t = 0 of its trajectory whenever the node comes up. Output: ``/wrist/reference``
 (sensor_msgs/JointState: position q_d, velocity, effort = acceleration, documented in
@@ -15,8 +15,8 @@ from typing import Any, Mapping
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
+from sma_wrist.core.control.trajectory import GENERATORS, Trajectory, make_trajectory
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.trajectory import GENERATORS, Trajectory, make_trajectory
 from sma_wrist.nodes.common import Param, WristNode, main_for
 
 # Ranges by unit suffix for the per-shape parameters; the generators check the rest
@@ -31,7 +31,7 @@ def _shape_params() -> tuple[Param, ...]:
         for f in dataclasses.fields(cls):
             suffix = next(k for k in _RANGES if f.name.endswith(k))
             rng, unit = _RANGES[suffix]
-            out.append(Param(f'{shape}.{f.name}', float(f.default), f'{shape}: {f.name} (sma_wrist.core.trajectory.'
+            out.append(Param(f'{shape}.{f.name}', float(f.default), f'{shape}: {f.name} (sma_wrist.core.control.trajectory.'
                              f'{cls.__name__})', unit, rng))
     return tuple(out)
 

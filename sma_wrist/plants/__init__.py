@@ -2,7 +2,7 @@
 
 Registry :data:`PLANTS`: name -> factory. A factory takes the scenarios (one
 :class:`~sma_wrist.plants.spread.Scenario` per wrist: payload and perturbations) and the base
-:class:`~sma_wrist.core.plant.PlantParams` (dt, limits), and returns a plant with the interface
+:class:`~sma_wrist.core.plant.wrist.PlantParams` (dt, limits), and returns a plant with the interface
 plant_sim and the sweep use: ``advance(command (N, 2) [V], n_steps)``, ``state`` (t, q, qd,
 thermal, payload_kg, flags), ``muscle_temperature_C`` (N, 2), ``wire_stress_Pa`` (N, 2),
 ``muscle_torque_Nm`` (N,), ``params`` (thermal limits and window, dt). Sensor effects are not
@@ -22,8 +22,8 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis import SDGPIParams
-from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
+from sma_wrist.core.plant.wrist import PlantParams
 
 PlantFactory = Callable[..., Any]
 
@@ -54,7 +54,7 @@ def make_plant(name: str, scenarios: Sequence[Any], base: PlantParams | None = N
 def load_hysteresis(path: str | Path) -> SDGPIParams:
     """SD-GPI parameters identified from measured data (a ``hysteresis.yaml`` from ``sma-wrist identify
     hysteresis``); ParameterError names the file and what is wrong."""
-    from sma_wrist.core.hysteresis_file import load_hysteresis as load
+    from sma_wrist.core.hysteresis.params_file import load_hysteresis as load
     return load(path)
 
 

@@ -2,7 +2,7 @@
 
 Issue 14, plant family (b): a structurally different benchmark plant, written from the
 literature rather than from this project's SD-GPI, its Table 4.9 heat balance or its sensors.
-It drives the same joint (Eq. 4.18, :func:`sma_wrist.core.plant_kernel.joint_step_one`) and
+It drives the same joint (Eq. 4.18, :func:`sma_wrist.core.plant.kernel.joint_step_one`) and
 the same chain geometry (Eq. 4.17, 140 wires of 0.25 mm x 83 mm, pre-load elongation
 1.98 mm), and exposes the plant interface the closed loop uses (``advance(command_V, n)``,
 ``muscle_temperature_C``, ``wire_stress_Pa``, ``state.q``), plus :meth:`measure`: what the
@@ -55,10 +55,16 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, check_range
-from sma_wrist.core.joint import G, JointParams
-from sma_wrist.core.muscle import MuscleGeometry
-from sma_wrist.core.plant_kernel import _jit, joint_step_one
+from sma_wrist.core.errors import (
+    ModelInputError,
+    ParameterError,
+    check_finite,
+    check_range,
+)
+from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+from sma_wrist.core.jit import _jit
+from sma_wrist.core.joint.dynamics import G, JointParams
+from sma_wrist.core.joint.kernel import joint_step_one
 
 FloatArray = NDArray[np.float64]
 KELVIN = 273.15
@@ -539,8 +545,9 @@ class ScenarioPhaseFraction(PhaseFractionPlant):
     """
 
     def __init__(self, scenarios: Sequence[Any], base: Any = None, tc_lag_s: float | None = None) -> None:
-        from sma_wrist.core.plant import PlantParams
         from dataclasses import replace
+
+        from sma_wrist.core.plant.wrist import PlantParams
         base = base or PlantParams()
         one = PhaseFractionParams(dt=base.dt)
         lag = one.sensor.tc_lag_s if tc_lag_s is None else float(tc_lag_s)

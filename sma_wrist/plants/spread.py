@@ -16,12 +16,12 @@ Where each perturbation acts:
   r_j with the weights p(r_j) kept, Eqs. 3.23-3.24) and moves k_f by ``-(1 - s) y_ref`` so the
   pre-loaded bundle keeps its length at mid-stroke (Eq. 4.2);
 * TEMs (Eqs. 4.13-4.14): the same arithmetic as the diagnosis' extension parameters
-  (:func:`sma_wrist.core.model_extensions.plant_params`: drive gain, muscle-face losses, ambient);
+  (:func:`sma_wrist.core.plant.extensions.plant_params`: drive gain, muscle-face losses, ambient);
 * joint: the payload mass (Eq. 4.18);
 * sensors (:class:`SensorBank`): applied to what the plant publishes, not inside the model.
 
 The plant of N scenarios with their own parameters is :class:`VariedPlant`: the compiled
-plant step (:func:`sma_wrist.core.plant_kernel.step_many`) per scenario with its own constants.
+plant step (:func:`sma_wrist.core.plant.kernel.step_many`) per scenario with its own constants.
 """
 from __future__ import annotations
 
@@ -35,13 +35,21 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core import model_extensions as mx
-from sma_wrist.core import plant_kernel
-from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import ParameterError, check_finite
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams, initial_state, mirrored_output, play_bounds
-from sma_wrist.core.muscle import MuscleModel
-from sma_wrist.core.plant import PlantParams, PlantState, WristPlant
+from sma_wrist.core.hysteresis.kernel import _solve_load
+from sma_wrist.core.hysteresis.muscle import MuscleModel
+from sma_wrist.core.hysteresis.sdgpi import (
+    EnvelopeSections,
+    SDGPIParams,
+    initial_state,
+    mirrored_output,
+    play_bounds,
+)
+from sma_wrist.core.jit import _jit
+from sma_wrist.core.plant import extensions as mx
+from sma_wrist.core.plant import kernel as plant_kernel
+from sma_wrist.core.plant.wrist import PlantParams, PlantState, WristPlant
+from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
 
@@ -225,7 +233,7 @@ def scenario_params(sc: Scenario, base: PlantParams | None = None,
 
 
 # ------------------------------------------------------------------------------ the plant
-@plant_kernel._jit
+@_jit
 def _step_each(n_steps, u, thermal, q, qd, w3, heat2, T2, load2, comp2, payload, flags, th_coef, mech, stacked, edges,
                r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
     """plant_kernel.step_many for each scenario j with its own constants (row j of every constant);
@@ -237,7 +245,7 @@ def _step_each(n_steps, u, thermal, q, qd, w3, heat2, T2, load2, comp2, payload,
                                th_coef[j], mech[j], stacked[j], edges[j], r[j], p[j], mem_c[j], mem_d[j], joint[j])
 
 
-@plant_kernel._jit
+@_jit
 def _rest_each(q, w3, T2, load2, comp2, payload, mech, stacked, edges, r, p, mem_d, joint):  # pragma: no cover
     """WristPlant.rest_state's static equilibrium (40 bisections of muscle torque - gravity, loads
     solved against the frozen cooled memory from 0.8 kgf), then the loads committed, per scenario."""
@@ -257,7 +265,7 @@ def _rest_each(q, w3, T2, load2, comp2, payload, mech, stacked, edges, r, p, mem
                 T = T2[j, side]
                 y_mem = p0 * (mem_d[j, 0] * math.tanh(mem_d[j, 1] * T + mem_d[j, 2]) + mem_d[j, 3])
                 y_geo = e0 - x_mm if side == 0 else e0 + x_mm
-                m, dy, res = plant_kernel._solve_load(T, y_geo, w3[j, side], w_now, y_mem, load2[j, side], stacked[j],
+                m, dy, res = _solve_load(T, y_geo, w3[j, side], w_now, y_mem, load2[j, side], stacked[j],
                                                       edges[j], r[j], p[j], m_lo, m_hi, scale, c_el, k_f, m_max, tol,
                                                       max_it)
                 if it == 40:  # commit at the equilibrium

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from typing import Any
 
-from sma_wrist.core.joint_controller import MODES
+from sma_wrist.core.control.joint_controller import MODES
 
 
 def bench_sweep(quick: bool = False, repeats: int = 2) -> dict[str, Any]:

@@ -14,15 +14,25 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core import tem_kernel
-from sma_wrist.core import thermal as th
-from sma_wrist.core.adaptive import AdaptiveController
+from sma_wrist.core.control import tem_kernel
+from sma_wrist.core.control.adaptive import AdaptiveController
+from sma_wrist.core.control.joint_controller import (
+    REVERSAL_STEP_RAD,
+    JointControllerParams,
+    time_to_meet,
+)
+from sma_wrist.core.control.pid import PID
+from sma_wrist.core.control.tem import (
+    RANGE_REFRESH_S,
+    DriveLimits,
+    TemControlParams,
+    TemLoop,
+    observer_step,
+    target_prefilter,
+)
 from sma_wrist.core.errors import ModelInputError
-from sma_wrist.core.joint_controller import REVERSAL_STEP_RAD, JointControllerParams, time_to_meet
-from sma_wrist.core.pid import PID
-from sma_wrist.core.plant import PlantParams
-from sma_wrist.core.tem_control import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
-                                        target_prefilter)
+from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
 
@@ -48,7 +58,7 @@ def _reversal_lead_many(q: list[float], q_d: float, qdot_d: float, qddot_d: floa
 
 
 class JointControllerBank:
-    """:class:`sma_wrist.core.joint_controller.JointController` for n wrists of one mode.
+    """:class:`sma_wrist.core.control.joint_controller.JointController` for n wrists of one mode.
 
     ``update`` returns (force (n, 2) [N] or None, strain (n, 2), T_d (n, 2) [degC] or None,
     saturated (n,)), what the one-wrist object returns per wrist.
@@ -104,7 +114,7 @@ def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, d
 
 
 class TemLoopBank:
-    """:class:`sma_wrist.core.tem_control.TemLoop` (tem_controller's per-sample work) for n wrists
+    """:class:`sma_wrist.core.control.tem.TemLoop` (tem_controller's per-sample work) for n wrists
     sampled together. The constants are a one-wrist TemLoop's, built as the node builds them."""
 
     def __init__(self, n: int, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,

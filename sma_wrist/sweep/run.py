@@ -19,8 +19,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from sma_wrist.core.control.joint_controller import MODES
 from sma_wrist.core.errors import ParameterError, SmaWristError
-from sma_wrist.core.joint_controller import MODES
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import BY_NAME, FAMILY, Scenario, check_ranges, sample
 from sma_wrist.sweep.simulate import Case, simulate

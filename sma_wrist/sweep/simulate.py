@@ -9,7 +9,7 @@ order the graph's messages flow (sma_wrist/nodes):
    previous tick (tem_controller, :class:`~sma_wrist.sweep.laws.TemLoopBank`);
 3. the joint controllers (adaptive_controller, :class:`~sma_wrist.sweep.laws.JointControllerBank`)
    and, in inverse_adaptive mode, the inverse compensator (hysteresis_compensator:
-   :class:`~sma_wrist.core.compensation.MuscleCompensator` over all its wrists, memory
+   :class:`~sma_wrist.core.hysteresis.compensation.MuscleCompensator` over all its wrists, memory
    observing the measured temperatures and stresses, each wire's temperature axis tracking the
    strain at the measured angle) give the next desired temperatures, which the TEM loops
    prefilter (tem_controller's target_filter_s) at their next sample;
@@ -35,14 +35,18 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.compensation import MuscleCompensator
-from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
+from sma_wrist.core.control.tem import (
+    MuscleTemperatureObserver,
+    TemControlParams,
+    TemperatureObserverParams,
+)
+from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.joint_controller import MODES, JointControllerParams
+from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.metrics import SEED_PERIOD_S
-from sma_wrist.core.plant import PlantParams
-from sma_wrist.core.tem_control import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
-from sma_wrist.core.trajectory import make_trajectory
+from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank

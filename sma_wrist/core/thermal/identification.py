@@ -1,6 +1,6 @@
 """Identification of the TEM heat balance from measured runs (seed Sec. 4.3.2, Tables 4.9-4.10).
 
-The model is Eqs. 4.13/4.14 (:mod:`sma_wrist.core.thermal`): per face f (T1 = muscle face,
+The model is Eqs. 4.13/4.14 (:mod:`sma_wrist.core.thermal.heat_balance`): per face f (T1 = muscle face,
 T2 = exchanger face, degC; input I = -input_per_volt * u, u the drive voltage [V])::
 
     dT_f/dt = (K_at,f T_f + K_t,f T_o) I - K_Tinf,f T_f + K_T,f T_o + K_R,f I^2 + K_inf,f
@@ -13,7 +13,7 @@ of 12 V sine runs (1/128-1 Hz), starting every parameter at 1. Here:
   measured initial temperatures (a free-run prediction; nothing measured later is fed back).
 * **Vectorised**: for a held command the model is linear in T, dT/dt = M(I) T + b(I), so one
   RK4 step is the affine map T <- A T + c with A = 1 + h P M, c = h P b and
-  P = 1 + hM/2 + (hM)^2/6 + (hM)^3/24 (:func:`sma_wrist.core.thermal.step` uses the same
+  P = 1 + hM/2 + (hM)^2/6 + (hM)^3/24 (:func:`sma_wrist.core.thermal.heat_balance.step` uses the same
   identity). A and c of a block of steps are built in a few array operations over (steps,
   parameter sets, runs); the recursion itself is then 2 x 2 multiply-adds per step.
 * **Jacobian by complex step**: the model is a polynomial in its parameters, so simulating
@@ -48,8 +48,8 @@ from typing import Callable, Sequence
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import ParameterError, SmaWristError
+from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
 
@@ -635,7 +635,7 @@ def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[Thermal
 def hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[float, float]:
     """Command hold limits of an identified model, found as docs/thermal.md found the defaults.
 
-    :func:`sma_wrist.core.thermal.characterise_constant_commands` (every face in the window,
+    :func:`sma_wrist.core.thermal.heat_balance.characterise_constant_commands` (every face in the window,
     converged after 3000 s), rounded inward to whole volts. Raises when a direction holds
     less than 1 V.
     """

@@ -1,7 +1,7 @@
 """Feedback-linearising TEM temperature controller (seed Sec. 5.2, Eqs. 5.38-5.47).
 
 Per face f of a module, Eqs. 4.13/4.14 are quadratic in the model input I
-(:func:`sma_wrist.core.thermal.rate_terms`)::
+(:func:`sma_wrist.core.thermal.heat_balance.rate_terms`)::
 
     dT_f/dt = K_R I^2 + B_f I + D_f,
     B_f = K_at T_f + K_t T_other,   D_f = -K_Tinf T_f + K_T T_other + K_inf       (5.38-5.40)
@@ -40,9 +40,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core import plant_kernel, tem_kernel
-from sma_wrist.core import thermal as th
+from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
+from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal import kernel as thermal_kernel
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -144,7 +145,7 @@ def _one_wrist(state: FloatArray, compiled: bool | None) -> bool:
 def _kernel_constants(thermal: th.ThermalParams) -> FloatArray:
     coef = _KERNEL_CONSTANTS.get(id(thermal))
     if coef is None or coef[0] is not thermal:
-        coef = _KERNEL_CONSTANTS[id(thermal)] = (thermal, plant_kernel.thermal_constants(thermal))
+        coef = _KERNEL_CONSTANTS[id(thermal)] = (thermal, thermal_kernel.thermal_constants(thermal))
     return coef[1]
 
 

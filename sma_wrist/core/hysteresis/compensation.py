@@ -1,9 +1,9 @@
 """Inverse compensation in the wrist's own coordinates: bundle strain + wire stress -> temperature.
 
 The back-stepping law asks each muscle for a force at the elongation the chain gives it
-(Eq. 5.32 with Eq. 4.17); :class:`sma_wrist.core.inverse.InverseCompensator` works in the
+(Eq. 5.32 with Eq. 4.17); :class:`sma_wrist.core.hysteresis.inverse.InverseCompensator` works in the
 SD-GPI's coordinates (elongation of the 80 mm model wire, per-wire load). The muscle model
-(:mod:`sma_wrist.core.muscle`, Eq. 1 there) links them::
+(:mod:`sma_wrist.core.hysteresis.muscle`, Eq. 1 there) links them::
 
     y_bundle = (L_wire / L_model) y_SDGPI(T, m) + c_el m,     m = sigma A / g,   y_bundle = eps L_wire
 
@@ -30,11 +30,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sma_wrist.core import jit as _jm
 from sma_wrist.core.errors import ParameterError, check_finite
-from sma_wrist.core.hysteresis import SDGPIParams
-from sma_wrist.core import plant_kernel as _pk
-from sma_wrist.core.inverse import InverseCompensator, _output_frozen, _residual
-from sma_wrist.core.muscle import G, MuscleGeometry
+from sma_wrist.core.hysteresis import kernel as _hk
+from sma_wrist.core.hysteresis.inverse import (
+    InverseCompensator,
+    _output_frozen,
+    _residual,
+)
+from sma_wrist.core.hysteresis.muscle import G, MuscleGeometry
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
 
 FloatArray = NDArray[np.float64]
 
@@ -141,7 +146,7 @@ class MuscleCompensator:
         m = self._load(np.asarray(stress_Pa, float))[0]
         eps = np.asarray(strain_measured, float)
         y_meas = (eps * self._wire_mm - self._c_el * m) / self._scale
-        if _pk.AVAILABLE and st.T_prev.ndim == 1 and eps.shape == st.T_prev.shape:
+        if _jm.AVAILABLE and st.T_prev.ndim == 1 and eps.shape == st.T_prev.shape:
             # the node's call at 100 Hz: ~1 ms of numpy on (3, 2) arrays -> a few us
             shift = self.shift_C.astype(float)  # a copy: the kernel writes it
             _track_step(st.T_prev, st.heating, st.w, m, y_meas, shift, self.shift_gain_per_s * dt, SLOPE_STEP_C,
@@ -169,15 +174,15 @@ SLOPE_STEP_C = 0.5
 SLOPE_FLOOR_MM_PER_C = 0.05
 
 
-@_pk._jit
+@_jm._jit
 def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit,
                 stacked, edges, r, wts, c, d, p0, k_f):  # pragma: no cover - compiled
     """Compiled adaptation step of :meth:`MuscleCompensator.track`, wire by wire, on shift (S,) in place:
-    the SD-GPI output (Eqs. 3.19, 3.22, 4.1-4.5, :func:`~sma_wrist.core.inverse._residual` against the
+    the SD-GPI output (Eqs. 3.19, 3.22, 4.1-4.5, :func:`~sma_wrist.core.hysteresis.inverse._residual` against the
     frozen memory) at T_prev in the memory's direction and at T_prev +- h heating / cooling, then
     shift += gain_dt (y - y_meas) s / (s^2 + floor2), s = (y(+h) - y(-h)) / 2h, clipped to +-limit."""
     for s in range(T_prev.shape[0]):
-        coef, _ = _pk._envelopes(stacked, edges, m[s])
+        coef, _ = _hk._envelopes(stacked, edges, m[s])
         T0 = T_prev[s]
         y0 = _residual(T0, np.nan, heating[s], heating[s], coef, w[s], 0.0, r, wts, c, d, p0, k_f)
         y_up = _residual(T0 + h, np.nan, True, True, coef, w[s], 0.0, r, wts, c, d, p0, k_f)

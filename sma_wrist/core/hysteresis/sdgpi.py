@@ -15,7 +15,7 @@ Model (seed, Chapter 4), for wire temperature T [degC] and wire load m [kgf]:
   the elongation is y = k_f - y_m (Eq. 4.2, k_f = 6 mm);
 * stress dependence, Eqs. 4.4-4.5: every a_i, b_i is a quadratic of the load m,
   a_i = s_ai0 m^2 + s_ai1 m + s_ai2, on load sections joined at knots (the seed uses two
-  sections joined at 0.8 kgf; the default set of :mod:`sma_wrist.core.default_params`
+  sections joined at 0.8 kgf; the default set of :mod:`sma_wrist.core.hysteresis.default_params`
   uses more, same algebra).
 
 A plain GPI at one load is the special case of one section with constant quadratics
@@ -26,13 +26,17 @@ Units: T in degC, m in kgf (= kg of hanging mass per wire), y and y_m in mm.
 from __future__ import annotations
 
 import functools
-
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, check_range
+from sma_wrist.core.errors import (
+    ModelInputError,
+    ParameterError,
+    check_finite,
+    check_range,
+)
 
 FloatArray = NDArray[np.float64]
 

@@ -1,11 +1,11 @@
 """Scalar loop of the back-stepping adaptive law over scenarios, compiled by numba when present.
 
-:class:`sma_wrist.core.adaptive.AdaptiveController` runs one sample of Eqs. 5.24, 5.32 and
+:class:`sma_wrist.core.control.adaptive.AdaptiveController` runs one sample of Eqs. 5.24, 5.32 and
 5.37 (as corrected there) per call, for n scenarios; in the controller node n = 1 at 100 Hz,
 where ~70 numpy calls on 1-element arrays cost ~100 us a sample. Written as a loop over the
 scenarios it costs ~2 us compiled (the plant kernel's numba set-up,
-:mod:`sma_wrist.core.plant_kernel`), and stays correct, if slower, as plain Python without
-numba. The equations and their order are those documented in sma_wrist.core.adaptive.
+:mod:`sma_wrist.core.plant.kernel`), and stays correct, if slower, as plain Python without
+numba. The equations and their order are those documented in sma_wrist.core.control.adaptive.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from sma_wrist.core.plant_kernel import AVAILABLE, _jit
+from sma_wrist.core.jit import AVAILABLE, _jit
 
 __all__ = ['AVAILABLE', 'K_LEN', 'OUT_LEN', 'pack', 'update', 'warm_up']
 
@@ -95,9 +95,9 @@ def update(x, dt, theta, beta, d, k, out):  # pragma: no cover - compiled
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) :func:`update` before a node spins (see
-    :func:`sma_wrist.core.tem_kernel.warm_up`)."""
+    :func:`sma_wrist.core.control.tem_kernel.warm_up`)."""
     if not AVAILABLE:
         return
-    from sma_wrist.core.adaptive import AdaptiveParams
+    from sma_wrist.core.control.adaptive import AdaptiveParams
     update(np.zeros((5, 1)), 0.01, np.zeros(1), np.ones((1, 2)), np.zeros((1, 2)), pack(AdaptiveParams()),
            np.empty((1, OUT_LEN)))

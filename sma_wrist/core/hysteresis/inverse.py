@@ -19,19 +19,26 @@
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core import plant_kernel as _pk
-
+from sma_wrist.core import jit as _jm
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
-from sma_wrist.core.hysteresis import (HysteresisState, SDGPIParams, initial_state, memoryless, play_bounds, simulate,
-                                       step, tanh_envelope)
-from sma_wrist.core.play import play_update
+from sma_wrist.core.hysteresis import kernel as _hk
+from sma_wrist.core.hysteresis.play import play_update
+from sma_wrist.core.hysteresis.sdgpi import (
+    HysteresisState,
+    SDGPIParams,
+    initial_state,
+    memoryless,
+    play_bounds,
+    simulate,
+    step,
+    tanh_envelope,
+)
 from sma_wrist.data import seed_tables as st
 
 FloatArray = NDArray[np.float64]
@@ -143,7 +150,7 @@ def _per_wire(x: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
     return np.broadcast_to(np.asarray(x, float), shape).copy()
 
 
-# Compiled one-wrist paths (optional numba, the set-up of sma_wrist.core.plant_kernel). The node
+# Compiled one-wrist paths (optional numba, the set-up of sma_wrist.core.plant.kernel). The node
 # calls observe + solve at 100 Hz on two wires, where numpy's per-call overhead on (2,) arrays
 # was ~250 us a tick; these are the same equations as scalar loops over the wires. The numpy
 # code of InverseCompensator stays the reference and the path without numba (test_inverse
@@ -152,7 +159,7 @@ def _per_wire(x: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
 # the residual is evaluated ~60 times per wire and solve: inlined into its callers (numba IR),
 # it no longer passes its 13 arguments (5 arrays) on every evaluation, ~half its cost. The
 # same operations in the same order: the same numbers.
-_jit_inline = _pk._numba.njit(inline='always', cache=True, nogil=True) if _pk.AVAILABLE else _pk._jit
+_jit_inline = _jm._numba.njit(inline='always', cache=True, nogil=True) if _jm.AVAILABLE else _jm._jit
 
 
 @_jit_inline
@@ -175,7 +182,7 @@ def _residual(T, T0, h_prev, heat_side, coef, w, y, r, wts, c, d, p0, k_f):  # p
     return k_f - (p0 * mem + acc) - y
 
 
-@_pk._jit
+@_jm._jit
 def _refine(lo_T, hi_T, f_lo, f_hi, T0, h_prev, heat_side, coef, w, y, r, wts, c, d, p0, k_f, tol):  # pragma: no cover
     """Illinois regula falsi on a bracket [lo_T, hi_T] of :func:`_residual` (bisection where the
     secant stalls) to |residual| <= tol / 10; the last point evaluated."""
@@ -206,7 +213,7 @@ def _refine(lo_T, hi_T, f_lo, f_hi, T0, h_prev, heat_side, coef, w, y, r, wts, c
     return x
 
 
-@_pk._jit
+@_jm._jit
 def _argmin_abs(f):  # pragma: no cover - compiled
     """Index of the first smallest |f| (np.argmin(np.abs(f)))."""
     k = 0
@@ -216,7 +223,7 @@ def _argmin_abs(f):  # pragma: no cover - compiled
     return k
 
 
-@_pk._jit
+@_jm._jit
 def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg, f):  # pragma: no cover - compiled
     """(T, saturated) of one wire as :meth:`InverseCompensator._numerical` and ``_pick`` give them.
 
@@ -253,7 +260,7 @@ def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg
     return (Tg[1, k1] if abs(f[1, k1]) < abs(f[0, k0]) else Tg[0, k0]), True
 
 
-@_pk._jit
+@_jm._jit
 def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0, k_f, lo, hi, m_lo, m_hi, G, tol,
                    T, sat, y):  # pragma: no cover - compiled
     """Compiled :meth:`InverseCompensator._numerical` and :func:`_output_frozen` at the answer,
@@ -268,7 +275,7 @@ def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0,
     for s in range(T_prev.shape[0]):
         if not (math.isfinite(y_d[s]) and m_lo <= m[s] <= m_hi):
             ok = False
-        coef, _ = _pk._envelopes(stacked, edges, m[s])
+        coef, _ = _hk._envelopes(stacked, edges, m[s])
         T[s], sat[s] = _nearest_root(min(max(T_prev[s], lo), hi), heating[s], coef, w[s], y_d[s], r, wts, c, d, p0,
                                      k_f, lo, hi, tol, Tg, f)
         # elongation at the answer against the frozen memory (the residual of target 0), the
@@ -279,7 +286,7 @@ def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0,
     return ok
 
 
-@_pk._jit
+@_jm._jit
 def _observe_step(T, m, T_lo, T_hi, m_lo, m_hi, stacked, edges, r, w, heating, T_prev):  # pragma: no cover
     """Compiled :meth:`InverseCompensator.observe`: T and m clipped to the model's window, the
     envelopes at the clipped load (Eqs. 4.4-4.5, 3.21), the play update (Eq. 3.19) of w (S, n)
@@ -290,7 +297,7 @@ def _observe_step(T, m, T_lo, T_hi, m_lo, m_hi, stacked, edges, r, w, heating, T
             return False
     for s in range(S):
         Ts = min(max(T[s], T_lo), T_hi)
-        coef, _ = _pk._envelopes(stacked, edges, min(max(m[s], m_lo), m_hi))
+        coef, _ = _hk._envelopes(stacked, edges, min(max(m[s], m_lo), m_hi))
         gl = coef[4] * math.tanh(coef[5] * Ts + coef[6]) + coef[7]
         gr = coef[0] * math.tanh(coef[1] * Ts + coef[2]) + coef[3]
         for i in range(r.shape[0]):
@@ -356,7 +363,7 @@ class InverseCompensator:
         st_ = self._require_state()
         T = _per_wire(T, st_.T_prev.shape)
         m = _per_wire(load_kgf, st_.T_prev.shape)
-        if _pk.AVAILABLE:  # the node calls this at 100 Hz: ~100 us of numpy per call -> a few us
+        if _jm.AVAILABLE:  # the node calls this at 100 Hz: ~100 us of numpy per call -> a few us
             heating = st_.heating.copy()
             if _observe_step(T, m, *self._observe_params, st_.w, heating, st_.T_prev):
                 st_.heating = heating
@@ -411,7 +418,7 @@ class InverseCompensator:
         S = st_.T_prev.shape
         y_d = _per_wire(desired_elongation_mm, S)
         m = _per_wire(load_kgf, S)
-        if _pk.AVAILABLE and self.method == 'numerical' and not commit:
+        if _jm.AVAILABLE and self.method == 'numerical' and not commit:
             # the node's call at 100 Hz: root, pick and elongation in one compiled pass; the
             # checks run (and raise) only when the kernel saw a bad target or load
             T, sat, y, ok = self._invert_compiled(y_d, m)
@@ -465,7 +472,7 @@ class InverseCompensator:
         change, bisection refines it (y(T) is continuous on each side). Without any sign change
         the grid point closest to the target is returned and flagged saturated.
         """
-        if _pk.AVAILABLE:  # same search, compiled: ~0.8 ms of numpy -> ~10 us per call
+        if _jm.AVAILABLE:  # same search, compiled: ~0.8 ms of numpy -> ~10 us per call
             T, sat, _, _ = self._invert_compiled(y_d, m)
             return T, sat
         st_ = self._require_state()

@@ -4,9 +4,9 @@ tem_controller runs at 100 Hz on one wrist: an observer step of the heat balance
 linearising law and, at 10 Hz, the predictive command range. On (1, 2, 2) arrays numpy's
 per-call overhead is most of the cost (~200 us a sample); these are the same equations as
 scalar loops, compiled by numba when it is installed (the plant kernel's set-up, see
-:mod:`sma_wrist.core.plant_kernel`), plain Python otherwise. The numpy functions of
-:mod:`sma_wrist.core.thermal` and :mod:`sma_wrist.core.tem_control` stay the reference and
-the path for N scenarios; :mod:`sma_wrist.core.tem_control` dispatches here for one wrist,
+:mod:`sma_wrist.core.plant.kernel`), plain Python otherwise. The numpy functions of
+:mod:`sma_wrist.core.thermal.heat_balance` and :mod:`sma_wrist.core.control.tem` stay the reference and
+the path for N scenarios; :mod:`sma_wrist.core.control.tem` dispatches here for one wrist,
 and test_tem_control checks both paths agree.
 """
 from __future__ import annotations
@@ -15,7 +15,8 @@ import math
 
 import numpy as np
 
-from sma_wrist.core.plant_kernel import AVAILABLE, _jit, thermal_rk4
+from sma_wrist.core.jit import AVAILABLE, _jit
+from sma_wrist.core.thermal.kernel import thermal_rk4
 
 __all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range', 'control_sample',
            'CONFIG_FIELDS', 'warm_up']
@@ -195,8 +196,8 @@ def warm_up() -> None:
     """
     if not AVAILABLE:
         return
-    from sma_wrist.core.plant_kernel import thermal_constants
-    from sma_wrist.core.thermal import ThermalParams
+    from sma_wrist.core.thermal.heat_balance import ThermalParams
+    from sma_wrist.core.thermal.kernel import thermal_constants
     coef = thermal_constants(ThermalParams())
     x, two = np.full((2, 2), 30.0), np.zeros(2)
     observer_step(x, two, 0.01, coef)

@@ -11,10 +11,10 @@ quadratic fits of per-load GPI fits (Sec. 4.2.2).
 The fits use the exact Jacobian (:func:`simulate_jac`): every play state equals the bound
 that last clamped it, so one simulation that records which sample and which bound set each
 operator gives all derivatives (the play kernel is compiled by numba when installed,
-:mod:`sma_wrist.core.identification_kernel`). ``method='fd'`` keeps the earlier forward-difference
+:mod:`sma_wrist.core.hysteresis.identification_kernel`). ``method='fd'`` keeps the earlier forward-difference
 Jacobian (:func:`simulate_batch`, one batched simulation of 20 perturbed vectors) for the
 side-by-side benchmark (``sma-wrist bench --section identify``).
-Conventions are those of :mod:`sma_wrist.core.hysteresis` (b set = gamma_l followed while
+Conventions are those of :mod:`sma_wrist.core.hysteresis.sdgpi` (b set = gamma_l followed while
 heating; elongation y = k_f - y_m).
 """
 from __future__ import annotations
@@ -26,8 +26,11 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams
-from sma_wrist.core.identification_kernel import gpi_jacobian, play_jacobian_numpy
+from sma_wrist.core.hysteresis.identification_kernel import (
+    gpi_jacobian,
+    play_jacobian_numpy,
+)
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
 
 FloatArray = NDArray[np.float64]
 
@@ -46,7 +49,7 @@ def simulate_batch(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 
                    branch: str = 'cooling') -> FloatArray:
     """Elongation (N, B) for B GPI parameter vectors ``theta`` (B, 20) (layout IDX_*).
 
-    Same recursion as :func:`sma_wrist.core.hysteresis.simulate` (Eqs. 3.19-3.24, 4.1, 4.2):
+    Same recursion as :func:`sma_wrist.core.hysteresis.sdgpi.simulate` (Eqs. 3.19-3.24, 4.1, 4.2):
     initial memory on the ``branch`` bound at T[0]; the memoryless part keeps its direction
     while T is constant. T is (N,) shared or (N, B).
     """
@@ -97,7 +100,7 @@ def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.
     dw_j/dtheta is that bound's gradient at s; y = k_f - p0 gamma(T) - sum_j p_j w_j with
     p_j = rho exp(-tau c j) (Eq. 3.23) differentiates in closed form. Piecewise exact: a state
     that sits exactly on a switch has one-sided derivatives, which least squares tolerates.
-    ``compiled``: one numba pass (:func:`~sma_wrist.core.identification_kernel.gpi_jacobian`)
+    ``compiled``: one numba pass (:func:`~sma_wrist.core.hysteresis.identification_kernel.gpi_jacobian`)
     when numba is installed; False forces the numpy path (tests compare both).
     """
     T = np.asarray(T, dtype=float)

@@ -14,7 +14,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.plant_kernel import AVAILABLE, _jit  # the project's one optional-numba switch
+from sma_wrist.core.jit import (  # the project's one optional-numba switch
+    AVAILABLE,
+    _jit,
+)
 
 
 def play_sources_numpy(lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64],
@@ -117,7 +120,7 @@ def gpi_jacobian(T: NDArray[np.float64], theta: NDArray[np.float64], n: int, k_f
 
     One pass: envelopes and memoryless part (Eqs. 3.21-3.22, 4.1) with their gradients, then
     the play recursion (Eq. 3.19) with the weights of Eq. 3.23; the same numbers as the numpy
-    path of :func:`sma_wrist.core.identification.simulate_jac` (tests compare both), without
+    path of :func:`sma_wrist.core.hysteresis.identification.simulate_jac` (tests compare both), without
     its per-call array overhead (most of a fit's time on 400-1000-sample loops).
     """
     if not AVAILABLE:

@@ -2,13 +2,13 @@
 
 Written by ``sma-wrist identify hysteresis``; read by plant_sim, hysteresis_compensator and
 ``sma-wrist diagnose`` through their ``hysteresis_file`` parameter (empty: the default set of
-:mod:`sma_wrist.core.default_params`). Format version 1::
+:mod:`sma_wrist.core.hysteresis.default_params`). Format version 1::
 
     format: sma_wrist.hysteresis      # fixed
     version: 1
     name: <free text>
     units: {temperature: degC, load: kgf per 0.25 mm wire, elongation: mm of an 80 mm wire}
-    model:                            # Eqs. 3.19-3.24, 4.1-4.6, see core/hysteresis.py
+    model:                            # Eqs. 3.19-3.24, 4.1-4.6, see core/hysteresis/sdgpi.py
       n: 15                           # play operators
       p0: 1.0                         # memoryless weight, Eq. 4.1
       k_f_mm: 6.0                     # mirror constant, Eq. 4.2
@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
 
 FORMAT = 'sma_wrist.hysteresis'
 VERSION = 1
@@ -64,7 +64,7 @@ def save_hysteresis(path: str | Path, params: SDGPIParams, identification: dict[
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     head = ('# SD-GPI hysteresis of one wire (sma_wrist hysteresis file, format version 1; '
-            'see sma_wrist/core/hysteresis_file.py)\n')
+            'see sma_wrist/core/hysteresis/params_file.py)\n')
     p.write_text(head + yaml.safe_dump(params_to_dict(params, identification), sort_keys=False))
     return p
 
@@ -133,5 +133,5 @@ def hysteresis_params(path: str | Path | None = None) -> SDGPIParams:
     """The SD-GPI set the nodes use: ``path`` if given and non-empty, else the default set."""
     if path:
         return load_hysteresis(path)
-    from sma_wrist.core.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
     return default_sdgpi()

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.hysteresis import SDGPIParams, memoryless
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, memoryless
 
 FloatArray = NDArray[np.float64]
 G = 9.81  # m/s^2

@@ -2,12 +2,12 @@
 
 One step of length dt (docs/model.md, "Coupling and integration"):
 
-1. TEM heat balance (Eqs. 4.13-4.14, :mod:`sma_wrist.core.thermal`), RK4, from the drive
+1. TEM heat balance (Eqs. 4.13-4.14, :mod:`sma_wrist.core.thermal.heat_balance`), RK4, from the drive
    commands of both layers -> muscle temperatures T_i.
 2. Chain kinematics (Eq. 4.17) -> bundle elongations y_1 = e0 - x, y_2 = e0 + x,
    x = R_eff (q - q_neutral).
 3. Per-wire loads m_i from the SD-GPI elongation-load relation against frozen memory
-   (:class:`sma_wrist.core.muscle.MuscleModel`), then the memory is committed.
+   (:class:`sma_wrist.core.hysteresis.muscle.MuscleModel`), then the memory is committed.
 4. Joint (Eq. 4.18): torque (F_1 - F_2) R_eff with F_i = N_w m_i g, linearly implicit
    Euler with the bundles' stiffness from the load solve.
 
@@ -21,13 +21,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core import plant_kernel
-from sma_wrist.core import thermal as th
-from sma_wrist.core.default_params import default_sdgpi
+from sma_wrist.core import jit
 from sma_wrist.core.errors import ModelInputError, check_finite, check_range
-from sma_wrist.core.hysteresis import SDGPIParams, play_bounds
-from sma_wrist.core.joint import G, JointParams, joint_step
-from sma_wrist.core.muscle import MuscleGeometry, MuscleModel
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.muscle import MuscleGeometry, MuscleModel
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, play_bounds
+from sma_wrist.core.joint.dynamics import G, JointParams, joint_step
+from sma_wrist.core.plant import kernel as plant_kernel
+from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -111,7 +112,7 @@ class WristPlant:
         self._kernel_constants: tuple[PlantParams, tuple[np.ndarray, ...]] | None = None
         self._kernel_arrays: tuple[np.ndarray, ...] | None = None  # state arrays checked for the kernel
         self.state = self.rest_state(payload)
-        if plant_kernel.AVAILABLE and self.params.engine == 'auto':
+        if jit.AVAILABLE and self.params.engine == 'auto':
             # the first compiled step loads (or compiles) the kernel: 0.1-0.3 s from numba's cache.
             # Pay it here, not in the first step of a loop that runs against a clock (the device
             # emulator's thread, a plant_sim under ROS): one step on a copy, then the state is restored
@@ -213,11 +214,11 @@ class WristPlant:
         """``n_steps`` steps under one held command (N, 2) [V], as :meth:`step` in a loop.
 
         With numba installed (and ``engine='auto'``) the steps run in the compiled kernel of
-        :mod:`sma_wrist.core.plant_kernel` (~1 us per wrist-step instead of ~0.3 ms); flags
+        :mod:`sma_wrist.core.plant.kernel` (~1 us per wrist-step instead of ~0.3 ms); flags
         are ORed over the steps. This is what the plant_sim node calls once per tick.
         """
         p = self.params
-        if not (plant_kernel.AVAILABLE and p.engine == 'auto'):
+        if not (jit.AVAILABLE and p.engine == 'auto'):
             flags = self._no_flags(self.n)
             for _ in range(n_steps):
                 s = self.step(command_V)

@@ -29,8 +29,8 @@ import math
 from pathlib import Path
 from typing import Any, Mapping
 
-from sma_wrist.core import thermal as th
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.thermal import heat_balance as th
 
 FORMAT = 'sma_wrist/thermal'
 VERSION = 1

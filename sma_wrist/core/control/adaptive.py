@@ -37,8 +37,13 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core import adaptive_kernel
-from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, format_choices
+from sma_wrist.core.control import adaptive_kernel
+from sma_wrist.core.errors import (
+    ModelInputError,
+    ParameterError,
+    check_finite,
+    format_choices,
+)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -239,7 +244,7 @@ class AdaptiveController:
         """Advance the estimates by dt (s) with this sample and return the desired forces.
 
         q, qdot: measured angle (rad) and rate (rad/s); q_d, qdot_d, qddot_d: reference
-        (sma_wrist.core.trajectory). Raises ModelInputError on non-finite input or dt <= 0.
+        (sma_wrist.core.control.trajectory). Raises ModelInputError on non-finite input or dt <= 0.
         """
         p = self.params
         if not (isinstance(dt, (int, float, np.integer, np.floating)) and math.isfinite(dt) and dt > 0):

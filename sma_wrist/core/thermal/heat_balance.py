@@ -26,7 +26,7 @@ Input (decision): the public command is a drive voltage ``u`` [V], positive heat
 muscle face, as msg_defs/topics.yaml says. The model input is ``I = -input_per_volt * u``.
 The literal reading (I = u in V) cannot be what Table 4.9 was fitted to: the seed's 12 V
 identification sines then run away (hundreds to thousands of degC, see ``python -m
-sma_wrist.core.thermal``). With ``input_per_volt = 0.4`` (I in A through an effective
+sma_wrist.core.thermal.heat_balance``). With ``input_per_volt = 0.4`` (I in A through an effective
 2.5 Ohm, the class of a 12 V / 6 A module) a 12 V command held in either direction stays
 inside the 0-80 degC window, so the identification experiment is physical.
 

@@ -34,8 +34,13 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core import pid_kernel
-from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, format_choices
+from sma_wrist.core.control import pid_kernel
+from sma_wrist.core.errors import (
+    ModelInputError,
+    ParameterError,
+    check_finite,
+    format_choices,
+)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -118,7 +123,7 @@ class PID:
     def update(self, q: ArrayLike, q_d: ArrayLike, dt: float) -> PIDOutput:
         """One control step: measured angle q, reference q_d (rad), step dt (s).
 
-        The law above runs as one loop over the scenarios (:mod:`sma_wrist.core.pid_kernel`,
+        The law above runs as one loop over the scenarios (:mod:`sma_wrist.core.control.pid_kernel`,
         compiled with numba when installed).
         """
         p = self.params

@@ -29,7 +29,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
 
 FloatArray = NDArray[np.float64]
 

@@ -10,13 +10,13 @@ Conventions
 -----------
 ``envelope``
     'literal': a set -> gamma_r, b set -> gamma_l, as Eq. 3.21 prints (and as
-    :mod:`sma_wrist.core.hysteresis` implements). 'swapped': the a set is the ascending
+    :mod:`sma_wrist.core.hysteresis.sdgpi` implements). 'swapped': the a set is the ascending
     (heating, lower) envelope gamma_l and the b set gamma_r, implemented by passing the
     sets to :class:`SDGPIParams` in swapped roles.
 ``p0``
     1.0, 0.0, or 'fitted': the p0 whose loop shape (mean removed) is closest in the
     least-squares sense to the project's default loop at the same load
-    (:func:`sma_wrist.core.default_params.default_sdgpi`), i.e. to the behaviour Sec. 3.2
+    (:func:`sma_wrist.core.hysteresis.default_params.default_sdgpi`), i.e. to the behaviour Sec. 3.2
     describes. p0 enters linearly, so this is a one-line regression.
 ``mirror``
     True: elongation y = k_f - y_m (Eq. 4.2, k_f = 6 mm); False: the tables give the
@@ -37,8 +37,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core.errors import ModelInputError
-from sma_wrist.core.hysteresis import EnvelopeSections, SDGPIParams, memoryless, play_bounds
-from sma_wrist.core.play import play_update
+from sma_wrist.core.hysteresis.play import play_update
+from sma_wrist.core.hysteresis.sdgpi import (
+    EnvelopeSections,
+    SDGPIParams,
+    memoryless,
+    play_bounds,
+)
 from sma_wrist.data import seed_tables as st
 
 FloatArray = NDArray[np.float64]
@@ -159,7 +164,7 @@ def sawtooth_input(dt: float = 0.5, n_periods: int = 5, *, T_min: float = SAWTOO
 def split_output(params: SDGPIParams, T: ArrayLike, m: float, *, branch: str = 'cooling') -> tuple[FloatArray, FloatArray]:
     """(sum_j p_j w_j, memoryless part with p0 = 1) along a temperature series at fixed load.
 
-    Same recursion as :func:`sma_wrist.core.hysteresis.simulate` (Eqs. 3.19, 3.22, 4.1), with
+    Same recursion as :func:`sma_wrist.core.hysteresis.sdgpi.simulate` (Eqs. 3.19, 3.22, 4.1), with
     the bounds computed for all samples at once; y_m = p0 * second + first.
     """
     T = np.asarray(T, dtype=float)
@@ -252,7 +257,9 @@ class ConventionResult:
 
 
 def _reference_loop(load_g: int, T: FloatArray) -> FloatArray:
-    from sma_wrist.core.default_params import default_sdgpi  # the lead's set: Sec. 3.2 behaviour
+    from sma_wrist.core.hysteresis.default_params import (
+        default_sdgpi,  # the lead's set: Sec. 3.2 behaviour
+    )
     p = default_sdgpi()
     return elongation(p, T, load_g * 1e-3)
 

@@ -15,7 +15,7 @@ Where each effect acts (docs/diagnose.md has the equations)::
     q --backlash (play), potentiometer (delay, lag, offset, gain, drift)--> q_measured
 
 :func:`plant_params` folds the thermal and joint parameters into a
-:class:`~sma_wrist.core.plant.PlantParams`; :class:`SensorChain` is the measurement part.
+:class:`~sma_wrist.core.plant.wrist.PlantParams`; :class:`SensorChain` is the measurement part.
 The command delay, TEM driver dead zone and saturation, wire lag, cycle drift and ambient
 drift are not simulated by the plant
 (:data:`REPLAY_ONLY`): the diagnosis' replay models them, plant_sim refuses them.
@@ -29,7 +29,7 @@ from typing import Mapping
 import numpy as np
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.plant.wrist import PlantParams
 
 
 @dataclass(frozen=True)

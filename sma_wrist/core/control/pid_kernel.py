@@ -1,16 +1,16 @@
 """Scalar loop of the Sec. 6.1 PID over scenarios, compiled by numba when present.
 
-:class:`sma_wrist.core.pid.PID` runs one sample for n scenarios per call; in the controller
+:class:`sma_wrist.core.control.pid.PID` runs one sample for n scenarios per call; in the controller
 node n = 1 at 100 Hz, where ~25 numpy calls on 1-element arrays cost ~25 us a sample. As a
 loop over the scenarios it costs ~1 us compiled (the plant kernel's numba set-up,
-:mod:`sma_wrist.core.plant_kernel`) and stays correct, if slower for large n, as plain Python
-without numba. The equations and their order are those documented in :mod:`sma_wrist.core.pid`.
+:mod:`sma_wrist.core.plant.kernel`) and stays correct, if slower for large n, as plain Python
+without numba. The equations and their order are those documented in :mod:`sma_wrist.core.control.pid`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from sma_wrist.core.plant_kernel import AVAILABLE, _jit
+from sma_wrist.core.jit import AVAILABLE, _jit
 
 __all__ = ['AVAILABLE', 'OUT_FIELDS', 'pack', 'update', 'warm_up']
 

@@ -2,7 +2,7 @@
 
 Three modes (seed Sec. 6.1, Table 6.1):
 
-- ``inverse_adaptive``: the back-stepping adaptive law (:mod:`sma_wrist.core.adaptive`,
+- ``inverse_adaptive``: the back-stepping adaptive law (:mod:`sma_wrist.core.control.adaptive`,
   Eqs. 5.24, 5.32, 5.37) gives desired muscle forces; with the desired strain of each
   bundle at q_d (chain kinematics, Eq. 4.17) they go to the inverse SD-GPI compensator
   (hysteresis_compensator node, Eqs. 5.5-5.8), which turns them into temperatures.
@@ -10,7 +10,7 @@ Three modes (seed Sec. 6.1, Table 6.1):
   force deviation maps linearly to a temperature deviation around ``temperature_mid_C``
   with the plateau's stress-temperature slope ``force_per_degC_N`` (the hysteresis is
   treated as an unknown gain, which beta_hat absorbs in the inverse mode).
-- ``pid``: the Sec. 6.1 PID (:mod:`sma_wrist.core.pid`) on the angle error; its output u is a
+- ``pid``: the Sec. 6.1 PID (:mod:`sma_wrist.core.control.pid`) on the angle error; its output u is a
   differential temperature [degC]: T_1d = T_mid + u, T_2d = T_mid - u (muscle 1 contracts
   when heated and raises q).
 
@@ -26,10 +26,15 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.adaptive import KGF_N, N_WIRES, AdaptiveController, AdaptiveParams
+from sma_wrist.core.control.adaptive import (
+    KGF_N,
+    N_WIRES,
+    AdaptiveController,
+    AdaptiveParams,
+)
+from sma_wrist.core.control.pid import PID, PIDParams
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.pid import PID, PIDParams
-from sma_wrist.core.plant import PlantParams
+from sma_wrist.core.plant.wrist import PlantParams
 
 FloatArray = NDArray[np.float64]
 Mode = Literal['inverse_adaptive', 'direct_adaptive', 'pid']

@@ -1,0 +1,108 @@
+"""Compiled per-sample stepping of :class:`sma_wrist.core.plant.wrist.WristPlant` (optional numba).
+
+The plant is a time recursion: at 1 kHz a node steps one wrist at a time, and numpy's
+per-call overhead (~50 array operations a step) dominates a 1-wrist step. This module is
+the same step written as tight scalar loops over wrists (thermal RK4, Eqs. 4.13-4.14; the
+wire-load solve of muscle.py Eq. 1 with the SD-GPI of Eqs. 3.19-3.24, 4.1-4.6; the joint
+of Eq. 4.18), compiled by numba when it is installed (``pip install sma_wrist[fast]``).
+Without numba the plant uses its numpy path; :data:`AVAILABLE` says which.
+
+The uncompiled Python of the same functions (``step_many.py_func``) is the "plain
+per-sample Python reference loop" of the benchmark. test_plant_kernel checks the kernel
+against the numpy path step by step.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from sma_wrist.core.hysteresis.kernel import _solve_load_into
+from sma_wrist.core.jit import _jit
+from sma_wrist.core.joint.kernel import joint_step_one
+from sma_wrist.core.thermal.kernel import thermal_constants, thermal_rk4
+
+
+@_jit
+def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags,
+              th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
+    """Advance N wrists by n_steps plant steps under held commands u (N, 2) [V], in place.
+
+    Arrays: thermal (N, 2, 2); q, qd, payload (N,); w (2N, n) and heating, T_prev, load,
+    compliance (2N,) stacked [muscle 1 of all wrists, then muscle 2] as in plant.PlantState;
+    flags (N, 4) bool out: over_temperature, slack, overload, at_stop (OR over the steps).
+    th_coef (14,): input_per_volt, coupling, then per face (muscle, exchanger) the six
+    (K_at, K_t, K_Tinf, K_T, K_R, K_inf).
+    mech (16,): dt, scale, c_el, k_f, m_lo, m_hi, m_max, tol, max_it, p0, T_lo, T_hi, T_hot,
+    e0_mm, n_g_r, r_eff_m. joint (10,): I_w, lever, coulomb, viscous, static, stick_v,
+    q_neutral, q_min, q_max, g.
+    """
+    n = q.size
+    dt = mech[0]
+    scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
+    max_it = int(mech[8])
+    p0, T_lo, T_hi, T_hot, e0, n_g_r, r_eff = mech[9], mech[10], mech[11], mech[12], mech[13], mech[14], mech[15]
+    q_neutral, q_min, q_max = joint[6], joint[7], joint[8]
+    w_now = np.empty(w.shape[1])
+    y0 = np.empty((2, 2))
+    xs = np.empty((2, 2))
+    kk = np.empty((2, 2))
+    acc = np.empty((2, 2))
+    env_c = np.empty(8)  # envelope scratch of the load solve
+    env_s = np.empty(8)
+    for _ in range(n_steps):
+        for j in range(n):
+            thermal_rk4(thermal[j], u[j], dt, th_coef, y0, xs, kk, acc)
+            # mechanics at the new muscle temperatures
+            x_mm = 1e3 * r_eff * (q[j] - q_neutral)
+            torque = 0.0
+            inv_c = 0.0
+            for side in range(2):
+                i = j + side * n
+                T = thermal[j, side, 0]
+                if T > T_hot:
+                    flags[j, 0] = True
+                T = min(max(T, T_lo), T_hi)
+                if T > T_prev[i]:
+                    heating[i] = True
+                elif T < T_prev[i]:
+                    heating[i] = False
+                T_prev[i] = T
+                if heating[i]:
+                    y_mem = p0 * (mem_c[0] * math.tanh(mem_c[1] * T + mem_c[2]) + mem_c[3])
+                else:
+                    y_mem = p0 * (mem_d[0] * math.tanh(mem_d[1] * T + mem_d[2]) + mem_d[3])
+                y_geo = e0 - x_mm if side == 0 else e0 + x_mm
+                m, dy, res = _solve_load_into(T, y_geo, w[i], w_now, y_mem, load[i], stacked, edges, r, p, m_lo,
+                                              m_hi, scale, c_el, k_f, m_max, tol, max_it, env_c, env_s)
+                w[i, :] = w_now
+                load[i] = m
+                compliance[i] = dy
+                if m <= 1e-9 and res > tol:
+                    flags[j, 1] = True
+                if m >= m_max - 1e-9 and res < -tol:
+                    flags[j, 2] = True
+                torque += n_g_r * m if side == 0 else -n_g_r * m
+                inv_c += 1.0 / dy
+            stiffness = n_g_r * 1e3 * r_eff * inv_c
+            q[j], qd[j] = joint_step_one(q[j], qd[j], torque, stiffness, payload[j], dt, joint)
+            if q[j] <= q_min or q[j] >= q_max:
+                flags[j, 3] = True
+
+def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
+    """The kernel's constant arrays from a plant.PlantParams (see :func:`step_many`)."""
+    from sma_wrist.core.joint.dynamics import G
+    tp, hp, mg, jp = params.thermal, params.hysteresis, params.muscle, params.joint
+    th_coef = thermal_constants(tp)
+    m_lo, m_hi = hp.load_range
+    mech = np.array([params.dt, mg.length_scale, mg.elastic_mm_per_kgf, hp.k_f, m_lo, m_hi, mg.max_load_kgf,
+                     params.load_tolerance_mm, 60.0, hp.p0, hp.T_valid[0], hp.T_valid[1],
+                     params.max_muscle_temperature_C, params.preload_elongation_mm,
+                     mg.n_wires * G * jp.r_eff_m, jp.r_eff_m], dtype=float)
+    joint = np.array([jp.joint_inertia_kgm2, jp.lever_m, jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm,
+                      jp.stick_velocity_rad_s, jp.q_neutral_rad, jp.q_min_rad, jp.q_max_rad, G], dtype=float)
+    env = hp.envelopes
+    stacked = np.ascontiguousarray(np.concatenate([env.a, env.b], axis=1).transpose(0, 2, 1))
+    return (th_coef, mech, np.ascontiguousarray(stacked), np.ascontiguousarray(env.edges_kg, dtype=float),
+            np.ascontiguousarray(hp.thresholds, dtype=float), np.ascontiguousarray(hp.weights, dtype=float),
+            np.ascontiguousarray(hp.c, dtype=float), np.ascontiguousarray(hp.d, dtype=float), joint)

@@ -1,0 +1,56 @@
+"""Compiled TEM + Nitinol heat balance (seed Eqs. 4.13-4.14): classical RK4 on both layers.
+
+Scalar loops compiled by numba when present (:mod:`sma_wrist.core.jit`); the numpy reference is
+:mod:`sma_wrist.core.thermal.heat_balance` (``rate_terms``). Shared by the plant kernel and the TEM
+control kernel, so the plant and the TEM law's model integrate the same numbers.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from sma_wrist.core.jit import _jit
+
+
+@_jit
+def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
+    """dT/dt (2 layers x 2 faces) of Eqs. 4.13-4.14 (thermal.rate_terms) at commands u (2,) [V]."""
+    ipv = th_coef[0]
+    coupling = th_coef[1]
+    for l in range(2):
+        cur = -ipv * u[l]
+        for f in range(2):
+            o = 1 - f
+            b = 2 + 6 * f  # K_at, K_t, K_Tinf, K_T, K_R, K_inf of this face
+            d = (th_coef[b + 4] * cur + th_coef[b] * x[l, f] + th_coef[b + 1] * x[l, o]) * cur \
+                - th_coef[b + 2] * x[l, f] + th_coef[b + 3] * x[l, o] + th_coef[b + 5]
+            if f == 0 and coupling != 0.0:
+                d += coupling * (x[1 - l, 0] - x[l, 0])
+            out[l, f] = d
+
+
+@_jit
+def thermal_rk4(x, u, dt, th_coef, y0, xs, kk, acc):  # pragma: no cover - compiled
+    """One classical RK4 step of Eqs. 4.13-4.14 on both layers, x (2, 2) [degC] in place, command
+    u (2,) [V] held over dt [s]; y0, xs, kk, acc are (2, 2) scratch arrays."""
+    for l in range(2):
+        for f in range(2):
+            y0[l, f] = x[l, f]
+            xs[l, f] = y0[l, f]
+            acc[l, f] = 0.0
+    for stage in range(4):
+        _thermal_rate(xs, u, th_coef, kk)
+        wgt = 1.0 if (stage == 0 or stage == 3) else 2.0
+        frac = 1.0 if stage == 2 else 0.5
+        for l in range(2):
+            for f in range(2):
+                acc[l, f] += wgt * kk[l, f]
+                xs[l, f] = y0[l, f] + frac * dt * kk[l, f]
+    for l in range(2):
+        for f in range(2):
+            x[l, f] = y0[l, f] + dt / 6.0 * acc[l, f]
+
+
+def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """th_coef (14,) of :func:`step_many` from a thermal.ThermalParams."""
+    faces = [[tp._k_at[f], tp._k_t[f], tp._k_tinf[f], tp._k_tc[f], tp._k_r[f], tp._k_inf[f]] for f in (0, 1)]
+    return np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1], dtype=float)
