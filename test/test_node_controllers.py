@@ -427,6 +427,51 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
     np.testing.assert_allclose(got, expected, atol=1e-9)
 
 
+def test_compensator_takes_the_tem_commands_only_while_its_observer_runs():
+    """With the thermocouple the commands are not needed: no subscription (two deliveries per tick less);
+    switching the observer on and off at run time subscribes and unsubscribes."""
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
+    def command_subs(node) -> set[str]:
+        return {s.topic_name for s in node.subscriptions if '/command' in s.topic_name}
+
+    with Runtime() as rt:
+        node = rt.add(HysteresisCompensator)
+        off = command_subs(node)
+        node.set_parameters([Parameter('temperature_source', value='observer')])
+        on = command_subs(node)
+        node.set_parameters([Parameter('temperature_source', value='thermocouple')])
+        off_again = command_subs(node)
+    assert off == set() and off_again == set()
+    assert on == {'/wrist/tem_1/command', '/wrist/tem_2/command'}
+
+
+def test_compensator_observer_runs_the_thermal_file_and_refuses_a_bad_one(tmp_path):
+    """thermal_file: the observer runs the identified heat balance tem_controller loads (saturating at
+    the driver rating), and a missing file stops the node with its path (only with the observer on)."""
+    import dataclasses
+
+    from sma_wrist.core.errors import SmaWristError
+    from sma_wrist.core.thermal.heat_balance import ThermalParams
+    from sma_wrist.core.thermal.params_file import write_thermal_file
+    from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL, HysteresisCompensator
+    weak = dataclasses.replace(ThermalParams(), input_per_volt=0.7 * ThermalParams().input_per_volt)
+    f = write_thermal_file(tmp_path / 'tems.yaml', weak, {'note': 'test'}, header='test')
+    observer = {'temperature_source': 'observer'}
+    with Runtime(params={'/hysteresis_compensator': {**observer, 'thermal_file': str(f)}}) as rt:
+        thermal = rt.add(HysteresisCompensator).observer.thermal
+    assert thermal.input_per_volt == weak.input_per_volt != OBSERVER_THERMAL.input_per_volt
+    assert (thermal.u_min_V, thermal.u_max_V) == (OBSERVER_THERMAL.u_min_V, OBSERVER_THERMAL.u_max_V)
+    missing = str(tmp_path / 'missing.yaml')
+    with Runtime(params={'/hysteresis_compensator': {**observer, 'thermal_file': missing}}) as rt:
+        with pytest.raises(SmaWristError, match='missing.yaml'):
+            rt.add(HysteresisCompensator)
+    with Runtime(params={'/hysteresis_compensator': {'thermal_file': missing}}) as rt:
+        assert rt.add(HysteresisCompensator).observer is None  # the thermocouple needs no heat balance
+
+
 def test_compensator_observer_parameters_are_validated_with_a_reason():
     from rclpy.parameter import Parameter
 

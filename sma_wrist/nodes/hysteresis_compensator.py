@@ -19,7 +19,9 @@ Eqs. 4.13-4.14 driven by the TEM commands) instead of the raw thermocouple, as t
 ``compensator_observer`` does (docs/control.md "The observer in the node graph"). The commands carry
 no stamp: each is filed at its arrival (the node clock, or the newest measurement stamp seen if
 later) and a tick stamped t_k takes the newest command filed before t_k, the one tem_controller
-computed from the previous tick.
+computed from the previous tick. The node subscribes to the commands only while the observer is on
+(two deliveries per tick less otherwise). ``thermal_file`` gives the observer the identified heat
+balance tem_controller loads (the same file for both nodes, docs/identification_thermal.md).
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ from sma_wrist.core.hysteresis.compensation import MuscleCompensator
 from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal.heat_balance import ThermalParams
+from sma_wrist.core.thermal.params_file import load_thermal_file
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
@@ -54,8 +57,17 @@ MAX_PENDING_TICKS = 5
 ANGLE = 2  # slot of the angle in one tick's [T_1, T_2, angle]
 #: TEM commands kept per layer for the observer: enough for MAX_PENDING_TICKS ticks waiting, with slack
 MAX_COMMANDS = 4 * MAX_PENDING_TICKS
-#: the observer's heat balance: tem_controller's defaults (Table 4.9, saturation at the driver rating)
+#: the observer's heat balance without a thermal_file: Table 4.9, saturating at the driver rating
+#: (the commands it replays are tem_controller's, which the driver clips there)
 OBSERVER_THERMAL = replace(ThermalParams(), u_min_V=DriveLimits().boost_min_V, u_max_V=DriveLimits().boost_max_V)
+
+
+def observer_thermal(thermal_file: str) -> ThermalParams:
+    """The observer's heat balance: ``thermal_file`` (identified, as tem_controller loads it) or Table 4.9,
+    saturating at the driver rating. Raises ParameterError (with the path) for a missing or malformed file."""
+    if not thermal_file:
+        return OBSERVER_THERMAL
+    return load_thermal_file(thermal_file).with_limits(DriveLimits().boost_min_V, DriveLimits().boost_max_V)
 
 
 class HysteresisCompensator(WristNode):
@@ -85,6 +97,8 @@ class HysteresisCompensator(WristNode):
               'constant pulling the estimate toward the thermocouple', 's', (0.0, 10.0)),
         Param('observer.tc_lag_s', TemperatureObserverParams.tc_lag_s, 'temperature_source observer: first-order lag '
               'of the thermocouple the observer assumes (0: none)', 's', (0.0, 10.0)),
+        Param('thermal_file', '', 'temperature_source observer: identified TEM heat balance the observer runs '
+              "(sma-wrist identify thermal; the same file as tem_controller's; empty: Table 4.9)", runtime=False),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -113,8 +127,8 @@ class HysteresisCompensator(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_measured_T(i, m))
             self.subscription(f'/wrist/muscle_{i}/stress', lambda m, i=i: self._on_measured_stress(i, m))
         self.subscription('/wrist/joint_states', self._on_joint_state)
-        for i in (1, 2):
-            self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m))
+        self.command_subs: list[Any] = []
+        self._subscribe_commands()
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
@@ -127,6 +141,8 @@ class HysteresisCompensator(WristNode):
         if problem is None:
             try:
                 lo, hi = hysteresis_params(values['hysteresis_file']).T_valid
+                if values['temperature_source'] == 'observer':
+                    observer_thermal(values['thermal_file'])
             except SmaWristError as e:
                 return str(e)
             if values['temperature_min_C'] < lo or values['temperature_max_C'] > hi:
@@ -147,11 +163,24 @@ class HysteresisCompensator(WristNode):
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
         self.observer = None if self.p['temperature_source'] != 'observer' else MuscleTemperatureObserver(
-            OBSERVER_THERMAL, TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
+            observer_thermal(self.p['thermal_file']), TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
         self.started = False  # re-seed the memory (and the observer) from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:
         self._build()
+        self._subscribe_commands()
+
+    def _subscribe_commands(self) -> None:
+        """Take the TEM commands while the observer runs, and only then."""
+        if self.observer is not None and not self.command_subs:
+            self.command_subs = [self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m))
+                                 for i in (1, 2)]
+        elif self.observer is None and self.command_subs:
+            for sub in self.command_subs:
+                self.destroy_subscription(sub)
+            self.command_subs = []
+            for q in self.commands:
+                q.clear()
 
     def _on_measured_T(self, i: int, msg: Any) -> None:
         if finite(msg.temperature):
