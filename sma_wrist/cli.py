@@ -30,6 +30,16 @@ def _positive_float(text: str) -> float:
     return v
 
 
+def _nonnegative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f'{text!r} must be >= 0')
+    return v
+
+
 def _payload(text: str) -> float:
     try:
         v = float(text)
@@ -147,7 +157,8 @@ def _controller(text: str) -> str:
 def cmd_experiment(a: argparse.Namespace) -> int:
     from sma_wrist.experiment import run_experiment
     table = run_experiment(a.controllers, a.payloads, a.out, duration_s=a.duration, workers=a.workers,
-                           params_files=a.params_file or (), plots=not a.no_plots)
+                           params_files=a.params_file or (), plots=not a.no_plots, family=a.family,
+                           family_seed=a.family_seed)
     print(json.dumps(table, indent=2) if a.json else
           f'{len(table["runs"])} runs in {table["wall_s"]:.0f} s wall; report: {a.out}/report.md')
     return 0
@@ -235,6 +246,10 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument('--params-file', action='append', help='params file for every run (e.g. config/paper_table_6_1.yaml)')
     e.add_argument('--no-plots', action='store_true')
     e.add_argument('--json', action='store_true')
+    e.add_argument('--family', type=_nonnegative_int, default=8,
+                   help='also run every controller x payload on this many sampled off-model plants (the sweep '
+                        'engine) and report them beside the nominal figures (0: none; default 8)')
+    e.add_argument('--family-seed', type=int, default=1, help='seed of the sampled plants (default 1)')
     e.set_defaults(func=cmd_experiment)
 
     c = sub.add_parser('compare', help='tracking metrics of recorded runs (sim or hardware), aligned on time')

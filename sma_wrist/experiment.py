@@ -11,7 +11,11 @@ embedded runtime, and writes ``runs/ch6/``:
   and what agrees or disagrees with the seed;
 - ``tracking_<payload>kg.png``: q and q_d, and the error, of every controller at that payload;
 - ``tem_tracking.png``: the TEM controller's own story (seed Figs. 5.24-5.28): one module
-  cannot hold two temperatures, two layers can.
+  cannot hold two temperatures, two layers can;
+- ``family/`` (``family`` > 0): the same controllers and payloads on ``family`` plants that are not
+  the controllers' model (:mod:`sma_wrist.plants.spread`, issue 14's spread), run by the vectorised
+  sweep (bit-equal to the graph, docs/sweep.md); the report gives their median / 95th percentile /
+  share under 15 % beside each nominal figure.
 """
 from __future__ import annotations
 
@@ -69,8 +73,15 @@ def _plot_series(run: Any, step: int = 10) -> Any:
 
 def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: str | Path, *,
                    duration_s: float = TWO_PERIODS_S, workers: int | None = None,
-                   params_files: Sequence[str] = (), plots: bool = True, log: Any = sys.stderr) -> dict[str, Any]:
-    """Run all combinations (in parallel processes), then write the report. Returns the table."""
+                   params_files: Sequence[str] = (), plots: bool = True, log: Any = sys.stderr,
+                   family: int = 0, family_seed: int = 1) -> dict[str, Any]:
+    """Run all combinations (in parallel processes), then write the report. Returns the table.
+
+    family: number of sampled off-model plants to run every combination on as well (0: none).
+    """
+    if not (isinstance(family, int) and family >= 0):
+        from sma_wrist.core.errors import ParameterError
+        raise ParameterError(f'family = {family!r}: the number of off-model plants must be an integer >= 0')
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     specs = [RunSpec(c, float(m), duration_s, str(out / f'{c}_{m:g}kg'), tuple(params_files))
@@ -94,12 +105,41 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
             log.flush()
     wall = time.perf_counter() - t0
     rows.sort(key=lambda r: (list(controllers).index(r['controller']), r['payload_kg']))
-    table = {'wall_s': wall, 'workers': workers, 'duration_s': duration_s, 'runs': rows}
+    table: dict[str, Any] = {'wall_s': wall, 'workers': workers, 'duration_s': duration_s, 'runs': rows}
+    if family:
+        table['family'] = run_family(controllers, payloads, duration_s, family, family_seed, out / 'family', log)
+        table['family']['params_files_ignored'] = bool(params_files)
     (out / 'table.json').write_text(json.dumps(table, indent=2))
     if plots:
         write_plots(rows, out, series)
-    (out / 'report.md').write_text(report_markdown(rows, wall, workers, plots))
+    (out / 'report.md').write_text(report_markdown(rows, wall, workers, plots, table.get('family')))
     return table
+
+
+def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s: float, n_plants: int, seed: int,
+               out: Path, log: Any) -> dict[str, Any]:
+    """Every controller x payload on ``n_plants`` sampled off-model plants (the sweep engine, the node
+    laws at their defaults): per (controller, payload) median / 95th percentile / worst max error and
+    the share under 15 %."""
+    from sma_wrist.sweep.run import LIMIT_PCT, Progress, SweepConfig, run_sweep
+    cfg = SweepConfig(n_plants=n_plants, seed=seed, controllers=tuple(controllers),
+                      payloads=tuple(float(m) for m in payloads), duration_s=duration_s, nominal=False)
+    n_loops = n_plants * len(payloads) * len(controllers)
+    log.write(f'off-model family: {n_plants} sampled plants x {len(payloads)} payloads x {len(controllers)} '
+              f'controllers = {n_loops} loops (sma-wrist sweep engine)\n')
+    res = run_sweep(cfg, out, progress=Progress(n_loops, log))  # results.jsonl, sweep.json, table, PNGs
+    cells = []
+    for c in controllers:
+        for m in payloads:
+            e = np.array([r['max_error_pct'] for r in res.rows if r['controller'] == c
+                          and abs(r['payload_kg'] - m) < 1e-9])
+            if e.size:
+                cells.append({'controller': c, 'payload_kg': float(m), 'plants': int(e.size),
+                              'median_max_error_pct': float(np.median(e)),
+                              'p95_max_error_pct': float(np.percentile(e, 95)), 'worst_max_error_pct': float(e.max()),
+                              'share_under_15_pct': float(np.mean(e < LIMIT_PCT))})
+    return {'n_plants': n_plants, 'seed': seed, 'interrupted': res.interrupted, 'wall_s': res.wall_s,
+            'cells': cells, 'summary': res.summary, 'files': res.files}
 
 
 def _ordering(rows: list[dict[str, Any]], key: str, payload: float) -> list[str]:
@@ -136,7 +176,8 @@ def seed_claims(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
-def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plots: bool) -> str:
+def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plots: bool,
+                    family: dict[str, Any] | None = None) -> str:
     ctrls = list(dict.fromkeys(r['controller'] for r in rows))
     loads = sorted({r['payload_kg'] for r in rows})
     lines = ['# Chapter 6 experiment in simulation', '',
@@ -145,8 +186,10 @@ def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plo
              'metrics from each run\'s bag (`sma_wrist.runs`, definitions in `sma_wrist/core/metrics.py`): max and '
              'RMS error in % of the 1.048 rad reference range; total absolute error = sum of |e| % over the last full '
              'cycle resampled at 1 kHz (the only rate at which Table 6.2\'s numbers are plausible).', '',
-             '| load | controller | max error % (seed) | RMS % | total abs. error % (seed) | peak TEM V |',
-             '|---|---|---|---|---|---|']
+             '| load | controller | max error % (seed) | RMS % | total abs. error % (seed) | peak TEM V |'
+             + (' off-model family: median / p95 / share < 15 % |' if family else ''),
+             '|---|---|---|---|---|---|' + ('---|' if family else '')]
+    cell = {(f['controller'], round(f['payload_kg'], 9)): f for f in (family or {}).get('cells', [])}
     for m in loads:
         for c in ctrls:
             r = next((r for r in rows if r['controller'] == c and abs(r['payload_kg'] - m) < 1e-9), None)
@@ -157,8 +200,24 @@ def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plo
             smax = f' ({seed[col]:.2f})' if seed and col is not None else ''
             stot = f' ({seed[3 + col]:,})' if seed and col is not None else ''
             tot = f'{r["total_abs_error_pct"]:,.0f}' if r.get('total_abs_error_pct') is not None else 'n/a'
+            fam = ''
+            if family:
+                f = cell.get((c, round(m, 9)))
+                fam = (f' {f["median_max_error_pct"]:.2f} / {f["p95_max_error_pct"]:.2f} / '
+                       f'{100 * f["share_under_15_pct"]:.0f} % |' if f else ' n/a |')
             lines.append(f'| {m:g} kg | {c} | {r["max_error_pct"]:.2f}{smax} | {r["rms_error_pct"]:.2f} | {tot}{stot} '
-                         f'| {r["peak_command_V"]:.1f} |')
+                         f'| {r["peak_command_V"]:.1f} |{fam}')
+    if family:
+        lines += ['', f'Nominal columns: the node graph on the controllers\' own model, noise-free. Off-model column: '
+                  f'the same controllers and payloads on {family["n_plants"]} plants sampled from issue 14\'s spread '
+                  f'(seed {family["seed"]}: transition temperatures +-10 degC, stroke +-30 %, TEM gain and losses '
+                  '+-30 %, coolant/ambient +-5 degC, thermocouple noise and lag, potentiometer noise; '
+                  '`sma_wrist/plants/spread.py`), run by the sweep engine, which reproduces the graph bit for bit '
+                  f'(docs/sweep.md); max error over the last cycle, the seed\'s requirement is < 15 %. Files: '
+                  '`family/`.' + (' The family runs the code defaults: the params files given apply to the graph '
+                                  'runs only.' if family.get('params_files_ignored') else '')
+                  + (' Interrupted: the family figures cover the loops that finished.' if family.get('interrupted')
+                     else '')]
     lines += ['', '## Ordering against the seed', '']
     agree = disagree = 0
     for m in loads:

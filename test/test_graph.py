@@ -28,7 +28,7 @@ def experiment_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp('ch6')
     with open(os.devnull, 'w') as log:
         kw = dict(duration_s=4 * math.pi / 0.1, workers=2, plots=False, log=log)
-        run_experiment(['direct_adaptive'], DIRECT_LOADS, out / 'direct', **kw)
+        run_experiment(['direct_adaptive'], DIRECT_LOADS, out / 'direct', family=1, **kw)  # + 1 off-model plant
         run_experiment(['inverse_adaptive', 'pid'], PID_LOADS, out / 'main', **kw)  # report of both at six loads
     return out
 
@@ -64,6 +64,25 @@ def test_experiment_report_has_every_run_and_checks_the_seed_claims(experiment_d
                  == 'inverse_adaptive' for m in PID_LOADS)
     claim = 'inverse_adaptive has the lowest total absolute error. Here: at '
     assert claim + ('6 of 6 loads -- agrees.' if lowest else '') in text
+
+
+def test_experiment_report_puts_the_off_model_family_beside_each_nominal_figure(experiment_dir, tracking_runs):
+    """Issue 14: nominal and off-model figures side by side in the experiment report. The family cell of each
+    payload is the sweep's own result for that sampled plant (family/results.jsonl), not the nominal run."""
+    table = json.loads((experiment_dir / 'direct' / 'table.json').read_text())
+    rows = [json.loads(line) for line in (experiment_dir / 'direct' / 'family' / 'results.jsonl').read_text().splitlines()]
+    text = (experiment_dir / 'direct' / 'report.md').read_text()
+    assert 'off-model family: median / p95 / share < 15 %' in text and 'issue 14' in text
+    assert sorted(r['payload_kg'] for r in rows) == sorted(DIRECT_LOADS) and {r['group'] for r in rows} == {'spread'}
+    for cell in table['family']['cells']:
+        row, = [r for r in rows if abs(r['payload_kg'] - cell['payload_kg']) < 1e-9]
+        assert cell['plants'] == 1 and cell['median_max_error_pct'] == row['max_error_pct']
+        nominal = tracking_runs[('direct_adaptive', cell['payload_kg'])]['max_error_pct']
+        assert row['max_error_pct'] != nominal  # a plant that is not the model
+        line = f'| {cell["payload_kg"]:g} kg | direct_adaptive | {nominal:.2f}'  # (seed) where the seed has the load
+        assert any(ln.startswith(line) and ln.endswith(f' {row["max_error_pct"]:.2f} / {row["max_error_pct"]:.2f} / '
+                                                       f'{100 * (row["max_error_pct"] < 15):.0f} % |')
+                   for ln in text.splitlines())
 
 
 @pytest.mark.parametrize('controller, payload', [('pid', m) for m in PID_LOADS] +
