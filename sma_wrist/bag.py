@@ -61,14 +61,7 @@ class BagError(SmaWristError):
 
 # --------------------------------------------------------------------------- recording
 def _rosbags_qos(qos: Any) -> Any:
-    from rosbags.interfaces import (
-        Qos,
-        QosDurability,
-        QosHistory,
-        QosLiveliness,
-        QosReliability,
-        QosTime,
-    )
+    from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 
     def t(d: Any) -> QosTime:
         sec, nsec = divmod(int(d.nanoseconds), 10**9)

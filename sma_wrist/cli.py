@@ -12,11 +12,7 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import (
-    diagnose_arguments,
-    emulator_arguments,
-    sweep_arguments,
-)
+from sma_wrist.cli_options import diagnose_arguments, emulator_arguments, sweep_arguments
 from sma_wrist.core.errors import SmaWristError
 
 
@@ -187,14 +183,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
 def cmd_sweep(a: argparse.Namespace) -> int:
     from sma_wrist.core.errors import ParameterError
     from sma_wrist.plants.spread import FAMILY
-    from sma_wrist.sweep.run import (
-        Progress,
-        SweepConfig,
-        format_table,
-        make_cases,
-        parse_perturbations,
-        run_sweep,
-    )
+    from sma_wrist.sweep.run import Progress, SweepConfig, format_table, make_cases, parse_perturbations, run_sweep
     ranges = parse_perturbations(a.perturb)
     try:
         payloads = tuple(float(x) for x in a.payloads.split(',')) if a.payloads else None

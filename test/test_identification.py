@@ -4,12 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
-from sma_wrist.core.hysteresis.identification import (
-    fit_gpi,
-    fit_sdgpi,
-    gpi_vector,
-    simulate_batch,
-)
+from sma_wrist.core.hysteresis.identification import fit_gpi, fit_sdgpi, gpi_vector, simulate_batch
 from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, simulate
 from sma_wrist.core.hysteresis.seed_params import sawtooth_input
 from sma_wrist.identify.wrist import shifted_wire
@@ -117,10 +112,7 @@ def test_lower_degrees_keep_the_higher_load_terms_at_zero() -> None:
 
 
 def test_clausius_clapeyron_law_is_one_exact_quadratic_section_with_exact_jacobian() -> None:
-    from sma_wrist.core.hysteresis.identification import (
-        cc_coefficients,
-        cc_to_quadratic,
-    )
+    from sma_wrist.core.hysteresis.identification import cc_coefficients, cc_to_quadratic
 
     z = np.array([1.2, 0.3, -0.1, 0.25, 0.04, 60.0, 25.0, 0.8, 0.1, 0.05])
     m = np.linspace(0.1, 2.0, 9)
@@ -135,10 +127,7 @@ def test_clausius_clapeyron_law_is_one_exact_quadratic_section_with_exact_jacobi
 
 
 def test_saturating_stroke_law_has_an_exact_jacobian_and_sections_that_follow_it() -> None:
-    from sma_wrist.core.hysteresis.identification import (
-        sat_coefficients,
-        sat_to_sections,
-    )
+    from sma_wrist.core.hysteresis.identification import sat_coefficients, sat_to_sections
 
     z = np.array([0.2, 1.1, 6.0, 0.25, 0.04, 60.0, 25.0, 0.1, 0.7, 0.05])
     m = np.linspace(0.03, 2.0, 41)

@@ -15,20 +15,10 @@ from test_identification import two_section_default
 from sma_wrist.cli import main as cli_main
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
-from sma_wrist.core.hysteresis.params_file import (
-    load_hysteresis,
-    params_from_dict,
-    params_to_dict,
-)
+from sma_wrist.core.hysteresis.params_file import load_hysteresis, params_from_dict, params_to_dict
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, simulate
 from sma_wrist.identify.hysteresis import Options, run
-from sma_wrist.identify.io import (
-    IdentifyInputError,
-    Units,
-    load_kgf_to_stress,
-    read_measurement,
-    stress_to_load_kgf,
-)
+from sma_wrist.identify.io import IdentifyInputError, Units, load_kgf_to_stress, read_measurement, stress_to_load_kgf
 from sma_wrist.identify.segment import loops_of
 
 DATA = Path(__file__).parent / 'data' / 'sma_react'
@@ -174,12 +164,7 @@ def test_real_nitihf_interior_held_out_load_needs_the_clausius_clapeyron_law() -
     """300 MPa held out, trained on 7, 50, 100, 200, 400 MPa: the seed's quadratics of the load
     (one section over 7-400 MPa) swing between 200 and 400 MPa; the Clausius-Clapeyron law
     (transition temperatures shift linearly with stress) interpolates."""
-    from sma_wrist.core.hysteresis.identification import (
-        fit_sdgpi,
-        fit_sdgpi_cc,
-        sdgpi_gpi_vectors,
-        simulate_batch,
-    )
+    from sma_wrist.core.hysteresis.identification import fit_sdgpi, fit_sdgpi_cc, sdgpi_gpi_vectors, simulate_batch
     from sma_wrist.identify.hysteresis import choose_edges
     from sma_wrist.identify.io import REF_LENGTH_MM
     from sma_wrist.identify.loops import errors_pct

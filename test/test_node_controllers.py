@@ -375,10 +375,7 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
     from std_msgs.msg import Header
 
     from sma_wrist.core.control.joint_controller import bundle_strain
-    from sma_wrist.core.control.tem import (
-        MuscleTemperatureObserver,
-        TemperatureObserverParams,
-    )
+    from sma_wrist.core.control.tem import MuscleTemperatureObserver, TemperatureObserverParams
     from sma_wrist.core.hysteresis.compensation import MuscleCompensator
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry

@@ -15,14 +15,7 @@ from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.sdgpi import initial_state, mirrored_output
 from sma_wrist.core.plant.wrist import WristPlant
 from sma_wrist.plants import PLANTS, load_hysteresis, make_plant
-from sma_wrist.plants.spread import (
-    FAMILY,
-    VALIDITY,
-    Scenario,
-    SensorBank,
-    perturbed_hysteresis,
-    sample,
-)
+from sma_wrist.plants.spread import FAMILY, VALIDITY, Scenario, SensorBank, perturbed_hysteresis, sample
 
 #: a plant inside issue 14's spread, away from nominal on every axis
 PERTURBED = Scenario(payload_kg=0.4, transition_shift_C=4.0, stroke_scale=0.9, tem_gain_scale=1.1,

@@ -5,11 +5,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sma_wrist.core.hysteresis.inverse import (
-    pi_inverse_params,
-    pi_inverse_state,
-    pi_series,
-)
+from sma_wrist.core.hysteresis.inverse import pi_inverse_params, pi_inverse_state, pi_series
 from sma_wrist.core.hysteresis.play import play_series, stop_series
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, play_bounds, simulate
 

@@ -10,11 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from sma_wrist.core.control.joint_controller import (
-    MODES,
-    JointController,
-    JointControllerParams,
-)
+from sma_wrist.core.control.joint_controller import MODES, JointController, JointControllerParams
 from sma_wrist.core.control.tem import TemLoop
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.plants.spread import sample

@@ -269,11 +269,7 @@ def test_one_wrist_kernels_agree_with_the_numpy_path(seed):
     """tem_controller's per-sample path (tem_kernel, compiled with numba) against the numpy
     reference: observer step, linearising law (roots, vertex, flags, saturation) and the
     predictive command range, on random faces, targets and rates."""
-    from sma_wrist.core.control.tem import (
-        DriveLimits,
-        observer_step,
-        safe_command_range,
-    )
+    from sma_wrist.core.control.tem import DriveLimits, observer_step, safe_command_range
     rng = np.random.default_rng(seed)
     x = th.rest_state(P, 1) + rng.uniform(-20.0, 55.0, (1, 2, 2))
     T_d = rng.uniform(0.0, 90.0, (1, 2, 2))

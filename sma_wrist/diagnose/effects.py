@@ -22,13 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import savgol_filter
 
-from sma_wrist.core.plant.extensions import (
-    PARAMS,
-    STATIC_PER_COULOMB,
-    TEMP_CHANNEL_KEYS,
-    TEMP_GAIN_REF_C,
-    drive,
-)
+from sma_wrist.core.plant.extensions import PARAMS, STATIC_PER_COULOMB, TEMP_CHANNEL_KEYS, TEMP_GAIN_REF_C, drive
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.diagnose.kernels import Constants, _jit

@@ -43,11 +43,7 @@ def _synthetic(n: int, load: float = 0.85) -> tuple[Any, Any, Any]:
 
 
 def _real(stresses: tuple[int, ...]) -> tuple[list[Any], list[Any], Any, list[str]]:
-    from sma_wrist.identify.io import (
-        REF_LENGTH_MM,
-        read_measurement,
-        stress_to_load_kgf,
-    )
+    from sma_wrist.identify.io import REF_LENGTH_MM, read_measurement, stress_to_load_kgf
     from sma_wrist.identify.segment import loops_of
 
     loops = [loops_of(read_measurement(DATA / f'{s}MPa.txt'))[0] for s in stresses]
@@ -64,11 +60,7 @@ def _timed(fn: Any) -> tuple[Any, float, float]:
 
 def measure(quick: bool) -> dict[str, Any]:
     """All cases in this process (call through :func:`bench_identify` for the one-core set-up)."""
-    from sma_wrist.core.hysteresis.identification import (
-        fit_gpi,
-        fit_sdgpi,
-        simulate_batch,
-    )
+    from sma_wrist.core.hysteresis.identification import fit_gpi, fit_sdgpi, simulate_batch
     from sma_wrist.identify.hysteresis import choose_edges
 
     out: dict[str, Any] = {'loadavg_start': list(os.getloadavg())}

@@ -295,11 +295,7 @@ def _wrist_params(out: Any, params: Any, thermal_file: str | None, progress: Any
 
     from sma_wrist.core.errors import ParameterError
     from sma_wrist.core.thermal.params_file import load_thermal_file
-    from sma_wrist.identify.wrist import (
-        operating_window,
-        wrist_params,
-        write_wrist_params,
-    )
+    from sma_wrist.identify.wrist import operating_window, wrist_params, write_wrist_params
 
     tems = load_thermal_file(thermal_file).window_C if thermal_file else None
     hf = (out / 'hysteresis.yaml').resolve()

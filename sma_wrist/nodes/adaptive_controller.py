@@ -31,14 +31,7 @@ from sma_wrist.core.control.joint_controller import JointControllerParams
 from sma_wrist.core.control.pid import PIDParams
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
-from sma_wrist.nodes.common import (
-    MUSCLE_FRAMES,
-    Freshness,
-    Param,
-    WristNode,
-    finite,
-    main_for,
-)
+from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 
 DEFAULTS = JointControllerParams()
 

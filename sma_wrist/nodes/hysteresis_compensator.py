@@ -35,11 +35,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
 
 from sma_wrist.core.control.joint_controller import bundle_strain
-from sma_wrist.core.control.tem import (
-    DriveLimits,
-    MuscleTemperatureObserver,
-    TemperatureObserverParams,
-)
+from sma_wrist.core.control.tem import DriveLimits, MuscleTemperatureObserver, TemperatureObserverParams
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator
 from sma_wrist.core.hysteresis.params_file import hysteresis_params

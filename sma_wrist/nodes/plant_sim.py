@@ -40,14 +40,7 @@ from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import (
-    MUSCLE_FRAMES,
-    Freshness,
-    Param,
-    WristNode,
-    finite,
-    main_for,
-)
+from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import VALIDITY as SCENARIO_AXES
 

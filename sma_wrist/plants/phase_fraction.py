@@ -55,12 +55,7 @@ from typing import Any, Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core.errors import (
-    ModelInputError,
-    ParameterError,
-    check_finite,
-    check_range,
-)
+from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, check_range
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.joint.dynamics import G, JointParams

@@ -38,13 +38,7 @@ from numpy.typing import NDArray
 from sma_wrist.core.errors import ParameterError, check_finite
 from sma_wrist.core.hysteresis.kernel import _solve_load
 from sma_wrist.core.hysteresis.muscle import MuscleModel
-from sma_wrist.core.hysteresis.sdgpi import (
-    EnvelopeSections,
-    SDGPIParams,
-    initial_state,
-    mirrored_output,
-    play_bounds,
-)
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, initial_state, mirrored_output, play_bounds
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant import kernel as plant_kernel

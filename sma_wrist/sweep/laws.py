@@ -16,11 +16,7 @@ from numpy.typing import NDArray
 
 from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
-from sma_wrist.core.control.joint_controller import (
-    REVERSAL_STEP_RAD,
-    JointControllerParams,
-    time_to_meet,
-)
+from sma_wrist.core.control.joint_controller import REVERSAL_STEP_RAD, JointControllerParams, time_to_meet
 from sma_wrist.core.control.pid import PID
 from sma_wrist.core.control.tem import (
     RANGE_REFRESH_S,

@@ -36,11 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
-from sma_wrist.core.control.tem import (
-    MuscleTemperatureObserver,
-    TemControlParams,
-    TemperatureObserverParams,
-)
+from sma_wrist.core.control.tem import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
 from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator

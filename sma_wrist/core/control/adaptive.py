@@ -38,12 +38,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core.control import adaptive_kernel
-from sma_wrist.core.errors import (
-    ModelInputError,
-    ParameterError,
-    check_finite,
-    format_choices,
-)
+from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, format_choices
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

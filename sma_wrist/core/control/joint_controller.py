@@ -26,12 +26,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.control.adaptive import (
-    KGF_N,
-    N_WIRES,
-    AdaptiveController,
-    AdaptiveParams,
-)
+from sma_wrist.core.control.adaptive import KGF_N, N_WIRES, AdaptiveController, AdaptiveParams
 from sma_wrist.core.control.pid import PID, PIDParams
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.plant.wrist import PlantParams

@@ -33,11 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from sma_wrist.core import jit as _jm
 from sma_wrist.core.errors import ParameterError, check_finite
 from sma_wrist.core.hysteresis import kernel as _hk
-from sma_wrist.core.hysteresis.inverse import (
-    InverseCompensator,
-    _output_frozen,
-    _residual,
-)
+from sma_wrist.core.hysteresis.inverse import InverseCompensator, _output_frozen, _residual
 from sma_wrist.core.hysteresis.muscle import G, MuscleGeometry
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
 

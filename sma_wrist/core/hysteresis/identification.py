@@ -26,10 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
-from sma_wrist.core.hysteresis.identification_kernel import (
-    gpi_jacobian,
-    play_jacobian_numpy,
-)
+from sma_wrist.core.hysteresis.identification_kernel import gpi_jacobian, play_jacobian_numpy
 from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
 
 FloatArray = NDArray[np.float64]

@@ -14,10 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.jit import (  # the project's one optional-numba switch
-    AVAILABLE,
-    _jit,
-)
+from sma_wrist.core.jit import AVAILABLE, _jit  # the project's one optional-numba switch
 
 
 def play_sources_numpy(lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64],

@@ -31,12 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from sma_wrist.core.errors import (
-    ModelInputError,
-    ParameterError,
-    check_finite,
-    check_range,
-)
+from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, check_range
 
 FloatArray = NDArray[np.float64]
 

@@ -38,12 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.hysteresis.play import play_update
-from sma_wrist.core.hysteresis.sdgpi import (
-    EnvelopeSections,
-    SDGPIParams,
-    memoryless,
-    play_bounds,
-)
+from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, memoryless, play_bounds
 from sma_wrist.data import seed_tables as st
 
 FloatArray = NDArray[np.float64]
@@ -257,9 +252,7 @@ class ConventionResult:
 
 
 def _reference_loop(load_g: int, T: FloatArray) -> FloatArray:
-    from sma_wrist.core.hysteresis.default_params import (
-        default_sdgpi,  # the lead's set: Sec. 3.2 behaviour
-    )
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi  # the lead's set: Sec. 3.2 behaviour
     p = default_sdgpi()
     return elongation(p, T, load_g * 1e-3)
 

@@ -10,12 +10,7 @@ from typing import Any, Iterable, Optional
 from .context import Context
 from .executors import Executor, SingleThreadedExecutor
 from .node import Node
-from .utilities import (
-    get_default_context,
-    get_rmw_implementation_identifier,
-    ok,
-    remove_ros_args,
-)
+from .utilities import get_default_context, get_rmw_implementation_identifier, ok, remove_ros_args
 from .utilities import shutdown as _shutdown
 from .utilities import try_shutdown as _try_shutdown
 

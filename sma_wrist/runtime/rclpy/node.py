@@ -20,11 +20,7 @@ from typing import Any, Callable, Iterator, List, Optional, Tuple, Union
 from sma_wrist.runtime.arguments import RosArguments, overrides_for, parse_ros_args
 from sma_wrist.runtime.messages import get_message_class, is_message_class
 
-from .callback_groups import (
-    CallbackGroup,
-    MutuallyExclusiveCallbackGroup,
-    ReentrantCallbackGroup,
-)
+from .callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from .clock import Clock, ROSClock
 from .constants import S_TO_NS
 from .context import Context
