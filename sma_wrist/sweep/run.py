@@ -18,7 +18,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -206,6 +206,18 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     return res
 
 
+def _collect(completed: Iterable[Any], keep: Callable[[list[dict[str, Any]]], None],
+             progress: Callable[[float], None] | None) -> None:
+    """Keep each chunk's rows as its future completes (local processes or Dask), progress in loops done."""
+    done = 0
+    for fut in completed:
+        rows = fut.result()
+        keep(rows)
+        done += len(rows)
+        if progress is not None:
+            progress(done)
+
+
 def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
                    keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None) -> None:
     """The chunks in ``workers`` local processes (forked where the OS can: the compiled kernels come along)."""
@@ -214,13 +226,7 @@ def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
     pool = ProcessPoolExecutor(workers, mp_context=ctx)
     futures = [pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant) for ch in chunks]
     try:
-        done = 0
-        for fut in as_completed(futures):
-            rows = fut.result()
-            keep(rows)
-            done += len(rows)
-            if progress is not None:
-                progress(done)
+        _collect(as_completed(futures), keep, progress)
     except BaseException:  # Ctrl-C or a failed chunk: drop the queued chunks, keep what finished
         pool.shutdown(wait=False, cancel_futures=True)
         raise
@@ -239,14 +245,8 @@ def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Ca
         raise SmaWristError(f'cannot reach the Dask scheduler at {address}: {e}') from None
     try:
         futures = [client.submit(run_chunk, ch, cfg.duration_s, cfg.plant, pure=False) for ch in chunks]
-        done = 0
         try:
-            for fut in as_completed(futures):
-                rows = fut.result()
-                keep(rows)
-                done += len(rows)
-                if progress is not None:
-                    progress(done)
+            _collect(as_completed(futures), keep, progress)
         except KeyboardInterrupt:
             client.cancel(futures)
             raise
