@@ -48,7 +48,7 @@ def section(name: str) -> Callable[[SectionFn], SectionFn]:
 class PlainWrist:
     """One wrist stepped by plain Python: the uncompiled source of the plant kernel.
 
-    :func:`sma_wrist.core.plant.kernel.step_many` is written as scalar loops; its
+    :func:`sma_wrist.core.plant.kernel.step_many_into` is written as scalar loops; its
     ``py_func`` (the function before numba compiles it, or the function itself without
     numba) is the plain per-sample Python reference loop: same equations, no numpy
     vectorisation, no compilation. Set-up (parameters, initial state) comes from
@@ -67,7 +67,8 @@ class PlainWrist:
         self._consts = plant_kernel.pack_constants(p)
         self._u = np.zeros((1, 2))
         self._lim = (p.thermal.u_min_V, p.thermal.u_max_V)  # type: ignore[attr-defined]
-        self._step = plant_kernel.step_many.py_func
+        self._step = plant_kernel.step_many_into.py_func
+        self._scratch = plant_kernel.scratch.py_func(self._state[3].shape[1])
 
     @property
     def q(self) -> float:
@@ -81,7 +82,7 @@ class PlainWrist:
         lo, hi = self._lim
         self._u[0, 0] = min(max(u1, lo), hi)
         self._u[0, 1] = min(max(u2, lo), hi)
-        self._step(1, self._u, *self._state, self._flags, *self._consts)
+        self._step(1, self._u, *self._state, self._flags, *self._consts, *self._scratch)
 
 
 # ----------------------------------------------------------------------- plant section

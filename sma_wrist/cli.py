@@ -197,7 +197,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
                       ranges=ranges if a.only else {**FAMILY, **ranges}, chunk=a.chunk, nominal=not a.no_nominal,
                       heatmap_axes=axes)  # type: ignore[arg-type]
     progress = None if a.quiet else Progress(len(make_cases(cfg)))
-    res = run_sweep(cfg, a.out, a.scheduler, progress)
+    res = run_sweep(cfg, a.out, a.scheduler, progress, workers=a.workers)
     if a.json:
         print(json.dumps({k: v for k, v in res.to_json().items() if k != 'rows'}, indent=2))
     else:

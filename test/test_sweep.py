@@ -137,3 +137,15 @@ def test_dask_cluster_gives_the_single_process_numbers(tmp_path) -> None:
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None) as lc:
         remote = run_sweep(cfg, tmp_path, scheduler=lc.scheduler_address)
     assert remote.rows == local.rows
+
+
+def test_worker_processes_give_the_single_process_numbers(tmp_path) -> None:
+    cfg = SweepConfig(n_plants=2, controllers=('pid', 'direct_adaptive'), duration_s=2.0, chunk=8, nominal=False)
+    local = run_sweep(cfg)
+    done: list[float] = []
+    # 4 loops over 2 processes: the chunk is cut to 2 loops so both get one
+    forked = run_sweep(cfg, tmp_path, progress=done.append, workers=2)
+    assert forked.rows == local.rows and done[-1] == 4 and len(done) == 2
+    assert len((tmp_path / 'results.jsonl').read_text().splitlines()) == 4
+    with pytest.raises(ParameterError, match='workers'):
+        run_sweep(cfg, workers=-1)

@@ -232,11 +232,13 @@ def _step_each(n_steps, u, thermal, q, qd, w3, heat2, T2, load2, comp2, payload,
                r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
     """plant_kernel.step_many for each scenario j with its own constants (row j of every constant);
     wire arrays scenario-major: w3 (N, 2, n), heat2, T2, load2, comp2 (N, 2)."""
+    w_now, rk, env = plant_kernel.scratch(w3.shape[2])  # once, not per wrist
     for j in range(q.size):
         # reshape of a row keeps numba's C layout (a j:j+1 slice would be 'A': ~2x slower loops)
-        plant_kernel.step_many(n_steps, u[j].reshape(1, 2), thermal[j].reshape(1, 2, 2), q[j:j + 1], qd[j:j + 1],
-                               w3[j], heat2[j], T2[j], load2[j], comp2[j], payload[j:j + 1], flags[j].reshape(1, 4),
-                               th_coef[j], mech[j], stacked[j], edges[j], r[j], p[j], mem_c[j], mem_d[j], joint[j])
+        plant_kernel.step_many_into(n_steps, u[j].reshape(1, 2), thermal[j].reshape(1, 2, 2), q[j:j + 1],
+                                    qd[j:j + 1], w3[j], heat2[j], T2[j], load2[j], comp2[j], payload[j:j + 1],
+                                    flags[j].reshape(1, 4), th_coef[j], mech[j], stacked[j], edges[j], r[j], p[j],
+                                    mem_c[j], mem_d[j], joint[j], w_now, rk, env)
 
 
 @_jit

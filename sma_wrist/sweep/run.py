@@ -2,7 +2,8 @@
 
 Each chunk is one vectorised simulation (:func:`sma_wrist.sweep.simulate.simulate`); a loop's
 result depends only on its own case (seeded scenario, own noise stream), so the chunking, the
-order and the machine (``--scheduler``: a Dask distributed cluster) do not change any number.
+order and the machine (``--workers``: local processes; ``--scheduler``: a Dask distributed cluster)
+do not change any number.
 Results are appended to ``results.jsonl`` as each chunk finishes, so Ctrl-C keeps them; the
 summary (``sweep.json``, ``table.txt``, ``cdf.png``, ``heatmap.png``) is written from whatever
 finished.
@@ -11,11 +12,13 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
+import os
 import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -42,7 +45,7 @@ class SweepConfig:
     duration_s: float = 126.0
     plant: str = 'sdgpi'
     ranges: dict[str, tuple[float, float]] = field(default_factory=lambda: dict(FAMILY))
-    chunk: int = 48
+    chunk: int = 96  # loops per simulation: its per-tick Python (~0.45 ms) spread over more loops
     nominal: bool = True  # also the nominal plant per controller at NOMINAL_PAYLOADS, side by side
     heatmap_axes: tuple[str, str] = ('transition_shift_C', 'stroke_scale')
 
@@ -140,11 +143,26 @@ class SweepResult:
                 'loops': len(self.rows), 'summary': self.summary, 'files': self.files, 'rows': self.rows}
 
 
+def available_cores() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one, not the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - macOS, Windows
+        return os.cpu_count() or 1
+
+
 def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: str | None = None,
-              progress: Callable[[float], None] | None = None) -> SweepResult:
-    """Run the sweep (locally, or on the Dask cluster at ``scheduler``); Ctrl-C keeps finished chunks."""
+              progress: Callable[[float], None] | None = None, workers: int = 1) -> SweepResult:
+    """Run the sweep (locally, or on the Dask cluster at ``scheduler``); Ctrl-C keeps finished chunks.
+
+    ``workers`` > 1: the chunks run in that many local processes (0: one per available core); the
+    chunks are then made no larger than an equal share of the loops, so every worker gets one."""
+    if not (isinstance(workers, int) and workers >= 0):
+        raise ParameterError(f'workers = {workers!r} must be an integer >= 0 (0: one per available core)')
+    workers = workers or available_cores()
     cases = make_cases(cfg)
-    chunks = [cases[i:i + cfg.chunk] for i in range(0, len(cases), cfg.chunk)]
+    size = cfg.chunk if workers == 1 or scheduler else min(cfg.chunk, -(-len(cases) // workers))
+    chunks = [cases[i:i + size] for i in range(0, len(cases), size)]
     out = Path(out_dir) if out_dir is not None else None
     jsonl = None
     if out is not None:
@@ -164,6 +182,8 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     try:
         if scheduler:
             _run_dask(scheduler, chunks, cfg, keep, progress)
+        elif workers > 1 and len(chunks) > 1:
+            _run_processes(min(workers, len(chunks)), chunks, cfg, keep, progress)
         else:
             done = 0
             for chunk in chunks:
@@ -186,6 +206,33 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     return res
 
 
+def _collect(completed: Iterable[Any], keep: Callable[[list[dict[str, Any]]], None],
+             progress: Callable[[float], None] | None) -> None:
+    """Keep each chunk's rows as its future completes (local processes or Dask), progress in loops done."""
+    done = 0
+    for fut in completed:
+        rows = fut.result()
+        keep(rows)
+        done += len(rows)
+        if progress is not None:
+            progress(done)
+
+
+def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
+                   keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None) -> None:
+    """The chunks in ``workers`` local processes (forked where the OS can: the compiled kernels come along)."""
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
+    pool = ProcessPoolExecutor(workers, mp_context=ctx)
+    futures = [pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant) for ch in chunks]
+    try:
+        _collect(as_completed(futures), keep, progress)
+    except BaseException:  # Ctrl-C or a failed chunk: drop the queued chunks, keep what finished
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
 def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Callable[[list[dict[str, Any]]], None],
               progress: Callable[[float], None] | None) -> None:
     try:
@@ -198,14 +245,8 @@ def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Ca
         raise SmaWristError(f'cannot reach the Dask scheduler at {address}: {e}') from None
     try:
         futures = [client.submit(run_chunk, ch, cfg.duration_s, cfg.plant, pure=False) for ch in chunks]
-        done = 0
         try:
-            for fut in as_completed(futures):
-                rows = fut.result()
-                keep(rows)
-                done += len(rows)
-                if progress is not None:
-                    progress(done)
+            _collect(as_completed(futures), keep, progress)
         except KeyboardInterrupt:
             client.cancel(futures)
             raise
@@ -317,5 +358,5 @@ def plot(res: SweepResult, out: Path) -> dict[str, str]:
     return {'cdf': str(out / 'cdf.png'), 'heatmap': str(out / 'heatmap.png')}
 
 
-__all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'parse_perturbations', 'summarise',
+__all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'available_cores', 'parse_perturbations', 'summarise',
            'format_table', 'Progress']

@@ -159,7 +159,7 @@ def _per_wire(x: ArrayLike, shape: tuple[int, ...]) -> FloatArray:
 # the residual is evaluated ~60 times per wire and solve: inlined into its callers (numba IR),
 # it no longer passes its 13 arguments (5 arrays) on every evaluation, ~half its cost. The
 # same operations in the same order: the same numbers.
-_jit_inline = _jm._numba.njit(inline='always', cache=True, nogil=True) if _jm.AVAILABLE else _jm._jit
+_jit_inline = _jm._jit_inline
 
 
 @_jit_inline

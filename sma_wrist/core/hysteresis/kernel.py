@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 
-from sma_wrist.core.jit import _jit
+from sma_wrist.core.jit import _jit, _jit_inline
 
 
 @_jit
@@ -22,7 +22,7 @@ def _envelopes(stacked, edges, m):  # pragma: no cover - compiled
     return c, s
 
 
-@_jit
+@_jit_inline
 def _envelopes_into(stacked, edges, m, c, s):  # pragma: no cover - compiled
     """:func:`_envelopes` into caller-owned (8,) arrays: the load solve evaluates it 2-3 times per wire
     and step, and two heap allocations per call cost ~3x the arithmetic (~150 of ~200 ns)."""
@@ -37,7 +37,7 @@ def _envelopes_into(stacked, edges, m, c, s):  # pragma: no cover - compiled
         s[j] = 2.0 * q2 * m + q1
 
 
-@_jit
+@_jit_inline
 def _elongation(T, m, w, w_now, y_mem, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f, c, s):  # pragma: no cover
     """(y, dy/dm) of muscle.py Eq. 1 against frozen memory w; w_now receives the clamped memory;
     c, s: (8,) scratch for the envelope coefficients and slopes."""
@@ -79,7 +79,7 @@ def _solve_load(T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, 
                             m_max, tol, max_it, np.empty(8), np.empty(8))
 
 
-@_jit
+@_jit_inline
 def _solve_load_into(T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f,
                      m_max, tol, max_it, c, s):  # pragma: no cover - compiled
     """:func:`_solve_load` with caller-owned (8,) envelope scratch c, s (the plant step's, reused)."""

@@ -7,10 +7,10 @@ from __future__ import annotations
 
 import math
 
-from sma_wrist.core.jit import _jit
+from sma_wrist.core.jit import _jit_inline
 
 
-@_jit
+@_jit_inline
 def joint_step_one(qj, qdj, torque, stiffness, payload, dt, joint):  # pragma: no cover - compiled
     """One wrist's joint step, linearly implicit Euler of Eq. 4.18 (joint.joint_step): (q, q').
 

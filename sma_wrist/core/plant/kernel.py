@@ -7,7 +7,7 @@ wire-load solve of muscle.py Eq. 1 with the SD-GPI of Eqs. 3.19-3.24, 4.1-4.6; t
 of Eq. 4.18), compiled by numba when it is installed (``pip install sma_wrist[fast]``).
 Without numba the plant uses its numpy path; :data:`AVAILABLE` says which.
 
-The uncompiled Python of the same functions (``step_many.py_func``) is the "plain
+The uncompiled Python of the same functions (``step_many_into.py_func``) is the "plain
 per-sample Python reference loop" of the benchmark. test_plant_kernel checks the kernel
 against the numpy path step by step.
 """
@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from sma_wrist.core.hysteresis.kernel import _solve_load_into
-from sma_wrist.core.jit import _jit
+from sma_wrist.core.jit import _jit, _jit_inline
 from sma_wrist.core.joint.kernel import joint_step_one
 from sma_wrist.core.thermal.kernel import thermal_constants, thermal_rk4
 
@@ -37,19 +37,30 @@ def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, 
     e0_mm, n_g_r, r_eff_m. joint (10,): I_w, lever, coulomb, viscous, static, stick_v,
     q_neutral, q_min, q_max, g.
     """
+    w_now, rk, env = scratch(w.shape[1])
+    step_many_into(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags, th_coef, mech,
+                   stacked, edges, r, p, mem_c, mem_d, joint, w_now, rk, env)
+
+
+@_jit_inline
+def scratch(n_play):  # pragma: no cover - compiled
+    """Work arrays of :func:`step_many_into`: w_now (n_play,), RK4 stages (4, 2, 2), envelope (2, 8)."""
+    return np.empty(n_play), np.empty((4, 2, 2)), np.empty((2, 8))
+
+
+@_jit_inline
+def step_many_into(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags, th_coef, mech,
+                   stacked, edges, r, p, mem_c, mem_d, joint, w_now, rk, env):  # pragma: no cover - compiled
+    """:func:`step_many` with caller-owned work arrays (:func:`scratch`): a caller stepping wrists one
+    call at a time (VariedPlant, per scenario) allocates them once, not per wrist and tick."""
     n = q.size
     dt = mech[0]
     scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
     max_it = int(mech[8])
     p0, T_lo, T_hi, T_hot, e0, n_g_r, r_eff = mech[9], mech[10], mech[11], mech[12], mech[13], mech[14], mech[15]
     q_neutral, q_min, q_max = joint[6], joint[7], joint[8]
-    w_now = np.empty(w.shape[1])
-    y0 = np.empty((2, 2))
-    xs = np.empty((2, 2))
-    kk = np.empty((2, 2))
-    acc = np.empty((2, 2))
-    env_c = np.empty(8)  # envelope scratch of the load solve
-    env_s = np.empty(8)
+    y0, xs, kk, acc = rk[0], rk[1], rk[2], rk[3]
+    env_c, env_s = env[0], env[1]  # envelope coefficients and slopes of the load solve
     for _ in range(n_steps):
         for j in range(n):
             thermal_rk4(thermal[j], u[j], dt, th_coef, y0, xs, kk, acc)

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from sma_wrist.core.jit import _jit
+from sma_wrist.core.jit import _jit_inline
 
 
-@_jit
+@_jit_inline
 def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
     """dT/dt (2 layers x 2 faces) of Eqs. 4.13-4.14 (thermal.rate_terms) at commands u (2,) [V]."""
     ipv = th_coef[0]
@@ -28,7 +28,7 @@ def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
             out[l, f] = d
 
 
-@_jit
+@_jit_inline
 def thermal_rk4(x, u, dt, th_coef, y0, xs, kk, acc):  # pragma: no cover - compiled
     """One classical RK4 step of Eqs. 4.13-4.14 on both layers, x (2, 2) [degC] in place, command
     u (2,) [V] held over dt [s]; y0, xs, kk, acc are (2, 2) scratch arrays."""
