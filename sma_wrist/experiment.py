@@ -107,7 +107,8 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
     rows.sort(key=lambda r: (list(controllers).index(r['controller']), r['payload_kg']))
     table: dict[str, Any] = {'wall_s': wall, 'workers': workers, 'duration_s': duration_s, 'runs': rows}
     if family:
-        table['family'] = run_family(controllers, payloads, duration_s, family, family_seed, out / 'family', log)
+        table['family'] = run_family(controllers, payloads, duration_s, family, family_seed, out / 'family', log,
+                                     workers=workers)
         table['family']['params_files_ignored'] = bool(params_files)
     (out / 'table.json').write_text(json.dumps(table, indent=2))
     if plots:
@@ -117,17 +118,17 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
 
 
 def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s: float, n_plants: int, seed: int,
-               out: Path, log: Any) -> dict[str, Any]:
+               out: Path, log: Any, workers: int = 1) -> dict[str, Any]:
     """Every controller x payload on ``n_plants`` sampled off-model plants (the sweep engine, the node
     laws at their defaults): per (controller, payload) median / 95th percentile / worst max error and
-    the share under 15 %."""
+    the share under 15 %. ``workers``: local processes for the sweep's chunks."""
     from sma_wrist.sweep.run import LIMIT_PCT, Progress, SweepConfig, run_sweep
     cfg = SweepConfig(n_plants=n_plants, seed=seed, controllers=tuple(controllers),
                       payloads=tuple(float(m) for m in payloads), duration_s=duration_s, nominal=False)
     n_loops = n_plants * len(payloads) * len(controllers)
     log.write(f'off-model family: {n_plants} sampled plants x {len(payloads)} payloads x {len(controllers)} '
               f'controllers = {n_loops} loops (sma-wrist sweep engine)\n')
-    res = run_sweep(cfg, out, progress=Progress(n_loops, log))  # results.jsonl, sweep.json, table, PNGs
+    res = run_sweep(cfg, out, progress=Progress(n_loops, log), workers=workers)  # results.jsonl, sweep.json, table, PNGs
     cells = []
     for c in controllers:
         for m in payloads:
