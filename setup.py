@@ -44,7 +44,9 @@ setup(
     ],
     extras_require={
         # dask[distributed]: the sweep's --scheduler test (LocalCluster, ~5 s) runs in CI, not skipped
-        'test': ['pytest>=7', 'hypothesis>=6', 'dask[distributed]>=2023.1'],
+        # pytest-xdist: the suite is CPU-bound and was serial, one of CI's 2 cores idle
+        # (`-n 2 --dist loadgroup` in .ci/run; test/conftest.py groups module fixtures)
+        'test': ['pytest>=7', 'hypothesis>=6', 'dask[distributed]>=2023.1', 'pytest-xdist>=3.0'],
         # Reports write PNG plots; optional so a headless robot install stays small.
         'plot': ['matplotlib>=3.5'],
         # Compiles the per-sample plant step (sma_wrist/core/plant/kernel.py): ~1 us instead of

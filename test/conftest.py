@@ -2,6 +2,8 @@
 probe node that publishes inputs and collects outputs of a node under test."""
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -9,6 +11,54 @@ import pytest
 from sma_wrist import runtime
 
 runtime.activate()
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    # registered here too, so the marks below are known when pytest-xdist is not installed
+    config.addinivalue_line('markers', 'xdist_group(name): run these tests on one pytest-xdist worker')
+    config.addinivalue_line('markers', 'exclusive: a wall-clock real-time test; under pytest-xdist the other '
+                            'workers wait while it runs, so it has the CPUs a serial run would give it')
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Under ``pytest -n 2 --dist loadgroup`` keep a module on one worker when its tests share a
+    module- or class-scoped fixture, so the fixture (the diagnosis cases, the experiment runs:
+    tens of seconds each) is built once, not once per worker. Tests with only function-scoped
+    fixtures stay free to balance the load. Serial runs ignore the mark; tryfirst: before
+    xdist's own hook reads it."""
+    for item in items:
+        defs = getattr(item, '_fixtureinfo', None)
+        scopes = {fd.scope for fds in (defs.name2fixturedefs.values() if defs else ()) for fd in fds}
+        if scopes & {'module', 'class', 'package'}:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split('::')[0]))
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
+    """Under pytest-xdist: every test holds a shared lock from setup to teardown, an ``exclusive``
+    one the exclusive lock. A real-time loop (the emulated device on its own wall clock) starved
+    by the other worker falls behind and stalls, which is no fault of the code under test. The
+    turnstile lets a waiting exclusive test in before the next shared one. Serial runs: no-op."""
+    if 'PYTEST_XDIST_WORKER' not in os.environ:
+        yield
+        return
+    import fcntl
+    # the workers' basetemps are <run's basetemp>/popen-gwN: the parent is this run's, shared by all
+    base = str(item.config._tmp_path_factory.getbasetemp().parent / 'sma_wrist-xdist')  # type: ignore[attr-defined]
+    exclusive = item.get_closest_marker('exclusive') is not None
+    with open(base + '.turnstile', 'a') as gate, open(base + '.lock', 'a') as lock:
+        fcntl.flock(gate, fcntl.LOCK_EX)
+        if exclusive:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # holding the gate: no new shared holder gets in
+        else:
+            fcntl.flock(gate, fcntl.LOCK_UN)
+            fcntl.flock(lock, fcntl.LOCK_SH)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_UN)
+            fcntl.flock(gate, fcntl.LOCK_UN)
 
 
 @pytest.fixture
