@@ -128,10 +128,13 @@ class MuscleCompensator:
             y = self._target(eps, m)  # type: ignore[arg-type]
         window = None
         if self.shift_gain_per_s and self.window_follows_shift:
+            # inside the model's validity: |shift| <= shift_limit_C, the window's edges 1 degC apart at least
             lo, hi = self.T_range_C
             v_lo, v_hi = self.params.T_valid
-            shift = np.broadcast_to(self.shift_C, y.shape)
-            window = (np.clip(lo - shift, v_lo, v_hi - 1.0), np.clip(hi - shift, v_lo + 1.0, v_hi))
+            # float by float (see _load): numpy's per-call cost on the node's (2,) arrays tripled this call's
+            shift = np.broadcast_to(self.shift_C, y.shape).ravel().tolist()
+            window = (np.array([min(max(lo - x, v_lo), v_hi - 1.0) for x in shift]).reshape(y.shape),
+                      np.array([min(max(hi - x, v_lo + 1.0), v_hi) for x in shift]).reshape(y.shape))
         res = self.inverse.solve(y, m, commit=commit, window=window)
         T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
         return CompensationResult(T, res.saturated, clipped, m, y)

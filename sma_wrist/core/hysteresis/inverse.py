@@ -465,9 +465,9 @@ class InverseCompensator:
             return np.full(S, self.T_range[0]), np.full(S, self.T_range[1])
         if self.method != 'numerical':
             raise ParameterError(f'a per-wire window needs the numerical inverse, not {self.method!r}')
-        lo, hi = (np.broadcast_to(np.asarray(x, float), S).copy() for x in window)
+        lo, hi = (_per_wire(x, S) for x in window)
         v_lo, v_hi = self.params.T_valid
-        if not (np.all(v_lo <= lo) and np.all(lo < hi) and np.all(hi <= v_hi)):  # NaN fails too
+        if not all(v_lo <= a < b <= v_hi for a, b in zip(lo.ravel().tolist(), hi.ravel().tolist())):  # NaN fails too
             raise ModelInputError('compensator window', (lo.tolist(), hi.tolist()), f'inside {self.params.T_valid}',
                                   'degC')
         return lo, hi
