@@ -356,7 +356,7 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
                 ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
     got, _ = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='thermocouple')])
     # the node's default: the inverse's window moves with each wire's shift
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0, window_follows_shift=True)
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
     ref.reset(T[0], stress)
     expected = []
     for j in range(n):
@@ -412,8 +412,8 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
         msgs += temps + (angle + cmds if order == 'in_order' else cmds + angle) + targets
     got, rejected = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')])
     obs = MuscleTemperatureObserver(OBSERVER_THERMAL, TemperatureObserverParams())
-    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0, window_follows_shift=True)
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0, window_follows_shift=True)
+    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
     expected, thermocouple = [], []
     for j in range(n):
         est = obs.update(T[j:j + 1], u[j - 1:j] if j else np.zeros((1, 2)), 0.01)[0]

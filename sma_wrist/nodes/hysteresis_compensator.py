@@ -74,7 +74,7 @@ class HysteresisCompensator(WristNode):
         Param('memory_source', 'measured', "the inverse's hysteresis memory follows the measured temperatures "
               '(default: the plant lags its command, docs/control.md) or the commanded ones (Eq. 5.5 as written)',
               choices=('measured', 'commanded')),
-        Param('shift_gain_per_s', 1.0, "memory_source measured: rate at which each wire's temperature axis follows "
+        Param('shift_gain_per_s', 2.0, "memory_source measured: rate at which each wire's temperature axis follows "
               "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
               '"Feedback off-model")', '1/s', (0.0, 20.0)),
         Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),

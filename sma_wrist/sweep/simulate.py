@@ -55,7 +55,7 @@ FloatArray = NDArray[np.float64]
 
 TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
-SHIFT_GAIN_PER_S = 1.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
+SHIFT_GAIN_PER_S = 2.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
 #: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
 TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 
