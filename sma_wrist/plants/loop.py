@@ -184,7 +184,7 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                          'the compensator on the thermocouples')
     ap.add_argument('--before-item-2', action='store_true',
                     help='the compensator before issue 14 item 2 (docs/control.md): on the thermocouples, its '
-                         'window not following the shift')
+                         'window not following the shift, the axis adapting at 1 /s')
     ap.add_argument('--thermocouple', action='store_true',
                     help='the compensator reads the thermocouples (hysteresis_compensator temperature_source '
                          'thermocouple) instead of the observer')
@@ -200,6 +200,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw = {'tem_params': TemControlParams(rate_filter_s=0.05), 'shift_gain_per_s': 0.0}
     if a.legacy or a.before_item_2:
         kw.update(compensator_observer=None, window_follows_shift=False)
+    if a.before_item_2:
+        kw['shift_gain_per_s'] = 1.0
     if a.thermocouple:
         kw['compensator_observer'] = None
     if a.true_temperature:
