@@ -196,7 +196,8 @@ def test_compensator_pairs_one_cycles_targets_whatever_their_arrival_order(probe
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
         rt.add(HysteresisCompensator, parameter_overrides=[Parameter('stress_source', value='desired'),
-                                                           Parameter('memory_source', value='commanded')])
+                                                           Parameter('memory_source', value='commanded'),
+                                                           Parameter('temperature_source', value='thermocouple')])
         for i in (1, 2):
             probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0)
             probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
@@ -230,7 +231,7 @@ def test_compensator_memory_follows_the_measured_or_the_commanded_temperature(pr
     second = np.array([1.1, 1.1]) / g.wire_length_mm  # a little back
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired',))
-        node = rt.add(HysteresisCompensator)
+        node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('temperature_source', value='thermocouple')])
         assert node.set_parameters([Parameter('memory_source', value=memory_source)])[0].successful
         for i in (1, 2):
             probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0)  # and it stays there
@@ -317,6 +318,7 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
     tick's parts arrive in any order, the next tick's first part overtakes this cycle's targets, and
     an old sample arrives late (taking 'the latest' at each cycle's targets mixed ticks)."""
     from builtin_interfaces.msg import Time
+    from rclpy.parameter import Parameter
     from std_msgs.msg import Header
 
     from sma_wrist.core.control.joint_controller import bundle_strain
@@ -352,8 +354,9 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
         else:  # the angle first, T_1 of this tick overtaken by the next one's, an old T_2 late
             msgs += [q_msg(j), T_msg(j, 2)] + ([T_msg(0, 1)] if j == 0 else []) + \
                 ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
-    got, _ = _compensator_answers(probe_factory, stress, msgs)
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
+    got, _ = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='thermocouple')])
+    # the node's default: the inverse's window moves with each wire's shift
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
     ref.reset(T[0], stress)
     expected = []
     for j in range(n):
@@ -406,8 +409,8 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
         msgs += temps + (angle + cmds if order == 'in_order' else cmds + angle) + targets
     got, rejected = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')])
     obs = MuscleTemperatureObserver(OBSERVER_THERMAL, TemperatureObserverParams())
-    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=1.0, shift_limit_C=15.0)
+    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
     expected, thermocouple = [], []
     for j in range(n):
         est = obs.update(T[j:j + 1], u[j - 1:j] if j else np.zeros((1, 2)), 0.01)[0]

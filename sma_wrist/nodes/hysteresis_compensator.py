@@ -82,13 +82,16 @@ class HysteresisCompensator(WristNode):
         Param('memory_source', 'measured', "the inverse's hysteresis memory follows the measured temperatures "
               '(default: the plant lags its command, docs/control.md) or the commanded ones (Eq. 5.5 as written)',
               choices=('measured', 'commanded')),
-        Param('shift_gain_per_s', 1.0, "memory_source measured: rate at which each wire's temperature axis follows "
+        Param('shift_gain_per_s', 2.0, "memory_source measured: rate at which each wire's temperature axis follows "
               "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
               '"Feedback off-model")', '1/s', (0.0, 20.0)),
         Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
-        Param('temperature_source', 'thermocouple', 'temperature the memory and the axis follow: the thermocouple '
-              'as measured (default) or the muscle-temperature observer driven by the TEM commands (docs/control.md '
-              '"The observer in the node graph")', choices=('thermocouple', 'observer')),
+        Param('temperature_source', 'observer', 'temperature the memory and the axis follow: the muscle-temperature '
+              'observer driven by the TEM commands (default) or the thermocouple as measured (docs/control.md '
+              '"The observer in the node graph", "Issue 14 item 2")', choices=('thermocouple', 'observer')),
+        Param('window_follows_shift', True, "shift_gain_per_s > 0: the inverse searches the temperature window moved "
+              "by each wire's shift, so its answers span the whole window on the wire's axis (docs/control.md "
+              '"Issue 14 item 2")'),
         Param('observer.correction_s', TemperatureObserverParams.correction_s, 'temperature_source observer: time '
               'constant pulling the estimate toward the thermocouple', 's', (0.0, 10.0)),
         Param('observer.tc_lag_s', TemperatureObserverParams.tc_lag_s, 'temperature_source observer: first-order lag '
@@ -150,10 +153,12 @@ class HysteresisCompensator(WristNode):
         window = (self.p['temperature_min_C'], self.p['temperature_max_C'])
         wire = hysteresis_params(self.p['hysteresis_file'])
         self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'],
-                                      shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'])
+                                      shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'],
+                                      window_follows_shift=self.p['window_follows_shift'])
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
-        warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'], shift_gain_per_s=1.0)
+        warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'], shift_gain_per_s=1.0,
+                                 window_follows_shift=self.p['window_follows_shift'])
         T_mid = 0.5 * (window[0] + window[1])
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)

@@ -101,16 +101,18 @@ def _result(row: dict[str, Any], trace: Trace | None = None) -> LoopResult:
 def run_cases(cases: Sequence[tuple[OffModelCase, str]], duration_s: float = 126.0, window_s: float = SEED_PERIOD_S,
               tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
               on_tick: Callable[[float], None] | None = None, true_temperature: Sequence[str] = (),
-              compensator_observer: TemperatureObserverParams | None = None) -> list[LoopResult]:
+              compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
+              **compensator: Any) -> list[LoopResult]:
     """(case, mode) pairs as closed loops of the sweep engine, one vectorised run per plant; results in order.
-    ``true_temperature``, ``compensator_observer``: as in :func:`~sma_wrist.sweep.simulate.simulate`."""
+    ``true_temperature``, ``compensator_observer``, ``compensator`` (``window_follows_shift``): as in
+    :func:`~sma_wrist.sweep.simulate.simulate`."""
     out: list[LoopResult | None] = [None] * len(cases)
     for plant in dict.fromkeys(c.plant for c, _ in cases):
         idx = [i for i, (c, _) in enumerate(cases) if c.plant == plant]
         rows, _ = simulate([Case(i, cases[i][1], cases[i][0].scenario) for i in idx], duration_s, plant,
                            on_tick=on_tick, window_s=window_s, tem_params=tem_params,
                            shift_gain_per_s=shift_gain_per_s, true_temperature=true_temperature,
-                           compensator_observer=compensator_observer)
+                           compensator_observer=compensator_observer, **compensator)
         for i, row in zip(idx, rows):
             out[i] = _result(row)
     return [r for r in out if r is not None]
@@ -119,15 +121,17 @@ def run_cases(cases: Sequence[tuple[OffModelCase, str]], duration_s: float = 126
 def run_loop(case: OffModelCase, mode: str, duration_s: float = 126.0, window_s: float = SEED_PERIOD_S,
              tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
              record: bool = False, on_tick: Callable[[float], None] | None = None,
-             true_temperature: Sequence[str] = (), compensator_observer: TemperatureObserverParams | None = None
+             true_temperature: Sequence[str] = (),
+             compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(), **compensator: Any
              ) -> LoopResult:
     """One case under one mode (the node graph's loop, :mod:`sma_wrist.sweep.simulate`) for ``duration_s``;
     metrics over the last ``window_s`` (the last full cycle of the Sec. 6.1 sine). ``tem_params`` /
     ``shift_gain_per_s``: the laws' parameters (default: the nodes'); ``true_temperature``,
-    ``compensator_observer``: as in :func:`~sma_wrist.sweep.simulate.simulate`."""
+    ``compensator_observer``, ``compensator``: as in :func:`run_cases`."""
     rows, trace = simulate([Case(0, mode, case.scenario)], duration_s, case.plant, record=record, on_tick=on_tick,
                            window_s=window_s, tem_params=tem_params, shift_gain_per_s=shift_gain_per_s,
-                           true_temperature=true_temperature, compensator_observer=compensator_observer)
+                           true_temperature=true_temperature, compensator_observer=compensator_observer,
+                           **compensator)
     return _result(rows[0], trace)
 
 
@@ -176,18 +180,30 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     ap.add_argument('--payloads', default='0.3')
     ap.add_argument('--duration', type=float, default=126.0)
     ap.add_argument('--legacy', action='store_true',
-                    help='the controllers before issue 14: no target prefilter, no temperature-axis adaptation')
+                    help='the controllers before issue 14: no target prefilter, no temperature-axis adaptation, '
+                         'the compensator on the thermocouples')
+    ap.add_argument('--before-item-2', action='store_true',
+                    help='the compensator before issue 14 item 2 (docs/control.md): on the thermocouples, its '
+                         'window not following the shift, the axis adapting at 1 /s')
+    ap.add_argument('--thermocouple', action='store_true',
+                    help='the compensator reads the thermocouples (hysteresis_compensator temperature_source '
+                         'thermocouple) instead of the observer')
     ap.add_argument('--true-temperature', default='', metavar='CONSUMERS',
                     help='diagnosis: comma list of compensator,tem that read the true muscle temperature instead '
                          'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
     ap.add_argument('--observer', default='', metavar='CORRECTION_S,LAG_S',
-                    help='the compensator reads a heat-balance observer of the thermocouples (the graph\'s '
-                         'hysteresis_compensator temperature_source observer; docs/control.md), e.g. 0.33,0.2')
+                    help='the observer\'s parameters (hysteresis_compensator observer.*; default 0.33,0.2)')
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
     if a.legacy:
         kw = {'tem_params': TemControlParams(rate_filter_s=0.05), 'shift_gain_per_s': 0.0}
+    if a.legacy or a.before_item_2:
+        kw.update(compensator_observer=None, window_follows_shift=False)
+    if a.before_item_2:
+        kw['shift_gain_per_s'] = 1.0
+    if a.thermocouple:
+        kw['compensator_observer'] = None
     if a.true_temperature:
         kw['true_temperature'] = tuple(a.true_temperature.split(','))
         unknown = sorted(set(kw['true_temperature']) - set(TRUE_TEMPERATURE_CONSUMERS))

@@ -54,7 +54,8 @@ class MuscleCompensator:
 
     def __init__(self, params: SDGPIParams, geometry: MuscleGeometry | None = None,
                  T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical',
-                 shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0) -> None:
+                 shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0, window_follows_shift: bool = False
+                 ) -> None:
         self.params = params
         self.T_range_C = T_range_C
         if not (math.isfinite(shift_gain_per_s) and shift_gain_per_s >= 0):
@@ -63,6 +64,9 @@ class MuscleCompensator:
             raise ParameterError(f'shift_limit_C = {shift_limit_C!r} must be >= 0')
         self.shift_gain_per_s = float(shift_gain_per_s)
         self.shift_limit_C = float(shift_limit_C)
+        #: the inverse searches [lo, hi] - shift on the model's axis, so its answer on the wire's axis
+        #: spans the whole window [lo, hi] (else a wire colder than the model never gets above hi - |shift|)
+        self.window_follows_shift = bool(window_follows_shift)
         #: per wire: the wire's temperature minus the model's that explains its strain [degC]
         self.shift_C = np.zeros(2)  # the node's two wires; reset() sizes it to its wires
         self.geometry = geometry or MuscleGeometry()
@@ -118,7 +122,16 @@ class MuscleCompensator:
             y = y.reshape(eps.shape) if eps.ndim != 1 else y
         else:  # broadcast shapes: the same expression on arrays
             y = self._target(eps, m)  # type: ignore[arg-type]
-        res = self.inverse.solve(y, m, commit=commit)
+        window = None
+        if self.shift_gain_per_s and self.window_follows_shift:
+            # inside the model's validity: |shift| <= shift_limit_C, the window's edges 1 degC apart at least
+            lo, hi = self.T_range_C
+            v_lo, v_hi = self.params.T_valid
+            # float by float (see _load): numpy's per-call cost on the node's (2,) arrays tripled this call's
+            shift = np.broadcast_to(self.shift_C, y.shape).ravel().tolist()
+            window = (np.array([min(max(lo - x, v_lo), v_hi - 1.0) for x in shift]).reshape(y.shape),
+                      np.array([min(max(hi - x, v_lo + 1.0), v_hi) for x in shift]).reshape(y.shape))
+        res = self.inverse.solve(y, m, commit=commit, window=window)
         T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
         return CompensationResult(T, res.saturated, clipped, m, y)
 

@@ -264,7 +264,7 @@ def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg
 def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0, k_f, lo, hi, m_lo, m_hi, G, tol,
                    T, sat, y):  # pragma: no cover - compiled
     """Compiled :meth:`InverseCompensator._numerical` and :func:`_output_frozen` at the answer,
-    wire by wire (Eqs. 3.19-3.22, 4.1-4.5).
+    wire by wire (Eqs. 3.19-3.22, 4.1-4.5), each in its own window [lo[s], hi[s]] [degC].
 
     Writes T, sat and y (S,); returns False when a target is not finite or a load is not inside
     [m_lo, m_hi] (then the caller runs its input checks), the outputs being written all the same.
@@ -276,8 +276,8 @@ def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0,
         if not (math.isfinite(y_d[s]) and m_lo <= m[s] <= m_hi):
             ok = False
         coef, _ = _hk._envelopes(stacked, edges, m[s])
-        T[s], sat[s] = _nearest_root(min(max(T_prev[s], lo), hi), heating[s], coef, w[s], y_d[s], r, wts, c, d, p0,
-                                     k_f, lo, hi, tol, Tg, f)
+        T[s], sat[s] = _nearest_root(min(max(T_prev[s], lo[s]), hi[s]), heating[s], coef, w[s], y_d[s], r, wts, c, d,
+                                     p0, k_f, lo[s], hi[s], tol, Tg, f)
         # elongation at the answer against the frozen memory (the residual of target 0), the
         # memoryless part's direction from T_prev (Eq. 3.22)
         Ts = T[s]
@@ -408,25 +408,29 @@ class InverseCompensator:
         """Same as calling with elongation = strain x 80 mm (Sec. 3.2.1 effective length)."""
         return self(np.asarray(desired_strain, float) * WIRE_LENGTH_MM, load_kgf)
 
-    def solve(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike, *, commit: bool = True) -> InverseResult:
+    def solve(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike, *, commit: bool = True,
+              window: tuple[ArrayLike, ArrayLike] | None = None) -> InverseResult:
         """Temperatures reaching the desired elongation from the current memory.
 
         commit: advance the memory to the answer (Eq. 5.5, memory of the commands); False leaves
-        it to :meth:`observe` and reports the elongation the answer would give.
+        it to :meth:`observe` and reports the elongation the answer would give. ``window``: per
+        wire (lowest, highest) temperature [degC] of the search, inside ``params.T_valid``
+        (None: ``T_range`` for every wire); the numerical method only.
         """
         st_ = self._require_state()
         S = st_.T_prev.shape
         y_d = _per_wire(desired_elongation_mm, S)
         m = _per_wire(load_kgf, S)
+        win = self._window(window, S)
         if _jm.AVAILABLE and self.method == 'numerical' and not commit:
             # the node's call at 100 Hz: root, pick and elongation in one compiled pass; the
             # checks run (and raise) only when the kernel saw a bad target or load
-            T, sat, y, ok = self._invert_compiled(y_d, m)
+            T, sat, y, ok = self._invert_compiled(y_d, m, win)
             if not ok:
                 self._check_targets(y_d, m)
             return InverseResult(T, sat, y)
         self._check_targets(y_d, m)
-        T_num, sat = self._numerical(y_d, m)
+        T_num, sat = self._numerical(y_d, m, win)
         if self.method == 'numerical':
             T = T_num
         else:
@@ -454,18 +458,33 @@ class InverseCompensator:
             bad = float(m.min() if m.min() < lo_m else m.max())
             raise ModelInputError('wire load m', bad, f'[{lo_m:g}, {hi_m:g}]', 'kgf')
 
-    def _invert_compiled(self, y_d: FloatArray,
-                         m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, bool]:
+    def _window(self, window: tuple[ArrayLike, ArrayLike] | None,
+                S: tuple[int, ...]) -> tuple[FloatArray, FloatArray]:
+        """Per-wire search window (lo, hi), each of the memory's shape [degC], checked inside the model's validity."""
+        if window is None:
+            return np.full(S, self.T_range[0]), np.full(S, self.T_range[1])
+        if self.method != 'numerical':
+            raise ParameterError(f'a per-wire window needs the numerical inverse, not {self.method!r}')
+        lo, hi = (_per_wire(x, S) for x in window)
+        v_lo, v_hi = self.params.T_valid
+        if not all(v_lo <= a < b <= v_hi for a, b in zip(lo.ravel().tolist(), hi.ravel().tolist())):  # NaN fails too
+            raise ModelInputError('compensator window', (lo.tolist(), hi.tolist()), f'inside {self.params.T_valid}',
+                                  'degC')
+        return lo, hi
+
+    def _invert_compiled(self, y_d: FloatArray, m: FloatArray, window: tuple[FloatArray, FloatArray]
+                         ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, bool]:
         """(T, saturated, elongation at T against the frozen memory, inputs valid) from :func:`_invert_frozen`."""
         st_ = self._require_state()
         S = st_.T_prev.shape
         T, sat, y = np.empty(S), np.empty(S, np.bool_), np.empty(S)
         lo_m, hi_m = self.params.load_range
-        ok = _invert_frozen(st_.T_prev, st_.heating, st_.w, y_d, m, *self._kernel_params, *self.T_range, lo_m, hi_m,
+        ok = _invert_frozen(st_.T_prev, st_.heating, st_.w, y_d, m, *self._kernel_params, *window, lo_m, hi_m,
                             self.grid, self.tol_mm, T, sat, y)
         return T, sat, y, ok
 
-    def _numerical(self, y_d: FloatArray, m: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+    def _numerical(self, y_d: FloatArray, m: FloatArray,
+                   window: tuple[FloatArray, FloatArray]) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Bracketed root of y(T) = y_d on each side of T_prev against frozen memory; nearest root wins.
 
         Both sides are searched at once: a grid walking away from T_prev finds the first sign
@@ -473,11 +492,11 @@ class InverseCompensator:
         the grid point closest to the target is returned and flagged saturated.
         """
         if _jm.AVAILABLE:  # same search, compiled: ~0.8 ms of numpy -> ~10 us per call
-            T, sat, _, _ = self._invert_compiled(y_d, m)
+            T, sat, _, _ = self._invert_compiled(y_d, m, window)
             return T, sat
         st_ = self._require_state()
         p = self.params
-        lo, hi = self.T_range
+        lo, hi = window
         T0 = np.clip(st_.T_prev, lo, hi)
         a, b = self._coefficients(m)  # load fixed during the solve: evaluate once
         r, wts, w = p.thresholds, p.weights, st_.w
@@ -485,7 +504,7 @@ class InverseCompensator:
         S = y_d.size
         # columns 0..S-1 heating side, S..2S-1 cooling side
         T0s = np.concatenate([T0, T0])
-        ends = np.concatenate([np.full(S, hi), np.full(S, lo)])
+        ends = np.concatenate([hi, lo])
         side_heat = np.concatenate([np.ones(S, bool), np.zeros(S, bool)])
         a2, b2, w2, y2 = np.concatenate([a, a]), np.concatenate([b, b]), np.concatenate([w, w]), np.concatenate([y_d, y_d])
         h_prev = np.concatenate([st_.heating, st_.heating])
