@@ -429,7 +429,7 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
 
 def test_compensator_takes_the_tem_commands_only_while_its_observer_runs():
     """With the thermocouple the commands are not needed: no subscription (two deliveries per tick less);
-    switching the observer on and off at run time subscribes and unsubscribes."""
+    switching the observer (the default) on and off at run time subscribes and unsubscribes."""
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
@@ -439,13 +439,13 @@ def test_compensator_takes_the_tem_commands_only_while_its_observer_runs():
 
     with Runtime() as rt:
         node = rt.add(HysteresisCompensator)
+        default = command_subs(node)
+        node.set_parameters([Parameter('temperature_source', value='thermocouple')])
         off = command_subs(node)
         node.set_parameters([Parameter('temperature_source', value='observer')])
-        on = command_subs(node)
-        node.set_parameters([Parameter('temperature_source', value='thermocouple')])
-        off_again = command_subs(node)
-    assert off == set() and off_again == set()
-    assert on == {'/wrist/tem_1/command', '/wrist/tem_2/command'}
+        on_again = command_subs(node)
+    assert default == on_again == {'/wrist/tem_1/command', '/wrist/tem_2/command'}
+    assert off == set()
 
 
 def test_compensator_observer_runs_the_thermal_file_and_refuses_a_bad_one(tmp_path):
@@ -468,7 +468,7 @@ def test_compensator_observer_runs_the_thermal_file_and_refuses_a_bad_one(tmp_pa
     with Runtime(params={'/hysteresis_compensator': {**observer, 'thermal_file': missing}}) as rt:
         with pytest.raises(SmaWristError, match='missing.yaml'):
             rt.add(HysteresisCompensator)
-    with Runtime(params={'/hysteresis_compensator': {'thermal_file': missing}}) as rt:
+    with Runtime(params={'/hysteresis_compensator': {'temperature_source': 'thermocouple', 'thermal_file': missing}}) as rt:
         assert rt.add(HysteresisCompensator).observer is None  # the thermocouple needs no heat balance
 
 
