@@ -184,6 +184,19 @@ class WristPlant:
         stiffness = n_g_r * 1e3 * p.joint.r_eff_m * (1.0 / c1 + 1.0 / c2)
         return torque, stiffness
 
+    def _commands(self, command_V: ArrayLike) -> tuple[np.ndarray, np.ndarray | None]:
+        """Commands (N, 2) [V] clipped to the TEM limits, and per wrist whether one was clipped (None:
+        none was, the common case kept cheap). Non-finite commands raise ModelInputError."""
+        tp = self.params.thermal
+        u = np.asarray(command_V, dtype=float)
+        if u.shape != (self.n, 2):
+            u = np.broadcast_to(u, (self.n, 2))
+        if _within(u, tp.u_min_V, tp.u_max_V):
+            return u, None
+        check_finite('TEM command', u, 'V')
+        uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
+        return uc, (uc != u).any(axis=1)
+
     def step(self, command_V: ArrayLike) -> PlantState:
         """Advance all wrists by dt under TEM drive commands of shape (N, 2) [V].
 
@@ -193,16 +206,7 @@ class WristPlant:
         p = self.params
         tp = p.thermal
         s = self.state
-        u = np.asarray(command_V, dtype=float)
-        if u.shape != (self.n, 2):
-            u = np.broadcast_to(u, (self.n, 2))
-        if _within(u, tp.u_min_V, tp.u_max_V):
-            clipped = None
-        else:
-            check_finite('TEM command', u, 'V')
-            uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
-            clipped = (uc != u).any(axis=1)
-            u = uc
+        u, clipped = self._commands(command_V)
         # command in range, dt checked by PlantParams (<= 0.01 s < dt_max_s), state finite by construction
         s.thermal = th.step(tp, s.thermal, u, p.dt, validate=False)
         self._mechanics(s.thermal[:, :, th.MUSCLE_FACE].T.reshape(-1))
@@ -226,17 +230,11 @@ class WristPlant:
                     flags[k] = flags[k] | v
             s.flags = flags
             return s
-        tp = p.thermal
         s = self.state
-        u = np.asarray(command_V, dtype=float)
-        if u.shape != (self.n, 2):
-            u = np.broadcast_to(u, (self.n, 2))
-        if _within(u, tp.u_min_V, tp.u_max_V):
-            uc, clipped = np.ascontiguousarray(u), np.zeros(self.n, bool)
-        else:
-            check_finite('TEM command', u, 'V')
-            uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
-            clipped = (uc != u).any(axis=1)
+        uc, clipped = self._commands(command_V)
+        uc = np.ascontiguousarray(uc)
+        if clipped is None:
+            clipped = np.zeros(self.n, bool)
         if self._kernel_constants is None or self._kernel_constants[0] is not p:
             self._kernel_constants = (p, plant_kernel.pack_constants(p))
         arrays = (s.thermal, s.q, s.qd, s.w, s.heating, s.T_prev, s.load_kgf, s.compliance, s.payload_kg)
