@@ -12,16 +12,9 @@ from sma_wrist.core import jit
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.hysteresis import kernel as hysteresis_kernel
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
-from sma_wrist.core.hysteresis.inverse import (
-    InverseCompensator,
-    LinearCorrection,
-    composition_error,
-    inverse_table_parameters,
-    pi_inverse_params,
-    pi_inverse_state,
-    pi_series,
-    table_5_1_correction,
-)
+from sma_wrist.core.hysteresis.inverse import (InverseCompensator, LinearCorrection, composition_error,
+                                               inverse_table_parameters, pi_inverse_params, pi_inverse_state, pi_series,
+                                               table_5_1_correction)
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, initial_state, simulate, step
 
 

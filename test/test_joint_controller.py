@@ -6,13 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from sma_wrist.core.control.joint_controller import (
-    REVERSAL_STEP_RAD,
-    JointController,
-    JointControllerParams,
-    time_to_meet,
-    time_to_turn,
-)
+from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointController, JointControllerParams,
+                                                     time_to_meet, time_to_turn)
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.plant.wrist import PlantParams
 

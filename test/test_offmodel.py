@@ -11,28 +11,16 @@ import functools
 import numpy as np
 import pytest
 
-from sma_wrist.core.control.tem import (
-    DriveLimits,
-    MuscleTemperatureObserver,
-    TemControlParams,
-    TemLoop,
-    TemperatureObserverParams,
-)
+from sma_wrist.core.control.tem import (DriveLimits, MuscleTemperatureObserver, TemControlParams, TemLoop,
+                                        TemperatureObserverParams)
 from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
 from sma_wrist.core.hysteresis.sdgpi import initial_state, step
 from sma_wrist.core.thermal import heat_balance as th
-from sma_wrist.plants.loop import (
-    CASES,
-    REVERSAL_BAND_V,
-    LoopResult,
-    reversals_per_s,
-    run_cases,
-    run_loop,
-    shifted_sdgpi,
-)
+from sma_wrist.plants.loop import (CASES, REVERSAL_BAND_V, LoopResult, reversals_per_s, run_cases, run_loop,
+                                   shifted_sdgpi)
 from sma_wrist.sweep.simulate import Case, simulate
 
 #: TEM command sign changes per second allowed (docs/control.md "Chattering"): one heating/cooling

@@ -9,15 +9,8 @@ import pytest
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.loop import reversals_per_s
-from sma_wrist.plants.phase_fraction import (
-    PhaseFractionParams,
-    PhaseFractionPlant,
-    SensorParams,
-    WireParams,
-    fraction_path,
-    major_cooling,
-    major_heating,
-)
+from sma_wrist.plants.phase_fraction import (PhaseFractionParams, PhaseFractionPlant, SensorParams, WireParams,
+                                             fraction_path, major_cooling, major_heating)
 
 W = WireParams()
 

@@ -98,23 +98,11 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
 
     import numpy as np
 
-    from sma_wrist.core.hysteresis.identification import (
-        fit_gpi,
-        fit_sdgpi,
-        fit_sdgpi_cc,
-        gpi_vector,
-        sdgpi_gpi_vectors,
-        simulate_batch,
-    )
+    from sma_wrist.core.hysteresis.identification import (fit_gpi, fit_sdgpi, fit_sdgpi_cc, gpi_vector,
+                                                          sdgpi_gpi_vectors, simulate_batch)
     from sma_wrist.core.hysteresis.params_file import hysteresis_params, save_hysteresis
-    from sma_wrist.identify.io import (
-        REF_LENGTH_MM,
-        IdentifyInputError,
-        Units,
-        load_kgf_to_stress,
-        read_measurement,
-        stress_to_load_kgf,
-    )
+    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, load_kgf_to_stress, read_measurement,
+                                       stress_to_load_kgf)
     from sma_wrist.identify.loops import errors_pct, slope, transitions
     from sma_wrist.identify.segment import loops_of
 

@@ -22,15 +22,8 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import WristPlant
 from sma_wrist.plants.spread import Scenario, perturbed_hysteresis, scenario_params
-from sma_wrist.sweep.simulate import (
-    CHATTER_DEADBAND_V,
-    SHIFT_GAIN_PER_S,
-    TRUE_TEMPERATURE_CONSUMERS,
-    Case,
-    Trace,
-    sign_changes_per_s,
-    simulate,
-)
+from sma_wrist.sweep.simulate import (CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, TRUE_TEMPERATURE_CONSUMERS, Case, Trace,
+                                      sign_changes_per_s, simulate)
 
 #: a command counts as heating above +REVERSAL_BAND_V and as cooling below -REVERSAL_BAND_V
 REVERSAL_BAND_V = CHATTER_DEADBAND_V

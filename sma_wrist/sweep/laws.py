@@ -18,14 +18,8 @@ from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
 from sma_wrist.core.control.joint_controller import REVERSAL_STEP_RAD, JointControllerParams, time_to_meet
 from sma_wrist.core.control.pid import PID
-from sma_wrist.core.control.tem import (
-    RANGE_REFRESH_S,
-    DriveLimits,
-    TemControlParams,
-    TemLoop,
-    observer_step,
-    target_prefilter,
-)
+from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
+                                        target_prefilter)
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import heat_balance as th

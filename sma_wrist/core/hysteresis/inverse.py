@@ -29,16 +29,8 @@ from sma_wrist.core import jit as _jm
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis import kernel as _hk
 from sma_wrist.core.hysteresis.play import play_update
-from sma_wrist.core.hysteresis.sdgpi import (
-    HysteresisState,
-    SDGPIParams,
-    initial_state,
-    memoryless,
-    play_bounds,
-    simulate,
-    step,
-    tanh_envelope,
-)
+from sma_wrist.core.hysteresis.sdgpi import (HysteresisState, SDGPIParams, initial_state, memoryless, play_bounds,
+                                             simulate, step, tanh_envelope)
 from sma_wrist.data import seed_tables as st
 
 FloatArray = NDArray[np.float64]

@@ -1,7 +1,7 @@
 """Compiled wire-load solve of a muscle (muscle.py Eq. 1) with the SD-GPI of Eqs. 3.19-3.24, 4.1-4.6.
 
 Scalar per-wire loops, compiled by numba when present (see :mod:`sma_wrist.core.jit`); the numpy
-reference is :meth:`sma_wrist.core.hysteresis.sdgpi.muscle.MuscleModel.solve_load`. The plant kernel
+reference is :meth:`sma_wrist.core.hysteresis.muscle.MuscleModel.solve_load`. The plant kernel
 (:mod:`sma_wrist.core.plant.kernel`) calls :func:`_solve_load_into` once per muscle and step.
 """
 from __future__ import annotations

@@ -25,17 +25,10 @@ from .clock import Clock, ROSClock
 from .constants import S_TO_NS
 from .context import Context
 from .exceptions import (
-    InvalidNamespaceException,
-    InvalidNodeNameException,
-    InvalidParameterException,
-    InvalidParameterTypeException,
-    InvalidParameterValueException,
-    InvalidTopicNameException,
-    NotInitializedException,
-    ParameterAlreadyDeclaredException,
-    ParameterImmutableException,
-    ParameterNotDeclaredException,
-    ParameterUninitializedException,
+    InvalidNamespaceException, InvalidNodeNameException, InvalidParameterException,
+    InvalidParameterTypeException, InvalidParameterValueException, InvalidTopicNameException,
+    NotInitializedException, ParameterAlreadyDeclaredException, ParameterImmutableException,
+    ParameterNotDeclaredException, ParameterUninitializedException,
 )
 from .logging import RcutilsLogger, get_logger
 from .parameter import PARAMETER_SEPARATOR_STRING, Parameter
