@@ -122,7 +122,7 @@ def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s
     """Every controller x payload on ``n_plants`` sampled off-model plants (the sweep engine, the node
     laws at their defaults): per (controller, payload) median / 95th percentile / worst max error and
     the share under 15 %. ``workers``: local processes for the sweep's chunks."""
-    from sma_wrist.sweep.run import LIMIT_PCT, Progress, SweepConfig, run_sweep
+    from sma_wrist.sweep.run import Progress, SweepConfig, error_stats, run_sweep
     cfg = SweepConfig(n_plants=n_plants, seed=seed, controllers=tuple(controllers),
                       payloads=tuple(float(m) for m in payloads), duration_s=duration_s, nominal=False)
     n_loops = n_plants * len(payloads) * len(controllers)
@@ -132,13 +132,9 @@ def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s
     cells = []
     for c in controllers:
         for m in payloads:
-            e = np.array([r['max_error_pct'] for r in res.rows if r['controller'] == c
-                          and abs(r['payload_kg'] - m) < 1e-9])
-            if e.size:
-                cells.append({'controller': c, 'payload_kg': float(m), 'plants': int(e.size),
-                              'median_max_error_pct': float(np.median(e)),
-                              'p95_max_error_pct': float(np.percentile(e, 95)), 'worst_max_error_pct': float(e.max()),
-                              'share_under_15_pct': float(np.mean(e < LIMIT_PCT))})
+            e = [r['max_error_pct'] for r in res.rows if r['controller'] == c and abs(r['payload_kg'] - m) < 1e-9]
+            if e:
+                cells.append({'controller': c, 'payload_kg': float(m), 'plants': len(e), **error_stats(e)})
     return {'n_plants': n_plants, 'seed': seed, 'interrupted': res.interrupted, 'wall_s': res.wall_s,
             'cells': cells, 'summary': res.summary, 'files': res.files}
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import replace
 from typing import Any, Mapping
 
 import numpy as np
@@ -53,17 +52,19 @@ MAX_PENDING_TICKS = 5
 ANGLE = 2  # slot of the angle in one tick's [T_1, T_2, angle]
 #: TEM commands kept per layer for the observer: enough for MAX_PENDING_TICKS ticks waiting, with slack
 MAX_COMMANDS = 4 * MAX_PENDING_TICKS
-#: the observer's heat balance without a thermal_file: Table 4.9, saturating at the driver rating
-#: (the commands it replays are tem_controller's, which the driver clips there)
-OBSERVER_THERMAL = replace(ThermalParams(), u_min_V=DriveLimits().boost_min_V, u_max_V=DriveLimits().boost_max_V)
 
 
-def observer_thermal(thermal_file: str) -> ThermalParams:
+def observer_thermal(thermal_file: str = '') -> ThermalParams:
     """The observer's heat balance: ``thermal_file`` (identified, as tem_controller loads it) or Table 4.9,
-    saturating at the driver rating. Raises ParameterError (with the path) for a missing or malformed file."""
-    if not thermal_file:
-        return OBSERVER_THERMAL
-    return load_thermal_file(thermal_file).with_limits(DriveLimits().boost_min_V, DriveLimits().boost_max_V)
+    saturating at the driver rating (the commands it replays are tem_controller's, which the driver clips
+    there). Raises ParameterError (with the path) for a missing or malformed file."""
+    drive = DriveLimits()
+    return (load_thermal_file(thermal_file) if thermal_file else ThermalParams()).with_limits(drive.boost_min_V,
+                                                                                               drive.boost_max_V)
+
+
+#: the observer's heat balance without a thermal_file
+OBSERVER_THERMAL = observer_thermal()
 
 
 class HysteresisCompensator(WristNode):
@@ -164,7 +165,8 @@ class HysteresisCompensator(WristNode):
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
         self.observer = None if self.p['temperature_source'] != 'observer' else MuscleTemperatureObserver(
-            observer_thermal(self.p['thermal_file']), TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
+            observer_thermal(self.p['thermal_file']),
+            TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
         self.started = False  # re-seed the memory (and the observer) from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:

@@ -22,7 +22,7 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import WristPlant
 from sma_wrist.plants.spread import Scenario, perturbed_hysteresis, scenario_params
-from sma_wrist.sweep.simulate import (CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, TRUE_TEMPERATURE_CONSUMERS, Case, Trace,
+from sma_wrist.sweep.simulate import (CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, Case, Trace, check_true_temperature,
                                       sign_changes_per_s, simulate)
 
 #: a command counts as heating above +REVERSAL_BAND_V and as cooling below -REVERSAL_BAND_V
@@ -199,10 +199,10 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw['compensator_observer'] = None
     if a.true_temperature:
         kw['true_temperature'] = tuple(a.true_temperature.split(','))
-        unknown = sorted(set(kw['true_temperature']) - set(TRUE_TEMPERATURE_CONSUMERS))
-        if unknown:
-            ap.error(f'--true-temperature: unknown {", ".join(unknown)}; '
-                     f'known: {", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
+        try:
+            check_true_temperature(kw['true_temperature'])
+        except ParameterError as e:
+            ap.error(f'--true-temperature: {e}')
     if a.observer:
         try:
             kw['compensator_observer'] = TemperatureObserverParams(*(float(x) for x in a.observer.split(',')))

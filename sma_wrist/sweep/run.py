@@ -254,6 +254,13 @@ def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Ca
         client.close()
 
 
+def error_stats(max_error_pct: Sequence[float]) -> dict[str, float]:
+    """Median / 95th percentile / worst of a set of loops' max errors [%] and the share under 15 %."""
+    e = np.asarray(max_error_pct, dtype=float)
+    return {'median_max_error_pct': float(np.median(e)), 'p95_max_error_pct': float(np.percentile(e, 95)),
+            'worst_max_error_pct': float(e.max()), 'share_under_15_pct': float(np.mean(e < LIMIT_PCT))}
+
+
 def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (group, controller): loops, median / 95th percentile / worst max error, share under 15 %,
     median and worst TEM sign changes per second."""
@@ -263,12 +270,9 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             sel = [r for r in rows if r['group'] == group and r['controller'] == c]
             if not sel:
                 continue
-            e = np.array([r['max_error_pct'] for r in sel])
             ch = np.array([r['sign_changes_per_s'] for r in sel])
             out.append({'group': group, 'controller': c, 'loops': len(sel),
-                        'median_max_error_pct': float(np.median(e)), 'p95_max_error_pct': float(np.percentile(e, 95)),
-                        'worst_max_error_pct': float(e.max()),
-                        'share_under_15_pct': float(np.mean(e < LIMIT_PCT)),
+                        **error_stats([r['max_error_pct'] for r in sel]),
                         'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
                         'median_sign_changes_per_s': float(np.median(ch)), 'worst_sign_changes_per_s': float(ch.max())})
     return out
@@ -358,5 +362,5 @@ def plot(res: SweepResult, out: Path) -> dict[str, str]:
     return {'cdf': str(out / 'cdf.png'), 'heatmap': str(out / 'heatmap.png')}
 
 
-__all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'available_cores', 'parse_perturbations', 'summarise',
-           'format_table', 'Progress']
+__all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'available_cores', 'parse_perturbations',
+           'error_stats', 'summarise', 'format_table', 'Progress']

@@ -127,6 +127,14 @@ def _stamp_s(t: float) -> float:
     return ns // 1_000_000_000 + 1e-9 * (ns % 1_000_000_000)
 
 
+def check_true_temperature(consumers: Sequence[str]) -> None:
+    """ParameterError naming any of ``consumers`` that is not in :data:`TRUE_TEMPERATURE_CONSUMERS`."""
+    bad = sorted(set(consumers) - set(TRUE_TEMPERATURE_CONSUMERS))
+    if bad:
+        raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
+                             f'{", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
+
+
 def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
              base: PlantParams | None = None, record: bool = False,
              on_tick: Callable[[float], None] | None = None, window_s: float = SEED_PERIOD_S,
@@ -150,10 +158,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     ``temperature_source: observer`` (the default) and the same ``observer.*`` parameters; None: the
     thermocouples themselves (``temperature_source: thermocouple``). ``window_follows_shift``:
     hysteresis_compensator's parameter of that name."""
-    bad = sorted(set(true_temperature) - set(TRUE_TEMPERATURE_CONSUMERS))
-    if bad:
-        raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
-                             f'{", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
+    check_true_temperature(true_temperature)
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
     if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
@@ -197,9 +202,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         T_tem = T_comp = T_m
         if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
             # dt from the stamps, as hysteresis_compensator's observer takes it
-            T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)),
-                                     (int(round(s.t * 1e9)) - t_obs_ns) * 1e-9)
-            t_obs_ns = int(round(s.t * 1e9))
+            t_ns = int(round(s.t * 1e9))
+            T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)), (t_ns - t_obs_ns) * 1e-9)
+            t_obs_ns = t_ns
         if true_temperature:  # a plant with its own thermocouple (phase fraction) also has the node's
             T_true = getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
             T_tem = T_true if 'tem' in true_temperature else T_m
@@ -249,4 +254,4 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
 
 __all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S', 'CHATTER_DEADBAND_V',
-           'SHIFT_GAIN_PER_S', 'TRUE_TEMPERATURE_CONSUMERS']
+           'SHIFT_GAIN_PER_S', 'TRUE_TEMPERATURE_CONSUMERS', 'check_true_temperature']

@@ -135,7 +135,6 @@ class MuscleCompensator:
         T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
         return CompensationResult(T, res.saturated, clipped, m, y)
 
-
     def track(self, T_C: ArrayLike, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float) -> None:
         """:meth:`observe` on the adapted temperature axis, then one adaptation step of the shift
         (module docstring) from the bundles' strains at the measured angle (2,) over dt [s]. Without
@@ -154,7 +153,7 @@ class MuscleCompensator:
         assert st is not None
         m = self._load(np.asarray(stress_Pa, float))[0]
         eps = np.asarray(strain_measured, float)
-        y_meas = (eps * self._wire_mm - self._c_el * m) / self._scale
+        y_meas = self._target(eps, m)  # type: ignore[arg-type]  # the same expression on arrays
         if _jm.AVAILABLE and st.T_prev.ndim == 1 and eps.shape == st.T_prev.shape:
             # the node's call at 100 Hz: ~1 ms of numpy on (3, 2) arrays -> a few us
             shift = self.shift_C.astype(float)  # a copy: the kernel writes it
