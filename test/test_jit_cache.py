@@ -1,0 +1,83 @@
+"""numba's on-disk cache follows edits to a kernel's helpers in other files (core/jit.py).
+
+numba keys a cached kernel on its own file only (numba issue #1833): a caller in an unchanged file
+keeps the old machine code of a helper it inlined from an edited one. The package drops its caches
+when the sources of its kernel folders change; these tests run real numba on a two-file package.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from sma_wrist.core import jit
+
+ROOT = Path(jit.__file__).resolve().parent.parent
+
+
+def test_every_compiled_kernel_lives_in_a_folder_the_stamp_covers():
+    users = {f.relative_to(ROOT).parts[0] for f in ROOT.rglob('*.py') if '_jit' in f.read_text()}
+    assert users - {'core'}, 'the scan found no kernels outside core/: it is not looking'
+    assert users <= set(jit.KERNEL_FOLDERS), f'kernels in {sorted(users - set(jit.KERNEL_FOLDERS))} are not stamped'
+
+
+def test_a_source_edit_drops_the_caches_and_an_unchanged_tree_keeps_them(tmp_path):
+    kern = tmp_path / 'core'
+    (kern / '__pycache__').mkdir(parents=True)
+    (kern / 'k.py').write_text('X = 1\n')
+    other = tmp_path / 'cli.py'
+    other.write_text('Y = 1\n')
+    cached = [kern / '__pycache__' / 'k.f-1.py311.nbi', kern / '__pycache__' / 'k.f-1.py311.0.nbc']
+
+    def write_caches():
+        for f in cached:
+            f.write_bytes(b'compiled')
+
+    write_caches()
+    assert jit.drop_stale_caches(tmp_path, ('core',))  # no stamp yet: caches of unknown sources go
+    assert not any(f.exists() for f in cached)
+    write_caches()
+    assert not jit.drop_stale_caches(tmp_path, ('core',))
+    other.write_text('Y = 2\n')  # outside the kernel folders
+    assert not jit.drop_stale_caches(tmp_path, ('core',))
+    assert all(f.exists() for f in cached)
+    (kern / 'k.py').write_text('X = 2\n')
+    assert jit.drop_stale_caches(tmp_path, ('core',))
+    assert not any(f.exists() for f in cached)
+
+
+RUN = textwrap.dedent('''
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, sys.argv[1])
+    if sys.argv[2] == 'guard':
+        from sma_wrist.core.jit import drop_stale_caches
+        drop_stale_caches(Path(sys.argv[1]) / 'pkg', ('.',))
+    from pkg.caller import twice
+    print(twice(1.0))
+''')
+
+
+def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_path):
+    pytest.importorskip('numba')
+    pkg = tmp_path / 'pkg'
+    pkg.mkdir()
+    (pkg / '__init__.py').write_text('')
+    (pkg / 'helper.py').write_text('import numba\n\n@numba.njit(cache=True, inline="always")\n'
+                                   'def gain(x):\n    return 2.0 * x\n')
+    (pkg / 'caller.py').write_text('import numba\nfrom pkg.helper import gain\n\n@numba.njit(cache=True)\n'
+                                   'def twice(x):\n    return gain(x)\n')
+
+    def run(mode):
+        out = subprocess.run([sys.executable, '-c', RUN, str(tmp_path), mode], capture_output=True, text=True,
+                             timeout=120)
+        assert out.returncode == 0, out.stderr
+        return float(out.stdout.split()[-1])
+
+    assert run('guard') == 2.0  # compiles and caches
+    (pkg / 'helper.py').write_text('import numba\n\n@numba.njit(cache=True, inline="always")\n'
+                                   'def gain(x):\n    return 3.0 * x\n')
+    assert run('guard') == 3.0
