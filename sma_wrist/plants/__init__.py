@@ -10,8 +10,8 @@ the plant's: :class:`~sma_wrist.plants.spread.SensorBank` applies them to what i
 
 * ``sdgpi``: the project's plant (SD-GPI wire, Eqs. 3.19-4.6) with the scenario's parameter
   spread (:mod:`sma_wrist.plants.spread`); at the nominal scenario it is the plain plant.
-* ``phase_fraction``: a structurally different wire (sma_wrist/plants/phase_fraction.py, when
-  present; it registers itself below).
+* ``phase_fraction``: a structurally different wire (Brinson / Liang-Rogers kind,
+  sma_wrist/plants/phase_fraction.py), options ``tc_lag_s`` (its own thermocouple's lag).
 
 Wires identified from real data: ``hysteresis_file`` (:func:`load_hysteresis`) replaces the
 SD-GPI set the ``sdgpi`` plant perturbs.
@@ -33,15 +33,13 @@ def _sdgpi(scenarios: Sequence[Any], base: PlantParams | None = None, hysteresis
     return build_plant(scenarios, base, load_hysteresis(hysteresis_file) if hysteresis_file else None)
 
 
-#: name -> factory(scenarios, base PlantParams, **options) -> plant (see the module docstring)
-PLANTS: dict[str, PlantFactory] = {'sdgpi': _sdgpi}
+def _phase_fraction(scenarios: Sequence[Any], base: PlantParams | None = None, **options: Any) -> Any:
+    from sma_wrist.plants.phase_fraction import factory
+    return factory(scenarios, base, **options)
 
-try:  # the structurally different wire (issue 14, 1(b)); absent: the registry works without it
-    from sma_wrist.plants import phase_fraction as _phase_fraction
-except ImportError:  # pragma: no cover - depends on the checkout
-    _phase_fraction = None  # type: ignore[assignment]
-if _phase_fraction is not None and hasattr(_phase_fraction, 'factory'):
-    PLANTS['phase_fraction'] = _phase_fraction.factory
+
+#: name -> factory(scenarios, base PlantParams, **options) -> plant (see the module docstring)
+PLANTS: dict[str, PlantFactory] = {'sdgpi': _sdgpi, 'phase_fraction': _phase_fraction}
 
 
 def make_plant(name: str, scenarios: Sequence[Any], base: PlantParams | None = None, **options: Any) -> Any:
