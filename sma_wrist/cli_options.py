@@ -62,6 +62,9 @@ def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument('--workers', type=int, default=1, metavar='N',
                    help='run the chunks in N local processes (0: one per available core; default 1)')
     p.add_argument('--out', default='runs/sweep', help='output directory (results.jsonl, sweep.json, table, PNGs)')
+    p.add_argument('--reach', action='store_true',
+                   help='also each plant\'s reach floor (the least max error any controller can have on it; '
+                        '~2-5 s per plant) and the figures over the plants where it is under 15 %%')
     p.add_argument('--json', action='store_true', help='print the summary as JSON')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     return p

@@ -15,7 +15,8 @@ from sma_wrist.core.control.tem import TemLoop
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.plants.spread import sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
-from sma_wrist.sweep.run import SweepConfig, make_cases, parse_perturbations, run_sweep
+from sma_wrist.sweep.run import (SweepConfig, add_reach_floors, format_table, make_cases, parse_perturbations,
+                                 run_sweep, summarise)
 from sma_wrist.sweep.simulate import Case, sign_changes_per_s, simulate
 
 
@@ -88,6 +89,8 @@ def test_bad_input_gives_clear_errors() -> None:
         SweepConfig(controllers=('bang_bang',))
     with pytest.raises(ParameterError, match='no closed loops'):
         simulate([], 1.0)
+    with pytest.raises(ParameterError, match='reach floor is computed on the project'):
+        SweepConfig(plant='phase_fraction', reach=True)
 
 
 def test_cli_reports_bad_input_without_traceback() -> None:
@@ -149,3 +152,25 @@ def test_worker_processes_give_the_single_process_numbers(tmp_path) -> None:
     assert len((tmp_path / 'results.jsonl').read_text().splitlines()) == 4
     with pytest.raises(ParameterError, match='workers'):
         run_sweep(cfg, workers=-1)
+
+
+def test_reach_floors_split_the_family_into_plants_a_controller_can_track_and_the_rest() -> None:
+    """--reach: a wire 10 degC hotter than the model holds the joint short of the sine's top inside
+    20-80 degC (docs/control.md: floor 33.9 % at 0.3 kg), one 5 degC hotter nearly reaches it (3.6 %):
+    each plant's floor once, on every controller's row, and the summary over the plants under 15 %
+    (rows as the sweep writes them; the loops' errors are made up, the floors are computed)."""
+    from sma_wrist.plants.spread import Scenario
+    rows = []
+    for shift, err in ((10.0, 40.0), (5.0, 6.0)):
+        for c in ('pid', 'inverse_adaptive'):
+            rows.append({'index': len(rows), 'group': 'spread', 'controller': c, 'max_error_pct': err + len(rows),
+                         'rms_error_pct': 1.0, 'sign_changes_per_s': 1.0, **Scenario(transition_shift_C=shift, payload_kg=0.3, temp_noise_C=0.0).to_dict()})
+            rows[-1]['temp_noise_C'] = 0.1 * len(rows)  # sensors differ per row: the same plant all the same
+    add_reach_floors(rows)
+    hot, warm = rows[0]['reach_floor_pct'], rows[2]['reach_floor_pct']
+    assert rows[1]['reach_floor_pct'] == hot and rows[3]['reach_floor_pct'] == warm
+    assert hot > 25.0 and warm < 10.0
+    pid = next(s for s in summarise(rows) if s['controller'] == 'pid')
+    assert pid['loops'] == 2 and pid['reachable_loops'] == 1
+    assert pid['reachable']['median_max_error_pct'] == 8.0 and pid['reachable']['share_under_15_pct'] == 1.0
+    assert 'reach floor is under 15 %' in format_table(summarise(rows))

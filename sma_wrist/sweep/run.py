@@ -25,7 +25,7 @@ import numpy as np
 from sma_wrist.core.control.joint_controller import MODES
 from sma_wrist.core.errors import ParameterError, SmaWristError
 from sma_wrist.plants import PLANTS
-from sma_wrist.plants.spread import BY_NAME, FAMILY, Scenario, check_ranges, sample
+from sma_wrist.plants.spread import BY_NAME, FAMILY, VALIDITY, Scenario, check_ranges, sample
 from sma_wrist.sweep.simulate import Case, simulate
 
 #: the seed's requirement and issue 14's targets over the family
@@ -48,6 +48,9 @@ class SweepConfig:
     chunk: int = 96  # loops per simulation: its per-tick Python (~0.45 ms) spread over more loops
     nominal: bool = True  # also the nominal plant per controller at NOMINAL_PAYLOADS, side by side
     heatmap_axes: tuple[str, str] = ('transition_shift_C', 'stroke_scale')
+    #: also each plant's reach floor (:func:`sma_wrist.plants.loop.reach_floor_pct`, ~5-7 s of CPU per plant):
+    #: the least max error any controller can have on it, and the figures over the plants where it is < 15 %
+    reach: bool = False
 
     def __post_init__(self) -> None:
         if not (isinstance(self.n_plants, int) and self.n_plants >= 1):
@@ -69,6 +72,8 @@ class SweepConfig:
         for a in self.heatmap_axes:
             if a not in BY_NAME:
                 raise ParameterError(f'heat-map axis {a!r} is not a perturbation; known: {", ".join(BY_NAME)}')
+        if self.reach and self.plant != 'sdgpi':
+            raise ParameterError(f'the reach floor is computed on the project\'s plant (sdgpi), not {self.plant!r}')
 
 
 def parse_perturbations(items: Sequence[str]) -> dict[str, tuple[float, float]]:
@@ -199,6 +204,11 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
         if jsonl is not None:
             jsonl.close()
     rows.sort(key=lambda r: r['index'])
+    if cfg.reach and not interrupted:
+        try:
+            add_reach_floors(rows, workers if not scheduler else 1)
+        except KeyboardInterrupt:  # the loops' rows stay, with the floors computed so far
+            interrupted = True
     res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0)
     res.summary = summarise(rows)
     if out is not None:
@@ -254,6 +264,46 @@ def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Ca
         client.close()
 
 
+#: the axes that act on the sensors, not the plant: a reach floor does not depend on them
+SENSOR_AXES = ('temp_noise_C', 'temp_lag_s', 'angle_noise_rad')
+
+
+def _reach_floor(scenario: Scenario) -> float:
+    from sma_wrist.plants.loop import OffModelCase, reach_floor_pct
+    return reach_floor_pct(OffModelCase('sdgpi', scenario))
+
+
+def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1) -> None:
+    """``reach_floor_pct`` into each row, computed once per plant (its scenario: payload and plant axes),
+    in ``workers`` local processes; a floor does not depend on the controller or the sensors. Each plant's
+    rows get their floor as it finishes, so Ctrl-C keeps the floors computed."""
+    axes = [p.name for p in VALIDITY if p.name not in SENSOR_AXES]
+    key = [tuple(r[a] for a in axes) for r in rows]
+    plants = list(dict.fromkeys(key))
+
+    def put(k: tuple[float, ...], floor: float) -> None:
+        for r, rk in zip(rows, key):
+            if rk == k:
+                r['reach_floor_pct'] = floor
+
+    scen = {k: Scenario(**dict(zip(axes, k))) for k in plants}
+    if workers <= 1 or len(plants) <= 1:
+        for k in plants:
+            put(k, _reach_floor(scen[k]))
+        return
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+    ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
+    pool = ProcessPoolExecutor(min(workers, len(plants)), mp_context=ctx)
+    futures = {pool.submit(_reach_floor, scen[k]): k for k in plants}
+    try:
+        for fut in as_completed(futures):
+            put(futures[fut], fut.result())
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
+
+
 def error_stats(max_error_pct: Sequence[float]) -> dict[str, float]:
     """Median / 95th percentile / worst of a set of loops' max errors [%] and the share under 15 %."""
     e = np.asarray(max_error_pct, dtype=float)
@@ -271,10 +321,14 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             if not sel:
                 continue
             ch = np.array([r['sign_changes_per_s'] for r in sel])
-            out.append({'group': group, 'controller': c, 'loops': len(sel),
-                        **error_stats([r['max_error_pct'] for r in sel]),
-                        'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
-                        'median_sign_changes_per_s': float(np.median(ch)), 'worst_sign_changes_per_s': float(ch.max())})
+            row = {'group': group, 'controller': c, 'loops': len(sel), **error_stats([r['max_error_pct'] for r in sel]),
+                   'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
+                   'median_sign_changes_per_s': float(np.median(ch)), 'worst_sign_changes_per_s': float(ch.max())}
+            if sel and all('reach_floor_pct' in r for r in sel):
+                ok = [r['max_error_pct'] for r in sel if r['reach_floor_pct'] < LIMIT_PCT]
+                row['reachable_loops'] = len(ok)
+                row['reachable'] = error_stats(ok) if ok else None
+            out.append(row)
     return out
 
 
@@ -288,6 +342,16 @@ def format_table(summary: Sequence[dict[str, Any]]) -> str:
                      f'{100 * s["share_under_15_pct"]:5.0f}% {s["median_sign_changes_per_s"]:8.2f}')
     lines.append('max error over the last reference cycle, % of the reference range (true angle); '
                  'flips/s: median TEM command sign changes per second')
+    reach = [s for s in summary if 'reachable_loops' in s]
+    if reach:
+        lines += ['', 'plants whose reach floor is under 15 % (the rest: no controller can track the sine on them '
+                  'inside the 20-80 degC window):',
+                  f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"<15%":>6}']
+        for s in reach:
+            r = s['reachable']
+            lines.append(f'{s["group"]:8} {s["controller"]:17} {s["reachable_loops"]:5d} ' + (
+                f'{r["median_max_error_pct"]:6.2f}% {r["p95_max_error_pct"]:6.2f}% {100 * r["share_under_15_pct"]:5.0f}%'
+                if r else '      -       -      -'))
     return '\n'.join(lines)
 
 
@@ -363,4 +427,4 @@ def plot(res: SweepResult, out: Path) -> dict[str, str]:
 
 
 __all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'available_cores', 'parse_perturbations',
-           'error_stats', 'summarise', 'format_table', 'Progress']
+           'error_stats', 'summarise', 'format_table', 'Progress', 'add_reach_floors']
