@@ -198,9 +198,10 @@ class MuscleCompensator:
         if _jm.AVAILABLE and st.T_prev.ndim == 1 and eps.shape == st.T_prev.shape:
             # the node's call at 100 Hz: ~1 ms of numpy on (3, 2) arrays -> a few us
             shift = self.shift_C.astype(float)  # a copy: the kernel writes it
-            stroke = self.stroke.astype(float)
+            # without stroke adaptation the kernel neither reads the flags nor writes the stroke: no copies
+            stroke, on = (self.stroke.astype(float), self._seen.all(axis=0)) if k_dt else (self.stroke, self._seen[0])
             _track_step(st.T_prev, st.heating, st.w, m, y_meas, shift, self.shift_gain_per_s * dt, SLOPE_STEP_C,
-                        SLOPE_FLOOR_MM_PER_C ** 2, self.shift_limit_C, stroke, self._seen.all(axis=0), k_dt,
+                        SLOPE_FLOOR_MM_PER_C ** 2, self.shift_limit_C, stroke, on, k_dt,
                         self.y_mid_mm, STROKE_FLOOR_MM ** 2, *self.stroke_limits, *inv._kernel_params)
             self.shift_C, self.stroke = shift, stroke
             return
