@@ -488,3 +488,17 @@ def test_compensator_observer_parameters_are_validated_with_a_reason():
     assert not negative.successful and 'correction_s' in negative.reason
     assert all(r.successful for r in ok) and on
     assert not commanded.successful and "needs memory_source 'measured'" in commanded.reason
+
+
+def test_compensator_hands_its_stroke_gain_to_the_core() -> None:
+    """hysteresis_compensator's stroke_gain_per_s (docs/control.md "Issue 14 item 2, continued") reaches
+    MuscleCompensator; the default leaves the model's stroke (0), as the sweep's STROKE_GAIN_PER_S."""
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    from sma_wrist.sweep.simulate import STROKE_GAIN_PER_S
+    declared = {p.name: p for p in HysteresisCompensator.PARAMS}['stroke_gain_per_s']
+    assert declared.default == STROKE_GAIN_PER_S == 0.0 and declared.range == (0.0, 20.0)
+    with Runtime() as rt:
+        node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('stroke_gain_per_s', value=0.5)])
+        assert node.comp.stroke_gain_per_s == 0.5

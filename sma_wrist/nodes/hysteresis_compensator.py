@@ -87,6 +87,9 @@ class HysteresisCompensator(WristNode):
               "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
               '"Feedback off-model")', '1/s', (0.0, 20.0)),
         Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
+        Param('stroke_gain_per_s', 0.0, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
+              "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
+              'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued")', '1/s', (0.0, 20.0)),
         Param('temperature_source', 'observer', 'temperature the memory and the axis follow: the muscle-temperature '
               'observer driven by the TEM commands (default) or the thermocouple as measured (docs/control.md '
               '"The observer in the node graph", "Issue 14 item 2")', choices=('thermocouple', 'observer')),
@@ -155,11 +158,12 @@ class HysteresisCompensator(WristNode):
         wire = hysteresis_params(self.p['hysteresis_file'])
         self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'],
                                       shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'],
-                                      window_follows_shift=self.p['window_follows_shift'])
+                                      window_follows_shift=self.p['window_follows_shift'],
+                                      stroke_gain_per_s=self.p['stroke_gain_per_s'])
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
         warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'], shift_gain_per_s=1.0,
-                                 window_follows_shift=self.p['window_follows_shift'])
+                                 window_follows_shift=self.p['window_follows_shift'], stroke_gain_per_s=1.0)
         T_mid = 0.5 * (window[0] + window[1])
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)

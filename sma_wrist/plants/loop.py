@@ -97,7 +97,8 @@ def run_cases(cases: Sequence[tuple[OffModelCase, str]], duration_s: float = 126
               compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
               **compensator: Any) -> list[LoopResult]:
     """(case, mode) pairs as closed loops of the sweep engine, one vectorised run per plant; results in order.
-    ``true_temperature``, ``compensator_observer``, ``compensator`` (``window_follows_shift``): as in
+    ``true_temperature``, ``compensator_observer``, ``compensator`` (``window_follows_shift``,
+    ``stroke_gain_per_s``): as in
     :func:`~sma_wrist.sweep.simulate.simulate`."""
     out: list[LoopResult | None] = [None] * len(cases)
     for plant in dict.fromkeys(c.plant for c, _ in cases):
@@ -186,13 +187,17 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                          'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
     ap.add_argument('--observer', default='', metavar='CORRECTION_S,LAG_S',
                     help='the observer\'s parameters (hysteresis_compensator observer.*; default 0.33,0.2)')
+    ap.add_argument('--stroke-gain', type=float, default=None, metavar='PER_S',
+                    help="hysteresis_compensator's stroke_gain_per_s (0: the model's stroke; default the node's)")
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
     if a.legacy:
         kw = {'tem_params': TemControlParams(rate_filter_s=0.05), 'shift_gain_per_s': 0.0}
     if a.legacy or a.before_item_2:
-        kw.update(compensator_observer=None, window_follows_shift=False)
+        kw.update(compensator_observer=None, window_follows_shift=False, stroke_gain_per_s=0.0)
+    if a.stroke_gain is not None:
+        kw['stroke_gain_per_s'] = a.stroke_gain
     if a.before_item_2:
         kw['shift_gain_per_s'] = 1.0
     if a.thermocouple:

@@ -52,6 +52,7 @@ FloatArray = NDArray[np.float64]
 TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
 SHIFT_GAIN_PER_S = 2.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
+STROKE_GAIN_PER_S = 0.0  # hysteresis_compensator's stroke_gain_per_s default (config/wrist.yaml)
 #: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
 TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 
@@ -141,7 +142,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
              true_temperature: Sequence[str] = (),
              compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
-             window_follows_shift: bool = True) -> tuple[list[dict[str, Any]], Trace | None]:
+             window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S
+             ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
     Metrics over the last ``window_s`` [s]. The laws are the nodes' defaults; ``tem_params``
@@ -157,7 +159,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     thermocouples driven by the TEM commands: the node graph with hysteresis_compensator's
     ``temperature_source: observer`` (the default) and the same ``observer.*`` parameters; None: the
     thermocouples themselves (``temperature_source: thermocouple``). ``window_follows_shift``:
-    hysteresis_compensator's parameter of that name."""
+    hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off)."""
     check_true_temperature(true_temperature)
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
@@ -179,7 +181,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     if 'inverse_adaptive' in groups:
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
         comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=shift_gain_per_s,
-                                 shift_limit_C=15.0, window_follows_shift=window_follows_shift)
+                                 shift_limit_C=15.0, window_follows_shift=window_follows_shift,
+                                 stroke_gain_per_s=stroke_gain_per_s)
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]

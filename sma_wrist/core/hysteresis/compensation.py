@@ -21,6 +21,13 @@ inverse work on the temperature axis that explains the wire, and the answer is s
 T_d = T_inv + shift. Where the model's loop is flat (inside the hysteresis gap) its slope is ~0
 and the shift holds. Each wire has its own shift: the common mode, which the angle alone
 cannot see (both wires move it the same way), is seen by each wire's strain prediction.
+
+Stroke adaptation (issue 14 item 2, docs/control.md "Issue 14 item 2, continued"): a wire whose
+transformation strain differs from the model's (stroke x s about the mid-stroke elongation y_mid,
+the way the family's plants differ, ``plants.spread.perturbed_hysteresis``) is predicted as
+y = y_mid + k (y_SDGPI(T - shift) - y_mid); k follows the same prediction error where the shift
+cannot (on the loop's flat ends, where a stroke error shows whole), and the inverse is asked for
+y_mid + (y_target - y_mid) / k.
 """
 from __future__ import annotations
 
@@ -35,7 +42,7 @@ from sma_wrist.core.errors import ParameterError, check_finite
 from sma_wrist.core.hysteresis import kernel as _hk
 from sma_wrist.core.hysteresis.inverse import InverseCompensator, _output_frozen, _residual
 from sma_wrist.core.hysteresis.muscle import G, MuscleGeometry
-from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, initial_state, mirrored_output
 
 FloatArray = NDArray[np.float64]
 
@@ -54,8 +61,8 @@ class MuscleCompensator:
 
     def __init__(self, params: SDGPIParams, geometry: MuscleGeometry | None = None,
                  T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical',
-                 shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0, window_follows_shift: bool = False
-                 ) -> None:
+                 shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0, window_follows_shift: bool = False,
+                 stroke_gain_per_s: float = 0.0, stroke_limits: tuple[float, float] = (0.5, 2.0)) -> None:
         self.params = params
         self.T_range_C = T_range_C
         if not (math.isfinite(shift_gain_per_s) and shift_gain_per_s >= 0):
@@ -64,6 +71,25 @@ class MuscleCompensator:
             raise ParameterError(f'shift_limit_C = {shift_limit_C!r} must be >= 0')
         self.shift_gain_per_s = float(shift_gain_per_s)
         self.shift_limit_C = float(shift_limit_C)
+        if not (math.isfinite(stroke_gain_per_s) and stroke_gain_per_s >= 0):
+            raise ParameterError(f'stroke_gain_per_s = {stroke_gain_per_s!r} must be >= 0')
+        k_lo, k_hi = (float(x) for x in stroke_limits)
+        if not (0 < k_lo <= 1 <= k_hi and math.isfinite(k_hi)):
+            raise ParameterError(f'stroke_limits = {stroke_limits!r} must be (lo, hi) with 0 < lo <= 1 <= hi')
+        #: rate [1/s] at which each wire's stroke ratio follows the strain prediction error (0: off)
+        self.stroke_gain_per_s, self.stroke_limits = float(stroke_gain_per_s), (k_lo, k_hi)
+        #: per wire: the wire's stroke over the model's, about y_mid_mm
+        self.stroke = np.ones(2)
+        #: per wire: (cold, hot) edge of the window reached since reset; the stroke adapts once both
+        #: are (the memory is then wiped of its unknown starting state, which would read as a stroke error)
+        self._seen = np.zeros((2, 2), np.bool_)
+        # the model's mid-stroke elongation: mean of the cold (cooled) and hot (heated) major-loop ends
+        # at the adaptive law's default pre-load per wire
+        lo, hi = T_range_C
+        cold = initial_state(params, lo, MID_LOAD_KGF, branch='cooling')
+        hot = initial_state(params, hi, MID_LOAD_KGF, branch='heating')
+        self.y_mid_mm = params.k_f - 0.5 * float(mirrored_output(params, cold, lo)[0]
+                                                  + mirrored_output(params, hot, hi)[0])
         #: the inverse searches [lo, hi] - shift on the model's axis, so its answer on the wire's axis
         #: spans the whole window [lo, hi] (else a wire colder than the model never gets above hi - |shift|)
         self.window_follows_shift = bool(window_follows_shift)
@@ -82,6 +108,8 @@ class MuscleCompensator:
         m = self._load(np.asarray(stress_Pa, float))[0]
         self.inverse.reset(np.asarray(T0_C, float), m, branch=branch)
         self.shift_C = np.zeros(np.shape(m))
+        self.stroke = np.ones(np.shape(m))
+        self._seen = np.zeros((2,) + np.shape(m), np.bool_)
 
     def observe(self, T_C: ArrayLike, stress_Pa: ArrayLike) -> None:
         """Advance the memory with measured temperatures and stresses (InverseCompensator.observe)."""
@@ -122,6 +150,9 @@ class MuscleCompensator:
             y = y.reshape(eps.shape) if eps.ndim != 1 else y
         else:  # broadcast shapes: the same expression on arrays
             y = self._target(eps, m)  # type: ignore[arg-type]
+        if self.stroke_gain_per_s:  # the model's elongation whose stroke-scaled value is the target
+            c = self.y_mid_mm
+            y = c + (y - c) / np.broadcast_to(self.stroke, np.shape(y))
         window = None
         if self.shift_gain_per_s and self.window_follows_shift:
             # inside the model's validity: |shift| <= shift_limit_C, the window's edges 1 degC apart at least
@@ -143,11 +174,21 @@ class MuscleCompensator:
         Step: shift += gain dt (y_model - y_meas) s / (s^2 + s_0^2), s = dy_model/dT [mm/degC] of the
         loop the memory is on (central difference, heating up / cooling down), y in the SD-GPI's
         coordinates (:meth:`_target`), s_0 = SLOPE_FLOOR_MM_PER_C; clipped to +-shift_limit_C.
-        A model predicting a longer wire than measured is too cold: its axis moves up."""
+        A model predicting a longer wire than measured is too cold: its axis moves up.
+
+        With ``stroke_gain_per_s`` k > 0 (module docstring): the prediction is y_mid + k (y_model - y_mid),
+        the shift's slope k s, and, once the wire has been within STROKE_EDGE_C of both window edges,
+        k -= gain_k dt (y_pred - y_meas) d / (d^2 + d_0^2) s_0^2 / ((k s)^2 + s_0^2), d = y_model - y_mid,
+        d_0 = STROKE_FLOOR_MM: a gradient step on the loop's flat ends, where the shift's is ~0;
+        clipped to ``stroke_limits``."""
         T = np.asarray(T_C, float)
         self.observe(T - self.shift_C, stress_Pa)
         if self.shift_gain_per_s <= 0.0:
             return
+        k_dt = self.stroke_gain_per_s * dt
+        if k_dt:
+            lo, hi = self.T_range_C
+            self._seen |= np.stack([T <= lo + STROKE_EDGE_C, T >= hi - STROKE_EDGE_C])
         inv = self.inverse
         st = inv.state
         assert st is not None
@@ -157,17 +198,26 @@ class MuscleCompensator:
         if _jm.AVAILABLE and st.T_prev.ndim == 1 and eps.shape == st.T_prev.shape:
             # the node's call at 100 Hz: ~1 ms of numpy on (3, 2) arrays -> a few us
             shift = self.shift_C.astype(float)  # a copy: the kernel writes it
+            # without stroke adaptation the kernel neither reads the flags nor writes the stroke: no copies
+            stroke, on = (self.stroke.astype(float), self._seen.all(axis=0)) if k_dt else (self.stroke, self._seen[0])
             _track_step(st.T_prev, st.heating, st.w, m, y_meas, shift, self.shift_gain_per_s * dt, SLOPE_STEP_C,
-                        SLOPE_FLOOR_MM_PER_C ** 2, self.shift_limit_C, *inv._kernel_params)
-            self.shift_C = shift
+                        SLOPE_FLOOR_MM_PER_C ** 2, self.shift_limit_C, stroke, on, k_dt,
+                        self.y_mid_mm, STROKE_FLOOR_MM ** 2, *self.stroke_limits, *inv._kernel_params)
+            self.shift_C, self.stroke = shift, stroke
             return
         h = SLOPE_STEP_C
         up, down = np.ones_like(st.heating), np.zeros_like(st.heating)
         y = _output_frozen(self.params, st.w, st.T_prev + np.array([0.0, h, -h]).reshape((3,) + (1,) * st.T_prev.ndim),
                            m, np.stack([st.heating, up, down]))
         slope = (y[1] - y[2]) / (2.0 * h)  # mm/degC of the loop the wire is on, ~0 inside the gap
+        f2 = SLOPE_FLOOR_MM_PER_C ** 2
         err = y[0] - y_meas
-        step = self.shift_gain_per_s * dt * err * slope / (slope * slope + SLOPE_FLOOR_MM_PER_C ** 2)
+        if k_dt:
+            k, d = self.stroke, y[0] - self.y_mid_mm
+            err, slope = self.y_mid_mm + k * d - y_meas, k * slope
+            dk = k_dt * err * d / (d * d + STROKE_FLOOR_MM ** 2) * f2 / (slope * slope + f2)
+            self.stroke = np.clip(k - np.where(self._seen.all(axis=0), dk, 0.0), *self.stroke_limits)
+        step = self.shift_gain_per_s * dt * err * slope / (slope * slope + f2)
         self.shift_C = np.clip(self.shift_C + step, -self.shift_limit_C, self.shift_limit_C)
 
     def clip_T(self, temperature_C: FloatArray) -> FloatArray:
@@ -180,15 +230,23 @@ class MuscleCompensator:
 SLOPE_STEP_C = 0.5
 #: slope below which the shift adapts ever more slowly (the flat inside of the loop) [mm/degC]
 SLOPE_FLOOR_MM_PER_C = 0.05
+#: distance of the model's output from y_mid below which the stroke adapts ever more slowly [mm]
+#: (the model's stroke is ~3.6 mm: its ends lie ~1.8 mm from y_mid)
+STROKE_FLOOR_MM = 0.3
+#: the stroke adapts once a wire has been this close to both edges of the window [degC]
+STROKE_EDGE_C = 15.0
+#: per-wire load at which y_mid is taken [kgf]: the adaptive law's default pre-load (AdaptiveParams)
+MID_LOAD_KGF = 0.775
 
 
 @_jm._jit
-def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit,
-                stacked, edges, r, wts, c, d, p0, k_f):  # pragma: no cover - compiled
-    """Compiled adaptation step of :meth:`MuscleCompensator.track`, wire by wire, on shift (S,) in place:
-    the SD-GPI output (Eqs. 3.19, 3.22, 4.1-4.5, :func:`~sma_wrist.core.hysteresis.inverse._residual` against the
-    frozen memory) at T_prev in the memory's direction and at T_prev +- h heating / cooling, then
-    shift += gain_dt (y - y_meas) s / (s^2 + floor2), s = (y(+h) - y(-h)) / 2h, clipped to +-limit."""
+def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit, stroke, stroke_on, gain_k_dt, y_mid,
+                floor_k2, k_lo, k_hi, stacked, edges, r, wts, c, d, p0, k_f):  # pragma: no cover - compiled
+    """Compiled adaptation step of :meth:`MuscleCompensator.track`, wire by wire, on shift (S,) and stroke (S,)
+    in place: the SD-GPI output (Eqs. 3.19, 3.22, 4.1-4.5, :func:`~sma_wrist.core.hysteresis.inverse._residual`
+    against the frozen memory) at T_prev in the memory's direction and at T_prev +- h heating / cooling, then
+    shift += gain_dt (y - y_meas) s / (s^2 + floor2), s = (y(+h) - y(-h)) / 2h, clipped to +-limit; with
+    gain_k_dt > 0 the stroke step of the method's docstring first (where stroke_on)."""
     for s in range(T_prev.shape[0]):
         coef, _ = _hk._envelopes(stacked, edges, m[s])
         T0 = T_prev[s]
@@ -196,7 +254,16 @@ def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit,
         y_up = _residual(T0 + h, np.nan, True, True, coef, w[s], 0.0, r, wts, c, d, p0, k_f)
         y_down = _residual(T0 - h, np.nan, False, False, coef, w[s], 0.0, r, wts, c, d, p0, k_f)
         slope = (y_up - y_down) / (2.0 * h)
-        x = shift[s] + gain_dt * (y0 - y_meas[s]) * slope / (slope * slope + floor2)
+        err = y0 - y_meas[s]
+        if gain_k_dt != 0.0:
+            k = stroke[s]
+            dev = y0 - y_mid
+            err = y_mid + k * dev - y_meas[s]
+            slope = k * slope
+            if stroke_on[s]:
+                k = k - gain_k_dt * err * dev / (dev * dev + floor_k2) * floor2 / (slope * slope + floor2)
+                stroke[s] = min(max(k, k_lo), k_hi)
+        x = shift[s] + gain_dt * err * slope / (slope * slope + floor2)
         shift[s] = min(max(x, -limit), limit)
 
 
