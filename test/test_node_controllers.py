@@ -502,3 +502,46 @@ def test_compensator_hands_its_stroke_gain_to_the_core() -> None:
     with Runtime() as rt:
         node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('stroke_gain_per_s', value=0.5)])
         assert node.comp.stroke_gain_per_s == 0.5
+
+
+def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory):
+    """A joint held on its stop (-0.1 rad) with both wires at 55 degC, the measurement the measured
+    Flexinol run starts from (docs/control.md "The inverse mode on a measured wire"): the strain there
+    is the chain's, not the wire's, muscle 1's shift runs to its limit in under 4 s, and /diagnostics
+    says so once (WARN naming the wire); with the adaptation off nothing is reported."""
+    from builtin_interfaces.msg import Time
+    from rclpy.parameter import Parameter
+    from std_msgs.msg import Header
+
+    from sma_wrist.core.control.joint_controller import bundle_strain
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    stress = MuscleGeometry().stress_Pa(np.array([0.8, 0.7]))
+    rest = bundle_strain(PlantParams(), 0.5)
+
+    def run(gain: float):  # type: ignore[no-untyped-def]
+        with Runtime() as rt:
+            probe = probe_factory(rt, ('/diagnostics',))
+            node = rt.add(HysteresisCompensator, parameter_overrides=[
+                Parameter('temperature_source', value='thermocouple'), Parameter('shift_gain_per_s', value=gain)])
+            for i in (1, 2):
+                probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
+            for j in range(400):  # 4 s at 100 Hz
+                header = Header(stamp=Time(sec=1 + j // 100, nanosec=(j % 100) * 10_000_000))
+                for i in (1, 2):
+                    probe.publish(f'/wrist/muscle_{i}/temperature', header=header, temperature=55.0)
+                probe.publish('/wrist/joint_states', header=header, name=['wrist'], position=[-0.1], velocity=[0.0],
+                              effort=[0.0])
+                for kind, v in (('strain', rest), ('stress', stress)):
+                    for i in (1, 2):
+                        probe.publish(f'/wrist/muscle_{i}/{kind}_desired', data=float(v[i - 1]))
+                rt.spin_for(0.0005, until='steady')
+            shift = node.comp.shift_C.copy()
+        return [s for m in probe.got['/diagnostics'] for s in m.status if s.name.endswith(': adaptation')], shift
+
+    warned, shift = run(2.0)
+    assert shift[0] == 15.0 and abs(shift[1]) < 15.0
+    assert len(warned) == 1 and warned[0].level == b'\x01'  # WARN, once
+    assert 'of muscle 1 at its +-15 degC limit' in warned[0].message and 'muscle 2' not in warned[0].message
+    assert run(0.0)[0] == []

@@ -120,6 +120,7 @@ class HysteresisCompensator(WristNode):
         self.plant = PlantParams()  # chain geometry of the measured strains
         self.started = False
         self._saturated: bool | None = None  # last state reported on /diagnostics
+        self._shift_at_limit: tuple[bool, ...] = (False, False)  # per wire, last state reported on /diagnostics
         # per TEM layer, (filed at [ns], command [V]) received, oldest first (the observer's inputs)
         self.commands: list[deque[tuple[int, float]]] = [deque(maxlen=MAX_COMMANDS) for _ in (1, 2)]
         self.t_seen_ns = 0  # newest measurement stamp received
@@ -274,10 +275,28 @@ class HysteresisCompensator(WristNode):
         try:
             if tick[ANGLE] == tick[ANGLE]:
                 self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, tick[ANGLE]), dt)
+                self._report_shift()
             else:
                 self.comp.observe(self.T_meas, self.stress_meas)
         except SmaWristError as e:
             self.diagnose('inverse', DiagnosticStatus.ERROR, f'memory update failed: {e}')
+
+    def _report_shift(self) -> None:
+        """WARN on /diagnostics while a wire's learnt temperature shift sits on its limit: the model does
+        not explain that wire (another wire, or a slack wire / a joint on its stop read as a temperature
+        error), which on a measured wire went with the inverse mode failing (docs/control.md, "The
+        inverse mode on a measured wire")."""
+        lim = self.comp.shift_limit_C
+        at = tuple(lim > 0 and abs(x) >= lim for x in self.comp.shift_C.tolist())
+        if at == self._shift_at_limit:  # diagnose publishes on change only: skip building its values
+            return
+        self._shift_at_limit = at
+        wires = ', '.join(f'muscle {i + 1}' for i, a in enumerate(at) if a)
+        self.diagnose('adaptation', DiagnosticStatus.WARN if wires else DiagnosticStatus.OK,
+                      f'learnt temperature shift of {wires} at its +-{lim:g} degC limit: the model does not explain '
+                      'the wire (another wire, or slack / on a stop); direct_adaptive or pid do not depend on it'
+                      if wires else 'learnt temperature shifts inside their limits',
+                      {'shift_C': np.round(self.comp.shift_C, 2).tolist()})
 
     def _on_target(self, key: str, msg: Any) -> None:
         """Collect one cycle's four targets, paired by their order on each topic, not by arrival.
