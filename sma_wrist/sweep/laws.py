@@ -71,7 +71,11 @@ class JointControllerBank:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
         x = self.plant.joint.chain_displacement_mm(np.asarray(q, float))
         e0 = self.plant.preload_elongation_mm
-        return np.stack([e0 - x, e0 + x], axis=-1) / self.plant.muscle.wire_length_mm
+        out = np.empty(np.shape(x) + (2,))  # [e0 - x, e0 + x] / L without np.stack's per-call cost
+        np.subtract(e0, x, out=out[..., 0])
+        np.add(e0, x, out=out[..., 1])
+        out /= self.plant.muscle.wire_length_mm
+        return out
 
     def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float
                ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
@@ -80,7 +84,7 @@ class JointControllerBank:
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
             T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
-            Tc = np.clip(T, lo, hi)
+            Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
             return None, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
         assert self.adaptive is not None
         o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
@@ -91,17 +95,19 @@ class JointControllerBank:
                                 self.hold_after, self._target)
             return force, self.strain_at(self._target), None, o.saturated
         T = p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N
-        Tc = np.clip(T, lo, hi)
+        Tc = np.minimum(np.maximum(T, lo), hi)
         return force, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
 
 
 @tem_kernel._jit
 def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
                   cfg, candidates, status):  # pragma: no cover - compiled
-    """tem_kernel.control_sample for each wrist j (row j of every state array)."""
+    """tem_kernel.control_sample for each wrist j (row j of every state array), its work arrays allocated once."""
+    scratch = tem_kernel.sample_scratch()
     for j in range(x.shape[0]):
-        status[j] = tem_kernel.control_sample(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j], T_meas[j],
-                                              T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef, cfg, candidates)
+        status[j] = tem_kernel.control_sample_into(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j],
+                                                   T_meas[j], T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef, cfg,
+                                                   candidates, scratch)
 
 
 class TemLoopBank:
