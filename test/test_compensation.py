@@ -139,3 +139,35 @@ def test_compiled_track_step_is_the_numpy_step(seed: int) -> None:
         shifts.append(comps[0].shift_C.copy())
     shifts = np.array(shifts)
     assert np.ptp(shifts) > 1.0 and np.abs(shifts).max() == pytest.approx(4.0)  # it adapted, up to the limit
+
+
+def test_many_wires_in_one_compensator_are_the_two_wire_ones_to_the_bit() -> None:
+    """The sweep runs one MuscleCompensator over the wires of all its inverse-mode wrists (arrays, not
+    the node's float-by-float path): track and the inverse give each wrist what its own two-wire
+    compensator (the node's) gives, bit for bit, with the axis adaptation and the window following
+    it, loads partly outside the SD-GPI's range, each wrist on its own phase."""
+    n = 6  # 12 wires: above FLOAT_BY_FLOAT_MAX
+    kw = dict(T_range_C=(20.0, 80.0), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
+    bank = MuscleCompensator(default_sdgpi(), **kw)
+    ones = [MuscleCompensator(default_sdgpi(), **kw) for _ in range(n)]
+    seqs = [[np.roll(x, 11 * j, axis=0) for x in _wrist_sequence(200)] for j in range(n)]
+    strain_measured = [0.97 * s[2] for s in seqs]  # a wire the model does not predict: the shifts move
+    stack = [np.concatenate([s[i][0] for s in seqs]) for i in range(4)]
+    bank.reset(stack[0], stack[1])
+    for c, s in zip(ones, seqs):
+        c.reset(s[0][0], s[1][0])
+    clipped_seen = False
+    for k in range(1, 200):
+        bank.track(np.concatenate([s[0][k] for s in seqs]), np.concatenate([s[1][k] for s in seqs]),
+                   np.concatenate([e[k - 1] for e in strain_measured]), 0.01)
+        res = bank(np.concatenate([s[2][k] for s in seqs]), np.concatenate([s[3][k] for s in seqs]), commit=False)
+        for j, (c, s) in enumerate(zip(ones, seqs)):
+            c.track(s[0][k], s[1][k], strain_measured[j][k - 1], 0.01)
+            one = c(s[2][k], s[3][k], commit=False)
+            w = slice(2 * j, 2 * j + 2)
+            for a, b in ((res.temperature_C, one.temperature_C), (res.saturated, one.saturated),
+                         (res.load_kgf, one.load_kgf), (res.load_clipped, one.load_clipped),
+                         (res.sdgpi_elongation_mm, one.sdgpi_elongation_mm), (bank.shift_C, c.shift_C)):
+                np.testing.assert_array_equal(a[w], b)
+        clipped_seen |= bool(res.load_clipped.any())
+    assert np.ptp(bank.shift_C) > 0.1 and clipped_seen

@@ -111,6 +111,29 @@ def test_step_is_classical_rk4(coupling: float) -> None:
     np.testing.assert_allclose(th.step(p, T, u, 0.8), _rk4_reference(p, T, u, 0.8), rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize('coupling', [0.0, 0.03])
+@pytest.mark.parametrize('shape', [(1, 2), (9, 2), (4, 1), (3, 3)])
+def test_compiled_step_is_the_numpy_step_to_the_bit(coupling: float, shape: tuple[int, int]) -> None:
+    """step's compiled path (numba installed: kernel.step_horner, wrist by wrist) gives its numpy
+    code's numbers exactly: the observer of the node (one wrist) and of the sweep (many) both run it."""
+    from unittest import mock
+
+    from sma_wrist.core import jit
+    if not jit.AVAILABLE:
+        pytest.skip('numba is not installed: there is only the numpy path')
+    p = dataclasses.replace(P, coupling_per_s=coupling, ambient_C=(23.0, 27.0))
+    rng = np.random.default_rng(2)
+    T = rng.uniform(10, 75, shape + (2,))
+    for dt in (0.01, 0.013, 0.8):
+        u = rng.uniform(P.u_min_V, P.u_max_V, shape)
+        fast = th.step(p, T, u, dt)
+        with mock.patch.object(jit, 'AVAILABLE', False):
+            ref = th.step(p, T, u, dt)
+        np.testing.assert_array_equal(fast, ref)
+        assert not np.array_equal(fast, T)
+        T = fast
+
+
 def test_rk4_is_fourth_order_against_the_exact_solution() -> None:
     u = np.array([[11.0, -9.0]])
     T0 = np.array([[[30.0, 20.0], [60.0, 25.0]]])

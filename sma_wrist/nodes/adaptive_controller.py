@@ -27,7 +27,7 @@ from std_msgs.msg import Float64, Header
 from sma_wrist.core.control import adaptive_kernel, pid_kernel
 from sma_wrist.core.control.adaptive import AdaptiveParams
 from sma_wrist.core.control.joint_controller import JointController as JointLaw
-from sma_wrist.core.control.joint_controller import JointControllerParams
+from sma_wrist.core.control.joint_controller import JointControllerParams, time_to_meet
 from sma_wrist.core.control.pid import PIDParams
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
@@ -117,6 +117,7 @@ class AdaptiveController(WristNode):
         super().__init__('adaptive_controller', **kwargs)
         adaptive_kernel.warm_up()  # compile before the first sample, not inside the loop
         pid_kernel.warm_up()
+        time_to_meet(0.0, 0.1, -0.1)  # the reversal lead's, compiled as well
         self.law = JointLaw(self._core_params(self.p))
         self.geometry = MuscleGeometry()
         self.reference: tuple[float, float, float] | None = None

@@ -172,6 +172,10 @@ class HysteresisCompensator(WristNode):
         self.observer = None if self.p['temperature_source'] != 'observer' else MuscleTemperatureObserver(
             observer_thermal(self.p['thermal_file']),
             TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
+        if self.observer is not None:  # its heat-balance step is compiled too: a throwaway observer's two samples
+            warm_obs = MuscleTemperatureObserver(self.observer.thermal, self.observer.params)
+            for _ in range(2):
+                warm_obs.update(np.full((1, 2), T_mid), np.zeros((1, 2)), 0.01)
         self.started = False  # re-seed the memory (and the observer) from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:

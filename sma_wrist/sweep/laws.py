@@ -26,11 +26,12 @@ from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
 
-def _reversal_lead_many(q: list[float], q_d: float, qdot_d: float, qddot_d: float, lead_s: float, step: float,
-                        hold_on: list[bool], hold_q: list[float], hold_after: list[float], target: list[float]) -> None:
-    """JointController._reversal_lead for each wrist (Python floats: time_to_meet is scalar code):
-    target[j] = the angle whose strain is asked for; hold_* the latch per wrist, in place."""
-    for j in range(len(q)):
+@tem_kernel._jit
+def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, hold_after,
+                        target):  # pragma: no cover - compiled
+    """JointController._reversal_lead for each wrist j, compiled (q (n,) [rad]): target[j] = the angle
+    whose strain is asked for; hold_on, hold_q, hold_after (n,) the latch per wrist, in place."""
+    for j in range(q.shape[0]):
         e = q_d - q[j]
         s_meet, after = time_to_meet(e, qdot_d, qddot_d)
         turns = after != math.copysign(1.0, qdot_d) or (abs(e) > step and after != math.copysign(1.0, e))
@@ -61,16 +62,20 @@ class JointControllerBank:
         p = params
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode), n) if p.mode != 'pid' else None
         self.pid = PID(p.pid, n) if p.mode == 'pid' else None
-        self.hold_on = [False] * n
-        self.hold_q = [0.0] * n
-        self.hold_after = [0.0] * n
-        self._target = [0.0] * n
+        self.hold_on = np.zeros(n, np.bool_)
+        self.hold_q = np.zeros(n)
+        self.hold_after = np.zeros(n)
+        self._target = np.zeros(n)
 
     def strain_at(self, q: FloatArray) -> FloatArray:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
         x = self.plant.joint.chain_displacement_mm(np.asarray(q, float))
         e0 = self.plant.preload_elongation_mm
-        return np.stack([e0 - x, e0 + x], axis=-1) / self.plant.muscle.wire_length_mm
+        out = np.empty(np.shape(x) + (2,))  # [e0 - x, e0 + x] / L without np.stack's per-call cost
+        np.subtract(e0, x, out=out[..., 0])
+        np.add(e0, x, out=out[..., 1])
+        out /= self.plant.muscle.wire_length_mm
+        return out
 
     def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float
                ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
@@ -79,28 +84,30 @@ class JointControllerBank:
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
             T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
-            Tc = np.clip(T, lo, hi)
+            Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
             return None, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
         assert self.adaptive is not None
         o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
         force = np.stack([o.force_1_N, o.force_2_N], axis=-1)
         if p.mode == 'inverse_adaptive':
-            _reversal_lead_many(np.asarray(q, float).tolist(), float(q_d), float(qdot_d), float(qddot_d),
+            _reversal_lead_many(np.ascontiguousarray(q, float), float(q_d), float(qdot_d), float(qddot_d),
                                 float(p.reversal_lead_s), REVERSAL_STEP_RAD, self.hold_on, self.hold_q,
                                 self.hold_after, self._target)
-            return force, self.strain_at(np.array(self._target)), None, o.saturated
+            return force, self.strain_at(self._target), None, o.saturated
         T = p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N
-        Tc = np.clip(T, lo, hi)
+        Tc = np.minimum(np.maximum(T, lo), hi)
         return force, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
 
 
 @tem_kernel._jit
 def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
                   cfg, candidates, status):  # pragma: no cover - compiled
-    """tem_kernel.control_sample for each wrist j (row j of every state array)."""
+    """tem_kernel.control_sample for each wrist j (row j of every state array), its work arrays allocated once."""
+    scratch = tem_kernel.sample_scratch()
     for j in range(x.shape[0]):
-        status[j] = tem_kernel.control_sample(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j], T_meas[j],
-                                              T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef, cfg, candidates)
+        status[j] = tem_kernel.control_sample_into(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j],
+                                                   T_meas[j], T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef, cfg,
+                                                   candidates, scratch)
 
 
 class TemLoopBank:

@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from sma_wrist.core.control.adaptive import KGF_N, N_WIRES, AdaptiveController, AdaptiveParams
 from sma_wrist.core.control.pid import PID, PIDParams
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
 
 FloatArray = NDArray[np.float64]
@@ -57,6 +58,7 @@ def tuned_adaptive() -> AdaptiveParams:
 REVERSAL_STEP_RAD = 1e-2
 
 
+@_jit
 def time_to_turn(qdot_d: float, qddot_d: float) -> float:
     """Time [s] until the reference velocity crosses zero, from its local parabola (inf if it does not).
 
@@ -67,6 +69,7 @@ def time_to_turn(qdot_d: float, qddot_d: float) -> float:
     return math.inf
 
 
+@_jit
 def time_to_meet(error: float, qdot_d: float, qddot_d: float) -> tuple[float, float]:
     """When the reference, on its local parabola, last comes to a joint that stays where it is.
 
@@ -74,21 +77,27 @@ def time_to_meet(error: float, qdot_d: float, qddot_d: float) -> tuple[float, fl
     sign of the reference velocity there: the direction the joint must move afterwards.
     (inf, 0) if the reference does not come to the joint. For a joint on the reference this is
     the far root, 2 s* (:func:`time_to_turn`); for one far behind, the time q_d needs to come
-    back to it after its turn; for one beyond the coming extremum, 2 s* as well.
+    back to it after its turn; for one beyond the coming extremum, 2 s* as well. Compiled (the
+    sweep's bank calls it per wrist and tick from compiled code), scalars only.
     """
+    s = -math.inf  # the largest positive root so far
     if qddot_d == 0.0:
-        roots = [-error / qdot_d] if qdot_d != 0.0 else []
+        x = -error / qdot_d if qdot_d != 0.0 else -math.inf
+        if x > 0.0:
+            s = x
     else:
         disc = qdot_d * qdot_d - 2.0 * qddot_d * error
         if disc < 0.0:  # the joint lies beyond the reference's coming extremum: it turns there
             s_turn = time_to_turn(qdot_d, qddot_d)
-            return (2.0 * s_turn, -math.copysign(1.0, qdot_d)) if math.isfinite(s_turn) else (math.inf, 0.0)
+            if math.isfinite(s_turn):
+                return 2.0 * s_turn, -math.copysign(1.0, qdot_d)
+            return math.inf, 0.0
         r = math.sqrt(disc)
-        roots = [(-qdot_d - r) / qddot_d, (-qdot_d + r) / qddot_d]
-    positive = [x for x in roots if x > 0.0]
-    if not positive:
+        for x in ((-qdot_d - r) / qddot_d, (-qdot_d + r) / qddot_d):
+            if x > 0.0 and x > s:  # max of the positive roots, the first of equal ones
+                s = x
+    if s == -math.inf:
         return math.inf, 0.0
-    s = max(positive)
     return s, math.copysign(1.0, qdot_d + qddot_d * s)
 
 

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from sma_wrist.core.jit import AVAILABLE, _jit
+from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline
 from sma_wrist.core.thermal.kernel import thermal_rk4
 
 __all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range', 'control_sample',
@@ -125,6 +125,22 @@ SATURATED, LIMITED, HOT = 1, 2, 4
 @_jit
 def control_sample(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh,
                    th_coef, cfg, candidates):  # pragma: no cover - compiled
+    """:func:`control_sample_into` with its work arrays allocated here (the node's one call per sample)."""
+    return control_sample_into(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev,
+                               refresh, th_coef, cfg, candidates, sample_scratch())
+
+
+@_jit_inline
+def sample_scratch():  # pragma: no cover - compiled
+    """Work arrays of :func:`control_sample_into`: RK4 stages (4, 2, 2), targets (2, 2), law command (2,),
+    face currents (2, 2), no-root flags (2, 2), saturation flags (2,)."""
+    return (np.empty((4, 2, 2)), np.empty((2, 2)), np.empty(2), np.empty((2, 2)), np.empty((2, 2), np.bool_),
+            np.empty(2, np.bool_))
+
+
+@_jit_inline
+def control_sample_into(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh,
+                        th_coef, cfg, candidates, scratch):  # pragma: no cover - compiled
     """One tem_controller sample (tem_control.TemLoop.sample) in one call, state in place.
 
     x (2, 2) observer faces [degC]: stepped dt_obs [s] (if > 0) under ``command`` (2,) [V], the
@@ -135,15 +151,15 @@ def control_sample(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, 
     Writes the new command into ``command`` and per-layer bits SATURATED | LIMITED | HOT into flags.
     Returns OK, or BAD_STATE / BAD_TARGET / BAD_COMMAND (non-finite) leaving ``command`` as it was.
     """
-    if dt_obs > 0:
-        observer_step(x, command, dt_obs, th_coef)
+    s, Td, u, face, no_root, sat = scratch  # caller-owned: the sweep's bank allocates them once per tick, not per wrist
+    if dt_obs > 0:  # observer_step on the scratch stages
+        thermal_rk4(x, command, dt_obs, th_coef, s[0], s[1], s[2], s[3])
     for l in range(2):
         x[l, 0] = T_meas[l]
     for l in range(2):
         for f in range(2):
             if not math.isfinite(x[l, f]):
                 return BAD_STATE
-    Td = np.empty((2, 2))
     for l in range(2):
         if not math.isfinite(T_d[l]):
             return BAD_TARGET
@@ -158,10 +174,6 @@ def control_sample(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, 
                 rate[l, f] = 0.0
             T_d_prev[l, f] = Td[l, f]
     h = cfg[2:4]
-    u = np.empty(2)
-    face = np.empty((2, 2))
-    no_root = np.empty((2, 2), np.bool_)
-    sat = np.empty(2, np.bool_)
     if not linearising_command(x, Td, rate, th_coef, cfg[0], h, cfg[4], cfg[5], u, face, no_root, sat):
         return BAD_COMMAND
     predictive = cfg[6] != 0.0

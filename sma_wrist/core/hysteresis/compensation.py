@@ -119,16 +119,23 @@ class MuscleCompensator:
         m = np.array(self._kgf(sigma))
         self.inverse.observe(np.asarray(T_C, float), m.reshape(sigma.shape) if sigma.ndim != 1 else m)
 
-    def _kgf(self, stress_Pa: FloatArray) -> list[float]:
+    def _kgf(self, stress_Pa: FloatArray) -> list[float] | FloatArray:
         """MuscleGeometry.load_kgf, m = sigma A / g, on the flattened stresses as Python floats: on
-        the node's two wires a fraction of the numpy calls on (2,) arrays, the same IEEE operations."""
+        the node's two wires a fraction of the numpy calls on (2,) arrays, the same IEEE operations.
+        On many wires (the sweep's bank) the same expression on the flat array, element by element."""
         area = self._area_m2
+        if stress_Pa.size > FLOAT_BY_FLOAT_MAX:
+            return stress_Pa.ravel() * area / G
         return [s * area / G for s in stress_Pa.ravel().tolist()]
 
     def _load(self, stress_Pa: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
         """(per-wire load clipped to the SD-GPI's range, clipped flags), shaped as stress_Pa."""
         lo, hi = self._load_range
         m = self._kgf(stress_Pa)
+        if stress_Pa.size > FLOAT_BY_FLOAT_MAX:  # min(max(x, lo), hi) and the range test on the array
+            m_a = np.asarray(m)
+            return np.minimum(np.maximum(m_a, lo), hi).reshape(stress_Pa.shape), ((m_a < lo) | (m_a > hi)).reshape(
+                stress_Pa.shape)
         m_c, out = np.array([min(max(x, lo), hi) for x in m]), np.array([x < lo or x > hi for x in m], np.bool_)
         if stress_Pa.ndim != 1:
             m_c, out = m_c.reshape(stress_Pa.shape), out.reshape(stress_Pa.shape)
@@ -145,7 +152,7 @@ class MuscleCompensator:
         _check_finite('desired strain', eps)
         _check_finite('desired stress', sigma, 'Pa')
         m, clipped = self._load(sigma)
-        if eps.shape == m.shape:  # the node's call: float by float (see _load)
+        if eps.shape == m.shape and eps.size <= FLOAT_BY_FLOAT_MAX:  # the node's call: float by float (see _load)
             y = np.array([self._target(e, x) for e, x in zip(eps.ravel().tolist(), m.ravel().tolist())])
             y = y.reshape(eps.shape) if eps.ndim != 1 else y
         else:  # broadcast shapes: the same expression on arrays
@@ -159,9 +166,14 @@ class MuscleCompensator:
             lo, hi = self.T_range_C
             v_lo, v_hi = self.params.T_valid
             # float by float (see _load): numpy's per-call cost on the node's (2,) arrays tripled this call's
-            shift = np.broadcast_to(self.shift_C, y.shape).ravel().tolist()
-            window = (np.array([min(max(lo - x, v_lo), v_hi - 1.0) for x in shift]).reshape(y.shape),
-                      np.array([min(max(hi - x, v_lo + 1.0), v_hi) for x in shift]).reshape(y.shape))
+            if y.size > FLOAT_BY_FLOAT_MAX:  # the same on the sweep's bank of wires, as arrays
+                shift_a = np.broadcast_to(self.shift_C, y.shape)
+                window = (np.minimum(np.maximum(lo - shift_a, v_lo), v_hi - 1.0),
+                          np.minimum(np.maximum(hi - shift_a, v_lo + 1.0), v_hi))
+            else:
+                shift = np.broadcast_to(self.shift_C, y.shape).ravel().tolist()
+                window = (np.array([min(max(lo - x, v_lo), v_hi - 1.0) for x in shift]).reshape(y.shape),
+                          np.array([min(max(hi - x, v_lo + 1.0), v_hi) for x in shift]).reshape(y.shape))
         res = self.inverse.solve(y, m, commit=commit, window=window)
         T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
         return CompensationResult(T, res.saturated, clipped, m, y)
@@ -267,10 +279,15 @@ def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit,
         shift[s] = min(max(x, -limit), limit)
 
 
+#: arrays up to this size (the node's two wires) are converted float by float (numpy's per-call cost
+#: dominates there); larger ones (the sweep's bank of wires) stay arrays: the same IEEE operations
+FLOAT_BY_FLOAT_MAX = 8
+
+
 def _check_finite(name: str, x: FloatArray, unit: str = '') -> None:
     """check_finite for a float array: a few float tests on the node's (2,) arrays (np.isfinite
     costs more than the rest of the conversion), check_finite's message on a bad value."""
-    if x.size > 8 or not all(map(math.isfinite, x.ravel().tolist())):
+    if x.size > FLOAT_BY_FLOAT_MAX or not all(map(math.isfinite, x.ravel().tolist())):
         check_finite(name, x, unit)
 
 

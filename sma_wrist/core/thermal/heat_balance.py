@@ -42,7 +42,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from sma_wrist.core import jit as _jm
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
+from sma_wrist.core.thermal import kernel as _tk
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -308,6 +310,12 @@ def step(params: ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: floa
         if T.ndim != 3 or T.shape[-1] != 2 or not np.isfinite(T.sum()):
             check_state(T)
     if u.shape + (2,) == T.shape:  # fast path: no broadcasting needed
+        if _jm.AVAILABLE and u.ndim == 2:  # the same operations compiled, wrist by wrist (kernel.step_horner)
+            out = np.empty(T.shape)
+            _tk.step_horner(np.ascontiguousarray(T), np.ascontiguousarray(u), float(dt), float(params.input_per_volt),
+                            params._k_at, params._k_t, params._col_neg_tinf[:, 0], params._k_tc, params._k_r,
+                            params._k_inf, float(params.coupling_per_s), out)
+            return out
         shape = T.shape
     else:
         shape = np.broadcast_shapes(T.shape, u.shape + (2,))
