@@ -168,7 +168,7 @@ def test_reference_ahead_is_the_sine_ahead_and_each_mode_uses_its_own_lead():
         # Taylor remainders: a (w tau)^3 / 6 = 0.47 mrad and a w^3 tau^2 / 2 = 0.59 mrad/s
         assert ahead == pytest.approx(a + a * math.sin(w * (t + 1.5)), abs=a * (w * 1.5) ** 3 / 6)
         assert ahead_dot == pytest.approx(a * w * math.cos(w * (t + 1.5)), abs=a * w ** 3 * 1.5 ** 2 / 2)
-    for mode, lead in (('pid', 1.5), ('direct_adaptive', 1.0)):
+    for mode, lead in (('pid', 1.25), ('direct_adaptive', 1.0)):
         led = JointController(JointControllerParams(mode=mode))
         assert led.params.reference_lead_s == lead
         plain = JointController(JointControllerParams(mode=mode, pid_reference_lead_s=0.0,

@@ -130,7 +130,7 @@ class JointControllerParams:
     #: pid / direct modes: the law acts on the reference this far ahead [s] (its local parabola,
     #: :func:`reference_ahead`): the TEMs' lag, fed forward; 0 = the seed's laws on q_d(t)
     #: (docs/control.md, "Direct adaptive and PID off-model")
-    pid_reference_lead_s: float = 1.5
+    pid_reference_lead_s: float = 1.25
     direct_reference_lead_s: float = 1.0
 
     @property
