@@ -15,7 +15,10 @@ Three modes (seed Sec. 6.1, Table 6.1):
   when heated and raises q).
 
 All modes also return the desired strain (what the compensator needs) and never ask for
-temperatures outside [temperature_min_C, temperature_max_C] (reported as saturation).
+temperatures outside [temperature_min_C, temperature_max_C] (reported as saturation). The
+``direct_adaptive`` and ``pid`` laws act on the reference ``direct_reference_lead_s`` /
+``pid_reference_lead_s`` ahead (:func:`reference_ahead`): the TEMs' lag fed forward, which holds
+their tracking on plants that are not the model (docs/control.md, "Direct adaptive and PID off-model").
 """
 from __future__ import annotations
 
