@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointController, JointControllerParams,
-                                                     time_to_meet, time_to_turn)
+                                                     reference_ahead, time_to_meet, time_to_turn)
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.plant.wrist import PlantParams
 
@@ -150,7 +150,38 @@ def test_reversal_lead_zero_is_the_strain_at_q_d_throughout():
 
 
 @pytest.mark.parametrize('kw', [dict(mode='mpc'), dict(temperature_mid_C=90.0), dict(force_per_degC_N=0.0),
-                                dict(temperature_min_C=float('nan')), dict(reversal_lead_s=-1.0)])
+                                dict(temperature_min_C=float('nan')), dict(reversal_lead_s=-1.0),
+                                dict(pid_reference_lead_s=-0.5), dict(direct_reference_lead_s=float('inf'))])
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ParameterError):
         JointControllerParams(**kw)
+
+
+def test_reference_ahead_is_the_sine_ahead_and_each_mode_uses_its_own_lead():
+    """reference_ahead on the Sec. 6.1 sine q_d = 0.524 (1 + sin(0.1 t)): the parabola 1.5 s ahead is
+    the sine there to within the Taylor remainder. A pid / direct law with its lead equals the one without lead fed
+    the reference ahead; the inverse mode ignores both leads (it has its reversal lead)."""
+    a, w = 0.524, 0.1
+    for t in (0.0, 7.0, 15.7, 40.0):
+        q_d, qd, qdd = a + a * math.sin(w * t), a * w * math.cos(w * t), -a * w * w * math.sin(w * t)
+        ahead, ahead_dot = reference_ahead(q_d, qd, qdd, 1.5)
+        # Taylor remainders: a (w tau)^3 / 6 = 0.47 mrad and a w^3 tau^2 / 2 = 0.59 mrad/s
+        assert ahead == pytest.approx(a + a * math.sin(w * (t + 1.5)), abs=a * (w * 1.5) ** 3 / 6)
+        assert ahead_dot == pytest.approx(a * w * math.cos(w * (t + 1.5)), abs=a * w ** 3 * 1.5 ** 2 / 2)
+    for mode, lead in (('pid', 1.25), ('direct_adaptive', 1.0)):
+        led = JointController(JointControllerParams(mode=mode))
+        assert led.params.reference_lead_s == lead
+        plain = JointController(JointControllerParams(mode=mode, pid_reference_lead_s=0.0,
+                                                      direct_reference_lead_s=0.0))
+        for k in range(20):
+            q, ref = 0.3 + 0.001 * k, (0.5, 0.05, -0.005)
+            c = led.update(q, 0.0, *ref, 0.01)
+            d = plain.update(q, 0.0, *reference_ahead(*ref, lead), ref[2], 0.01)
+            np.testing.assert_array_equal(c.temperature_desired_C, d.temperature_desired_C)
+            np.testing.assert_array_equal(c.strain_desired, led.strain_at(ref[0]))  # strain at q_d(t) still
+    inv = [JointController(JointControllerParams(mode='inverse_adaptive', pid_reference_lead_s=x,
+                                                 direct_reference_lead_s=x)) for x in (0.0, 3.0)]
+    assert inv[1].params.reference_lead_s == 0.0
+    for k in range(20):
+        c0, c1 = (jc.update(0.3, 0.0, 0.5, 0.05, -0.005, 0.01) for jc in inv)
+        np.testing.assert_array_equal(c0.force_N, c1.force_N)

@@ -125,6 +125,19 @@ def test_target_prefilter_removes_chattering_on_noisy_sensors() -> None:
     assert raw.reversals_per_s > 15.0
 
 
+def test_reference_lead_brings_direct_and_pid_onto_a_weaker_wire() -> None:
+    """Stroke x0.7 (a wire with 30 % less stroke than the model's), one cycle at 0.3 kg: measured
+    13.4 % (direct_adaptive) and 12.2 % (pid) with the reference leads (1 / 1.25 s, the defaults),
+    17.7 and 17.5 % with the seed's laws on q_d(t); chattering 0.9 / 1.2 sign changes a second."""
+    cases = [(CASES['stroke x0.7'](0.3), m) for m in ('direct_adaptive', 'pid')]
+    led = [_without_inverse('stroke x0.7')[m] for m in ('direct_adaptive', 'pid')]
+    assert [r.max_error_pct < 15.0 for r in led] == [True, True]
+    assert all(r.reversals_per_s < REVERSALS_LIMIT_PER_S for r in led)
+    plain = run_cases(cases, 62.83, window_s=31.4,
+                      controller_overrides={'pid_reference_lead_s': 0.0, 'direct_reference_lead_s': 0.0})
+    assert [r.max_error_pct > 16.0 for r in plain] == [True, True]
+
+
 @functools.lru_cache(maxsize=None)
 def _one_cycle_all(case: str, modes: tuple[str, ...]) -> dict[str, LoopResult]:
     """:func:`_one_cycle` for several modes in one vectorised run (a loop does not depend on its
@@ -133,10 +146,23 @@ def _one_cycle_all(case: str, modes: tuple[str, ...]) -> dict[str, LoopResult]:
     return dict(zip(modes, res))
 
 
+@functools.lru_cache(maxsize=None)
+def _without_inverse_runs() -> dict[tuple[str, str], LoopResult]:
+    """direct_adaptive and pid, one cycle (:func:`_one_cycle`), on the two cases their tests read, in
+    one vectorised run (the per-tick work is shared; a loop does not depend on its neighbours)."""
+    keys = [(c, m) for c in ('losses +30%', 'stroke x0.7') for m in ('direct_adaptive', 'pid')]
+    return dict(zip(keys, run_cases([(CASES[c](0.3), m) for c, m in keys], 62.83, window_s=31.4)))
+
+
+def _without_inverse(case: str) -> dict[str, LoopResult]:
+    return {m: r for (c, m), r in _without_inverse_runs().items() if c == case}
+
+
 @pytest.mark.parametrize('mode, bound', [('direct_adaptive', 10.0), ('pid', 10.0)])
 def test_modes_without_inverse_hold_on_other_heat_losses(mode: str, bound: float) -> None:
-    """Muscle-face losses +30 %: measured 7.2 % (direct) and 7.7 % (pid), 1.1 and 1.5 sign changes a second."""
-    r = _one_cycle_all('losses +30%', ('direct_adaptive', 'pid'))[mode]
+    """Muscle-face losses +30 %: measured 7.2 % (direct) and 7.7 % (pid), 1.1 and 1.5 sign changes a second;
+    with the reference leads and the direct map's 3 N/degC (issue 14 item 2) 7.8 and 6.8 %, 1.1 and 1.5."""
+    r = _without_inverse('losses +30%')[mode]
     assert r.max_error_pct < bound and r.reversals_per_s < REVERSALS_LIMIT_PER_S
 
 

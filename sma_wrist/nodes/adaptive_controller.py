@@ -73,6 +73,10 @@ FIELD_DOCS: dict[str, tuple[Any, ...]] = {
     'force_per_degC_N': ('direct mode: force request per degC of temperature request', 'N/degC', (0.0, 100.0)),
     'reversal_lead_s': ('inverse mode: start crossing the hysteresis gap this long before the joint must '
                         'reverse (docs/control.md; 0 = Eq. 5.5 as composed in the seed)', 's', (0.0, 30.0)),
+    'pid_reference_lead_s': ('pid mode: the PID acts on the reference this far ahead, the TEMs\' lag fed '
+                             'forward (docs/control.md; 0 = the seed\'s PID on q_d(t))', 's', (0.0, 10.0)),
+    'direct_reference_lead_s': ('direct_adaptive mode: the law acts on the reference this far ahead, the TEMs\' '
+                                'lag fed forward (docs/control.md; 0 = the seed\'s law on q_d(t))', 's', (0.0, 10.0)),
 }
 
 

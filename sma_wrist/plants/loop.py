@@ -182,6 +182,9 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     ap.add_argument('--thermocouple', action='store_true',
                     help='the compensator reads the thermocouples (hysteresis_compensator temperature_source '
                          'thermocouple) instead of the observer')
+    ap.add_argument('--before-lead', action='store_true',
+                    help='direct_adaptive and pid as before their reference leads (docs/control.md "Direct adaptive '
+                         'and PID off-model"): laws on q_d(t), direct map 1 N/degC')
     ap.add_argument('--true-temperature', default='', metavar='CONSUMERS',
                     help='diagnosis: comma list of compensator,tem that read the true muscle temperature instead '
                          'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
@@ -202,6 +205,9 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw['shift_gain_per_s'] = 1.0
     if a.thermocouple:
         kw['compensator_observer'] = None
+    if a.before_lead:
+        kw['controller_overrides'] = {'pid_reference_lead_s': 0.0, 'direct_reference_lead_s': 0.0,
+                                      'force_per_degC_N': 1.0}
     if a.true_temperature:
         kw['true_temperature'] = tuple(a.true_temperature.split(','))
         try:

@@ -16,7 +16,8 @@ from numpy.typing import NDArray
 
 from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
-from sma_wrist.core.control.joint_controller import REVERSAL_STEP_RAD, JointControllerParams, time_to_meet
+from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, reference_ahead,
+                                                     time_to_meet)
 from sma_wrist.core.control.pid import PID
 from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
                                         target_prefilter)
@@ -81,11 +82,14 @@ class JointControllerBank:
                ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
         p = self.params
         lo, hi = p.temperature_min_C, p.temperature_max_C
+        q_now = q_d  # the desired strain stays the one at q_d(t), as JointController's
+        if p.reference_lead_s > 0:
+            q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
             T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
             Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
-            return None, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
+            return None, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
         assert self.adaptive is not None
         o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
         force = np.stack([o.force_1_N, o.force_2_N], axis=-1)
@@ -96,7 +100,7 @@ class JointControllerBank:
             return force, self.strain_at(self._target), None, o.saturated
         T = p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N
         Tc = np.minimum(np.maximum(T, lo), hi)
-        return force, np.broadcast_to(self.strain_at(q_d), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
+        return force, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
 
 
 @tem_kernel._jit

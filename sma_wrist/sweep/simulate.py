@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -142,7 +142,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
              true_temperature: Sequence[str] = (),
              compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
-             window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S
+             window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
+             controller_overrides: Mapping[str, Any] | None = None
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -159,7 +160,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     thermocouples driven by the TEM commands: the node graph with hysteresis_compensator's
     ``temperature_source: observer`` (the default) and the same ``observer.*`` parameters; None: the
     thermocouples themselves (``temperature_source: thermocouple``). ``window_follows_shift``:
-    hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off)."""
+    hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off).
+    ``controller_overrides``: adaptive_controller's parameters other than its defaults
+    ({JointControllerParams field: value}, e.g. the reference leads)."""
     check_true_temperature(true_temperature)
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
@@ -176,7 +179,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     for mode in MODES:
         idx = np.array([i for i, c in enumerate(cases) if c.controller == mode], dtype=np.intp)
         if idx.size:
-            groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode), idx.size, base))
+            groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode, **(controller_overrides or {})),
+                                                     idx.size, base))
     comp = None
     if 'inverse_adaptive' in groups:
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis

@@ -15,7 +15,10 @@ Three modes (seed Sec. 6.1, Table 6.1):
   when heated and raises q).
 
 All modes also return the desired strain (what the compensator needs) and never ask for
-temperatures outside [temperature_min_C, temperature_max_C] (reported as saturation).
+temperatures outside [temperature_min_C, temperature_max_C] (reported as saturation). The
+``direct_adaptive`` and ``pid`` laws act on the reference ``direct_reference_lead_s`` /
+``pid_reference_lead_s`` ahead (:func:`reference_ahead`): the TEMs' lag fed forward, which holds
+their tracking on plants that are not the model (docs/control.md, "Direct adaptive and PID off-model").
 """
 from __future__ import annotations
 
@@ -101,6 +104,15 @@ def time_to_meet(error: float, qdot_d: float, qddot_d: float) -> tuple[float, fl
     return s, math.copysign(1.0, qdot_d + qddot_d * s)
 
 
+def reference_ahead(q_d: float, qdot_d: float, qddot_d: float, lead_s: float) -> tuple[float, float]:
+    """The reference ``lead_s`` [s] ahead on its local parabola: (q_d(t + lead), qdot_d(t + lead)) [rad, rad/s].
+
+    The TEMs need seconds to move a muscle across its hysteresis, so a law on q_d(t) acts late; for
+    the Sec. 6.1 sine (omega = 0.1 rad/s) the parabola's error at 2 s is 0.524 (0.2)^3 / 6 = 0.7 mrad.
+    """
+    return q_d + qdot_d * lead_s + 0.5 * qddot_d * lead_s * lead_s, qdot_d + qddot_d * lead_s
+
+
 def bundle_strain(plant: PlantParams, q: float) -> FloatArray:
     """Strains (elongation / wire length) of the two bundles at angle q [rad] (Eq. 4.17, muscle.py):
     y_1 = e0 - x, y_2 = e0 + x with x the chain travel from q_neutral and e0 the pre-load elongation."""
@@ -121,16 +133,28 @@ class JointControllerParams:
     temperature_mid_C: float = 50.0  # centre of the muscles' working band [degC]
     temperature_min_C: float = 20.0
     temperature_max_C: float = 80.0
-    force_per_degC_N: float = 1.0  # direct mode: force request per degC of temperature request [N/degC]
+    #: direct mode: force request per degC of temperature request [N/degC] (1 until issue 14 item 2:
+    #: 3 narrows the off-model error spread and keeps chattering under 2 /s; docs/control.md)
+    force_per_degC_N: float = 3.0
     #: inverse mode: start crossing the hysteresis gap this long before the reference turns [s]
     #: (0 = the strain at q_d throughout, Eq. 5.5 as written; docs/control.md "Reversal lead")
     reversal_lead_s: float = 2.75
+    #: pid / direct modes: the law acts on the reference this far ahead [s] (its local parabola,
+    #: :func:`reference_ahead`): the TEMs' lag, fed forward; 0 = the seed's laws on q_d(t)
+    #: (docs/control.md, "Direct adaptive and PID off-model")
+    pid_reference_lead_s: float = 1.25
+    direct_reference_lead_s: float = 1.0
+
+    @property
+    def reference_lead_s(self) -> float:
+        """The lead of this mode's law [s] (0 in inverse_adaptive, which has its reversal lead)."""
+        return {'pid': self.pid_reference_lead_s, 'direct_adaptive': self.direct_reference_lead_s}.get(self.mode, 0.0)
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
         for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N',
-                     'reversal_lead_s'):
+                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s'):
             if not math.isfinite(getattr(self, name)):
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
@@ -138,8 +162,9 @@ class JointControllerParams:
                                  f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
         if not self.force_per_degC_N > 0:
             raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
-        if not self.reversal_lead_s >= 0:
-            raise ParameterError(f'reversal_lead_s = {self.reversal_lead_s!r} must be >= 0')
+        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s'):
+            if not getattr(self, name) >= 0:
+                raise ParameterError(f'{name} = {getattr(self, name)!r} must be >= 0')
 
 
 @dataclass(frozen=True)
@@ -218,6 +243,8 @@ class JointController:
         """One sample: measured q [rad], q' [rad/s]; reference q_d, q_d', q_d''; step dt [s]."""
         p = self.params
         strain = self.strain_at(q_d)
+        if p.reference_lead_s > 0:
+            q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
             u = float(o.u[0])
@@ -237,4 +264,4 @@ class JointController:
         return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)
 
 
-__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES', 'bundle_strain']
+__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES', 'bundle_strain', 'reference_ahead']
