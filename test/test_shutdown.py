@@ -115,3 +115,23 @@ def test_start_up_refusal_names_the_parameter_before_the_reason(capsys, argv, ex
     out = capsys.readouterr().out
     assert out.startswith(expected)
     assert not out.rstrip().endswith('payload_kg')  # Humble's exception args were joined message-first
+
+
+def test_ctrl_c_inside_a_finaliser_is_not_raised_there():
+    """Humble, `timeout -s INT ros2 launch`: the SIGINT landed in rclpy's Future.__del__, where a raised
+    KeyboardInterrupt is printed as "Exception ignored in ... __del__" with a traceback and dropped.
+    There the request is only noted (rclpy's own handler has shut the context down); anywhere else it
+    raises as Python's default handler does."""
+    from sma_wrist.nodes.common import _ShutdownRequest
+    frames = []
+
+    class Finalised:
+        def __del__(self) -> None:
+            frames.append(sys._getframe())
+
+    Finalised()  # collected at once: its __del__ frame is kept
+    req = _ShutdownRequest()
+    req._on_sigint(2, frames[0])
+    assert req.requested
+    with pytest.raises(KeyboardInterrupt):
+        _ShutdownRequest()._on_sigint(2, sys._getframe())

@@ -282,6 +282,12 @@ class _ShutdownRequest:
 
     def _on_sigint(self, signum: int, frame: Any) -> None:
         self.requested = True
+        if frame is not None and frame.f_code.co_name == '__del__':
+            # raised in a finaliser (rclpy's Future.__del__ during a collection), Python prints
+            # "Exception ignored in ... __del__" with a traceback and drops it (seen under Humble with
+            # `timeout -s INT ros2 launch`); rclpy's handler, which called this one, has already shut
+            # the context down, so spin ends on ExternalShutdownException all the same
+            return
         raise KeyboardInterrupt
 
     def restore(self) -> None:
