@@ -543,5 +543,5 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     warned, shift = run(2.0)
     assert shift[0] == 15.0 and abs(shift[1]) < 15.0
     assert len(warned) == 1 and warned[0].level == b'\x01'  # WARN, once
-    assert 'of muscle 1 at its +-15 degC limit' in warned[0].message and 'muscle 2' not in warned[0].message
+    assert 'of muscle 1 at the +-15 degC limit' in warned[0].message and 'muscle 2' not in warned[0].message
     assert run(0.0)[0] == []

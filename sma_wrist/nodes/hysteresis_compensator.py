@@ -295,9 +295,9 @@ class HysteresisCompensator(WristNode):
         if at == self._shift_at_limit:  # diagnose publishes on change only: skip building its values
             return
         self._shift_at_limit = at
-        wires = ', '.join(f'muscle {i + 1}' for i, a in enumerate(at) if a)
+        wires = ' and '.join(f'muscle {i + 1}' for i, a in enumerate(at) if a)
         self.diagnose('adaptation', DiagnosticStatus.WARN if wires else DiagnosticStatus.OK,
-                      f'learnt temperature shift of {wires} at its +-{lim:g} degC limit: the model does not explain '
+                      f'learnt temperature shift of {wires} at the +-{lim:g} degC limit: the model does not explain '
                       'the wire (another wire, or slack / on a stop); direct_adaptive or pid do not depend on it'
                       if wires else 'learnt temperature shifts inside their limits',
                       {'shift_C': np.round(self.comp.shift_C, 2).tolist()})
