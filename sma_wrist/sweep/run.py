@@ -206,7 +206,7 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     rows.sort(key=lambda r: r['index'])
     if cfg.reach and not interrupted:
         try:
-            add_reach_floors(rows, workers if not scheduler else 1)
+            add_reach_floors(rows, workers if not scheduler else 1, None if progress is None else _reach_progress)
         except KeyboardInterrupt:  # the loops' rows stay, with the floors computed so far
             interrupted = True
     res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0)
@@ -228,12 +228,18 @@ def _collect(completed: Iterable[Any], keep: Callable[[list[dict[str, Any]]], No
             progress(done)
 
 
+def _process_pool(workers: int) -> Any:
+    """A pool of ``workers`` local processes, forked where the OS can (the compiled kernels come along)."""
+    from concurrent.futures import ProcessPoolExecutor
+    ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
+    return ProcessPoolExecutor(workers, mp_context=ctx)
+
+
 def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
                    keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None) -> None:
     """The chunks in ``workers`` local processes (forked where the OS can: the compiled kernels come along)."""
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
-    pool = ProcessPoolExecutor(workers, mp_context=ctx)
+    from concurrent.futures import as_completed
+    pool = _process_pool(workers)
     futures = [pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant) for ch in chunks]
     try:
         _collect(as_completed(futures), keep, progress)
@@ -264,6 +270,11 @@ def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Ca
         client.close()
 
 
+def _reach_progress(done: int, total: int) -> None:
+    sys.stderr.write(f'[sweep] reach floors: {done} / {total} plants\n')
+    sys.stderr.flush()
+
+
 #: the axes that act on the sensors, not the plant: a reach floor does not depend on them
 SENSOR_AXES = ('temp_noise_C', 'temp_lag_s', 'angle_noise_rad')
 
@@ -273,27 +284,34 @@ def _reach_floor(scenario: Scenario) -> float:
     return reach_floor_pct(OffModelCase('sdgpi', scenario))
 
 
-def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1) -> None:
+def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
+                     progress: Callable[[int, int], None] | None = None) -> None:
     """``reach_floor_pct`` into each row, computed once per plant (its scenario: payload and plant axes),
     in ``workers`` local processes; a floor does not depend on the controller or the sensors. Each plant's
-    rows get their floor as it finishes, so Ctrl-C keeps the floors computed."""
+    rows get their floor as it finishes, so Ctrl-C keeps the floors computed; ``progress(done, total)``
+    after each plant."""
     axes = [p.name for p in VALIDITY if p.name not in SENSOR_AXES]
     key = [tuple(r[a] for a in axes) for r in rows]
     plants = list(dict.fromkeys(key))
 
+    done = 0
+
     def put(k: tuple[float, ...], floor: float) -> None:
+        nonlocal done
         for r, rk in zip(rows, key):
             if rk == k:
                 r['reach_floor_pct'] = floor
+        done += 1
+        if progress is not None:
+            progress(done, len(plants))
 
     scen = {k: Scenario(**dict(zip(axes, k))) for k in plants}
     if workers <= 1 or len(plants) <= 1:
         for k in plants:
             put(k, _reach_floor(scen[k]))
         return
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
-    pool = ProcessPoolExecutor(min(workers, len(plants)), mp_context=ctx)
+    from concurrent.futures import as_completed
+    pool = _process_pool(min(workers, len(plants)))
     futures = {pool.submit(_reach_floor, scen[k]): k for k in plants}
     try:
         for fut in as_completed(futures):
