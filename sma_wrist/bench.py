@@ -26,6 +26,7 @@ import os
 import platform
 import sys
 import time
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -269,6 +270,21 @@ def bench_identify_wrist(quick: bool = False) -> dict:
     return hot_wire_runs(('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
                          progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
                          png=os.path.join(os.environ.get('SMA_WRIST_BENCH_DIR', '.'), 'identify_wrist.png'))
+
+
+@section('measured_wire')
+def bench_measured_wire(quick: bool = False) -> dict:
+    """The measured Flexinol wire (test/data/flexinol, a source checkout) identified and run in the graph
+    on TEMs rated 120 degC; direct and pid also without their reference leads (docs/identification.md)."""
+    from sma_wrist.core.errors import SmaWristError
+    from sma_wrist.identify.wrist import measured_wire_runs
+    data = Path(__file__).resolve().parent.parent / 'test' / 'data' / 'flexinol'
+    files = sorted(data.glob('*MPa.txt'))
+    if not files:
+        raise SmaWristError(f'the measured-wire benchmark reads the source checkout\'s {data}: not found')
+    return measured_wire_runs(files, ('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
+                              progress=lambda m: print(f'[measured_wire] {m}', file=sys.stderr, flush=True),
+                              png=os.path.join(os.environ.get('SMA_WRIST_BENCH_DIR', '.'), 'measured_wire.png'))
 
 
 # -------------------------------------------------------------------------------- driver
