@@ -154,6 +154,11 @@ def rated_tems(top_C: float) -> Any:
     return p.with_limits(float(np.ceil(2 * ch.cooling_max_V) / 2), float(np.floor(2 * ch.heating_max_V) / 2))
 
 
+#: a closed-loop case: label, params file (None: the defaults), the problems wrist_params reported,
+#: extra node parameters (None: none), the controllers to run on it
+_Case = tuple[str, Any, list[str], dict[str, Any] | None, tuple[str, ...]]
+
+
 def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_adaptive', 'pid'), dT_C: float = 20.0,
                   duration_s: float = 126.0, tem_tops_C: tuple[float, ...] = (80.0, 120.0),
                   progress: Any = None, png: str | None = None) -> dict[str, Any]:
@@ -177,14 +182,15 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
                                     'window_C': list(operating_window(wire))}, 'runs': []}
     with tempfile.TemporaryDirectory(prefix='sma_hot_wire_') as d:
         hf = save_hysteresis(Path(d) / 'hysteresis.yaml', wire)
-        cases: list[tuple[str, Any, list[str], dict[str, Any] | None]] = [('built-in wire, defaults', None, [], None)]
+        cases: list[_Case] = [('built-in wire, defaults', None, [], None, controllers)]
         for top in tem_tops_C:
             tems = rated_tems(top)
             tf = write_thermal_file(Path(d) / f'tems_{top:g}C.yaml', tems)
             nodes, problems = wrist_params(hf, wire, tf, tems.window_C)
             cases.append((f'hot wire, TEMs rated {top:g} degC', write_wrist_params(Path(d) / f'wrist_{top:g}C.yaml',
-                                                                                   nodes, problems), problems, None))
-        _closed_loops(cases, controllers, duration_s, Path(d), out, progress, png)
+                                                                                   nodes, problems), problems, None,
+                          controllers))
+        _closed_loops(cases, duration_s, Path(d), out, progress, png)
     return out
 
 
@@ -214,28 +220,27 @@ def measured_wire_runs(files: list[str | Path], controllers: tuple[str, ...] = (
         if not wp['file']:
             raise ParameterError(f'no wrist parameters for this wire: {"; ".join(wp["problems"])}')
         out['wire'] = {'window_C': wp['window_C'], 'problems': wp['problems'], 'files': [str(f) for f in files]}
-        cases: list[tuple[str, Any, list[str], dict[str, Any] | None]] = [
-            (f'measured wire, TEMs rated {tem_top_C:g} degC', wp['file'], wp['problems'], None)]
-        if set(controllers) & {'direct_adaptive', 'pid'}:
+        cases: list[_Case] = [(f'measured wire, TEMs rated {tem_top_C:g} degC', wp['file'], wp['problems'], None,
+                               controllers)]
+        with_leads = tuple(c for c in controllers if c in ('direct_adaptive', 'pid'))
+        if with_leads:
             cases.append(('the same, direct and pid without their reference leads', wp['file'], wp['problems'],
-                          WITHOUT_LEADS))
-        _closed_loops(cases, controllers, duration_s, Path(d), out, progress, png)
+                          WITHOUT_LEADS, with_leads))
+        _closed_loops(cases, duration_s, Path(d), out, progress, png)
     return out
 
 
-def _closed_loops(cases: list[tuple[str, Any, list[str], dict[str, Any] | None]], controllers: tuple[str, ...],
-                  duration_s: float, work: Path, out: dict[str, Any], progress: Any, png: str | None) -> None:
-    """Each case (label, params file or None, problems, extra node parameters or None) under each controller
-    (the leads-off cases only for the modes that have leads): rows into ``out['runs']``, one PNG per case."""
+def _closed_loops(cases: list[_Case], duration_s: float, work: Path, out: dict[str, Any], progress: Any,
+                  png: str | None) -> None:
+    """Each case under each of its controllers at 0.3 kg: rows into ``out['runs']``, one PNG per case."""
     from sma_wrist import runtime
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.runs import plot_runs
 
     figures: list[tuple[str, list[Any], list[str]]] = []
-    for label, pf, problems, extra in cases:
+    for label, pf, problems, extra, names in cases:
         traces: list[Any] = []
-        names = [c for c in controllers if extra is None or c != 'inverse_adaptive']
         for ctrl in names:
             s = run_closed_loop(ctrl, 0.3, duration_s, bag=work / f'bag_{len(out["runs"])}',
                                 params_files=[pf] if pf is not None else [], extra_params=extra)
@@ -248,7 +253,7 @@ def _closed_loops(cases: list[tuple[str, Any, list[str], dict[str, Any] | None]]
             if progress is not None:
                 progress(f'{label}, {ctrl}: max {row["max_error_pct"]:.1f} %, RMS {row["rms_error_pct"]:.1f} % '
                          f'(last cycle), hottest muscle {row["hottest_muscle_C"]:.1f} degC')
-        figures.append((label, traces, names))
+        figures.append((label, traces, list(names)))
     if png:  # one figure per case, its controllers overlaid (runs.plot_runs)
         out['png'] = []
         for k, (label, traces, names) in enumerate(figures):
