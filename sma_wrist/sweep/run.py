@@ -10,6 +10,7 @@ finished.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import multiprocessing
@@ -18,7 +19,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -228,25 +229,28 @@ def _collect(completed: Iterable[Any], keep: Callable[[list[dict[str, Any]]], No
             progress(done)
 
 
-def _process_pool(workers: int) -> Any:
-    """A pool of ``workers`` local processes, forked where the OS can (the compiled kernels come along)."""
+@contextlib.contextmanager
+def _process_pool(workers: int) -> Iterator[Any]:
+    """A pool of ``workers`` local processes, forked where the OS can (the compiled kernels come along).
+    Ctrl-C or a failed task inside the block drops the queued tasks; what finished was kept by the block."""
     from concurrent.futures import ProcessPoolExecutor
     ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
-    return ProcessPoolExecutor(workers, mp_context=ctx)
+    pool = ProcessPoolExecutor(workers, mp_context=ctx)
+    try:
+        yield pool
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    pool.shutdown()
 
 
 def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
                    keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None) -> None:
-    """The chunks in ``workers`` local processes (forked where the OS can: the compiled kernels come along)."""
+    """The chunks in ``workers`` local processes (:func:`_process_pool`)."""
     from concurrent.futures import as_completed
-    pool = _process_pool(workers)
-    futures = [pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant) for ch in chunks]
-    try:
-        _collect(as_completed(futures), keep, progress)
-    except BaseException:  # Ctrl-C or a failed chunk: drop the queued chunks, keep what finished
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown()
+    with _process_pool(workers) as pool:
+        _collect(as_completed([pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant) for ch in chunks]), keep,
+                 progress)
 
 
 def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Callable[[list[dict[str, Any]]], None],
@@ -291,16 +295,16 @@ def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
     rows get their floor as it finishes, so Ctrl-C keeps the floors computed; ``progress(done, total)``
     after each plant."""
     axes = [p.name for p in VALIDITY if p.name not in SENSOR_AXES]
-    key = [tuple(r[a] for a in axes) for r in rows]
-    plants = list(dict.fromkeys(key))
-
+    rows_of: dict[tuple[float, ...], list[dict[str, Any]]] = {}  # plant -> its rows, in order
+    for r in rows:
+        rows_of.setdefault(tuple(r[a] for a in axes), []).append(r)
+    plants = list(rows_of)
     done = 0
 
     def put(k: tuple[float, ...], floor: float) -> None:
         nonlocal done
-        for r, rk in zip(rows, key):
-            if rk == k:
-                r['reach_floor_pct'] = floor
+        for r in rows_of[k]:
+            r['reach_floor_pct'] = floor
         done += 1
         if progress is not None:
             progress(done, len(plants))
@@ -311,15 +315,10 @@ def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
             put(k, _reach_floor(scen[k]))
         return
     from concurrent.futures import as_completed
-    pool = _process_pool(min(workers, len(plants)))
-    futures = {pool.submit(_reach_floor, scen[k]): k for k in plants}
-    try:
+    with _process_pool(min(workers, len(plants))) as pool:
+        futures = {pool.submit(_reach_floor, scen[k]): k for k in plants}
         for fut in as_completed(futures):
             put(futures[fut], fut.result())
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    pool.shutdown()
 
 
 def error_stats(max_error_pct: Sequence[float]) -> dict[str, float]:
