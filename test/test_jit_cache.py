@@ -6,6 +6,7 @@ when the sources of its kernel folders change; these tests run real numba on a t
 """
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -53,15 +54,22 @@ RUN = textwrap.dedent('''
     import sys
     from pathlib import Path
     sys.path.insert(0, sys.argv[1])
-    if sys.argv[2] == 'guard':
+    pkg = Path(sys.argv[1]) / 'pkg'
+    if sys.argv[2] == 'locator':
+        from sma_wrist.core.jit import install_cache_locator
+        assert install_cache_locator(pkg, ('.',), Path(sys.argv[1]) / 'cache')
+    elif sys.argv[2] == 'in-tree guard':
         from sma_wrist.core.jit import drop_stale_caches
-        drop_stale_caches(Path(sys.argv[1]) / 'pkg', ('.',))
+        drop_stale_caches(pkg, ('.',))
     from pkg.caller import twice
     print(twice(1.0))
 ''')
 
 
 def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_path):
+    """numba alone keeps the caller's stale copy of the helper (2.0 after the edit to 3.0); the
+    package's locator and the in-tree fallback both recompile, and the locator writes nothing into
+    the source tree (where pip would leave it behind on uninstall)."""
     pytest.importorskip('numba')
     pkg = tmp_path / 'pkg'
     pkg.mkdir()
@@ -77,7 +85,27 @@ def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_
         assert out.returncode == 0, out.stderr
         return float(out.stdout.split()[-1])
 
-    assert run('guard') == 2.0  # compiles and caches
+    def in_tree():
+        return sorted(f.name for f in pkg.rglob('*.nb[ic]'))
+
+    assert run('locator') == 2.0  # compiles and caches
+    assert in_tree() == [] and list((tmp_path / 'cache').rglob('*.nbi'))
+    assert run('numba alone') == 2.0
+    assert in_tree()
     (pkg / 'helper.py').write_text('import numba\n\n@numba.njit(cache=True, inline="always")\n'
                                    'def gain(x):\n    return 3.0 * x\n')
-    assert run('guard') == 3.0
+    assert run('numba alone') == 2.0  # numba issue #1833: the cached caller is stale
+    assert run('locator') == 3.0
+    assert run('in-tree guard') == 3.0
+
+
+def test_the_package_caches_its_kernels_outside_its_own_folder(tmp_path):
+    pytest.importorskip('numba')
+    cache = tmp_path / 'cache'
+    code = ('from sma_wrist.core.plant.kernel import step_many; from numba.core import caching;'
+            'loc = (getattr(caching, "CacheImpl", None) or caching._CacheImpl)._locator_classes[0];'
+            'print(loc.from_function(step_many.py_func, step_many.py_func.__code__.co_filename).get_cache_path())')
+    env = {**os.environ, 'NUMBA_CACHE_DIR': str(cache)}
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stderr
+    assert Path(out.stdout.split()[-1]).parent == cache

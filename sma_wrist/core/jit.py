@@ -9,24 +9,38 @@ load solve's elongation, the RK4 stage, the joint step): numba inlines them into
 A compiled call with array arguments costs ~50 ns (arguments unpacked, reference counts); the
 elongation's arithmetic is ~75 ns. Same operations, same numbers (test_plant_kernel).
 
-numba's on-disk cache (``cache=True``) checks only the source file of the function it compiled
-(numba issue #1833, documented: "old function code might be used in the calculations"): a kernel
-that calls or inlines a helper from another file, or reads a constant from one, keeps its old
-machine code after that file changes in a source checkout or editable install.
-:func:`drop_stale_caches` therefore keys the package's caches on the sources of every folder that
-holds kernels (:data:`KERNEL_FOLDERS`) at import.
+Where the compiled kernels are cached, and when they are stale:
+
+- numba's on-disk cache (``cache=True``) checks only the source file of the function it compiled
+  (numba issue #1833, documented: "old function code might be used in the calculations"): a kernel
+  that calls or inlines a helper from another file, or reads a constant from one, keeps its old
+  machine code after that file changes in a source checkout or editable install.
+- numba writes its cache next to the source (``__pycache__/*.nbi``, ``*.nbc``). pip does not know
+  those files, so ``pip uninstall`` leaves the package folder behind with only them in it; Python
+  then imports that folder as a namespace package ahead of a later editable install's finder
+  (``import sma_wrist`` gives ``__file__ None`` and the CLI runs the old copy).
+
+:class:`PackageCacheLocator` answers both: the package's kernels are cached in the user's cache
+folder (``$XDG_CACHE_HOME/sma_wrist/numba``, ``NUMBA_CACHE_DIR`` when the user set it), one
+sub-folder per installed copy, and stamped with the digest of every source in the folders that
+hold kernels (:data:`KERNEL_FOLDERS`), so numba itself recompiles after an edit anywhere there.
+The locator plugs into numba's cache-locator list, which is not a public API; a numba without it
+gets the older guard, :func:`drop_stale_caches`, on numba's in-tree cache.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 from pathlib import Path
 
-#: the package's cache stamp: the digest of its sources when its numba caches were written
+#: the in-tree cache stamp of :func:`drop_stale_caches`: the digest of the sources its caches were
+#: written from
 STAMP_NAME = 'numba-sources.sha256'
 #: the package folders whose code the kernels compile or read constants from (an edit elsewhere,
 #: e.g. the CLI or the nodes, keeps the compiled kernels)
 KERNEL_FOLDERS = ('core', 'plants', 'sweep', 'diagnose', 'data')
+PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 
 
 def source_digest(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> str:
@@ -38,11 +52,19 @@ def source_digest(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> str:
     return h.hexdigest()
 
 
+def user_cache_dir() -> Path:
+    """Where the package's compiled kernels go: ``NUMBA_CACHE_DIR`` if the user set one (numba's own
+    switch), else ``$XDG_CACHE_HOME/sma_wrist/numba`` (``~/.cache/sma_wrist/numba``)."""
+    if os.environ.get('NUMBA_CACHE_DIR'):
+        return Path(os.environ['NUMBA_CACHE_DIR'])
+    return Path(os.environ.get('XDG_CACHE_HOME') or Path.home() / '.cache') / 'sma_wrist' / 'numba'
+
+
 def drop_stale_caches(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> bool:
     """Delete numba's in-tree cache files (``__pycache__/*.nbi``, ``*.nbc``) under ``root`` when a
-    source in ``folders`` changed since they were written; True if it deleted. A tree numba cannot write
-    (an install into a read-only prefix) is left alone: numba then caches in the user's cache
-    folder, and a new install gives every file a new stamp there anyway."""
+    source in ``folders`` changed since they were written; True if it deleted. The fallback for a numba
+    without a cache-locator list (:func:`install_cache_locator`). A tree numba cannot write is left
+    alone: numba then caches in the user's cache folder, where a new install gets a new stamp anyway."""
     stamp = root / '__pycache__' / STAMP_NAME
     try:
         digest = source_digest(root, folders)
@@ -59,11 +81,56 @@ def drop_stale_caches(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> 
         return False
 
 
+def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS,
+                          cache_dir: Path | None = None) -> bool:
+    """Cache every kernel compiled from a file under ``root`` in ``cache_dir`` (default
+    :func:`user_cache_dir`), stamped with :func:`source_digest` of ``folders``; other packages' kernels
+    keep numba's locators. False (nothing installed) if this numba has no locator list to extend."""
+    try:
+        from numba.core import caching
+        impl = getattr(caching, 'CacheImpl', None) or caching._CacheImpl  # renamed in numba 0.59
+        base = (caching._SourceFileBackedLocatorMixin, caching._CacheLocator)
+    except (ImportError, AttributeError):
+        return False
+    root = root.resolve()
+    digest = functools.cache(lambda: source_digest(root, folders))  # once per process, at first compile
+
+    class PackageCacheLocator(*base):  # type: ignore[misc]
+        def __init__(self, py_func, py_file):  # type: ignore[no-untyped-def]
+            self._py_file = py_file
+            self._lineno = py_func.__code__.co_firstlineno
+            where = cache_dir if cache_dir is not None else user_cache_dir()
+            self._cache_path = os.path.join(where, self.get_suitable_cache_subpath(py_file))
+
+        def get_cache_path(self) -> str:
+            return self._cache_path
+
+        def get_source_stamp(self):  # type: ignore[no-untyped-def]
+            # numba's stamp is the file's mtime and size; any kernel-folder source counts here
+            return (digest(), super().get_source_stamp())
+
+        @classmethod
+        def from_function(cls, py_func, py_file):  # type: ignore[no-untyped-def]
+            try:
+                if not Path(py_file).resolve().is_relative_to(root):
+                    return None
+            except (OSError, ValueError):
+                return None
+            return super().from_function(py_func, py_file)  # None if the folder cannot be written
+
+    impl._locator_classes = [c for c in impl._locator_classes
+                             if getattr(c, '_sma_wrist_root', None) != root]
+    PackageCacheLocator._sma_wrist_root = root
+    impl._locator_classes.insert(0, PackageCacheLocator)
+    return True
+
+
 try:  # numba is optional: a 20-100x faster per-sample plant, same numbers
     import numba as _numba
 
     AVAILABLE = True
-    drop_stale_caches(Path(__file__).resolve().parent.parent)
+    if not install_cache_locator(PACKAGE_ROOT):
+        drop_stale_caches(PACKAGE_ROOT)
     _jit = _numba.njit(cache=True, nogil=True)
     _jit_inline = _numba.njit(cache=True, nogil=True, inline='always')
 except ImportError:  # pragma: no cover - exercised where numba is absent
