@@ -114,6 +114,27 @@ def test_other_exports_of_a_measured_loop_read_the_same(tmp_path: Path, loop: np
     assert np.allclose(m.stress_MPa, loop[:, 2], rtol=2e-5, atol=2e-3)
 
 
+@pytest.mark.parametrize('header, scale', [
+    ('Temperature (degrees C),Strain (%),Stress (N/mm2)', (1.0, 0.0, 100.0, 1.0)),
+    ('Temperature [deg. C],Strain [ % ],Stress [ksi]', (1.0, 0.0, 100.0, 1 / 6.89476)),
+    ('Temperatur [º C],Dehnung [-],Spannung [MPa]', (1.0, 0.0, 1.0, 1.0)),
+    ('time (s),Temp. (K),Elongation (mm),Load (lbf)', (1.0, 273.15, 80.0, area_mm2(0.25) / 4.4482216)),
+])
+def test_header_units_as_people_write_them(tmp_path: Path, loop: np.ndarray, header: str,
+                                           scale: tuple[float, float, float, float]) -> None:
+    kT, oT, kS, kP = scale
+    cols = [loop[:, 0] * kT + oT, loop[:, 1] * kS, loop[:, 2] * kP]
+    if header.startswith('time'):
+        cols = [np.arange(loop.shape[0], dtype=float)] + cols
+    (tmp_path / 'h.csv').write_text(header + '\n' + ''.join(','.join(f'{v:.10g}' for v in r) + '\n'
+                                                            for r in np.column_stack(cols)), encoding='utf-8')
+    names = header.split(',')
+    columns = None if 'Dehnung' not in header else names  # German names: given with --columns
+    m = read_measurement(tmp_path / 'h.csv', Units(length_mm=80.0, wire_diameter_mm=0.25), columns)
+    assert np.allclose(m.T_C, loop[:, 0], atol=1e-6) and np.allclose(m.strain, loop[:, 1], atol=1e-9)
+    assert np.allclose(m.stress_MPa, loop[:, 2], rtol=1e-8)
+
+
 def test_an_export_cleaned_of_nan_duplicates_and_unsorted_rows_keeps_the_rest(tmp_path: Path, loop: np.ndarray) -> None:
     lines = ['time (s),temperature (C),strain (%),stress (MPa)'] + [
         f'{0.5 * i:.1f},{T:.5f},{100 * e:.6f},{s:.4f}' for i, (T, e, s) in enumerate(loop)]

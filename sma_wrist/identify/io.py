@@ -293,8 +293,8 @@ def _resolve(spec: str, header: list[str] | None, ncol: int, path: str) -> int:
 
 #: unit words in a header's brackets, per role -> unit name (None: dimensionless, read by value)
 _UNIT_WORDS: dict[str, dict[str, str | None]] = {
-    'T': {'c': 'degC', '°c': 'degC', 'degc': 'degC', 'deg c': 'degC', 'celsius': 'degC', 'k': 'K', 'kelvin': 'K',
-          'f': 'degF', '°f': 'degF', 'degf': 'degF', 'deg f': 'degF', 'fahrenheit': 'degF'},
+    'T': {'c': 'degC', '°c': 'degC', 'degc': 'degC', 'celsius': 'degC', 'k': 'K', 'kelvin': 'K',
+          'f': 'degF', '°f': 'degF', 'degf': 'degF', 'fahrenheit': 'degF'},
     'strain': {'%': '%', 'pct': '%', 'percent': '%', 'mm': 'mm', 'mm/mm': 'fraction', 'm/m': 'fraction',
                'in/in': 'fraction', '-': 'fraction', '1': 'fraction', '': None},
     'stress': {'mpa': 'MPa', 'n/mm2': 'MPa', 'n/mm^2': 'MPa', 'n/mm²': 'MPa', 'psi': 'psi', 'ksi': 'ksi',
@@ -306,7 +306,10 @@ _UNIT_WORDS: dict[str, dict[str, str | None]] = {
 def _bracket_unit(name: str) -> str | None:
     """The unit written in the last (...) or [...] of a header name, lower case, or None."""
     m = re.findall(r'[\[(]\s*([^\])]*?)\s*[\])]', name)
-    return m[-1].lower().replace('\u00ba', '°') if m else None
+    if not m:
+        return None
+    # 'deg. C', 'degrees C', '° C', 'º C' (the ordinal sign Windows keyboards give) -> 'degc', '°c'
+    return m[-1].lower().replace('\u00ba', '°').replace('degrees', 'deg').replace('.', '').replace(' ', '')
 
 
 def _unit_from_header(name: str, role: str, path: str = '') -> str | None:
