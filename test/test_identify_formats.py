@@ -135,6 +135,22 @@ def test_header_units_as_people_write_them(tmp_path: Path, loop: np.ndarray, hea
     assert np.allclose(m.stress_MPa, loop[:, 2], rtol=1e-8)
 
 
+@pytest.mark.parametrize('stamp', [
+    lambda t: f'{int(23 + (59 * 60 + 50 + t) // 3600) % 24}:{int((59 * 60 + 50 + t) % 3600 // 60):02d}:'
+              f'{(50 + t) % 60:04.1f}',  # a time of day that passes midnight
+    lambda t: f'2024-05-01T13:{int(t // 60):02d}:{t % 60:04.1f}',  # ISO date and time
+])
+def test_clock_time_stamps_are_seconds(tmp_path: Path, loop: np.ndarray, stamp: Callable[[float], str]) -> None:
+    """A logger's clock column: read as seconds (before: every row unreadable), sorted, midnight unwrapped."""
+    rows = [f'{stamp(0.5 * i)};{T:.6f};{e:.8f};{s:.6f}' for i, (T, e, s) in enumerate(loop)]
+    rows[30], rows[31] = rows[31], rows[30]
+    (tmp_path / 'c.csv').write_text('Time;Temperature (C);Strain (-);Stress (MPa)\n' + '\n'.join(rows) + '\n')
+    m = read_measurement(tmp_path / 'c.csv')
+    assert m.counts['unsorted_stamps'] == 1 and m.T_C.size == loop.shape[0]
+    assert m.time is not None and np.allclose(np.diff(m.time), 0.5)
+    assert np.allclose(m.T_C, loop[:, 0], atol=1e-6)
+
+
 def test_an_export_cleaned_of_nan_duplicates_and_unsorted_rows_keeps_the_rest(tmp_path: Path, loop: np.ndarray) -> None:
     lines = ['time (s),temperature (C),strain (%),stress (MPa)'] + [
         f'{0.5 * i:.1f},{T:.5f},{100 * e:.6f},{s:.4f}' for i, (T, e, s) in enumerate(loop)]

@@ -98,13 +98,32 @@ def _split(line: str, delim: str | None) -> list[str]:
     return cells
 
 
+#: clock stamps of data loggers: hh:mm[:ss[.f]], optionally after an ISO date ('2024-05-01 13:45:07.5')
+_CLOCK = re.compile(r'^(?:(\d{4})-(\d{2})-(\d{2})[ T])?(\d{1,2}):(\d{2})(?::(\d{2}(?:\.\d*)?))?$')
+
+
+def _is_number(c: str) -> bool:
+    return bool(_NUM.match(c) or _CLOCK.match(c))
+
+
 def _is_numeric(cells: list[str]) -> bool:
-    return (len(cells) >= 2 and all(_NUM.match(c) or c.lower() in _MISSING for c in cells)
-            and sum(bool(_NUM.match(c)) for c in cells) >= 2)
+    return (len(cells) >= 2 and all(_is_number(c) or c.lower() in _MISSING for c in cells)
+            and sum(_is_number(c) for c in cells) >= 2)
 
 
 def _cell(c: str) -> float:
-    return float(c) if _NUM.match(c) else np.nan
+    """A number; a clock stamp in seconds (since midnight, or since 1970 with its date); else NaN."""
+    if _NUM.match(c):
+        return float(c)
+    m = _CLOCK.match(c)
+    if m is None:
+        return np.nan
+    y, mo, d, h, mi, sec = m.groups()
+    t = int(h) * 3600.0 + int(mi) * 60.0 + float(sec or 0.0)
+    if y is not None:
+        import datetime
+        t += (datetime.date(int(y), int(mo), int(d)) - datetime.date(1970, 1, 1)).days * 86400.0
+    return t
 
 
 def _decode(raw: bytes) -> str:
@@ -251,6 +270,11 @@ def read_table(path: str | Path, need: str = 'temperature, strain and stress', e
                              else f'line {n}: {ln.strip()[:60]!r} (not a number in every column)')
             continue
         data[i] = [_cell(c) for c in r]
+    for j in range(ncol):  # times of day without a date: a run past midnight goes on counting
+        if any(_CLOCK.match(r[j]) and not r[j][:4].isdigit() for _, r, _ in body[:50] if len(r) == ncol):
+            col = data[:, j]
+            ok = np.isfinite(col)
+            col[ok] += 86400.0 * np.cumsum(np.r_[0.0, np.diff(col[ok]) < -43200.0])
     return Table(str(p), data, header, {'unreadable_rows': bad}, first_bad)
 
 
