@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import json
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import pytest
@@ -18,8 +18,8 @@ import scipy.io
 
 from sma_wrist.cli import main as cli_main
 from sma_wrist.identify.hysteresis import Options, run
-from sma_wrist.identify.io import G, IdentifyInputError, Units, area_mm2, read_measurement, read_table
-from sma_wrist.identify.segment import loops_of, stress_levels
+from sma_wrist.identify.io import G, Units, area_mm2, read_measurement, read_table
+from sma_wrist.identify.segment import stress_levels
 
 DATA = Path(__file__).parent / 'data'
 LOOP = DATA / 'flexinol' / '100MPa.txt'
@@ -203,6 +203,8 @@ def _mat_cells(p: Path) -> None:
     ('mismatch.mat', _mat_mismatch, 'equally long numeric vectors'),
     ('cells.mat', _mat_cells, 'cell array'),
     ('broken.mat', lambda p: p.write_bytes(b'MATLAB 5.0 MAT-file' + bytes(200)), 'not a readable MATLAB .mat file'),
+    ('cut.mat', lambda p: (scipy.io.savemat(p, {'T': np.arange(99.0)}), p.write_bytes(p.read_bytes()[:100])),
+     'not a readable MATLAB .mat file'),
     ('broken.xlsx', lambda p: p.write_bytes(b'PK\x03\x04' + bytes(100)), 'not a readable .xlsx workbook'),
     ('old.xls', lambda p: p.write_bytes(b'\xd0\xcf\x11\xe0' + bytes(100)), 'save the sheet as .xlsx or CSV'),
     ('binary.dat', lambda p: p.write_bytes(bytes(range(256)) * 4), 'a binary file, not a text table'),
@@ -234,6 +236,16 @@ def test_temperature_dropouts_are_dropped_and_counted_not_read(tmp_path: Path, l
     assert read_measurement(LOOP).counts['temperature_spikes'] == 0  # a real sweep is not a spike
 
 
+def test_a_mat_reader_that_crashes_is_an_error_not_a_crash(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """scipy's .mat reader segfaulted on a file with a few flipped bytes: it runs in a child process."""
+    from sma_wrist.identify import io
+
+    scipy.io.savemat(tmp_path / 'x.mat', {'T': np.arange(30.0), 'strain': np.zeros(30)})
+    monkeypatch.setattr(io, '_LOADMAT', 'import os; os.abort()')  # stands for the crash
+    with pytest.raises(io.IdentifyInputError, match=r'x.mat: not a readable MATLAB .mat file \(the reader stopped'):
+        read_measurement(tmp_path / 'x.mat')
+
+
 def test_load_ramps_between_levels_in_one_file_are_not_one_level(loop: np.ndarray) -> None:
     """The raw multi-load export: ~970 ramp samples bridged the gaps and made 5 loads one (100 MPa)."""
     levels, label = stress_levels(read_measurement(NITIPD, Units(length_mm=200.0)).stress_MPa)
@@ -262,8 +274,8 @@ def test_identify_on_measured_nitipd_multiload_export(tmp_path: Path) -> None:
     fit = {round(d['stress_MPa']): d for d in r['fit']['per_load']}
     assert sorted(fit) == [22, 50, 150, 200]
     # measured GPI 0.91 / 0.90 / 1.59 / 1.71 %, SD-GPI 4.78 / 3.24 / 5.77 / 5.09 % of stroke
-    for s in fit:
-        assert fit[s]['gpi_rms_pct'] < 2.0 and fit[s]['sdgpi_rms_pct'] < 6.5, fit[s]
+    for f in fit.values():
+        assert f['gpi_rms_pct'] < 2.0 and f['sdgpi_rms_pct'] < 6.5, f
     (h,) = r['holdout']
     assert h['rms_pct'] < 7.0 and h['max_pct'] < 14.0, h  # measured 5.61 / 10.8 %
     # the built-in wire (30-80 degC) is far off this one (-45..+40 degC)

@@ -138,8 +138,8 @@ def _decode(raw: bytes) -> str:
 
 def _xlsx_lines(p: Path, error: type) -> list[list[str]]:
     """Cells of the first worksheet of an Excel .xlsx workbook (the Office Open XML zip), row by row."""
-    import zipfile
     import xml.etree.ElementTree as ET
+    import zipfile
 
     ns = '{http://schemas.openxmlformats.org/spreadsheetml/2006/main}'
     try:
@@ -178,17 +178,40 @@ def _xlsx_lines(p: Path, error: type) -> list[list[str]]:
     return rows
 
 
+#: run in a child process: scipy's C reader of .mat files can crash the process (segfault) on a
+#: damaged file (seen with a few flipped bytes), which no ``except`` catches
+_LOADMAT = """
+import pickle, sys
+import scipy.io
+try:
+    m = scipy.io.loadmat(sys.argv[1], squeeze_me=True)
+    r = {k: v for k, v in m.items() if not k.startswith('__')}
+except NotImplementedError:
+    r = 'v7.3'
+except Exception as e:
+    r = 'error: ' + str(e)
+pickle.dump(r, sys.stdout.buffer)
+"""
+
+
 def _mat_table(p: Path, error: type) -> Table:
     """A MATLAB .mat file: one numeric matrix (columns as in a text table) or equally long vectors named by column."""
-    import scipy.io
+    import pickle
+    import subprocess
+    import sys
 
     try:
-        m = scipy.io.loadmat(str(p), squeeze_me=True)
-    except NotImplementedError:
-        raise error(f'{p}: a MATLAB v7.3 (HDF5) .mat file; save it with save(..., "-v7") or export a CSV') from None
-    except Exception as e:  # scipy raises ValueError, TypeError or OSError on a damaged file
-        raise error(f'{p}: not a readable MATLAB .mat file ({e})') from None
-    items = {k: v for k, v in m.items() if not k.startswith('__')}
+        proc = subprocess.run([sys.executable, '-c', _LOADMAT, str(p)], capture_output=True, timeout=300, check=False)
+    except subprocess.TimeoutExpired:
+        raise error(f'{p}: reading the .mat file took over 300 s; export a CSV') from None
+    if proc.returncode != 0:
+        raise error(f'{p}: not a readable MATLAB .mat file (the reader stopped with exit code {proc.returncode}: '
+                    f'{proc.stderr.decode(errors="replace").strip()[-200:] or "a crash"})')
+    items = pickle.loads(proc.stdout)  # our own child's answer (numpy arrays), not the file's bytes
+    if items == 'v7.3':
+        raise error(f'{p}: a MATLAB v7.3 (HDF5) .mat file; save it with save(..., "-v7") or export a CSV')
+    if isinstance(items, str):
+        raise error(f'{p}: not a readable MATLAB .mat file ({items[len("error: "):]})')
     num = {k: np.asarray(v, float) for k, v in items.items()
            if isinstance(v, np.ndarray) and v.dtype.kind in 'fiu' and v.size > 1}
     vectors = {k: v for k, v in num.items() if v.ndim == 1}
@@ -198,7 +221,7 @@ def _mat_table(p: Path, error: type) -> Table:
         return Table(str(p), np.column_stack([vectors[k] for k in names]), names, {'unreadable_rows': 0})
     mats = {k: v for k, v in num.items() if v.ndim == 2 and min(v.shape) >= 2}
     if len(mats) == 1:
-        (k, v), = mats.items()
+        (v,) = mats.values()
         return Table(str(p), v if v.shape[0] >= v.shape[1] else v.T, None, {'unreadable_rows': 0})
     found = ', '.join(f'{k} ({type(v).__name__} {getattr(v, "shape", "")}, '
                       f'{"cell array" if getattr(v, "dtype", None) is not None and v.dtype == object else "numeric"})'
