@@ -70,7 +70,8 @@ def test_cleaning_counts_nan_duplicate_and_unsorted_rows(tmp_path: Path) -> None
     f = tmp_path / 'run.csv'
     f.write_text('time_s,temperature_C,strain_pct,stress_MPa\n' + '\n'.join(rows) + '\n')
     m = read_measurement(f)
-    assert m.counts == {'unreadable_rows': 1, 'nan_rows': 1, 'duplicate_rows': 1, 'unsorted_stamps': 1}
+    assert m.counts == {'unreadable_rows': 1, 'nan_rows': 1, 'duplicate_rows': 1, 'unsorted_stamps': 1,
+                        'temperature_spikes': 0}
     assert m.T_C.size == T.size and np.all(np.diff(m.time) > 0)
 
 

@@ -29,7 +29,8 @@ HELP = 'identify the SD-GPI hysteresis of a wire from measured isobaric loops (d
 def register(sub: Any) -> None:
     """Add the ``hysteresis`` sub-command to the ``identify`` sub-parsers."""
     p = sub.add_parser('hysteresis', help=HELP, description=HELP)
-    p.add_argument('files', nargs='+', metavar='FILE', help='isobaric test tables (CSV, TSV or whitespace)')
+    p.add_argument('files', nargs='+', metavar='FILE',
+                   help='isobaric test tables (CSV, TSV, ";" or whitespace text, .xlsx, MATLAB .mat)')
     p.add_argument('--holdout', nargs='+', action='extend', default=[], metavar='FILE',
                    help='files predicted by the SD-GPI fitted without them')
     p.add_argument('--out', default='runs/identify', metavar='DIR',
@@ -38,11 +39,11 @@ def register(sub: Any) -> None:
     p.add_argument('--params', metavar='FILE', help='the "before" model: an earlier hysteresis.yaml (default: built-in set)')
     p.add_argument('--columns', metavar='T,STRAIN[,STRESS[,TIME]]',
                    help='column names or 0-based numbers (default: by header name, else 0,1,2)')
-    p.add_argument('--temperature-unit', choices=('degC', 'K'))
+    p.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'))  # = io.TEMPERATURE_UNITS (io imports numpy)
     p.add_argument('--strain-unit', choices=('fraction', '%', 'mm'))
-    p.add_argument('--stress-unit', choices=('MPa', 'N', 'kg', 'kgf'))
+    p.add_argument('--stress-unit', choices=('MPa', 'psi', 'ksi', 'N', 'lbf', 'kg', 'kgf', 'g'), help='a stress (MPa, psi, ksi) or a load (N, lbf, kg, kgf, g)')
     p.add_argument('--length-mm', type=float, help='gauge length, for elongation in mm')
-    p.add_argument('--wire-diameter-mm', type=float, help='wire diameter, for a load column in N, kg or kgf')
+    p.add_argument('--wire-diameter-mm', type=float, help='wire diameter, for a load column in N, lbf, kg, kgf or g')
     p.add_argument('--stress-mpa', type=float, help='stress of files without a stress column')
     p.add_argument('--cycle', default='last', help="which complete cycle per stress: a number (1-based), 'last' or 'all'")
     p.add_argument('--no-loo', action='store_true', help='skip the leave-one-load-out validation')

@@ -5,7 +5,8 @@ before it are skipped, quoted cells as instrument exports write them are accepte
 are found by header name (temperature, strain/extension, stress/load, time) or given with
 ``columns``; units are given or detected from the header or the values, with a warning that
 says what was assumed. Rows with unreadable or NaN cells, duplicated rows and out-of-order
-time stamps are removed and counted, never silently.
+time stamps are removed and counted, never silently, and so are temperature samples that
+jump away from their neighbours and back (logger dropouts, :func:`temperature_spikes`).
 
 Mapping to the model (:mod:`sma_wrist.core.hysteresis.sdgpi`): the SD-GPI is written for the seed's
 test wire, elongation y in mm of an 80 mm wire (:data:`REF_LENGTH_MM`) and load m in kgf per
@@ -31,9 +32,14 @@ REF_LENGTH_MM = 80.0  # the seed's test wire (Sec. 3.2); the plant scales to its
 REF_DIAMETER_MM = 0.25  # Nitinol #6 wire of the wrist
 G = 9.80665  # m/s^2, kgf -> N
 
-TEMPERATURE_UNITS = ('degC', 'K')
+TEMPERATURE_UNITS = ('degC', 'K', 'degF')
 STRAIN_UNITS = ('fraction', '%', 'mm')
-STRESS_UNITS = ('MPa', 'N', 'kg', 'kgf')
+STRESS_UNITS = ('MPa', 'psi', 'ksi', 'N', 'lbf', 'kg', 'kgf', 'g')
+#: stress units -> MPa, load units -> N (a load needs the wire diameter)
+_TO_MPA = {'MPa': 1.0, 'psi': 0.00689476, 'ksi': 6.89476}
+_TO_N = {'N': 1.0, 'lbf': 4.4482216, 'kg': G, 'kgf': G, 'g': G / 1000.0}
+#: cells that mean "no value" in instrument and spreadsheet exports (MTS writes ****)
+_MISSING = {'', '****', '***', '**', '--', '---', 'n/a', 'na', '#n/a', 'null', 'none', '#value!', '#div/0!'}
 
 
 class IdentifyInputError(SmaWristError):
@@ -61,6 +67,7 @@ class Table:
     data: FloatArray
     header: list[str] | None
     counts: dict[str, int] = field(default_factory=dict)
+    first_bad: str | None = None  # 'line N: <text>' of the first unreadable row, for the warning
 
 
 @dataclass
@@ -77,6 +84,7 @@ class Measurement:
 
 
 _NUM = re.compile(r'^[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$|^[+-]?(nan|inf)$', re.IGNORECASE)
+_DECIMAL_COMMA = re.compile(r'^[+-]?\d+,\d+([eE][+-]?\d+)?$')
 
 
 def _split(line: str, delim: str | None) -> list[str]:
@@ -84,35 +92,184 @@ def _split(line: str, delim: str | None) -> list[str]:
     if len(line) >= 2 and line[0] == '"' and line[-1] == '"' and line.count('"') == 2:
         line = line[1:-1]  # a whole row quoted (MTS exports)
     cells = line.split(delim) if delim else line.split()
-    return [c.strip().strip('"').strip() for c in cells]
+    cells = [c.strip().strip('"').strip() for c in cells]
+    if delim != ',':  # decimal commas (European spreadsheet exports: ';' or tab between cells)
+        cells = [c.replace(',', '.') if _DECIMAL_COMMA.match(c) else c for c in cells]
+    return cells
+
+
+#: clock stamps of data loggers: hh:mm[:ss[.f]], optionally after an ISO date ('2024-05-01 13:45:07.5')
+_CLOCK = re.compile(r'^(?:(\d{4})-(\d{2})-(\d{2})[ T])?(\d{1,2}):(\d{2})(?::(\d{2}(?:\.\d*)?))?$')
+
+
+def _is_number(c: str) -> bool:
+    return bool(_NUM.match(c) or _CLOCK.match(c))
 
 
 def _is_numeric(cells: list[str]) -> bool:
-    return len(cells) >= 2 and all(_NUM.match(c) for c in cells if c != '') and any(c != '' for c in cells)
+    return (len(cells) >= 2 and all(_is_number(c) or c.lower() in _MISSING for c in cells)
+            and sum(_is_number(c) for c in cells) >= 2)
+
+
+def _cell(c: str) -> float:
+    """A number; a clock stamp in seconds (since midnight, or since 1970 with its date); else NaN."""
+    if _NUM.match(c):
+        return float(c)
+    m = _CLOCK.match(c)
+    if m is None:
+        return np.nan
+    y, mo, d, h, mi, sec = m.groups()
+    t = int(h) * 3600.0 + int(mi) * 60.0 + float(sec or 0.0)
+    if y is not None:
+        import datetime
+        t += (datetime.date(int(y), int(mo), int(d)) - datetime.date(1970, 1, 1)).days * 86400.0
+    return t
+
+
+def _decode(raw: bytes) -> str:
+    """Text of a file: UTF-16 or UTF-8 by its byte-order mark, else UTF-8, else Windows-1252 (Excel's CSV)."""
+    if raw[:2] in (b'\xff\xfe', b'\xfe\xff'):
+        return raw.decode('utf-16', errors='replace')
+    try:
+        return raw.decode('utf-8-sig')
+    except UnicodeDecodeError:
+        return raw.decode('cp1252', errors='replace')
+
+
+def _xlsx_lines(p: Path, error: type) -> list[list[str]]:
+    """Cells of the first worksheet of an Excel .xlsx workbook (the Office Open XML zip), row by row."""
+    import xml.etree.ElementTree as ET
+    import zipfile
+
+    ns = '{http://schemas.openxmlformats.org/spreadsheetml/2006/main}'
+    try:
+        with zipfile.ZipFile(p) as z:
+            names = z.namelist()
+            shared: list[str] = []
+            if 'xl/sharedStrings.xml' in names:
+                for si in ET.fromstring(z.read('xl/sharedStrings.xml')).iter(ns + 'si'):
+                    shared.append(''.join(t.text or '' for t in si.iter(ns + 't')))
+            sheets = sorted(n for n in names if re.match(r'xl/worksheets/sheet\d+\.xml$', n))
+            if not sheets:
+                raise error(f'{p}: an .xlsx workbook without worksheets')
+            root = ET.fromstring(z.read(sheets[0]))
+    except (zipfile.BadZipFile, ET.ParseError, KeyError) as e:
+        raise error(f'{p}: not a readable .xlsx workbook ({e}); save it as .xlsx or export a CSV') from None
+    rows = []
+    for row in root.iter(ns + 'row'):
+        cells: dict[int, str] = {}
+        for c in row.iter(ns + 'c'):
+            ref = re.match(r'([A-Z]+)', c.get('r', ''))
+            col = (sum((ord(ch) - 64) * 26 ** k for k, ch in enumerate(reversed(ref.group(1)))) - 1 if ref
+                   else len(cells))
+            v = c.find(ns + 'v')
+            t = c.get('t')
+            if t == 'inlineStr':
+                text = ''.join(x.text or '' for x in c.iter(ns + 't'))
+            elif v is None or v.text is None:
+                text = ''
+            elif t == 's':
+                text = shared[int(v.text)]
+            else:
+                text = v.text
+            cells[col] = text.strip()
+        if cells:
+            rows.append([cells.get(i, '') for i in range(max(cells) + 1)])
+    return rows
+
+
+#: run in a child process: scipy's C reader of .mat files can crash the process (segfault) on a
+#: damaged file (seen with a few flipped bytes), which no ``except`` catches
+_LOADMAT = """
+import pickle, sys
+import scipy.io
+try:
+    m = scipy.io.loadmat(sys.argv[1], squeeze_me=True)
+    r = {k: v for k, v in m.items() if not k.startswith('__')}
+except NotImplementedError:
+    r = 'v7.3'
+except Exception as e:
+    r = 'error: ' + str(e)
+pickle.dump(r, sys.stdout.buffer)
+"""
+
+
+def _mat_table(p: Path, error: type) -> Table:
+    """A MATLAB .mat file: one numeric matrix (columns as in a text table) or equally long vectors named by column."""
+    import pickle
+    import subprocess
+    import sys
+
+    try:
+        proc = subprocess.run([sys.executable, '-c', _LOADMAT, str(p)], capture_output=True, timeout=300, check=False)
+    except subprocess.TimeoutExpired:
+        raise error(f'{p}: reading the .mat file took over 300 s; export a CSV') from None
+    if proc.returncode != 0:
+        raise error(f'{p}: not a readable MATLAB .mat file (the reader stopped with exit code {proc.returncode}: '
+                    f'{proc.stderr.decode(errors="replace").strip()[-200:] or "a crash"})')
+    items = pickle.loads(proc.stdout)  # our own child's answer (numpy arrays), not the file's bytes
+    if items == 'v7.3':
+        raise error(f'{p}: a MATLAB v7.3 (HDF5) .mat file; save it with save(..., "-v7") or export a CSV')
+    if isinstance(items, str):
+        raise error(f'{p}: not a readable MATLAB .mat file ({items[len("error: "):]})')
+    num = {k: np.asarray(v, float) for k, v in items.items()
+           if isinstance(v, np.ndarray) and v.dtype.kind in 'fiu' and v.size > 1}
+    vectors = {k: v for k, v in num.items() if v.ndim == 1}
+    lengths = {v.size for v in vectors.values()}
+    if len(vectors) >= 2 and len(lengths) == 1:
+        names = list(vectors)
+        return Table(str(p), np.column_stack([vectors[k] for k in names]), names, {'unreadable_rows': 0})
+    mats = {k: v for k, v in num.items() if v.ndim == 2 and min(v.shape) >= 2}
+    if len(mats) == 1:
+        (v,) = mats.values()
+        return Table(str(p), v if v.shape[0] >= v.shape[1] else v.T, None, {'unreadable_rows': 0})
+    found = ', '.join(f'{k} ({type(v).__name__} {getattr(v, "shape", "")}, '
+                      f'{"cell array" if getattr(v, "dtype", None) is not None and v.dtype == object else "numeric"})'
+                      for k, v in items.items()) or 'nothing'
+    raise error(f'{p}: a .mat file needs one numeric matrix (a column per quantity) or equally long numeric '
+                f'vectors named by quantity; it holds {found}. Cell arrays of curves: save one stress per file')
 
 
 def read_table(path: str | Path, need: str = 'temperature, strain and stress', error: type = IdentifyInputError) -> Table:
-    """Parse a CSV / TSV / whitespace table; metadata, comment and header lines before the numbers are skipped.
+    """Parse a CSV / TSV / semicolon / whitespace table, an .xlsx workbook or a MATLAB .mat file.
 
     The one table reader of ``sma-wrist identify`` (hysteresis and thermal inputs): ``need``
-    names the columns in its error messages, ``error`` is the exception raised. Rows that
-    are not all numbers (or have another column count) become NaN rows, counted as
-    ``unreadable_rows``; the caller drops and counts what it cannot use.
+    names the columns in its error messages, ``error`` is the exception raised. Metadata,
+    comment ('#', '%') and header lines before the numbers are skipped; decimal commas are
+    read where cells are split by ';', tabs or spaces; cells an export writes for "no
+    value" (empty, '****', 'n/a', ...) are NaN. Rows that are not all numbers (or have another
+    column count) become NaN rows, counted as ``unreadable_rows`` with the first one in
+    ``first_bad``; the caller drops and counts what it cannot use.
     """
     p = Path(path)
+    if p.suffix.lower() == '.mat':
+        if not p.is_file():
+            raise error(f'{p}: cannot read the file (no such file); give a readable table')
+        return _mat_table(p, error)
+    if p.suffix.lower() in ('.xls', '.ods'):
+        raise error(f'{p}: {p.suffix} workbooks are not read; save the sheet as .xlsx or CSV')
     try:
-        text = p.read_text(encoding='utf-8', errors='replace')
+        raw = p.read_bytes()
     except OSError as e:
         raise error(f'{p}: cannot read the file ({e.strerror or e}); give a readable text table') from None
-    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if raw[:4] == b'PK\x03\x04':  # a zip: an .xlsx workbook, whatever its name
+        cell_rows = _xlsx_lines(p, error)
+        numbered = [(i + 1, '\t'.join(r)) for i, r in enumerate(cell_rows) if any(c for c in r)]
+        delim: str | None = '\t'
+    else:
+        if b'\x00' in raw[:4096] and raw[:2] not in (b'\xff\xfe', b'\xfe\xff'):
+            raise error(f'{p}: a binary file, not a text table; export {need} as CSV')
+        numbered = [(i + 1, ln) for i, ln in enumerate(_decode(raw).splitlines()) if ln.strip()]
+        delim = None
+    lines = [ln for _, ln in numbered]
     if not lines:
         raise error(f'{p}: empty file; a table with {need} columns is needed')
-    sample = [ln for ln in lines if any(ch.isdigit() for ch in ln)][-20:]
-    delim: str | None = None
-    for d in ('\t', ',', ';'):
-        if sample and all(d in ln for ln in sample):
-            delim = d
-            break
+    if delim is None:
+        sample = [ln for ln in lines if any(ch.isdigit() for ch in ln)][-20:]
+        for d in ('\t', ';', ','):  # ';' before ',': a ';' table may have decimal commas
+            if sample and all(d in ln for ln in sample):
+                delim = d
+                break
     rows = [_split(ln, delim) for ln in lines]
     first = next((i for i, r in enumerate(rows) if _is_numeric(r)), None)
     if first is None:
@@ -120,18 +277,28 @@ def read_table(path: str | Path, need: str = 'temperature, strain and stress', e
     ncol = len(rows[first])
     header = None
     if first > 0:  # the line above the numbers, also as a '# a b c' comment (numpy.savetxt's default)
-        above = _split(lines[first - 1].lstrip().lstrip('#'), delim)
+        above = _split(lines[first - 1].lstrip().lstrip('#%'), delim)
         if len(above) == ncol and not _is_numeric(above):
             header = above
-    body = [r for r, ln in zip(rows[first:], lines[first:]) if not ln.lstrip().startswith('#')]  # comments
+    body = [(n, r, ln) for (n, ln), r in zip(numbered[first:], rows[first:])
+            if not ln.lstrip().startswith(('#', '%'))]  # comments
     data = np.full((len(body), ncol), np.nan)
     bad = 0
-    for i, r in enumerate(body):
+    first_bad = None
+    for i, (n, r, ln) in enumerate(body):
         if len(r) != ncol or not _is_numeric(r):
             bad += 1
+            if first_bad is None:
+                first_bad = (f'line {n}: {ln.strip()[:60]!r} ({len(r)} cells, {ncol} expected)' if len(r) != ncol
+                             else f'line {n}: {ln.strip()[:60]!r} (not a number in every column)')
             continue
-        data[i] = [float(c) if c != '' else np.nan for c in r]
-    return Table(str(p), data, header, {'unreadable_rows': bad})
+        data[i] = [_cell(c) for c in r]
+    for j in range(ncol):  # times of day without a date: a run past midnight goes on counting
+        if any(_CLOCK.match(r[j]) and not r[j][:4].isdigit() for _, r, _ in body[:50] if len(r) == ncol):
+            col = data[:, j]
+            ok = np.isfinite(col)
+            col[ok] += 86400.0 * np.cumsum(np.r_[0.0, np.diff(col[ok]) < -43200.0])
+    return Table(str(p), data, header, {'unreadable_rows': bad}, first_bad)
 
 
 # ----------------------------------------------------------------------------- columns and units
@@ -150,6 +317,10 @@ def _find(header: list[str], role: str) -> int | None:
         for i, c in enumerate(h):
             if key in c and not (role == 'T' and 'time' in c):
                 return i
+    if role == 'T':  # 'T (K)', or a thermocouple channel named by the logger ('_COM1 (C)'): its unit says it
+        bare = [re.sub(r'[\[(].*?[\])]', '', c).strip().lower() for c in header]
+        return next((i for i, c in enumerate(header) if bare[i] in ('t', 'theta')
+                     or _bracket_unit(c) in _UNIT_WORDS['T']), None)
     return None
 
 
@@ -167,28 +338,57 @@ def _resolve(spec: str, header: list[str] | None, ncol: int, path: str) -> int:
     raise IdentifyInputError(f'{path}: no column named {spec!r}; the header has {header}')
 
 
-def _unit_from_header(name: str, role: str) -> str | None:
+#: unit words in a header's brackets, per role -> unit name (None: dimensionless, read by value)
+_UNIT_WORDS: dict[str, dict[str, str | None]] = {
+    'T': {'c': 'degC', '°c': 'degC', 'degc': 'degC', 'celsius': 'degC', 'k': 'K', 'kelvin': 'K',
+          'f': 'degF', '°f': 'degF', 'degf': 'degF', 'fahrenheit': 'degF'},
+    'strain': {'%': '%', 'pct': '%', 'percent': '%', 'mm': 'mm', 'mm/mm': 'fraction', 'm/m': 'fraction',
+               'in/in': 'fraction', '-': 'fraction', '1': 'fraction', '': None},
+    'stress': {'mpa': 'MPa', 'n/mm2': 'MPa', 'n/mm^2': 'MPa', 'n/mm²': 'MPa', 'psi': 'psi', 'ksi': 'ksi',
+               'n': 'N', 'newton': 'N', 'lbf': 'lbf', 'kg': 'kg', 'kgf': 'kgf', 'g': 'g'},
+    'time': {},
+}
+
+
+def _bracket_unit(name: str) -> str | None:
+    """The unit written in the last (...) or [...] of a header name, lower case, or None."""
+    m = re.findall(r'[\[(]\s*([^\])]*?)\s*[\])]', name)
+    if not m:
+        return None
+    # 'deg. C', 'degrees C', '° C', 'º C' (the ordinal sign Windows keyboards give) -> 'degc', '°c'
+    return m[-1].lower().replace('\u00ba', '°').replace('degrees', 'deg').replace('.', '').replace(' ', '')
+
+
+def _unit_from_header(name: str, role: str, path: str = '') -> str | None:
+    """Unit of a column from its header name; an unknown unit in brackets is an error (never read silently)."""
     n = name.lower()
+    b = _bracket_unit(name)
+    if b is not None and role in ('T', 'strain', 'stress'):
+        if b in _UNIT_WORDS[role]:
+            return _UNIT_WORDS[role][b]
+        raise IdentifyInputError(
+            f'{path}: column {name!r}: unit {b!r} is not one of {", ".join(k for k in _UNIT_WORDS[role] if k)}; '
+            f'give --{ {"T": "temperature", "strain": "strain", "stress": "stress"}[role]}-unit')
     if role == 'T':
-        if re.search(r'\(k\)|\[k\]|kelvin|\bk\b', n):
+        if re.search(r'kelvin|\bk\b', n):
             return 'K'
-        if re.search(r'\(c\)|\[c\]|degc|°c|celsius', n):
+        if re.search(r'degc|°c|celsius', n):
             return 'degC'
+        if re.search(r'degf|°f|fahrenheit', n):
+            return 'degF'
     if role == 'strain':
         if '%' in n or 'pct' in n or 'percent' in n:
             return '%'
-        if 'mm' in n and '/mm' not in n:
-            return 'mm'
-        if 'mm/mm' in n or '(-)' in n or '[-]' in n:
+        if 'mm/mm' in n:
             return 'fraction'
+        if 'mm' in n:
+            return 'mm'
     if role == 'stress':
         if 'mpa' in n:
             return 'MPa'
         if 'kgf' in n:
             return 'kgf'
-        if '(kg)' in n or '[kg]' in n:
-            return 'kg'
-        if '(n)' in n or '[n]' in n or 'newton' in n:
+        if 'newton' in n:
             return 'N'
     return None
 
@@ -207,6 +407,30 @@ class Units:
 def _stress_from_name(path: str) -> float | None:
     m = re.search(r'(\d+(?:\.\d+)?)\s*mpa', Path(path).name, re.IGNORECASE)
     return float(m.group(1)) if m else None
+
+
+def temperature_spikes(T: FloatArray, half_window: int = 10, floor: float = 1.0, n_sigma: float = 3.5
+                       ) -> NDArray[np.bool_]:
+    """Samples where a temperature channel jumps away from its neighbours and back (Hampel filter).
+
+    Loggers drop out to 0 (or a rail) for a few samples: the chamber thermocouple of the NiTiPd
+    export (test/data/nitipd) reads 0.00 for 1-6 samples at -1.5..-7.4 degC, which pulls the
+    strain to a vertical line at 0 degC. A sample is a spike when it is further than
+    max(``floor``, ``n_sigma`` robust standard deviations) from the median of the 2 x
+    ``half_window`` + 1 samples around it [same unit as T]; ramps and turning points move the
+    median and widen the spread with them: no sample of the SMA-REACT or Flexinol loops is
+    flagged (with 3.5 sigma; 87 of the NiTiPd export's 138 zeros are, the others lie within
+    ~1-4 degC of the air's temperature, where the spread of the zeros around them hides them).
+    """
+    from numpy.lib.stride_tricks import sliding_window_view
+
+    T = np.asarray(T, float)
+    if T.size < 2 * half_window + 1:
+        return np.zeros(T.size, bool)
+    W = sliding_window_view(np.pad(T, half_window, mode='edge'), 2 * half_window + 1)
+    med = np.median(W, axis=1)
+    mad = 1.4826 * np.median(np.abs(W - med[:, None]), axis=1)
+    return np.abs(T - med) > np.maximum(floor, n_sigma * mad)
 
 
 def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
@@ -236,7 +460,18 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
     name = (lambda i: hdr[i] if hdr is not None and i is not None else '')  # noqa: E731
 
     cols = [i for i in (iT, iS, iP, iTime) if i is not None]
+    for role, i in (('temperature', iT), ('strain', iS), ('stress', iP), ('time', iTime)):
+        if i is not None and data.shape[0] and not np.isfinite(data[:, i]).any():
+            raise IdentifyInputError(f'{path}: the {role} column ({name(i) or i}) has no number in any row; '
+                                     'give the right one with --columns T,STRAIN[,STRESS[,TIME]]')
     counts = dict(table.counts)
+    bad = counts.get('unreadable_rows', 0)
+    if bad and table.first_bad:
+        if bad > data.shape[0] // 2:
+            raise IdentifyInputError(f'{path}: {bad} of {data.shape[0]} rows are unreadable, the first at '
+                                     f'{table.first_bad}; a table of numbers with the same columns in every row '
+                                     'is needed')
+        warn.append(f'{path}: {bad} unreadable row(s) dropped, the first at {table.first_bad}')
     ok = np.all(np.isfinite(data[:, cols]), axis=1)
     counts['nan_rows'] = int((~ok).sum()) - counts.get('unreadable_rows', 0)
     d = data[ok]
@@ -258,20 +493,30 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
     if d.shape[0] == 0:
         raise IdentifyInputError(f'{path}: no complete rows (all rows have unreadable or missing cells)')
 
+    spike = temperature_spikes(d[:, iT])
+    counts['temperature_spikes'] = int(spike.sum())
+    if spike.any():
+        warn.append(f'{path}: {int(spike.sum())} temperature sample(s) dropped as sensor spikes or dropouts '
+                    f'(e.g. row {int(np.argmax(spike)) + 1} of the cleaned table reads {d[np.argmax(spike), iT]:.4g} '
+                    'between its neighbours)')
+        d = d[~spike]
+        time = d[:, iTime] if time is not None else None
     T = d[:, iT].astype(float)
-    tu = units.temperature or _unit_from_header(name(iT), 'T')
+    tu = units.temperature or _unit_from_header(name(iT), 'T', path)
     if tu is None:
         tu = 'K' if T.min() > 200.0 else 'degC'
         warn.append(f'{path}: temperature unit not given; {T.min():.4g}..{T.max():.4g} read as {tu} '
                     '(use --temperature-unit)')
     if tu == 'K':
         T = T - 273.15
+    elif tu == 'degF':
+        T = (T - 32.0) * 5.0 / 9.0
     if T.min() < -150 or T.max() > 600:
         raise IdentifyInputError(f'{path}: temperatures {T.min():.4g}..{T.max():.4g} degC fit no SMA test; '
                                  'give --temperature-unit (degC or K) or the right --columns')
 
     raw = d[:, iS].astype(float)
-    su = units.strain or _unit_from_header(name(iS), 'strain')
+    su = units.strain or _unit_from_header(name(iS), 'strain', path)
     if su is None:
         mx = float(np.max(np.abs(raw)))
         if mx <= 0.1:
@@ -296,18 +541,17 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
 
     if iP is not None:
         sraw = d[:, iP].astype(float)
-        pu = units.stress or _unit_from_header(name(iP), 'stress')
+        pu = units.stress or _unit_from_header(name(iP), 'stress', path)
         if pu is None:
             pu = 'MPa'
             warn.append(f'{path}: stress unit not given; values {sraw.min():.4g}..{sraw.max():.4g} read as MPa '
                         '(use --stress-unit)')
-        if pu == 'MPa':
-            stress = sraw
+        if pu in _TO_MPA:
+            stress = sraw * _TO_MPA[pu]
         else:
             if not units.wire_diameter_mm:
                 raise IdentifyInputError(f'{path}: the stress column is a load in {pu}; give --wire-diameter-mm')
-            newton = sraw if pu == 'N' else sraw * G
-            stress = newton / area_mm2(units.wire_diameter_mm)
+            stress = sraw * _TO_N[pu] / area_mm2(units.wire_diameter_mm)
     else:
         s = stress_MPa if stress_MPa is not None else _stress_from_name(path)
         if s is None:

@@ -127,11 +127,11 @@ def write_report(out: Path, doc: dict[str, Any], train: list[Any], hold: list[An
               for h in doc['leave_one_load_out']]
     if not doc['holdout'] and not doc['leave_one_load_out']:
         L.append('none requested')
-    L += ['', '## Data cleaning', '', '| file | unreadable | NaN | duplicates | unsorted stamps | load-ramp samples |',
-          '|---|---|---|---|---|---|']
+    L += ['', '## Data cleaning', '', ('| file | unreadable | NaN | duplicates | unsorted stamps | temperature spikes '
+                                       '| load-ramp samples |'), '|---|---|---|---|---|---|---|']
     for f, c in doc['cleaning'].items():
         L.append(f'| {Path(f).name} | {c.get("unreadable_rows", 0)} | {c.get("nan_rows", 0)} | {c.get("duplicate_rows", 0)} '
-                 f'| {c.get("unsorted_stamps", 0)} | {c.get("ramp_samples_dropped", 0)} |')
+                 f'| {c.get("unsorted_stamps", 0)} | {c.get("temperature_spikes", 0)} | {c.get("ramp_samples_dropped", 0)} |')
     if doc['warnings']:
         L += ['', '## Warnings', ''] + [f'- {w}' for w in doc['warnings']]
     L += ['', '## Plots', '']

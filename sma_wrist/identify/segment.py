@@ -2,7 +2,8 @@
 
 * Stress levels: stresses are grouped where the sorted values have no gap larger than
   max(2 MPa, 3 %); groups holding at least 5 % of the samples (and >= 20) are levels, the
-  rest (load ramps between levels) is dropped and counted.
+  rest (load ramps between levels) is dropped and counted. A group that densely sampled
+  ramps have joined (several loads in one file) is split at its modes (:func:`_modes`).
 * Branches: the temperature's turning points with a dead band (a reversal counts once T has
   come back by max(2 degC, 10 % of the level's range)), so sensor noise does not cut
   branches. A branch is complete when it spans >= 80 % of the level's temperature range.
@@ -47,6 +48,41 @@ class Loop:
         return f'{self.source} @ {self.stress_MPa:.4g} MPa'
 
 
+def _tol(level: float) -> float:
+    """Half-width [MPa] of a stress level: max(2 MPa, 3 %)."""
+    return max(2.0, 0.03 * abs(level))
+
+
+def _modes(g: FloatArray, need: int) -> list[float]:
+    """Stress levels [MPa] held in one gap-free group of sorted stresses (the densest values first).
+
+    A test with several loads in one file ramps between them, and a densely sampled ramp
+    leaves no gap in the sorted stresses; the holds are where the samples pile up. A mode
+    counts as a new level only if it lies beyond the noise of the levels already found
+    (3 half-widths, 6 robust standard deviations), so a noisy single level is one level.
+    """
+    lo = np.searchsorted(g, g - np.maximum(2.0, 0.03 * np.abs(g)), 'left')
+    hi = np.searchsorted(g, g + np.maximum(2.0, 0.03 * np.abs(g)), 'right')
+    count = hi - lo
+    levels: list[float] = []
+    spread: list[float] = []
+    free = np.ones(g.size, bool)
+    while True:
+        c = np.where(free, count, 0)
+        i = int(np.argmax(c))
+        if c[i] < need:
+            break
+        lv = float(g[i])
+        near = np.abs(g - lv) <= 1.5 * _tol(lv)
+        lv = float(np.median(g[near]))
+        sigma = 1.4826 * float(np.median(np.abs(g[near] - lv)))
+        if all(abs(lv - m) > max(3.0 * _tol(m), 6.0 * sd) for m, sd in zip(levels, spread)):
+            levels.append(lv)
+            spread.append(sigma)
+        free &= ~(np.abs(g - lv) <= max(3.0 * _tol(lv), 6.0 * sigma))
+    return levels
+
+
 def stress_levels(stress: FloatArray) -> tuple[list[float], NDArray[np.intp]]:
     """(levels [MPa], label per sample: level index or -1 for ramp samples)."""
     s = np.sort(stress)
@@ -54,10 +90,16 @@ def stress_levels(stress: FloatArray) -> tuple[list[float], NDArray[np.intp]]:
     cuts = np.nonzero(np.diff(s) > tol)[0]
     groups = np.split(s, cuts + 1)
     need = max(20, int(0.05 * stress.size))
-    levels = [float(np.median(g)) for g in groups if g.size >= need]
+    levels = []
+    for g in groups:
+        if g.size < need:
+            continue
+        modes = _modes(g, need)
+        # one level: its median as before; several (ramps joined them): each hold's median
+        levels.extend([float(np.median(g))] if len(modes) <= 1 else sorted(modes))
     label = np.full(stress.size, -1, np.intp)
     for k, lv in enumerate(levels):
-        label[np.abs(stress - lv) <= max(2.0, 0.03 * abs(lv)) * 1.5] = k
+        label[np.abs(stress - lv) <= _tol(lv) * 1.5] = k
     return levels, label
 
 
