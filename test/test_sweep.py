@@ -12,7 +12,7 @@ import pytest
 
 from sma_wrist.core.control.joint_controller import MODES, JointController, JointControllerParams
 from sma_wrist.core.control.tem import TemLoop
-from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.plants.spread import sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 from sma_wrist.sweep.run import (SweepConfig, add_reach_floors, format_table, make_cases, parse_perturbations,
@@ -41,6 +41,20 @@ def test_joint_controller_bank_equals_one_wrist_objects(mode: str) -> None:
                 np.testing.assert_array_equal(force[j], cmd.force_N)
             else:
                 np.testing.assert_array_equal(T[j], cmd.temperature_desired_C)
+
+
+@pytest.mark.parametrize('mode', MODES)
+def test_joint_controller_bank_rejects_non_finite_input(mode: str) -> None:
+    """The bank checks its inputs once per call (not per law object): a NaN angle is named, not used."""
+    bank = JointControllerBank(JointControllerParams(mode=mode), 3)
+    q = np.array([0.5, np.nan, 0.5])
+    with pytest.raises(ModelInputError, match='q ='):
+        bank.update(q, np.zeros(3), 0.5, 0.0, 0.0, 0.01)
+    if mode != 'pid':
+        with pytest.raises(ModelInputError, match='qdot ='):
+            bank.update(np.full(3, 0.5), np.array([0.0, np.inf, 0.0]), 0.5, 0.0, 0.0, 0.01)
+        with pytest.raises(ModelInputError, match='dt'):
+            bank.update(np.full(3, 0.5), np.zeros(3), 0.5, 0.0, 0.0, 0.0)
 
 
 def test_tem_loop_bank_equals_one_wrist_loops() -> None:
