@@ -26,7 +26,6 @@ from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
-_FORCE_SIGNS, _PID_SIGNS = np.array([1.0, 1.0]), np.array([1.0, -1.0])  # _temperature_map's per-muscle signs
 
 @tem_kernel._jit
 def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, hold_after,
@@ -51,16 +50,14 @@ def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, 
 
 
 @tem_kernel._jit
-def _temperature_map(x, sign, mid, offset, per_unit, lo, hi, flag, T, saturated):  # pragma: no cover - compiled
-    """JointController's temperatures of the modes without an inverse, per wrist j and muscle i:
-    T[j, i] = mid + sign[i] (x[j, i] - offset) / per_unit clipped to [lo, hi] [degC]; saturated[j] = the
-    law's flag[j] or a clipped T. Direct adaptive: x the forces [N] (sign +1, +1); PID: x its output u in
-    both columns (sign +1, -1, offset 0, per_unit 1). numpy's element-wise operations in their order."""
-    for j in range(x.shape[0]):
+def _temperature_map(force, mid, preload, per_degC, lo, hi, flag, T, saturated):  # pragma: no cover - compiled
+    """JointController's temperatures in direct_adaptive mode, per wrist j and muscle i:
+    T[j, i] = mid + (force[j, i] - preload) / per_degC clipped to [lo, hi] [degC] (force [N]); saturated[j] =
+    the law's flag[j] or a clipped T. numpy's element-wise operations in their order."""
+    for j in range(force.shape[0]):
         sat = flag[j]
         for i in range(2):
-            d = (x[j, i] - offset) / per_unit
-            t = mid + d if sign[i] > 0 else mid - d
+            t = mid + (force[j, i] - preload) / per_degC
             tc = min(max(t, lo), hi)
             T[j, i] = tc
             sat = sat or tc != t
@@ -81,10 +78,6 @@ class JointControllerBank:
         p = params
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode), n) if p.mode != 'pid' else None
         self.pid = PID(p.pid, n) if p.mode == 'pid' else None
-        self.hold_on = np.zeros(n, np.bool_)
-        self.hold_q = np.zeros(n)
-        self.hold_after = np.zeros(n)
-        self._target = np.zeros(n)
         # the bank's adaptive path calls the compiled law directly (AdaptiveController.update's kernel call,
         # without its per-call checks and output record): inputs (5, n) filled in place, constants packed once
         self._x = np.empty((5, n))
@@ -93,6 +86,10 @@ class JointControllerBank:
         j = self.plant.joint
         self._mm_per_rad, self._q_neutral = 1e3 * j.r_eff_m, j.q_neutral_rad
         self._e0, self._wire_mm = self.plant.preload_elongation_mm, self.plant.muscle.wire_length_mm
+        self.hold_on = np.zeros(n, np.bool_)
+        self.hold_q = np.zeros(n)
+        self.hold_after = np.zeros(n)
+        self._target = np.zeros(n)
 
     def strain_at(self, q: FloatArray) -> FloatArray:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
@@ -121,11 +118,9 @@ class JointControllerBank:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
-            # [mid + u, mid - u] clipped: one compiled call instead of ~8 numpy calls
-            Tc, saturated = np.empty((self.n, 2)), np.empty(self.n, np.bool_)
-            _temperature_map(np.broadcast_to(o.u[:, None], (self.n, 2)), _PID_SIGNS, p.temperature_mid_C, 0.0, 1.0,
-                             lo, hi, o.saturated, Tc, saturated)
-            return None, self._strain_rows(q_now), Tc, saturated
+            T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
+            Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
+            return None, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
         assert self.adaptive is not None and self._k is not None
         # AdaptiveController.update's checks, once for the bank: dt from increasing stamps, finite inputs
         if not (math.isfinite(dt) and dt > 0):
@@ -146,8 +141,8 @@ class JointControllerBank:
                                 self.hold_after, self._target)
             return force, self.strain_at(self._target), None, saturated
         Tc, sat_T = np.empty((self.n, 2)), np.empty(self.n, np.bool_)
-        _temperature_map(force, _FORCE_SIGNS, p.temperature_mid_C, p.adaptive.preload_N, p.force_per_degC_N, lo, hi,
-                         saturated, Tc, sat_T)
+        _temperature_map(force, p.temperature_mid_C, p.adaptive.preload_N, p.force_per_degC_N, lo, hi, saturated, Tc,
+                         sat_T)
         return force, self._strain_rows(q_now), Tc, sat_T
 
 
