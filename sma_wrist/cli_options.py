@@ -55,7 +55,7 @@ def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
                    help='replace a perturbation range of the family (NAME=VALUE fixes it); repeatable')
     p.add_argument('--only', action='store_true', help='sample only the --perturb axes (others nominal)')
     p.add_argument('--no-nominal', action='store_true', help='skip the nominal-plant loops run side by side')
-    p.add_argument('--chunk', type=int, default=96, help='loops per vectorised simulation / Dask task (default 96)')
+    p.add_argument('--chunk', type=int, default=192, help='most loops per vectorised simulation / Dask task (default 192)')
     p.add_argument('--heatmap-axes', default='transition_shift_C,stroke_scale', help='two perturbation names')
     p.add_argument('--scheduler', default=None, metavar='ADDRESS',
                    help='run the chunks on this Dask distributed scheduler (pip install "sma_wrist[dask]")')

@@ -12,11 +12,11 @@ import pytest
 
 from sma_wrist.core.control.joint_controller import MODES, JointController, JointControllerParams
 from sma_wrist.core.control.tem import TemLoop
-from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.plants.spread import sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 from sma_wrist.sweep.run import (SweepConfig, add_reach_floors, format_table, make_cases, parse_perturbations,
-                                 run_sweep, summarise)
+                                 run_sweep, split_chunks, summarise)
 from sma_wrist.sweep.simulate import Case, sign_changes_per_s, simulate
 
 
@@ -41,6 +41,20 @@ def test_joint_controller_bank_equals_one_wrist_objects(mode: str) -> None:
                 np.testing.assert_array_equal(force[j], cmd.force_N)
             else:
                 np.testing.assert_array_equal(T[j], cmd.temperature_desired_C)
+
+
+@pytest.mark.parametrize('mode', MODES)
+def test_joint_controller_bank_rejects_non_finite_input(mode: str) -> None:
+    """The bank checks its inputs once per call (not per law object): a NaN angle is named, not used."""
+    bank = JointControllerBank(JointControllerParams(mode=mode), 3)
+    q = np.array([0.5, np.nan, 0.5])
+    with pytest.raises(ModelInputError, match='q ='):
+        bank.update(q, np.zeros(3), 0.5, 0.0, 0.0, 0.01)
+    if mode != 'pid':
+        with pytest.raises(ModelInputError, match='qdot ='):
+            bank.update(np.full(3, 0.5), np.array([0.0, np.inf, 0.0]), 0.5, 0.0, 0.0, 0.01)
+        with pytest.raises(ModelInputError, match='dt'):
+            bank.update(np.full(3, 0.5), np.zeros(3), 0.5, 0.0, 0.0, 0.0)
 
 
 def test_tem_loop_bank_equals_one_wrist_loops() -> None:
@@ -76,6 +90,19 @@ def test_loops_do_not_depend_on_their_chunk() -> None:
     alone = [simulate([c], 3.0)[0][0] for c in cases]
     for a, b in zip(together, alone):
         assert a == b
+
+
+def test_chunks_follow_the_work_and_the_workers() -> None:
+    loops = list(range(400))
+    sizes = lambda chunk, workers: [len(c) for c in split_chunks(loops, chunk, workers)]  # noqa: E731
+    assert sizes(192, 1) == [134, 134, 132]  # at most 192, no short last chunk
+    assert sizes(192, 2) == [100] * 4  # every worker as many chunks
+    assert sizes(500, 2) == [200, 200]  # at least one chunk per worker
+    assert sizes(192, 1000) == [1] * 400
+    assert [x for c in split_chunks(loops, 7, 3) for x in c] == loops  # every loop once, in order
+    assert split_chunks([], 192, 2) == []
+    with pytest.raises(ParameterError, match='chunk = 0'):
+        split_chunks(loops, 0)
 
 
 def test_bad_input_gives_clear_errors() -> None:

@@ -29,16 +29,18 @@ def bench_sweep(quick: bool = False, repeats: int | None = None) -> dict[str, An
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.plants.spread import sample
-    from sma_wrist.sweep.run import SweepConfig, _run_processes, available_cores
+    from sma_wrist.sweep.run import SweepConfig, _run_processes, available_cores, split_chunks
     from sma_wrist.sweep.simulate import Case, simulate
     duration = 5.0 if quick else 30.0
     repeats = repeats or (2 if quick else 3)
-    chunk = SweepConfig().chunk  # what `sma-wrist sweep` puts in one simulation
+    chunk = SweepConfig().chunk  # the most `sma-wrist sweep` puts in one simulation
     cores = available_cores()
     n_plants = -(-chunk * cores // len(MODES))
     cases = [Case(len(MODES) * i + j, m, s) for i, s in enumerate(sample(n_plants, seed=1)) for j, m in enumerate(MODES)]
-    one = cases[:chunk]
-    chunks = [cases[i:i + chunk] for i in range(0, chunk * cores, chunk)]
+    cases = cases[:chunk * cores]
+    # chunked as `sma-wrist sweep` (--workers 1) and `sma-wrist sweep --workers 0` chunk these loops
+    one = split_chunks(cases, chunk, 1)[0]
+    chunks = split_chunks(cases, chunk, cores)
     cfg = SweepConfig(duration_s=duration)
     simulate(cases[:3], 1.0)  # numba cache load / compile outside the timing
     for m in MODES:

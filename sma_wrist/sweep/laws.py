@@ -14,14 +14,14 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.control import tem_kernel
+from sma_wrist.core.control import adaptive_kernel, tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
 from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, reference_ahead,
                                                      time_to_meet)
 from sma_wrist.core.control.pid import PID
 from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
                                         target_prefilter)
-from sma_wrist.core.errors import ModelInputError
+from sma_wrist.core.errors import ModelInputError, check_finite
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import heat_balance as th
 
@@ -49,6 +49,21 @@ def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, 
                 target[j] = hold_q[j]
 
 
+@tem_kernel._jit
+def _temperature_map(force, mid, preload, per_degC, lo, hi, flag, T, saturated):  # pragma: no cover - compiled
+    """JointController's temperatures in direct_adaptive mode, per wrist j and muscle i:
+    T[j, i] = mid + (force[j, i] - preload) / per_degC clipped to [lo, hi] [degC] (force [N]); saturated[j] =
+    the law's flag[j] or a clipped T. numpy's element-wise operations in their order."""
+    for j in range(force.shape[0]):
+        sat = flag[j]
+        for i in range(2):
+            t = mid + (force[j, i] - preload) / per_degC
+            tc = min(max(t, lo), hi)
+            T[j, i] = tc
+            sat = sat or tc != t
+        saturated[j] = sat
+
+
 class JointControllerBank:
     """:class:`sma_wrist.core.control.joint_controller.JointController` for n wrists of one mode.
 
@@ -63,6 +78,14 @@ class JointControllerBank:
         p = params
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode), n) if p.mode != 'pid' else None
         self.pid = PID(p.pid, n) if p.mode == 'pid' else None
+        # the bank's adaptive path calls the compiled law directly (AdaptiveController.update's kernel call,
+        # without its per-call checks and output record): inputs (5, n) filled in place, constants packed once
+        self._x = np.empty((5, n))
+        self._k = None if self.adaptive is None else adaptive_kernel.pack(self.adaptive.params)
+        # strain_at's constants read once (the properties are recomputed on every access); the same operations
+        j = self.plant.joint
+        self._mm_per_rad, self._q_neutral = 1e3 * j.r_eff_m, j.q_neutral_rad
+        self._e0, self._wire_mm = self.plant.preload_elongation_mm, self.plant.muscle.wire_length_mm
         self.hold_on = np.zeros(n, np.bool_)
         self.hold_q = np.zeros(n)
         self.hold_after = np.zeros(n)
@@ -70,12 +93,20 @@ class JointControllerBank:
 
     def strain_at(self, q: FloatArray) -> FloatArray:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
-        x = self.plant.joint.chain_displacement_mm(np.asarray(q, float))
-        e0 = self.plant.preload_elongation_mm
+        # JointParams.chain_displacement_mm: 1e3 r_eff (q - q_neutral), in its order of operations
+        x = self._mm_per_rad * (np.asarray(q, float) - self._q_neutral)
+        e0 = self._e0
         out = np.empty(np.shape(x) + (2,))  # [e0 - x, e0 + x] / L without np.stack's per-call cost
         np.subtract(e0, x, out=out[..., 0])
         np.add(e0, x, out=out[..., 1])
-        out /= self.plant.muscle.wire_length_mm
+        out /= self._wire_mm
+        return out
+
+    def _strain_rows(self, q: float) -> FloatArray:
+        """(n, 2): every wrist's row the bundle strains at the one angle q (the reference's)."""
+        x = self._mm_per_rad * (q - self._q_neutral)  # strain_at's operations on floats: the same numbers
+        out = np.empty((self.n, 2))
+        out[:] = ((self._e0 - x) / self._wire_mm, (self._e0 + x) / self._wire_mm)
         return out
 
     def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float
@@ -90,17 +121,29 @@ class JointControllerBank:
             T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
             Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
             return None, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
-        assert self.adaptive is not None
-        o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
-        force = np.stack([o.force_1_N, o.force_2_N], axis=-1)
+        assert self.adaptive is not None and self._k is not None
+        # AdaptiveController.update's checks, once for the bank: dt from increasing stamps, finite inputs
+        if not (math.isfinite(dt) and dt > 0):
+            raise ModelInputError('dt', dt, '(0, inf)', 's')
+        x = self._x
+        x[0], x[1], x[2], x[3], x[4] = q, qdot, q_d, qdot_d, qddot_d
+        if not np.isfinite(x).all():
+            for name, unit, row in zip(('q', 'qdot', 'q_d', 'qdot_d', 'qddot_d'),
+                                       ('rad', 'rad/s', 'rad', 'rad/s', 'rad/s^2'), x):
+                check_finite(name, row, unit)  # raises, naming the first non-finite input
+        st = self.adaptive.state
+        out = np.empty((self.n, adaptive_kernel.OUT_LEN))
+        adaptive_kernel.update(x, float(dt), st.theta_hat, st.beta_hat, st.d_hat, self._k, out)
+        force, saturated = out[:, :2], out[:, 7] != 0.0  # ControlOutput's force_1_N, force_2_N and saturated
         if p.mode == 'inverse_adaptive':
             _reversal_lead_many(np.ascontiguousarray(q, float), float(q_d), float(qdot_d), float(qddot_d),
                                 float(p.reversal_lead_s), REVERSAL_STEP_RAD, self.hold_on, self.hold_q,
                                 self.hold_after, self._target)
-            return force, self.strain_at(self._target), None, o.saturated
-        T = p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N
-        Tc = np.minimum(np.maximum(T, lo), hi)
-        return force, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
+            return force, self.strain_at(self._target), None, saturated
+        Tc, sat_T = np.empty((self.n, 2)), np.empty(self.n, np.bool_)
+        _temperature_map(force, p.temperature_mid_C, p.adaptive.preload_N, p.force_per_degC_N, lo, hi, saturated, Tc,
+                         sat_T)
+        return force, self._strain_rows(q_now), Tc, sat_T
 
 
 @tem_kernel._jit

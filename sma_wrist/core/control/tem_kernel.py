@@ -83,13 +83,13 @@ def held_command_range(x, candidates, horizon_s, n_sub, face_min, face_max, th_c
     least = np.zeros(2)
     lo[:] = np.inf
     hi[:] = -np.inf
+    top = np.empty(2)  # allocated once: two heap allocations per candidate cost more than its bounds
+    bottom = np.empty(2)
     for k in range(candidates.size):
         for l in range(2):
             u[l] = candidates[k]
             for f in range(2):
                 y[l, f] = x[l, f]
-        top = np.empty(2)
-        bottom = np.empty(2)
         for l in range(2):
             top[l] = max(y[l, 0], y[l, 1])
             bottom[l] = min(y[l, 0], y[l, 1])

@@ -406,10 +406,11 @@ def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0,
     Tg = np.empty((2, G))
     f = np.empty((2, G))
     P, A, known, stack = np.empty((2, G)), np.empty((2, G)), np.empty((2, G), np.bool_), np.empty((G, 2), np.int64)
+    coef, slope = np.empty(8), np.empty(8)  # once, not two heap allocations per wire
     for s in range(T_prev.shape[0]):
         if not (math.isfinite(y_d[s]) and m_lo <= m[s] <= m_hi):
             ok = False
-        coef, _ = _hk._envelopes(stacked, edges, m[s])
+        _hk._envelopes_into(stacked, edges, m[s], coef, slope)
         T[s], sat[s] = _nearest_root(min(max(T_prev[s], lo[s]), hi[s]), heating[s], coef, w[s], y_d[s], r, wts, c, d,
                                      p0, k_f, lo[s], hi[s], tol, Tg, f, P, A, known, stack)
         # elongation at the answer against the frozen memory (the residual of target 0), the
@@ -429,9 +430,10 @@ def _observe_step(T, m, T_lo, T_hi, m_lo, m_hi, stacked, edges, r, w, heating, T
     for s in range(S):
         if math.isnan(T[s]) or math.isnan(m[s]):
             return False
+    coef, slope = np.empty(8), np.empty(8)  # once, not two heap allocations per wire
     for s in range(S):
         Ts = min(max(T[s], T_lo), T_hi)
-        coef, _ = _hk._envelopes(stacked, edges, min(max(m[s], m_lo), m_hi))
+        _hk._envelopes_into(stacked, edges, min(max(m[s], m_lo), m_hi), coef, slope)
         gl = coef[4] * math.tanh(coef[5] * Ts + coef[6]) + coef[7]
         gr = coef[0] * math.tanh(coef[1] * Ts + coef[2]) + coef[3]
         for i in range(r.shape[0]):
