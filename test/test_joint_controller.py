@@ -151,7 +151,8 @@ def test_reversal_lead_zero_is_the_strain_at_q_d_throughout():
 
 @pytest.mark.parametrize('kw', [dict(mode='mpc'), dict(temperature_mid_C=90.0), dict(force_per_degC_N=0.0),
                                 dict(temperature_min_C=float('nan')), dict(reversal_lead_s=-1.0),
-                                dict(pid_reference_lead_s=-0.5), dict(direct_reference_lead_s=float('inf'))])
+                                dict(pid_reference_lead_s=-0.5), dict(direct_reference_lead_s=float('inf')),
+                                dict(pid_output_filter_s=-0.1), dict(pid_output_filter_s=float('nan'))])
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ParameterError):
         JointControllerParams(**kw)
@@ -185,3 +186,22 @@ def test_reference_ahead_is_the_sine_ahead_and_each_mode_uses_its_own_lead():
     for k in range(20):
         c0, c1 = (jc.update(0.3, 0.0, 0.5, 0.05, -0.005, 0.01) for jc in inv)
         np.testing.assert_array_equal(c0.force_N, c1.force_N)
+
+
+def test_pid_output_filter_is_a_first_order_lag_on_the_pid_output():
+    """pid_output_filter_s = tau: after an error step the temperature request follows Kp e with
+    1 - (tau / (tau + dt))^k (backward Euler); tau 0 gives the PID's output itself. No integral (ki 0) so the
+    PID's own output is Kp e throughout."""
+    from sma_wrist.core.control.pid import PIDParams
+    pid = PIDParams(kp=300.0, ki=0.0, kd=0.0, output_min=-30.0, output_max=30.0)
+    tau, dt = 0.3, 0.01
+    lagged, plain = (JointController(JointControllerParams(mode='pid', pid=pid, pid_reference_lead_s=0.0,
+                                                           pid_output_filter_s=x)) for x in (tau, 0.0))
+    for jc in (lagged, plain):
+        for _ in range(10):
+            jc.update(0.5, 0.0, 0.5, 0.0, 0.0, dt)
+    for k in range(1, 31):
+        c, d = lagged.update(0.5, 0.0, 0.52, 0.0, 0.0, dt), plain.update(0.5, 0.0, 0.52, 0.0, 0.0, dt)
+        assert d.temperature_desired_C[0] == pytest.approx(50.0 + 6.0)
+        assert c.temperature_desired_C[0] == pytest.approx(50.0 + 6.0 * (1 - (tau / (tau + dt)) ** k))
+        assert c.temperature_desired_C[0] + c.temperature_desired_C[1] == pytest.approx(100.0)

@@ -77,6 +77,9 @@ FIELD_DOCS: dict[str, tuple[Any, ...]] = {
                              'forward (docs/control.md; 0 = the seed\'s PID on q_d(t))', 's', (0.0, 10.0)),
     'direct_reference_lead_s': ('direct_adaptive mode: the law acts on the reference this far ahead, the TEMs\' '
                                 'lag fed forward (docs/control.md; 0 = the seed\'s law on q_d(t))', 's', (0.0, 10.0)),
+    'pid_output_filter_s': ('pid mode: time constant of a first-order low-pass on the PID output, against the '
+                            'joint\'s stick-slip reaching the TEMs (docs/control.md "PID chattering"; 0 = off)',
+                            's', (0.0, 10.0)),
 }
 
 

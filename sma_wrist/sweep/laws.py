@@ -16,8 +16,8 @@ from numpy.typing import NDArray
 
 from sma_wrist.core.control import adaptive_kernel, tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
-from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, reference_ahead,
-                                                     time_to_meet)
+from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, output_filter_step,
+                                                     reference_ahead, time_to_meet)
 from sma_wrist.core.control.pid import PID
 from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
                                         target_prefilter)
@@ -90,6 +90,7 @@ class JointControllerBank:
         self.hold_q = np.zeros(n)
         self.hold_after = np.zeros(n)
         self._target = np.zeros(n)
+        self.u_filtered: FloatArray | None = None  # pid_output_filter_s's state (n,) [degC]
 
     def strain_at(self, q: FloatArray) -> FloatArray:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
@@ -118,7 +119,8 @@ class JointControllerBank:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
-            T = np.stack([p.temperature_mid_C + o.u, p.temperature_mid_C - o.u], axis=-1)
+            self.u_filtered = u = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
+            T = np.stack([p.temperature_mid_C + u, p.temperature_mid_C - u], axis=-1)
             Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
             return None, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
         assert self.adaptive is not None and self._k is not None

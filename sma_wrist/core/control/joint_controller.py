@@ -113,6 +113,14 @@ def reference_ahead(q_d: float, qdot_d: float, qddot_d: float, lead_s: float) ->
     return q_d + qdot_d * lead_s + 0.5 * qddot_d * lead_s * lead_s, qdot_d + qddot_d * lead_s
 
 
+def output_filter_step(y: FloatArray | None, u: FloatArray, dt: float, tau: float) -> FloatArray:
+    """One backward-Euler step of the first-order low-pass 1 / (tau s + 1) [tau, dt in s] from its state y
+    to the new input u (the PID's output, degC); None (the first sample) or tau 0: u itself."""
+    if y is None or tau <= 0:
+        return u
+    return y + dt / (tau + dt) * (u - y)
+
+
 def bundle_strain(plant: PlantParams, q: float) -> FloatArray:
     """Strains (elongation / wire length) of the two bundles at angle q [rad] (Eq. 4.17, muscle.py):
     y_1 = e0 - x, y_2 = e0 + x with x the chain travel from q_neutral and e0 the pre-load elongation."""
@@ -127,8 +135,9 @@ class JointControllerParams:
 
     mode: Mode = 'inverse_adaptive'  # the seed's controller; under 5 % on this plant (docs/control.md)
     adaptive: AdaptiveParams = field(default_factory=tuned_adaptive)
-    #: PID on the angle error, output in degC of differential temperature (docs/control.md)
-    pid: PIDParams = field(default_factory=lambda: PIDParams(kp=300.0, ki=60.0, kd=0.0, output_min=-30.0,
+    #: PID on the angle error, output in degC of differential temperature (docs/control.md; Kp / Ki
+    #: 300 / 60 until the output filter below, docs/control.md "PID chattering")
+    pid: PIDParams = field(default_factory=lambda: PIDParams(kp=400.0, ki=30.0, kd=0.0, output_min=-30.0,
                                                               output_max=30.0))
     temperature_mid_C: float = 50.0  # centre of the muscles' working band [degC]
     temperature_min_C: float = 20.0
@@ -144,6 +153,10 @@ class JointControllerParams:
     #: (docs/control.md, "Direct adaptive and PID off-model")
     pid_reference_lead_s: float = 1.25
     direct_reference_lead_s: float = 1.0
+    #: pid mode: first-order low-pass on the PID's output [s] (:func:`output_filter_step`): the joint's
+    #: stick-slip (a ~1 Hz sawtooth of the angle error) and the potentiometer noise times Kp swung the
+    #: TEMs between heating and cooling; 0 = the seed's PID output as it is (docs/control.md "PID chattering")
+    pid_output_filter_s: float = 0.3
 
     @property
     def reference_lead_s(self) -> float:
@@ -154,7 +167,7 @@ class JointControllerParams:
         if self.mode not in MODES:
             raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
         for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N',
-                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s'):
+                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s'):
             if not math.isfinite(getattr(self, name)):
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
@@ -162,7 +175,7 @@ class JointControllerParams:
                                  f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
         if not self.force_per_degC_N > 0:
             raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
-        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s'):
+        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s'):
             if not getattr(self, name) >= 0:
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be >= 0')
 
@@ -190,6 +203,7 @@ class JointController:
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode)) if p.mode != 'pid' else None
         self.pid = PID(p.pid) if p.mode == 'pid' else None
         self.hold: tuple[float, float] | None = None  # (held angle, direction after the turn)
+        self.u_filtered: FloatArray | None = None  # pid_output_filter_s's state [degC]
 
     def strain_at(self, q: float) -> FloatArray:
         """Bundle strains (elongation / wire length) at angle q (:func:`bundle_strain`)."""
@@ -247,7 +261,8 @@ class JointController:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
-            u = float(o.u[0])
+            self.u_filtered = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
+            u = float(self.u_filtered[0])
             T, clipped = self._clip_T(np.array([p.temperature_mid_C + u, p.temperature_mid_C - u]))
             return JointCommand(None, strain, T, bool(o.saturated[0]) or clipped,
                                 {'error_rad': float(o.error[0]), 'u_degC': u, 'integral': float(o.i_term[0])})
@@ -264,4 +279,5 @@ class JointController:
         return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)
 
 
-__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES', 'bundle_strain', 'reference_ahead']
+__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES', 'bundle_strain', 'reference_ahead',
+           'output_filter_step']
