@@ -76,6 +76,13 @@ def qos_for(topic: Topic) -> QoSProfile:
                       durability=DurabilityPolicy.VOLATILE)
 
 
+#: the chain's pre-load elongation e0 (Eq. 4.17): plant_sim, hysteresis_compensator and adaptive_controller
+#: must agree on it; `sma-wrist identify hysteresis` writes the one calibrated for the wire (core/plant/preload.py)
+PRELOAD_PARAM = Param('preload_elongation_mm', 1.98, "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; "
+                      'the same value in plant_sim, hysteresis_compensator and adaptive_controller; the identified '
+                      "wire's in its wrist_params.yaml, docs/identification.md)", 'mm', (0.1, 10.0), runtime=False)
+
+
 class WristNode(Node):
     """Base of the sma_wrist nodes: parameters from specs, contract topics, diagnostics."""
 

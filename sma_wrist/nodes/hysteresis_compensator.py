@@ -41,7 +41,7 @@ from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import PRELOAD_PARAM, Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 #: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
@@ -75,6 +75,7 @@ class HysteresisCompensator(WristNode):
               "model's valid range)", 'degC', (-60.0, 400.0)),
         Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
               '(empty: the built-in set)', runtime=False),
+        PRELOAD_PARAM,
         Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
               choices=('numerical', 'analytic', 'auto')),
         Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
@@ -117,7 +118,7 @@ class HysteresisCompensator(WristNode):
         self.ticks: dict[int, list[float]] = {}
         self.t_tick_ns: int | None = None  # stamp of the last tick the memory took
         self.angle_seen = False  # joint_states arrive: a tick waits for its angle
-        self.plant = PlantParams()  # chain geometry of the measured strains
+        self.plant = PlantParams(preload_elongation_mm=self.p['preload_elongation_mm'])  # chain of the measured strains
         self.started = False
         self._saturated: bool | None = None  # last state reported on /diagnostics
         self._shift_at_limit: tuple[bool, ...] = (False, False)  # per wire, last state reported on /diagnostics
