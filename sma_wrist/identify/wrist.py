@@ -242,7 +242,8 @@ def measured_wire_runs(files: list[str | Path], controllers: tuple[str, ...] = (
         wp = doc['wrist_params']
         if not wp['file']:
             raise ParameterError(f'no wrist parameters for this wire: {"; ".join(wp["problems"])}')
-        out['wire'] = {'window_C': wp['window_C'], 'problems': wp['problems'], 'files': [str(f) for f in files]}
+        out['wire'] = {'window_C': wp['window_C'], 'problems': wp['problems'], 'files': [str(f) for f in files],
+                       'preload_elongation_mm': wp['preload_elongation_mm']}
         cases: list[_Case] = [(f'measured wire, TEMs rated {tem_top_C:g} degC', wp['file'], wp['problems'], None,
                                controllers)]
         with_leads = tuple(c for c in controllers if c in ('direct_adaptive', 'pid'))
