@@ -46,8 +46,8 @@ def test_the_nodes_take_the_pre_load_and_refuse_a_bad_one() -> None:
 
     from sma_wrist.nodes.common import start_up_refusal
     for bad in (-1.0, float('nan')):
-        with Runtime(params={'/plant_sim': {'preload_elongation_mm': bad}}) as rt:
-            with pytest.raises((InvalidParameterValueException, SmaWristError), match='preload_elongation_mm') as e:
-                rt.add(PlantSim)
+        with Runtime(params={'/plant_sim': {'preload_elongation_mm': bad}}) as rt, \
+                pytest.raises((InvalidParameterValueException, SmaWristError), match='preload_elongation_mm') as e:
+            rt.add(PlantSim)
         assert 'preload_elongation_mm' in (start_up_refusal(e.value, PlantSim) or '')  # what the user is told
     assert np.isfinite(PlantParams().preload_elongation_mm)

@@ -7,7 +7,7 @@ calibrated so that +-30 deg about q_neutral is reachable quasi-statically up to 
 TEM-reachable temperature window. :func:`calibrate_preload` applies the same calibration to any SD-GPI
 set: the smallest e0 with which slow antagonistic swings between the window's ends reach the whole
 target range at every payload of the given range (the lightest reaches least far down, the heaviest
-least far up), found by bisection on the plant itself.
+least far up), found by scans of the plant itself (all candidates of a scan in one batched run).
 """
 from __future__ import annotations
 
@@ -47,7 +47,7 @@ def swing_range(params: PlantParams, payload_kg: np.ndarray, T_lo_C: float, T_hi
     q_min = np.full(plant.n, np.inf)
     q_max = np.full(plant.n, -np.inf)
     T = np.empty((plant.n, 2))
-    for k in range(int(round(cycles * period_s / dt))):
+    for k in range(round(cycles * period_s / dt)):
         t = (k + 1) * dt
         ph = 0.5 * (1.0 - math.cos(2.0 * math.pi * t / period_s))
         T[:, 0] = T_lo_C + (T_hi_C - T_lo_C) * ph
@@ -84,8 +84,7 @@ def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
     The smallest e0 in ``bracket_mm`` with which q_neutral +- 30 deg is reachable quasi-statically
     (:func:`reach_margins`) at both ends of ``payload_kg``: the heaviest payload must reach the top, the
     lightest the bottom. The top is not monotonic in e0 (a pair pulled too tight hardly moves), so a scan
-    in ``step_mm`` finds the first e0 that reaches it and a second scan in ``tolerance_mm`` below it
-    refines; raises :class:`ParameterError`, naming what is missing, when no e0 reaches the range.
+    in ``step_mm`` finds the first e0 that reaches it and scans 5x finer below it refine to ``tolerance_mm``; raises :class:`ParameterError`, naming what is missing, when no e0 reaches the range.
     """
     lo_C, hi_C = (float(v) for v in window_C)
     m_lo, m_hi = (float(v) for v in payload_kg)
@@ -98,19 +97,19 @@ def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
     q_n = params.joint.q_neutral_rad
     q_low, q_high = q_n - TARGET_HALF_RANGE_RAD, q_n + TARGET_HALF_RANGE_RAD
     coarse = np.arange(a, b + 0.5 * step_mm, step_mm)
-    _down, up = reach_margins(params, coarse, (lo_C, hi_C), (m_lo, m_hi))
+    down, up = reach_margins(params, coarse, (lo_C, hi_C), (m_lo, m_hi))
     hit = np.flatnonzero(up >= 0.0)
     if hit.size == 0:
         raise ParameterError(f'{params.hysteresis.name}: no pre-load of {a:g}-{b:g} mm lifts {m_hi:g} kg to '
                              f'{q_high:.3f} rad with the muscles at {lo_C:.1f}-{hi_C:.1f} degC (best '
                              f'{q_high + up.max():.3f} rad at {coarse[up.argmax()]:.2f} mm): a lighter payload or a '
                              'hotter window is needed')
-    e0, down_e0 = float(coarse[hit[0]]), float(_down[hit[0]])
+    e0, down_e0 = float(coarse[hit[0]]), float(down[hit[0]])
     step = step_mm
     while hit[0] > 0 and step > tolerance_mm * 1.001:
         # e0 - step did not reach: try the points between at a 5x finer step (one batched run a pass)
         fine_step = max(step / 5.0, tolerance_mm)
-        fine = e0 - step + fine_step * np.arange(1, int(round(step / fine_step)))
+        fine = e0 - step + fine_step * np.arange(1, round(step / fine_step))
         step = fine_step
         down, up = reach_margins(params, fine, (lo_C, hi_C), (m_lo, m_hi))
         ok = np.flatnonzero(up >= 0.0)
