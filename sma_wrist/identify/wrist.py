@@ -99,6 +99,7 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     parameters are still returned so the user sees what would be needed. ``preload_mm``: the
     chain's pre-load elongation; None calibrates it for this wire (:func:`wire_preload`).
     """
+    from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.core.thermal.heat_balance import ThermalParams
     lo, hi = operating_window(params)
     face = tem_window_C if tem_window_C is not None else ThermalParams().window_C
@@ -116,8 +117,8 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
         try:
             preload_mm = wire_preload(params, thermal_file, (lo, hi))
         except ParameterError as e:  # the built-in pre-load stays; the user sees why
-            problems.append(f'pre-load: {e}; kept the built-in 1.98 mm')
-            preload_mm = 1.98
+            preload_mm = PlantParams.preload_elongation_mm
+            problems.append(f'pre-load: {e}; kept the built-in {preload_mm:g} mm')
     f = str(hysteresis_file)
     lo_a, hi_a = float(np.clip(lo, 0.0, NODE_MAX_C)), float(np.clip(hi, 0.0, NODE_MAX_C))  # the node's bounds
     out: dict[str, dict[str, Any]] = {
