@@ -171,3 +171,31 @@ def test_many_wires_in_one_compensator_are_the_two_wire_ones_to_the_bit() -> Non
                 np.testing.assert_array_equal(a[w], b)
         clipped_seen |= bool(res.load_clipped.any())
     assert np.ptp(bank.shift_C) > 0.1 and clipped_seen
+
+
+def test_strain_informative_holds_on_a_stop_and_while_still_with_a_slack_wire() -> None:
+    """core.hysteresis.compensation.strain_informative (docs/control.md, ctrl14e): per wrist, both wires."""
+    from sma_wrist.core.hysteresis.compensation import strain_informative
+    taut, slack = [1e8, 1e8], [1e8, 0.0]
+    q = np.array([0.5, -0.35, 1.4, 0.5, 0.5, 0.5])
+    q_prev = np.array([0.5, -0.35, 1.4, 0.5, 0.49, 0.5])  # the fifth moves (1 rad/s), the others stand
+    stress = np.array([taut, taut, taut, slack, slack, [0.0, 5e5]])
+    got = strain_informative(q, q_prev, 0.01, stress, (-0.35, 1.40))
+    assert got.shape == (6, 2) and np.all(got[:, 0] == got[:, 1])
+    assert got[:, 0].tolist() == [True, False, False, False, True, False]
+
+
+def test_track_holds_the_shift_where_told_and_is_unchanged_elsewhere() -> None:
+    """MuscleCompensator.track(adapt=...): a held wire keeps shift and stroke; the other steps as without the mask."""
+    m = MuscleGeometry().stress_Pa(np.array([0.8, 0.8]))
+    runs = []
+    for adapt in (None, np.array([True, False])):
+        comp = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, stroke_gain_per_s=1.0)
+        comp.reset(np.full(2, 55.0), m)
+        for k in range(50):
+            comp.track(np.full(2, 55.0 + 0.1 * k), m, np.array([0.03, 0.03]), 0.01, adapt)
+        runs.append((comp.shift_C.copy(), comp.stroke.copy()))
+    (free_shift, free_stroke), (held_shift, held_stroke) = runs
+    assert abs(free_shift[1]) > 0.1  # the strain disagrees with the model: the free wire's shift moves
+    assert held_shift[1] == 0.0 and held_stroke[1] == 1.0
+    assert held_shift[0] == free_shift[0] and held_stroke[0] == free_stroke[0]

@@ -298,9 +298,9 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     hot = shifted_wire(default_sdgpi(), 20.0)  # transforms at 55-98 degC at 0.8 kgf
     lo, hi = operating_window(hot)
     assert lo == pytest.approx(40.1, abs=0.2) and hi == pytest.approx(100.0, abs=0.2)  # defaults + 20 degC
-    nodes, problems = wrist_params('wire.yaml', hot)  # the seed's TEMs: 0-80 degC
+    nodes, problems = wrist_params('wire.yaml', hot, preload_mm=1.98)  # the seed's TEMs: 0-80 degC
     assert len(problems) == 1 and 'TEMs work only up to 80' in problems[0]
-    nodes, problems = wrist_params('wire.yaml', hot, 'tems.yaml', (0.0, 120.0))
+    nodes, problems = wrist_params('wire.yaml', hot, 'tems.yaml', (0.0, 120.0), preload_mm=1.98)
     assert problems == []
     assert nodes['hysteresis_compensator']['temperature_max_C'] == pytest.approx(hi, abs=0.05)
     assert nodes['adaptive_controller']['temperature_min_C'] == pytest.approx(lo, abs=0.05)
@@ -311,6 +311,12 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     doc = yaml.safe_load(Path(wp['file']).read_text())
     assert doc['hysteresis_compensator']['ros__parameters']['temperature_max_C'] > 105.0
     assert any('TEMs work only up to 80' in p for p in wp['problems'])
+    # and the chain's pre-load, one value for the three nodes that use the chain (core/plant/preload.py): the seed's
+    # TEMs hold this wire's muscles only at its cold end, so no pre-load reaches the range and it says so
+    e0 = {n: doc[n]['ros__parameters']['preload_elongation_mm'] for n in ('plant_sim', 'hysteresis_compensator',
+                                                                          'adaptive_controller')}
+    assert set(e0.values()) == {wp['preload_elongation_mm']} == {1.98}
+    assert any(p.startswith('pre-load: ') and 'kept the built-in 1.98 mm' in p for p in wp['problems'])
 
 
 def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_does_not() -> None:

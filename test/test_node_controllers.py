@@ -520,18 +520,19 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     stress = MuscleGeometry().stress_Pa(np.array([0.8, 0.7]))
     rest = bundle_strain(PlantParams(), 0.5)
 
-    def run(gain: float):  # type: ignore[no-untyped-def]
+    def run(gain: float, hold: bool = False, q: float = -0.1, stress=stress, n: int = 400):  # type: ignore[no-untyped-def]
         with Runtime() as rt:
             probe = probe_factory(rt, ('/diagnostics',))
             node = rt.add(HysteresisCompensator, parameter_overrides=[
-                Parameter('temperature_source', value='thermocouple'), Parameter('shift_gain_per_s', value=gain)])
+                Parameter('temperature_source', value='thermocouple'), Parameter('shift_gain_per_s', value=gain),
+                Parameter('hold_shift_on_stop', value=hold)])
             for i in (1, 2):
                 probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
-            for j in range(400):  # 4 s at 100 Hz
+            for j in range(n):  # 4 s at 100 Hz
                 header = Header(stamp=Time(sec=1 + j // 100, nanosec=(j % 100) * 10_000_000))
                 for i in (1, 2):
                     probe.publish(f'/wrist/muscle_{i}/temperature', header=header, temperature=55.0)
-                probe.publish('/wrist/joint_states', header=header, name=['wrist'], position=[-0.1], velocity=[0.0],
+                probe.publish('/wrist/joint_states', header=header, name=['wrist'], position=[q], velocity=[0.0],
                               effort=[0.0])
                 for kind, v in (('strain', rest), ('stress', stress)):
                     for i in (1, 2):
@@ -545,3 +546,8 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     assert len(warned) == 1 and warned[0].level == b'\x01'  # WARN, once
     assert 'of muscle 1 at the +-15 degC limit' in warned[0].message and 'muscle 2' not in warned[0].message
     assert run(0.0)[0] == []
+    # hold_shift_on_stop (docs/control.md, ctrl14e): both taut and the joint off its stops, the shift still learns;
+    # on the stop (-0.35 rad), or standing still with muscle 2 slack, it holds
+    assert run(2.0, hold=True, n=100)[1][0] > 3.0
+    assert np.all(run(2.0, hold=True, q=-0.35, n=100)[1] == 0.0)
+    assert np.all(run(2.0, hold=True, stress=stress * [1.0, 0.0], n=100)[1] == 0.0)

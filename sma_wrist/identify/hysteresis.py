@@ -295,7 +295,8 @@ def _wrist_params(out: Any, params: Any, thermal_file: str | None, progress: Any
         return {'file': None, 'window_C': None, 'problems': [str(e)]}
     f = write_wrist_params(out / 'wrist_params.yaml', nodes, problems)
     progress(f'wrote {f} (sma-wrist run --params-file {f})' + ''.join(f'\nPROBLEM: {p}' for p in problems))
-    return {'file': str(f), 'window_C': list(operating_window(params)), 'problems': problems}
+    return {'file': str(f), 'window_C': list(operating_window(params)), 'problems': problems,
+            'preload_elongation_mm': nodes['plant_sim']['preload_elongation_mm']}
 
 
 def options_from_args(a: argparse.Namespace) -> Options:

@@ -90,13 +90,16 @@ def operating_window(params: SDGPIParams, load_kgf: float = WRIST_LOAD_KGF) -> t
 
 
 def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file: str | Path | None = None,
-                 tem_window_C: tuple[float, float] | None = None) -> tuple[dict[str, dict[str, Any]], list[str]]:
+                 tem_window_C: tuple[float, float] | None = None,
+                 preload_mm: float | None = None) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """(ROS parameters per node, problems) to run the wrist on this wire.
 
     ``tem_window_C``: the TEMs' operating window (the thermal file's ``window_C``; default
     the seed's 0-80 degC). A problem is any window the TEMs or the nodes cannot give; the
-    parameters are still returned so the user sees what would be needed.
+    parameters are still returned so the user sees what would be needed. ``preload_mm``: the
+    chain's pre-load elongation; None calibrates it for this wire (:func:`wire_preload`).
     """
+    from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.core.thermal.heat_balance import ThermalParams
     lo, hi = operating_window(params)
     face = tem_window_C if tem_window_C is not None else ThermalParams().window_C
@@ -110,16 +113,24 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     if hi + TEM_MUSCLE_MARGIN_C > NODE_MAX_C:
         problems.append(f'the window top {hi:.0f} degC + {TEM_MUSCLE_MARGIN_C:g} exceeds the nodes\' limit '
                         f'{NODE_MAX_C:g} degC')
+    if preload_mm is None:
+        try:
+            preload_mm = wire_preload(params, thermal_file, (lo, hi))
+        except ParameterError as e:  # the built-in pre-load stays; the user sees why
+            preload_mm = PlantParams.preload_elongation_mm
+            problems.append(f'pre-load: {e}; kept the built-in {preload_mm:g} mm')
     f = str(hysteresis_file)
     lo_a, hi_a = float(np.clip(lo, 0.0, NODE_MAX_C)), float(np.clip(hi, 0.0, NODE_MAX_C))  # the node's bounds
     out: dict[str, dict[str, Any]] = {
         # the plant only reports above its threshold: capped at the parameter's bound, not a problem
         'plant_sim': {'hysteresis_file': f,
-                      'max_muscle_temperature_C': round(min(hi + PLANT_MUSCLE_MARGIN_C, NODE_MAX_C), 1)},
+                      'max_muscle_temperature_C': round(min(hi + PLANT_MUSCLE_MARGIN_C, NODE_MAX_C), 1),
+                      'preload_elongation_mm': preload_mm},
         'hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': round(lo, 1),
-                                   'temperature_max_C': round(hi, 1)},
+                                   'temperature_max_C': round(hi, 1), 'preload_elongation_mm': preload_mm},
         'adaptive_controller': {'temperature_min_C': round(lo_a, 1), 'temperature_max_C': round(hi_a, 1),
-                                'temperature_mid_C': round(0.5 * (lo_a + hi_a), 1)},
+                                'temperature_mid_C': round(0.5 * (lo_a + hi_a), 1),
+                                'preload_elongation_mm': preload_mm},
         'tem_controller': {'max_muscle_temperature_C': round(min(hi + TEM_MUSCLE_MARGIN_C, NODE_MAX_C), 1)},
     }
     if thermal_file is not None:
@@ -129,11 +140,24 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     return out, problems
 
 
+def wire_preload(params: SDGPIParams, thermal_file: str | Path | None, window_C: tuple[float, float]) -> float:
+    """The chain's pre-load elongation [mm] for this wire (core/plant/preload.py, the built-in 1.98 mm's calibration):
+    +-30 deg about q_neutral reachable at 0-0.7 kg with the muscles between what the TEMs hold at their command
+    limits (the thermal file's heat balance, else Table 4.9's) inside the controllers' window ``window_C``."""
+    from sma_wrist.core.plant.preload import calibrate_preload, reachable_window
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.core.thermal.heat_balance import ThermalParams
+    from sma_wrist.core.thermal.params_file import load_thermal_file
+    thermal = load_thermal_file(thermal_file) if thermal_file else ThermalParams()
+    return calibrate_preload(PlantParams(hysteresis=params), reachable_window(thermal, window_C))
+
+
 def write_wrist_params(path: str | Path, nodes: dict[str, dict[str, Any]], problems: list[str]) -> Path:
     """The ROS params file (``sma-wrist run --params-file``, ``ros2 launch ... params_file:=``)."""
     import yaml
     head = ['sma_wrist parameters for an identified wire (sma-wrist identify; docs/identification.md).',
-            'Temperature windows placed around the wire\'s transitions with the built-in wire\'s margins.']
+            'Temperature windows placed around the wire\'s transitions with the built-in wire\'s margins;',
+            'the chain pre-load (preload_elongation_mm) calibrated for the wire like the built-in 1.98 mm.']
     head += [f'PROBLEM: {p}' for p in problems]
     doc = {node: {'ros__parameters': values} for node, values in nodes.items()}
     p = Path(path)
@@ -219,7 +243,8 @@ def measured_wire_runs(files: list[str | Path], controllers: tuple[str, ...] = (
         wp = doc['wrist_params']
         if not wp['file']:
             raise ParameterError(f'no wrist parameters for this wire: {"; ".join(wp["problems"])}')
-        out['wire'] = {'window_C': wp['window_C'], 'problems': wp['problems'], 'files': [str(f) for f in files]}
+        out['wire'] = {'window_C': wp['window_C'], 'problems': wp['problems'], 'files': [str(f) for f in files],
+                       'preload_elongation_mm': wp['preload_elongation_mm']}
         cases: list[_Case] = [(f'measured wire, TEMs rated {tem_top_C:g} degC', wp['file'], wp['problems'], None,
                                controllers)]
         with_leads = tuple(c for c in controllers if c in ('direct_adaptive', 'pid'))

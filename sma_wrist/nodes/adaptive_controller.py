@@ -31,7 +31,8 @@ from sma_wrist.core.control.joint_controller import JointControllerParams, time_
 from sma_wrist.core.control.pid import PIDParams
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
-from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
+from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.nodes.common import MUSCLE_FRAMES, PRELOAD_PARAM, Freshness, Param, WristNode, finite, main_for
 
 DEFAULTS = JointControllerParams()
 
@@ -117,6 +118,7 @@ def _own_fields() -> tuple[Param, ...]:
 class AdaptiveController(WristNode):
     PARAMS = (
         Param('stale_timeout_s', 0.25, 'reference/joint-state age that stops the output', 's', (0.01, 10.0)),
+        PRELOAD_PARAM,
     ) + _own_fields() + _fields_as_params(AdaptiveParams, 'adaptive.', skip=('mode',), default=DEFAULTS.adaptive) \
         + _fields_as_params(PIDParams, 'pid.', default=DEFAULTS.pid)
 
@@ -125,7 +127,8 @@ class AdaptiveController(WristNode):
         adaptive_kernel.warm_up()  # compile before the first sample, not inside the loop
         pid_kernel.warm_up()
         time_to_meet(0.0, 0.1, -0.1)  # the reversal lead's, compiled as well
-        self.law = JointLaw(self._core_params(self.p))
+        self.chain = PlantParams(preload_elongation_mm=self.p['preload_elongation_mm'])  # the strains it asks for
+        self.law = JointLaw(self._core_params(self.p), self.chain)
         self.geometry = MuscleGeometry()
         self.reference: tuple[float, float, float] | None = None
         self.T_meas = np.full(2, np.nan)
@@ -166,7 +169,7 @@ class AdaptiveController(WristNode):
 
     def apply(self, changed: Mapping[str, Any]) -> None:
         # Gains change in place of the law; a mode change restarts the estimates.
-        self.law = JointLaw(self._core_params(self.p))
+        self.law = JointLaw(self._core_params(self.p), self.chain)
 
     # -- inputs ----------------------------------------------------------------------
     def _on_reference(self, msg: Any) -> None:

@@ -27,6 +27,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from sma_wrist.contract import Topic, load_contract
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.plant.wrist import PlantParams
 
 #: a /diagnostics condition that keeps changing is logged at most this often per key [s]
 LOG_THROTTLE_S = 10.0
@@ -74,6 +75,13 @@ def qos_for(topic: Topic) -> QoSProfile:
                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+
+
+#: the chain's pre-load elongation e0 (Eq. 4.17): plant_sim, hysteresis_compensator and adaptive_controller
+#: must agree on it; `sma-wrist identify hysteresis` writes the one calibrated for the wire (core/plant/preload.py)
+PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm, "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; "
+                      'the same value in plant_sim, hysteresis_compensator and adaptive_controller; the identified '
+                      "wire's in its wrist_params.yaml, docs/identification.md)", 'mm', (0.1, 10.0), runtime=False)
 
 
 class WristNode(Node):

@@ -36,12 +36,12 @@ from sensor_msgs.msg import Temperature
 from sma_wrist.core.control.joint_controller import bundle_strain
 from sma_wrist.core.control.tem import DriveLimits, MuscleTemperatureObserver, TemperatureObserverParams
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import PRELOAD_PARAM, Param, WristNode, finite, main_for
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 #: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
@@ -75,6 +75,7 @@ class HysteresisCompensator(WristNode):
               "model's valid range)", 'degC', (-60.0, 400.0)),
         Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
               '(empty: the built-in set)', runtime=False),
+        PRELOAD_PARAM,
         Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
               choices=('numerical', 'analytic', 'auto')),
         Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
@@ -87,6 +88,9 @@ class HysteresisCompensator(WristNode):
               "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
               '"Feedback off-model")', '1/s', (0.0, 20.0)),
         Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
+        Param('hold_shift_on_stop', False, 'shift_gain_per_s > 0: each wire\'s shift (and stroke) holds while the '
+              'measured angle is on a mechanical stop, or the joint stands still with a wire slack: the angle then '
+              'says nothing about the wires (docs/control.md "The inverse mode on a measured wire")'),
         Param('stroke_gain_per_s', 0.0, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
               "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
               'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued")', '1/s', (0.0, 20.0)),
@@ -117,8 +121,9 @@ class HysteresisCompensator(WristNode):
         self.ticks: dict[int, list[float]] = {}
         self.t_tick_ns: int | None = None  # stamp of the last tick the memory took
         self.angle_seen = False  # joint_states arrive: a tick waits for its angle
-        self.plant = PlantParams()  # chain geometry of the measured strains
+        self.plant = PlantParams(preload_elongation_mm=self.p['preload_elongation_mm'])  # chain of the measured strains
         self.started = False
+        self.q_prev = math.nan  # angle of the last tick the axis adapted on [rad]
         self._saturated: bool | None = None  # last state reported on /diagnostics
         self._shift_at_limit: tuple[bool, ...] = (False, False)  # per wire, last state reported on /diagnostics
         # per TEM layer, (filed at [ns], command [V]) received, oldest first (the observer's inputs)
@@ -273,12 +278,19 @@ class HysteresisCompensator(WristNode):
                 return
         if not self.started:
             self._start()
+            self.q_prev = tick[ANGLE]
             return
         if self.p['memory_source'] != 'measured':
             return
         try:
             if tick[ANGLE] == tick[ANGLE]:
-                self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, tick[ANGLE]), dt)
+                adapt = None
+                if self.p['hold_shift_on_stop']:  # no earlier angle yet: taken as standing still
+                    q_prev = self.q_prev if self.q_prev == self.q_prev else tick[ANGLE]
+                    adapt = strain_informative(tick[ANGLE], q_prev, dt, self.stress_meas,
+                                               (self.plant.joint.q_min_rad, self.plant.joint.q_max_rad))
+                self.q_prev = tick[ANGLE]
+                self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, tick[ANGLE]), dt, adapt)
                 self._report_shift()
             else:
                 self.comp.observe(self.T_meas, self.stress_meas)

@@ -40,7 +40,7 @@ from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import MUSCLE_FRAMES, Freshness, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import MUSCLE_FRAMES, PRELOAD_PARAM, Freshness, Param, WristNode, finite, main_for
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import VALIDITY as SCENARIO_AXES
 
@@ -92,6 +92,7 @@ class PlantSim(WristNode):
               runtime=False),
         Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
               '(empty: the built-in set)', runtime=False),
+        PRELOAD_PARAM,
     ) + tuple(
         # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
         Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
@@ -111,7 +112,8 @@ class PlantSim(WristNode):
         p = self.p
         ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
         base = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'],
-                           hysteresis=hysteresis_params(p['hysteresis_file']))
+                           hysteresis=hysteresis_params(p['hysteresis_file']),
+                           preload_elongation_mm=p['preload_elongation_mm'])
         if p['thermal_file']:  # identified TEMs; the plant still clips at the driver rating
             lim = base.thermal
             base = replace(base, thermal=load_thermal_file(p['thermal_file']).with_limits(lim.u_min_V, lim.u_max_V))

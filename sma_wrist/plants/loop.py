@@ -192,6 +192,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                     help='the observer\'s parameters (hysteresis_compensator observer.*; default 0.33,0.2)')
     ap.add_argument('--stroke-gain', type=float, default=None, metavar='PER_S',
                     help="hysteresis_compensator's stroke_gain_per_s (0: the model's stroke; default the node's)")
+    ap.add_argument('--hold-shift-on-stop', choices=('on', 'off'),
+                    help="hysteresis_compensator's hold_shift_on_stop (default the node's)")
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
@@ -201,6 +203,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw.update(compensator_observer=None, window_follows_shift=False, stroke_gain_per_s=0.0)
     if a.stroke_gain is not None:
         kw['stroke_gain_per_s'] = a.stroke_gain
+    if a.hold_shift_on_stop is not None:
+        kw['hold_shift_on_stop'] = a.hold_shift_on_stop == 'on'
     if a.before_item_2:
         kw['shift_gain_per_s'] = 1.0
     if a.thermocouple:

@@ -39,7 +39,7 @@ from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.control.tem import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
 from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import PlantParams
@@ -53,6 +53,7 @@ TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
 SHIFT_GAIN_PER_S = 2.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
 STROKE_GAIN_PER_S = 0.0  # hysteresis_compensator's stroke_gain_per_s default (config/wrist.yaml)
+HOLD_SHIFT_ON_STOP = False  # hysteresis_compensator's hold_shift_on_stop default (config/wrist.yaml)
 #: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
 TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 
@@ -143,6 +144,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              true_temperature: Sequence[str] = (),
              compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
              window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
+             hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
              controller_overrides: Mapping[str, Any] | None = None
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
@@ -160,7 +162,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     thermocouples driven by the TEM commands: the node graph with hysteresis_compensator's
     ``temperature_source: observer`` (the default) and the same ``observer.*`` parameters; None: the
     thermocouples themselves (``temperature_source: thermocouple``). ``window_follows_shift``:
-    hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off).
+    hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off),
+    ``hold_shift_on_stop`` its gate on the adaptation (core.hysteresis.compensation.strain_informative).
     ``controller_overrides``: adaptive_controller's parameters other than its defaults
     ({JointControllerParams field: value}, e.g. the reference leads)."""
     check_true_temperature(true_temperature)
@@ -189,6 +192,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                                  stroke_gain_per_s=stroke_gain_per_s)
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
+    q_track = np.zeros(0)  # the measured angles of that tick [rad]
     t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]
     tem = TemLoopBank.like_node(n, tem_params)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
@@ -235,8 +239,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                 comp.reset(T_g, stress_g)
                 comp_started = True
             else:
-                comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), (now_ns - t_track_ns) * 1e-9)
-            t_track_ns = now_ns
+                dt_track = (now_ns - t_track_ns) * 1e-9
+                adapt = None if not hold_shift_on_stop else strain_informative(
+                    q_m[idx], q_track, dt_track, stress[idx], (base.joint.q_min_rad, base.joint.q_max_rad)).ravel()
+                comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), dt_track, adapt)
+            t_track_ns, q_track = now_ns, q_m[idx]
         if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():

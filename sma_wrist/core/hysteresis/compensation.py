@@ -178,10 +178,12 @@ class MuscleCompensator:
         T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
         return CompensationResult(T, res.saturated, clipped, m, y)
 
-    def track(self, T_C: ArrayLike, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float) -> None:
+    def track(self, T_C: ArrayLike, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float,
+              adapt: ArrayLike | None = None) -> None:
         """:meth:`observe` on the adapted temperature axis, then one adaptation step of the shift
         (module docstring) from the bundles' strains at the measured angle (2,) over dt [s]. Without
-        adaptation (``shift_gain_per_s`` 0) the same as observe.
+        adaptation (``shift_gain_per_s`` 0) the same as observe. ``adapt`` (bool, shaped like the
+        temperatures): where False that wire's shift and stroke hold (:func:`strain_informative`).
 
         Step: shift += gain dt (y_model - y_meas) s / (s^2 + s_0^2), s = dy_model/dT [mm/degC] of the
         loop the memory is on (central difference, heating up / cooling down), y in the SD-GPI's
@@ -197,6 +199,17 @@ class MuscleCompensator:
         self.observe(T - self.shift_C, stress_Pa)
         if self.shift_gain_per_s <= 0.0:
             return
+        if adapt is None:
+            self._adapt(T, stress_Pa, strain_measured, dt)
+            return
+        held = ~np.asarray(adapt, bool)
+        shift, stroke = self.shift_C, self.stroke
+        self._adapt(T, stress_Pa, strain_measured, dt)
+        self.shift_C = np.where(held, shift, self.shift_C)
+        self.stroke = np.where(held, stroke, self.stroke)
+
+    def _adapt(self, T: FloatArray, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float) -> None:
+        """The adaptation step of :meth:`track` on every wire."""
         k_dt = self.stroke_gain_per_s * dt
         if k_dt:
             lo, hi = self.T_range_C
@@ -236,6 +249,22 @@ class MuscleCompensator:
         """Temperatures clipped to the compensator's window [degC]."""
         lo, hi = self.T_range_C
         return np.minimum(np.maximum(temperature_C, lo), hi)
+
+
+def strain_informative(q_rad: ArrayLike, q_prev_rad: ArrayLike, dt: float, stress_Pa: ArrayLike,
+                       q_stops_rad: tuple[float, float], slack_Pa: float = 1e6,
+                       still_rad_s: float = 0.05) -> NDArray[np.bool_]:
+    """(N, 2) whether the bundles' strains at the measured angle (Eq. 4.17) say something about the wires
+    (docs/control.md "The inverse mode on a measured wire"): not while the joint rests on a mechanical stop
+    (measured angle q_rad (N,) at or over ``q_stops_rad``), nor while it stands still (|q - q_prev| / dt
+    below ``still_rad_s``) with a wire slack (measured stress (N, 2) [Pa] below ``slack_Pa``): there the
+    angle is the stop's or the other wire's, and a shift fitted to it winds up (both wires then pull
+    against each other). Both wires of a wrist hold together."""
+    q = np.asarray(q_rad, float)
+    on_stop = (q <= q_stops_rad[0]) | (q >= q_stops_rad[1])
+    still = np.abs(q - np.asarray(q_prev_rad, float)) < still_rad_s * dt
+    slack = (np.asarray(stress_Pa, float) < slack_Pa).any(axis=-1)
+    return np.repeat(~(on_stop | (still & slack))[..., None], 2, axis=-1)
 
 
 #: temperature step of the model's loop slope in :meth:`MuscleCompensator.track` [degC]
