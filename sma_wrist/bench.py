@@ -269,7 +269,7 @@ def bench_identify_wrist(quick: bool = False) -> dict:
     from sma_wrist.identify.wrist import hot_wire_runs
     return hot_wire_runs(('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
                          progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
-                         png=os.path.join(os.environ.get('SMA_WRIST_BENCH_DIR', '.'), 'identify_wrist.png'))
+                         png=bench_png('identify_wrist.png'))
 
 
 @section('measured_wire')
@@ -284,10 +284,22 @@ def bench_measured_wire(quick: bool = False) -> dict:
         raise SmaWristError(f'the measured-wire benchmark reads the source checkout\'s {data}: not found')
     return measured_wire_runs(files, ('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
                               progress=lambda m: print(f'[measured_wire] {m}', file=sys.stderr, flush=True),
-                              png=os.path.join(os.environ.get('SMA_WRIST_BENCH_DIR', '.'), 'measured_wire.png'))
+                              png=bench_png('measured_wire.png'))
 
 
 # -------------------------------------------------------------------------------- driver
+
+def bench_png(name: str) -> str:
+    """Path of a benchmark's figure: in ``$SMA_WRIST_BENCH_DIR`` (default: the current directory),
+    created if missing, so a run does not end in a traceback after minutes of work."""
+    from sma_wrist.core.errors import SmaWristError
+    folder = Path(os.environ.get('SMA_WRIST_BENCH_DIR', '.'))
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SmaWristError(f'SMA_WRIST_BENCH_DIR={folder}: cannot hold the figures ({e.strerror or e})') from None
+    return str(folder / name)
+
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     """Run the named sections (all registered ones by default) and return their results."""
