@@ -14,20 +14,21 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
-from sma_wrist.core.control import adaptive_kernel, tem_kernel
+from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
 from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, output_filter_step,
                                                      reference_ahead, time_to_meet)
 from sma_wrist.core.control.pid import PID
 from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
                                         target_prefilter)
-from sma_wrist.core.errors import ModelInputError, check_finite
+from sma_wrist.core.errors import ModelInputError
+from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
 
-@tem_kernel._jit
+@_jit
 def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, hold_after,
                         target):  # pragma: no cover - compiled
     """JointController._reversal_lead for each wrist j, compiled (q (n,) [rad]): target[j] = the angle
@@ -49,7 +50,7 @@ def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, 
                 target[j] = hold_q[j]
 
 
-@tem_kernel._jit
+@_jit
 def _temperature_map(force, mid, preload, per_degC, lo, hi, flag, T, saturated):  # pragma: no cover - compiled
     """JointController's temperatures in direct_adaptive mode, per wrist j and muscle i:
     T[j, i] = mid + (force[j, i] - preload) / per_degC clipped to [lo, hi] [degC] (force [N]); saturated[j] =
@@ -78,10 +79,8 @@ class JointControllerBank:
         p = params
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode), n) if p.mode != 'pid' else None
         self.pid = PID(p.pid, n) if p.mode == 'pid' else None
-        # the bank's adaptive path calls the compiled law directly (AdaptiveController.update's kernel call,
-        # without its per-call checks and output record): inputs (5, n) filled in place, constants packed once
+        # the bank's adaptive inputs (5, n), filled in place each tick (AdaptiveController.update_stacked)
         self._x = np.empty((5, n))
-        self._k = None if self.adaptive is None else adaptive_kernel.pack(self.adaptive.params)
         # strain_at's constants read once (the properties are recomputed on every access); the same operations
         j = self.plant.joint
         self._mm_per_rad, self._q_neutral = 1e3 * j.r_eff_m, j.q_neutral_rad
@@ -122,20 +121,11 @@ class JointControllerBank:
             self.u_filtered = u = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
             T = np.stack([p.temperature_mid_C + u, p.temperature_mid_C - u], axis=-1)
             Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
-            return None, np.broadcast_to(self.strain_at(q_now), (self.n, 2)), Tc, o.saturated | (Tc != T).any(axis=1)
-        assert self.adaptive is not None and self._k is not None
-        # AdaptiveController.update's checks, once for the bank: dt from increasing stamps, finite inputs
-        if not (math.isfinite(dt) and dt > 0):
-            raise ModelInputError('dt', dt, '(0, inf)', 's')
+            return None, self._strain_rows(q_now), Tc, o.saturated | (Tc != T).any(axis=1)
+        assert self.adaptive is not None
         x = self._x
         x[0], x[1], x[2], x[3], x[4] = q, qdot, q_d, qdot_d, qddot_d
-        if not np.isfinite(x).all():
-            for name, unit, row in zip(('q', 'qdot', 'q_d', 'qdot_d', 'qddot_d'),
-                                       ('rad', 'rad/s', 'rad', 'rad/s', 'rad/s^2'), x):
-                check_finite(name, row, unit)  # raises, naming the first non-finite input
-        st = self.adaptive.state
-        out = np.empty((self.n, adaptive_kernel.OUT_LEN))
-        adaptive_kernel.update(x, float(dt), st.theta_hat, st.beta_hat, st.d_hat, self._k, out)
+        out = self.adaptive.update_stacked(x, dt)
         force, saturated = out[:, :2], out[:, 7] != 0.0  # ControlOutput's force_1_N, force_2_N and saturated
         if p.mode == 'inverse_adaptive':
             _reversal_lead_many(np.ascontiguousarray(q, float), float(q_d), float(qdot_d), float(qddot_d),
@@ -148,7 +138,7 @@ class JointControllerBank:
         return force, self._strain_rows(q_now), Tc, sat_T
 
 
-@tem_kernel._jit
+@_jit
 def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
                   cfg, candidates, status):  # pragma: no cover - compiled
     """tem_kernel.control_sample for each wrist j (row j of every state array), its work arrays allocated once."""

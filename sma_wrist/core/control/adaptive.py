@@ -208,6 +208,9 @@ class ControlOutput:
     d_hat: FloatArray  # (n, 2)
 
 
+#: the law's inputs in the order of its stacked rows, with their units (error messages)
+INPUTS = (('q', 'rad'), ('qdot', 'rad/s'), ('q_d', 'rad'), ('qdot_d', 'rad/s'), ('qddot_d', 'rad/s^2'))
+
 class AdaptiveController:
     """Back-stepping adaptive controller for n independent scenarios (vectorised).
 
@@ -241,10 +244,8 @@ class AdaptiveController:
         q, qdot: measured angle (rad) and rate (rad/s); q_d, qdot_d, qddot_d: reference
         (sma_wrist.core.control.trajectory). Raises ModelInputError on non-finite input or dt <= 0.
         """
-        p = self.params
         if not (isinstance(dt, (int, float, np.integer, np.floating)) and math.isfinite(dt) and dt > 0):
             raise ModelInputError('dt', dt, '(0, inf)', 's')
-        names = (('q', 'rad'), ('qdot', 'rad/s'), ('q_d', 'rad'), ('qdot_d', 'rad/s'), ('qddot_d', 'rad/s^2'))
         raw = (q, qdot, q_d, qdot_d, qddot_d)
         if self.n == 1 and all(type(x) is float and math.isfinite(x) for x in raw):
             stacked = np.array(raw).reshape(5, 1)  # one wrist, finite floats: the node's every sample
@@ -258,18 +259,37 @@ class AdaptiveController:
                 raise ModelInputError('shapes of (q, qdot, q_d, qdot_d, qddot_d)', shapes,
                                       f'broadcastable to ({self.n},)') from None
             if not np.isfinite(stacked).all():
-                for (name, unit), x in zip(names, raw):
+                for (name, unit), x in zip(INPUTS, raw):
                     check_finite(name, x, unit)  # raises, naming the first non-finite input
-        # Eqs. 5.24, 5.32, 5.37 per scenario (adaptive_kernel: compiled with numba, else plain Python)
+        out = self._kernel_step(stacked, dt)
+        st = self.state
+        return ControlOutput(force_1_N=out[:, 0], force_2_N=out[:, 1], delta_force_N=out[:, 0] - out[:, 1],
+                             delta_force_request_N=out[:, 2], saturated=out[:, 7] != 0.0, z1=out[:, 3],
+                             z2=out[:, 4], v_c=out[:, 5:7], theta_hat=st.theta_hat.copy(),
+                             beta_hat=st.beta_hat.copy(), d_hat=st.d_hat.copy())
+
+    def update_stacked(self, x: FloatArray, dt: float) -> FloatArray:
+        """:meth:`update` on inputs already stacked as (5, n) rows q, qdot, q_d, qdot_d, qddot_d (units as
+        there): the same checks on the rows and the same step, returning the kernel's (n, OUT_LEN) output
+        (forces in columns 0-1, the saturated flag in 7) without the ControlOutput record (the sweep's bank,
+        every tick)."""
+        if not (math.isfinite(dt) and dt > 0):
+            raise ModelInputError('dt', dt, '(0, inf)', 's')
+        if not np.isfinite(x).all():
+            for (name, unit), row in zip(INPUTS, x):
+                check_finite(name, row, unit)  # raises, naming the first non-finite input
+        return self._kernel_step(x, dt)
+
+    def _kernel_step(self, stacked: FloatArray, dt: float) -> FloatArray:
+        """Eqs. 5.24, 5.32, 5.37 per scenario on checked inputs (adaptive_kernel: compiled with numba, else
+        plain Python), the estimates in place."""
+        p = self.params
         st = self.state
         if self._k is None or self._k[0] is not p:
             self._k = (p, adaptive_kernel.pack(p))
         out = np.empty((self.n, adaptive_kernel.OUT_LEN))
         adaptive_kernel.update(stacked, float(dt), st.theta_hat, st.beta_hat, st.d_hat, self._k[1], out)
-        return ControlOutput(force_1_N=out[:, 0], force_2_N=out[:, 1], delta_force_N=out[:, 0] - out[:, 1],
-                             delta_force_request_N=out[:, 2], saturated=out[:, 7] != 0.0, z1=out[:, 3],
-                             z2=out[:, 4], v_c=out[:, 5:7], theta_hat=st.theta_hat.copy(),
-                             beta_hat=st.beta_hat.copy(), d_hat=st.d_hat.copy())
+        return out
 
 
 __all__ = ['ControlGeometry', 'AdaptiveParams', 'AdaptiveState', 'ControlOutput', 'AdaptiveController']
