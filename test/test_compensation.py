@@ -199,3 +199,34 @@ def test_track_holds_the_shift_where_told_and_is_unchanged_elsewhere() -> None:
     assert abs(free_shift[1]) > 0.1  # the strain disagrees with the model: the free wire's shift moves
     assert held_shift[1] == 0.0 and held_stroke[1] == 1.0
     assert held_shift[0] == free_shift[0] and held_stroke[0] == free_stroke[0]
+
+
+def test_shifts_hold_while_either_wire_of_a_pair_is_outside_the_load_range() -> None:
+    """MuscleCompensator(hold_outside_load_range=True), the default (docs/control.md "The pair's load range
+    gates the shift"): the measured Flexinol wrist starts with muscle 1 at 14 MPa and muscle 2 slack, below the
+    SD-GPI's 0.2-1.5 kgf; a strain the model cannot explain there ran each wire's shift to its limit. Both
+    wires hold while either is out of range, on the node's (2,) and the sweep's flat (2N,) wires alike; inside
+    the range the adaptation steps as without the gate; without the gate it steps everywhere."""
+    geo = MuscleGeometry()
+    taut = geo.stress_Pa(np.array([0.8, 0.8]))
+    slack = geo.stress_Pa(np.array([0.07, 0.0]))  # 14 MPa / 0 MPa
+    over = geo.stress_Pa(np.array([0.8, 1.7]))
+    comp = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0)
+    assert comp.hold_outside_load_range
+    assert comp.pair_in_load_range(taut).tolist() == [True, True]
+    assert comp.pair_in_load_range(slack).tolist() == [False, False]
+    flat = np.concatenate([taut, over, slack, taut])  # four wrists' wires, flat as the sweep's bank has them
+    assert comp.pair_in_load_range(flat).tolist() == [True, True, False, False, False, False, True, True]
+    assert comp.pair_in_load_range(flat.reshape(4, 2)).tolist() == [[True, True], [False, False], [False, False],
+                                                                    [True, True]]
+
+    def shifts(stress: np.ndarray, gate: bool) -> np.ndarray:
+        c = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, hold_outside_load_range=gate)
+        c.reset(np.full(2, 55.0), stress)
+        for k in range(50):
+            c.track(np.full(2, 55.0 + 0.1 * k), stress, np.array([0.03, 0.03]), 0.01)
+        return c.shift_C
+
+    assert np.all(shifts(slack, True) == 0.0) and np.all(shifts(over, True) == 0.0)
+    assert np.abs(shifts(slack, False)).max() > 0.1 and np.abs(shifts(over, False)).max() > 0.1
+    assert np.array_equal(shifts(taut, True), shifts(taut, False)) and np.abs(shifts(taut, True)).max() > 0.1

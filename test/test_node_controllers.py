@@ -520,12 +520,13 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     stress = MuscleGeometry().stress_Pa(np.array([0.8, 0.7]))
     rest = bundle_strain(PlantParams(), 0.5)
 
-    def run(gain: float, hold: bool = False, q: float = -0.1, stress=stress, n: int = 400):  # type: ignore[no-untyped-def]
+    def run(gain: float, hold: bool = False, q: float = -0.1, stress=stress, n: int = 400,  # type: ignore[no-untyped-def]
+            in_range: bool = True):
         with Runtime() as rt:
             probe = probe_factory(rt, ('/diagnostics',))
             node = rt.add(HysteresisCompensator, parameter_overrides=[
                 Parameter('temperature_source', value='thermocouple'), Parameter('shift_gain_per_s', value=gain),
-                Parameter('hold_shift_on_stop', value=hold)])
+                Parameter('hold_shift_on_stop', value=hold), Parameter('hold_shift_outside_load_range', value=in_range)])
             for i in (1, 2):
                 probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
             for j in range(n):  # 4 s at 100 Hz
@@ -551,3 +552,8 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     assert run(2.0, hold=True, n=100)[1][0] > 3.0
     assert np.all(run(2.0, hold=True, q=-0.35, n=100)[1] == 0.0)
     assert np.all(run(2.0, hold=True, stress=stress * [1.0, 0.0], n=100)[1] == 0.0)
+    # hold_shift_outside_load_range (default on; docs/control.md "The pair's load range gates the shift"): the
+    # measured Flexinol wrist's start, muscle 1 at 14 MPa and muscle 2 slack, below the model's 0.2-1.5 kgf
+    low = MuscleGeometry().stress_Pa(np.array([0.07, 0.0]))
+    assert np.all(run(2.0, stress=low, n=100)[1] == 0.0)
+    assert np.abs(run(2.0, stress=low, n=100, in_range=False)[1]).max() > 1.0  # 2.5 degC in 1 s

@@ -91,6 +91,10 @@ class HysteresisCompensator(WristNode):
         Param('hold_shift_on_stop', False, 'shift_gain_per_s > 0: each wire\'s shift (and stroke) holds while the '
               'measured angle is on a mechanical stop, or the joint stands still with a wire slack: the angle then '
               'says nothing about the wires (docs/control.md "The inverse mode on a measured wire")'),
+        Param('hold_shift_outside_load_range', True, "shift_gain_per_s > 0: a wrist's shifts (and strokes) hold "
+              "while either wire's measured load lies outside the SD-GPI's calibrated range (a slack or "
+              'overloaded pair: the strain at the measured angle is not the model\'s to explain; docs/control.md '
+              '"The pair\'s load range gates the shift")'),
         Param('stroke_gain_per_s', 0.0, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
               "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
               'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued")', '1/s', (0.0, 20.0)),
@@ -165,11 +169,13 @@ class HysteresisCompensator(WristNode):
         self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'],
                                       shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'],
                                       window_follows_shift=self.p['window_follows_shift'],
-                                      stroke_gain_per_s=self.p['stroke_gain_per_s'])
+                                      stroke_gain_per_s=self.p['stroke_gain_per_s'],
+                                      hold_outside_load_range=self.p['hold_shift_outside_load_range'])
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
         warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'], shift_gain_per_s=1.0,
-                                 window_follows_shift=self.p['window_follows_shift'], stroke_gain_per_s=1.0)
+                                 window_follows_shift=self.p['window_follows_shift'], stroke_gain_per_s=1.0,
+                                 hold_outside_load_range=False)  # adapts at any load: the adaptation compiles
         T_mid = 0.5 * (window[0] + window[1])
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)

@@ -194,6 +194,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                     help="hysteresis_compensator's stroke_gain_per_s (0: the model's stroke; default the node's)")
     ap.add_argument('--hold-shift-on-stop', choices=('on', 'off'),
                     help="hysteresis_compensator's hold_shift_on_stop (default the node's)")
+    ap.add_argument('--hold-shift-outside-load-range', choices=('on', 'off'),
+                    help="hysteresis_compensator's hold_shift_outside_load_range (default the node's)")
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
@@ -205,6 +207,8 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw['stroke_gain_per_s'] = a.stroke_gain
     if a.hold_shift_on_stop is not None:
         kw['hold_shift_on_stop'] = a.hold_shift_on_stop == 'on'
+    if a.hold_shift_outside_load_range is not None:
+        kw['hold_shift_outside_load_range'] = a.hold_shift_outside_load_range == 'on'
     if a.before_item_2:
         kw['shift_gain_per_s'] = 1.0
     if a.thermocouple:

@@ -54,6 +54,8 @@ ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_m
 SHIFT_GAIN_PER_S = 2.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
 STROKE_GAIN_PER_S = 0.0  # hysteresis_compensator's stroke_gain_per_s default (config/wrist.yaml)
 HOLD_SHIFT_ON_STOP = False  # hysteresis_compensator's hold_shift_on_stop default (config/wrist.yaml)
+#: hysteresis_compensator's hold_shift_outside_load_range default (config/wrist.yaml)
+HOLD_SHIFT_OUTSIDE_LOAD_RANGE = True
 #: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
 TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 
@@ -145,6 +147,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
              window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
              hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
+             hold_shift_outside_load_range: bool = HOLD_SHIFT_OUTSIDE_LOAD_RANGE,
              controller_overrides: Mapping[str, Any] | None = None
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
@@ -163,7 +166,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     ``temperature_source: observer`` (the default) and the same ``observer.*`` parameters; None: the
     thermocouples themselves (``temperature_source: thermocouple``). ``window_follows_shift``:
     hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off),
-    ``hold_shift_on_stop`` its gate on the adaptation (core.hysteresis.compensation.strain_informative).
+    ``hold_shift_on_stop`` its gate on the adaptation (core.hysteresis.compensation.strain_informative),
+    ``hold_shift_outside_load_range`` the one on the pair's load range (``MuscleCompensator.pair_in_load_range``).
     ``controller_overrides``: adaptive_controller's parameters other than its defaults
     ({JointControllerParams field: value}, e.g. the reference leads)."""
     check_true_temperature(true_temperature)
@@ -189,7 +193,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
         comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=shift_gain_per_s,
                                  shift_limit_C=15.0, window_follows_shift=window_follows_shift,
-                                 stroke_gain_per_s=stroke_gain_per_s)
+                                 stroke_gain_per_s=stroke_gain_per_s,
+                                 hold_outside_load_range=hold_shift_outside_load_range)
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     q_track = np.zeros(0)  # the measured angles of that tick [rad]

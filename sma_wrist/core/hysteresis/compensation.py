@@ -62,7 +62,8 @@ class MuscleCompensator:
     def __init__(self, params: SDGPIParams, geometry: MuscleGeometry | None = None,
                  T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical',
                  shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0, window_follows_shift: bool = False,
-                 stroke_gain_per_s: float = 0.0, stroke_limits: tuple[float, float] = (0.5, 2.0)) -> None:
+                 stroke_gain_per_s: float = 0.0, stroke_limits: tuple[float, float] = (0.5, 2.0),
+                 hold_outside_load_range: bool = True) -> None:
         self.params = params
         self.T_range_C = T_range_C
         if not (math.isfinite(shift_gain_per_s) and shift_gain_per_s >= 0):
@@ -78,6 +79,9 @@ class MuscleCompensator:
             raise ParameterError(f'stroke_limits = {stroke_limits!r} must be (lo, hi) with 0 < lo <= 1 <= hi')
         #: rate [1/s] at which each wire's stroke ratio follows the strain prediction error (0: off)
         self.stroke_gain_per_s, self.stroke_limits = float(stroke_gain_per_s), (k_lo, k_hi)
+        #: :meth:`track` holds a wrist's shifts (and strokes) while either of its wires' measured load lies
+        #: outside the SD-GPI's calibrated range (:meth:`pair_in_load_range`)
+        self.hold_outside_load_range = bool(hold_outside_load_range)
         #: per wire: the wire's stroke over the model's, about y_mid_mm
         self.stroke = np.ones(2)
         #: per wire: (cold, hot) edge of the window reached since reset; the stroke adapts once both
@@ -183,7 +187,8 @@ class MuscleCompensator:
         """:meth:`observe` on the adapted temperature axis, then one adaptation step of the shift
         (module docstring) from the bundles' strains at the measured angle (2,) over dt [s]. Without
         adaptation (``shift_gain_per_s`` 0) the same as observe. ``adapt`` (bool, shaped like the
-        temperatures): where False that wire's shift and stroke hold (:func:`strain_informative`).
+        temperatures): where False that wire's shift and stroke hold (:func:`strain_informative`); with
+        ``hold_outside_load_range`` they also hold where :meth:`pair_in_load_range` is False.
 
         Step: shift += gain dt (y_model - y_meas) s / (s^2 + s_0^2), s = dy_model/dT [mm/degC] of the
         loop the memory is on (central difference, heating up / cooling down), y in the SD-GPI's
@@ -199,6 +204,10 @@ class MuscleCompensator:
         self.observe(T - self.shift_C, stress_Pa)
         if self.shift_gain_per_s <= 0.0:
             return
+        if self.hold_outside_load_range:
+            taut = self.pair_in_load_range(stress_Pa)
+            if not taut.all():
+                adapt = taut if adapt is None else np.asarray(adapt, bool) & taut
         if adapt is None:
             self._adapt(T, stress_Pa, strain_measured, dt)
             return
@@ -207,6 +216,20 @@ class MuscleCompensator:
         self._adapt(T, stress_Pa, strain_measured, dt)
         self.shift_C = np.where(held, shift, self.shift_C)
         self.stroke = np.where(held, stroke, self.stroke)
+
+    def pair_in_load_range(self, stress_Pa: ArrayLike) -> NDArray[np.bool_]:
+        """Per wire (shaped like ``stress_Pa``, wires in pairs: (2,), (N, 2) or (2N,) flat): whether both wires
+        of its wrist carry a measured load inside the SD-GPI's calibrated range (``load_range``).
+
+        Outside it the strain at the measured angle is not the model's to explain: a slack wire's (0 Pa)
+        is the chain's, not the wire's, and the model is extrapolated there (the plant clamps its
+        envelopes, Eq. 4.4-4.5). On the measured Flexinol wire the pair runs below 50 MPa most of the
+        time, and each wire's shift fitted there ran to its limit within seconds (docs/control.md, "The
+        pair's load range gates the shift"). The partner counts too: a slack antagonist leaves the
+        other wire carrying the payload alone, off the operating point the pre-load sets."""
+        sigma = np.asarray(stress_Pa, float)
+        out = self._load(sigma)[1].reshape(-1, 2).any(axis=1)
+        return np.repeat(~out, 2).reshape(sigma.shape)
 
     def _adapt(self, T: FloatArray, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float) -> None:
         """The adaptation step of :meth:`track` on every wire."""
