@@ -306,6 +306,7 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     assert nodes['adaptive_controller']['temperature_min_C'] == pytest.approx(lo, abs=0.05)
     assert nodes['tem_controller']['max_muscle_temperature_C'] == pytest.approx(hi + 5.0, abs=0.05)
     assert nodes['tem_controller']['face_max_C'] == 120.0 and nodes['plant_sim']['thermal_file'] == 'tems.yaml'
+    assert nodes['hysteresis_compensator']['thermal_file'] == 'tems.yaml'  # its observer runs the same TEMs
     # identify wrote the file for the synthetic +30 degC wire (A_f 108 degC): seed TEMs cannot, and it says so
     wp = synthetic[0]['wrist_params']
     doc = yaml.safe_load(Path(wp['file']).read_text())

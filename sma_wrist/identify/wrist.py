@@ -135,6 +135,8 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     }
     if thermal_file is not None:
         out['plant_sim']['thermal_file'] = str(thermal_file)
+        # the compensator's temperature observer runs the TEMs' heat balance too (temperature_source observer)
+        out['hysteresis_compensator']['thermal_file'] = str(thermal_file)
         out['tem_controller'].update({'thermal_file': str(thermal_file), 'face_min_C': float(face[0]),
                                       'face_max_C': float(min(face[1], NODE_MAX_C))})
     return out, problems
