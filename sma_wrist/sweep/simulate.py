@@ -145,7 +145,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
              window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
              hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
-             controller_overrides: Mapping[str, Any] | None = None
+             controller_overrides: Mapping[str, Any] | None = None, oracle: Sequence[str] = ()
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -165,10 +165,22 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     hysteresis_compensator's parameter of that name; ``stroke_gain_per_s`` its stroke adaptation (0 = off),
     ``hold_shift_on_stop`` its gate on the adaptation (core.hysteresis.compensation.strain_informative).
     ``controller_overrides``: adaptive_controller's parameters other than its defaults
-    ({JointControllerParams field: value}, e.g. the reference leads)."""
+    ({JointControllerParams field: value}, e.g. the reference leads).
+
+    ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
+    (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
+    ``'sensors'``; docs/control.md "What a perfect model would give"); every case must then be on
+    the one ``sdgpi`` scenario."""
     check_true_temperature(true_temperature)
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
+    orc: Any = None
+    if oracle:  # lazily: plants.oracle runs this engine
+        from sma_wrist.plants import oracle as oracle_models
+        orc = oracle_models
+        orc.check(oracle, plant, [c.scenario for c in cases])
+        if 'sensors' in oracle:
+            true_temperature = TRUE_TEMPERATURE_CONSUMERS
     if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
         raise ParameterError(f'duration {duration_s!r} s must be >= {2 * TICK_S} s')
     base = base or PlantParams()
@@ -182,19 +194,25 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     for mode in MODES:
         idx = np.array([i for i, c in enumerate(cases) if c.controller == mode], dtype=np.intp)
         if idx.size:
-            groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode, **(controller_overrides or {})),
-                                                     idx.size, base))
+            jp = JointControllerParams(mode=mode, **(controller_overrides or {}))
+            if orc is not None and 'payload' in oracle:
+                jp = orc.knows_payload(jp, scen[0].payload_kg)
+            groups[mode] = (idx, JointControllerBank(jp, idx.size, base))
     comp = None
     if 'inverse_adaptive' in groups:
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
         comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=shift_gain_per_s,
                                  shift_limit_C=15.0, window_follows_shift=window_follows_shift,
                                  stroke_gain_per_s=stroke_gain_per_s)
+        if orc is not None and 'hysteresis' in oracle:
+            comp = orc.own_compensator(comp, scen[0], base)
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     q_track = np.zeros(0)  # the measured angles of that tick [rad]
     t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]
     tem = TemLoopBank.like_node(n, tem_params)
+    if orc is not None and 'thermal' in oracle:
+        tem = orc.own_tem_bank(tem, scen[0], base)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
     observer = None if compensator_observer is None else MuscleTemperatureObserver(tem.thermal, compensator_observer)
     k_total = int(round(duration_s / TICK_S)) + 1
@@ -210,6 +228,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         dt_law, t_last = t - t_last, t
         t_rec[k] = t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
+        if orc is not None and 'sensors' in oracle:
+            T_m, q_m, qdot_m = wrists.muscle_temperature_C, s.q.copy(), s.qd.copy()
         T_tem = T_comp = T_m
         if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
             # dt from the stamps, as hysteresis_compensator's observer takes it
