@@ -107,3 +107,13 @@ def test_summary_counts_the_family_and_its_reachable_plants() -> None:
     assert s['as_built']['n_reachable'] == 2 and s['as_built']['median_reachable'] == 8.5
     assert s['all']['under_8_reachable'] == 1.0 and s['as_built']['nominal'] == [2.5]
     assert s['all']['nominal'] == []
+
+
+def test_a_cut_results_file_is_named_not_read_as_data(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    path = tmp_path / 'oracle.jsonl'
+    path.write_text('{"group": "spread", "plant_index": 0, "variant": "reach", "reach_floor_pct": 1.0}\n{"group": "spr')
+    with pytest.raises(ParameterError, match=r'oracle.jsonl:2: not a JSON row'):
+        oracle.load(path)
+    path.write_text('[1, 2]\n')
+    with pytest.raises(ParameterError, match=r':1: not a row'):
+        oracle.load(path)

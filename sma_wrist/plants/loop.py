@@ -219,19 +219,19 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     if a.before_lead:
         kw['controller_overrides'] = {'pid_reference_lead_s': 0.0, 'direct_reference_lead_s': 0.0,
                                       'force_per_degC_N': 1.0}
-    if a.true_temperature:
-        kw['true_temperature'] = tuple(a.true_temperature.split(','))
+    def names(option: str, value: str, check: Callable[[Sequence[str]], None]) -> tuple[str, ...]:
+        """A comma list of names, checked; a bad one ends the program with the option's name."""
+        items = tuple(value.split(','))
         try:
-            check_true_temperature(kw['true_temperature'])
+            check(items)
         except ParameterError as e:
-            ap.error(f'--true-temperature: {e}')
+            ap.error(f'{option}: {e}')
+        return items
+    if a.true_temperature:
+        kw['true_temperature'] = names('--true-temperature', a.true_temperature, check_true_temperature)
     if a.oracle:
         from sma_wrist.plants.oracle import check as check_oracle
-        kw['oracle'] = tuple(a.oracle.split(','))
-        try:
-            check_oracle(kw['oracle'])
-        except ParameterError as e:
-            ap.error(f'--oracle: {e}')
+        kw['oracle'] = names('--oracle', a.oracle, check_oracle)
     if a.observer:
         try:
             kw['compensator_observer'] = TemperatureObserverParams(*(float(x) for x in a.observer.split(',')))

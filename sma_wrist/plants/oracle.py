@@ -191,8 +191,20 @@ def measure(n: int, seed: int, variants: Sequence[str], out: Path, duration_s: f
 
 
 def load(path: Path) -> list[dict[str, Any]]:
-    """The JSON lines of :func:`measure` (one per plant x variant x mode, and one reach row per plant)."""
-    return [json.loads(line) for line in Path(path).read_text().splitlines() if line.strip()]
+    """The JSON lines of :func:`measure` (one per plant x variant x mode, and one reach row per plant);
+    ParameterError naming the line that is not one (e.g. cut by an interrupted run: rerun :func:`measure`)."""
+    rows = []
+    for k, line in enumerate(Path(path).read_text().splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            r = json.loads(line)
+        except ValueError as e:
+            raise ParameterError(f'{path}:{k}: not a JSON row ({e}); an interrupted run? rerun to measure it again') from None
+        if not (isinstance(r, dict) and {'group', 'plant_index', 'variant'} <= set(r)):
+            raise ParameterError(f'{path}:{k}: not a row of sma_wrist.plants.oracle (group, plant_index, variant)')
+        rows.append(r)
+    return rows
 
 
 def per_plant(rows: Sequence[dict[str, Any]]) -> dict[tuple[str, int], dict[str, Any]]:
