@@ -5,14 +5,18 @@ docs/control.md "What a perfect model would give (oracle14, 2026-11-24)" has the
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from sma_wrist.core.control.joint_controller import JointControllerParams
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.hysteresis.compensation import MuscleCompensator
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.plants import oracle
 from sma_wrist.plants.loop import CASES, run_cases
 from sma_wrist.plants.spread import Scenario, scenario_params
-from sma_wrist.core.control.joint_controller import JointControllerParams
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 from sma_wrist.sweep.simulate import Case, simulate
 
@@ -42,8 +46,6 @@ def test_oracle_models_are_the_plants_own() -> None:
         assert law.muscle_face == own.thermal.muscle_face and law.effective_ambient_C == own.thermal.effective_ambient_C
         assert (law.u_min_V, law.u_max_V) == (limits.u_min_V, limits.u_max_V)
     assert tem.max_muscle_C == built_tem.max_muscle_C and tem.n == 3
-    from sma_wrist.core.hysteresis.compensation import MuscleCompensator
-    from sma_wrist.core.hysteresis.default_params import default_sdgpi
     comp = oracle.own_compensator(MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, stroke_gain_per_s=1.0), sc)
     h = own.hysteresis
     assert comp.params.k_f == h.k_f and comp.params.name == h.name
@@ -109,7 +111,7 @@ def test_summary_counts_the_family_and_its_reachable_plants() -> None:
     assert s['all']['nominal'] == []
 
 
-def test_a_cut_results_file_is_named_not_read_as_data(tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_a_cut_results_file_is_named_not_read_as_data(tmp_path: Path) -> None:
     path = tmp_path / 'oracle.jsonl'
     path.write_text('{"group": "spread", "plant_index": 0, "variant": "reach", "reach_floor_pct": 1.0}\n{"group": "spr')
     with pytest.raises(ParameterError, match=r'oracle.jsonl:2: not a JSON row'):
