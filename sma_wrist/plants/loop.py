@@ -12,7 +12,7 @@ Used by test_offmodel.py and for the off-model figures of docs/control.md
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -95,18 +95,22 @@ def run_cases(cases: Sequence[tuple[OffModelCase, str]], duration_s: float = 126
               tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
               on_tick: Callable[[float], None] | None = None, true_temperature: Sequence[str] = (),
               compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
-              **compensator: Any) -> list[LoopResult]:
+              oracle: Sequence[str] = (), **compensator: Any) -> list[LoopResult]:
     """(case, mode) pairs as closed loops of the sweep engine, one vectorised run per plant; results in order.
     ``true_temperature``, ``compensator_observer``, ``compensator`` (``window_follows_shift``,
     ``stroke_gain_per_s``): as in
-    :func:`~sma_wrist.sweep.simulate.simulate`."""
+    :func:`~sma_wrist.sweep.simulate.simulate`. ``oracle`` (a diagnosis, :mod:`sma_wrist.plants.oracle`):
+    the loops with the plant's own models, one run per scenario (each needs its own models)."""
     out: list[LoopResult | None] = [None] * len(cases)
-    for plant in dict.fromkeys(c.plant for c, _ in cases):
-        idx = [i for i, (c, _) in enumerate(cases) if c.plant == plant]
+    # with an oracle a run holds one scenario (sensor noise streams aside), else one registered plant
+    group = (lambda c: (c.plant, replace(c.scenario, noise_seed=0))) if oracle else (lambda c: c.plant)
+    for key in dict.fromkeys(group(c) for c, _ in cases):
+        idx = [i for i, (c, _) in enumerate(cases) if group(c) == key]
+        plant = cases[idx[0]][0].plant
         rows, _ = simulate([Case(i, cases[i][1], cases[i][0].scenario) for i in idx], duration_s, plant,
                            on_tick=on_tick, window_s=window_s, tem_params=tem_params,
                            shift_gain_per_s=shift_gain_per_s, true_temperature=true_temperature,
-                           compensator_observer=compensator_observer, **compensator)
+                           compensator_observer=compensator_observer, oracle=oracle, **compensator)
         for i, row in zip(idx, rows):
             out[i] = _result(row)
     return [r for r in out if r is not None]
@@ -196,6 +200,9 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                     help="hysteresis_compensator's hold_shift_on_stop (default the node's)")
     ap.add_argument('--hold-shift-outside-load-range', choices=('on', 'off'),
                     help="hysteresis_compensator's hold_shift_outside_load_range (default the node's)")
+    ap.add_argument('--oracle', default='', metavar='SWITCHES',
+                    help='diagnosis: comma list of hysteresis,thermal,payload,sensors: the loop given the plant\'s '
+                         'own model(s) (docs/control.md, "What a perfect model would give")')
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
@@ -216,12 +223,19 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     if a.before_lead:
         kw['controller_overrides'] = {'pid_reference_lead_s': 0.0, 'direct_reference_lead_s': 0.0,
                                       'force_per_degC_N': 1.0}
-    if a.true_temperature:
-        kw['true_temperature'] = tuple(a.true_temperature.split(','))
+    def names(option: str, value: str, check: Callable[[Sequence[str]], None]) -> tuple[str, ...]:
+        """A comma list of names, checked; a bad one ends the program with the option's name."""
+        items = tuple(value.split(','))
         try:
-            check_true_temperature(kw['true_temperature'])
+            check(items)
         except ParameterError as e:
-            ap.error(f'--true-temperature: {e}')
+            ap.error(f'{option}: {e}')
+        return items
+    if a.true_temperature:
+        kw['true_temperature'] = names('--true-temperature', a.true_temperature, check_true_temperature)
+    if a.oracle:
+        from sma_wrist.plants.oracle import check as check_oracle
+        kw['oracle'] = names('--oracle', a.oracle, check_oracle)
     if a.observer:
         try:
             kw['compensator_observer'] = TemperatureObserverParams(*(float(x) for x in a.observer.split(',')))

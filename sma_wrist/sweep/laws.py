@@ -157,6 +157,7 @@ class TemLoopBank:
                  hold: th.ThermalParams, max_muscle_C: float) -> None:
         one = TemLoop(thermal, params, drive, hold, max_muscle_C, compiled=True)
         self.n, self.thermal, self.drive, self.params, self.hold = n, thermal, drive, params, hold
+        self.max_muscle_C = float(max_muscle_C)  # a bank on another heat balance (plants.oracle) keeps it
         self._coef, self._cfg, self._candidates = one._coef, one._cfg, one._candidates
         self.observer = np.repeat(one.observer, n, axis=0)  # (n, 2 layers, 2 faces)
         self.rate, self.T_d_prev, self.rng = np.zeros((n, 2, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2, 2))

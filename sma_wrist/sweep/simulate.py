@@ -148,7 +148,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
              hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
              hold_shift_outside_load_range: bool = HOLD_SHIFT_OUTSIDE_LOAD_RANGE,
-             controller_overrides: Mapping[str, Any] | None = None
+             controller_overrides: Mapping[str, Any] | None = None, oracle: Sequence[str] = ()
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -169,10 +169,22 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     ``hold_shift_on_stop`` its gate on the adaptation (core.hysteresis.compensation.strain_informative),
     ``hold_shift_outside_load_range`` the one on the pair's load range (``MuscleCompensator.pair_in_load_range``).
     ``controller_overrides``: adaptive_controller's parameters other than its defaults
-    ({JointControllerParams field: value}, e.g. the reference leads)."""
+    ({JointControllerParams field: value}, e.g. the reference leads).
+
+    ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
+    (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
+    ``'sensors'``; docs/control.md "What a perfect model would give"); every case must then be on
+    the one ``sdgpi`` scenario."""
     check_true_temperature(true_temperature)
     if not cases:
         raise ParameterError('no closed loops to simulate (N = 0)')
+    orc: Any = None
+    if oracle:  # lazily: plants.oracle runs this engine
+        from sma_wrist.plants import oracle as oracle_models
+        orc = oracle_models
+        orc.check(oracle, plant, [c.scenario for c in cases])
+        if 'sensors' in oracle:
+            true_temperature = TRUE_TEMPERATURE_CONSUMERS
     if not (math.isfinite(duration_s) and duration_s >= 2 * TICK_S):
         raise ParameterError(f'duration {duration_s!r} s must be >= {2 * TICK_S} s')
     base = base or PlantParams()
@@ -186,8 +198,10 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     for mode in MODES:
         idx = np.array([i for i, c in enumerate(cases) if c.controller == mode], dtype=np.intp)
         if idx.size:
-            groups[mode] = (idx, JointControllerBank(JointControllerParams(mode=mode, **(controller_overrides or {})),
-                                                     idx.size, base))
+            jp = JointControllerParams(mode=mode, **(controller_overrides or {}))
+            if orc is not None and 'payload' in oracle:
+                jp = orc.knows_payload(jp, scen[0].payload_kg)
+            groups[mode] = (idx, JointControllerBank(jp, idx.size, base))
     comp = None
     if 'inverse_adaptive' in groups:
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
@@ -195,11 +209,15 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                                  shift_limit_C=15.0, window_follows_shift=window_follows_shift,
                                  stroke_gain_per_s=stroke_gain_per_s,
                                  hold_outside_load_range=hold_shift_outside_load_range)
+        if orc is not None and 'hysteresis' in oracle:
+            comp = orc.own_compensator(comp, scen[0], base)
     comp_started = False
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     q_track = np.zeros(0)  # the measured angles of that tick [rad]
     t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]
     tem = TemLoopBank.like_node(n, tem_params)
+    if orc is not None and 'thermal' in oracle:
+        tem = orc.own_tem_bank(tem, scen[0], base)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
     observer = None if compensator_observer is None else MuscleTemperatureObserver(tem.thermal, compensator_observer)
     k_total = int(round(duration_s / TICK_S)) + 1
@@ -215,6 +233,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         dt_law, t_last = t - t_last, t
         t_rec[k] = t
         T_m, q_m, qdot_m = sensors.measure(wrists.muscle_temperature_C, s.q.copy(), s.qd.copy())
+        if orc is not None and 'sensors' in oracle:
+            T_m, q_m, qdot_m = wrists.muscle_temperature_C, s.q.copy(), s.qd.copy()
         T_tem = T_comp = T_m
         if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
             # dt from the stamps, as hysteresis_compensator's observer takes it
