@@ -17,9 +17,8 @@ from numpy.typing import NDArray
 from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
 from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, output_filter_step,
-                                                     reference_ahead, time_to_meet, time_to_turn)
+                                                     reference_ahead, time_to_meet)
 from sma_wrist.core.control.pid import PID
-from sma_wrist.core.control.preheat import IdlePreheat
 from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
                                         target_prefilter)
 from sma_wrist.core.errors import ModelInputError
@@ -91,8 +90,6 @@ class JointControllerBank:
         self.hold_after = np.zeros(n)
         self._target = np.zeros(n)
         self.u_filtered: FloatArray | None = None  # pid_output_filter_s's state (n,) [degC]
-        self.preheat = (IdlePreheat(n, p.pid_preheat_s, p.pid_preheat_margin_C, p.pid_preheat_onset_rad)
-                        if p.mode == 'pid' and p.pid_preheat_s > 0 else None)
 
     def strain_at(self, q: FloatArray) -> FloatArray:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
@@ -112,23 +109,17 @@ class JointControllerBank:
         out[:] = ((self._e0 - x) / self._wire_mm, (self._e0 + x) / self._wire_mm)
         return out
 
-    def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float,
-               muscle_temperature_C: FloatArray | None = None
+    def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float
                ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
-        """One sample of every wrist: measured q, q' (n,), the reference, dt [s]; ``muscle_temperature_C``
-        (n, 2) the measured muscle temperatures (the node's /wrist/muscle_i/temperature; pid pre-heat only)."""
         p = self.params
         lo, hi = p.temperature_min_C, p.temperature_max_C
         q_now = q_d  # the desired strain stays the one at q_d(t), as JointController's
-        s_turn, qdot_now = (time_to_turn(qdot_d, qddot_d) if self.preheat is not None else math.inf), qdot_d
         if p.reference_lead_s > 0:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
             self.u_filtered = u = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
             T = np.stack([p.temperature_mid_C + u, p.temperature_mid_C - u], axis=-1)
-            if self.preheat is not None:
-                T = np.maximum(T, self.preheat.floor(np.asarray(q, float), muscle_temperature_C, u, s_turn, qdot_now))
             Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
             return None, self._strain_rows(q_now), Tc, o.saturated | (Tc != T).any(axis=1)
         assert self.adaptive is not None

@@ -247,7 +247,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():
-                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law, T_m[idx])
+                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law)
                 if T_g is not None:
                     T_new[idx] = T_g
                     continue

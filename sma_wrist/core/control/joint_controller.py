@@ -31,7 +31,6 @@ from numpy.typing import NDArray
 
 from sma_wrist.core.control.adaptive import KGF_N, N_WIRES, AdaptiveController, AdaptiveParams
 from sma_wrist.core.control.pid import PID, PIDParams
-from sma_wrist.core.control.preheat import IdlePreheat
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
@@ -158,13 +157,6 @@ class JointControllerParams:
     #: stick-slip (a ~1 Hz sawtooth of the angle error) and the potentiometer noise times Kp swung the
     #: TEMs between heating and cooling; 0 = the seed's PID output as it is (docs/control.md "PID chattering")
     pid_output_filter_s: float = 0.3
-    #: pid mode: pre-heat the muscle that drives after the reference's turn this long before it [s], to its
-    #: learnt contraction onset less ``pid_preheat_margin_C`` [degC]; onset = the angle moved by
-    #: ``pid_preheat_onset_rad`` [rad] (:mod:`sma_wrist.core.control.preheat`); 0 s = off
-    #: (docs/control.md "PID on the phase-fraction wrist")
-    pid_preheat_s: float = 0.0
-    pid_preheat_margin_C: float = 3.0
-    pid_preheat_onset_rad: float = 0.02
 
     @property
     def reference_lead_s(self) -> float:
@@ -175,8 +167,7 @@ class JointControllerParams:
         if self.mode not in MODES:
             raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
         for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N',
-                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s',
-                     'pid_preheat_s', 'pid_preheat_margin_C', 'pid_preheat_onset_rad'):
+                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s'):
             if not math.isfinite(getattr(self, name)):
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
@@ -184,12 +175,9 @@ class JointControllerParams:
                                  f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
         if not self.force_per_degC_N > 0:
             raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
-        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s',
-                     'pid_preheat_s', 'pid_preheat_margin_C'):
+        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s'):
             if not getattr(self, name) >= 0:
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be >= 0')
-        if not self.pid_preheat_onset_rad > 0:
-            raise ParameterError(f'pid_preheat_onset_rad = {self.pid_preheat_onset_rad!r} must be > 0')
 
 
 @dataclass(frozen=True)
@@ -216,8 +204,6 @@ class JointController:
         self.pid = PID(p.pid) if p.mode == 'pid' else None
         self.hold: tuple[float, float] | None = None  # (held angle, direction after the turn)
         self.u_filtered: FloatArray | None = None  # pid_output_filter_s's state [degC]
-        self.preheat = (IdlePreheat(1, p.pid_preheat_s, p.pid_preheat_margin_C, p.pid_preheat_onset_rad)
-                        if p.mode == 'pid' and p.pid_preheat_s > 0 else None)
 
     def strain_at(self, q: float) -> FloatArray:
         """Bundle strains (elongation / wire length) at angle q (:func:`bundle_strain`)."""
@@ -271,19 +257,13 @@ class JointController:
         """One sample: measured q [rad], q' [rad/s]; reference q_d, q_d', q_d''; step dt [s]."""
         p = self.params
         strain = self.strain_at(q_d)
-        # the reference's own turn, before the lead (pre-heat)
-        s_turn, qdot_now = (time_to_turn(qdot_d, qddot_d) if self.preheat is not None else math.inf), qdot_d
         if p.reference_lead_s > 0:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
             self.u_filtered = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
             u = float(self.u_filtered[0])
-            T = np.array([p.temperature_mid_C + u, p.temperature_mid_C - u])
-            if self.preheat is not None:
-                T_meas = None if muscle_temperature_C is None else np.asarray(muscle_temperature_C, float).reshape(1, 2)
-                T = np.maximum(T, self.preheat.floor(np.array([q]), T_meas, self.u_filtered, s_turn, qdot_now)[0])
-            T, clipped = self._clip_T(T)
+            T, clipped = self._clip_T(np.array([p.temperature_mid_C + u, p.temperature_mid_C - u]))
             return JointCommand(None, strain, T, bool(o.saturated[0]) or clipped,
                                 {'error_rad': float(o.error[0]), 'u_degC': u, 'integral': float(o.i_term[0])})
         assert self.adaptive is not None
