@@ -65,7 +65,8 @@ def reach(case: OffModelCase, T_window_C: tuple[float, float] = (20.0, 80.0)) ->
 
 
 def reach_floor_pct(case: OffModelCase, q_range: tuple[float, float] = (0.0, 1.048)) -> float:
-    """Least max error [% of the range] any controller can have on the Sec. 6.1 sine (:func:`reach`)."""
+    """Least max error [% of the range] any controller can have on the Sec. 6.1 sine (:func:`reach`): a static
+    floor; what TEM schedules reach in time is :mod:`sma_wrist.plants.dynamic_reach`'s."""
     bottom, top = reach(case)
     miss = max(q_range[1] - top, bottom - q_range[0], 0.0)
     return 100.0 * miss / (q_range[1] - q_range[0])
