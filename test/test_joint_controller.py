@@ -152,7 +152,8 @@ def test_reversal_lead_zero_is_the_strain_at_q_d_throughout():
 @pytest.mark.parametrize('kw', [dict(mode='mpc'), dict(temperature_mid_C=90.0), dict(force_per_degC_N=0.0),
                                 dict(temperature_min_C=float('nan')), dict(reversal_lead_s=-1.0),
                                 dict(pid_reference_lead_s=-0.5), dict(direct_reference_lead_s=float('inf')),
-                                dict(pid_output_filter_s=-0.1), dict(pid_output_filter_s=float('nan'))])
+                                dict(pid_output_filter_s=-0.1), dict(pid_output_filter_s=float('nan')),
+                                dict(direct_output_filter_s=-0.1), dict(direct_output_filter_s=float('inf'))])
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ParameterError):
         JointControllerParams(**kw)
@@ -205,3 +206,27 @@ def test_pid_output_filter_is_a_first_order_lag_on_the_pid_output():
         assert d.temperature_desired_C[0] == pytest.approx(50.0 + 6.0)
         assert c.temperature_desired_C[0] == pytest.approx(50.0 + 6.0 * (1 - (tau / (tau + dt)) ** k))
         assert c.temperature_desired_C[0] + c.temperature_desired_C[1] == pytest.approx(100.0)
+
+
+def test_direct_output_filter_is_a_first_order_lag_on_the_temperature_map():
+    """direct_output_filter_s = tau: after an error step the temperature request follows the map's
+    T_mid + (F - F_pre) / k with 1 - (tau / (tau + dt))^k (backward Euler); tau 0 gives the map itself, bit for
+    bit as before the filter existed. theta_hat frozen (gamma_a 0) so the law's force is constant after the step."""
+    from dataclasses import replace
+
+    from sma_wrist.core.control.joint_controller import tuned_adaptive
+    law = replace(tuned_adaptive(), gamma_a=0.0)
+    tau, dt = 0.1, 0.01
+    lagged, plain = (JointController(JointControllerParams(mode='direct_adaptive', adaptive=law,
+                                                           direct_reference_lead_s=0.0, direct_output_filter_s=x))
+                     for x in (tau, 0.0))
+    assert lagged.params.output_filter_s == tau and JointControllerParams(mode='pid').output_filter_s == 0.3
+    for jc in (lagged, plain):
+        for _ in range(10):
+            jc.update(0.5, 0.0, 0.5, 0.0, 0.0, dt)
+    for k in range(1, 31):
+        c, d = lagged.update(0.5, 0.0, 0.55, 0.0, 0.0, dt), plain.update(0.5, 0.0, 0.55, 0.0, 0.0, dt)
+        mapped = 50.0 + (d.force_N - law.preload_N) / plain.params.force_per_degC_N
+        np.testing.assert_array_equal(d.temperature_desired_C, mapped)  # unfiltered: the map, clipped to nothing
+        assert 60.0 < mapped[0] < 80.0  # 0.05 rad inside the window: a proportional band (k 3: 102 degC, clipped)
+        np.testing.assert_allclose(c.temperature_desired_C, 50.0 + (mapped - 50.0) * (1 - (tau / (tau + dt)) ** k))

@@ -81,6 +81,9 @@ FIELD_DOCS: dict[str, tuple[Any, ...]] = {
     'pid_output_filter_s': ('pid mode: time constant of a first-order low-pass on the PID output, against the '
                             'joint\'s stick-slip reaching the TEMs (docs/control.md "PID chattering"; 0 = off)',
                             's', (0.0, 10.0)),
+    'direct_output_filter_s': ('direct_adaptive mode: time constant of a first-order low-pass on the temperature '
+                               'request (F - F_pre) / k, against sensor noise reaching the TEMs (docs/control.md '
+                               '"Direct adaptive: a proportional temperature map"; 0 = off)', 's', (0.0, 10.0)),
 }
 
 

@@ -190,6 +190,9 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     ap.add_argument('--before-lead', action='store_true',
                     help='direct_adaptive and pid as before their reference leads (docs/control.md "Direct adaptive '
                          'and PID off-model"): laws on q_d(t), direct map 1 N/degC')
+    ap.add_argument('--before-direct-map', action='store_true',
+                    help='direct_adaptive with its temperature map before the proportional band (docs/control.md '
+                         '"Direct adaptive: a proportional temperature map"): 3 N/degC, no output filter')
     ap.add_argument('--true-temperature', default='', metavar='CONSUMERS',
                     help='diagnosis: comma list of compensator,tem that read the true muscle temperature instead '
                          'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
@@ -223,7 +226,10 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
         kw['compensator_observer'] = None
     if a.before_lead:
         kw['controller_overrides'] = {'pid_reference_lead_s': 0.0, 'direct_reference_lead_s': 0.0,
-                                      'force_per_degC_N': 1.0}
+                                      'force_per_degC_N': 1.0, 'direct_output_filter_s': 0.0}
+    if a.before_direct_map:
+        kw['controller_overrides'] = {'force_per_degC_N': 3.0, 'direct_output_filter_s': 0.0}
+
     def names(option: str, value: str, check: Callable[[Sequence[str]], None]) -> tuple[str, ...]:
         """A comma list of names, checked; a bad one ends the program with the option's name."""
         items = tuple(value.split(','))

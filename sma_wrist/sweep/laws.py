@@ -51,14 +51,14 @@ def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, 
 
 
 @_jit
-def _temperature_map(force, mid, preload, per_degC, lo, hi, flag, T, saturated):  # pragma: no cover - compiled
+def _temperature_map(deviation, mid, lo, hi, flag, T, saturated):  # pragma: no cover - compiled
     """JointController's temperatures in direct_adaptive mode, per wrist j and muscle i:
-    T[j, i] = mid + (force[j, i] - preload) / per_degC clipped to [lo, hi] [degC] (force [N]); saturated[j] =
-    the law's flag[j] or a clipped T. numpy's element-wise operations in their order."""
-    for j in range(force.shape[0]):
+    T[j, i] = mid + deviation[j, i] clipped to [lo, hi] [degC] (deviation = the filtered (F - F_pre) / k);
+    saturated[j] = the law's flag[j] or a clipped T. numpy's element-wise operations in their order."""
+    for j in range(deviation.shape[0]):
         sat = flag[j]
         for i in range(2):
-            t = mid + (force[j, i] - preload) / per_degC
+            t = mid + deviation[j, i]
             tc = min(max(t, lo), hi)
             T[j, i] = tc
             sat = sat or tc != t
@@ -89,7 +89,7 @@ class JointControllerBank:
         self.hold_q = np.zeros(n)
         self.hold_after = np.zeros(n)
         self._target = np.zeros(n)
-        self.u_filtered: FloatArray | None = None  # pid_output_filter_s's state (n,) [degC]
+        self.u_filtered: FloatArray | None = None  # the output filter's state (output_filter_s), (n,) or (n, 2) [degC]
 
     def strain_at(self, q: FloatArray) -> FloatArray:
         """(n, 2) bundle strains at angles q (Eq. 4.17)."""
@@ -118,7 +118,7 @@ class JointControllerBank:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
-            self.u_filtered = u = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
+            self.u_filtered = u = output_filter_step(self.u_filtered, o.u, dt, p.output_filter_s)
             T = np.stack([p.temperature_mid_C + u, p.temperature_mid_C - u], axis=-1)
             Tc = np.minimum(np.maximum(T, lo), hi)  # np.clip, without its dispatch cost
             return None, self._strain_rows(q_now), Tc, o.saturated | (Tc != T).any(axis=1)
@@ -133,8 +133,9 @@ class JointControllerBank:
                                 self.hold_after, self._target)
             return force, self.strain_at(self._target), None, saturated
         Tc, sat_T = np.empty((self.n, 2)), np.empty(self.n, np.bool_)
-        _temperature_map(force, p.temperature_mid_C, p.adaptive.preload_N, p.force_per_degC_N, lo, hi, saturated, Tc,
-                         sat_T)
+        self.u_filtered = output_filter_step(self.u_filtered, (force - p.adaptive.preload_N) / p.force_per_degC_N, dt,
+                                             p.output_filter_s)
+        _temperature_map(self.u_filtered, p.temperature_mid_C, lo, hi, saturated, Tc, sat_T)
         return force, self._strain_rows(q_now), Tc, sat_T
 
 

@@ -9,7 +9,8 @@ Three modes (seed Sec. 6.1, Table 6.1):
 - ``direct_adaptive``: the same law with only theta adapted; without an inverse, each
   force deviation maps linearly to a temperature deviation around ``temperature_mid_C``
   with the plateau's stress-temperature slope ``force_per_degC_N`` (the hysteresis is
-  treated as an unknown gain, which beta_hat absorbs in the inverse mode).
+  treated as an unknown gain, which beta_hat absorbs in the inverse mode), low-passed by
+  ``direct_output_filter_s``.
 - ``pid``: the Sec. 6.1 PID (:mod:`sma_wrist.core.control.pid`) on the angle error; its output u is a
   differential temperature [degC]: T_1d = T_mid + u, T_2d = T_mid - u (muscle 1 contracts
   when heated and raises q).
@@ -142,9 +143,11 @@ class JointControllerParams:
     temperature_mid_C: float = 50.0  # centre of the muscles' working band [degC]
     temperature_min_C: float = 20.0
     temperature_max_C: float = 80.0
-    #: direct mode: force request per degC of temperature request [N/degC] (1 until issue 14 item 2:
-    #: 3 narrows the off-model error spread and keeps chattering under 2 /s; docs/control.md)
-    force_per_degC_N: float = 3.0
+    #: direct mode: force request per degC of temperature request [N/degC] (1 until issue 14 item 2, then 3;
+    #: 10 with the output filter below: the law's C1 C2 e then spans the 20-80 degC window over ~0.1 rad of
+    #: error instead of ~0.03, a proportional band like the PID's; docs/control.md "Direct adaptive: a
+    #: proportional temperature map")
+    force_per_degC_N: float = 10.0
     #: inverse mode: start crossing the hysteresis gap this long before the reference turns [s]
     #: (0 = the strain at q_d throughout, Eq. 5.5 as written; docs/control.md "Reversal lead")
     reversal_lead_s: float = 2.75
@@ -157,17 +160,28 @@ class JointControllerParams:
     #: stick-slip (a ~1 Hz sawtooth of the angle error) and the potentiometer noise times Kp swung the
     #: TEMs between heating and cooling; 0 = the seed's PID output as it is (docs/control.md "PID chattering")
     pid_output_filter_s: float = 0.3
+    #: direct mode: the same low-pass on the temperature request (F - F_pre) / k [s]: with k = 10 N/degC the
+    #: map is a proportional band rather than a relay between 20 and 80 degC, and it passes the sensor noise
+    #: and stick-slip to the TEMs (2.9 sign changes /s on the family's worst plant without the filter);
+    #: 0 = the map as it is (docs/control.md "Direct adaptive: a proportional temperature map")
+    direct_output_filter_s: float = 0.1
 
     @property
     def reference_lead_s(self) -> float:
         """The lead of this mode's law [s] (0 in inverse_adaptive, which has its reversal lead)."""
         return {'pid': self.pid_reference_lead_s, 'direct_adaptive': self.direct_reference_lead_s}.get(self.mode, 0.0)
 
+    @property
+    def output_filter_s(self) -> float:
+        """The output low-pass of this mode's temperature request [s] (0 in inverse_adaptive)."""
+        return {'pid': self.pid_output_filter_s, 'direct_adaptive': self.direct_output_filter_s}.get(self.mode, 0.0)
+
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
         for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N',
-                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s'):
+                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s',
+                     'direct_output_filter_s'):
             if not math.isfinite(getattr(self, name)):
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
@@ -175,7 +189,8 @@ class JointControllerParams:
                                  f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
         if not self.force_per_degC_N > 0:
             raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
-        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s'):
+        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s',
+                     'direct_output_filter_s'):
             if not getattr(self, name) >= 0:
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be >= 0')
 
@@ -203,7 +218,7 @@ class JointController:
         self.adaptive = AdaptiveController(replace(p.adaptive, mode=p.mode)) if p.mode != 'pid' else None
         self.pid = PID(p.pid) if p.mode == 'pid' else None
         self.hold: tuple[float, float] | None = None  # (held angle, direction after the turn)
-        self.u_filtered: FloatArray | None = None  # pid_output_filter_s's state [degC]
+        self.u_filtered: FloatArray | None = None  # the output filter's state (output_filter_s) [degC]
 
     def strain_at(self, q: float) -> FloatArray:
         """Bundle strains (elongation / wire length) at angle q (:func:`bundle_strain`)."""
@@ -261,7 +276,7 @@ class JointController:
             q_d, qdot_d = reference_ahead(q_d, qdot_d, qddot_d, p.reference_lead_s)
         if self.pid is not None:
             o = self.pid.update(q, q_d, dt)
-            self.u_filtered = output_filter_step(self.u_filtered, o.u, dt, p.pid_output_filter_s)
+            self.u_filtered = output_filter_step(self.u_filtered, o.u, dt, p.output_filter_s)
             u = float(self.u_filtered[0])
             T, clipped = self._clip_T(np.array([p.temperature_mid_C + u, p.temperature_mid_C - u]))
             return JointCommand(None, strain, T, bool(o.saturated[0]) or clipped,
@@ -275,7 +290,9 @@ class JointController:
         if p.mode == 'inverse_adaptive':
             strain = self._reversal_lead(strain, q, q_d, qdot_d, qddot_d, info)
             return JointCommand(force, strain, None, bool(o.saturated[0]), info)
-        T, clipped = self._clip_T(p.temperature_mid_C + (force - p.adaptive.preload_N) / p.force_per_degC_N)
+        self.u_filtered = output_filter_step(self.u_filtered, (force - p.adaptive.preload_N) / p.force_per_degC_N, dt,
+                                             p.output_filter_s)
+        T, clipped = self._clip_T(p.temperature_mid_C + self.u_filtered)
         return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)
 
 
