@@ -36,10 +36,15 @@ def _warm_kernels(config: pytest.Config) -> None:
     if (hasattr(config, 'workerinput') or not getattr(config.option, 'numprocesses', None)
             or os.environ.get('SMA_WRIST_NO_WARM') or not jit.AVAILABLE):
         return
+    import sma_wrist
     script = Path(__file__).with_name('warm_kernels.py')
+    # the copy of the package this run imports (``python -m pytest`` puts the checkout ahead of an
+    # installed one): numba caches per source folder, so warming another copy would help nobody
+    here = str(Path(sma_wrist.__file__).resolve().parent.parent)
+    env = {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in (here, os.environ.get('PYTHONPATH')) if p)}
     t0 = time.perf_counter()
     procs = [subprocess.Popen([sys.executable, str(script), part], stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, text=True) for part in ('closed_loops', 'replays')]
+                              stderr=subprocess.PIPE, text=True, env=env) for part in ('closed_loops', 'replays')]
     failed = [err.strip().splitlines()[-1] for p in procs if (err := p.communicate()[1]) and p.returncode]
     print(f'sma_wrist: numba kernels ready for the workers in {time.perf_counter() - t0:.0f} s'
           + (f' (not all: {"; ".join(failed)})' if failed else ''), file=sys.__stderr__)

@@ -80,7 +80,9 @@ def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_
                                    'def twice(x):\n    return gain(x)\n')
 
     def run(mode):
-        out = subprocess.run([sys.executable, '-c', RUN, str(tmp_path), mode], capture_output=True, text=True,
+        # numba's own default (next to the sources), whatever cache folder the user has set
+        env = {k: v for k, v in os.environ.items() if k != 'NUMBA_CACHE_DIR'}
+        out = subprocess.run([sys.executable, '-c', RUN, str(tmp_path), mode], capture_output=True, text=True, env=env,
                              timeout=120)
         assert out.returncode == 0, out.stderr
         return float(out.stdout.split()[-1])
