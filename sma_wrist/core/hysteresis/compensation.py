@@ -204,16 +204,18 @@ class MuscleCompensator:
         self.observe(T - self.shift_C, stress_Pa)
         if self.shift_gain_per_s <= 0.0:
             return
+        sigma = np.asarray(stress_Pa, float)
+        m, out = self._load(sigma)  # once: the gate and the step both need it
         if self.hold_outside_load_range:
-            taut = self.pair_in_load_range(stress_Pa)
+            taut = _pair_taut(out)
             if not taut.all():
                 adapt = taut if adapt is None else np.asarray(adapt, bool) & taut
         if adapt is None:
-            self._adapt(T, stress_Pa, strain_measured, dt)
+            self._adapt(T, m, strain_measured, dt)
             return
         held = ~np.asarray(adapt, bool)
         shift, stroke = self.shift_C, self.stroke
-        self._adapt(T, stress_Pa, strain_measured, dt)
+        self._adapt(T, m, strain_measured, dt)
         self.shift_C = np.where(held, shift, self.shift_C)
         self.stroke = np.where(held, stroke, self.stroke)
 
@@ -227,12 +229,10 @@ class MuscleCompensator:
         time, and each wire's shift fitted there ran to its limit within seconds (docs/control.md, "The
         pair's load range gates the shift"). The partner counts too: a slack antagonist leaves the
         other wire carrying the payload alone, off the operating point the pre-load sets."""
-        sigma = np.asarray(stress_Pa, float)
-        out = self._load(sigma)[1].reshape(-1, 2).any(axis=1)
-        return np.repeat(~out, 2).reshape(sigma.shape)
+        return _pair_taut(self._load(np.asarray(stress_Pa, float))[1])
 
-    def _adapt(self, T: FloatArray, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float) -> None:
-        """The adaptation step of :meth:`track` on every wire."""
+    def _adapt(self, T: FloatArray, m: FloatArray, strain_measured: ArrayLike, dt: float) -> None:
+        """The adaptation step of :meth:`track` on every wire (m: the loads clipped to the range [kgf])."""
         k_dt = self.stroke_gain_per_s * dt
         if k_dt:
             lo, hi = self.T_range_C
@@ -240,7 +240,6 @@ class MuscleCompensator:
         inv = self.inverse
         st = inv.state
         assert st is not None
-        m = self._load(np.asarray(stress_Pa, float))[0]
         eps = np.asarray(strain_measured, float)
         y_meas = self._target(eps, m)  # type: ignore[arg-type]  # the same expression on arrays
         if _jm.AVAILABLE and st.T_prev.ndim == 1 and eps.shape == st.T_prev.shape:
@@ -272,6 +271,12 @@ class MuscleCompensator:
         """Temperatures clipped to the compensator's window [degC]."""
         lo, hi = self.T_range_C
         return np.minimum(np.maximum(temperature_C, lo), hi)
+
+
+def _pair_taut(outside: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """Per wire, shaped like ``outside`` (wires in pairs): neither wire of its wrist outside the load range."""
+    out = outside.reshape(-1, 2).any(axis=1)
+    return np.repeat(~out, 2).reshape(outside.shape)
 
 
 def strain_informative(q_rad: ArrayLike, q_prev_rad: ArrayLike, dt: float, stress_Pa: ArrayLike,
