@@ -306,7 +306,8 @@ def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     names = list(SECTIONS) if not sections else list(sections)
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:
-        raise ValueError(f'unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}')
+        from sma_wrist.core.errors import ParameterError
+        raise ParameterError(f'unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}')
     out: dict = {'meta': {'python': platform.python_version(), 'numpy': np.__version__,
                           'machine': platform.machine(), 'cpu_count': os.cpu_count(), 'quick': quick}}
     for name in names:

@@ -287,6 +287,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except FileExistsError as e:
         print(f'error: {e.filename or e} already exists; choose a new --bag directory', file=sys.stderr)
         return 2
+    except OSError as e:
+        if e.filename is None:  # not a path the user named: a defect, keep its traceback
+            raise
+        # an output folder that cannot be made, a file that cannot be written: the user's path, said plainly
+        print(f'error: cannot use {e.filename}: {e.strerror or e}', file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
         return 130

@@ -19,3 +19,9 @@ def test_a_figure_folder_that_cannot_be_made_is_a_clear_error(tmp_path, monkeypa
     monkeypatch.setenv('SMA_WRIST_BENCH_DIR', str(tmp_path / 'file'))
     with pytest.raises(SmaWristError, match='SMA_WRIST_BENCH_DIR=.*cannot hold the figures'):
         bench_png('x.png')
+
+
+def test_an_unknown_section_is_a_clear_error():
+    from sma_wrist.bench import run
+    with pytest.raises(SmaWristError, match=r"unknown benchmark section\(s\) \['nope'\]"):
+        run(['nope'])

@@ -129,6 +129,39 @@ def test_cli_reports_bad_input_without_traceback() -> None:
         assert p.returncode == 2 and text in p.stderr and 'Traceback' not in p.stderr
 
 
+def test_an_output_path_that_cannot_be_made_is_a_clear_error(tmp_path) -> None:
+    """sweep --out, run --bag, experiment --out under a regular file: the path and the reason, exit 2, before
+    any loop runs (a traceback from mkdir before)."""
+    (tmp_path / 'file').write_text('')
+    under_file = str(tmp_path / 'file' / 'out')
+    for args in (['sweep', '--plants', '1', '--controllers', 'pid', '--duration', '2', '--no-nominal', '--quiet',
+                  '--out', under_file],
+                 ['run', '--duration', '0.5', '--bag', under_file],
+                 ['experiment', '--duration', '0.5', '--payloads', '0.3', '--out', under_file]):
+        p = subprocess.run([sys.executable, '-m', 'sma_wrist', *args], capture_output=True, text=True,
+                           env={**os.environ, 'PYTHONPATH': os.getcwd()}, timeout=120)
+        assert p.returncode == 2 and f'error: cannot use {under_file}' in p.stderr, (args, p.stderr[-500:])
+        assert 'Traceback' not in p.stderr
+
+
+def test_an_os_error_without_a_path_keeps_its_traceback(monkeypatch) -> None:
+    """main turns a user's unusable path into one line; an OSError that names no path is a defect, not hidden."""
+    import argparse
+
+    from sma_wrist import cli
+
+    def boom(_: argparse.Namespace) -> int:
+        raise OSError('no path')
+
+    class Parser:
+        def parse_args(self, argv):  # type: ignore[no-untyped-def]
+            return argparse.Namespace(func=boom)
+
+    monkeypatch.setattr(cli, 'build_parser', Parser)
+    with pytest.raises(OSError, match='no path'):
+        cli.main([])
+
+
 def test_ctrl_c_keeps_finished_chunks(tmp_path) -> None:
     cfg = SweepConfig(n_plants=2, controllers=('pid',), duration_s=2.0, chunk=2, nominal=True)
     calls = []
