@@ -282,3 +282,21 @@ def test_identify_on_measured_nitipd_multiload_export(tmp_path: Path) -> None:
     assert min(b['rms_pct'] for b in r['before']['per_load']) > 25.0
     sl = r['transitions']['slopes_per_MPa']
     assert sl['measured']['A_50'] > 0.1 and sl['fitted']['A_50'] > 0.1
+
+
+def test_a_folder_of_loops_is_its_tables_and_a_held_out_loop_is_never_fitted(tmp_path: Path) -> None:
+    """`identify hysteresis test/data/flexinol` read "Is a directory" before; a folder is now its tables (the data
+    set's README.md and LICENSE are not), and a held-out table inside it stays out of the fit."""
+    from sma_wrist.identify.io import IdentifyInputError, expand_folders
+    folder = DATA / 'flexinol'
+    tables = [str(folder / f'{s}MPa.txt') for s in (100, 150, 172, 200, 50)]  # sorted by name
+    assert expand_folders([str(folder)]) == tables
+    assert expand_folders([str(folder)], exclude=[tables[3]]) == tables[:3] + tables[4:]
+    assert expand_folders([str(LOOP), str(folder / 'README.md')]) == [str(LOOP), str(folder / 'README.md')]  # files as given
+    (tmp_path / 'notes.md').write_text('no tables here')
+    with pytest.raises(IdentifyInputError, match='a folder with no table in it'):
+        expand_folders([str(tmp_path)])
+    doc = run(Options([str(folder)], [tables[3]], '', loo=False, plots=False, model='quadratic'),
+              progress=_quiet)
+    fitted = sorted(round(r['stress_MPa']) for r in doc['fit']['per_load'])
+    assert fitted == [50, 100, 150, 172] and [round(h['stress_MPa']) for h in doc['holdout']] == [200]

@@ -30,7 +30,7 @@ def register(sub: Any) -> None:
     """Add the ``hysteresis`` sub-command to the ``identify`` sub-parsers."""
     p = sub.add_parser('hysteresis', help=HELP, description=HELP)
     p.add_argument('files', nargs='+', metavar='FILE',
-                   help='isobaric test tables (CSV, TSV, ";" or whitespace text, .xlsx, MATLAB .mat)')
+                   help='isobaric test tables (CSV, TSV, ";" or whitespace text, .xlsx, MATLAB .mat), or folders of them')
     p.add_argument('--holdout', nargs='+', action='extend', default=[], metavar='FILE',
                    help='files predicted by the SD-GPI fitted without them')
     p.add_argument('--out', default='runs/identify', metavar='DIR',
@@ -102,8 +102,8 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     from sma_wrist.core.hysteresis.identification import (fit_gpi, fit_sdgpi, fit_sdgpi_cc, gpi_vector,
                                                           sdgpi_gpi_vectors, simulate_batch)
     from sma_wrist.core.hysteresis.params_file import hysteresis_params, save_hysteresis
-    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, load_kgf_to_stress, read_measurement,
-                                       stress_to_load_kgf)
+    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, expand_folders, load_kgf_to_stress,
+                                       read_measurement, stress_to_load_kgf)
     from sma_wrist.identify.loops import errors_pct, slope, transitions
     from sma_wrist.identify.segment import loops_of
 
@@ -122,8 +122,9 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
             loops.extend(ls)
         return loops
 
-    train = sorted(load_files(o.files), key=lambda lp: lp.stress_MPa)
-    hold = sorted(load_files(o.holdout), key=lambda lp: lp.stress_MPa)
+    hold_files = expand_folders(o.holdout)
+    train = sorted(load_files(expand_folders(o.files, exclude=hold_files)), key=lambda lp: lp.stress_MPa)
+    hold = sorted(load_files(hold_files), key=lambda lp: lp.stress_MPa)
     stresses = sorted({round(lp.stress_MPa, 6) for lp in train})
     if len(stresses) < 3:
         raise IdentifyInputError(

@@ -20,6 +20,7 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -228,6 +229,32 @@ def _mat_table(p: Path, error: type) -> Table:
                       for k, v in items.items()) or 'nothing'
     raise error(f'{p}: a .mat file needs one numeric matrix (a column per quantity) or equally long numeric '
                 f'vectors named by quantity; it holds {found}. Cell arrays of curves: save one stress per file')
+
+
+#: the suffixes a folder given as input is searched for (:func:`expand_folders`); "" is a plain file name
+TABLE_SUFFIXES = ('.txt', '.csv', '.tsv', '.dat', '.xlsx', '.mat')
+
+
+def expand_folders(paths: Sequence[str], exclude: Sequence[str] = (), error: type = IdentifyInputError) -> list[str]:
+    """Each folder among ``paths`` replaced by the tables in it (:data:`TABLE_SUFFIXES`, sorted by name; a
+    data set's README.md and LICENSE are not tables), files kept as given. A table of a folder that is
+    also in ``exclude`` (the held-out files) is left out, so a held-out loop is never fitted. A folder
+    without tables is an error: the user named it, so nothing in it is silently skipped."""
+    held = {Path(f).resolve() for f in exclude}
+    out: list[str] = []
+    for a in paths:
+        p = Path(a)
+        if not p.is_dir():
+            out.append(a)
+            continue
+        found = sorted(str(f) for f in p.iterdir()
+                       if f.is_file() and not f.name.startswith('.') and f.suffix.lower() in TABLE_SUFFIXES
+                       and f.resolve() not in held)
+        if not found:
+            raise error(f'{p}: a folder with no table in it to fit (looked for '
+                        f'{", ".join(TABLE_SUFFIXES)} files, held-out ones left out); give the tables or their folder')
+        out.extend(found)
+    return out
 
 
 def read_table(path: str | Path, need: str = 'temperature, strain and stress', error: type = IdentifyInputError) -> Table:
