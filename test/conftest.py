@@ -38,8 +38,9 @@ def _warm_kernels(config: pytest.Config) -> None:
         return
     import sma_wrist
     script = Path(__file__).with_name('warm_kernels.py')
-    # the copy of the package this run imports (``python -m pytest`` puts the checkout ahead of an
-    # installed one): numba caches per source folder, so warming another copy would help nobody
+    # the copy of the package this run imports (the installed one under .ci/run, which runs from test/; the
+    # checkout under ``python -m pytest test`` from the root): numba caches per source folder, so warming
+    # another copy would help nobody
     here = str(Path(sma_wrist.__file__).resolve().parent.parent)
     env = {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in (here, os.environ.get('PYTHONPATH')) if p)}
     t0 = time.perf_counter()
