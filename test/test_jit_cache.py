@@ -111,3 +111,30 @@ def test_the_package_caches_its_kernels_outside_its_own_folder(tmp_path):
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr
     assert Path(out.stdout.split()[-1]).parent == cache
+
+
+def test_cache_folders_of_copies_that_are_gone_are_pruned_and_no_others(tmp_path):
+    """Every clone, venv or reinstall of the package got its own cache sub-folder (~0.5 MB) that nothing removed."""
+    cache, live = tmp_path / 'cache', tmp_path / 'clone' / 'core'
+    live.mkdir(parents=True)
+    for name, source in (('live', live), ('gone', tmp_path / 'deleted_clone' / 'core'), ('foreign', None)):
+        (cache / name).mkdir(parents=True)
+        (cache / name / 'k.f-1.py311.nbi').write_bytes(b'compiled')
+        if source is not None:
+            jit.mark_cache_folder(cache / name, source)
+    assert jit.prune_caches(cache) == [cache / 'gone']
+    assert sorted(d.name for d in cache.iterdir() if d.is_dir()) == ['foreign', 'live']  # unmarked: not ours
+    jit.mark_cache_folder(cache / 'late', tmp_path / 'also_deleted')
+    assert jit.prune_caches(cache) == []  # at most once an hour
+    assert jit.prune_caches(cache, force=True) == [cache / 'late']
+
+
+def test_the_package_marks_the_cache_folders_it_uses(tmp_path):
+    pytest.importorskip('numba')
+    cache = tmp_path / 'cache'
+    code = 'import sma_wrist.core.plant.kernel'
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, 'NUMBA_CACHE_DIR': str(cache)})
+    assert out.returncode == 0, out.stderr
+    marks = {Path((d / jit.SOURCE_MARKER).read_text()) for d in cache.iterdir() if (d / jit.SOURCE_MARKER).is_file()}
+    assert ROOT / 'core' / 'plant' in marks and all(m.is_dir() for m in marks)

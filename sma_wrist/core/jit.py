@@ -24,6 +24,9 @@ Where the compiled kernels are cached, and when they are stale:
 folder (``$XDG_CACHE_HOME/sma_wrist/numba``, ``NUMBA_CACHE_DIR`` when the user set it), one
 sub-folder per installed copy, and stamped with the digest of every source in the folders that
 hold kernels (:data:`KERNEL_FOLDERS`), so numba itself recompiles after an edit anywhere there.
+Each sub-folder it writes names its source folder (:data:`SOURCE_MARKER`); :func:`prune_caches`
+deletes the sub-folders whose copy is gone (an uninstalled package, a deleted clone or venv: ~0.5 MB
+each, which otherwise pile up), at most once an hour, and never a folder it did not mark.
 The locator plugs into numba's cache-locator list, which is not a public API; a numba without it
 gets the older guard, :func:`drop_stale_caches`, on numba's in-tree cache.
 """
@@ -41,6 +44,10 @@ STAMP_NAME = 'numba-sources.sha256'
 #: e.g. the CLI or the nodes, keeps the compiled kernels)
 KERNEL_FOLDERS = ('core', 'plants', 'sweep', 'diagnose', 'data')
 PACKAGE_ROOT = Path(__file__).resolve().parent.parent
+#: written into each cache sub-folder the package's locator uses: the source folder it caches
+SOURCE_MARKER = 'sma_wrist-source.txt'
+#: the cache folder's stamp of the last :func:`prune_caches`, and how often it runs [s]
+PRUNE_STAMP, PRUNE_EVERY_S = '.sma_wrist-pruned', 3600.0
 
 
 def source_digest(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> str:
@@ -81,6 +88,47 @@ def drop_stale_caches(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> 
         return False
 
 
+def mark_cache_folder(cache_path: str | Path, source_folder: str | Path) -> None:
+    """Write :data:`SOURCE_MARKER` (the source folder's path) into a cache sub-folder, once."""
+    marker = Path(cache_path) / SOURCE_MARKER
+    try:
+        if not marker.is_file():
+            marker.parent.mkdir(parents=True, exist_ok=True)
+            marker.write_text(str(source_folder))
+    except OSError:  # a read-only cache folder: numba then does not cache there either
+        pass
+
+
+def prune_caches(cache_dir: Path, *, force: bool = False) -> list[Path]:
+    """Delete the sub-folders of ``cache_dir`` whose :data:`SOURCE_MARKER` names a source folder that no
+    longer exists; the deleted ones. Unmarked folders (other packages' under a shared ``NUMBA_CACHE_DIR``,
+    or written before the marker existed) are left alone. Runs at most every :data:`PRUNE_EVERY_S`
+    unless ``force``; a race with another process pruning or compiling only skips a folder."""
+    import shutil
+    import time
+    stamp = cache_dir / PRUNE_STAMP
+    try:
+        if not force and time.time() - stamp.stat().st_mtime < PRUNE_EVERY_S:
+            return []
+    except OSError:
+        pass  # never pruned (or no cache folder yet)
+    gone: list[Path] = []
+    try:
+        subs = [d for d in cache_dir.iterdir() if d.is_dir()]
+        for d in subs:
+            try:
+                source = (d / SOURCE_MARKER).read_text().strip()
+            except OSError:
+                continue
+            if source and not Path(source).is_dir():
+                shutil.rmtree(d, ignore_errors=True)
+                gone.append(d)
+        stamp.touch()
+    except OSError:
+        pass
+    return gone
+
+
 def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS,
                           cache_dir: Path | None = None) -> bool:
     """Cache every kernel compiled from a file under ``root`` in ``cache_dir`` (default
@@ -94,6 +142,8 @@ def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS,
         return False
     root = root.resolve()
     digest = functools.cache(lambda: source_digest(root, folders))  # once per process, at first compile
+    marked: set[str] = set()  # cache sub-folders marked by this process
+    pruned: list[list[Path]] = []  # prune_caches' answer, once per process, at the first kernel
 
     class PackageCacheLocator(*base):  # type: ignore[misc]
         def __init__(self, py_func, py_file):  # type: ignore[no-untyped-def]
@@ -101,6 +151,11 @@ def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS,
             self._lineno = py_func.__code__.co_firstlineno
             where = cache_dir if cache_dir is not None else user_cache_dir()
             self._cache_path = os.path.join(where, self.get_suitable_cache_subpath(py_file))
+            if self._cache_path not in marked:
+                marked.add(self._cache_path)
+                mark_cache_folder(self._cache_path, Path(py_file).resolve().parent)
+                if not pruned:
+                    pruned.append(prune_caches(Path(where)))
 
         def get_cache_path(self) -> str:
             return self._cache_path
