@@ -197,6 +197,29 @@ def test_graph_with_the_temperature_observer_is_the_sweep_with_it() -> None:
     assert np.max(np.abs(run.q - raw.q_measured[k, 0])) > 1e-5  # the observer reached the memory
 
 
+@pytest.mark.parametrize('mode', ['pid', 'inverse_adaptive'])
+def test_graph_learning_the_tems_online_is_the_sweep_learning_them(mode: str) -> None:
+    """tem_controller and hysteresis_compensator each run their own estimate of the TEMs (thermal_adaptation, used
+    after 4 s here instead of 30) on the samples they take; the sweep runs one per wrist and hands the compensator's
+    observer the TEM loop's: same TEM commands and measured angles to the last bit, and not the loop without it."""
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.core.thermal.online import OnlineThermalParams
+    from sma_wrist.sweep.simulate import Case, simulate
+    sc = PERTURBED
+    early = {'thermal_adaptation.apply_after_s': 4.0}
+    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
+                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}},
+             '/tem_controller': early, '/hysteresis_compensator': early}
+    with tempfile.TemporaryDirectory() as d:
+        run = run_closed_loop(mode, sc.payload_kg, 10.0, Path(d) / 'bag', extra_params=extra).run
+    _, tr = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=OnlineThermalParams(apply_after_s=4.0))
+    k, kc = np.rint(run.t / 0.01).astype(int), np.rint(run.command_t / 0.01).astype(int)
+    assert np.max(np.abs(run.q - tr.q_measured[k, 0])) <= 1e-12
+    np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
+    _, off = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=None)
+    assert np.max(np.abs(off.command_V[kc, 0] - run.command_V)) > 1e-3  # the estimate reached the commands
+
+
 def test_graph_runs_the_phase_fraction_wrist_and_the_sweep_is_the_graph() -> None:
     """plant_sim ``plant:=phase_fraction`` (the structurally different wire, its own thermocouple lag
     plus the scenario's sensor noise) in the node graph for 4 s; the sweep's loop on the same plant and

@@ -28,6 +28,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sma_wrist.contract import Topic, load_contract
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal.online import OnlineThermalParams
 
 #: a /diagnostics condition that keeps changing is logged at most this often per key [s]
 LOG_THROTTLE_S = 10.0
@@ -82,6 +83,27 @@ def qos_for(topic: Topic) -> QoSProfile:
 PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm, "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; "
                       'the same value in plant_sim, hysteresis_compensator and adaptive_controller; the identified '
                       "wire's in its wrist_params.yaml, docs/identification.md)", 'mm', (0.1, 10.0), runtime=False)
+
+#: the online heat-balance estimate (core.thermal.online): the same values in tem_controller and
+#: hysteresis_compensator, which each run one on the same samples (docs/control.md "Learning the TEMs online")
+THERMAL_ADAPTATION_PARAMS = (
+    Param('thermal_adaptation', True, "estimate the TEMs' drive gain, muscle-face losses and ambient online from the "
+          'commands and the thermocouples, and run the observer and law on the estimate (docs/control.md "Learning '
+          'the TEMs online")', runtime=False),
+    Param('thermal_adaptation.apply_after_s', OnlineThermalParams.apply_after_s,
+          'thermal_adaptation: the estimate is used from this long after the first sample on', 's', (0.0, 600.0),
+          runtime=False),
+    Param('thermal_adaptation.tc_lag_s', OnlineThermalParams.tc_lag_s,
+          "thermal_adaptation: the thermocouple's first-order lag the estimate assumes", 's', (0.0, 5.0), runtime=False),
+)
+
+
+def online_thermal(p: Mapping[str, Any]) -> OnlineThermalParams | None:
+    """The estimator's settings from a node's THERMAL_ADAPTATION_PARAMS values; None when it is off."""
+    if not p['thermal_adaptation']:
+        return None
+    return OnlineThermalParams(apply_after_s=p['thermal_adaptation.apply_after_s'],
+                               tc_lag_s=p['thermal_adaptation.tc_lag_s'])
 
 
 class WristNode(Node):

@@ -40,8 +40,10 @@ from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_inf
 from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal.heat_balance import ThermalParams
+from sma_wrist.core.thermal.online import ThermalScaleEstimator
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import PRELOAD_PARAM, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import (PRELOAD_PARAM, THERMAL_ADAPTATION_PARAMS, Param, WristNode, finite, main_for,
+                                   online_thermal)
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 #: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
@@ -110,6 +112,7 @@ class HysteresisCompensator(WristNode):
               'of the thermocouple the observer assumes (0: none)', 's', (0.0, 10.0)),
         Param('thermal_file', '', 'temperature_source observer: identified TEM heat balance the observer runs '
               "(sma-wrist identify thermal; the same file as tem_controller's; empty: Table 4.9)", runtime=False),
+        *THERMAL_ADAPTATION_PARAMS,
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -187,6 +190,16 @@ class HysteresisCompensator(WristNode):
             warm_obs = MuscleTemperatureObserver(self.observer.thermal, self.observer.params)
             for _ in range(2):
                 warm_obs.update(np.full((1, 2), T_mid), np.zeros((1, 2)), 0.01)
+        # the observer's own estimate of the TEMs, fed the samples tem_controller's takes (core.thermal.online)
+        online = online_thermal(self.p)
+        old = getattr(self, 'estimator', None)
+        if self.observer is None or online is None:
+            self.estimator = None
+        elif old is None:  # else a runtime change of another parameter: what has been learnt stays
+            self.estimator = ThermalScaleEstimator(self.observer.thermal, 1, online)
+            self.est_last: tuple[float, np.ndarray] | None = None  # (stamp [s], [T_1, T_2]) of the last tick
+        elif old.updates and old.ready:
+            self.observer.coef_rows = old.constants()
         self.started = False  # re-seed the memory (and the observer) from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:
@@ -264,6 +277,18 @@ class HysteresisCompensator(WristNode):
             if T_1 == T_1 and T_2 == T_2:
                 self._take_tick(t0, tick)
 
+    def _learn(self, t_ns: int, tick: list[float]) -> None:
+        """The estimate takes the last tick with the command in force since it (tem_controller took that tick
+        with the command it then sent); once ready and moved, the observer runs on it."""
+        if self.estimator is None:
+            return
+        last, self.est_last = self.est_last, (t_ns // 1_000_000_000 + 1e-9 * (t_ns % 1_000_000_000),
+                                              np.array(tick[:2], dtype=float))
+        if last is not None and self.estimator.sample(last[0], last[1][None], self._command_before(t_ns)) \
+                and self.estimator.ready:
+            assert self.observer is not None
+            self.observer.coef_rows = self.estimator.constants()
+
     def _start(self) -> None:
         """Start the memory at the last measured tick once the loads are known too."""
         if finite(*self.T_meas.tolist(), *self.stress_meas.tolist()):
@@ -278,6 +303,7 @@ class HysteresisCompensator(WristNode):
             self.T_meas = np.array(tick[:2])
         else:
             try:
+                self._learn(t_ns, tick)
                 self.T_meas = self.observer.update(np.array([tick[:2]]), self._command_before(t_ns), dt)[0]
             except SmaWristError as e:  # the estimate stays; this tick is not taken
                 self.reject_input('observer', f'tick skipped: {e}')  # constant text: one report per fault

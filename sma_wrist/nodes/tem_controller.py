@@ -30,7 +30,8 @@ from sma_wrist.core.control.tem import DriveLimits, TemControlParams, TemLoop
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import Freshness, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import (THERMAL_ADAPTATION_PARAMS, Freshness, Param, WristNode, finite, main_for,
+                                   online_thermal)
 
 LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
 DRIVE = DriveLimits()
@@ -59,6 +60,7 @@ class TemController(WristNode):
         Param('stale_timeout_s', 0.25, 'measurement/target age that switches the TEMs off', 's', (0.01, 10.0)),
         Param('thermal_file', '', 'identified TEM heat balance for the law, observer and protection '
               '(sma-wrist identify thermal; empty: Table 4.9)', runtime=False),
+        *THERMAL_ADAPTATION_PARAMS,
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -103,9 +105,12 @@ class TemController(WristNode):
         thermal = replace(self.hold, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
         loop = TemLoop(thermal, TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s'],
                                                     target_filter_s=p['target_filter_s']),
-                       drive, self.hold, p['max_muscle_temperature_C'])
+                       drive, self.hold, p['max_muscle_temperature_C'], online=online_thermal(p))
         if old is not None:  # new gains and limits act on the same observed TEMs and command in force
             loop.observer, loop.command_V, loop.t_last = old.observer, old.command_V, old.t_last
+            loop.estimator = old.estimator  # ... and keep what has been learnt of them
+            if old.estimated and old.estimator is not None:
+                loop.use_estimate(old.estimator.theta[0])
         return loop
 
     def apply(self, changed: Mapping[str, Any]) -> None:

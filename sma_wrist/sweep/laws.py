@@ -25,6 +25,7 @@ from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal.online import OnlineThermalParams, ThermalScaleEstimator
 
 FloatArray = NDArray[np.float64]
 
@@ -142,12 +143,13 @@ class JointControllerBank:
 @_jit
 def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
                   cfg, candidates, status):  # pragma: no cover - compiled
-    """tem_kernel.control_sample for each wrist j (row j of every state array), its work arrays allocated once."""
+    """tem_kernel.control_sample for each wrist j (row j of every state array and of th_coef), its work arrays
+    allocated once."""
     scratch = tem_kernel.sample_scratch()
     for j in range(x.shape[0]):
         status[j] = tem_kernel.control_sample_into(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j],
-                                                   T_meas[j], T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef, cfg,
-                                                   candidates, scratch)
+                                                   T_meas[j], T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef[j],
+                                                   cfg, candidates, scratch)
 
 
 class TemLoopBank:
@@ -155,11 +157,15 @@ class TemLoopBank:
     sampled together. The constants are a one-wrist TemLoop's, built as the node builds them."""
 
     def __init__(self, n: int, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
-                 hold: th.ThermalParams, max_muscle_C: float) -> None:
+                 hold: th.ThermalParams, max_muscle_C: float, online: OnlineThermalParams | None = None) -> None:
         one = TemLoop(thermal, params, drive, hold, max_muscle_C, compiled=True)
         self.n, self.thermal, self.drive, self.params, self.hold = n, thermal, drive, params, hold
         self.max_muscle_C = float(max_muscle_C)  # a bank on another heat balance (plants.oracle) keeps it
         self._coef, self._cfg, self._candidates = one._coef, one._cfg, one._candidates
+        # per wrist: the heat balance each wrist's observer and law integrate (the online estimate's, if on)
+        self.coef_rows = np.tile(self._coef, (n, 1))
+        self.estimator = None if online is None else ThermalScaleEstimator(thermal, n, online)
+        self.estimated = False  # True once the estimate has replaced the model (TemLoop.estimated)
         self.observer = np.repeat(one.observer, n, axis=0)  # (n, 2 layers, 2 faces)
         self.rate, self.T_d_prev, self.rng = np.zeros((n, 2, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2, 2))
         self.command_V = np.zeros((n, 2))
@@ -172,7 +178,8 @@ class TemLoopBank:
         self.range_t: float | None = None
 
     @classmethod
-    def like_node(cls, n: int, params: TemControlParams | None = None) -> 'TemLoopBank':
+    def like_node(cls, n: int, params: TemControlParams | None = None, online: OnlineThermalParams | None = None
+                  ) -> 'TemLoopBank':
         """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
         0.05 s, target prefilter 0.5 s, driver rating, hold limits, 85 degC); test_plants' graph agreement
         checks they still are. ``params`` replaces the law's parameters (gain, filters)."""
@@ -180,7 +187,7 @@ class TemLoopBank:
         drive = DriveLimits()
         return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
                    params or TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold,
-                   85.0)
+                   85.0, online)
 
     def sample(self, t: float, T_meas: FloatArray, T_d: FloatArray | None) -> FloatArray:
         """Commands (n, 2) [V] in force after a sample at t [s] (TemLoop.sample; T_d None: TEMs off)."""
@@ -190,11 +197,15 @@ class TemLoopBank:
         self.t_last = t
         dt_obs = 0.0 if dt is None else min(dt, self.thermal.dt_max_s)
         if T_d is None:
-            if dt_obs > 0:
+            if dt_obs > 0 and self.estimated:  # each wrist on its own heat balance
+                for j in range(self.n):
+                    tem_kernel.observer_step(self.observer[j], self.command_V[j], dt_obs, self.coef_rows[j])
+            elif dt_obs > 0:
                 self.observer = observer_step(self.thermal, self.observer, self.command_V, dt_obs, compiled=True)
             self.observer[:, :, 0] = T_meas
             self.command_V = np.zeros((self.n, 2))
             self.T_d_filtered = None
+            self._learn(t, T_meas)
             return self.command_V
         self.T_d_filtered, self.T_d_slope = target_prefilter(self.params.target_filter_s, self.T_d_filtered,
                                                              self.T_d_slope, T_d, dt)
@@ -204,13 +215,20 @@ class TemLoopBank:
         dt_law = t - self.t_law if has_prev else 0.0
         _control_many(self.observer, self.rate, self.T_d_prev, self.rng, self.command_V, self.flags,
                       np.ascontiguousarray(T_meas, float), np.ascontiguousarray(T_d, float), dt_obs, dt_law, has_prev,
-                      refresh, self._coef, self._cfg, self._candidates, self.status)
+                      refresh, self.coef_rows, self._cfg, self._candidates, self.status)
         if self.status.any():
             raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
         self.t_law = t
         if refresh:
             self.range_t = t
+        self._learn(t, T_meas)
         return self.command_V
+
+    def _learn(self, t: float, T_meas: FloatArray) -> None:
+        """The online heat-balance estimate takes the sample and the commands now in force."""
+        if self.estimator is not None and self.estimator.sample(t, T_meas, self.command_V) and self.estimator.ready:
+            self.coef_rows = self.estimator.constants()
+            self.estimated = True
 
 
 __all__ = ['JointControllerBank', 'TemLoopBank']

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.control.tem import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
+from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
@@ -148,7 +149,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
              hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
              hold_shift_outside_load_range: bool = HOLD_SHIFT_OUTSIDE_LOAD_RANGE,
-             controller_overrides: Mapping[str, Any] | None = None, oracle: Sequence[str] = ()
+             controller_overrides: Mapping[str, Any] | None = None, oracle: Sequence[str] = (),
+             online_thermal: OnlineThermalParams | None = OnlineThermalParams()
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -170,6 +172,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     ``hold_shift_outside_load_range`` the one on the pair's load range (``MuscleCompensator.pair_in_load_range``).
     ``controller_overrides``: adaptive_controller's parameters other than its defaults
     ({JointControllerParams field: value}, e.g. the reference leads).
+
+    ``online_thermal``: tem_controller's and hysteresis_compensator's ``thermal_adaptation`` (the online estimate
+    of each wrist's TEMs, :mod:`sma_wrist.core.thermal.online`; None = off).
 
     ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
     (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
@@ -215,7 +220,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     q_track = np.zeros(0)  # the measured angles of that tick [rad]
     t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]
-    tem = TemLoopBank.like_node(n, tem_params)
+    tem = TemLoopBank.like_node(n, tem_params, online_thermal)
     if orc is not None and 'thermal' in oracle:
         tem = orc.own_tem_bank(tem, scen[0], base)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
@@ -239,6 +244,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         if observer is not None and k >= 1:  # the commands in force over the last tick: u of the previous one
             # dt from the stamps, as hysteresis_compensator's observer takes it
             t_ns = int(round(s.t * 1e9))
+            if tem.estimated:  # hysteresis_compensator's own estimate: the TEM loop's as of the last tick's sample
+                observer.coef_rows = tem.coef_rows
             T_comp = observer.update(T_m, u_rec[k - 1] if k >= 2 else np.zeros((n, 2)), (t_ns - t_obs_ns) * 1e-9)
             t_obs_ns = t_ns
         if true_temperature:  # a plant with its own thermocouple (phase fraction) also has the node's

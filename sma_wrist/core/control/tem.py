@@ -44,6 +44,7 @@ from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal import kernel as thermal_kernel
+from sma_wrist.core.thermal.online import OnlineThermalParams, ThermalScaleEstimator, scaled_constants, with_scales
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -244,6 +245,8 @@ class MuscleTemperatureObserver:
         self.params = params
         self.faces: FloatArray | None = None  # (N, 2, 2) degC
         self.junction: FloatArray | None = None  # (N, 2) degC
+        # (N, 14) per-wrist heat balances (the online estimate's, core.thermal.online); None: ``thermal`` for all
+        self.coef_rows: FloatArray | None = None
 
     def update(self, T_meas: ArrayLike, command_V: ArrayLike, dt: float) -> FloatArray:
         """One sample: measured junction temperatures (N, 2) [degC], commands (N, 2) [V] held over the
@@ -260,7 +263,13 @@ class MuscleTemperatureObserver:
             return T.copy()
         if not (np.isfinite(dt) and dt > 0):
             raise ModelInputError('observer time step', dt, '(0, inf)', 's')
-        faces = observer_step(self.thermal, self.faces, u, min(dt, self.thermal.dt_max_s), compiled=False)
+        if self.coef_rows is None:
+            faces = observer_step(self.thermal, self.faces, u, min(dt, self.thermal.dt_max_s), compiled=False)
+        else:  # row by row: a wrist's numbers do not depend on how many are observed together
+            faces = self.faces.copy()
+            for j in range(faces.shape[0]):
+                tem_kernel.observer_step(faces[j], np.ascontiguousarray(u[j]), min(dt, self.thermal.dt_max_s),
+                                         self.coef_rows[j])
         muscle = faces[:, :, th.MUSCLE_FACE]
         p = self.params
         z = self.junction + dt / (p.tc_lag_s + dt) * (muscle - self.junction)
@@ -574,7 +583,8 @@ class TemLoop:
     """
 
     def __init__(self, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
-                 hold: th.ThermalParams, max_muscle_C: float, *, compiled: bool | None = None) -> None:
+                 hold: th.ThermalParams, max_muscle_C: float, *, compiled: bool | None = None,
+                 online: OnlineThermalParams | None = None) -> None:
         if tuple(params.weights) != TWO_LAYER_WEIGHTS:
             raise ParameterError(f'TemLoop runs two layers, weights {TWO_LAYER_WEIGHTS}; got {params.weights!r}')
         self.thermal, self.params, self.drive, self.hold = thermal, params, drive, hold
@@ -593,6 +603,11 @@ class TemLoop:
         self._flags = np.zeros(2, np.int64)
         self._T_meas, self._T_d = np.zeros(2), np.zeros(2)
         self._coef = _kernel_constants(thermal)
+        # the online heat-balance estimate (core.thermal.online): once it is used, the observer, law and
+        # protection integrate it (``thermal``, ``hold`` and the kernel's constants); None: Table 4.9 / the file
+        self.base_thermal, self.base_hold = thermal, hold
+        self.estimator = None if online is None else ThermalScaleEstimator(thermal, 1, online)
+        self.estimated = False  # True once the estimate has replaced the model
         self._candidates = drive.boost_min_V + _CANDIDATES * (drive.boost_max_V - drive.boost_min_V)
         self._cfg = np.array([params.gain_per_s, params.rate_filter_s, *params.weights, thermal.u_min_V,
                               thermal.u_max_V, float(drive.predictive), drive.horizon_s,
@@ -619,11 +634,15 @@ class TemLoop:
         if T_d is None:
             self._observe(T_meas, dt_obs)
             self.T_d_filtered = None
-            return TemSample(self.off(), np.zeros(2, bool), np.zeros(2, bool))
+            out = TemSample(self.off(), np.zeros(2, bool), np.zeros(2, bool))
+            self._learn(t, T_meas)
+            return out
         T_d = self._prefilter(T_d, dt)
         refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
         if self.compiled:
-            return self._sample_compiled(t, T_meas, T_d, dt_obs, refresh)
+            out = self._sample_compiled(t, T_meas, T_d, dt_obs, refresh)
+            self._learn(t, T_meas)
+            return out
         self._observe(T_meas, dt_obs)
         res = self.law.update(t, self.observer, np.stack([T_d, T_d], axis=-1)[None])
         if refresh:
@@ -632,7 +651,27 @@ class TemLoop:
         u_prot, limited = protected_command(self.hold, self.drive, self.observer, res.command_V, self.command_range)
         hot = np.asarray(T_meas, dtype=float) > self.max_muscle_C
         self.command_V = np.where(hot, np.minimum(u_prot[0], 0.0), u_prot[0])
-        return TemSample(self.command_V, res.saturated[0] | limited[0], hot)
+        out = TemSample(self.command_V, res.saturated[0] | limited[0], hot)
+        self._learn(t, T_meas)
+        return out
+
+    def _learn(self, t: float, T_meas: ArrayLike) -> None:
+        """The online estimate takes the sample and the command now in force; once it is ready and has
+        moved, the loop's models are its (:mod:`sma_wrist.core.thermal.online`)."""
+        est = self.estimator
+        if est is None or not est.sample(t, np.asarray(T_meas, dtype=float)[None], self.command_V[None]) \
+                or not est.ready:
+            return
+        self.use_estimate(est.theta[0])
+
+    def use_estimate(self, theta: ArrayLike) -> None:
+        """Observer, law and protection on the heat balance scaled by theta = (g, s, a) (core.thermal.online)."""
+        theta = np.asarray(theta, dtype=float)
+        self._coef = scaled_constants(self.base_thermal, theta[None])[0]
+        self.thermal = with_scales(self.base_thermal, theta)
+        self.hold = with_scales(self.base_hold, theta)
+        self.law.thermal = self.thermal
+        self.estimated = True
 
     def _prefilter(self, T_d: ArrayLike, dt: float | None) -> FloatArray:
         """The desired temperatures through the tracking prefilter (:func:`target_prefilter`);
@@ -642,7 +681,10 @@ class TemLoop:
         return self.T_d_filtered
 
     def _observe(self, T_meas: ArrayLike, dt_obs: float) -> None:
-        if dt_obs > 0:
+        if dt_obs > 0 and self.compiled:  # the kernel's constants: the estimate's once used
+            tem_kernel.observer_step(self.observer[0], np.ascontiguousarray(self.command_V, dtype=float), dt_obs,
+                                     self._coef)
+        elif dt_obs > 0:
             self.observer = observer_step(self.thermal, self.observer, self.command_V[None, :], dt_obs,
                                           compiled=self.compiled)
         self.observer[0, :, 0] = T_meas
