@@ -21,6 +21,7 @@ from sma_wrist.core.control.tem import TemControlParams, TemperatureObserverPara
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import WristPlant
+from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.plants.spread import Scenario, perturbed_hysteresis, scenario_params
 from sma_wrist.sweep.simulate import (CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, Case, Trace, check_true_temperature,
                                       sign_changes_per_s, simulate)
@@ -207,13 +208,17 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     ap.add_argument('--oracle', default='', metavar='SWITCHES',
                     help='diagnosis: comma list of hysteresis,thermal,payload,sensors: the loop given the plant\'s '
                          'own model(s) (docs/control.md, "What a perfect model would give")')
+    ap.add_argument('--thermal-adaptation', choices=('on', 'off'),
+                    help="tem_controller's and hysteresis_compensator's thermal_adaptation (default the nodes')")
     ap.add_argument('--json', action='store_true')
     a = ap.parse_args(argv)
     kw: dict[str, Any] = {}
     if a.legacy:
         kw = {'tem_params': TemControlParams(rate_filter_s=0.05), 'shift_gain_per_s': 0.0}
     if a.legacy or a.before_item_2:
-        kw.update(compensator_observer=None, window_follows_shift=False, stroke_gain_per_s=0.0)
+        kw.update(compensator_observer=None, window_follows_shift=False, stroke_gain_per_s=0.0, online_thermal=None)
+    if a.thermal_adaptation is not None:
+        kw['online_thermal'] = OnlineThermalParams() if a.thermal_adaptation == 'on' else None
     if a.stroke_gain is not None:
         kw['stroke_gain_per_s'] = a.stroke_gain
     if a.hold_shift_on_stop is not None:

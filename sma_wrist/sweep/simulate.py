@@ -37,13 +37,13 @@ from numpy.typing import NDArray
 
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.control.tem import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
-from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank

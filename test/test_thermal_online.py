@@ -1,0 +1,90 @@
+"""The online estimate of the TEMs (core/thermal/online.py) on data it did not make.
+
+The data come from the plant's heat balance with the family's perturbations (``plant_params``, the
+plant's code, not the estimator's), driven by commands the estimator never chose, read through a
+thermocouple the way a real one reads: a first-order junction lag and white noise.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal.kernel import thermal_constants
+from sma_wrist.core.thermal.online import (OnlineThermalParams, ThermalScaleEstimator, scaled_constants, theta_of,
+                                           with_scales)
+from sma_wrist.plants.spread import Scenario, scenario_params
+
+BASE = th.ThermalParams().with_limits(-24.0, 24.0)
+DT = 0.01
+
+
+def _thermocouple_run(thermal: th.ThermalParams, seconds: float, lag_s: float, noise_C: float,
+                      seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, T_meas (K, 2), u (K, 2)): both TEMs of one wrist under slow random square-ish commands (+-20 V,
+    held 1-6 s), the plant's heat balance at 1 ms, a lagging noisy thermocouple sampled at 100 Hz."""
+    rng = np.random.default_rng(seed)
+    k = int(seconds / DT)
+    u = np.empty((k, 2))
+    for j in range(2):
+        i = 0
+        while i < k:
+            n = int(rng.uniform(1.0, 6.0) / DT)
+            u[i:i + n, j] = rng.uniform(-20.0, 20.0)
+            i += n
+    x = th.rest_state(thermal, 1)
+    z = x[0, :, th.MUSCLE_FACE].copy()
+    T = np.empty((k, 2))
+    for i in range(k):
+        T[i] = z + noise_C * rng.standard_normal(2)
+        for _ in range(10):
+            x = th.step(thermal, x, u[i][None], DT / 10, validate=False)
+        z += DT / (lag_s + DT) * (x[0, :, th.MUSCLE_FACE] - z) if lag_s > 0 else x[0, :, th.MUSCLE_FACE] - z
+    return np.arange(k) * DT, T, u
+
+
+def test_the_scales_are_the_plants_perturbations_exactly():
+    sc = Scenario(tem_gain_scale=0.8, heat_loss_scale=1.2, ambient_offset_C=3.0)
+    plant = scenario_params(sc).thermal
+    theta = theta_of(BASE, plant)
+    np.testing.assert_allclose(theta, [0.8, 1.2, 3.0], atol=1e-12)
+    np.testing.assert_allclose(scaled_constants(BASE, theta), thermal_constants(plant), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(thermal_constants(with_scales(BASE, theta)), thermal_constants(plant), atol=1e-15)
+
+
+@pytest.mark.parametrize('truth', [(0.75, 1.25, 4.0), (1.25, 0.8, -3.0)])
+def test_it_learns_a_weaker_or_stronger_tem_through_a_lagging_noisy_thermocouple(truth):
+    plant = scenario_params(Scenario(tem_gain_scale=truth[0], heat_loss_scale=truth[1],
+                                     ambient_offset_C=truth[2])).thermal
+    t, T, u = _thermocouple_run(plant, 100.0, lag_s=0.15, noise_C=0.2, seed=1)
+    est = ThermalScaleEstimator(BASE, 1, OnlineThermalParams())
+    for k in range(t.size):
+        est.sample(t[k], T[k][None], u[k][None])
+    assert est.updates >= 45 and est.ready
+    err = est.theta[0] - np.array(truth)
+    assert abs(err[0]) < 0.03 and abs(err[1]) < 0.06 and abs(err[2]) < 1.5, est.theta
+    assert np.all(np.abs(np.array(truth) - [1.0, 1.0, 0.0]) > [0.15, 0.15, 2.5])  # the start was far from it
+
+
+def test_a_wrist_learns_the_same_alone_as_among_others_and_a_bad_sample_costs_one_window():
+    runs = [_thermocouple_run(scenario_params(Scenario(tem_gain_scale=g)).thermal, 12.0, 0.1, 0.1, seed=s)
+            for g, s in ((0.8, 2), (1.1, 3), (0.9, 4))]
+    many = ThermalScaleEstimator(BASE, 3)
+    one = ThermalScaleEstimator(BASE, 1)
+    for k in range(runs[0][0].size):
+        many.sample(runs[0][0][k], np.stack([r[1][k] for r in runs]), np.stack([r[2][k] for r in runs]))
+        one.sample(runs[1][0][k], runs[1][1][k][None], runs[1][2][k][None])
+    assert one.updates == many.updates >= 4
+    np.testing.assert_array_equal(one.theta[0], many.theta[1])  # bit for bit: tem_controller == the sweep
+    before, n = one.theta.copy(), one.updates
+    one.sample(12.0, np.array([[np.nan, 30.0]]), np.zeros((1, 2)))
+    assert one.updates == n and np.array_equal(one.theta, before)
+
+
+@pytest.mark.parametrize('bad', [dict(window_s=0.0), dict(points=0), dict(avg_s=5.0), dict(tc_lag_s=-1.0),
+                                 dict(prior_sd=(0.1, 0.1)), dict(max_step=(0.1, -0.1, 1.0)),
+                                 dict(noise_sd_C=0.0), dict(apply_after_s=float('nan'))])
+def test_bad_settings_are_clear_errors(bad):
+    with pytest.raises(ParameterError):
+        OnlineThermalParams(**bad)
