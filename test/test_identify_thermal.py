@@ -246,7 +246,7 @@ def _tem_loop(plant_file: str | None, controller_file: str | None, bag: Path | N
     from sma_wrist.nodes.tem_controller import TemController
     from sma_wrist.runtime.launch import Runtime
     params: dict = {'/plant_sim': {'use_sim_time': False},
-                    '/tem_controller': {'use_sim_time': True, 'thermal_adaptation': adapt}}
+                    '/tem_controller': {'use_sim_time': True, 'thermal_adaptation.enabled': adapt}}
     if plant_file:
         params['/plant_sim']['thermal_file'] = plant_file
     if controller_file:

@@ -87,7 +87,7 @@ PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm
 #: the online heat-balance estimate (core.thermal.online): the same values in tem_controller and
 #: hysteresis_compensator, which each run one on the same samples (docs/control.md "Learning the TEMs online")
 THERMAL_ADAPTATION_PARAMS = (
-    Param('thermal_adaptation', True, "estimate the TEMs' drive gain, muscle-face losses and ambient online from the "
+    Param('thermal_adaptation.enabled', True, "estimate the TEMs' drive gain, muscle-face losses and ambient online from the "
           'commands and the thermocouples, and run the observer and law on the estimate (docs/control.md "Learning '
           'the TEMs online")', runtime=False),
     Param('thermal_adaptation.apply_after_s', OnlineThermalParams.apply_after_s,
@@ -100,7 +100,7 @@ THERMAL_ADAPTATION_PARAMS = (
 
 def online_thermal(p: Mapping[str, Any]) -> OnlineThermalParams | None:
     """The estimator's settings from a node's THERMAL_ADAPTATION_PARAMS values; None when it is off."""
-    if not p['thermal_adaptation']:
+    if not p['thermal_adaptation.enabled']:
         return None
     return OnlineThermalParams(apply_after_s=p['thermal_adaptation.apply_after_s'],
                                tc_lag_s=p['thermal_adaptation.tc_lag_s'])
