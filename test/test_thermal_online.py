@@ -59,8 +59,10 @@ def test_it_learns_a_weaker_or_stronger_tem_through_a_lagging_noisy_thermocouple
                                      ambient_offset_C=truth[2])).thermal
     t, T, u = _thermocouple_run(plant, 100.0, lag_s=0.15, noise_C=0.2, seed=1)
     est = ThermalScaleEstimator(BASE, 1, OnlineThermalParams())
+    u_now, T_now = np.empty((1, 2)), np.empty((1, 2))  # reused in place, as the TEM kernel reuses its command array
     for k in range(t.size):
-        est.sample(t[k], T[k][None], u[k][None])
+        u_now[0], T_now[0] = u[k], T[k]
+        est.sample(t[k], T_now, u_now)
     assert est.updates >= 45 and est.ready
     err = est.theta[0] - np.array(truth)
     assert abs(err[0]) < 0.03 and abs(err[1]) < 0.06 and abs(err[2]) < 1.5, est.theta
@@ -88,3 +90,19 @@ def test_a_wrist_learns_the_same_alone_as_among_others_and_a_bad_sample_costs_on
 def test_bad_settings_are_clear_errors(bad):
     with pytest.raises(ParameterError):
         OnlineThermalParams(**bad)
+
+
+def test_the_compiled_window_is_the_numpy_window():
+    """thermal.kernel.predict_junction (what every consumer runs with numba) against the numpy reference."""
+    pytest.importorskip('numba')
+    t, T, u = _thermocouple_run(scenario_params(Scenario(tem_gain_scale=0.8)).thermal, 3.0, 0.1, 0.1, seed=5)
+    est = ThermalScaleEstimator(BASE, 1)
+    for k in range(60):
+        est.sample(t[k], T[k][None], u[k][None])
+    theta = np.repeat(est.theta, 4, axis=0) + np.vstack([np.zeros(3), np.diag([0.02, 0.02, 0.5])])
+    a, xa = est._predict(theta, compiled=True)
+    b, xb = est._predict(theta, compiled=False)
+    assert a.shape == b.shape == (len(est._t), 4, 2) and len(est._t) > 50
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-10)
+    assert np.ptp(a[-1, :, 0]) > 1e-4  # the four scales predict four different junctions

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sma_wrist.core.jit import _jit, _jit_inline
+from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline  # noqa: F401 (AVAILABLE: callers choose the path)
 
 
 @_jit_inline
@@ -104,3 +104,34 @@ def step_horner(T, u, dt, ipv, k_at, k_t, neg_k_tinf, k_tc, k_r, k_inf, coupling
         for l in range(n_layers):
             for f in range(2):
                 out[j, l, f] = (a[l, f] * h[2] + v[l, f]) * dt + x[l, f]
+
+
+@_jit
+def predict_junction(x0, z0, us, ts, coef, reps, lag, out, x_end):  # pragma: no cover - compiled
+    """The online estimate's window (core.thermal.online, ``ThermalScaleEstimator._predict``): per row m of
+    coef (M, 14) (wrist m // reps), the faces from x0[w] (N, 2, 2) under the commands us[k - 1, w] (K, N, 2)
+    held over the sample steps of ts (K,) [s] (RK4, :func:`thermal_rk4`), the muscle face seen through a
+    first-order thermocouple of lag [s] from z0[w] (N, 2); out (K, M, 2) the junction, x_end (M, 2, 2) the
+    faces at the end. The numpy path there is the reference (test_thermal_online)."""
+    x = np.empty((2, 2))
+    y0, xs, kk, acc = np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2)), np.empty((2, 2))
+    z = np.empty(2)
+    for m in range(coef.shape[0]):
+        w = m // reps
+        for l in range(2):
+            z[l] = z0[w, l]
+            out[0, m, l] = z[l]
+            for f in range(2):
+                x[l, f] = x0[w, l, f]
+        for k in range(1, ts.shape[0]):
+            dt = ts[k] - ts[k - 1]
+            thermal_rk4(x, us[k - 1, w], dt, coef[m], y0, xs, kk, acc)
+            for l in range(2):
+                if lag <= 0.0:
+                    z[l] = x[l, 0]
+                else:
+                    z[l] = z[l] + dt / (lag + dt) * (x[l, 0] - z[l])
+                out[k, m, l] = z[l]
+        for l in range(2):
+            for f in range(2):
+                x_end[m, l, f] = x[l, f]
