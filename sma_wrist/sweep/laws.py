@@ -198,8 +198,7 @@ class TemLoopBank:
         dt_obs = 0.0 if dt is None else min(dt, self.thermal.dt_max_s)
         if T_d is None:
             if dt_obs > 0 and self.estimated:  # each wrist on its own heat balance
-                for j in range(self.n):
-                    tem_kernel.observer_step(self.observer[j], self.command_V[j], dt_obs, self.coef_rows[j])
+                tem_kernel.observer_step_rows(self.observer, self.command_V, dt_obs, self.coef_rows)
             elif dt_obs > 0:
                 self.observer = observer_step(self.thermal, self.observer, self.command_V, dt_obs, compiled=True)
             self.observer[:, :, 0] = T_meas

@@ -267,9 +267,8 @@ class MuscleTemperatureObserver:
             faces = observer_step(self.thermal, self.faces, u, min(dt, self.thermal.dt_max_s), compiled=False)
         else:  # row by row: a wrist's numbers do not depend on how many are observed together
             faces = self.faces.copy()
-            for j in range(faces.shape[0]):
-                tem_kernel.observer_step(faces[j], np.ascontiguousarray(u[j]), min(dt, self.thermal.dt_max_s),
-                                         self.coef_rows[j])
+            tem_kernel.observer_step_rows(faces, np.ascontiguousarray(u), min(dt, self.thermal.dt_max_s),
+                                          np.ascontiguousarray(self.coef_rows))
         muscle = faces[:, :, th.MUSCLE_FACE]
         p = self.params
         z = self.junction + dt / (p.tc_lag_s + dt) * (muscle - self.junction)

@@ -18,8 +18,8 @@ import numpy as np
 from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline
 from sma_wrist.core.thermal.kernel import thermal_rk4
 
-__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'held_command_range', 'control_sample',
-           'CONFIG_FIELDS', 'warm_up']
+__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'observer_step_rows', 'held_command_range',
+           'control_sample', 'CONFIG_FIELDS', 'warm_up']
 
 
 @_jit
@@ -27,6 +27,15 @@ def observer_step(x, u, dt, th_coef):  # pragma: no cover - compiled
     """RK4 step of Eqs. 4.13-4.14 for faces x (2, 2) [degC] in place under u (2,) [V] held dt [s]."""
     s = np.empty((4, 2, 2))
     thermal_rk4(x, u, dt, th_coef, s[0], s[1], s[2], s[3])
+
+
+@_jit
+def observer_step_rows(x, u, dt, th_coef):  # pragma: no cover - compiled
+    """:func:`observer_step` for each wrist j of x (N, 2, 2) in place under u (N, 2) held dt, with its own
+    constants th_coef (N, 14) (the online estimate's rows): one call, the same numbers row by row."""
+    s = np.empty((4, 2, 2))
+    for j in range(x.shape[0]):
+        thermal_rk4(x[j], u[j], dt, th_coef[j], s[0], s[1], s[2], s[3])
 
 
 @_jit
