@@ -106,3 +106,22 @@ def test_the_compiled_window_is_the_numpy_window():
     np.testing.assert_allclose(a, b, rtol=0, atol=1e-10)
     np.testing.assert_allclose(xa, xb, rtol=0, atol=1e-10)
     assert np.ptp(a[-1, :, 0]) > 1e-4  # the four scales predict four different junctions
+
+
+def test_a_gap_or_tems_switched_off_between_samples_break_the_window():
+    """Lost samples, or tem_controller's watchdog switching the TEMs off between samples: the commands the window
+    recorded are not the ones that were in force, so the window is dropped, not fitted."""
+    from sma_wrist.core.control.tem import DriveLimits, TemControlParams, TemLoop
+    t, T, u = _thermocouple_run(scenario_params(Scenario(tem_gain_scale=0.8)).thermal, 6.0, 0.1, 0.1, seed=6)
+    est = ThermalScaleEstimator(BASE, 1)
+    for k in range(150):
+        est.sample(t[k], T[k][None], u[k][None])
+    assert len(est._t) > 100
+    est.sample(t[150] + 1.0, T[150][None], u[150][None])  # 1 s without a sample
+    assert est._t == [] and est.updates == 0
+    loop = TemLoop(BASE, TemControlParams(), DriveLimits(), th.ThermalParams(), 85.0, online=OnlineThermalParams())
+    for k in range(150):
+        loop.sample(t[k], T[k], np.array([40.0, 40.0]))
+    assert len(loop.estimator._t) > 100
+    loop.off()
+    assert loop.estimator._t == [] and not loop.command_V.any()

@@ -615,8 +615,11 @@ class TemLoop:
                               hold.u_min_V, hold.u_max_V, self.max_muscle_C], dtype=float)
 
     def off(self) -> FloatArray:
-        """Switch the TEMs off: 0 V is the command in force from now on."""
+        """Switch the TEMs off: 0 V is the command in force from now on (the online estimate's window in
+        progress recorded another: it is dropped)."""
         self.command_V = np.zeros(2)
+        if self.estimator is not None:
+            self.estimator.break_window()
         return self.command_V
 
     def sample(self, t: float, T_meas: ArrayLike, T_d: ArrayLike | None) -> TemSample | None:
@@ -633,7 +636,8 @@ class TemLoop:
         if T_d is None:
             self._observe(T_meas, dt_obs)
             self.T_d_filtered = None
-            out = TemSample(self.off(), np.zeros(2, bool), np.zeros(2, bool))
+            self.command_V = np.zeros(2)  # off from this sample on (not off(): this sample records it)
+            out = TemSample(self.command_V, np.zeros(2, bool), np.zeros(2, bool))
             self._learn(t, T_meas)
             return out
         T_d = self._prefilter(T_d, dt)

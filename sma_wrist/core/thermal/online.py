@@ -41,6 +41,8 @@ BOUNDS = np.array([[0.5, 1.5], [0.5, 1.5], [-10.0, 10.0]])
 #: finite-difference steps of g, s, a for the Jacobian
 STEPS = np.array([0.02, 0.02, 0.5])
 NOMINAL_THETA = np.array([1.0, 1.0, 0.0])
+#: a longer time between two samples breaks the window [s]: the commands in force over it are not known
+MAX_GAP_S = 0.5
 
 
 @dataclass(frozen=True)
@@ -167,8 +169,8 @@ class ThermalScaleEstimator:
         # copies: a caller's command array is updated in place by the next sample
         T = np.array(T_meas, dtype=float).reshape(self.n, 2)
         u = np.array(command_V, dtype=float).reshape(self.n, 2)
-        if not (np.all(np.isfinite(T)) and np.all(np.isfinite(u))):
-            self._restart()  # a bad sample breaks the window: nothing learnt from it
+        if not (np.all(np.isfinite(T)) and np.all(np.isfinite(u))) or (self._t and t - self._t[-1] > MAX_GAP_S):
+            self._restart()  # a bad sample or a gap (lost data, TEMs switched off between samples) breaks the window
             return False
         self._recent.append((t, T))
         p = self.params
@@ -192,6 +194,11 @@ class ThermalScaleEstimator:
         self._x0 = self._start()
         self._t, self._T, self._u = [t], [T], [u]
         return moved
+
+    def break_window(self) -> None:
+        """Forget the window in progress (the commands it recorded are no longer the ones in force, e.g. the
+        TEMs were switched off between samples); the estimate so far stays."""
+        self._restart()
 
     def _restart(self) -> None:
         self._x0, self._x_end, self._t, self._T, self._u, self._recent = None, None, [], [], [], []
