@@ -557,3 +557,31 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     low = MuscleGeometry().stress_Pa(np.array([0.07, 0.0]))
     assert np.all(run(2.0, stress=low, n=100)[1] == 0.0)
     assert np.abs(run(2.0, stress=low, n=100, in_range=False)[1]).max() > 1.0  # 2.5 degC in 1 s
+
+
+def test_a_runtime_parameter_change_keeps_what_the_tems_online_estimate_has_learnt():
+    """tem_controller and hysteresis_compensator rebuild their loop / observer on a runtime parameter change; the
+    online TEM estimate (thermal_adaptation) and the heat balance they run on stay: learning restarts nowhere."""
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.core.thermal.online import scaled_constants
+    from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+    from sma_wrist.nodes.tem_controller import TemController
+
+    theta = np.array([0.8, 1.2, 2.0])
+    with Runtime() as rt:
+        tem = rt.add(TemController)
+        est = tem.loop.estimator
+        tem.loop.use_estimate(theta)
+        coef = tem.loop._coef.copy()
+        assert tem.set_parameters([Parameter('gain_per_s', value=2.0)])[0].successful
+        assert tem.loop.estimator is est and np.array_equal(tem.loop.theta_used, theta)
+        np.testing.assert_array_equal(tem.loop._coef, coef)
+        comp = rt.add(HysteresisCompensator)
+        est = comp.estimator
+        rows = scaled_constants(comp.observer.thermal, theta[None])
+        comp.observer.coef_rows = rows
+        assert comp.set_parameters([Parameter('shift_gain_per_s', value=1.0)])[0].successful
+        assert comp.estimator is est
+        np.testing.assert_array_equal(comp.observer.coef_rows, rows)
+    assert est is not None and not np.array_equal(coef, scaled_constants(tem.loop.base_thermal, np.array([[1.0, 1.0, 0.0]]))[0])

@@ -183,6 +183,7 @@ class HysteresisCompensator(WristNode):
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
+        old_observer = getattr(self, 'observer', None)
         self.observer = None if self.p['temperature_source'] != 'observer' else MuscleTemperatureObserver(
             observer_thermal(self.p['thermal_file']),
             TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
@@ -198,8 +199,8 @@ class HysteresisCompensator(WristNode):
         elif old is None:  # else a runtime change of another parameter: what has been learnt stays
             self.estimator = ThermalScaleEstimator(self.observer.thermal, 1, online)
             self.est_last: tuple[float, np.ndarray] | None = None  # (stamp [s], [T_1, T_2]) of the last tick
-        elif old.updates and old.ready:
-            self.observer.coef_rows = old.constants()
+        elif old_observer is not None:  # ... and so does the heat balance the observer ran on
+            self.observer.coef_rows = old_observer.coef_rows
         self.started = False  # re-seed the memory (and the observer) from the next measurement
 
     def apply(self, changed: Mapping[str, Any]) -> None:
@@ -277,15 +278,14 @@ class HysteresisCompensator(WristNode):
             if T_1 == T_1 and T_2 == T_2:
                 self._take_tick(t0, tick)
 
-    def _learn(self, t_ns: int, tick: list[float]) -> None:
-        """The estimate takes the last tick with the command in force since it (tem_controller took that tick
-        with the command it then sent); once ready and moved, the observer runs on it."""
+    def _learn(self, t_ns: int, tick: list[float], u: np.ndarray) -> None:
+        """The estimate takes the last tick with the command u (1, 2) [V] in force since it (tem_controller took
+        that tick with the command it then sent); once ready and moved, the observer runs on it."""
         if self.estimator is None:
             return
         last, self.est_last = self.est_last, (t_ns // 1_000_000_000 + 1e-9 * (t_ns % 1_000_000_000),
                                               np.array(tick[:2], dtype=float))
-        if last is not None and self.estimator.sample(last[0], last[1][None], self._command_before(t_ns)) \
-                and self.estimator.ready:
+        if last is not None and self.estimator.sample(last[0], last[1][None], u) and self.estimator.ready:
             assert self.observer is not None
             self.observer.coef_rows = self.estimator.constants()
 
@@ -303,8 +303,9 @@ class HysteresisCompensator(WristNode):
             self.T_meas = np.array(tick[:2])
         else:
             try:
-                self._learn(t_ns, tick)
-                self.T_meas = self.observer.update(np.array([tick[:2]]), self._command_before(t_ns), dt)[0]
+                u = self._command_before(t_ns)  # in force over the tick ending at t_ns
+                self._learn(t_ns, tick, u)
+                self.T_meas = self.observer.update(np.array([tick[:2]]), u, dt)[0]
             except SmaWristError as e:  # the estimate stays; this tick is not taken
                 self.reject_input('observer', f'tick skipped: {e}')  # constant text: one report per fault
                 return

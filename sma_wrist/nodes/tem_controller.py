@@ -109,8 +109,8 @@ class TemController(WristNode):
         if old is not None:  # new gains and limits act on the same observed TEMs and command in force
             loop.observer, loop.command_V, loop.t_last = old.observer, old.command_V, old.t_last
             loop.estimator = old.estimator  # ... and keep what has been learnt of them
-            if old.estimated and old.estimator is not None:
-                loop.use_estimate(old.estimator.theta[0])
+            if old.theta_used is not None and loop.estimator is not None:
+                loop.use_estimate(old.theta_used)
         return loop
 
     def apply(self, changed: Mapping[str, Any]) -> None:

@@ -606,7 +606,7 @@ class TemLoop:
         # protection integrate it (``thermal``, ``hold`` and the kernel's constants); None: Table 4.9 / the file
         self.base_thermal, self.base_hold = thermal, hold
         self.estimator = None if online is None else ThermalScaleEstimator(thermal, 1, online)
-        self.estimated = False  # True once the estimate has replaced the model
+        self.theta_used: FloatArray | None = None  # the estimate's scales the loop runs on (None: the model's)
         self._candidates = drive.boost_min_V + _CANDIDATES * (drive.boost_max_V - drive.boost_min_V)
         self._cfg = np.array([params.gain_per_s, params.rate_filter_s, *params.weights, thermal.u_min_V,
                               thermal.u_max_V, float(drive.predictive), drive.horizon_s,
@@ -669,12 +669,12 @@ class TemLoop:
 
     def use_estimate(self, theta: ArrayLike) -> None:
         """Observer, law and protection on the heat balance scaled by theta = (g, s, a) (core.thermal.online)."""
-        theta = np.asarray(theta, dtype=float)
+        theta = np.array(theta, dtype=float)
         self._coef = scaled_constants(self.base_thermal, theta[None])[0]
         self.thermal = with_scales(self.base_thermal, theta)
         self.hold = with_scales(self.base_hold, theta)
         self.law.thermal = self.thermal
-        self.estimated = True
+        self.theta_used = theta
 
     def _prefilter(self, T_d: ArrayLike, dt: float | None) -> FloatArray:
         """The desired temperatures through the tracking prefilter (:func:`target_prefilter`);
