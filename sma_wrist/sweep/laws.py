@@ -19,8 +19,7 @@ from sma_wrist.core.control.adaptive import AdaptiveController
 from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, output_filter_step,
                                                      reference_ahead, time_to_meet)
 from sma_wrist.core.control.pid import PID
-from sma_wrist.core.control.tem import (RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, observer_step,
-                                        target_prefilter)
+from sma_wrist.core.control.tem import RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, target_prefilter
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
@@ -197,10 +196,8 @@ class TemLoopBank:
         self.t_last = t
         dt_obs = 0.0 if dt is None else min(dt, self.thermal.dt_max_s)
         if T_d is None:
-            if dt_obs > 0 and self.estimated:  # each wrist on its own heat balance
+            if dt_obs > 0:  # TemLoop._observe's compiled step, each wrist on its own heat balance
                 tem_kernel.observer_step_rows(self.observer, self.command_V, dt_obs, self.coef_rows)
-            elif dt_obs > 0:
-                self.observer = observer_step(self.thermal, self.observer, self.command_V, dt_obs, compiled=True)
             self.observer[:, :, 0] = T_meas
             self.command_V = np.zeros((self.n, 2))
             self.T_d_filtered = None

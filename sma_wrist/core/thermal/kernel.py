@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline  # noqa: F401 (AVAILABLE: callers choose the path)
+from sma_wrist.core.jit import _jit, _jit_inline
 
 
 @_jit_inline

@@ -13,7 +13,7 @@ the thermocouples it reads. Per wrist, the scales
 are the three numbers ``sma_wrist.core.plant.extensions.plant_params`` perturbs (``tem_gain_err``,
 ``loss_scale_err``, ``ambient_offset_C``), estimated by an extended Kalman filter on windows of
 ``window_s``: from the faces at the window's start (the muscle face from the thermocouple, its lag
-undone with the slope of the last samples; the exchanger face from the loop's observer), the
+undone with the slope of the last samples; the exchanger face the estimator's own prediction), the
 recorded commands drive the heat balance (RK4 at the samples' steps) and a first-order
 thermocouple (``tc_lag_s``); the residuals are the measured minus predicted junction temperature,
 averaged over ``avg_s`` at ``points`` times in the window, per muscle; the Jacobian is by finite
@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.jit import AVAILABLE
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal import kernel as thermal_kernel
 from sma_wrist.core.thermal.kernel import thermal_constants
@@ -223,7 +224,7 @@ class ThermalScaleEstimator:
         m = theta.shape[0]
         reps = m // self.n
         c = scaled_constants(self.base, theta)
-        if thermal_kernel.AVAILABLE if compiled is None else compiled:
+        if AVAILABLE if compiled is None else compiled:
             out, x_end = np.empty((len(self._t), m, 2)), np.empty((m, 2, 2))
             thermal_kernel.predict_junction(np.ascontiguousarray(self._x0), np.ascontiguousarray(self._T[0]),
                                             np.ascontiguousarray(np.stack(self._u)), np.asarray(self._t, dtype=float),
