@@ -222,11 +222,46 @@ def test_shifts_hold_while_either_wire_of_a_pair_is_outside_the_load_range() -> 
 
     def shifts(stress: np.ndarray, gate: bool) -> np.ndarray:
         c = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, hold_outside_load_range=gate)
-        c.reset(np.full(2, 55.0), stress)
+        # 50-55 degC: where the model's loop has a slope at the clipped loads (at the slack pair's 0.2 kgf it
+        # is flat from ~55 degC on, and a flat loop does not move the shift)
+        c.reset(np.full(2, 50.0), stress)
         for k in range(50):
-            c.track(np.full(2, 55.0 + 0.1 * k), stress, np.array([0.03, 0.03]), 0.01)
+            c.track(np.full(2, 50.0 + 0.1 * k), stress, np.array([0.03, 0.03]), 0.01)
         return c.shift_C
 
     assert np.all(shifts(slack, True) == 0.0) and np.all(shifts(over, True) == 0.0)
     assert np.abs(shifts(slack, False)).max() > 0.1 and np.abs(shifts(over, False)).max() > 0.1
     assert np.array_equal(shifts(taut, True), shifts(taut, False)) and np.abs(shifts(taut, True)).max() > 0.1
+
+
+@pytest.mark.parametrize('compiled', [True, False])
+def test_a_wire_that_transformed_where_the_model_is_flat_moves_the_shift_only_the_right_way(compiled: bool) -> None:
+    """docs/control.md "The shift's slope": inside the model's loop the central difference of track's step spans
+    both branches' memoryless parts (Eq. 3.22) and reads ~+0.0009 mm/degC; times the error of a wire that
+    transformed where the model is flat (a family plant: 1.6 mm) it drove the shift up at ~1 degC/s, the way
+    that makes the model colder still, to its limit. A wire shorter than the model predicts needs the model's
+    axis hotter (shift <= 0), on the compiled and the numpy path alike."""
+    from unittest import mock
+
+    from sma_wrist.core import jit
+    from sma_wrist.core.hysteresis.inverse import _output_frozen
+    if compiled and not jit.AVAILABLE:
+        pytest.skip('numba is not installed: there is only the numpy path')
+    g = MuscleGeometry()
+    stress = g.stress_Pa(np.array([0.8, 0.8]))
+    comp = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0)
+    comp.reset(np.full(2, 25.0), stress)
+    with mock.patch.object(jit, 'AVAILABLE', compiled):
+        for T in np.arange(25.0, 40.01, 0.5):  # heated from cold to below the model's transformation
+            comp.track(np.full(2, T), stress, np.full(2, 0.04), 0.01, adapt=np.zeros(2, bool))
+        st = comp.inverse.state
+        m = np.full(2, 0.8)
+        y_model = _output_frozen(comp.params, st.w, st.T_prev, m, st.heating)
+        h = 0.5
+        y_pm = _output_frozen(comp.params, st.w, st.T_prev + np.array([[h], [-h]]), m, np.array([[True] * 2, [False] * 2]))
+        assert np.all((y_pm[0] - y_pm[1]) / (2 * h) > 0.0)  # the artefact this test is about is there
+        # a wire 1.5 mm shorter than the model (it transformed), in bundle strain (CompensationResult's inverse)
+        eps = ((y_model - 1.5) * g.length_scale + g.elastic_mm_per_kgf * m) / g.wire_length_mm
+        for _ in range(200):
+            comp.track(np.full(2, 40.0), stress, eps, 0.01)
+    assert np.all(comp.shift_C <= 0.0), comp.shift_C

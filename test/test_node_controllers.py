@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from sma_wrist.runtime.launch import Runtime
+from sma_wrist.sweep.simulate import STROKE_GAIN_PER_S
 
 
 def test_trajectory_generator_publishes_the_seed_sine_with_derivatives(probe_factory):
@@ -356,7 +357,8 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
                 ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
     got, _ = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='thermocouple')])
     # the node's default: the inverse's window moves with each wire's shift
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True,
+                            stroke_gain_per_s=STROKE_GAIN_PER_S)
     ref.reset(T[0], stress)
     expected = []
     for j in range(n):
@@ -409,8 +411,10 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
         msgs += temps + (angle + cmds if order == 'in_order' else cmds + angle) + targets
     got, rejected = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')])
     obs = MuscleTemperatureObserver(OBSERVER_THERMAL, TemperatureObserverParams())
-    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True)
+    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True,
+                            stroke_gain_per_s=STROKE_GAIN_PER_S)
+    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True,
+                            stroke_gain_per_s=STROKE_GAIN_PER_S)
     expected, thermocouple = [], []
     for j in range(n):
         est = obs.update(T[j:j + 1], u[j - 1:j] if j else np.zeros((1, 2)), 0.01)[0]
@@ -492,16 +496,15 @@ def test_compensator_observer_parameters_are_validated_with_a_reason():
 
 def test_compensator_hands_its_stroke_gain_to_the_core() -> None:
     """hysteresis_compensator's stroke_gain_per_s (docs/control.md "Issue 14 item 2, continued") reaches
-    MuscleCompensator; the default leaves the model's stroke (0), as the sweep's STROKE_GAIN_PER_S."""
+    MuscleCompensator; the default (0.5 /s, docs/control.md "The shift's slope") is the sweep's STROKE_GAIN_PER_S."""
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
-    from sma_wrist.sweep.simulate import STROKE_GAIN_PER_S
     declared = {p.name: p for p in HysteresisCompensator.PARAMS}['stroke_gain_per_s']
-    assert declared.default == STROKE_GAIN_PER_S == 0.0 and declared.range == (0.0, 20.0)
+    assert declared.default == STROKE_GAIN_PER_S == 0.5 and declared.range == (0.0, 20.0)
     with Runtime() as rt:
-        node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('stroke_gain_per_s', value=0.5)])
-        assert node.comp.stroke_gain_per_s == 0.5
+        node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('stroke_gain_per_s', value=1.5)])
+        assert node.comp.stroke_gain_per_s == 1.5
 
 
 def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory):
@@ -521,7 +524,7 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     rest = bundle_strain(PlantParams(), 0.5)
 
     def run(gain: float, hold: bool = False, q: float = -0.1, stress=stress, n: int = 400,  # type: ignore[no-untyped-def]
-            in_range: bool = True):
+            in_range: bool = True, temp: float = 55.0):
         with Runtime() as rt:
             probe = probe_factory(rt, ('/diagnostics',))
             node = rt.add(HysteresisCompensator, parameter_overrides=[
@@ -532,7 +535,7 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
             for j in range(n):  # 4 s at 100 Hz
                 header = Header(stamp=Time(sec=1 + j // 100, nanosec=(j % 100) * 10_000_000))
                 for i in (1, 2):
-                    probe.publish(f'/wrist/muscle_{i}/temperature', header=header, temperature=55.0)
+                    probe.publish(f'/wrist/muscle_{i}/temperature', header=header, temperature=temp)
                 probe.publish('/wrist/joint_states', header=header, name=['wrist'], position=[q], velocity=[0.0],
                               effort=[0.0])
                 for kind, v in (('strain', rest), ('stress', stress)):
@@ -556,7 +559,10 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     # measured Flexinol wrist's start, muscle 1 at 14 MPa and muscle 2 slack, below the model's 0.2-1.5 kgf
     low = MuscleGeometry().stress_Pa(np.array([0.07, 0.0]))
     assert np.all(run(2.0, stress=low, n=100)[1] == 0.0)
-    assert np.abs(run(2.0, stress=low, n=100, in_range=False)[1]).max() > 1.0  # 2.5 degC in 1 s
+    # ungated the shift moves (at 50 degC: at the clipped 0.2 kgf the model's loop is flat from ~55 degC on, and
+    # a flat loop moves no shift, docs/control.md "The shift's slope")
+    assert np.all(run(2.0, stress=low, n=100, temp=50.0)[1] == 0.0)
+    assert np.abs(run(2.0, stress=low, n=100, in_range=False, temp=50.0)[1]).max() > 1.0
 
 
 def test_a_runtime_parameter_change_keeps_what_the_tems_online_estimate_has_learnt():

@@ -97,9 +97,9 @@ class HysteresisCompensator(WristNode):
               "while either wire's measured load lies outside the SD-GPI's calibrated range (a slack or "
               'overloaded pair: the strain at the measured angle is not the model\'s to explain; docs/control.md '
               '"The pair\'s load range gates the shift")'),
-        Param('stroke_gain_per_s', 0.0, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
+        Param('stroke_gain_per_s', 0.5, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
               "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
-              'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued")', '1/s', (0.0, 20.0)),
+              'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued", "The shift\'s slope")', '1/s', (0.0, 20.0)),
         Param('temperature_source', 'observer', 'temperature the memory and the axis follow: the muscle-temperature '
               'observer driven by the TEM commands (default) or the thermocouple as measured (docs/control.md '
               '"The observer in the node graph", "Issue 14 item 2")', choices=('thermocouple', 'observer')),

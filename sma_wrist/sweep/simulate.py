@@ -53,7 +53,7 @@ FloatArray = NDArray[np.float64]
 TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish_rate_hz, rate_hz)
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
 SHIFT_GAIN_PER_S = 2.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
-STROKE_GAIN_PER_S = 0.0  # hysteresis_compensator's stroke_gain_per_s default (config/wrist.yaml)
+STROKE_GAIN_PER_S = 0.5  # hysteresis_compensator's stroke_gain_per_s default (config/wrist.yaml)
 HOLD_SHIFT_ON_STOP = False  # hysteresis_compensator's hold_shift_on_stop default (config/wrist.yaml)
 #: hysteresis_compensator's hold_shift_outside_load_range default (config/wrist.yaml)
 HOLD_SHIFT_OUTSIDE_LOAD_RANGE = True

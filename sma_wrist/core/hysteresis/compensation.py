@@ -194,6 +194,12 @@ class MuscleCompensator:
         loop the memory is on (central difference, heating up / cooling down), y in the SD-GPI's
         coordinates (:meth:`_target`), s_0 = SLOPE_FLOOR_MM_PER_C; clipped to +-shift_limit_C.
         A model predicting a longer wire than measured is too cold: its axis moves up.
+        s is taken as min(s, 0): heating never lengthens the model's wire along its loop, but inside the
+        loop the central difference spans both branches' memoryless parts (Eq. 3.22, c set at T + h, d set
+        at T - h) and reads up to ~+0.001 mm/degC. Times a large prediction error (a wire that transformed
+        where the model's loop is flat: 1.6 mm on a family plant) that sign drove the shift the wrong way
+        at ~1 degC/s, to its limit, and the pair locked against each other (docs/control.md, "The shift's
+        slope").
 
         With ``stroke_gain_per_s`` k > 0 (module docstring): the prediction is y_mid + k (y_model - y_mid),
         the shift's slope k s, and, once the wire has been within STROKE_EDGE_C of both window edges,
@@ -256,7 +262,8 @@ class MuscleCompensator:
         up, down = np.ones_like(st.heating), np.zeros_like(st.heating)
         y = _output_frozen(self.params, st.w, st.T_prev + np.array([0.0, h, -h]).reshape((3,) + (1,) * st.T_prev.ndim),
                            m, np.stack([st.heating, up, down]))
-        slope = (y[1] - y[2]) / (2.0 * h)  # mm/degC of the loop the wire is on, ~0 inside the gap
+        # mm/degC of the loop the wire is on, ~0 inside the gap; never > 0 (track's docstring)
+        slope = np.minimum((y[1] - y[2]) / (2.0 * h), 0.0)
         f2 = SLOPE_FLOOR_MM_PER_C ** 2
         err = y[0] - y_meas
         if k_dt:
@@ -314,7 +321,7 @@ def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit,
     """Compiled adaptation step of :meth:`MuscleCompensator.track`, wire by wire, on shift (S,) and stroke (S,)
     in place: the SD-GPI output (Eqs. 3.19, 3.22, 4.1-4.5, :func:`~sma_wrist.core.hysteresis.inverse._residual`
     against the frozen memory) at T_prev in the memory's direction and at T_prev +- h heating / cooling, then
-    shift += gain_dt (y - y_meas) s / (s^2 + floor2), s = (y(+h) - y(-h)) / 2h, clipped to +-limit; with
+    shift += gain_dt (y - y_meas) s / (s^2 + floor2), s = min((y(+h) - y(-h)) / 2h, 0), clipped to +-limit; with
     gain_k_dt > 0 the stroke step of the method's docstring first (where stroke_on)."""
     for s in range(T_prev.shape[0]):
         coef, _ = _hk._envelopes(stacked, edges, m[s])
@@ -322,7 +329,7 @@ def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit,
         y0 = _residual(T0, np.nan, heating[s], heating[s], coef, w[s], 0.0, r, wts, c, d, p0, k_f)
         y_up = _residual(T0 + h, np.nan, True, True, coef, w[s], 0.0, r, wts, c, d, p0, k_f)
         y_down = _residual(T0 - h, np.nan, False, False, coef, w[s], 0.0, r, wts, c, d, p0, k_f)
-        slope = (y_up - y_down) / (2.0 * h)
+        slope = min((y_up - y_down) / (2.0 * h), 0.0)
         err = y0 - y_meas[s]
         if gain_k_dt != 0.0:
             k = stroke[s]
