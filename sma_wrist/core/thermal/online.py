@@ -57,7 +57,9 @@ class OnlineThermalParams:
         noise_sd_C: standard deviation of one residual (noise after averaging plus model error) [degC];
         max_step: the most one window may move (g, s, a) (a trust region: the Jacobian is a local one);
         apply_after_s: the estimate is used (:attr:`ThermalScaleEstimator.ready`) from this long after
-        the first sample on [s]: early windows, before the loop has swept the temperatures, fit little.
+        the first sample on [s]: the very first windows, before the loop has swept the temperatures, fit
+        little; until it is used, the TEM loop's face protection predicts a stronger TEM's unmeasured hot
+        faces on the model's gain (docs/control.md "The TEMs' hot faces": 10 s, not 30 s).
     """
 
     window_s: float = 2.0
@@ -68,7 +70,7 @@ class OnlineThermalParams:
     walk_sd_per_sqrt_s: tuple[float, float, float] = (0.002, 0.002, 0.02)
     noise_sd_C: float = 0.15
     max_step: tuple[float, float, float] = (0.05, 0.05, 1.0)
-    apply_after_s: float = 30.0
+    apply_after_s: float = 10.0
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.window_s) and 0.2 <= self.window_s <= 60.0):
