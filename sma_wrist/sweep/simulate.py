@@ -154,7 +154,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
-    Metrics over the last ``window_s`` [s]. The laws are the nodes' defaults; ``tem_params``
+    Metrics over the last ``window_s`` [s]; over the whole run, the plant's TEM faces: ``tem_face_max_C`` the
+    hottest [degC], ``tem_face_outside_s`` the time any face of the wrist was outside the face protection's
+    window (DriveLimits, 0-80 degC) [s], sampled at every tick. The laws are the nodes' defaults; ``tem_params``
     (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
     (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
     controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``).
@@ -230,6 +232,10 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
     qd_rec = np.empty(k_total)
     T_d: FloatArray | None = None
+    # the TEMs' faces as the plant has them (no node sees the exchanger faces): hottest, and time outside the
+    # window the face protection keeps them in (docs/control.md "The TEMs' hot faces")
+    face_lo, face_hi = tem.drive.face_min_C, tem.drive.face_max_C
+    face_max, face_outside = np.full(n, -np.inf), np.zeros(n)
     t_last = 0.0
     tick_ns = int(round(TICK_S * 1e9))
     for k in range(k_total):
@@ -289,12 +295,16 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             T_d = T_new
         u_rec[k] = u
         wrists.advance(u, steps)
+        faces = wrists.state.thermal.reshape(n, -1)
+        face_max = np.maximum(face_max, faces.max(axis=1))
+        face_outside += TICK_S * ((faces.max(axis=1) > face_hi) | (faces.min(axis=1) < face_lo))
         if on_tick is not None and k % 100 == 0:
             on_tick(t)
     # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on
     rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:], window_s)
-    out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m}
-           for c, m in zip(cases, rows)]
+    out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m,
+            'tem_face_max_C': float(face_max[j]), 'tem_face_outside_s': float(face_outside[j])}
+           for j, (c, m) in enumerate(zip(cases, rows))]
     trace = Trace(t_rec, qd_rec, q_rec, qm_rec, u_rec) if record else None
     return out, trace
 
