@@ -164,7 +164,7 @@ class TemLoopBank:
         # per wrist: the heat balance each wrist's observer and law integrate (the online estimate's, if on)
         self.coef_rows = np.tile(self._coef, (n, 1))
         self.estimator = None if online is None else ThermalScaleEstimator(thermal, n, online)
-        self.estimated = False  # True once the estimate has replaced the model (TemLoop.estimated)
+        self.estimated = False  # True once the estimate has replaced the model (TemLoop.theta_used set)
         self.observer = np.repeat(one.observer, n, axis=0)  # (n, 2 layers, 2 faces)
         self.rate, self.T_d_prev, self.rng = np.zeros((n, 2, 2)), np.zeros((n, 2, 2)), np.zeros((n, 2, 2))
         self.command_V = np.zeros((n, 2))

@@ -43,6 +43,7 @@ from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_inf
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal.heat_balance import out_of_window
 from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
@@ -155,8 +156,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
     Metrics over the last ``window_s`` [s]; over the whole run, the plant's TEM faces: ``tem_face_max_C`` the
-    hottest [degC], ``tem_face_outside_s`` the time any face of the wrist was outside the face protection's
-    window (DriveLimits, 0-80 degC) [s], sampled at every tick. The laws are the nodes' defaults; ``tem_params``
+    hottest [degC], ``tem_face_outside_s`` the time any face of the wrist was outside the TEM's window
+    (``base.thermal.window_C``, 0-80 degC, as plant_sim's ``tem_faces`` diagnostic) [s], sampled at every tick. The laws are the nodes' defaults; ``tem_params``
     (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
     (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
     controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``).
@@ -232,9 +233,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
     qd_rec = np.empty(k_total)
     T_d: FloatArray | None = None
-    # the TEMs' faces as the plant has them (no node sees the exchanger faces): hottest, and time outside the
-    # window the face protection keeps them in (docs/control.md "The TEMs' hot faces")
-    face_lo, face_hi = tem.drive.face_min_C, tem.drive.face_max_C
+    # the TEMs' faces as the plant has them (no node sees the exchanger faces): hottest, and time outside their
+    # window, as plant_sim's tem_faces diagnostic judges it (docs/control.md "The TEMs' hot faces")
     face_max, face_outside = np.full(n, -np.inf), np.zeros(n)
     t_last = 0.0
     tick_ns = int(round(TICK_S * 1e9))
@@ -295,9 +295,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             T_d = T_new
         u_rec[k] = u
         wrists.advance(u, steps)
-        faces = wrists.state.thermal.reshape(n, -1)
-        face_max = np.maximum(face_max, faces.max(axis=1))
-        face_outside += TICK_S * ((faces.max(axis=1) > face_hi) | (faces.min(axis=1) < face_lo))
+        faces = wrists.state.thermal
+        face_max = np.maximum(face_max, faces.max(axis=(1, 2)))
+        face_outside += TICK_S * out_of_window(base.thermal, faces).any(axis=(1, 2))
         if on_tick is not None and k % 100 == 0:
             on_tick(t)
     # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on

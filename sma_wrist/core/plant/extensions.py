@@ -141,16 +141,9 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
     if off:
         raise ParameterError(f'model extension(s) {", ".join(f"{k} = {v[k]:g}" for k in off)} are replayed by '
                              f'sma-wrist diagnose but not simulated by the plant (docs/diagnose.md)')
-    tp = p.thermal
-    ls, js = 1.0 + v['loss_scale_err'], 1.0 + v['joule_scale_err']
-    amb = tp.effective_ambient_C
-    mf = dataclasses.replace(tp.muscle_face, K_T_inf=tp.muscle_face.K_T_inf * ls, K_T=tp.muscle_face.K_T * ls,
-                             K_inf=tp.muscle_face.K_inf * ls, K_R=tp.muscle_face.K_R * js)
-    xf = dataclasses.replace(tp.exchanger_face, K_R=tp.exchanger_face.K_R * js)
-    tp = dataclasses.replace(tp, muscle_face=mf, exchanger_face=xf,
-                             input_per_volt=tp.input_per_volt * (1.0 + v['tem_gain_err']),
-                             coupling_per_s=v['coupling_per_s'],
-                             ambient_C=(amb[0] + v['ambient_offset_C'], amb[1] + v['ambient_offset_C']))
+    tp = dataclasses.replace(p.thermal.scaled(1.0 + v['tem_gain_err'], 1.0 + v['loss_scale_err'],
+                                              1.0 + v['joule_scale_err'], v['ambient_offset_C']),
+                             coupling_per_s=v['coupling_per_s'])
     jp = dataclasses.replace(p.joint, coulomb_Nm=v['coulomb_Nm'], static_Nm=STATIC_PER_COULOMB * v['coulomb_Nm'],
                              viscous_Nms=v['viscous_Nms'])
     return dataclasses.replace(p, thermal=tp, joint=jp, preload_elongation_mm=p.preload_elongation_mm + v['preload_err_mm'])

@@ -185,6 +185,20 @@ class ThermalParams:
         s1 = shift_C if exchanger_shift_C is None else exchanger_shift_C
         return dataclasses.replace(self, ambient_C=(a0 + shift_C, a1 + s1))
 
+    def scaled(self, gain: float = 1.0, losses: float = 1.0, joule: float = 1.0,
+               ambient_shift_C: float = 0.0) -> 'ThermalParams':
+        """Copy as another module of this kind: drive gain input_per_volt x ``gain``; the muscle face's K_Tinf,
+        K_T and K_inf x ``losses`` (its ambient unchanged, Eq. 4.15); both faces' K_R x ``joule``; both faces'
+        ambients + ``ambient_shift_C`` [degC]. The plant's thermal extensions (core.plant.extensions.plant_params)
+        and the online estimate's scales (core.thermal.online.with_scales) are these."""
+        amb = self.effective_ambient_C
+        mf = dataclasses.replace(self.muscle_face, K_T_inf=self.muscle_face.K_T_inf * losses,
+                                 K_T=self.muscle_face.K_T * losses, K_inf=self.muscle_face.K_inf * losses,
+                                 K_R=self.muscle_face.K_R * joule)
+        xf = dataclasses.replace(self.exchanger_face, K_R=self.exchanger_face.K_R * joule)
+        return dataclasses.replace(self, muscle_face=mf, exchanger_face=xf, input_per_volt=self.input_per_volt * gain,
+                                   ambient_C=(amb[0] + ambient_shift_C, amb[1] + ambient_shift_C))
+
     def with_limits(self, u_min_V: float, u_max_V: float) -> 'ThermalParams':
         """Copy with other command limits (e.g. for characterisation beyond the defaults)."""
         return dataclasses.replace(self, u_min_V=u_min_V, u_max_V=u_max_V)

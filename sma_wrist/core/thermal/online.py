@@ -24,7 +24,7 @@ Units: temperatures degC, commands V, times s. Vectorised over wrists (N); one w
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
@@ -281,10 +281,7 @@ class ThermalScaleEstimator:
 def with_scales(base: th.ThermalParams, theta: FloatArray) -> th.ThermalParams:
     """One wrist's ThermalParams for scales theta (3,): ``base`` as ``plant_params`` perturbs it."""
     g, s, a = (float(v) for v in theta)
-    amb = base.effective_ambient_C
-    mf = replace(base.muscle_face, K_T_inf=base.muscle_face.K_T_inf * s, K_T=base.muscle_face.K_T * s,
-                 K_inf=base.muscle_face.K_inf * s)
-    return replace(base, muscle_face=mf, input_per_volt=base.input_per_volt * g, ambient_C=(amb[0] + a, amb[1] + a))
+    return base.scaled(gain=g, losses=s, ambient_shift_C=a)
 
 
 __all__ = ['OnlineThermalParams', 'ThermalScaleEstimator', 'scaled_constants', 'theta_of', 'with_scales', 'BOUNDS']
