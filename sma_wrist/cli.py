@@ -195,7 +195,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     cfg = SweepConfig(n_plants=a.plants, seed=a.seed, controllers=tuple(x.strip() for x in a.controllers.split(',')),
                       payloads=payloads, duration_s=a.duration, plant=a.plant,
                       ranges=ranges if a.only else {**FAMILY, **ranges}, chunk=a.chunk, nominal=not a.no_nominal,
-                      heatmap_axes=axes, reach=a.reach)  # type: ignore[arg-type]
+                      heatmap_axes=axes, reach=a.reach, params_files=tuple(a.params_file))  # type: ignore[arg-type]
     progress = None if a.quiet else Progress(len(make_cases(cfg)))
     res = run_sweep(cfg, a.out, a.scheduler, progress, workers=a.workers)
     if a.json:

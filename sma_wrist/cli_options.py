@@ -65,6 +65,10 @@ def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument('--reach', action='store_true',
                    help='also each plant\'s reach floor (the least max error any controller can have on it; '
                         '~2-5 s per plant) and the figures over the plants where it is under 15 %%')
+    p.add_argument('--params-file', action='append', default=[], metavar='FILE',
+                   help='ROS params file of the node graph applied after config/wrist.yaml (as sma-wrist run '
+                        '--params-file; e.g. your identified hysteresis_file / thermal_file); repeatable. '
+                        'A parameter the sweep cannot honour is refused (docs/sweep.md)')
     p.add_argument('--json', action='store_true', help='print the summary as JSON')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     return p

@@ -82,6 +82,9 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
     if not (isinstance(family, int) and family >= 0):
         from sma_wrist.core.errors import ParameterError
         raise ParameterError(f'family = {family!r}: the number of off-model plants must be an integer >= 0')
+    if family and params_files:  # the family honours the files too: what it cannot honour stops here, not after the runs
+        from sma_wrist.sweep.graph_params import loop_settings
+        loop_settings(params_files)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     specs = [RunSpec(c, float(m), duration_s, str(out / f'{c}_{m:g}kg'), tuple(params_files))
@@ -108,8 +111,7 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
     table: dict[str, Any] = {'wall_s': wall, 'workers': workers, 'duration_s': duration_s, 'runs': rows}
     if family:
         table['family'] = run_family(controllers, payloads, duration_s, family, family_seed, out / 'family', log,
-                                     workers=workers)
-        table['family']['params_files_ignored'] = bool(params_files)
+                                     workers=workers, params_files=params_files)
     (out / 'table.json').write_text(json.dumps(table, indent=2))
     if plots:
         write_plots(rows, out, series)
@@ -118,13 +120,14 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
 
 
 def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s: float, n_plants: int, seed: int,
-               out: Path, log: Any, workers: int = 1) -> dict[str, Any]:
+               out: Path, log: Any, workers: int = 1, params_files: Sequence[str] = ()) -> dict[str, Any]:
     """Every controller x payload on ``n_plants`` sampled off-model plants (the sweep engine, the node
-    laws at their defaults): per (controller, payload) median / 95th percentile / worst max error and
-    the share under 15 %. ``workers``: local processes for the sweep's chunks."""
+    laws as config/wrist.yaml and ``params_files`` set them): per (controller, payload) median / 95th
+    percentile / worst max error and the share under 15 %. ``workers``: local processes for the sweep's chunks."""
     from sma_wrist.sweep.run import Progress, SweepConfig, error_stats, run_sweep
     cfg = SweepConfig(n_plants=n_plants, seed=seed, controllers=tuple(controllers),
-                      payloads=tuple(float(m) for m in payloads), duration_s=duration_s, nominal=False)
+                      payloads=tuple(float(m) for m in payloads), duration_s=duration_s, nominal=False,
+                      params_files=tuple(str(f) for f in params_files))
     n_loops = n_plants * len(payloads) * len(controllers)
     log.write(f'off-model family: {n_plants} sampled plants x {len(payloads)} payloads x {len(controllers)} '
               f'controllers = {n_loops} loops (sma-wrist sweep engine)\n')
@@ -136,7 +139,7 @@ def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s
             if e:
                 cells.append({'controller': c, 'payload_kg': float(m), 'plants': len(e), **error_stats(e)})
     return {'n_plants': n_plants, 'seed': seed, 'interrupted': res.interrupted, 'wall_s': res.wall_s,
-            'cells': cells, 'summary': res.summary, 'files': res.files}
+            'cells': cells, 'summary': res.summary, 'files': res.files, 'parameters_changed': res.parameters_changed}
 
 
 def _ordering(rows: list[dict[str, Any]], key: str, payload: float) -> list[str]:
@@ -211,8 +214,9 @@ def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plo
                   '+-30 %, coolant/ambient +-5 degC, thermocouple noise and lag, potentiometer noise; '
                   '`sma_wrist/plants/spread.py`), run by the sweep engine, which reproduces the graph bit for bit '
                   f'(docs/sweep.md); max error over the last cycle, the seed\'s requirement is < 15 %. Files: '
-                  '`family/`.' + (' The family runs the code defaults: the params files given apply to the graph '
-                                  'runs only.' if family.get('params_files_ignored') else '')
+                  '`family/`.' + (' The family runs the graph\'s parameters as the params files set them: '
+                                  + ', '.join(f'{n}.{k} = {v}' for n, kv in family['parameters_changed'].items()
+                                              for k, v in kv.items()) + '.' if family.get('parameters_changed') else '')
                   + (' Interrupted: the family figures cover the loops that finished.' if family.get('interrupted')
                      else '')]
     lines += ['', '## Ordering against the seed', '']

@@ -2,10 +2,12 @@
 the node graph, chunking and Dask change nothing, bad input and Ctrl-C (docs/sweep.md)."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +15,8 @@ import pytest
 from sma_wrist.core.control.joint_controller import MODES, JointController, JointControllerParams
 from sma_wrist.core.control.tem import TemLoop
 from sma_wrist.core.errors import ModelInputError, ParameterError
-from sma_wrist.plants.spread import sample
+from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.plants.spread import Scenario, sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
 from sma_wrist.sweep.run import (SweepConfig, add_reach_floors, format_table, make_cases, parse_perturbations,
                                  run_sweep, split_chunks, summarise)
@@ -234,3 +237,117 @@ def test_reach_floors_split_the_family_into_plants_a_controller_can_track_and_th
     assert pid['loops'] == 2 and pid['reachable_loops'] == 1
     assert pid['reachable']['median_max_error_pct'] == 8.0 and pid['reachable']['share_under_15_pct'] == 1.0
     assert 'reach floor is under 15 %' in format_table(summarise(rows))
+
+
+def _identified_wrist_params(tmp_path: Path) -> Path:
+    """A user's params file as `sma-wrist identify` writes it (a wire 4 degC hotter than the built-in one, TEMs 10 %
+    stronger with 15 % less loss), plus tuned laws in three nodes and a change that only paces the wall clock."""
+    import yaml
+
+    from sma_wrist.core.hysteresis.params_file import save_hysteresis
+    from sma_wrist.core.thermal.heat_balance import ThermalParams
+    from sma_wrist.core.thermal.params_file import write_thermal_file
+    from sma_wrist.identify.wrist import shifted_wire, wrist_params
+    wire, tems = tmp_path / 'hysteresis.yaml', tmp_path / 'thermal.yaml'
+    save_hysteresis(wire, shifted_wire(default_sdgpi(), 4.0))
+    write_thermal_file(tems, ThermalParams().scaled(gain=1.1, losses=0.85))
+    nodes, _ = wrist_params(wire, shifted_wire(default_sdgpi(), 4.0), tems, preload_mm=2.1)
+    tuned = {'adaptive_controller': {'reversal_lead_s': 2.0, 'pid.kp': 300.0, 'adaptive.c1': 4.0},
+             'tem_controller': {'gain_per_s': 1.5, 'target_filter_s': 0.3},
+             'hysteresis_compensator': {'shift_gain_per_s': 1.5, 'observer.correction_s': 0.25},
+             'plant_sim': {'real_time_factor': 2.0}}
+    for node, values in tuned.items():
+        nodes.setdefault(node, {}).update(values)
+    f = tmp_path / 'wrist_params.yaml'
+    f.write_text(yaml.safe_dump({n: {'ros__parameters': v} for n, v in nodes.items()}))
+    return f
+
+
+@pytest.mark.parametrize('mode', ['pid', 'inverse_adaptive'])
+def test_a_params_file_reaches_the_sweep_as_it_reaches_the_graph(mode: str, tmp_path: Path) -> None:
+    """`sma-wrist sweep --params-file`: an identified wire and TEMs and tuned laws, in the node graph (the file on
+    the command line, a perturbed plant) and in the sweep (graph_params.loop_settings): the same TEM commands and
+    measured angles to the last bit over 6 s, and not the loop of config/wrist.yaml alone."""
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.sweep.graph_params import loop_settings
+    from sma_wrist.sweep.simulate import Case, simulate
+    f = _identified_wrist_params(tmp_path)
+    sc = Scenario(payload_kg=0.4, transition_shift_C=-3.0, stroke_scale=0.9, tem_gain_scale=1.1, heat_loss_scale=0.9,
+                  ambient_offset_C=2.0, temp_noise_C=0.1, temp_lag_s=0.1, angle_noise_rad=0.002, noise_seed=7)
+    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
+                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}}}
+    run = run_closed_loop(mode, sc.payload_kg, 6.0, tmp_path / 'bag', params_files=[f], extra_params=extra).run
+    settings = loop_settings([f])
+    assert settings.changed['plant_sim']['hysteresis_file'] == str(tmp_path / 'hysteresis.yaml')
+    assert settings.changed['tem_controller']['gain_per_s'] == 1.5
+    _, tr = simulate([Case(0, mode, sc)], 6.0, record=True, **settings.kwargs)
+    k, kc = np.rint(run.t / 0.01).astype(int), np.rint(run.command_t / 0.01).astype(int)
+    assert np.max(np.abs(run.q - tr.q_measured[k, 0])) <= 1e-12
+    np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
+    _, plain = simulate([Case(0, mode, sc)], 6.0, record=True)
+    assert np.max(np.abs(plain.command_V[kc, 0] - run.command_V)) > 1e-2  # the file reached the loop
+
+
+def test_the_sweep_refuses_what_it_cannot_honour_and_names_it(tmp_path: Path) -> None:
+    """A parameter the sweep's loops cannot take is refused, never swept at the default in silence: the seed's
+    composition (stress and memory sources), the mode (--controllers), a misspelt name, a bad value (the node's own
+    refusal), pre-loads the nodes do not share; and the CLI says so without a traceback."""
+    import yaml
+
+    from sma_wrist.sweep.graph_params import loop_settings
+
+    def params(nodes: dict) -> Path:
+        f = tmp_path / f'p{len(list(tmp_path.iterdir()))}.yaml'
+        f.write_text(yaml.safe_dump({n: {'ros__parameters': v} for n, v in nodes.items()}))
+        return f
+    with pytest.raises(ParameterError, match=r'stress_source = .desired. .*memory_source = .commanded.'):
+        loop_settings([Path(__file__).parent.parent / 'config' / 'paper_table_6_1.yaml'])
+    with pytest.raises(ParameterError, match=r'adaptive_controller.mode .*--controllers'):
+        loop_settings([params({'adaptive_controller': {'mode': 'pid'}})])
+    with pytest.raises(ParameterError, match=r'gain_per_sec under tem_controller'):
+        loop_settings([params({'tem_controller': {'gain_per_sec': 2.0}})])
+    with pytest.raises(ParameterError, match=r'tem_controller: invalid parameters: face_min_C = 40.0 must be below'):
+        loop_settings([params({'tem_controller': {'face_min_C': 40.0, 'face_max_C': 40.0}})])
+    with pytest.raises(ParameterError, match=r'TemController: invalid parameter face_max_C: .*out of range'):
+        loop_settings([params({'tem_controller': {'face_max_C': 20.0}})])
+    with pytest.raises(ParameterError, match=r'preload_elongation_mm differs'):
+        loop_settings([params({'plant_sim': {'preload_elongation_mm': 2.5}})])
+    with pytest.raises(ParameterError, match=r'no such file'):
+        loop_settings([tmp_path / 'missing.yaml'])
+    with pytest.raises(ParameterError, match=r'thermal_adaptation'):
+        loop_settings([params({'tem_controller': {'thermal_adaptation.apply_after_s': 20.0}})])
+    out = subprocess.run([sys.executable, '-m', 'sma_wrist', 'sweep', '--plants', '1', '--duration', '2', '--quiet',
+                          '--out', str(tmp_path / 'sw'), '--params-file', str(params({'plant_sim': {'payload_kg': 0.5}}))],
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and 'Traceback' not in out.stderr, out.stderr
+    assert 'plant_sim.payload_kg = 0.5' in out.stderr and '--payloads' in out.stderr
+    assert not (tmp_path / 'sw' / 'results.jsonl').exists()  # refused before any loop ran
+
+
+def test_a_sweep_with_a_params_file_runs_it_in_every_worker_and_records_it(tmp_path: Path) -> None:
+    """The graph's settings travel to the worker processes (and, the same way, to Dask's): the loops are those of
+    one process with the same file, differ from the defaults', and sweep.json names what the file changed."""
+    import yaml
+    f = tmp_path / 'tuned.yaml'
+    f.write_text(yaml.safe_dump({'tem_controller': {'ros__parameters': {'gain_per_s': 2.0}},
+                                 'adaptive_controller': {'ros__parameters': {'pid.kp': 250.0}}}))
+    cfg = SweepConfig(n_plants=2, controllers=('pid', 'inverse_adaptive'), duration_s=8.0, chunk=8, nominal=False,
+                      params_files=(str(f),))
+    one = run_sweep(cfg)
+    forked = run_sweep(cfg, tmp_path / 'out', workers=2)
+    assert forked.rows == one.rows
+    plain = run_sweep(dataclasses.replace(cfg, params_files=()))
+    assert all(a['rms_error_pct'] != b['rms_error_pct'] for a, b in zip(one.rows, plain.rows))
+    data = json.loads((tmp_path / 'out' / 'sweep.json').read_text())
+    assert data['parameters_changed'] == {'tem_controller': {'gain_per_s': 2.0}, 'adaptive_controller': {'pid.kp': 250.0}}
+    assert data['config']['params_files'] == [str(f)]
+
+
+def test_an_experiment_refuses_a_params_file_its_family_cannot_honour_before_any_run(tmp_path: Path) -> None:
+    """`sma-wrist experiment --family N --params-file F`: the family honours F as the graph runs do, so a file the
+    sweep cannot honour stops the experiment before its first run, not after them."""
+    from sma_wrist.experiment import run_experiment
+    paper = Path(__file__).parent.parent / 'config' / 'paper_table_6_1.yaml'
+    with pytest.raises(ParameterError, match='stress_source'):
+        run_experiment(['pid'], [0.3], tmp_path / 'exp', duration_s=2.0, params_files=[str(paper)], family=1)
+    assert not (tmp_path / 'exp').exists()

@@ -20,7 +20,7 @@ import numpy as np
 from sma_wrist.core.control.tem import TemControlParams, TemperatureObserverParams
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.metrics import SEED_PERIOD_S
-from sma_wrist.core.plant.wrist import WristPlant
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.plants.spread import Scenario, perturbed_hysteresis, scenario_params
 from sma_wrist.sweep.simulate import (CHATTER_DEADBAND_V, SHIFT_GAIN_PER_S, Case, Trace, check_true_temperature,
@@ -41,15 +41,17 @@ class OffModelCase:
     scenario: Scenario
 
 
-def reach(case: OffModelCase, T_window_C: tuple[float, float] = (20.0, 80.0)) -> tuple[float, float]:
+def reach(case: OffModelCase, T_window_C: tuple[float, float] = (20.0, 80.0),
+          base: PlantParams | None = None) -> tuple[float, float]:
     """(lowest, highest) angle [rad] a perturbed project wrist holds with its muscle temperatures
     imposed inside the controllers' window (one muscle hot, the other cold, both ways round,
     each approached along its branch; WristPlant.step_mechanics, no heat balance). A reference
-    outside it cannot be tracked by any controller: its excess is a floor under the max error."""
+    outside it cannot be tracked by any controller: its excess is a floor under the max error.
+    ``base``: the plant the scenario perturbs (e.g. an identified wire's; None: the built-in one)."""
     if case.plant != 'sdgpi':
         raise ParameterError(f'reach is computed on the project\'s plant (sdgpi), not {case.plant!r}')
     lo, hi = T_window_C
-    plant = WristPlant(scenario_params(case.scenario), payload_kg=case.scenario.payload_kg)
+    plant = WristPlant(scenario_params(case.scenario, base), payload_kg=case.scenario.payload_kg)
     T0 = float(plant.muscle_temperature_C[0, 0])
     n = 3000
     for T in np.linspace(T0, hi, n):
@@ -65,10 +67,12 @@ def reach(case: OffModelCase, T_window_C: tuple[float, float] = (20.0, 80.0)) ->
     return float(plant.state.q[0]), top
 
 
-def reach_floor_pct(case: OffModelCase, q_range: tuple[float, float] = (0.0, 1.048)) -> float:
-    """Least max error [% of the range] any controller can have on the Sec. 6.1 sine (:func:`reach`): a static
-    floor; what TEM schedules reach in time is :mod:`sma_wrist.plants.dynamic_reach`'s."""
-    bottom, top = reach(case)
+def reach_floor_pct(case: OffModelCase, q_range: tuple[float, float] = (0.0, 1.048),
+                    T_window_C: tuple[float, float] = (20.0, 80.0), base: PlantParams | None = None) -> float:
+    """Least max error [% of the range] any controller can have on the Sec. 6.1 sine (:func:`reach` inside the
+    controllers' window ``T_window_C`` [degC] on the plant ``base`` perturbs): a static floor; what TEM schedules
+    reach in time is :mod:`sma_wrist.plants.dynamic_reach`'s."""
+    bottom, top = reach(case, T_window_C, base)
     miss = max(q_range[1] - top, bottom - q_range[0], 0.0)
     return 100.0 * miss / (q_range[1] - q_range[0])
 

@@ -9,7 +9,7 @@ one-wrist objects by test_sweep (``JointControllerBank`` == ``JointController``,
 from __future__ import annotations
 
 import math
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -151,6 +151,19 @@ def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, d
                                                    cfg, candidates, scratch)
 
 
+@dataclass(frozen=True)
+class TemLoopSpec:
+    """What tem_controller builds its TemLoop from (nodes/tem_controller.py ``_build_loop``): the law's heat
+    balance (saturating at the driver rating), its gains and filters, the drive limits and protection, the
+    hold limits' heat balance and the muscles' over-temperature limit [degC]."""
+
+    thermal: th.ThermalParams
+    params: TemControlParams
+    drive: DriveLimits
+    hold: th.ThermalParams
+    max_muscle_C: float
+
+
 class TemLoopBank:
     """:class:`sma_wrist.core.control.tem.TemLoop` (tem_controller's per-sample work) for n wrists
     sampled together. The constants are a one-wrist TemLoop's, built as the node builds them."""
@@ -177,16 +190,14 @@ class TemLoopBank:
         self.range_t: float | None = None
 
     @classmethod
-    def like_node(cls, n: int, params: TemControlParams | None = None, online: OnlineThermalParams | None = None
-                  ) -> 'TemLoopBank':
+    def like_node(cls, n: int, params: TemControlParams | None = None, online: OnlineThermalParams | None = None,
+                  spec: TemLoopSpec | None = None) -> 'TemLoopBank':
         """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
         0.05 s, target prefilter 0.5 s, driver rating, hold limits, 85 degC); test_plants' graph agreement
-        checks they still are. ``params`` replaces the law's parameters (gain, filters)."""
-        hold = th.ThermalParams()
-        drive = DriveLimits()
-        return cls(n, replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
-                   params or TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold,
-                   85.0, online)
+        checks they still are. ``spec``: the node's loop as its parameters built it instead
+        (:func:`sma_wrist.sweep.graph_params.loop_settings`); ``params`` replaces the law's parameters (gain, filters)."""
+        spec = spec or default_tem_spec()
+        return cls(n, spec.thermal, params or spec.params, spec.drive, spec.hold, spec.max_muscle_C, online)
 
     def sample(self, t: float, T_meas: FloatArray, T_d: FloatArray | None) -> FloatArray:
         """Commands (n, 2) [V] in force after a sample at t [s] (TemLoop.sample; T_d None: TEMs off)."""
@@ -227,4 +238,12 @@ class TemLoopBank:
             self.estimated = True
 
 
-__all__ = ['JointControllerBank', 'TemLoopBank']
+def default_tem_spec() -> TemLoopSpec:
+    """tem_controller's loop with its defaults (config/wrist.yaml)."""
+    hold = th.ThermalParams()
+    drive = DriveLimits()
+    return TemLoopSpec(replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
+                       TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold, 85.0)
+
+
+__all__ = ['JointControllerBank', 'TemLoopBank', 'TemLoopSpec', 'default_tem_spec']

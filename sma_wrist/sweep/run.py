@@ -52,6 +52,9 @@ class SweepConfig:
     #: also each plant's reach floor (:func:`sma_wrist.plants.loop.reach_floor_pct`, ~5-7 s of CPU per plant):
     #: the least max error any controller can have on it, and the figures over the plants where it is < 15 %
     reach: bool = False
+    #: ROS params files of the node graph applied after config/wrist.yaml, as ``sma-wrist run --params-file``
+    #: (:mod:`sma_wrist.sweep.graph_params`: what the sweep cannot honour is refused)
+    params_files: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if not (isinstance(self.n_plants, int) and self.n_plants >= 1):
@@ -109,9 +112,11 @@ def make_cases(cfg: SweepConfig) -> list[Case]:
     return cases
 
 
-def run_chunk(cases: Sequence[Case], duration_s: float, plant: str) -> list[dict[str, Any]]:
-    """One chunk: what a local loop or a Dask worker runs."""
-    return simulate(cases, duration_s, plant)[0]
+def run_chunk(cases: Sequence[Case], duration_s: float, plant: str,
+              settings: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+    """One chunk: what a local loop or a Dask worker runs (``settings``: the graph's parameters,
+    :func:`sma_wrist.sweep.graph_params.loop_settings`)."""
+    return simulate(cases, duration_s, plant, **(settings or {}))[0]
 
 
 class Progress:
@@ -142,10 +147,13 @@ class SweepResult:
     wall_s: float
     summary: list[dict[str, Any]] = field(default_factory=list)
     files: dict[str, str] = field(default_factory=dict)
+    #: per node, the parameters the params files set to other values than config/wrist.yaml's
+    parameters_changed: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def to_json(self) -> dict[str, Any]:
         cfg = asdict(self.config)
-        return {'config': cfg, 'interrupted': self.interrupted, 'wall_s': self.wall_s,
+        return {'config': cfg, 'parameters_changed': self.parameters_changed, 'interrupted': self.interrupted,
+                'wall_s': self.wall_s,
                 'loops': len(self.rows), 'summary': self.summary, 'files': self.files, 'rows': self.rows}
 
 
@@ -183,6 +191,10 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     if not (isinstance(workers, int) and workers >= 0):
         raise ParameterError(f'workers = {workers!r} must be an integer >= 0 (0: one per available core)')
     workers = workers or available_cores()
+    settings = None
+    if cfg.params_files:  # before any loop runs: a parameter the sweep cannot honour stops it here
+        from sma_wrist.sweep.graph_params import loop_settings
+        settings = loop_settings(cfg.params_files, cfg.plant)
     cases = make_cases(cfg)
     chunks = split_chunks(cases, cfg.chunk, 1 if scheduler else workers)
     out = Path(out_dir) if out_dir is not None else None
@@ -202,16 +214,17 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
             jsonl.flush()
 
     try:
+        kwargs = None if settings is None else settings.kwargs
         if scheduler:
-            _run_dask(scheduler, chunks, cfg, keep, progress)
+            _run_dask(scheduler, chunks, cfg, keep, progress, kwargs)
         elif workers > 1 and len(chunks) > 1:
-            _run_processes(min(workers, len(chunks)), chunks, cfg, keep, progress)
+            _run_processes(min(workers, len(chunks)), chunks, cfg, keep, progress, kwargs)
         else:
             done = 0
             for chunk in chunks:
                 tick = None if progress is None else (
                     lambda t, d=done, n=len(chunk): progress(d + n * min(t / cfg.duration_s, 1.0)))
-                keep(simulate(chunk, cfg.duration_s, cfg.plant, on_tick=tick)[0])
+                keep(simulate(chunk, cfg.duration_s, cfg.plant, on_tick=tick, **(kwargs or {}))[0])
                 done += len(chunk)
                 if progress is not None:
                     progress(done)
@@ -223,10 +236,12 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     rows.sort(key=lambda r: r['index'])
     if cfg.reach and not interrupted:
         try:
-            add_reach_floors(rows, workers if not scheduler else 1, None if progress is None else _reach_progress)
+            add_reach_floors(rows, workers if not scheduler else 1, None if progress is None else _reach_progress,
+                             None if settings is None else settings.kwargs)
         except KeyboardInterrupt:  # the loops' rows stay, with the floors computed so far
             interrupted = True
-    res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0)
+    res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0,
+                      parameters_changed={} if settings is None else _json_values(settings.changed))
     res.summary = summarise(rows)
     if out is not None:
         res.files = write_outputs(res, out)
@@ -260,17 +275,25 @@ def _process_pool(workers: int) -> Iterator[Any]:
     pool.shutdown()
 
 
+def _json_values(changed: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Parameter values as JSON has them (a ROS array parameter may be a tuple or an array)."""
+    def plain(v: Any) -> Any:
+        return v.tolist() if isinstance(v, np.ndarray) else list(v) if isinstance(v, tuple) else v
+    return {node: {k: plain(v) for k, v in values.items()} for node, values in changed.items()}
+
+
 def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
-                   keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None) -> None:
+                   keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None,
+                   settings: dict[str, Any] | None = None) -> None:
     """The chunks in ``workers`` local processes (:func:`_process_pool`)."""
     from concurrent.futures import as_completed
     with _process_pool(workers) as pool:
-        _collect(as_completed([pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant) for ch in chunks]), keep,
-                 progress)
+        _collect(as_completed([pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant, settings) for ch in chunks]),
+                 keep, progress)
 
 
 def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Callable[[list[dict[str, Any]]], None],
-              progress: Callable[[float], None] | None) -> None:
+              progress: Callable[[float], None] | None, settings: dict[str, Any] | None = None) -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -280,7 +303,7 @@ def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Ca
     except (OSError, TimeoutError, ValueError) as e:
         raise SmaWristError(f'cannot reach the Dask scheduler at {address}: {e}') from None
     try:
-        futures = [client.submit(run_chunk, ch, cfg.duration_s, cfg.plant, pure=False) for ch in chunks]
+        futures = [client.submit(run_chunk, ch, cfg.duration_s, cfg.plant, settings, pure=False) for ch in chunks]
         try:
             _collect(as_completed(futures), keep, progress)
         except KeyboardInterrupt:
@@ -299,17 +322,20 @@ def _reach_progress(done: int, total: int) -> None:
 SENSOR_AXES = ('temp_noise_C', 'temp_lag_s', 'angle_noise_rad')
 
 
-def _reach_floor(scenario: Scenario) -> float:
+def _reach_floor(scenario: Scenario, settings: dict[str, Any] | None = None) -> float:
     from sma_wrist.plants.loop import OffModelCase, reach_floor_pct
-    return reach_floor_pct(OffModelCase('sdgpi', scenario))
+    over = (settings or {}).get('controller_overrides') or {}
+    window = (over.get('temperature_min_C', 20.0), over.get('temperature_max_C', 80.0))  # adaptive_controller's
+    return reach_floor_pct(OffModelCase('sdgpi', scenario), T_window_C=window, base=(settings or {}).get('base'))
 
 
 def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
-                     progress: Callable[[int, int], None] | None = None) -> None:
+                     progress: Callable[[int, int], None] | None = None, settings: dict[str, Any] | None = None) -> None:
     """``reach_floor_pct`` into each row, computed once per plant (its scenario: payload and plant axes),
     in ``workers`` local processes; a floor does not depend on the controller or the sensors. Each plant's
     rows get their floor as it finishes, so Ctrl-C keeps the floors computed; ``progress(done, total)``
-    after each plant."""
+    after each plant. ``settings``: the graph's parameters (:func:`sma_wrist.sweep.graph_params.loop_settings`):
+    the plant the scenarios perturb and the controllers' temperature window."""
     axes = [p.name for p in VALIDITY if p.name not in SENSOR_AXES]
     rows_of: dict[tuple[float, ...], list[dict[str, Any]]] = {}  # plant -> its rows, in order
     for r in rows:
@@ -328,11 +354,11 @@ def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
     scen = {k: Scenario(**dict(zip(axes, k))) for k in plants}
     if workers <= 1 or len(plants) <= 1:
         for k in plants:
-            put(k, _reach_floor(scen[k]))
+            put(k, _reach_floor(scen[k], settings))
         return
     from concurrent.futures import as_completed
     with _process_pool(min(workers, len(plants))) as pool:
-        futures = {pool.submit(_reach_floor, scen[k]): k for k in plants}
+        futures = {pool.submit(_reach_floor, scen[k], settings): k for k in plants}
         for fut in as_completed(futures):
             put(futures[fut], fut.result())
 
@@ -378,7 +404,7 @@ def format_table(summary: Sequence[dict[str, Any]]) -> str:
     reach = [s for s in summary if 'reachable_loops' in s]
     if reach:
         lines += ['', 'plants whose reach floor is under 15 % (the rest: no controller can track the sine on them '
-                  'inside the 20-80 degC window):',
+                  'inside the controllers\' temperature window):',
                   f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"<15%":>6}']
         for s in reach:
             r = s['reachable']

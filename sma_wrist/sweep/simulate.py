@@ -28,6 +28,7 @@ and on the measured one (what a bag holds), and the TEM commands' sign changes p
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
@@ -41,13 +42,14 @@ from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import PlantParams
-from sma_wrist.core.thermal.heat_balance import out_of_window
+from sma_wrist.core.thermal.heat_balance import ThermalParams, out_of_window
 from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.plants import make_plant
 from sma_wrist.plants.spread import Scenario, SensorBank
-from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
+from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank, TemLoopSpec
 
 FloatArray = NDArray[np.float64]
 
@@ -55,6 +57,7 @@ TICK_S = 0.01  # the graph's publish and control rate (config/wrist.yaml publish
 ANGLE_LIMITS_RAD = (0.0, 1.05)  # trajectory_generator's angle_min_rad / angle_max_rad
 SHIFT_GAIN_PER_S = 2.0  # hysteresis_compensator's shift_gain_per_s default (config/wrist.yaml)
 STROKE_GAIN_PER_S = 0.5  # hysteresis_compensator's stroke_gain_per_s default (config/wrist.yaml)
+SHIFT_LIMIT_C = 15.0  # hysteresis_compensator's shift_limit_C default (config/wrist.yaml)
 HOLD_SHIFT_ON_STOP = False  # hysteresis_compensator's hold_shift_on_stop default (config/wrist.yaml)
 #: hysteresis_compensator's hold_shift_outside_load_range default (config/wrist.yaml)
 HOLD_SHIFT_OUTSIDE_LOAD_RANGE = True
@@ -151,7 +154,10 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
              hold_shift_outside_load_range: bool = HOLD_SHIFT_OUTSIDE_LOAD_RANGE,
              controller_overrides: Mapping[str, Any] | None = None, oracle: Sequence[str] = (),
-             online_thermal: OnlineThermalParams | None = OnlineThermalParams()
+             online_thermal: OnlineThermalParams | None = OnlineThermalParams(),
+             compensator_wire: SDGPIParams | None = None, compensator_window_C: tuple[float, float] = (20.0, 80.0),
+             shift_limit_C: float = SHIFT_LIMIT_C, tem_loop: TemLoopSpec | None = None,
+             observer_thermal: ThermalParams | None = None
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -178,6 +184,13 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
     ``online_thermal``: tem_controller's and hysteresis_compensator's ``thermal_adaptation`` (the online estimate
     of each wrist's TEMs, :mod:`sma_wrist.core.thermal.online`; None = off).
+
+    The node graph's other parameters, as :func:`sma_wrist.sweep.graph_params.loop_settings` reads them from
+    params files (``sma-wrist sweep --params-file``): ``base`` plant_sim's plant (its wire, TEMs, pre-load and
+    step); ``compensator_wire``, ``compensator_window_C`` and ``shift_limit_C`` hysteresis_compensator's SD-GPI
+    (None: the built-in set), temperature window [degC] and shift limit [degC]; ``observer_thermal`` its
+    observer's heat balance (None: the TEM loops' model); ``tem_loop`` tem_controller's loop
+    (:class:`~sma_wrist.sweep.laws.TemLoopSpec`; None: its defaults).
 
     ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
     (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
@@ -206,15 +219,20 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     for mode in MODES:
         idx = np.array([i for i, c in enumerate(cases) if c.controller == mode], dtype=np.intp)
         if idx.size:
-            jp = JointControllerParams(mode=mode, **(controller_overrides or {}))
+            over = dict(controller_overrides or {})
+            if 'adaptive' in over:  # the adaptive law's mode follows the group's, as adaptive_controller sets it
+                over['adaptive'] = dataclasses.replace(over['adaptive'],
+                                                       mode=mode if mode != 'pid' else 'inverse_adaptive')
+            jp = JointControllerParams(mode=mode, **over)
             if orc is not None and 'payload' in oracle:
                 jp = orc.knows_payload(jp, scen[0].payload_kg)
             groups[mode] = (idx, JointControllerBank(jp, idx.size, base))
     comp = None
     if 'inverse_adaptive' in groups:
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
-        comp = MuscleCompensator(default_sdgpi(), T_range_C=(20.0, 80.0), shift_gain_per_s=shift_gain_per_s,
-                                 shift_limit_C=15.0, window_follows_shift=window_follows_shift,
+        comp = MuscleCompensator(compensator_wire or default_sdgpi(), T_range_C=compensator_window_C,
+                                 shift_gain_per_s=shift_gain_per_s, shift_limit_C=shift_limit_C,
+                                 window_follows_shift=window_follows_shift,
                                  stroke_gain_per_s=stroke_gain_per_s,
                                  hold_outside_load_range=hold_shift_outside_load_range)
         if orc is not None and 'hysteresis' in oracle:
@@ -223,11 +241,12 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     t_track_ns = 0  # stamp of the last measured tick the compensator's memory took [ns]
     q_track = np.zeros(0)  # the measured angles of that tick [rad]
     t_obs_ns = 0  # stamp of the last measured tick the observer took [ns]
-    tem = TemLoopBank.like_node(n, tem_params, online_thermal)
+    tem = TemLoopBank.like_node(n, tem_params, online_thermal, tem_loop)
     if orc is not None and 'thermal' in oracle:
         tem = orc.own_tem_bank(tem, scen[0], base)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
-    observer = None if compensator_observer is None else MuscleTemperatureObserver(tem.thermal, compensator_observer)
+    observer = None if compensator_observer is None else MuscleTemperatureObserver(observer_thermal or tem.thermal,
+                                                                                    compensator_observer)
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))

@@ -1,0 +1,219 @@
+"""The node graph's parameters in the sweep's loops: ``sma-wrist sweep --params-file``.
+
+A user who tuned the graph (a params file for ``ros2 launch`` / ``sma-wrist run --params-file``) or
+identified a wire and its TEMs (``sma-wrist identify``: hysteresis.yaml, thermal.yaml) sweeps that
+graph over the family. The nodes are built on the embedded runtime from config/wrist.yaml and the
+files given, as the graph starts them, so their own checks refuse a bad value with the node's
+message; the sweep's laws then take what the nodes built (:func:`loop_settings`).
+
+Not every parameter has a place in a lockstep simulation over sampled plants: a parameter the
+sweep cannot honour is refused when the files set it to anything but config/wrist.yaml's value,
+never dropped in silence (:data:`HONOURED`, :data:`NO_EFFECT`).
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+from sma_wrist.core.control.adaptive import AdaptiveParams
+from sma_wrist.core.control.pid import PIDParams
+from sma_wrist.core.control.tem import TemperatureObserverParams
+from sma_wrist.core.errors import ParameterError, SmaWristError
+
+#: per node, the parameters the sweep's loops take from the files (see :func:`loop_settings`)
+HONOURED: dict[str, frozenset[str]] = {
+    # the sampled plants perturb this plant (--plant sdgpi only): the user's wire, TEMs, pre-load, step and
+    # over-temperature flag
+    'plant_sim': frozenset({'hysteresis_file', 'thermal_file', 'preload_elongation_mm', 'dt_s',
+                            'max_muscle_temperature_C'}),
+    'trajectory_generator': frozenset(),  # the metrics are over the last cycle of the Sec. 6.1 sine
+    # every law parameter; the mode is --controllers
+    'adaptive_controller': frozenset({'temperature_mid_C', 'temperature_min_C', 'temperature_max_C',
+                                      'force_per_degC_N', 'reversal_lead_s', 'pid_reference_lead_s',
+                                      'direct_reference_lead_s', 'pid_output_filter_s', 'direct_output_filter_s',
+                                      'preload_elongation_mm'}
+                                     | {f'adaptive.{f.name}' for f in dataclasses.fields(AdaptiveParams) if f.name != 'mode'}
+                                     | {f'pid.{f.name}' for f in dataclasses.fields(PIDParams)}),
+    'hysteresis_compensator': frozenset({'temperature_min_C', 'temperature_max_C', 'hysteresis_file',
+                                         'preload_elongation_mm', 'shift_gain_per_s', 'shift_limit_C',
+                                         'hold_shift_on_stop', 'hold_shift_outside_load_range', 'stroke_gain_per_s',
+                                         'temperature_source', 'window_follows_shift', 'observer.correction_s',
+                                         'observer.tc_lag_s', 'thermal_file', 'thermal_adaptation.enabled',
+                                         'thermal_adaptation.apply_after_s', 'thermal_adaptation.tc_lag_s'}),
+    'tem_controller': frozenset({'gain_per_s', 'rate_filter_s', 'target_filter_s', 'u_min_V', 'u_max_V',
+                                 'predictive_protection', 'face_min_C', 'face_max_C', 'protection_horizon_s',
+                                 'protect_above_C', 'max_muscle_temperature_C', 'thermal_file',
+                                 'thermal_adaptation.enabled', 'thermal_adaptation.apply_after_s',
+                                 'thermal_adaptation.tc_lag_s'}),
+}
+#: accepted, and they change nothing in the sweep: wall-clock pacing, and watchdogs on late or lost
+#: messages, which a lockstep simulation never has
+NO_EFFECT: dict[str, frozenset[str]] = {
+    'plant_sim': frozenset({'real_time_factor', 'command_timeout_s'}),
+    'adaptive_controller': frozenset({'stale_timeout_s'}),
+    'tem_controller': frozenset({'stale_timeout_s'}),
+}
+#: why a parameter the sweep does not honour is refused, where a better way exists
+_INSTEAD = {('adaptive_controller', 'mode'): 'choose the modes with --controllers',
+            ('plant_sim', 'payload_kg'): 'the plants carry their sampled payloads; fix them with --payloads',
+            ('plant_sim', 'plant'): 'choose the plant with --plant',
+            ('hysteresis_compensator', 'method'): "the sweep's inverse is the numerical one"}
+#: the pre-load three nodes must share (nodes.common.PRELOAD_PARAM)
+PRELOAD_NODES = ('plant_sim', 'adaptive_controller', 'hysteresis_compensator')
+
+
+def _activate() -> None:
+    """The embedded runtime builds the nodes, also in a shell with ROS 2 sourced: nothing here talks to a graph."""
+    from sma_wrist import runtime
+    try:
+        runtime.activate(force=True)
+    except SmaWristError as e:  # the real rclpy is already imported in this process
+        raise ParameterError(f'the nodes cannot be built to read the params files: {e}') from None
+
+
+def _node_values(params_files: Sequence[str | Path]) -> dict[str, Any]:
+    """{node name: the node} of the inverse mode's graph (it has every node), built on the embedded
+    runtime from config/wrist.yaml and ``params_files``; a node that refuses its values raises
+    ParameterError with the node's reason."""
+    _activate()
+    from sma_wrist.closed_loop import graph_nodes, ros_args
+    from sma_wrist.runtime.launch import Runtime
+    for f in params_files:
+        if not Path(f).is_file():
+            raise ParameterError(f'params file {f}: no such file')
+    from sma_wrist.nodes.common import start_up_refusal
+    built: dict[str, _Built] = {}
+    with Runtime(ros_args(params_files) + ['--log-level', 'warn'], params={'/**': {'use_sim_time': True},
+                                                                          '/plant_sim': {'use_sim_time': False}}) as rt:
+        for cls in graph_nodes('inverse_adaptive'):
+            try:
+                node = rt.add(cls)
+            except ParameterError:
+                raise
+            except Exception as e:  # a node's refusal (its values, a wrong type or range): the reason ros2 run gives
+                why = start_up_refusal(e, cls)
+                if why is None:
+                    raise
+                raise ParameterError(why.removeprefix('error: ')) from None
+            built[node.get_name()] = _Built.of(node)
+    return built
+
+
+@dataclasses.dataclass
+class _Built:
+    """What the sweep takes from one node: its parameter values and the core objects it built from them."""
+
+    values: dict[str, Any]
+    objects: dict[str, Any]
+
+    @classmethod
+    def of(cls, node: Any) -> '_Built':
+        name = node.get_name()
+        objects: dict[str, Any] = {}
+        if name == 'plant_sim':
+            objects['plant'] = node.sim_params
+        elif name == 'adaptive_controller':
+            objects['controller'] = node._core_params(node.p)
+        elif name == 'hysteresis_compensator':
+            objects['wire'] = node.comp.params
+            objects['observer_thermal'] = None if node.observer is None else node.observer.thermal
+        elif name == 'tem_controller':
+            loop = node.loop
+            objects['tem_loop'] = (loop.thermal, loop.params, loop.drive, loop.hold, loop.max_muscle_C)
+        return cls(dict(node.p), objects)
+
+
+def _undeclared(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:
+    """Keys of ``params_files`` under a graph node (or ``/**``) that no such node declares: ROS ignores them,
+    so a misspelt name would sweep the defaults in silence."""
+    from sma_wrist.runtime.arguments import load_params_file
+    everyone = set().union(*declared.values()) | {'use_sim_time'}
+    out = []
+    for f in params_files:
+        for rule in load_params_file(f):
+            node = rule.node.strip('/')
+            names = everyone if node in ('**', '*') else declared[node] | {'use_sim_time'} if node in declared else None
+            if names is not None and rule.name not in names:
+                out.append(f'{rule.name} under {rule.node} in {f}')
+    return out
+
+
+def changed_parameters(params_files: Sequence[str | Path]) -> tuple[dict[str, _Built], dict[str, dict[str, Any]]]:
+    """The graph's nodes built with ``params_files``, and per node the parameters whose values differ from
+    config/wrist.yaml's."""
+    user = _node_values(params_files)
+    unknown = _undeclared(params_files, {name: set(b.values) for name, b in user.items()})
+    if unknown:
+        raise ParameterError('not a parameter of the node graph (misspelt?): ' + '; '.join(unknown))
+    default = _node_values(())
+    changed = {name: {k: v for k, v in b.values.items() if default[name].values.get(k) != v}
+               for name, b in user.items()}
+    return user, {k: v for k, v in changed.items() if v}
+
+
+def _refusals(changed: Mapping[str, Mapping[str, Any]], plant: str) -> list[str]:
+    out = []
+    for node, values in changed.items():
+        for k, v in values.items():
+            if k in NO_EFFECT.get(node, ()):
+                continue
+            if k in HONOURED.get(node, ()) and not (node == 'plant_sim' and plant != 'sdgpi'):
+                continue
+            why = _INSTEAD.get((node, k)) or (f'the {plant} plant is its own model' if node == 'plant_sim'
+                                                and k in HONOURED['plant_sim'] else 'the sweep does not model it')
+            out.append(f'{node}.{k} = {v!r} ({why})')
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class LoopSettings:
+    """:func:`sma_wrist.sweep.simulate.simulate`'s keyword arguments for a graph's parameters, and which of
+    them differ from config/wrist.yaml ({node: {parameter: value}}, what a sweep's report records)."""
+
+    kwargs: dict[str, Any]
+    changed: dict[str, dict[str, Any]]
+
+
+def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> LoopSettings:
+    """The sweep's loops for the graph that config/wrist.yaml and ``params_files`` set up (applied in that
+    order, as ``sma-wrist run --params-file`` applies them).
+
+    Raises ParameterError naming every parameter the files change that the sweep cannot honour, a node's
+    refusal of a value, and pre-loads or TEM estimates that the nodes do not share (the sweep has one of each)."""
+    user, changed = changed_parameters(params_files)
+    from sma_wrist.nodes.common import online_thermal
+    bad = _refusals(changed, plant)
+    if bad:
+        raise ParameterError('sma-wrist sweep cannot honour: ' + '; '.join(bad) + '. Remove them from the params '
+                             'file(s), or run the graph with sma-wrist run --params-file')
+    preload = {n: user[n].values['preload_elongation_mm'] for n in PRELOAD_NODES}
+    if len(set(preload.values())) > 1:
+        raise ParameterError('preload_elongation_mm differs between ' + ', '.join(f'{n} ({v:g} mm)' for n, v in
+                             preload.items()) + ': the graph needs one pre-load (the wire\'s wrist_params.yaml)')
+    comp, tem = user['hysteresis_compensator'].values, user['tem_controller'].values
+    online = online_thermal(tem)
+    if online_thermal(comp) != online:  # the sweep's compensator runs on the TEM loops' estimate
+        raise ParameterError('thermal_adaptation.* differ between hysteresis_compensator and tem_controller: both '
+                             'learn from the same samples and must have the same values')
+    from sma_wrist.sweep.laws import TemLoopSpec
+    jp = user['adaptive_controller'].objects['controller']
+    out: dict[str, Any] = {
+        'base': user['plant_sim'].objects['plant'] if plant == 'sdgpi' else None,
+        'controller_overrides': {f.name: getattr(jp, f.name) for f in dataclasses.fields(jp) if f.name != 'mode'},
+        'compensator_wire': user['hysteresis_compensator'].objects['wire'],
+        'compensator_window_C': (comp['temperature_min_C'], comp['temperature_max_C']),
+        'shift_gain_per_s': comp['shift_gain_per_s'], 'shift_limit_C': comp['shift_limit_C'],
+        'stroke_gain_per_s': comp['stroke_gain_per_s'], 'window_follows_shift': comp['window_follows_shift'],
+        'hold_shift_on_stop': comp['hold_shift_on_stop'],
+        'hold_shift_outside_load_range': comp['hold_shift_outside_load_range'],
+        'compensator_observer': None if comp['temperature_source'] != 'observer' else TemperatureObserverParams(
+            comp['observer.correction_s'], comp['observer.tc_lag_s']),
+        'observer_thermal': user['hysteresis_compensator'].objects['observer_thermal'],
+        'tem_loop': TemLoopSpec(*user['tem_controller'].objects['tem_loop']),
+        'online_thermal': online,
+    }
+    return LoopSettings(out, changed)
+
+
+__all__ = ['HONOURED', 'NO_EFFECT', 'LoopSettings', 'changed_parameters', 'loop_settings']
