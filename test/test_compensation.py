@@ -202,17 +202,17 @@ def test_track_holds_the_shift_where_told_and_is_unchanged_elsewhere() -> None:
 
 
 def test_shifts_hold_while_either_wire_of_a_pair_is_outside_the_load_range() -> None:
-    """MuscleCompensator(hold_outside_load_range=True), the default (docs/control.md "The pair's load range
-    gates the shift"): the measured Flexinol wrist starts with muscle 1 at 14 MPa and muscle 2 slack, below the
-    SD-GPI's 0.2-1.5 kgf; a strain the model cannot explain there ran each wire's shift to its limit. Both
-    wires hold while either is out of range, on the node's (2,) and the sweep's flat (2N,) wires alike; inside
-    the range the adaptation steps as without the gate; without the gate it steps everywhere."""
+    """MuscleCompensator(hold_outside_load_range=True) (docs/control.md "The pair's load range gates the shift";
+    off by default since "The load-range gate, after the slope fix"): the measured Flexinol wrist starts with
+    muscle 1 at 14 MPa and muscle 2 slack, below the SD-GPI's 0.2-1.5 kgf. With the gate both wires hold while
+    either is out of range, on the node's (2,) and the sweep's flat (2N,) wires alike; inside the range the
+    adaptation steps as without the gate; without the gate it steps everywhere."""
     geo = MuscleGeometry()
     taut = geo.stress_Pa(np.array([0.8, 0.8]))
     slack = geo.stress_Pa(np.array([0.07, 0.0]))  # 14 MPa / 0 MPa
     over = geo.stress_Pa(np.array([0.8, 1.7]))
     comp = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0)
-    assert comp.hold_outside_load_range
+    assert not comp.hold_outside_load_range
     assert comp.pair_in_load_range(taut).tolist() == [True, True]
     assert comp.pair_in_load_range(slack).tolist() == [False, False]
     flat = np.concatenate([taut, over, slack, taut])  # four wrists' wires, flat as the sweep's bank has them

@@ -555,7 +555,7 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     assert run(2.0, hold=True, n=100)[1][0] > 3.0
     assert np.all(run(2.0, hold=True, q=-0.35, n=100)[1] == 0.0)
     assert np.all(run(2.0, hold=True, stress=stress * [1.0, 0.0], n=100)[1] == 0.0)
-    # hold_shift_outside_load_range (default on; docs/control.md "The pair's load range gates the shift"): the
+    # hold_shift_outside_load_range (docs/control.md "The pair's load range gates the shift"; off by default): the
     # measured Flexinol wrist's start, muscle 1 at 14 MPa and muscle 2 slack, below the model's 0.2-1.5 kgf
     low = MuscleGeometry().stress_Pa(np.array([0.07, 0.0]))
     assert np.all(run(2.0, stress=low, n=100)[1] == 0.0)

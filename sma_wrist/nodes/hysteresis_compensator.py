@@ -93,10 +93,10 @@ class HysteresisCompensator(WristNode):
         Param('hold_shift_on_stop', False, 'shift_gain_per_s > 0: each wire\'s shift (and stroke) holds while the '
               'measured angle is on a mechanical stop, or the joint stands still with a wire slack: the angle then '
               'says nothing about the wires (docs/control.md "The inverse mode on a measured wire")'),
-        Param('hold_shift_outside_load_range', True, "shift_gain_per_s > 0: a wrist's shifts (and strokes) hold "
+        Param('hold_shift_outside_load_range', False, "shift_gain_per_s > 0: a wrist's shifts (and strokes) hold "
               "while either wire's measured load lies outside the SD-GPI's calibrated range (a slack or "
-              'overloaded pair: the strain at the measured angle is not the model\'s to explain; docs/control.md '
-              '"The pair\'s load range gates the shift")'),
+              'overloaded pair; docs/control.md "The pair\'s load range gates the shift"; off by default: '
+              '"The load-range gate, after the slope fix")'),
         Param('stroke_gain_per_s', 0.5, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
               "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
               'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued", "The shift\'s slope")', '1/s', (0.0, 20.0)),

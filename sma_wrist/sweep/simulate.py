@@ -60,7 +60,7 @@ STROKE_GAIN_PER_S = 0.5  # hysteresis_compensator's stroke_gain_per_s default (c
 SHIFT_LIMIT_C = 15.0  # hysteresis_compensator's shift_limit_C default (config/wrist.yaml)
 HOLD_SHIFT_ON_STOP = False  # hysteresis_compensator's hold_shift_on_stop default (config/wrist.yaml)
 #: hysteresis_compensator's hold_shift_outside_load_range default (config/wrist.yaml)
-HOLD_SHIFT_OUTSIDE_LOAD_RANGE = True
+HOLD_SHIFT_OUTSIDE_LOAD_RANGE = False
 #: the laws that can be given the true muscle temperatures in :func:`simulate` (a diagnosis)
 TRUE_TEMPERATURE_CONSUMERS = ('compensator', 'tem')
 

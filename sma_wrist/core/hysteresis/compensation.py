@@ -63,7 +63,7 @@ class MuscleCompensator:
                  T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical',
                  shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0, window_follows_shift: bool = False,
                  stroke_gain_per_s: float = 0.0, stroke_limits: tuple[float, float] = (0.5, 2.0),
-                 hold_outside_load_range: bool = True) -> None:
+                 hold_outside_load_range: bool = False) -> None:
         self.params = params
         self.T_range_C = T_range_C
         if not (math.isfinite(shift_gain_per_s) and shift_gain_per_s >= 0):
@@ -80,7 +80,9 @@ class MuscleCompensator:
         #: rate [1/s] at which each wire's stroke ratio follows the strain prediction error (0: off)
         self.stroke_gain_per_s, self.stroke_limits = float(stroke_gain_per_s), (k_lo, k_hi)
         #: :meth:`track` holds a wrist's shifts (and strokes) while either of its wires' measured load lies
-        #: outside the SD-GPI's calibrated range (:meth:`pair_in_load_range`)
+        #: outside the SD-GPI's calibrated range (:meth:`pair_in_load_range`); off by default since the shift's
+        #: slope is kept <= 0: it had stood in for that fix, and it kept a measured wire from adapting at all
+        #: (docs/control.md, "The load-range gate, after the slope fix")
         self.hold_outside_load_range = bool(hold_outside_load_range)
         #: per wire: the wire's stroke over the model's, about y_mid_mm
         self.stroke = np.ones(2)
