@@ -14,7 +14,7 @@ import pytest
 
 from sma_wrist.core.control.joint_controller import MODES, JointController, JointControllerParams
 from sma_wrist.core.control.tem import TemLoop
-from sma_wrist.core.errors import ModelInputError, ParameterError
+from sma_wrist.core.errors import ModelInputError, ParameterError, SmaWristError
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.plants.spread import Scenario, sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
@@ -314,6 +314,11 @@ def test_the_sweep_refuses_what_it_cannot_honour_and_names_it(tmp_path: Path) ->
         loop_settings([params({'plant_sim': {'preload_elongation_mm': 2.5}})])
     with pytest.raises(ParameterError, match=r'no such file'):
         loop_settings([tmp_path / 'missing.yaml'])
+    (tmp_path / 'broken.yaml').write_text('tem_controller:\n  ros__parameters:\n    gain_per_s: [1.0\n')
+    with pytest.raises(SmaWristError, match=r'broken.yaml: invalid YAML'):
+        loop_settings([tmp_path / 'broken.yaml'])
+    with pytest.raises(ParameterError, match=r"TemController: invalid parameter.*'gain_per_s'.*expecting type 'DOUBLE'"):
+        loop_settings([params({'tem_controller': {'gain_per_s': 'fast'}})])
     with pytest.raises(ParameterError, match=r'thermal_adaptation'):
         loop_settings([params({'tem_controller': {'thermal_adaptation.apply_after_s': 20.0}})])
     out = subprocess.run([sys.executable, '-m', 'sma_wrist', 'sweep', '--plants', '1', '--duration', '2', '--quiet',

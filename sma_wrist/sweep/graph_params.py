@@ -20,6 +20,7 @@ from sma_wrist.core.control.adaptive import AdaptiveParams
 from sma_wrist.core.control.pid import PIDParams
 from sma_wrist.core.control.tem import TemperatureObserverParams
 from sma_wrist.core.errors import ParameterError, SmaWristError
+from sma_wrist.sweep.laws import TemLoopSpec
 
 #: per node, the parameters the sweep's loops take from the files (see :func:`loop_settings`)
 HONOURED: dict[str, frozenset[str]] = {
@@ -72,7 +73,31 @@ def _activate() -> None:
         raise ParameterError(f'the nodes cannot be built to read the params files: {e}') from None
 
 
-def _node_values(params_files: Sequence[str | Path]) -> dict[str, Any]:
+@dataclasses.dataclass
+class _Built:
+    """What the sweep takes from one node: its parameter values and the core objects it built from them."""
+
+    values: dict[str, Any]
+    objects: dict[str, Any]
+
+    @classmethod
+    def of(cls, node: Any) -> '_Built':
+        name = node.get_name()
+        objects: dict[str, Any] = {}
+        if name == 'plant_sim':
+            objects['plant'] = node.sim_params
+        elif name == 'adaptive_controller':
+            objects['controller'] = node._core_params(node.p)
+        elif name == 'hysteresis_compensator':
+            objects['wire'] = node.comp.params
+            objects['observer_thermal'] = None if node.observer is None else node.observer.thermal
+        elif name == 'tem_controller':
+            loop = node.loop
+            objects['tem_loop'] = TemLoopSpec(loop.thermal, loop.params, loop.drive, loop.hold, loop.max_muscle_C)
+        return cls(dict(node.p), objects)
+
+
+def _build_graph(params_files: Sequence[str | Path]) -> dict[str, _Built]:
     """{node name: the node} of the inverse mode's graph (it has every node), built on the embedded
     runtime from config/wrist.yaml and ``params_files``; a node that refuses its values raises
     ParameterError with the node's reason."""
@@ -100,30 +125,6 @@ def _node_values(params_files: Sequence[str | Path]) -> dict[str, Any]:
     return built
 
 
-@dataclasses.dataclass
-class _Built:
-    """What the sweep takes from one node: its parameter values and the core objects it built from them."""
-
-    values: dict[str, Any]
-    objects: dict[str, Any]
-
-    @classmethod
-    def of(cls, node: Any) -> '_Built':
-        name = node.get_name()
-        objects: dict[str, Any] = {}
-        if name == 'plant_sim':
-            objects['plant'] = node.sim_params
-        elif name == 'adaptive_controller':
-            objects['controller'] = node._core_params(node.p)
-        elif name == 'hysteresis_compensator':
-            objects['wire'] = node.comp.params
-            objects['observer_thermal'] = None if node.observer is None else node.observer.thermal
-        elif name == 'tem_controller':
-            loop = node.loop
-            objects['tem_loop'] = (loop.thermal, loop.params, loop.drive, loop.hold, loop.max_muscle_C)
-        return cls(dict(node.p), objects)
-
-
 def _undeclared(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:
     """Keys of ``params_files`` under a graph node (or ``/**``) that no such node declares: ROS ignores them,
     so a misspelt name would sweep the defaults in silence."""
@@ -142,11 +143,11 @@ def _undeclared(params_files: Sequence[str | Path], declared: Mapping[str, set[s
 def changed_parameters(params_files: Sequence[str | Path]) -> tuple[dict[str, _Built], dict[str, dict[str, Any]]]:
     """The graph's nodes built with ``params_files``, and per node the parameters whose values differ from
     config/wrist.yaml's."""
-    user = _node_values(params_files)
+    user = _build_graph(params_files)
     unknown = _undeclared(params_files, {name: set(b.values) for name, b in user.items()})
     if unknown:
         raise ParameterError('not a parameter of the node graph (misspelt?): ' + '; '.join(unknown))
-    default = _node_values(())
+    default = _build_graph(())
     changed = {name: {k: v for k, v in b.values.items() if default[name].values.get(k) != v}
                for name, b in user.items()}
     return user, {k: v for k, v in changed.items() if v}
@@ -196,7 +197,6 @@ def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> L
     if online_thermal(comp) != online:  # the sweep's compensator runs on the TEM loops' estimate
         raise ParameterError('thermal_adaptation.* differ between hysteresis_compensator and tem_controller: both '
                              'learn from the same samples and must have the same values')
-    from sma_wrist.sweep.laws import TemLoopSpec
     jp = user['adaptive_controller'].objects['controller']
     out: dict[str, Any] = {
         'base': user['plant_sim'].objects['plant'] if plant == 'sdgpi' else None,
@@ -210,7 +210,7 @@ def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> L
         'compensator_observer': None if comp['temperature_source'] != 'observer' else TemperatureObserverParams(
             comp['observer.correction_s'], comp['observer.tc_lag_s']),
         'observer_thermal': user['hysteresis_compensator'].objects['observer_thermal'],
-        'tem_loop': TemLoopSpec(*user['tem_controller'].objects['tem_loop']),
+        'tem_loop': user['tem_controller'].objects['tem_loop'],
         'online_thermal': online,
     }
     return LoopSettings(out, changed)
