@@ -346,6 +346,9 @@ def test_a_sweep_with_a_params_file_runs_it_in_every_worker_and_records_it(tmp_p
     data = json.loads((tmp_path / 'out' / 'sweep.json').read_text())
     assert data['parameters_changed'] == {'tem_controller': {'gain_per_s': 2.0}, 'adaptive_controller': {'pid.kp': 250.0}}
     assert data['config']['params_files'] == [str(f)]
+    # reading the files leaves the process's logging as it was (a --log-level for the nodes would set it for good)
+    from sma_wrist.runtime.rclpy import logging as rlog
+    assert rlog.get_logger_effective_level('') == rlog.LoggingSeverity.INFO and rlog.stream_output
 
 
 def test_an_experiment_refuses_a_params_file_its_family_cannot_honour_before_any_run(tmp_path: Path) -> None:
