@@ -18,7 +18,6 @@ from typing import Any, Mapping, Sequence
 
 from sma_wrist.core.control.adaptive import AdaptiveParams
 from sma_wrist.core.control.pid import PIDParams
-from sma_wrist.core.control.tem import TemperatureObserverParams
 from sma_wrist.core.errors import ParameterError, SmaWristError
 from sma_wrist.sweep.laws import TemLoopSpec
 
@@ -87,13 +86,13 @@ class _Built:
         if name == 'plant_sim':
             objects['plant'] = node.sim_params
         elif name == 'adaptive_controller':
-            objects['controller'] = node._core_params(node.p)
+            objects['controller'] = node.law.params
         elif name == 'hysteresis_compensator':
-            objects['wire'] = node.comp.params
-            objects['observer_thermal'] = None if node.observer is None else node.observer.thermal
-        elif name == 'tem_controller':
+            objects['compensator'], objects['observer'] = node.comp, node.observer
+        elif name == 'tem_controller':  # as built, before any estimate scales it (base_*)
             loop = node.loop
-            objects['tem_loop'] = TemLoopSpec(loop.thermal, loop.params, loop.drive, loop.hold, loop.max_muscle_C)
+            objects['tem_loop'] = TemLoopSpec(loop.base_thermal, loop.params, loop.drive, loop.base_hold,
+                                              loop.max_muscle_C)
         return cls(dict(node.p), objects)
 
 
@@ -204,18 +203,17 @@ def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> L
         raise ParameterError('thermal_adaptation.* differ between hysteresis_compensator and tem_controller: both '
                              'learn from the same samples and must have the same values')
     jp = user['adaptive_controller'].objects['controller']
+    mc, obs = user['hysteresis_compensator'].objects['compensator'], user['hysteresis_compensator'].objects['observer']
     out: dict[str, Any] = {
         'base': user['plant_sim'].objects['plant'] if plant == 'sdgpi' else None,
         'controller_overrides': {f.name: getattr(jp, f.name) for f in dataclasses.fields(jp) if f.name != 'mode'},
-        'compensator_wire': user['hysteresis_compensator'].objects['wire'],
-        'compensator_window_C': (comp['temperature_min_C'], comp['temperature_max_C']),
-        'shift_gain_per_s': comp['shift_gain_per_s'], 'shift_limit_C': comp['shift_limit_C'],
-        'stroke_gain_per_s': comp['stroke_gain_per_s'], 'window_follows_shift': comp['window_follows_shift'],
-        'hold_shift_on_stop': comp['hold_shift_on_stop'],
-        'hold_shift_outside_load_range': comp['hold_shift_outside_load_range'],
-        'compensator_observer': None if comp['temperature_source'] != 'observer' else TemperatureObserverParams(
-            comp['observer.correction_s'], comp['observer.tc_lag_s']),
-        'observer_thermal': user['hysteresis_compensator'].objects['observer_thermal'],
+        'compensator_wire': mc.params, 'compensator_window_C': mc.T_range_C,
+        'shift_gain_per_s': mc.shift_gain_per_s, 'shift_limit_C': mc.shift_limit_C,
+        'stroke_gain_per_s': mc.stroke_gain_per_s, 'window_follows_shift': mc.window_follows_shift,
+        'hold_shift_on_stop': comp['hold_shift_on_stop'],  # the node's gate, not the compensator's
+        'hold_shift_outside_load_range': mc.hold_outside_load_range,
+        'compensator_observer': None if obs is None else obs.params,
+        'observer_thermal': None if obs is None else obs.thermal,
         'tem_loop': user['tem_controller'].objects['tem_loop'],
         'online_thermal': online,
     }

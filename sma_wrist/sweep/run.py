@@ -191,10 +191,11 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     if not (isinstance(workers, int) and workers >= 0):
         raise ParameterError(f'workers = {workers!r} must be an integer >= 0 (0: one per available core)')
     workers = workers or available_cores()
-    settings = None
+    settings, kwargs = None, {}  # kwargs: simulate's, for the graph's parameters
     if cfg.params_files:  # before any loop runs: a parameter the sweep cannot honour stops it here
         from sma_wrist.sweep.graph_params import loop_settings
         settings = loop_settings(cfg.params_files, cfg.plant)
+        kwargs = settings.kwargs
     cases = make_cases(cfg)
     chunks = split_chunks(cases, cfg.chunk, 1 if scheduler else workers)
     out = Path(out_dir) if out_dir is not None else None
@@ -214,7 +215,6 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
             jsonl.flush()
 
     try:
-        kwargs = None if settings is None else settings.kwargs
         if scheduler:
             _run_dask(scheduler, chunks, cfg, keep, progress, kwargs)
         elif workers > 1 and len(chunks) > 1:
@@ -224,7 +224,7 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
             for chunk in chunks:
                 tick = None if progress is None else (
                     lambda t, d=done, n=len(chunk): progress(d + n * min(t / cfg.duration_s, 1.0)))
-                keep(simulate(chunk, cfg.duration_s, cfg.plant, on_tick=tick, **(kwargs or {}))[0])
+                keep(simulate(chunk, cfg.duration_s, cfg.plant, on_tick=tick, **kwargs)[0])
                 done += len(chunk)
                 if progress is not None:
                     progress(done)
@@ -237,7 +237,7 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     if cfg.reach and not interrupted:
         try:
             add_reach_floors(rows, workers if not scheduler else 1, None if progress is None else _reach_progress,
-                             None if settings is None else settings.kwargs)
+                             kwargs)
         except KeyboardInterrupt:  # the loops' rows stay, with the floors computed so far
             interrupted = True
     res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0,
