@@ -393,7 +393,11 @@ def test_the_inverse_adapts_on_a_wire_identified_from_measured_loops(tmp_path) -
     loops (test/data/flexinol, maestrolab, MIT; TEMs rated 120 degC, identify's wrist_params.yaml) runs slack or
     below its 50-200 MPa calibration most of the time, so with the gate on its shift and stroke never adapted:
     a wire 5 degC hotter than that model, 0.3 kg, 126 s, gave 51.5 % (pid 9.7 %). With the gate off (the
-    default) the shift adapts on it: 5.6 %, and 5.2 % on the identified wire itself (8.0 % gated)."""
+    default) the shift adapts on it: 5.6 %, and 5.2 % on the identified wire itself (8.0 % gated).
+
+    On this wire the inverse's TEM commands chatter (3.2 / 3.9 sign changes a second without tem_controller's
+    chatter guard, session 10); with it (the default) 1.5 / 1.7, at 7.5 / 6.5 % (docs/control.md "A chatter
+    guard"). Gated, with the guard: 54.9 %."""
     from pathlib import Path
 
     from sma_wrist.core.thermal.params_file import write_thermal_file
@@ -409,7 +413,14 @@ def test_the_inverse_adapts_on_a_wire_identified_from_measured_loops(tmp_path) -
     assert kw['hold_shift_outside_load_range'] is False  # config/wrist.yaml's default
     cases = [Case(0, 'inverse_adaptive', Scenario(payload_kg=0.3, noise_seed=5)),
              Case(1, 'inverse_adaptive', Scenario(payload_kg=0.3, transition_shift_C=5.0, noise_seed=5))]
-    own, hotter = (r['max_error_pct'] for r in simulate(cases, 126.0, **kw)[0])
-    assert own < 7.0 and hotter < 8.0, (own, hotter)  # measured 5.23 / 5.62 %
+    tem = kw['tem_loop']
+    unguarded = {**kw, 'tem_loop': replace(tem, params=replace(tem.params, chatter_limit_per_s=0.0))}
+    rows = simulate(cases, 126.0, **kw)[0] + simulate(cases, 126.0, **unguarded)[0]
+    own, hotter, own_free, hotter_free = (r['max_error_pct'] for r in rows)
+    flips = [r['sign_changes_per_s'] for r in rows]
+    assert own_free < 7.0 and hotter_free < 8.0, (own_free, hotter_free)  # measured 5.23 / 5.62 %
+    assert min(flips[2:]) > 2.5, flips  # measured 3.23 / 3.87 a second: the relay of docs/control.md
+    assert max(flips[:2]) < REVERSALS_LIMIT_PER_S, flips  # measured 1.54 / 1.67 with the guard
+    assert own < 10.0 and hotter < 9.0, (own, hotter)  # measured 7.51 / 6.45 %: the guard's price
     gated = simulate(cases[1:], 126.0, **{**kw, 'hold_shift_outside_load_range': True})[0][0]['max_error_pct']
-    assert gated > 30.0, gated  # measured 51.5 %: no adaptation at all on this wire
+    assert gated > 30.0, gated  # measured 54.9 % (51.5 % without the guard): no adaptation at all on this wire

@@ -253,7 +253,9 @@ def _identified_wrist_params(tmp_path: Path) -> Path:
     write_thermal_file(tems, ThermalParams().scaled(gain=1.1, losses=0.85))
     nodes, _ = wrist_params(wire, shifted_wire(default_sdgpi(), 4.0), tems, preload_mm=2.1)
     tuned = {'adaptive_controller': {'reversal_lead_s': 2.0, 'pid.kp': 300.0, 'adaptive.c1': 4.0},
-             'tem_controller': {'gain_per_s': 1.5, 'target_filter_s': 0.3},
+             # a chatter guard that engages within the test's 6 s (the default's 2.5 /s over 20 s would not)
+             'tem_controller': {'gain_per_s': 1.5, 'target_filter_s': 0.3, 'chatter_guard.limit_per_s': 0.4,
+                                'chatter_guard.window_s': 1.0, 'chatter_guard.rate_filter_s': 0.3},
              'hysteresis_compensator': {'shift_gain_per_s': 1.5, 'observer.correction_s': 0.25},
              'plant_sim': {'real_time_factor': 2.0}}
     for node, values in tuned.items():
@@ -286,6 +288,12 @@ def test_a_params_file_reaches_the_sweep_as_it_reaches_the_graph(mode: str, tmp_
     np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
     _, plain = simulate([Case(0, mode, sc)], 6.0, record=True)
     assert np.max(np.abs(plain.command_V[kc, 0] - run.command_V)) > 1e-2  # the file reached the loop
+    if mode == 'pid':  # no sign change in its first 6 s: nothing for the guard to count
+        return
+    unguarded = dict(settings.kwargs, tem_loop=dataclasses.replace(settings.kwargs["tem_loop"], params=dataclasses.replace(
+        settings.kwargs['tem_loop'].params, chatter_limit_per_s=0.0)))
+    _, free = simulate([Case(0, mode, sc)], 6.0, record=True, **unguarded)
+    assert np.max(np.abs(free.command_V[kc, 0] - run.command_V)) > 1e-2  # and its guard engaged in both
 
 
 def test_the_sweep_refuses_what_it_cannot_honour_and_names_it(tmp_path: Path) -> None:

@@ -340,3 +340,53 @@ def test_tem_loop_compiled_sample_matches_the_numpy_functions(seed, predictive):
             T_d = np.array([max_muscle_C + 10.0, T_d[1]])
     assert seen_hot and seen_clip
     assert loops[0].sample(t, x[0, :, 0], T_d) is None  # a repeated stamp leaves the command
+
+
+def test_chatter_guard_counts_sign_changes_outside_the_band_and_switches_with_hysteresis():
+    """ChatterGuard: a 1.5 Hz square wave of +-10 V (3 sign changes a second) engages a 2.5 /s guard after
+    about one window; the same wave inside the +-1 V band, or at 1 change a second, never does; back at
+    0.5 changes a second it releases once the rate is below half the limit."""
+    dt = 0.01
+
+    def run(guard: tc.ChatterGuard, t0: float, seconds: float, period_s: float, amplitude: float) -> list[float]:
+        switched = []
+        for k in range(int(round(seconds / dt))):
+            t = t0 + k * dt
+            u = amplitude * (1.0 if (t // (period_s / 2)) % 2 == 0 else -1.0)
+            if guard.update(t, np.array([[u, 0.3]]))[0]:
+                switched.append(t)
+        return switched
+
+    g = tc.ChatterGuard(1, 2.5, 20.0)
+    on = run(g, 0.0, 60.0, 1 / 1.5, 10.0)
+    assert len(on) == 1 and 15.0 < on[0] < 40.0 and g.engaged[0], on
+    assert 2.8 < g.rate[0, 0] < 3.1 and g.rate[0, 1] == 0.0  # the second TEM stays inside the band
+    off = run(g, 60.0, 120.0, 4.0, 10.0)  # 0.5 changes a second
+    assert len(off) == 1 and not g.engaged[0], off
+    for period, amp in ((1 / 1.5, 0.9), (2.0, 10.0)):  # inside the band; 1 change a second
+        quiet = tc.ChatterGuard(1, 2.5, 20.0)
+        assert run(quiet, 0.0, 120.0, period, amp) == [] and not quiet.engaged[0]
+    with pytest.raises(ParameterError, match='chatter_window_s'):
+        tc.TemControlParams(chatter_limit_per_s=2.0, chatter_window_s=0.0)
+
+
+def test_engaged_chatter_guard_switches_the_rate_filter_in_both_paths():
+    """TemLoop with its guard: targets that jump every 0.2 s make the commands swing; once engaged the law's
+    rate filter is chatter_rate_filter_s in the compiled and the numpy path alike (the two stay equal)."""
+    from sma_wrist.core.control.tem import DriveLimits, TemLoop
+    params = tc.TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.0, chatter_limit_per_s=1.0,
+                                 chatter_window_s=2.0, chatter_rate_filter_s=0.3)
+    loops = [TemLoop(P.with_limits(-24.0, 24.0), params, DriveLimits(), P, 85.0, compiled=c) for c in (False, True)]
+    x = th.rest_state(P, 1) + 20.0
+    engaged_at = None
+    for k in range(600):
+        t = 0.01 * (k + 1)
+        T_d = np.array([60.0, 40.0]) if (k // 20) % 2 == 0 else np.array([40.0, 60.0])
+        ref, got = (loop.sample(t, x[0, :, 0], T_d) for loop in loops)
+        np.testing.assert_allclose(got.command_V, ref.command_V, rtol=1e-9, atol=1e-9)
+        assert loops[0].chattering == loops[1].chattering
+        if engaged_at is None and loops[1].chattering:
+            engaged_at = t
+        x = th.step(P.with_limits(-24.0, 24.0), x, ref.command_V[None], 0.01)
+    assert engaged_at is not None and engaged_at < 3.0, engaged_at
+    assert loops[1]._cfg[1] == 0.3 and loops[0].law.params.rate_filter_s == 0.3

@@ -26,7 +26,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from std_msgs.msg import Float64
 
 from sma_wrist.core.control import tem_kernel
-from sma_wrist.core.control.tem import DriveLimits, TemControlParams, TemLoop
+from sma_wrist.core.control.tem import (CHATTER_LIMIT_PER_S, CHATTER_RATE_FILTER_S, CHATTER_WINDOW_S, DriveLimits,
+                                       TemControlParams, TemLoop)
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal.params_file import load_thermal_file
@@ -44,6 +45,14 @@ class TemController(WristNode):
         Param('rate_filter_s', 0.05, 'time constant of the filter on the estimated dT_d/dt', 's', (0.0, 10.0)),
         Param('target_filter_s', 0.5, 'time constant of the prefilter on the desired temperatures (no TEM '
               'chattering on noise and target jumps; docs/control.md "Chattering")', 's', (0.0, 10.0)),
+        Param('chatter_guard.limit_per_s', CHATTER_LIMIT_PER_S,
+              'a TEM command changing sign more often than this (averaged over chatter_guard.window_s) switches '
+              'the rate filter to chatter_guard.rate_filter_s until it is below half of it; 0: off '
+              '(docs/control.md "A chatter guard")', '1/s', (0.0, 50.0)),
+        Param('chatter_guard.window_s', CHATTER_WINDOW_S, 'chatter_guard: averaging time of the sign-change rate', 's',
+              (1.0, 600.0)),
+        Param('chatter_guard.rate_filter_s', CHATTER_RATE_FILTER_S,
+              'chatter_guard: the rate filter while engaged', 's', (0.0, 10.0)),
         Param('u_min_V', DRIVE.boost_min_V, 'most negative (cooling) drive command: driver rating', 'V', (-29.0, -1.0)),
         Param('u_max_V', DRIVE.boost_max_V, 'most positive (heating) drive command: driver rating', 'V', (1.0, 34.0)),
         Param('predictive_protection', DRIVE.predictive,
@@ -74,6 +83,7 @@ class TemController(WristNode):
         self.t_meas = [0.0, 0.0]  # stamp [s] of the latest measurement per muscle
         self.new_meas = [False, False]
         self._status: tuple[bool, bool, bool] | None = None  # (hot, saturated, fresh) last diagnosed
+        self._chattering = False  # the chatter guard's state last reported
         self.meas = Freshness(self, ('muscle_1', 'muscle_2'))
         self.targets = Freshness(self, ('target_1', 'target_2'))
         self.pub_cmd = [self.publisher(f'/wrist/tem_{i}/command') for i in (1, 2)]
@@ -103,11 +113,15 @@ class TemController(WristNode):
         drive = DriveLimits(p['u_min_V'], p['u_max_V'], p['protect_above_C'], p['predictive_protection'],
                             p['face_min_C'], p['face_max_C'], p['protection_horizon_s'])
         thermal = replace(self.hold, u_min_V=p['u_min_V'], u_max_V=p['u_max_V'])  # the law's saturation
-        loop = TemLoop(thermal, TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s'],
-                                                    target_filter_s=p['target_filter_s']),
-                       drive, self.hold, p['max_muscle_temperature_C'], online=online_thermal(p))
+        law = TemControlParams(gain_per_s=p['gain_per_s'], rate_filter_s=p['rate_filter_s'],
+                               target_filter_s=p['target_filter_s'],
+                               chatter_limit_per_s=p['chatter_guard.limit_per_s'],
+                               chatter_window_s=p['chatter_guard.window_s'],
+                               chatter_rate_filter_s=p['chatter_guard.rate_filter_s'])
+        loop = TemLoop(thermal, law, drive, self.hold, p['max_muscle_temperature_C'], online=online_thermal(p))
         if old is not None:  # new gains and limits act on the same observed TEMs and command in force
             loop.observer, loop.command_V, loop.t_last = old.observer, old.command_V, old.t_last
+            loop.take_guard_state(old)  # ... with the sign changes counted so far
             loop.estimator = old.estimator  # ... and keep what has been learnt of them
             if old.theta_used is not None and loop.estimator is not None:
                 loop.use_estimate(old.theta_used)
@@ -151,7 +165,20 @@ class TemController(WristNode):
             return  # a repeated or out-of-order sample: the command in force stays
         if fresh:
             self._report(bool(res.hot.any()), bool(res.saturated.any()))
+        if self.loop.chattering != self._chattering:
+            self._report_chatter()
         self._send(res.command_V)
+
+    def _report_chatter(self) -> None:
+        on = self._chattering = self.loop.chattering
+        g = self.loop.guard
+        rate = 0.0 if g is None else float(g.rate.max())
+        msg = (f'TEM commands change sign {rate:.2f} /s (> {self.p["chatter_guard.limit_per_s"]:g}): rate filter '
+               f'{self.p["chatter_guard.rate_filter_s"]:g} s' if on else
+               f'TEM command sign changes {rate:.2f} /s: rate filter {self.p["rate_filter_s"]:g} s')
+        self.diagnose('chatter', DiagnosticStatus.WARN if on else DiagnosticStatus.OK, msg,
+                      {'sign_changes_per_s': f'{rate:.2f}'})
+        (self.get_logger().warning if on else self.get_logger().info)(f'chatter guard: {msg}')
 
     def _report(self, hot: bool, sat: bool) -> None:
         # diagnose publishes on change only; skip building its arguments while nothing changed

@@ -45,7 +45,8 @@ HONOURED: dict[str, frozenset[str]] = {
                                  'predictive_protection', 'face_min_C', 'face_max_C', 'protection_horizon_s',
                                  'protect_above_C', 'max_muscle_temperature_C', 'thermal_file',
                                  'thermal_adaptation.enabled', 'thermal_adaptation.apply_after_s',
-                                 'thermal_adaptation.tc_lag_s'}),
+                                 'thermal_adaptation.tc_lag_s', 'chatter_guard.limit_per_s', 'chatter_guard.window_s',
+                                 'chatter_guard.rate_filter_s'}),
 }
 #: accepted, and they change nothing in the sweep: wall-clock pacing, and watchdogs on late or lost
 #: messages, which a lockstep simulation never has

@@ -19,7 +19,9 @@ from sma_wrist.core.control.adaptive import AdaptiveController
 from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, output_filter_step,
                                                      reference_ahead, time_to_meet)
 from sma_wrist.core.control.pid import PID
-from sma_wrist.core.control.tem import RANGE_REFRESH_S, DriveLimits, TemControlParams, TemLoop, target_prefilter
+from sma_wrist.core.control.tem import (CHATTER_LIMIT_PER_S, CHATTER_RATE_FILTER_S, CHATTER_WINDOW_S,
+                                       RANGE_REFRESH_S, ChatterGuard, DriveLimits, TemControlParams, TemLoop,
+                                       target_prefilter)
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
@@ -142,13 +144,13 @@ class JointControllerBank:
 @_jit
 def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
                   cfg, candidates, status):  # pragma: no cover - compiled
-    """tem_kernel.control_sample for each wrist j (row j of every state array and of th_coef), its work arrays
-    allocated once."""
+    """tem_kernel.control_sample for each wrist j (row j of every state array, of th_coef and of cfg: the chatter
+    guard sets a wrist's rate filter), its work arrays allocated once."""
     scratch = tem_kernel.sample_scratch()
     for j in range(x.shape[0]):
         status[j] = tem_kernel.control_sample_into(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j],
                                                    T_meas[j], T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef[j],
-                                                   cfg, candidates, scratch)
+                                                   cfg[j], candidates, scratch)
 
 
 @dataclass(frozen=True)
@@ -174,6 +176,8 @@ class TemLoopBank:
         self.n, self.thermal, self.drive, self.params, self.hold = n, thermal, drive, params, hold
         self.max_muscle_C = float(max_muscle_C)  # a bank on another heat balance (plants.oracle) keeps it
         self._coef, self._cfg, self._candidates = one._coef, one._cfg, one._candidates
+        self.cfg_rows = np.tile(self._cfg, (n, 1))  # per wrist: the chatter guard switches its rate filter
+        self.guard = None if one.guard is None else ChatterGuard(n, params.chatter_limit_per_s, params.chatter_window_s)
         # per wrist: the heat balance each wrist's observer and law integrate (the online estimate's, if on)
         self.coef_rows = np.tile(self._coef, (n, 1))
         self.estimator = None if online is None else ThermalScaleEstimator(thermal, n, online)
@@ -212,7 +216,7 @@ class TemLoopBank:
             self.observer[:, :, 0] = T_meas
             self.command_V = np.zeros((self.n, 2))
             self.T_d_filtered = None
-            self._learn(t, T_meas)
+            self._after(t, T_meas)
             return self.command_V
         self.T_d_filtered, self.T_d_slope = target_prefilter(self.params.target_filter_s, self.T_d_filtered,
                                                              self.T_d_slope, T_d, dt)
@@ -222,14 +226,24 @@ class TemLoopBank:
         dt_law = t - self.t_law if has_prev else 0.0
         _control_many(self.observer, self.rate, self.T_d_prev, self.rng, self.command_V, self.flags,
                       np.ascontiguousarray(T_meas, float), np.ascontiguousarray(T_d, float), dt_obs, dt_law, has_prev,
-                      refresh, self.coef_rows, self._cfg, self._candidates, self.status)
+                      refresh, self.coef_rows, self.cfg_rows, self._candidates, self.status)
         if self.status.any():
             raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
         self.t_law = t
         if refresh:
             self.range_t = t
-        self._learn(t, T_meas)
+        self._after(t, T_meas)
         return self.command_V
+
+    def _after(self, t: float, T_meas: FloatArray) -> None:
+        """TemLoop._after for every wrist: the chatter guard, then the online estimate."""
+        if self.guard is not None:
+            changed = self.guard.update(t, self.command_V)
+            if changed.any():
+                p = self.params
+                self.cfg_rows[changed, 1] = np.where(self.guard.engaged[changed], p.chatter_rate_filter_s,
+                                                     p.rate_filter_s)
+        self._learn(t, T_meas)
 
     def _learn(self, t: float, T_meas: FloatArray) -> None:
         """The online heat-balance estimate takes the sample and the commands now in force."""
@@ -243,7 +257,9 @@ def default_tem_spec() -> TemLoopSpec:
     hold = th.ThermalParams()
     drive = DriveLimits()
     return TemLoopSpec(replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
-                       TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5), drive, hold, 85.0)
+                       TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5,
+                                        chatter_limit_per_s=CHATTER_LIMIT_PER_S, chatter_window_s=CHATTER_WINDOW_S,
+                                        chatter_rate_filter_s=CHATTER_RATE_FILTER_S), drive, hold, 85.0)
 
 
 __all__ = ['JointControllerBank', 'TemLoopBank', 'TemLoopSpec', 'default_tem_spec']

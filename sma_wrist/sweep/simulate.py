@@ -37,7 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
-from sma_wrist.core.control.tem import MuscleTemperatureObserver, TemControlParams, TemperatureObserverParams
+from sma_wrist.core.control.tem import (CHATTER_DEADBAND_V, MuscleTemperatureObserver, TemControlParams,
+                                       TemperatureObserverParams)
 from sma_wrist.core.control.trajectory import make_trajectory
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
@@ -91,9 +92,9 @@ class Trace:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-#: commands within +-this [V] carry the previous sign in :func:`sign_changes_per_s`: a law settling
-#: about 0 V flips sign without moving heat; chattering is the driver swinging between heating and cooling
-CHATTER_DEADBAND_V = 1.0
+#: commands within +-CHATTER_DEADBAND_V [V] carry the previous sign in :func:`sign_changes_per_s` (and in
+#: tem_controller's chatter guard, core.control.tem.ChatterGuard): a law settling about 0 V flips sign without
+#: moving heat; chattering is the driver swinging between heating and cooling
 
 
 def sign_changes_per_s(u: FloatArray, dt: float, deadband: float = CHATTER_DEADBAND_V) -> FloatArray:

@@ -69,12 +69,19 @@ class TemControlParams:
         1 / gain_per_s; target content faster than that (sensor noise amplified by the joint
         law, the inverse's jumps between branches) cannot move the muscle, only reverse the
         TEM (docs/control.md, "Chattering").
+    chatter_limit_per_s: the chatter guard (only :class:`TemLoop` and the sweep's bank; 0 = off,
+        :class:`ChatterGuard`): a wrist whose TEM commands change sign more often than this
+        [1/s], averaged over ``chatter_window_s`` [s], runs its rate filter at
+        ``chatter_rate_filter_s`` [s] until the rate falls below half the limit.
     """
 
     gain_per_s: float = 1.0
     weights: tuple[float, float] = TWO_LAYER_WEIGHTS
     rate_filter_s: float = 0.0
     target_filter_s: float = 0.0
+    chatter_limit_per_s: float = 0.0
+    chatter_window_s: float = 20.0
+    chatter_rate_filter_s: float = 0.2
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.gain_per_s) and self.gain_per_s > 0):
@@ -85,6 +92,57 @@ class TemControlParams:
             raise ParameterError(f'rate_filter_s = {self.rate_filter_s!r} must be finite and >= 0')
         if not (np.isfinite(self.target_filter_s) and self.target_filter_s >= 0):
             raise ParameterError(f'target_filter_s = {self.target_filter_s!r} must be finite and >= 0')
+        if not (np.isfinite(self.chatter_limit_per_s) and self.chatter_limit_per_s >= 0):
+            raise ParameterError(f'chatter_limit_per_s = {self.chatter_limit_per_s!r} must be finite and >= 0')
+        if not (np.isfinite(self.chatter_window_s) and self.chatter_window_s > 0):
+            raise ParameterError(f'chatter_window_s = {self.chatter_window_s!r} must be finite and > 0')
+        if not (np.isfinite(self.chatter_rate_filter_s) and self.chatter_rate_filter_s >= 0):
+            raise ParameterError(f'chatter_rate_filter_s = {self.chatter_rate_filter_s!r} must be finite and >= 0')
+
+
+#: commands inside +-this band keep the last sign: the chattering metric's band [V] (docs/control.md
+#: "Chattering metric and limit"; sweep.simulate.sign_changes_per_s counts with it)
+CHATTER_DEADBAND_V = 1.0
+#: tem_controller's chatter guard (``chatter_guard.*``): engaged above 2.5 sign changes a second over ~20 s,
+#: a quarter above the 2 /s limit the guard serves (the built-in wire's nominal loops run at 1.7 /s and
+#: pass 2 /s for a while on their first cycles; 2 /s over 10 s switched them in, at 5.1-5.7 % error instead
+#: of 2.7-3.8 %); its rate filter 0.2 s (docs/control.md "A chatter guard")
+CHATTER_LIMIT_PER_S, CHATTER_WINDOW_S, CHATTER_RATE_FILTER_S = 2.5, 20.0, 0.2
+
+
+class ChatterGuard:
+    """Sign changes of n wrists' TEM commands per second, and which wrists chatter (TemControlParams.chatter_*).
+
+    Per TEM, a sign change (commands inside +-CHATTER_DEADBAND_V keep the last sign) adds 1 / window to an
+    exponentially forgetting rate r [1/s] (time constant ``window_s``): r is the sign changes per second
+    of the last ~window. A wrist is ``engaged`` from the sample one of its TEMs' r exceeds ``limit_per_s``
+    until both are below half of it. Why a rate filter then: on a steep measured wire the inverse's answer
+    relays across the loop's gap, and the law's feed-forward of dT_d/dt turns each relay step into a
+    full-scale swing (docs/control.md "A chatter guard"); a 0.2 s filter on that estimate halves the
+    swings there, but costs the built-in wire's nominal tracking, so it is only switched in where the
+    commands chatter.
+    """
+
+    def __init__(self, n: int, limit_per_s: float, window_s: float) -> None:
+        self.limit_per_s, self.window_s = float(limit_per_s), float(window_s)
+        self.sign = np.zeros((n, 2))  # last sign outside the band, 0 before the first
+        self.rate = np.zeros((n, 2))  # [1/s]
+        self.engaged = np.zeros(n, bool)
+        self.t_last: float | None = None
+
+    def update(self, t: float, command_V: FloatArray) -> BoolArray:
+        """Take the commands (n, 2) [V] in force from t [s] on; returns the wrists whose state changed."""
+        s = np.where(np.abs(command_V) > CHATTER_DEADBAND_V, np.sign(command_V), 0.0)
+        flip = (s != 0.0) & (self.sign != 0.0) & (s != self.sign)
+        self.sign = np.where(s != 0.0, s, self.sign)
+        dt = 0.0 if self.t_last is None else t - self.t_last
+        self.t_last = t
+        self.rate = self.rate * np.exp(-dt / self.window_s) + flip / self.window_s
+        worst = self.rate.max(axis=1)
+        now = np.where(self.engaged, worst >= 0.5 * self.limit_per_s, worst > self.limit_per_s)
+        changed = now != self.engaged
+        self.engaged = now
+        return changed
 
 
 @dataclass
@@ -608,6 +666,10 @@ class TemLoop:
         self.estimator = None if online is None else ThermalScaleEstimator(thermal, 1, online)
         self.theta_used: FloatArray | None = None  # the estimate's scales the loop runs on (None: the model's)
         self._candidates = drive.boost_min_V + _CANDIDATES * (drive.boost_max_V - drive.boost_min_V)
+        #: the chatter guard (TemControlParams.chatter_*; None: off); engaged, the law's rate filter is
+        #: params.chatter_rate_filter_s
+        self.guard = ChatterGuard(1, params.chatter_limit_per_s, params.chatter_window_s) \
+            if params.chatter_limit_per_s > 0 else None
         self._cfg = np.array([params.gain_per_s, params.rate_filter_s, *params.weights, thermal.u_min_V,
                               thermal.u_max_V, float(drive.predictive), drive.horizon_s,
                               max(1, int(np.ceil(drive.horizon_s / thermal.dt_max_s))), drive.face_min_C,
@@ -638,13 +700,13 @@ class TemLoop:
             self.T_d_filtered = None
             self.command_V = np.zeros(2)  # off from this sample on (not off(): this sample records it)
             out = TemSample(self.command_V, np.zeros(2, bool), np.zeros(2, bool))
-            self._learn(t, T_meas)
+            self._after(t, T_meas)
             return out
         T_d = self._prefilter(T_d, dt)
         refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
         if self.compiled:
             out = self._sample_compiled(t, T_meas, T_d, dt_obs, refresh)
-            self._learn(t, T_meas)
+            self._after(t, T_meas)
             return out
         self._observe(T_meas, dt_obs)
         res = self.law.update(t, self.observer, np.stack([T_d, T_d], axis=-1)[None])
@@ -655,8 +717,33 @@ class TemLoop:
         hot = np.asarray(T_meas, dtype=float) > self.max_muscle_C
         self.command_V = np.where(hot, np.minimum(u_prot[0], 0.0), u_prot[0])
         out = TemSample(self.command_V, res.saturated[0] | limited[0], hot)
-        self._learn(t, T_meas)
+        self._after(t, T_meas)
         return out
+
+    def _after(self, t: float, T_meas: ArrayLike) -> None:
+        """After a sample: the chatter guard takes the command in force, the online estimate the sample."""
+        if self.guard is not None and self.guard.update(t, self.command_V[None])[0]:
+            p = self.params
+            rf = p.chatter_rate_filter_s if self.guard.engaged[0] else p.rate_filter_s
+            self._cfg[1] = rf  # the compiled law's, and the numpy law's:
+            self.law.params = replace(self.law.params, rate_filter_s=rf)
+        self._learn(t, T_meas)
+
+    def take_guard_state(self, old: 'TemLoop') -> None:
+        """Continue ``old``'s chatter guard's count (a loop rebuilt for new parameters), under this loop's limits."""
+        if self.guard is None or old.guard is None:
+            return
+        for name in ('sign', 'rate', 't_last'):
+            setattr(self.guard, name, getattr(old.guard, name))
+        self.guard.update(old.guard.t_last if old.guard.t_last is not None else 0.0, self.command_V[None])
+        if self.guard.engaged[0]:
+            self._cfg[1] = self.params.chatter_rate_filter_s
+            self.law.params = replace(self.law.params, rate_filter_s=self.params.chatter_rate_filter_s)
+
+    @property
+    def chattering(self) -> bool:
+        """Whether the chatter guard is engaged (its rate filter in use)."""
+        return self.guard is not None and bool(self.guard.engaged[0])
 
     def _learn(self, t: float, T_meas: ArrayLike) -> None:
         """The online estimate takes the sample and the command now in force; once it is ready and has
