@@ -177,8 +177,7 @@ class TemController(WristNode):
                f'{self.p["chatter_guard.rate_filter_s"]:g} s' if on else
                f'TEM command sign changes {rate:.2f} /s: rate filter {self.p["rate_filter_s"]:g} s')
         self.diagnose('chatter', DiagnosticStatus.WARN if on else DiagnosticStatus.OK, msg,
-                      {'sign_changes_per_s': f'{rate:.2f}'})
-        (self.get_logger().warning if on else self.get_logger().info)(f'chatter guard: {msg}')
+                      {'sign_changes_per_s': f'{rate:.2f}'})  # diagnose logs it too
 
     def _report(self, hot: bool, sat: bool) -> None:
         # diagnose publishes on change only; skip building its arguments while nothing changed
