@@ -591,3 +591,29 @@ def test_a_runtime_parameter_change_keeps_what_the_tems_online_estimate_has_lear
         assert comp.estimator is est
         np.testing.assert_array_equal(comp.observer.coef_rows, rows)
     assert est is not None and not np.array_equal(coef, scaled_constants(tem.loop.base_thermal, np.array([[1.0, 1.0, 0.0]]))[0])
+
+
+def test_tem_controller_reports_its_chatter_guard_on_diagnostics(probe_factory):
+    """Targets that swing between 20 and 60 degC every 0.2 s reverse the TEMs 5 times a second: with the guard at
+    1 /s over 2 s the node switches its rate filter and says so (WARN 'chatter'); with the guard off it never does."""
+    from rclpy.parameter import Parameter
+
+    from sma_wrist.nodes.tem_controller import TemController
+    for limit in (1.0, 0.0):
+        with Runtime() as rt:
+            probe = probe_factory(rt, ('/wrist/tem_1/command',))
+            node = rt.add(TemController)
+            assert all(r.successful for r in node.set_parameters([
+                Parameter('chatter_guard.limit_per_s', value=limit), Parameter('chatter_guard.window_s', value=2.0)]))
+            for i in (1, 2):
+                probe.every(0.01, f'/wrist/muscle_{i}/temperature', temperature=40.0)
+            for k in range(400):
+                for i in (1, 2):
+                    probe.publish(f'/wrist/muscle_{i}/temperature_desired', temperature=60.0 if (k // 20) % 2 else 20.0)
+                rt.run_until(0.01 * (k + 1), until='steady')
+            chatter = [(level, m) for name, level, m in probe.diagnostics() if 'chatter' in name or 'change sign' in m]
+            assert node.loop.chattering == (limit > 0)
+        if limit > 0:
+            assert any(level == 1 and 'rate filter 0.2 s' in m for level, m in chatter), chatter
+        else:
+            assert chatter == [], chatter
