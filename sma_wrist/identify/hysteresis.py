@@ -22,6 +22,8 @@ from typing import Any
 #: core.hysteresis.identification.fit_sdgpi), the Clausius-Clapeyron shift (core.hysteresis.identification.fit_sdgpi_cc)
 #: and the same shift with a saturating stroke (fit_sdgpi_cc(amplitude_law='saturating')).
 MODELS = ('quadratic', 'clausius-clapeyron', 'saturating')
+#: a loop whose stroke is under this share of the largest one's does not enter the transition slopes over stress
+TRANSFORMING_STROKE_FRACTION = 0.1
 
 HELP = 'identify the SD-GPI hysteresis of a wire from measured isobaric loops (docs/identification.md)'
 
@@ -236,9 +238,21 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     # ---- transition temperatures and their slopes over stress (Clausius-Clapeyron)
     fit_tr = [transitions(lp.T_C, yf, lp.first_branch) for lp, yf in zip(train, y_fit)]
     s_all = np.array([lp.stress_MPa for lp in train + hold])
-    s_tr = s_all[:len(train)]
+    # a loop that hardly transforms (below the detwinning stress) has 10/50/90 % points of its noise, at
+    # the ends of its temperature sweep: they would bend the slopes (a phase-fraction wire's rig loops:
+    # A_50 0.25 degC/MPa with its 50 MPa loop, 0.10 = 1 / C_A without; docs/identification.md)
+    strokes = np.array([t['stroke_mm'] for t in meas_tr])
+    transforming = strokes >= TRANSFORMING_STROKE_FRACTION * strokes.max()
+    for lp, st, ok in zip(train + hold, strokes, transforming):
+        if not ok:
+            warnings.append(f'{lp.label}: stroke {st:.3g} mm is under {100 * TRANSFORMING_STROKE_FRACTION:g} % of '
+                            f'the largest ({strokes.max():.3g} mm): hardly any transformation at {lp.stress_MPa:.4g} MPa; '
+                            'its transition temperatures are left out of the slopes over stress')
+    keep = transforming.astype(float)
+    keep[~transforming] = np.nan  # slope() skips non-finite points
+    s_all, s_tr = s_all * keep, (s_all * keep)[:len(train)]
     keys = ('A_s', 'A_50', 'A_f', 'M_s', 'M_50', 'M_f', 'stroke_mm')
-    trans = {'measured': meas_tr, 'before': before_tr, 'fitted': fit_tr,
+    trans = {'measured': meas_tr, 'before': before_tr, 'fitted': fit_tr, 'in_slopes': transforming.tolist(),
              'slopes_per_MPa': {
                  'measured': {k: slope(s_all, [t[k] for t in meas_tr]) for k in keys},
                  'before': {k: slope(s_all, [t[k] for t in before_tr]) for k in keys},
