@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.loop import reversals_per_s
 from sma_wrist.plants.phase_fraction import (PhaseFractionParams, PhaseFractionPlant, SensorParams, WireParams,
@@ -120,3 +120,24 @@ def test_reversal_metric() -> None:
     small = 0.5 * square  # inside the +-1 V band? no: 12 V; and a dither of 0.5 V is not a reversal
     assert reversals_per_s(np.stack([small, 0.5 * np.sign(square)], 1), 0.01) == pytest.approx(4.0, abs=0.11)
     assert reversals_per_s(np.stack([0.5 * square / 24, 0 * t], 1), 0.01) == 0.0
+
+
+def test_a_rig_on_this_wire_gives_identify_its_clausius_clapeyron_slopes(tmp_path) -> None:
+    """Isobaric loops measured on the phase-fraction wire (isobaric_loops: a rig's thermocouple, extensometer and
+    load cell noise), read and identified by `sma-wrist identify hysteresis`: the transition temperatures it
+    measures rise 1 / C_A = 0.100 degC/MPa on heating and 1 / C_M = 0.125 on cooling, the wire's own constants,
+    which the SD-GPI never had (measured 0.101 / 0.127). The 50 MPa loop is below the detwinning stress (2 % of
+    the largest stroke): left out, with a warning; with it the A_50 slope read 0.25 degC/MPa."""
+    from sma_wrist.identify.hysteresis import Options, run
+    from sma_wrist.plants.phase_fraction import WireParams, isobaric_loops, write_isobaric_loops
+    files = write_isobaric_loops(tmp_path / 'loops', isobaric_loops([50, 100, 150, 200, 250]))
+    doc = run(Options([str(f) for f in files], out=str(tmp_path / 'id'), loo=False, plots=False, model='saturating'),
+              progress=lambda m: None)
+    w = WireParams()
+    tr = doc['transitions']
+    stress = [round(d['stress_MPa']) for d in doc['fit']['per_load']]
+    assert tr['in_slopes'] == [s != 50 for s in stress], (stress, tr['in_slopes'])
+    sl = tr['slopes_per_MPa']['measured']
+    assert abs(sl['A_50'] - 1 / w.C_A_MPa_per_C) < 0.01 and abs(sl['M_50'] - 1 / w.C_M_MPa_per_C) < 0.015, sl
+    with pytest.raises(ModelInputError, match='rig temperature step'):
+        isobaric_loops([100], step_C=0.0)

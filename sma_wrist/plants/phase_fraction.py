@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
@@ -293,6 +294,44 @@ def fraction_path(T_C: ArrayLike, sigma_MPa: ArrayLike, wire: WireParams | None 
         commit(0, T[k], sig[k], xi, xi_h, x_h, xi_c, x_c, wc)
         out[k] = xi[0]
     return out
+
+
+def isobaric_loops(stresses_MPa: Sequence[float], wire: WireParams | None = None, *, T_range_C: tuple[float, float] =
+                   (20.0, 110.0), step_C: float = 0.1, cycles: int = 2, noise: tuple[float, float, float] =
+                   (0.1, 2e-5, 1.0), seed: int = 7) -> dict[float, FloatArray]:
+    """What a test rig measures on this wire: isobaric loops (temperature cycled between T_range_C in steps of
+    step_C [degC], ``cycles`` times, at each constant stress), as SMA-REACT's and maestrolab's data were measured.
+
+    Returns {stress [MPa]: (K, 3) columns temperature [degC], strain [-], stress [MPa]} with the rig's noise
+    (thermocouple degC, extensometer strain, load cell MPa; seeded); ``write_isobaric_loops`` writes them as
+    files ``sma-wrist identify hysteresis`` reads. The wire starts cold (fully martensite)."""
+    check_range('rig temperature step', step_C, 1e-3, 5.0, 'degC')
+    lo, hi = T_range_C
+    if not lo < hi:
+        raise ParameterError(f'T_range_C = {T_range_C!r} must rise')
+    up = np.arange(lo, hi, step_C)
+    T = np.tile(np.concatenate([up, up[::-1]]), int(cycles))
+    wc = pack([PhaseFractionParams(wire=wire or WireParams())])[0][0]
+    rng = np.random.default_rng(seed)
+    out = {}
+    for s in stresses_MPa:
+        xi = fraction_path(T, float(s), wire)
+        eps = np.array([strain(Tk, float(s), xk, wc) for Tk, xk in zip(T, xi)])
+        out[float(s)] = np.column_stack([T + rng.normal(0.0, noise[0], T.size), eps + rng.normal(0.0, noise[1], T.size),
+                                         float(s) + rng.normal(0.0, noise[2], T.size)])
+    return out
+
+
+def write_isobaric_loops(folder: str | Path, loops: dict[float, FloatArray]) -> list[Path]:
+    """One ``<stress>MPa.txt`` per loop (header ``Temperature Strain Stress``, as test/data/flexinol's)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    files = []
+    for s, a in loops.items():
+        f = folder / f'{s:g}MPa.txt'
+        np.savetxt(f, a, fmt=['%.4f', '%.7f', '%.3f'], header='Temperature Strain Stress', comments='')
+        files.append(f)
+    return files
 
 
 @_jit
@@ -604,4 +643,5 @@ def factory(scenarios: Sequence[Any], base: Any = None, **options: Any) -> Scena
 
 
 __all__ = ['WireParams', 'PeltierParams', 'SensorParams', 'PhaseFractionParams', 'PhaseFractionPlant',
-           'ScenarioPhaseFraction', 'factory', 'PhaseFractionState', 'fraction_path', 'major_heating', 'major_cooling', 'fraction', 'strain', 'solve_stress']
+           'ScenarioPhaseFraction', 'factory', 'PhaseFractionState', 'fraction_path', 'major_heating', 'major_cooling',
+           'fraction', 'strain', 'solve_stress', 'isobaric_loops', 'write_isobaric_loops']
