@@ -183,7 +183,7 @@ def _crossing_T(T: FloatArray, y: FloatArray, rising: bool) -> float:
         return float(np.mean(T))
     Ts, ys = T[sel], y[sel]
     mid = 0.5 * (ys.min() + ys.max())
-    order = np.argsort(Ts)
+    order = np.argsort(Ts, kind='stable')  # equal temperatures keep their order (numpy's AVX-512 sort does not)
     Ts, ys = Ts[order], ys[order]
     idx = np.nonzero(np.diff(np.sign(ys - mid)) != 0)[0]
     return float(Ts[idx].mean()) if idx.size else float(np.median(Ts))
@@ -465,11 +465,11 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
             raise ParameterError(f'section {k} ({edges[k]}-{edges[k + 1]} kgf) needs >= 3 loads for a quadratic')
     # Shared c, d, rho, tau, c from a full GPI fit at the middle load, then only the envelopes per
     # load (so a_i, b_i of different loads are comparable: the rho-amplitude trade-off is fixed).
-    i_mid = int(np.argsort(loads)[loads.size // 2])
+    i_mid = int(np.argsort(loads, kind='stable')[loads.size // 2])
     base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=per_load_starts, max_nfev=max_nfev,
                    method=method, branch=br[i_mid]).theta
     lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
-    order = np.argsort(loads)
+    order = np.argsort(loads, kind='stable')  # repeated loads: the same order on every CPU
     mid = int(np.nonzero(order == i_mid)[0][0])
     deg = np.broadcast_to(np.asarray(degrees, dtype=int), (4,))
 
@@ -687,7 +687,7 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
     br = list(branches) if branches is not None else ['cooling'] * loads.size
     keep = [thin_indices(t) for t in Ts_all]
     Ts, ys = [t[k] for t, k in zip(Ts_all, keep)], [v[k] for v, k in zip(ys_all, keep)]
-    order = np.argsort(loads)
+    order = np.argsort(loads, kind='stable')  # repeated loads: the same order on every CPU
     i_mid = int(order[loads.size // 2])
     mid = loads.size // 2
     m_ref = float(np.mean(loads))
