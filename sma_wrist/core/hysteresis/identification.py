@@ -19,6 +19,7 @@ heating; elongation y = k_f - y_m).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -589,6 +590,14 @@ def cc_to_quadratic(z: ArrayLike, m_ref: float) -> FloatArray:
     return np.stack([np.polyfit(m, k[:, q], 2) for q in range(4)])
 
 
+def _chain(Jk: FloatArray, dk: FloatArray) -> FloatArray:
+    """Jk (N, 4) @ dk (4, M), summed in a fixed order (a BLAS product's order follows its CPU kernel)."""
+    out = Jk[:, 0, None] * dk[0]
+    for q in range(1, dk.shape[0]):
+        out += Jk[:, q, None] * dk[q]
+    return out
+
+
 def _cc_from_per_load(G: FloatArray, u: FloatArray, w: FloatArray, amp_deg: int) -> FloatArray:
     """Start of one envelope set's CC law: weighted polynomials through per-load fits (L, 4)."""
     def poly(v: FloatArray, deg: int, n_terms: int) -> list[float]:
@@ -617,7 +626,7 @@ def sat_coefficients(z: ArrayLike, m: ArrayLike, m_ref: float) -> tuple[FloatArr
     zc = z.copy()
     zc[[0, 1, 2, 7, 8, 9]] = 0.0
     k, J = cc_coefficients(zc, m - m_ref)
-    e = np.exp(-z[2] * m)
+    e = np.array([math.exp(-z[2] * v) for v in m])  # the C library's exp: numpy's rounds by CPU (trf.py)
     g = 1.0 - e
     k[:, 0] = z[0] + z[1] * g + z[9] * (m - m_ref)
     k[:, 3] = z[7] + z[8] * g
@@ -739,8 +748,8 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
             th = np.concatenate([ka[i], kb[i], x[rest]])
             yi, Ji = simulate_jac(Ts[i], th, n=n, k_f=k_f, branch=br[i], heat=heats[i])
             res[rows] = yi - ys[i]
-            J[rows, za] = Ji[:, IDX_A] @ Ja[i]
-            J[rows, zb] = Ji[:, IDX_B] @ Jb[i]
+            J[rows, za] = _chain(Ji[:, IDX_A], Ja[i])
+            J[rows, zb] = _chain(Ji[:, IDX_B], Jb[i])
             J[rows, rest] = Ji[:, 8:20]
         return res, J
 
