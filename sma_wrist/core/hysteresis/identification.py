@@ -29,6 +29,8 @@ from scipy.optimize import least_squares
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis.identification_kernel import gpi_jacobian, play_jacobian_numpy
 from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
+from sma_wrist.core.hysteresis.trf import AVAILABLE as TRF_AVAILABLE
+from sma_wrist.core.hysteresis.trf import quantize, trf_solve
 
 FloatArray = NDArray[np.float64]
 
@@ -252,16 +254,34 @@ def _solve(fun_batch, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi
     return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
 
+def _cost(r: FloatArray) -> float:
+    """0.5 sum r^2, correctly rounded (math.fsum): the same bits on every CPU, so the choice between
+    starts does not follow a BLAS kernel's summation order."""
+    return 0.5 * math.fsum(r * r)
+
+
 def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,
                  max_nfev: int) -> tuple[FloatArray, float, bool]:
     """As :func:`_solve` with the exact Jacobian: ``fun_jac(x) -> (residual, J over all of x)``.
 
-    The same trust-region-reflective solver and tolerances as the finite-difference path (a
+    The same trust-region-reflective algorithm and tolerances as the finite-difference path (a
     bounded Levenberg-Marquardt on the normal equations was tried: it settles in the first of
-    the loop's many local minima, 6x the cost TRF reaches). least_squares asks for the
-    Jacobian at the point whose residual it just computed, so one simulation serves both.
+    the loop's many local minima, 6x the cost TRF reaches). With numba it runs as
+    :func:`~sma_wrist.core.hysteresis.trf.trf_solve`: the same fit on every CPU (scipy's
+    ``least_squares`` walks a CPU-dependent path through the local minima: docs/identification.md
+    "The same data on two CPUs"); without, scipy's ``least_squares``, which asks for the Jacobian
+    at the point whose residual it just computed, so one simulation serves both.
     """
-    x = np.clip(x0, lo, hi)
+    x = quantize(np.clip(x0, lo, hi))  # starts from np.exp / LAPACK carry CPU-dependent last bits
+    if TRF_AVAILABLE:
+        def fj(z: FloatArray) -> tuple[FloatArray, FloatArray]:
+            xx = x.copy()
+            xx[free] = z
+            r, J = fun_jac(xx)
+            return r, J[:, free]
+        x[free], _, status, _ = trf_solve(fj, x[free], lo[free], hi[free], max_nfev)
+        cost = _cost(fun_jac(x)[0])
+        return x, cost, bool(status >= 0 and np.isfinite(cost))  # 0: budget used, still a valid fit
     cache: dict[str, object] = {}
 
     def both(z: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -276,7 +296,7 @@ def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray
     res = least_squares(lambda z: both(z)[0], z0, jac=lambda z: both(z)[1][:, free], bounds=(lo[free], hi[free]),
                         x_scale='jac', max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
     x[free] = res.x
-    return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))
+    return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
 
 def _solve_best(fun_jac, starts: list[FloatArray], free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,  # type: ignore[no-untyped-def]

@@ -1,0 +1,338 @@
+"""Bounded least squares (scipy's trust-region-reflective method) that ends in the same point on every CPU.
+
+Why: the identification objective (a play-operator model, Eq. 3.25) is piecewise, with many local
+minima, and the path of scipy's ``least_squares(method='trf')`` through it amplifies last-bit
+differences: its SVD, J^T f and column norms go through BLAS/LAPACK, whose kernel (OpenBLAS's per-CPU
+choice) and numpy's SIMD loops (AVX-512 or AVX2) round differently, so the same data gave different
+fits on different machines (docs/identification.md "The same data on two CPUs"). This is the same
+algorithm (``scipy.optimize._lsq.trf.trf_bounds``, ``tr_solver='exact'``, ``x_scale='jac'``, no
+loss) with two changes:
+
+- every O(m) reduction (the SVD of the scaled, augmented Jacobian, J^T f, J p, column norms, the
+  cost) is a compiled loop in a fixed order: the same bits on every CPU (numba, no fastmath, so no
+  reassociation or FMA contraction). The SVD is Householder QR then one-sided Jacobi on R.
+- each trial point is rounded to :data:`QUANT_BITS` mantissa bits (:func:`quantize`): what remains
+  CPU-dependent (scipy's small n-vector helpers, ~1e-16 relative) is absorbed there.
+
+Without numba the caller falls back to scipy's ``least_squares`` (same algorithm, CPU-dependent bits).
+"""
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize._lsq.common import (CL_scaling_vector, intersect_trust_region, make_strictly_feasible,
+                                        minimize_quadratic_1d, solve_lsq_trust_region, step_size_to_bound,
+                                        update_tr_radius)
+
+from sma_wrist.core.jit import AVAILABLE, _jit
+
+FloatArray = NDArray[np.float64]
+
+#: Mantissa bits kept of every trial point (2^-30 ~ 9.3e-10 relative): far above the ~1e-16 noise
+#: left in the step, far below any parameter change that moves a fit.
+QUANT_BITS = 30
+
+
+def quantize(x: FloatArray, bits: int = QUANT_BITS) -> FloatArray:
+    """``x`` rounded to ``bits`` mantissa bits (relative grid 2^-bits); frexp/rint/ldexp are exact on every CPU."""
+    m, e = np.frexp(x)
+    return np.ldexp(np.rint(np.ldexp(m, bits)), e - bits)
+
+
+@_jit
+def _dot(a, b):  # pragma: no cover - compiled
+    s = 0.0
+    for i in range(a.shape[0]):
+        s += a[i] * b[i]
+    return s
+
+
+@_jit
+def _matvec(J, p):  # pragma: no cover - compiled
+    m, n = J.shape
+    out = np.zeros(m)
+    for i in range(m):
+        s = 0.0
+        for j in range(n):
+            s += J[i, j] * p[j]
+        out[i] = s
+    return out
+
+
+@_jit
+def _rmatvec_and_norms(J, f):  # pragma: no cover - compiled
+    """J^T f and the column norms of J, each summed over rows in order."""
+    m, n = J.shape
+    g = np.zeros(n)
+    c = np.zeros(n)
+    for i in range(m):
+        for j in range(n):
+            g[j] += J[i, j] * f[i]
+            c[j] += J[i, j] * J[i, j]
+    return g, np.sqrt(c)
+
+
+@_jit
+def _svd_solve_data(Jh, diag_sqrt, f):  # pragma: no cover - compiled
+    """(s, V, uf) of the SVD of [Jh; diag(diag_sqrt)] (m+n, n) and uf = U^T [f; 0], s descending.
+
+    Householder QR (columns stored as rows of a transposed copy: contiguous inner loops), then
+    one-sided Jacobi (Hestenes) on the n x n R; uf = U_R^T (Q^T [f; 0])[:n].
+    """
+    m, n = Jh.shape
+    M = m + n
+    A = np.zeros((n, M))  # A[j] = column j
+    for i in range(m):
+        for j in range(n):
+            A[j, i] = Jh[i, j]
+    for j in range(n):
+        A[j, m + j] = diag_sqrt[j]
+    b = np.zeros(M)
+    for i in range(m):
+        b[i] = f[i]
+    v = np.empty(M)
+    for k in range(n):
+        nrm = 0.0
+        for i in range(k, M):
+            nrm += A[k, i] * A[k, i]
+        nrm = math.sqrt(nrm)
+        if nrm == 0.0:
+            continue
+        alpha = -nrm if A[k, k] > 0 else nrm
+        vn = 0.0
+        for i in range(k, M):
+            v[i] = A[k, i]
+        v[k] -= alpha
+        for i in range(k, M):
+            vn += v[i] * v[i]
+        if vn == 0.0:
+            continue
+        for j in range(k, n):
+            s = 0.0
+            for i in range(k, M):
+                s += v[i] * A[j, i]
+            s = 2.0 * s / vn
+            for i in range(k, M):
+                A[j, i] -= s * v[i]
+        s = 0.0
+        for i in range(k, M):
+            s += v[i] * b[i]
+        s = 2.0 * s / vn
+        for i in range(k, M):
+            b[i] -= s * v[i]
+    U = np.zeros((n, n))  # U[j] = column j of R
+    for j in range(n):
+        for i in range(j + 1):
+            U[j, i] = A[j, i]
+    V = np.zeros((n, n))  # V[j] = column j of V
+    for j in range(n):
+        V[j, j] = 1.0
+    for sweep in range(100):
+        rotated = False
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                a = 0.0
+                bb = 0.0
+                c = 0.0
+                for i in range(n):
+                    a += U[p, i] * U[p, i]
+                    bb += U[q, i] * U[q, i]
+                    c += U[p, i] * U[q, i]
+                if c == 0.0 or abs(c) <= 1e-15 * math.sqrt(a * bb):
+                    continue
+                rotated = True
+                zeta = (bb - a) / (2.0 * c)
+                t = (1.0 if zeta >= 0 else -1.0) / (abs(zeta) + math.sqrt(1.0 + zeta * zeta))
+                cs = 1.0 / math.sqrt(1.0 + t * t)
+                sn = cs * t
+                for i in range(n):
+                    up, uq = U[p, i], U[q, i]
+                    U[p, i] = cs * up - sn * uq
+                    U[q, i] = sn * up + cs * uq
+                    vp, vq = V[p, i], V[q, i]
+                    V[p, i] = cs * vp - sn * vq
+                    V[q, i] = sn * vp + cs * vq
+        if not rotated:
+            break
+    s = np.zeros(n)
+    uf = np.zeros(n)
+    for j in range(n):
+        nj = 0.0
+        for i in range(n):
+            nj += U[j, i] * U[j, i]
+        s[j] = math.sqrt(nj)
+        if s[j] > 0.0:
+            d = 0.0
+            for i in range(n):
+                d += U[j, i] * b[i]
+            uf[j] = d / s[j]
+    order = np.argsort(-s, kind='mergesort')
+    Vout = np.empty((n, n))  # rows = coordinates, columns = singular vectors (as scipy's V = Vt.T)
+    for jj in range(n):
+        for i in range(n):
+            Vout[i, jj] = V[order[jj], i]
+    return s[order], Vout, uf[order]
+
+
+class _DetJ:
+    """J_h with a fixed-order ``dot`` for scipy's quadratic-model helpers (they call ``J.dot``)."""
+
+    def __init__(self, J: FloatArray) -> None:
+        self.J = J
+
+    def dot(self, s: FloatArray) -> FloatArray:
+        return _matvec(self.J, np.ascontiguousarray(s, dtype=np.float64))
+
+
+def _quadratic(J: _DetJ, g: FloatArray, s: FloatArray, diag: FloatArray) -> float:
+    """scipy's evaluate_quadratic (0.5 s^T (J^T J + diag) s + g^T s), reductions in a fixed order."""
+    Js = J.dot(s)
+    return 0.5 * (_dot(Js, Js) + _dot(s * diag, s)) + _dot(s, g)
+
+
+def _quadratic_1d(J: _DetJ, g: FloatArray, s: FloatArray, diag: FloatArray,
+                  s0: FloatArray | None = None) -> tuple[float, ...]:
+    """scipy's build_quadratic_1d, reductions in a fixed order."""
+    v = J.dot(s)
+    a = 0.5 * (_dot(v, v) + _dot(s * diag, s))
+    b = _dot(g, s)
+    if s0 is None:
+        return a, b
+    u = J.dot(s0)
+    b += _dot(u, v) + _dot(s0 * diag, s)
+    c = 0.5 * _dot(u, u) + _dot(g, s0) + 0.5 * _dot(s0 * diag, s0)
+    return a, b, c
+
+
+def _norm(x: FloatArray) -> float:
+    return math.sqrt(_dot(x, x))
+
+
+def _select_step(x: FloatArray, J_h: _DetJ, diag_h: FloatArray, g_h: FloatArray, p: FloatArray,
+                 p_h: FloatArray, d: FloatArray, Delta: float, lb: FloatArray, ub: FloatArray,
+                 theta: float) -> tuple[FloatArray, FloatArray, float]:
+    """scipy's trf.select_step (reflective step), its quadratics in a fixed order."""
+    if np.all((x + p >= lb) & (x + p <= ub)):
+        return p, p_h, -_quadratic(J_h, g_h, p_h, diag_h)
+    p_stride, hits = step_size_to_bound(x, p, lb, ub)
+    r_h = np.copy(p_h)
+    r_h[hits.astype(bool)] *= -1
+    r = d * r_h
+    p = p * p_stride
+    p_h = p_h * p_stride
+    x_on_bound = x + p
+    _, to_tr = intersect_trust_region(p_h, r_h, Delta)
+    to_bound, _ = step_size_to_bound(x_on_bound, r, lb, ub)
+    r_stride = min(to_bound, to_tr)
+    if r_stride > 0:
+        r_stride_l = (1 - theta) * p_stride / r_stride
+        r_stride_u = theta * to_bound if r_stride == to_bound else to_tr
+    else:
+        r_stride_l, r_stride_u = 0.0, -1.0
+    if r_stride_l <= r_stride_u:
+        a, b, c = _quadratic_1d(J_h, g_h, r_h, diag_h, s0=p_h)
+        r_stride, r_value = minimize_quadratic_1d(a, b, r_stride_l, r_stride_u, c=c)
+        r_h = r_h * r_stride + p_h
+        r = r_h * d
+    else:
+        r_value = np.inf
+    p = p * theta
+    p_h = p_h * theta
+    p_value = _quadratic(J_h, g_h, p_h, diag_h)
+    ag_h = -g_h
+    ag = d * ag_h
+    to_tr = Delta / _norm(ag_h)
+    to_bound, _ = step_size_to_bound(x, ag, lb, ub)
+    ag_stride = theta * to_bound if to_bound < to_tr else to_tr
+    a, b = _quadratic_1d(J_h, g_h, ag_h, diag_h)
+    ag_stride, ag_value = minimize_quadratic_1d(a, b, 0, ag_stride)
+    ag_h = ag_h * ag_stride
+    ag = ag * ag_stride
+    if p_value < r_value and p_value < ag_value:
+        return p, p_h, -p_value
+    if r_value < p_value and r_value < ag_value:
+        return r, r_h, -r_value
+    return ag, ag_h, -ag_value
+
+
+def _onto_grid(x: FloatArray, lb: FloatArray, ub: FloatArray) -> FloatArray:
+    """quantize(x), keeping x where the grid point would leave the open box (TRF stays strictly inside)."""
+    q = quantize(x)
+    return np.where((q > lb) & (q < ub), q, x)
+
+
+def trf_solve(fun_jac: Callable[[FloatArray], tuple[FloatArray, FloatArray]], x0: FloatArray, lb: FloatArray,
+              ub: FloatArray, max_nfev: int, ftol: float = 1e-10, xtol: float = 1e-10,
+              gtol: float = 1e-10) -> tuple[FloatArray, float, int, int]:
+    """Minimise 0.5 |r(x)|^2 over lb < x < ub from x0: (x, cost, status, nfev), scipy's status codes.
+
+    ``fun_jac(x) -> (r (m,), J (m, n))``; the Jacobian is only used at accepted points, as in
+    scipy (which evaluates it after the residual at the same point). Requires numba (:data:`AVAILABLE`).
+    """
+    if not AVAILABLE:
+        raise RuntimeError('trf_solve needs numba (pip install sma_wrist[fast])')
+    x = _onto_grid(make_strictly_feasible(np.asarray(x0, dtype=float), lb, ub, rstep=0), lb, ub)
+    f, J = fun_jac(x)
+    J = np.ascontiguousarray(J)
+    nfev = 1
+    m, n = J.shape
+    cost = 0.5 * _dot(f, f)
+    g, scale_inv = _rmatvec_and_norms(J, f)
+    scale_inv[scale_inv == 0] = 1
+    scale = 1 / scale_inv
+    v, dv = CL_scaling_vector(x, g, lb, ub)
+    v[dv != 0] *= scale_inv[dv != 0]
+    Delta = _norm(x * scale_inv / v ** 0.5)
+    if Delta == 0:
+        Delta = 1.0
+    alpha = 0.0
+    status = None
+    while True:
+        v, dv = CL_scaling_vector(x, g, lb, ub)
+        g_norm = float(np.max(np.abs(g * v)))
+        if g_norm < gtol:
+            status = 1
+        if status is not None or nfev == max_nfev:
+            break
+        v[dv != 0] *= scale_inv[dv != 0]
+        d = v ** 0.5 * scale
+        diag_h = g * dv * scale
+        g_h = d * g
+        Jd = J * d
+        J_h = _DetJ(Jd)
+        s, V, uf = _svd_solve_data(Jd, diag_h ** 0.5, f)
+        theta = max(0.995, 1 - g_norm)
+        actual_reduction = -1.0
+        while actual_reduction <= 0 and nfev < max_nfev:
+            p_h, alpha, _ = solve_lsq_trust_region(n, m, uf, s, V, Delta, initial_alpha=alpha)
+            p = d * p_h
+            step, step_h, predicted_reduction = _select_step(x, J_h, diag_h, g_h, p, p_h, d, Delta, lb, ub, theta)
+            x_new = _onto_grid(make_strictly_feasible(x + step, lb, ub, rstep=0), lb, ub)
+            step = x_new - x  # what was actually taken (the grid may round a tiny step to nothing)
+            f_new, J_new = fun_jac(x_new)
+            nfev += 1
+            step_h_norm = _norm(step_h)
+            if not np.all(np.isfinite(f_new)):
+                Delta = 0.25 * step_h_norm
+                continue
+            cost_new = 0.5 * _dot(f_new, f_new)
+            actual_reduction = cost - cost_new
+            Delta_new, ratio = update_tr_radius(Delta, actual_reduction, predicted_reduction, step_h_norm,
+                                                step_h_norm > 0.95 * Delta)
+            ftol_ok = actual_reduction < ftol * cost and ratio > 0.25
+            xtol_ok = _norm(step) < xtol * (xtol + _norm(x))
+            status = 4 if ftol_ok and xtol_ok else 2 if ftol_ok else 3 if xtol_ok else None
+            if status is not None:
+                break
+            alpha *= Delta / Delta_new
+            Delta = Delta_new
+        if actual_reduction > 0:
+            x, f, cost = x_new, f_new, cost_new
+            J = np.ascontiguousarray(J_new)
+            g, si = _rmatvec_and_norms(J, f)
+            scale_inv = np.maximum(si, scale_inv)
+            scale = 1 / scale_inv
+    return x, cost, (0 if status is None else status), nfev
