@@ -30,7 +30,7 @@ from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis.identification_kernel import gpi_jacobian, play_jacobian_numpy
 from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
 from sma_wrist.core.hysteresis.trf import AVAILABLE as TRF_AVAILABLE
-from sma_wrist.core.hysteresis.trf import quantize, trf_solve
+from sma_wrist.core.hysteresis.trf import lstsq, polyfit, quantize, trf_solve
 
 FloatArray = NDArray[np.float64]
 
@@ -178,18 +178,23 @@ def _bounds(y_range: float) -> tuple[FloatArray, FloatArray]:
     return lo, hi
 
 
+def _mean(v: FloatArray) -> float:
+    """Correctly rounded mean (numpy's pairwise sum follows its SIMD width)."""
+    return math.fsum(v) / v.size
+
+
 def _crossing_T(T: FloatArray, y: FloatArray, rising: bool) -> float:
     """Mean temperature where y crosses its mid level on rising (or falling) T samples."""
     dT = np.diff(T, prepend=T[0])
     sel = dT > 0 if rising else dT < 0
     if sel.sum() < 3:
-        return float(np.mean(T))
+        return _mean(T)
     Ts, ys = T[sel], y[sel]
     mid = 0.5 * (ys.min() + ys.max())
     order = np.argsort(Ts, kind='stable')  # equal temperatures keep their order (numpy's AVX-512 sort does not)
     Ts, ys = Ts[order], ys[order]
     idx = np.nonzero(np.diff(np.sign(ys - mid)) != 0)[0]
-    return float(Ts[idx].mean()) if idx.size else float(np.median(Ts))
+    return _mean(Ts[idx]) if idx.size else float(np.median(Ts))
 
 
 def initial_guesses(T: FloatArray, y: FloatArray, *, n: int, k_f: float, p0: float, n_starts: int,
@@ -208,17 +213,17 @@ def initial_guesses(T: FloatArray, y: FloatArray, *, n: int, k_f: float, p0: flo
     T_c = _crossing_T(T, ym, rising=False)
     starts = []
     for s in range(n_starts):
-        k = (0.15, 0.4, 0.08, 0.25)[s % 4] * (1.0 if s < 4 else np.exp(rng.normal(0, 0.3)))
+        k = (0.15, 0.4, 0.08, 0.25)[s % 4] * (1.0 if s < 4 else math.exp(rng.normal(0, 0.3)))
         rho, tau, c = (1.0, 1.0, 0.05) if s % 2 == 0 else (0.5, 5.0, 0.1)
         r = c * np.arange(1, n + 1)
-        P = float(np.sum(rho * np.exp(-tau * r)))
+        P = math.fsum(rho * math.exp(-tau * v) for v in r)  # C library exp, exact sum: the same start on every CPU
         th_c = T_c + (0 if s < 4 else rng.normal(0, 3))
         th_h = T_h + (0 if s < 4 else rng.normal(0, 3))
         amp = max(hi - lo, 1e-3) / (2 * P) + r.mean()  # widen by the mean threshold so saturated ends match
         off = 0.5 * (hi + lo) / P
         a = [amp, k, -k * th_c, off]
         b = [amp, k, -k * th_h, off]
-        mem = [1e-3 * (hi - lo), 0.05, -0.05 * float(np.mean(T)), 0.0]
+        mem = [1e-3 * (hi - lo), 0.05, -0.05 * _mean(T), 0.0]
         starts.append(np.array(a + b + mem + mem + [rho, tau, c, p0], dtype=float))
     return starts
 
@@ -502,8 +507,8 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         for k in range(n_sec):
             sel = sec == k
             for q in range(4):  # polynomial of degree deg[q] in the load; higher terms stay zero
-                sa[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, q], deg[q])
-                sb[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, 4 + q], deg[q])
+                sa[k, q, 2 - deg[q]:] = polyfit(loads[sel], G[sel, q], deg[q])
+                sb[k, q, 2 - deg[q]:] = polyfit(loads[sel], G[sel, 4 + q], deg[q])
         return np.concatenate([sa.ravel(), sb.ravel(), base[8:20]])
 
     # the earlier code ('fd') starts from the middle load's fit only; 'exact' also tries continuation
@@ -600,6 +605,15 @@ def cc_coefficients(z: ArrayLike, u: ArrayLike) -> tuple[FloatArray, FloatArray]
     return k, J
 
 
+def _quadratic_through(m: FloatArray, k: FloatArray) -> FloatArray:
+    """(Q, 3) coefficients (m^2, m, 1) of the parabolas through (m_i, k[i, q]), i = 0..2 (Newton's divided
+    differences: elementwise, so the written file has the same bits on every CPU; np.polyfit goes through LAPACK)."""
+    d1 = (k[1] - k[0]) / (m[1] - m[0])
+    d2 = ((k[2] - k[1]) / (m[2] - m[1]) - d1) / (m[2] - m[0])
+    # k0 + d1 (x - m0) + d2 (x - m0)(x - m1)
+    return np.stack([d2, d1 - d2 * (m[0] + m[1]), k[0] - d1 * m[0] + d2 * m[0] * m[1]], axis=1)
+
+
 def cc_to_quadratic(z: ArrayLike, m_ref: float) -> FloatArray:
     """(4, 3) quadratic-in-load coefficients (s_i0 m^2 + s_i1 m + s_i2, Eqs. 4.4-4.5) of a CC law.
 
@@ -607,7 +621,7 @@ def cc_to_quadratic(z: ArrayLike, m_ref: float) -> FloatArray:
     """
     m = m_ref + np.array([-1.0, 0.0, 1.0])
     k, _ = cc_coefficients(z, m - m_ref)
-    return np.stack([np.polyfit(m, k[:, q], 2) for q in range(4)])
+    return _quadratic_through(m, k)
 
 
 def _chain(Jk: FloatArray, dk: FloatArray) -> FloatArray:
@@ -621,7 +635,7 @@ def _chain(Jk: FloatArray, dk: FloatArray) -> FloatArray:
 def _cc_from_per_load(G: FloatArray, u: FloatArray, w: FloatArray, amp_deg: int) -> FloatArray:
     """Start of one envelope set's CC law: weighted polynomials through per-load fits (L, 4)."""
     def poly(v: FloatArray, deg: int, n_terms: int) -> list[float]:
-        c = list(np.polyfit(u, v, deg, w=w)[::-1])
+        c = list(polyfit(u, v, deg, w=w)[::-1])
         return c + [0.0] * (n_terms - len(c))
     centre = -G[:, 2] / G[:, 1]
     return np.array(poly(G[:, 0], amp_deg, 3) + poly(G[:, 1], 1, 2) + poly(centre, 1, 2) + poly(G[:, 3], amp_deg, 3))
@@ -663,10 +677,12 @@ def _sat_from_per_load(G: FloatArray, m: FloatArray, u: FloatArray, w: FloatArra
     best: tuple[float, FloatArray] | None = None
     scale = 1.0 / max(float(np.max(m)), 1e-6)
     for kappa in scale * np.geomspace(0.5, 64.0, 15):
-        A = np.stack([np.ones_like(m), 1.0 - np.exp(-kappa * m)], axis=1) * w[:, None]
-        c0, r0 = np.linalg.lstsq(A, G[:, 0] * w, rcond=None)[:2]
-        c3, r3 = np.linalg.lstsq(A, G[:, 3] * w, rcond=None)[:2]
-        sse = float(np.sum((A @ c0 - G[:, 0] * w) ** 2) + np.sum((A @ c3 - G[:, 3] * w) ** 2))
+        # the C library's exp, fixed-order least squares and an exact sum: the same start on every CPU (trf.py)
+        A = np.stack([np.ones_like(m), 1.0 - np.array([math.exp(-kappa * v) for v in m])], axis=1) * w[:, None]
+        c0 = lstsq(A, G[:, 0] * w)
+        c3 = lstsq(A, G[:, 3] * w)
+        sse = math.fsum(np.r_[(A[:, 0] * c0[0] + A[:, 1] * c0[1] - G[:, 0] * w) ** 2,
+                              (A[:, 0] * c3[0] + A[:, 1] * c3[1] - G[:, 3] * w) ** 2])
         if best is None or sse < best[0]:
             best = (sse, np.r_[c0, kappa, 0.0, 0.0, 0.0, 0.0, c3, 0.0])
     assert best is not None
@@ -680,8 +696,7 @@ def sat_to_sections(z: ArrayLike, m_ref: float, edges: FloatArray) -> FloatArray
     out = np.empty((edges.size - 1, 4, 3))
     for k in range(edges.size - 1):
         m3 = np.array([edges[k], 0.5 * (edges[k] + edges[k + 1]), edges[k + 1]])
-        kk = sat_coefficients(z, m3, m_ref)[0]
-        out[k] = np.stack([np.polyfit(m3, kk[:, q], 2) for q in range(4)])
+        out[k] = _quadratic_through(m3, sat_coefficients(z, m3, m_ref)[0])
     return out
 
 

@@ -393,3 +393,31 @@ def trf_solve(fun_jac: Callable[[FloatArray], tuple[FloatArray, FloatArray]], x0
             scale = 1 / scale_inv
     return x, cost, (0 if status is None else status), nfev
 
+
+def lstsq(A: FloatArray, b: FloatArray) -> FloatArray:
+    """Least-squares solution of A x = b (A (m, n), m >= n), the same bits on every CPU with numba.
+
+    For the fits' starting points (polynomials through per-load fits): LAPACK's answer carries the
+    BLAS kernel's last bits, and a start is the one input the fit's path cannot lose. Singular
+    values below 1e-13 of the largest are dropped (a minimum-norm answer, as ``rcond``).
+    """
+    A = np.ascontiguousarray(A, dtype=np.float64)
+    b = np.ascontiguousarray(b, dtype=np.float64)
+    if not AVAILABLE:
+        return np.linalg.lstsq(A, b, rcond=None)[0]
+    s, V, uf = _svd_solve_data(A, np.zeros(A.shape[1]), b)
+    keep = s > 1e-13 * s[0] if s[0] > 0 else np.zeros(s.size, bool)
+    return _matvec(V, np.where(keep, uf / np.where(keep, s, 1.0), 0.0))
+
+
+def polyfit(x: FloatArray, y: FloatArray, deg: int, w: FloatArray | None = None) -> FloatArray:
+    """np.polyfit (coefficients highest power first, optional weights), solved by :func:`lstsq`."""
+    x = np.asarray(x, dtype=float)
+    lhs = x[:, None] ** np.arange(deg, -1, -1)[None, :].astype(float)
+    rhs = np.asarray(y, dtype=float)
+    if w is not None:
+        lhs = lhs * np.asarray(w, dtype=float)[:, None]
+        rhs = rhs * w
+    scale = np.array([math.sqrt(math.fsum(c * c)) for c in lhs.T])  # as np.polyfit: unit columns
+    scale[scale == 0] = 1.0
+    return lstsq(lhs / scale, rhs) / scale
