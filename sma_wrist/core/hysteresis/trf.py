@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from scipy.optimize._lsq.common import (EPS, CL_scaling_vector, make_strictly_feasible, minimize_quadratic_1d,
                                         step_size_to_bound, update_tr_radius)
 
-from sma_wrist.core.jit import AVAILABLE, _jit
+from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline
 
 FloatArray = NDArray[np.float64]
 
@@ -43,6 +43,28 @@ def quantize(x: FloatArray, bits: int = QUANT_BITS) -> FloatArray:
     """``x`` rounded to ``bits`` mantissa bits (relative grid 2^-bits); frexp/rint/ldexp are exact on every CPU."""
     m, e = np.frexp(x)
     return np.ldexp(np.rint(np.ldexp(m, bits)), e - bits)
+
+
+@_jit_inline
+def _rdot(a, b, lo, hi):  # pragma: no cover - compiled
+    """sum a[i] b[i] over lo <= i < hi in four interleaved partial sums, added in a fixed order: the order
+    is in the source (no fastmath), so it is the same on every CPU, and the compiler can keep the four
+    in one vector register (the QR's reductions ran at one add per cycle with a single sum)."""
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    s3 = 0.0
+    i = lo
+    while i + 4 <= hi:
+        s0 += a[i] * b[i]
+        s1 += a[i + 1] * b[i + 1]
+        s2 += a[i + 2] * b[i + 2]
+        s3 += a[i + 3] * b[i + 3]
+        i += 4
+    while i < hi:
+        s0 += a[i] * b[i]
+        i += 1
+    return (s0 + s1) + (s2 + s3)
 
 
 @_jit
@@ -98,32 +120,21 @@ def _svd_solve_data(Jh, diag_sqrt, f):  # pragma: no cover - compiled
         b[i] = f[i]
     v = np.empty(M)
     for k in range(n):
-        nrm = 0.0
-        for i in range(k, M):
-            nrm += A[k, i] * A[k, i]
-        nrm = math.sqrt(nrm)
+        nrm = math.sqrt(_rdot(A[k], A[k], k, M))
         if nrm == 0.0:
             continue
         alpha = -nrm if A[k, k] > 0 else nrm
-        vn = 0.0
         for i in range(k, M):
             v[i] = A[k, i]
         v[k] -= alpha
-        for i in range(k, M):
-            vn += v[i] * v[i]
+        vn = _rdot(v, v, k, M)
         if vn == 0.0:
             continue
         for j in range(k, n):
-            s = 0.0
-            for i in range(k, M):
-                s += v[i] * A[j, i]
-            s = 2.0 * s / vn
+            s = 2.0 * _rdot(v, A[j], k, M) / vn
             for i in range(k, M):
                 A[j, i] -= s * v[i]
-        s = 0.0
-        for i in range(k, M):
-            s += v[i] * b[i]
-        s = 2.0 * s / vn
+        s = 2.0 * _rdot(v, b, k, M) / vn
         for i in range(k, M):
             b[i] -= s * v[i]
     U = np.zeros((n, n))  # U[j] = column j of R
