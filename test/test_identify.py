@@ -161,10 +161,13 @@ def test_identified_file_widens_the_valid_range_and_loads(nitihf: dict) -> None:
     assert Path(nitihf['report']).exists()
 
 
-def test_real_nitihf_interior_held_out_load_needs_the_clausius_clapeyron_law() -> None:
-    """300 MPa held out, trained on 7, 50, 100, 200, 400 MPa: the seed's quadratics of the load
-    (one section over 7-400 MPa) swing between 200 and 400 MPa; the Clausius-Clapeyron law
-    (transition temperatures shift linearly with stress) interpolates."""
+def test_real_nitihf_interior_held_out_load_is_interpolated_best_by_the_saturating_law() -> None:
+    """300 MPa held out, trained on 7, 50, 100, 200, 400 MPa: the seed's quadratics of the load (one
+    section over 7-400 MPa), the Clausius-Clapeyron law (transition temperatures shift linearly with
+    stress) and the saturating stroke law. The fit is the same on every CPU (core/hysteresis/trf.py);
+    the quadratics' swing between 200 and 400 MPa that this test asserted before (> 30 %) was where
+    scipy's solver happened to end: with the data perturbed by 1e-12 it gave 6.5-8792 %, the
+    fixed-order solver 7.0-7.9 % (docs/identification.md "The same data on two CPUs")."""
     from sma_wrist.core.hysteresis.identification import fit_sdgpi, fit_sdgpi_cc, sdgpi_gpi_vectors, simulate_batch
     from sma_wrist.identify.hysteresis import choose_edges
     from sma_wrist.identify.io import REF_LENGTH_MM
@@ -188,13 +191,12 @@ def test_real_nitihf_interior_held_out_load_needs_the_clausius_clapeyron_law() -
             edges = r.params.envelopes.edges_kg
         th = sdgpi_gpi_vectors(r.theta, edges, m[4:5])
         err[law] = errors_pct(simulate_batch(T[4], th, branch=br[4])[:, 0], y[4])[0]
-    # measured 43.3 % (708 % before the joint fit continued only its best start: another local minimum); 473.6 % and,
-    # where numpy's exp/log/power take their AVX-512 paths, 32.5 % on session 9's machine (the fit's local minima
-    # follow the last bits: docs/identification.md "The same data on two CPUs"): the quadratics swing, CC does not
-    assert err['quadratic'] > 30.0, err
-    assert err['clausius-clapeyron'] < 8.0, err  # measured 6.9 % (both CPUs)
-    assert err['quadratic'] > 4 * err['clausius-clapeyron'], err  # measured 6.3x / 4.7x (AVX2 / AVX-512 numpy)
-    assert err['saturating'] < 3.0, err  # measured 1.79 % (the saturating stroke, docs/identification.md)
+    # measured (identical with numpy's AVX-512 or AVX2 loops, OpenBLAS's default or Haswell kernel):
+    # quadratic 7.13 %, Clausius-Clapeyron 6.65 %, saturating 1.69 %
+    assert err['quadratic'] < 10.0, err
+    assert err['clausius-clapeyron'] < 8.0, err
+    assert err['saturating'] < 3.0, err  # the saturating stroke (docs/identification.md)
+    assert err['saturating'] < 0.5 * min(err['quadratic'], err['clausius-clapeyron']), err  # measured 3.9x
 
 
 # ----------------------------------------------------------------------------- synthetic round trip
