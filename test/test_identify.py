@@ -199,6 +199,42 @@ def test_real_nitihf_interior_held_out_load_is_interpolated_best_by_the_saturati
     assert err['saturating'] < 0.5 * min(err['quadratic'], err['clausius-clapeyron']), err  # measured 3.9x
 
 
+#: Fits the NiTiHf SD-GPI (seed's quadratics, 300 MPa left out) and prints the hex of its parameter vector.
+_FIT_HEX = """
+import sys
+import numpy as np
+from sma_wrist.core.hysteresis.identification import fit_sdgpi
+from sma_wrist.identify.hysteresis import choose_edges
+from sma_wrist.identify.io import REF_LENGTH_MM, read_measurement, stress_to_load_kgf
+from sma_wrist.identify.segment import loops_of
+loops = [loops_of(read_measurement(f'{sys.argv[1]}/{s}MPa.txt'), 'last')[0] for s in (7, 50, 100, 200, 400)]
+m = np.array([stress_to_load_kgf(lp.stress_MPa) for lp in loops])
+r = fit_sdgpi([lp.T_C for lp in loops], [lp.strain * REF_LENGTH_MM for lp in loops], m, choose_edges(m),
+              branches=[lp.init_branch for lp in loops])
+print(r.theta.tobytes().hex())
+"""
+
+
+def test_the_fit_is_the_same_bits_with_other_simd_paths_and_blas_kernels() -> None:
+    """The same loops give the same wire whichever of numpy's SIMD paths and OpenBLAS's kernels run
+    (docs/identification.md "The same data on two CPUs": before core/hysteresis/trf.py this fit's 300 MPa
+    prediction was 32.5 % here, 43.3 % with numpy's AVX2 paths and OpenBLAS's Haswell kernel)."""
+    import os
+    import subprocess
+    import sys
+
+    from sma_wrist.core import jit
+    if not jit.AVAILABLE:
+        pytest.skip('without numba the fits are scipy least_squares, CPU-dependent in the last bits')
+    from numpy._core._multiarray_umath import __cpu_features__ as cpu
+
+    off = [f for f in ('X86_V4', 'AVX512_ICL', 'AVX512_SPR') if cpu.get(f)]  # only what this CPU has
+    runs = [{}, {'OPENBLAS_CORETYPE': 'Haswell', **({'NPY_DISABLE_CPU_FEATURES': ' '.join(off)} if off else {})}]
+    out = [subprocess.run([sys.executable, '-c', _FIT_HEX, str(HF)], env={**os.environ, **e}, capture_output=True,
+                          text=True, check=True).stdout.strip() for e in runs]
+    assert out[0] and out[0] == out[1], runs
+
+
 # ----------------------------------------------------------------------------- synthetic round trip
 
 def write_synthetic(d: Path, truth: SDGPIParams, loads: list[float], noise: float = 0.005) -> list[str]:
