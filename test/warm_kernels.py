@@ -36,7 +36,7 @@ def _cases() -> list:
 
 
 def replays() -> None:
-    """plant_sim's plant, the phase-fraction wrist, the diagnosis's replays, the identification's Jacobian and solver."""
+    """plant_sim's plant, the phase-fraction wrist, the diagnosis's replays, the identification's Jacobian, solver."""
     from sma_wrist.core.hysteresis.identification import simulate_jac
     from sma_wrist.core.hysteresis.trf import trf_solve
     from sma_wrist.core.plant.wrist import WristPlant
