@@ -19,6 +19,9 @@ loss) with two changes:
 Measured: bit-identical fits with numpy's AVX-512 or AVX2 loops, OpenBLAS's default or Haswell
 kernel, and numba compiled for the host or for generic x86-64 (docs/identification.md).
 Without numba the caller falls back to scipy's ``least_squares`` (same algorithm, CPU-dependent bits).
+
+The loop follows SciPy's ``scipy/optimize/_lsq/trf.py`` (BSD-3-Clause; Copyright (c) 2001-2002 Enthought, Inc.
+and 2003- SciPy Developers), and uses its helpers from ``scipy.optimize._lsq.common``.
 """
 from __future__ import annotations
 
@@ -27,10 +30,19 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize._lsq.common import (EPS, CL_scaling_vector, make_strictly_feasible, minimize_quadratic_1d,
-                                        step_size_to_bound, update_tr_radius)
+try:  # scipy's own helpers of the algorithm (a private module): should a release move them, the callers
+    # fall back to least_squares (the same algorithm, CPU-dependent bits) instead of failing to import
+    from scipy.optimize._lsq.common import (EPS, CL_scaling_vector, make_strictly_feasible, minimize_quadratic_1d,
+                                            step_size_to_bound, update_tr_radius)
+    _SCIPY_HELPERS = True
+except ImportError:  # pragma: no cover - depends on the scipy release
+    _SCIPY_HELPERS = False
 
-from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline
+from sma_wrist.core.jit import AVAILABLE as _COMPILED
+from sma_wrist.core.jit import _jit, _jit_inline
+
+#: numba and scipy's helpers are there: the fixed-order solver runs (else scipy's least_squares)
+AVAILABLE = _COMPILED and _SCIPY_HELPERS
 
 FloatArray = NDArray[np.float64]
 
