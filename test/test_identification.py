@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.identification import fit_gpi, fit_sdgpi, gpi_vector, simulate_batch
@@ -162,3 +163,34 @@ def test_fit_sdgpi_cc_recovers_a_wire_whose_transitions_shift_with_load() -> Non
     y_true = simulate(truth, T, 0.8)
     y_fit = simulate(r.params, T, 0.8)
     assert 100 * np.sqrt(np.mean((y_fit - y_true) ** 2)) / np.ptp(y_true) < 1.0  # never fitted (measured 0.65 %)
+
+
+def test_fixed_order_trf_is_scipys_trust_region_reflective() -> None:
+    """core/hysteresis/trf.py is scipy's TRF (exact subproblem, Jacobian scaling) in another summation order:
+    on a smooth problem with an active bound both end at the same point; lstsq / polyfit match numpy's."""
+    from scipy.optimize import least_squares
+
+    from sma_wrist.core import jit
+    from sma_wrist.core.hysteresis.trf import lstsq, polyfit, trf_solve
+    if not jit.AVAILABLE:
+        pytest.skip('trf_solve needs numba')
+    t = np.linspace(0.0, 4.0, 60)
+    y = 2.0 * np.exp(-1.3 * t) + 0.5 * np.exp(-0.2 * t) + 0.01 * np.sin(7 * t)
+
+    def fj(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        e1, e2 = np.exp(-x[1] * t), np.exp(-x[3] * t)
+        return x[0] * e1 + x[2] * e2 - y, np.stack([e1, -x[0] * t * e1, e2, -x[2] * t * e2], axis=1)
+
+    lo, hi = np.array([0.0, 0.25, 0.0, 0.25]), np.array([10.0, 10.0, 10.0, 10.0])  # the slow rate ends on its bound
+    x0 = np.array([1.5, 1.0, 0.8, 0.4])  # not symmetric in the two terms (from a symmetric start last bits pick one)
+    x, cost, status, _ = trf_solve(fj, x0, lo, hi, 200)
+    ref = least_squares(lambda z: fj(z)[0], x0, jac=lambda z: fj(z)[1], bounds=(lo, hi), x_scale='jac',
+                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200)
+    assert status > 0 and ref.status > 0
+    np.testing.assert_allclose(x, ref.x, rtol=1e-6, atol=1e-8)
+    assert abs(cost - ref.cost) <= 1e-9 * ref.cost
+    assert min(x[1], x[3]) == pytest.approx(0.25, abs=1e-6)
+    rng = np.random.default_rng(0)
+    A, b, w = rng.normal(size=(9, 3)) * [1.0, 1e3, 1e-3], rng.normal(size=9), rng.random(9)
+    np.testing.assert_allclose(lstsq(A, b), np.linalg.lstsq(A, b, rcond=None)[0], rtol=1e-9)
+    np.testing.assert_allclose(polyfit(A[:, 1], b, 2, w=w), np.polyfit(A[:, 1], b, 2, w=w), rtol=1e-9)

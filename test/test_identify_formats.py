@@ -273,14 +273,13 @@ def test_identify_on_measured_nitipd_multiload_export(tmp_path: Path) -> None:
                     length_mm=200.0, loo=False, plots=False, model='clausius-clapeyron'), progress=_quiet)
     fit = {round(d['stress_MPa']): d for d in r['fit']['per_load']}
     assert sorted(fit) == [22, 50, 150, 200]
-    # measured GPI 0.91 / 0.90 / 1.59 / 1.71 %, SD-GPI 4.78 / 3.24 / 5.77 / 5.09 % of stroke
+    # measured GPI 0.90 / 0.90 / 1.68 / 1.72 %, SD-GPI 4.79 / 3.13 / 5.76 / 5.17 % of stroke
     for f in fit.values():
         assert f['gpi_rms_pct'] < 2.0 and f['sdgpi_rms_pct'] < 6.5, f
     (h,) = r['holdout']
-    # measured 5.61 / 10.8 %; 5.74 / 15.0 % where numpy takes its AVX-512 paths, whose fit is better on the training
-    # loads (SD-GPI 3.95 % of stroke overall against 5.24 %): another local minimum (docs/identification.md "The
-    # same data on two CPUs")
-    assert h['rms_pct'] < 7.0 and h['max_pct'] < 17.0, h
+    # measured 5.46 / 9.86 % (SD-GPI 5.27 % of stroke overall on the training loads), identical with numpy's AVX-512
+    # or AVX2 loops and OpenBLAS's default or Haswell kernel (docs/identification.md "The same data on two CPUs")
+    assert h['rms_pct'] < 7.0 and h['max_pct'] < 14.0, h
     # the built-in wire (30-80 degC) is far off this one (-45..+40 degC)
     assert min(b['rms_pct'] for b in r['before']['per_load']) > 25.0
     sl = r['transitions']['slopes_per_MPa']

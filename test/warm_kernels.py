@@ -36,8 +36,9 @@ def _cases() -> list:
 
 
 def replays() -> None:
-    """plant_sim's plant, the phase-fraction wrist, the diagnosis's replays, the identification's Jacobian."""
+    """plant_sim's plant, the phase-fraction wrist, the diagnosis's replays, the identification's Jacobian, solver."""
     from sma_wrist.core.hysteresis.identification import simulate_jac
+    from sma_wrist.core.hysteresis.trf import trf_solve
     from sma_wrist.core.plant.wrist import WristPlant
     from sma_wrist.diagnose import diagnose_run
     from sma_wrist.diagnose.testdata import run_from_truth, simulate
@@ -47,6 +48,7 @@ def replays() -> None:
     diagnose_run(run_from_truth(simulate('none', seed=0, duration_s=4.0)), candidates=['backlash', 'tem_mismatch'])
     T = np.linspace(30.0, 80.0, 20)
     simulate_jac(np.concatenate([T, T[::-1]]), np.full(20, 0.1), n=3)
+    trf_solve(lambda x: (x - 1.0, np.eye(2)), np.zeros(2), np.full(2, -5.0), np.full(2, 5.0), 5)
 
 
 PARTS = {'closed_loops': closed_loops, 'replays': replays}

@@ -19,6 +19,7 @@ heating; elongation y = k_f - y_m).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,6 +29,8 @@ from scipy.optimize import least_squares
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis.identification_kernel import gpi_jacobian, play_jacobian_numpy
 from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
+from sma_wrist.core.hysteresis.trf import AVAILABLE as TRF_AVAILABLE
+from sma_wrist.core.hysteresis.trf import lstsq, polyfit, quantize, trf_solve
 
 FloatArray = NDArray[np.float64]
 
@@ -175,18 +178,23 @@ def _bounds(y_range: float) -> tuple[FloatArray, FloatArray]:
     return lo, hi
 
 
+def _mean(v: FloatArray) -> float:
+    """Correctly rounded mean (numpy's pairwise sum follows its SIMD width)."""
+    return math.fsum(v) / v.size
+
+
 def _crossing_T(T: FloatArray, y: FloatArray, rising: bool) -> float:
     """Mean temperature where y crosses its mid level on rising (or falling) T samples."""
     dT = np.diff(T, prepend=T[0])
     sel = dT > 0 if rising else dT < 0
     if sel.sum() < 3:
-        return float(np.mean(T))
+        return _mean(T)
     Ts, ys = T[sel], y[sel]
     mid = 0.5 * (ys.min() + ys.max())
-    order = np.argsort(Ts)
+    order = np.argsort(Ts, kind='stable')  # equal temperatures keep their order (numpy's AVX-512 sort does not)
     Ts, ys = Ts[order], ys[order]
     idx = np.nonzero(np.diff(np.sign(ys - mid)) != 0)[0]
-    return float(Ts[idx].mean()) if idx.size else float(np.median(Ts))
+    return _mean(Ts[idx]) if idx.size else float(np.median(Ts))
 
 
 def initial_guesses(T: FloatArray, y: FloatArray, *, n: int, k_f: float, p0: float, n_starts: int,
@@ -205,17 +213,17 @@ def initial_guesses(T: FloatArray, y: FloatArray, *, n: int, k_f: float, p0: flo
     T_c = _crossing_T(T, ym, rising=False)
     starts = []
     for s in range(n_starts):
-        k = (0.15, 0.4, 0.08, 0.25)[s % 4] * (1.0 if s < 4 else np.exp(rng.normal(0, 0.3)))
+        k = (0.15, 0.4, 0.08, 0.25)[s % 4] * (1.0 if s < 4 else math.exp(rng.normal(0, 0.3)))
         rho, tau, c = (1.0, 1.0, 0.05) if s % 2 == 0 else (0.5, 5.0, 0.1)
         r = c * np.arange(1, n + 1)
-        P = float(np.sum(rho * np.exp(-tau * r)))
+        P = math.fsum(rho * math.exp(-tau * v) for v in r)  # C library exp, exact sum: the same start on every CPU
         th_c = T_c + (0 if s < 4 else rng.normal(0, 3))
         th_h = T_h + (0 if s < 4 else rng.normal(0, 3))
         amp = max(hi - lo, 1e-3) / (2 * P) + r.mean()  # widen by the mean threshold so saturated ends match
         off = 0.5 * (hi + lo) / P
         a = [amp, k, -k * th_c, off]
         b = [amp, k, -k * th_h, off]
-        mem = [1e-3 * (hi - lo), 0.05, -0.05 * float(np.mean(T)), 0.0]
+        mem = [1e-3 * (hi - lo), 0.05, -0.05 * _mean(T), 0.0]
         starts.append(np.array(a + b + mem + mem + [rho, tau, c, p0], dtype=float))
     return starts
 
@@ -251,16 +259,34 @@ def _solve(fun_batch, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi
     return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
 
+def _cost(r: FloatArray) -> float:
+    """0.5 sum r^2, correctly rounded (math.fsum): the same bits on every CPU, so the choice between
+    starts does not follow a BLAS kernel's summation order."""
+    return 0.5 * math.fsum(r * r)
+
+
 def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,
                  max_nfev: int) -> tuple[FloatArray, float, bool]:
     """As :func:`_solve` with the exact Jacobian: ``fun_jac(x) -> (residual, J over all of x)``.
 
-    The same trust-region-reflective solver and tolerances as the finite-difference path (a
+    The same trust-region-reflective algorithm and tolerances as the finite-difference path (a
     bounded Levenberg-Marquardt on the normal equations was tried: it settles in the first of
-    the loop's many local minima, 6x the cost TRF reaches). least_squares asks for the
-    Jacobian at the point whose residual it just computed, so one simulation serves both.
+    the loop's many local minima, 6x the cost TRF reaches). With numba it runs as
+    :func:`~sma_wrist.core.hysteresis.trf.trf_solve`: the same fit on every CPU (scipy's
+    ``least_squares`` walks a CPU-dependent path through the local minima: docs/identification.md
+    "The same data on two CPUs"); without, scipy's ``least_squares``, which asks for the Jacobian
+    at the point whose residual it just computed, so one simulation serves both.
     """
-    x = np.clip(x0, lo, hi)
+    x = quantize(np.clip(x0, lo, hi))  # starts from np.exp / LAPACK carry CPU-dependent last bits
+    if TRF_AVAILABLE:
+        def fj(z: FloatArray) -> tuple[FloatArray, FloatArray]:
+            xx = x.copy()
+            xx[free] = z
+            r, J = fun_jac(xx)
+            return r, J[:, free]
+        x[free], _, status, _ = trf_solve(fj, x[free], lo[free], hi[free], max_nfev)
+        cost = _cost(fun_jac(x)[0])
+        return x, cost, bool(status >= 0 and np.isfinite(cost))  # 0: budget used, still a valid fit
     cache: dict[str, object] = {}
 
     def both(z: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -275,19 +301,23 @@ def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray
     res = least_squares(lambda z: both(z)[0], z0, jac=lambda z: both(z)[1][:, free], bounds=(lo[free], hi[free]),
                         x_scale='jac', max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
     x[free] = res.x
-    return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))
+    return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
 
 def _solve_best(fun_jac, starts: list[FloatArray], free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,  # type: ignore[no-untyped-def]
                 max_nfev: int, probe: float = 0.2) -> tuple[FloatArray, float, bool]:
-    """:func:`_solve_exact` from the best of several starts: each probed with ``probe`` of the
-    budget, the lowest cost continued with the rest (instead of every start to the full budget).
+    """:func:`_solve_exact` from the best of several starts: each probed with ``probe`` of the budget,
+    then each continued with the rest; the lowest final cost wins (the first start on a tie).
+
+    Why every start is continued: a probe stops at its budget, and which truncated path is lower
+    after a fifth of the budget says little about where it ends (synthetic 7-load SD-GPI: the
+    probe-best start ended at 0.75 % of stroke, the other at 0.62 %).
     """
     if len(starts) == 1:
         return _solve_exact(fun_jac, starts[0], free, lo, hi, max_nfev)
     n_probe = max(10, int(probe * max_nfev))
-    x, _, _ = min((_solve_exact(fun_jac, s0, free, lo, hi, n_probe) for s0 in starts), key=lambda t: t[1])
-    return _solve_exact(fun_jac, x, free, lo, hi, max_nfev - n_probe)
+    probes = [_solve_exact(fun_jac, s0, free, lo, hi, n_probe) for s0 in starts]
+    return min((_solve_exact(fun_jac, x, free, lo, hi, max_nfev - n_probe) for x, _, _ in probes), key=lambda t: t[1])
 
 
 def _solver(method: str, T: FloatArray, y: FloatArray, n: int, k_f: float, branch: str):  # type: ignore[no-untyped-def]
@@ -465,11 +495,11 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
             raise ParameterError(f'section {k} ({edges[k]}-{edges[k + 1]} kgf) needs >= 3 loads for a quadratic')
     # Shared c, d, rho, tau, c from a full GPI fit at the middle load, then only the envelopes per
     # load (so a_i, b_i of different loads are comparable: the rho-amplitude trade-off is fixed).
-    i_mid = int(np.argsort(loads)[loads.size // 2])
+    i_mid = int(np.argsort(loads, kind='stable')[loads.size // 2])
     base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=per_load_starts, max_nfev=max_nfev,
                    method=method, branch=br[i_mid]).theta
     lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
-    order = np.argsort(loads)
+    order = np.argsort(loads, kind='stable')  # repeated loads: the same order on every CPU
     mid = int(np.nonzero(order == i_mid)[0][0])
     deg = np.broadcast_to(np.asarray(degrees, dtype=int), (4,))
 
@@ -481,8 +511,8 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         for k in range(n_sec):
             sel = sec == k
             for q in range(4):  # polynomial of degree deg[q] in the load; higher terms stay zero
-                sa[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, q], deg[q])
-                sb[k, q, 2 - deg[q]:] = np.polyfit(loads[sel], G[sel, 4 + q], deg[q])
+                sa[k, q, 2 - deg[q]:] = polyfit(loads[sel], G[sel, q], deg[q])
+                sb[k, q, 2 - deg[q]:] = polyfit(loads[sel], G[sel, 4 + q], deg[q])
         return np.concatenate([sa.ravel(), sb.ravel(), base[8:20]])
 
     # the earlier code ('fd') starts from the middle load's fit only; 'exact' also tries continuation
@@ -579,6 +609,15 @@ def cc_coefficients(z: ArrayLike, u: ArrayLike) -> tuple[FloatArray, FloatArray]
     return k, J
 
 
+def _quadratic_through(m: FloatArray, k: FloatArray) -> FloatArray:
+    """(Q, 3) coefficients (m^2, m, 1) of the parabolas through (m_i, k[i, q]), i = 0..2 (Newton's divided
+    differences: elementwise, so the written file has the same bits on every CPU; np.polyfit goes through LAPACK)."""
+    d1 = (k[1] - k[0]) / (m[1] - m[0])
+    d2 = ((k[2] - k[1]) / (m[2] - m[1]) - d1) / (m[2] - m[0])
+    # k0 + d1 (x - m0) + d2 (x - m0)(x - m1)
+    return np.stack([d2, d1 - d2 * (m[0] + m[1]), k[0] - d1 * m[0] + d2 * m[0] * m[1]], axis=1)
+
+
 def cc_to_quadratic(z: ArrayLike, m_ref: float) -> FloatArray:
     """(4, 3) quadratic-in-load coefficients (s_i0 m^2 + s_i1 m + s_i2, Eqs. 4.4-4.5) of a CC law.
 
@@ -586,13 +625,21 @@ def cc_to_quadratic(z: ArrayLike, m_ref: float) -> FloatArray:
     """
     m = m_ref + np.array([-1.0, 0.0, 1.0])
     k, _ = cc_coefficients(z, m - m_ref)
-    return np.stack([np.polyfit(m, k[:, q], 2) for q in range(4)])
+    return _quadratic_through(m, k)
+
+
+def _chain(Jk: FloatArray, dk: FloatArray) -> FloatArray:
+    """Jk (N, 4) @ dk (4, M), summed in a fixed order (a BLAS product's order follows its CPU kernel)."""
+    out = Jk[:, 0, None] * dk[0]
+    for q in range(1, dk.shape[0]):
+        out += Jk[:, q, None] * dk[q]
+    return out
 
 
 def _cc_from_per_load(G: FloatArray, u: FloatArray, w: FloatArray, amp_deg: int) -> FloatArray:
     """Start of one envelope set's CC law: weighted polynomials through per-load fits (L, 4)."""
     def poly(v: FloatArray, deg: int, n_terms: int) -> list[float]:
-        c = list(np.polyfit(u, v, deg, w=w)[::-1])
+        c = list(polyfit(u, v, deg, w=w)[::-1])
         return c + [0.0] * (n_terms - len(c))
     centre = -G[:, 2] / G[:, 1]
     return np.array(poly(G[:, 0], amp_deg, 3) + poly(G[:, 1], 1, 2) + poly(centre, 1, 2) + poly(G[:, 3], amp_deg, 3))
@@ -617,7 +664,7 @@ def sat_coefficients(z: ArrayLike, m: ArrayLike, m_ref: float) -> tuple[FloatArr
     zc = z.copy()
     zc[[0, 1, 2, 7, 8, 9]] = 0.0
     k, J = cc_coefficients(zc, m - m_ref)
-    e = np.exp(-z[2] * m)
+    e = np.array([math.exp(-z[2] * v) for v in m])  # the C library's exp: numpy's rounds by CPU (trf.py)
     g = 1.0 - e
     k[:, 0] = z[0] + z[1] * g + z[9] * (m - m_ref)
     k[:, 3] = z[7] + z[8] * g
@@ -634,10 +681,12 @@ def _sat_from_per_load(G: FloatArray, m: FloatArray, u: FloatArray, w: FloatArra
     best: tuple[float, FloatArray] | None = None
     scale = 1.0 / max(float(np.max(m)), 1e-6)
     for kappa in scale * np.geomspace(0.5, 64.0, 15):
-        A = np.stack([np.ones_like(m), 1.0 - np.exp(-kappa * m)], axis=1) * w[:, None]
-        c0, r0 = np.linalg.lstsq(A, G[:, 0] * w, rcond=None)[:2]
-        c3, r3 = np.linalg.lstsq(A, G[:, 3] * w, rcond=None)[:2]
-        sse = float(np.sum((A @ c0 - G[:, 0] * w) ** 2) + np.sum((A @ c3 - G[:, 3] * w) ** 2))
+        # the C library's exp, fixed-order least squares and an exact sum: the same start on every CPU (trf.py)
+        A = np.stack([np.ones_like(m), 1.0 - np.array([math.exp(-kappa * v) for v in m])], axis=1) * w[:, None]
+        c0 = lstsq(A, G[:, 0] * w)
+        c3 = lstsq(A, G[:, 3] * w)
+        sse = math.fsum(np.r_[(A[:, 0] * c0[0] + A[:, 1] * c0[1] - G[:, 0] * w) ** 2,
+                              (A[:, 0] * c3[0] + A[:, 1] * c3[1] - G[:, 3] * w) ** 2])
         if best is None or sse < best[0]:
             best = (sse, np.r_[c0, kappa, 0.0, 0.0, 0.0, 0.0, c3, 0.0])
     assert best is not None
@@ -651,8 +700,7 @@ def sat_to_sections(z: ArrayLike, m_ref: float, edges: FloatArray) -> FloatArray
     out = np.empty((edges.size - 1, 4, 3))
     for k in range(edges.size - 1):
         m3 = np.array([edges[k], 0.5 * (edges[k] + edges[k + 1]), edges[k + 1]])
-        kk = sat_coefficients(z, m3, m_ref)[0]
-        out[k] = np.stack([np.polyfit(m3, kk[:, q], 2) for q in range(4)])
+        out[k] = _quadratic_through(m3, sat_coefficients(z, m3, m_ref)[0])
     return out
 
 
@@ -687,7 +735,7 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
     br = list(branches) if branches is not None else ['cooling'] * loads.size
     keep = [thin_indices(t) for t in Ts_all]
     Ts, ys = [t[k] for t, k in zip(Ts_all, keep)], [v[k] for v, k in zip(ys_all, keep)]
-    order = np.argsort(loads)
+    order = np.argsort(loads, kind='stable')  # repeated loads: the same order on every CPU
     i_mid = int(order[loads.size // 2])
     mid = loads.size // 2
     m_ref = float(np.mean(loads))
@@ -739,8 +787,8 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
             th = np.concatenate([ka[i], kb[i], x[rest]])
             yi, Ji = simulate_jac(Ts[i], th, n=n, k_f=k_f, branch=br[i], heat=heats[i])
             res[rows] = yi - ys[i]
-            J[rows, za] = Ji[:, IDX_A] @ Ja[i]
-            J[rows, zb] = Ji[:, IDX_B] @ Jb[i]
+            J[rows, za] = _chain(Ji[:, IDX_A], Ja[i])
+            J[rows, zb] = _chain(Ji[:, IDX_B], Jb[i])
             J[rows, rest] = Ji[:, 8:20]
         return res, J
 
