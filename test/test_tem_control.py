@@ -370,6 +370,24 @@ def test_chatter_guard_counts_sign_changes_outside_the_band_and_switches_with_hy
         tc.TemControlParams(chatter_limit_per_s=2.0, chatter_window_s=0.0)
 
 
+def test_chatter_guard_one_wrist_path_is_the_array_path():
+    """update_one (tem_controller's float path) against update (the sweep's bank) on random commands with runs
+    of chattering: the same rates to the bit and the same switches."""
+    rng = np.random.default_rng(3)
+    a, b = tc.ChatterGuard(1, 1.0, 1.0), tc.ChatterGuard(1, 1.0, 1.0)
+    switches = 0
+    for k in range(3000):
+        t = 0.01 * k
+        u = rng.normal(0.0, 8.0, 2) if (k // 500) % 2 else rng.normal(3.0, 1.5, 2)
+        changed = a.update(t, u[None])[0]
+        assert b.update_one(t, u) == changed
+        np.testing.assert_array_equal(a.rate, b.rate)
+        np.testing.assert_array_equal(a.sign, b.sign)
+        assert a.engaged[0] == b.engaged[0]
+        switches += changed
+    assert switches >= 3  # engaged, released and engaged again
+
+
 def test_engaged_chatter_guard_switches_the_rate_filter_in_both_paths():
     """TemLoop with its guard: targets that jump every 0.2 s make the commands swing; once engaged the law's
     rate filter is chatter_rate_filter_s in the compiled and the numpy path alike (the two stay equal)."""
