@@ -248,9 +248,8 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
             warnings.append(f'{lp.label}: stroke {st:.3g} mm is under {100 * TRANSFORMING_STROKE_FRACTION:g} % of '
                             f'the largest ({strokes.max():.3g} mm): hardly any transformation at {lp.stress_MPa:.4g} MPa; '
                             'its transition temperatures are left out of the slopes over stress')
-    keep = transforming.astype(float)
-    keep[~transforming] = np.nan  # slope() skips non-finite points
-    s_all, s_tr = s_all * keep, (s_all * keep)[:len(train)]
+    s_all = np.where(transforming, s_all, np.nan)  # slope() skips non-finite points
+    s_tr = s_all[:len(train)]
     keys = ('A_s', 'A_50', 'A_f', 'M_s', 'M_50', 'M_f', 'stroke_mm')
     trans = {'measured': meas_tr, 'before': before_tr, 'fitted': fit_tr, 'in_slopes': transforming.tolist(),
              'slopes_per_MPa': {
