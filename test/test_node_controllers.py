@@ -617,3 +617,29 @@ def test_tem_controller_reports_its_chatter_guard_on_diagnostics(probe_factory):
             assert any(level == 1 and 'rate filter 0.2 s' in m for level, m in chatter), chatter
         else:
             assert chatter == [], chatter
+
+
+def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_factory, monkeypatch):
+    """The SD-GPI load solve searches up to MuscleGeometry.max_load_kgf (3 kgf, ~600 MPa) and holds a wire there
+    (the plant's 'overload' flag); from then on the motion is the bound's, not the wire's. plant_sim says so (ERROR
+    'wire_load'). With the bound at 0.8 kgf, both muscles heated at +24 V (co-contraction) pull past it within
+    20 s; with the real bound the same drive stays inside it (~1 kgf) and the node raises nothing."""
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.nodes import plant_sim
+    for bound in (0.8, MuscleGeometry().max_load_kgf):
+        monkeypatch.setattr(plant_sim, 'PlantParams',
+                            lambda bound=bound, **kw: PlantParams(muscle=MuscleGeometry(max_load_kgf=bound), **kw))
+        with Runtime() as rt:
+            probe = probe_factory(rt, (), sim_time=True)
+            node = rt.add(plant_sim.PlantSim)
+            for k in range(2000):
+                probe.publish('/wrist/tem_1/command', data=24.0)
+                probe.publish('/wrist/tem_2/command', data=24.0)
+                rt.run_until(0.01 * (k + 1), until='steady')
+            load = [(level, m) for name, level, m in probe.diagnostics() if 'wire_load' in name]
+        peak_kgf = float(node.plant.state.load_kgf.max())
+        if bound < 1.0:
+            assert any(level == 2 and '0.8 kgf' in m for level, m in load), load
+        else:
+            assert 0.8 < peak_kgf < 1.5 and load == [], (peak_kgf, load)

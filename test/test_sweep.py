@@ -195,6 +195,48 @@ def test_sweep_writes_table_json_and_plots(tmp_path) -> None:
         assert (tmp_path / f).stat().st_size > 1000
 
 
+def test_each_loop_reports_the_highest_stress_its_wires_carried() -> None:
+    """wire_stress_max_MPa is the plant's own wire stress (plant_sim's /wrist/muscle_i/stress), its highest over
+    every tick of the run: replaying the recorded commands on a fresh plant gives the same peak; the summary's
+    worst is the rows' largest."""
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.plants import make_plant
+    from sma_wrist.sweep.simulate import TICK_S
+    cases = [Case(0, 'pid', Scenario(payload_kg=0.1), 'nominal'),
+             Case(1, 'inverse_adaptive', Scenario(payload_kg=0.6), 'nominal'),
+             Case(2, 'pid', Scenario(payload_kg=0.6, stroke_scale=0.8), 'spread')]
+    rows, tr = simulate(cases, 8.0, record=True)
+    wrists = make_plant('sdgpi', [c.scenario for c in cases], PlantParams())
+    steps = int(round(TICK_S / wrists.params.dt))
+    peak = np.zeros(len(cases))
+    for u in tr.command_V:
+        peak = np.maximum(peak, wrists.wire_stress_Pa.max(axis=1))
+        wrists.advance(u, steps)
+    got = np.array([r['wire_stress_max_MPa'] for r in rows])
+    np.testing.assert_allclose(got, peak * 1e-6, rtol=1e-12)
+    np.testing.assert_array_equal([r['angle_step_max_rad'] for r in rows], np.abs(np.diff(tr.q, axis=0)).max(axis=0))
+    assert 100.0 < got.min() and got[1] > got[0]  # a pre-loaded pair; the heavier payload pulls harder
+    worst = {(s['group'], s['controller']): s['worst_wire_stress_max_MPa'] for s in summarise(rows)}
+    assert worst == {('nominal', 'pid'): got[0], ('nominal', 'inverse_adaptive'): got[1], ('spread', 'pid'): got[2]}
+    assert f'{got[1]:5.0f}' in format_table(summarise(rows))
+
+
+def test_a_loop_that_holds_a_wire_at_the_models_load_bound_is_marked_not_physics() -> None:
+    """overload_s: the time the plant held a wire's load at MuscleGeometry.max_load_kgf (plant_sim's 'wire_load'
+    ERROR). With the bound lowered to 0.8 kgf the inverse mode's loop crosses it (its pair runs near 1 kgf); at
+    the real 3 kgf it does not, and the table says which loops left the model."""
+    from sma_wrist.core.hysteresis.muscle import MuscleGeometry
+    from sma_wrist.core.plant.wrist import PlantParams
+    cases = [Case(0, 'inverse_adaptive', Scenario(payload_kg=0.6), 'nominal')]
+    low = PlantParams(muscle=MuscleGeometry(max_load_kgf=0.8))
+    rows_low, _ = simulate(cases, 40.0, base=low)
+    rows, _ = simulate(cases, 40.0)
+    assert rows[0]['overload_s'] == 0.0 and 0.0 < rows_low[0]['overload_s'] < 40.0
+    assert rows_low[0]['wire_stress_max_MPa'] == pytest.approx(float(MuscleGeometry().stress_Pa(0.8)) * 1e-6, rel=1e-6)
+    assert 'not physics: 1 nominal inverse_adaptive' in format_table(summarise(rows_low))
+    assert 'not physics' not in format_table(summarise(rows))
+
+
 def test_dask_cluster_gives_the_single_process_numbers(tmp_path) -> None:
     distributed = pytest.importorskip('distributed')
     cfg = SweepConfig(n_plants=2, controllers=('pid', 'direct_adaptive'), duration_s=2.0, chunk=3, nominal=False)

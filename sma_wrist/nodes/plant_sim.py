@@ -136,7 +136,7 @@ class PlantSim(WristNode):
         self.steps_per_tick = max(1, int(round(1.0 / (p['publish_rate_hz'] * p['dt_s']))))
         self.command_V = np.zeros((1, 2))
         self.fresh = Freshness(self, ('tem_1', 'tem_2'))
-        self._status: tuple[Any, ...] | None = None  # (stale, saturated, hot, faces outside) last diagnosed
+        self._status: tuple[Any, ...] | None = None  # (stale, saturated, hot, faces outside, overload) last diagnosed
         self.real_time = RealTimeMonitor()
         self._slow_message: str | None = None
 
@@ -208,14 +208,16 @@ class PlantSim(WristNode):
         lo, hi = self.sim_params.thermal.window_C
         faces = s.thermal[0].ravel().tolist()
         outside = not all(lo <= f <= hi for f in faces)  # NaN counts as outside
-        status = (stale, bool(s.flags['command_saturated'][0]), bool(s.flags['over_temperature'][0]), outside)
+        clamped = s.flags.get('overload')  # a wire's load held at the wire model's bound (the phase-fraction wire has none)
+        status = (stale, bool(s.flags['command_saturated'][0]), bool(s.flags['over_temperature'][0]), outside,
+                  clamped is not None and bool(clamped[0]))
         if status != self._status:  # diagnose publishes on change only: skip building its arguments
             self._status = status
             self._diagnose_tick(*status, faces)
         self._publish_measurements()
         self._check_real_time(now_ns)
 
-    def _diagnose_tick(self, stale: tuple[str, ...], saturated: bool, hot: bool, outside: bool,
+    def _diagnose_tick(self, stale: tuple[str, ...], saturated: bool, hot: bool, outside: bool, overload: bool,
                        faces: list[float]) -> None:
         self.diagnose('command', DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
                       f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh')
@@ -228,6 +230,13 @@ class PlantSim(WristNode):
         self.diagnose('tem_faces', DiagnosticStatus.ERROR if outside else DiagnosticStatus.OK,
                       f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
                       {'hottest_C': f'{max(faces):.2f}', 'coldest_C': f'{min(faces):.2f}'} if outside else None)
+        # the SD-GPI load solve searches up to max_load_kgf; a wire that would carry more is held there, and the
+        # wrist's motion from then on is the bound's, not the wire's (docs/control.md "How hard the modes pull")
+        m = self.sim_params.muscle
+        bound = f'{m.max_load_kgf:g} kgf ({float(m.stress_Pa(m.max_load_kgf)) * 1e-6:.0f} MPa)'
+        self.diagnose('wire_load', DiagnosticStatus.ERROR if overload else DiagnosticStatus.OK,
+                      f'a wire\'s load reached the wire model\'s bound {bound}: the simulation has left the model'
+                      if overload else 'wire loads inside the wire model')
 
     def _check_real_time(self, now_ns: int) -> None:
         achieved = self.real_time.update(self.plant.state.t, now_ns * 1e-9)

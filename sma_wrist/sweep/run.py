@@ -372,7 +372,7 @@ def error_stats(max_error_pct: Sequence[float]) -> dict[str, float]:
 
 def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (group, controller): loops, median / 95th percentile / worst max error, share under 15 %,
-    median and worst TEM sign changes per second."""
+    median and worst TEM sign changes per second, median and worst of each loop's highest wire stress."""
     out = []
     for group in ('nominal', 'spread'):
         for c in MODES:
@@ -383,6 +383,11 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             row = {'group': group, 'controller': c, 'loops': len(sel), **error_stats([r['max_error_pct'] for r in sel]),
                    'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
                    'median_sign_changes_per_s': float(np.median(ch)), 'worst_sign_changes_per_s': float(ch.max())}
+            if all('wire_stress_max_MPa' in r for r in sel):  # rows of an older sweep may not have it
+                st = np.array([r['wire_stress_max_MPa'] for r in sel])
+                row.update(median_wire_stress_max_MPa=float(np.median(st)), worst_wire_stress_max_MPa=float(st.max()))
+            if all('overload_s' in r for r in sel):
+                row['overloaded_loops'] = sum(r['overload_s'] > 0 for r in sel)
             if sel and all('reach_floor_pct' in r for r in sel):
                 ok = [r['max_error_pct'] for r in sel if r['reach_floor_pct'] < LIMIT_PCT]
                 row['reachable_loops'] = len(ok)
@@ -393,14 +398,21 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 def format_table(summary: Sequence[dict[str, Any]]) -> str:
     head = (f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"worst":>7} {"<15%":>6} '
-            f'{"flips/s":>8}')
+            f'{"flips/s":>8} {"MPa":>5}')
     lines = [head, '-' * len(head)]
     for s in summary:
+        mpa = s.get('worst_wire_stress_max_MPa')
         lines.append(f'{s["group"]:8} {s["controller"]:17} {s["loops"]:5d} {s["median_max_error_pct"]:6.2f}% '
                      f'{s["p95_max_error_pct"]:6.2f}% {s["worst_max_error_pct"]:6.2f}% '
-                     f'{100 * s["share_under_15_pct"]:5.0f}% {s["median_sign_changes_per_s"]:8.2f}')
+                     f'{100 * s["share_under_15_pct"]:5.0f}% {s["median_sign_changes_per_s"]:8.2f} '
+                     + ('    -' if mpa is None else f'{mpa:5.0f}'))
     lines.append('max error over the last reference cycle, % of the reference range (true angle); '
-                 'flips/s: median TEM command sign changes per second')
+                 'flips/s: median TEM command sign changes per second; MPa: the highest wire stress of any loop '
+                 '(docs/control.md "How hard the modes pull on the wires")')
+    over = [s for s in summary if s.get('overloaded_loops')]
+    if over:
+        lines.append('not physics: ' + ', '.join(f'{s["overloaded_loops"]} {s["group"]} {s["controller"]}' for s in over)
+                     + ' loop(s) held a wire at the wire model\'s load bound (overload_s in results.jsonl)')
     reach = [s for s in summary if 'reachable_loops' in s]
     if reach:
         lines += ['', 'plants whose reach floor is under 15 % (the rest: no controller can track the sine on them '

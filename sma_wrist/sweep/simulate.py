@@ -164,7 +164,13 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
     Metrics over the last ``window_s`` [s]; over the whole run, the plant's TEM faces: ``tem_face_max_C`` the
     hottest [degC], ``tem_face_outside_s`` the time any face of the wrist was outside the TEM's window
-    (``base.thermal.window_C``, 0-80 degC, as plant_sim's ``tem_faces`` diagnostic) [s], sampled at every tick. The laws are the nodes' defaults; ``tem_params``
+    (``base.thermal.window_C``, 0-80 degC, as plant_sim's ``tem_faces`` diagnostic) [s], sampled at every tick;
+    ``wire_stress_max_MPa`` the highest stress either wire of the wrist carried at a tick [MPa] (plant_sim's
+    ``/wrist/muscle_{1,2}/stress``; docs/control.md "How hard the modes pull on the wires"); ``overload_s`` the time
+    a wire's load was held at the wire model's bound (``MuscleGeometry.max_load_kgf``, plant_sim's ``wire_load``
+    diagnostic) [s]: there the loop has left the model and its figures are not physics; ``angle_step_max_rad`` the
+    largest change of the true angle over one tick [rad] (the built-in family's are 0.0055 at most: larger ones are
+    snap-throughs or a load solve at its bound). The laws are the nodes' defaults; ``tem_params``
     (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
     (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
     controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``).
@@ -256,6 +262,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     # the TEMs' faces as the plant has them (no node sees the exchanger faces): hottest, and time outside their
     # window, as plant_sim's tem_faces diagnostic judges it (docs/control.md "The TEMs' hot faces")
     face_max, face_outside = np.full(n, -np.inf), np.zeros(n)
+    stress_max = np.zeros(n)  # the wires' highest stress over the run [Pa]: what a co-contraction costs the wire
+    overload = np.zeros(n)  # time a wire's load was held at the wire model's bound [s]: no physics there
     t_last = 0.0
     tick_ns = int(round(TICK_S * 1e9))
     for k in range(k_total):
@@ -280,6 +288,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             if 'compensator' in true_temperature:
                 T_comp = T_true
         stress = wrists.wire_stress_Pa
+        np.maximum(stress_max, stress.max(axis=1), out=stress_max)
         q_rec[k], qm_rec[k] = s.q, q_m
         # plant_sim publishes t = 0 before the others subscribe: the TEM loop starts at the first tick
         u = tem.sample(t, T_tem, T_d) if k >= 1 else np.zeros((n, 2))
@@ -315,6 +324,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             T_d = T_new
         u_rec[k] = u
         wrists.advance(u, steps)
+        clamped = wrists.state.flags.get('overload')  # the phase-fraction wire has no bound
+        if clamped is not None:
+            overload += TICK_S * clamped
         faces = wrists.state.thermal
         face_max = np.maximum(face_max, faces.max(axis=(1, 2)))
         face_outside += TICK_S * out_of_window(base.thermal, faces).any(axis=(1, 2))
@@ -322,8 +334,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             on_tick(t)
     # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on
     rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:], window_s)
+    step_max = np.abs(np.diff(q_rec, axis=0)).max(axis=0)  # the largest true-angle step of a tick [rad]: snaps
     out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m,
-            'tem_face_max_C': float(face_max[j]), 'tem_face_outside_s': float(face_outside[j])}
+            'tem_face_max_C': float(face_max[j]), 'tem_face_outside_s': float(face_outside[j]),
+            'wire_stress_max_MPa': float(stress_max[j]) * 1e-6, 'overload_s': float(overload[j]),
+            'angle_step_max_rad': float(step_max[j])}
            for j, (c, m) in enumerate(zip(cases, rows))]
     trace = Trace(t_rec, qd_rec, q_rec, qm_rec, u_rec) if record else None
     return out, trace
