@@ -268,3 +268,23 @@ def test_force_activation_refused_when_real_rclpy_imported(monkeypatch):
     with pytest.raises(ActivationError, match='already imported'):
         runtime.activate(force=True)
     assert runtime.activate() is False
+
+
+def test_silenced_keeps_records_off_stderr_and_restores_the_stream(capsys):
+    """The project's tools that build nodes only for their parameters or their speed (sweep --params-file, the
+    sweep benchmark) print none of the nodes' lines; sinks (the bag's /rosout) still get them, and the stream comes
+    back as it was, also after an error inside."""
+    from sma_wrist.runtime.rclpy import logging as rlog
+    records = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: records.append(msg))
+    try:
+        with rlog.silenced():
+            rlog.get_logger('quiet').warning('inside')
+        with pytest.raises(RuntimeError), rlog.silenced():
+            raise RuntimeError('stop')
+        assert rlog.stream_output
+        rlog.get_logger('quiet').warning('after')
+    finally:
+        remove()
+    err = capsys.readouterr().err
+    assert records == ['inside', 'after'] and 'inside' not in err and 'after' in err

@@ -42,13 +42,16 @@ def bench_sweep(quick: bool = False, repeats: int | None = None) -> dict[str, An
     one = split_chunks(cases, chunk, 1)[0]
     chunks = split_chunks(cases, chunk, cores)
     cfg = SweepConfig(duration_s=duration)
+    from sma_wrist.runtime.rclpy import logging as rlog
     simulate(cases[:3], 1.0)  # numba cache load / compile outside the timing
-    for m in MODES:
-        run_closed_loop(m, 0.3, 0.5)
+    with rlog.silenced():  # the nodes' log lines are not the benchmark's output
+        for m in MODES:
+            run_closed_loop(m, 0.3, 0.5)
 
     def graph() -> None:
-        for m in MODES:  # one loop per mode on the graph
-            run_closed_loop(m, 0.3, duration)
+        with rlog.silenced():
+            for m in MODES:  # one loop per mode on the graph
+                run_closed_loop(m, 0.3, duration)
 
     load = [os.getloadavg()[0]]
     g_wall, g_cpu, s_wall, s_cpu, p_wall = [], [], [], [], []

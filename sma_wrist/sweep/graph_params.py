@@ -110,9 +110,7 @@ def _build_graph(params_files: Sequence[str | Path]) -> dict[str, _Built]:
     from sma_wrist.nodes.common import start_up_refusal
     from sma_wrist.runtime.rclpy import logging as rlog
     built: dict[str, _Built] = {}
-    # the nodes' start-up lines are not the sweep's; not --log-level, which sets the process's level for good
-    quiet, rlog.stream_output = rlog.stream_output, False
-    try:
+    with rlog.silenced():  # the nodes' start-up lines are not the sweep's
         with Runtime(ros_args(params_files), params={'/**': {'use_sim_time': True},
                                                      '/plant_sim': {'use_sim_time': False}}) as rt:
             for cls in graph_nodes('inverse_adaptive'):
@@ -126,8 +124,6 @@ def _build_graph(params_files: Sequence[str | Path]) -> dict[str, _Built]:
                         raise
                     raise ParameterError(why.removeprefix('error: ')) from None
                 built[node.get_name()] = _Built.of(node)
-    finally:
-        rlog.stream_output = quiet
     return built
 
 

@@ -10,9 +10,10 @@ time of 0, which on a virtual clock starting at 0 would swallow the first messag
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 from enum import IntEnum
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Iterator, Optional
 
 from .clock import Clock
 
@@ -34,6 +35,19 @@ _default_level = LoggingSeverity.INFO
 Sink = Callable[[LoggingSeverity, str, str, int], None]
 _sinks: list[Sink] = []
 stream_output = True  # print to stderr; tests/CLI may turn it off
+
+
+@contextlib.contextmanager
+def silenced() -> Iterator[None]:
+    """No record printed to stderr inside the block (sinks still get them), the previous setting after it: for the
+    project's own tools that build nodes for their parameters or their speed. Not --log-level, which would set
+    the process's level for good."""
+    global stream_output
+    before, stream_output = stream_output, False
+    try:
+        yield
+    finally:
+        stream_output = before
 
 
 def add_sink(sink: Sink) -> Callable[[], None]:
