@@ -409,3 +409,17 @@ def test_an_experiment_refuses_a_params_file_its_family_cannot_honour_before_any
     with pytest.raises(ParameterError, match='stress_source'):
         run_experiment(['pid'], [0.3], tmp_path / 'exp', duration_s=2.0, params_files=[str(paper)], family=1)
     assert not (tmp_path / 'exp').exists()
+
+
+def test_the_sweep_reads_a_tick_as_a_node_reads_its_header_stamp() -> None:
+    """core.stamps.stamp_seconds (the sweep's ticks, hysteresis_compensator's estimate) equals sec + 1e-9 nanosec of
+    the header a node receives (WristNode.stamp_s) for every stamp, and is not ns * 1e-9, which the laws'
+    differences would see in the last bits."""
+    from rclpy.time import Time
+
+    from sma_wrist.core.stamps import stamp_seconds
+    ns = np.random.default_rng(0).integers(0, 200 * 10**9, 2000).tolist() + [10**9, 126 * 10**9 + 10**7]
+    for n in ns:
+        st = Time(nanoseconds=n).to_msg()
+        assert stamp_seconds(n) == st.sec + 1e-9 * st.nanosec
+    assert sum(stamp_seconds(n) != n * 1e-9 for n in ns) > 100

@@ -39,6 +39,7 @@ from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.stamps import stamp_seconds
 from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.core.thermal.online import ThermalScaleEstimator
 from sma_wrist.core.thermal.params_file import load_thermal_file
@@ -283,8 +284,7 @@ class HysteresisCompensator(WristNode):
         that tick with the command it then sent); once ready and moved, the observer runs on it."""
         if self.estimator is None:
             return
-        last, self.est_last = self.est_last, (t_ns // 1_000_000_000 + 1e-9 * (t_ns % 1_000_000_000),
-                                              np.array(tick[:2], dtype=float))
+        last, self.est_last = self.est_last, (stamp_seconds(t_ns), np.array(tick[:2], dtype=float))
         if last is not None and self.estimator.sample(last[0], last[1][None], u) and self.estimator.ready:
             assert self.observer is not None
             self.observer.coef_rows = self.estimator.constants()

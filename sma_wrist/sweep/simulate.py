@@ -46,6 +46,7 @@ from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
 from sma_wrist.core.metrics import SEED_PERIOD_S
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.stamps import stamp_seconds
 from sma_wrist.core.thermal.heat_balance import ThermalParams, out_of_window
 from sma_wrist.core.thermal.online import OnlineThermalParams
 from sma_wrist.plants import make_plant
@@ -133,8 +134,7 @@ def loop_metrics(t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArr
 def _stamp_s(t: float) -> float:
     """Plant time [s] as the nodes see it: a header stamp (integer ns) read back as sec + 1e-9 nanosec.
     The laws' decisions on time differences (TEM range refresh every 0.1 s, dt) then match the graph's."""
-    ns = int(round(t * 1e9))
-    return ns // 1_000_000_000 + 1e-9 * (ns % 1_000_000_000)
+    return stamp_seconds(int(round(t * 1e9)))
 
 
 def check_true_temperature(consumers: Sequence[str]) -> None:
