@@ -26,9 +26,12 @@ import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:  # the sweep is imported where the family runs
+    from sma_wrist.sweep.graph_params import LoopSettings
 
 #: Table 6.2 of the seed: load (kg) -> (max % inverse, direct, PID; total % inverse, direct, PID).
 SEED_TABLE_6_2 = {
@@ -82,9 +85,10 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
     if not (isinstance(family, int) and family >= 0):
         from sma_wrist.core.errors import ParameterError
         raise ParameterError(f'family = {family!r}: the number of off-model plants must be an integer >= 0')
+    settings = None
     if family and params_files:  # the family honours the files too: what it cannot honour stops here, not after the runs
         from sma_wrist.sweep.graph_params import loop_settings
-        loop_settings(params_files)
+        settings = loop_settings(params_files)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     specs = [RunSpec(c, float(m), duration_s, str(out / f'{c}_{m:g}kg'), tuple(params_files))
@@ -111,7 +115,7 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
     table: dict[str, Any] = {'wall_s': wall, 'workers': workers, 'duration_s': duration_s, 'runs': rows}
     if family:
         table['family'] = run_family(controllers, payloads, duration_s, family, family_seed, out / 'family', log,
-                                     workers=workers, params_files=params_files)
+                                     workers=workers, params_files=params_files, settings=settings)
     (out / 'table.json').write_text(json.dumps(table, indent=2))
     if plots:
         write_plots(rows, out, series)
@@ -120,10 +124,13 @@ def run_experiment(controllers: Sequence[str], payloads: Sequence[float], out: s
 
 
 def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s: float, n_plants: int, seed: int,
-               out: Path, log: Any, workers: int = 1, params_files: Sequence[str] = ()) -> dict[str, Any]:
+               out: Path, log: Any, workers: int = 1, params_files: Sequence[str] = (),
+               settings: LoopSettings | None = None) -> dict[str, Any]:
     """Every controller x payload on ``n_plants`` sampled off-model plants (the sweep engine, the node
     laws as config/wrist.yaml and ``params_files`` set them): per (controller, payload) median / 95th
-    percentile / worst max error and the share under 15 %. ``workers``: local processes for the sweep's chunks."""
+    percentile / worst max error and the share under 15 %. ``workers``: local processes for the sweep's chunks;
+    ``settings``: ``params_files`` as :func:`~sma_wrist.sweep.graph_params.loop_settings` read them (None: read
+    them again)."""
     from sma_wrist.sweep.run import Progress, SweepConfig, error_stats, run_sweep
     cfg = SweepConfig(n_plants=n_plants, seed=seed, controllers=tuple(controllers),
                       payloads=tuple(float(m) for m in payloads), duration_s=duration_s, nominal=False,
@@ -131,7 +138,7 @@ def run_family(controllers: Sequence[str], payloads: Sequence[float], duration_s
     n_loops = n_plants * len(payloads) * len(controllers)
     log.write(f'off-model family: {n_plants} sampled plants x {len(payloads)} payloads x {len(controllers)} '
               f'controllers = {n_loops} loops (sma-wrist sweep engine)\n')
-    res = run_sweep(cfg, out, progress=Progress(n_loops, log), workers=workers)  # results.jsonl, sweep.json, table, PNGs
+    res = run_sweep(cfg, out, progress=Progress(n_loops, log), workers=workers, settings=settings)  # results.jsonl, sweep.json, table, PNGs
     cells = []
     for c in controllers:
         for m in payloads:

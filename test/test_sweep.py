@@ -411,6 +411,27 @@ def test_an_experiment_refuses_a_params_file_its_family_cannot_honour_before_any
     assert not (tmp_path / 'exp').exists()
 
 
+def test_an_experiment_reads_its_params_files_for_the_family_once(tmp_path: Path, monkeypatch) -> None:
+    """experiment --family N --params-file F checks F for the family before its runs and hands the family's sweep
+    what it read: the nodes are built once for F, not twice, and the family still runs with F."""
+    import io
+
+    import yaml
+
+    from sma_wrist.experiment import run_experiment
+    from sma_wrist.sweep import graph_params
+    f = tmp_path / 'tuned.yaml'
+    f.write_text(yaml.safe_dump({'tem_controller': {'ros__parameters': {'gain_per_s': 2.0}}}))
+    calls = []
+    real = graph_params.loop_settings
+    monkeypatch.setattr(graph_params, 'loop_settings', lambda *a, **k: calls.append(a) or real(*a, **k))
+    run_experiment(['pid'], [0.3], tmp_path / 'exp', duration_s=2.0, params_files=[str(f)], family=1, workers=1,
+                   plots=False, log=io.StringIO())
+    assert len(calls) == 1
+    data = json.loads((tmp_path / 'exp' / 'family' / 'sweep.json').read_text())
+    assert data['parameters_changed'] == {'tem_controller': {'gain_per_s': 2.0}}
+
+
 def test_the_sweep_reads_a_tick_as_a_node_reads_its_header_stamp() -> None:
     """core.stamps.stamp_seconds (the sweep's ticks, hysteresis_compensator's estimate) equals sec + 1e-9 nanosec of
     the header a node receives (WristNode.stamp_s) for every stamp, and is not ns * 1e-9, which the laws'

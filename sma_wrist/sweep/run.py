@@ -19,7 +19,7 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -28,6 +28,9 @@ from sma_wrist.core.errors import ParameterError, SmaWristError
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import BY_NAME, FAMILY, VALIDITY, Scenario, check_ranges, sample
 from sma_wrist.sweep.simulate import Case, simulate
+
+if TYPE_CHECKING:  # graph_params builds nodes: imported where it is used
+    from sma_wrist.sweep.graph_params import LoopSettings
 
 #: the seed's requirement and issue 14's targets over the family
 LIMIT_PCT = 15.0
@@ -183,18 +186,24 @@ def split_chunks(cases: Sequence[Case], chunk: int, workers: int = 1) -> list[li
 
 
 def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: str | None = None,
-              progress: Callable[[float], None] | None = None, workers: int = 1) -> SweepResult:
+              progress: Callable[[float], None] | None = None, workers: int = 1,
+              settings: LoopSettings | None = None) -> SweepResult:
     """Run the sweep (locally, or on the Dask cluster at ``scheduler``); Ctrl-C keeps finished chunks.
 
     ``workers`` > 1: the chunks run in that many local processes (0: one per available core), as
-    :func:`split_chunks` cuts them (on Dask: chunks of ``cfg.chunk`` loops)."""
+    :func:`split_chunks` cuts them (on Dask: chunks of ``cfg.chunk`` loops). ``settings``: what
+    :func:`~sma_wrist.sweep.graph_params.loop_settings` already read from ``cfg.params_files`` for ``cfg.plant``
+    (a caller that checked the files first, ``experiment --family``; None: read them here)."""
     if not (isinstance(workers, int) and workers >= 0):
         raise ParameterError(f'workers = {workers!r} must be an integer >= 0 (0: one per available core)')
     workers = workers or available_cores()
-    settings, kwargs = None, {}  # kwargs: simulate's, for the graph's parameters
-    if cfg.params_files:  # before any loop runs: a parameter the sweep cannot honour stops it here
+    kwargs: dict[str, Any] = {}  # simulate's, for the graph's parameters
+    if not cfg.params_files:
+        settings = None
+    elif settings is None:  # before any loop runs: a parameter the sweep cannot honour stops it here
         from sma_wrist.sweep.graph_params import loop_settings
         settings = loop_settings(cfg.params_files, cfg.plant)
+    if settings is not None:
         kwargs = settings.kwargs
     cases = make_cases(cfg)
     chunks = split_chunks(cases, cfg.chunk, 1 if scheduler else workers)
