@@ -153,6 +153,10 @@ def cmd_experiment(a: argparse.Namespace) -> int:
 def cmd_compare(a: argparse.Namespace) -> int:
     from sma_wrist.runs import compare_runs
     rows = compare_runs(a.bags, a.plot)
+    for r in rows:  # a truncated bag's metrics cover only what was recorded before the cut
+        if r['damaged']:
+            print(f'warning: {r["bag"]}: {r["damaged"]}; its metrics cover only the {r["duration_s"]:.1f} s read',
+                  file=sys.stderr)
     if a.json:
         print(json.dumps(rows, indent=2))
         return 0
