@@ -280,7 +280,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'error: {e}', file=sys.stderr)
         return 2
     except FileExistsError as e:
-        print(f'error: {e.filename or e} already exists; choose a new --bag directory', file=sys.stderr)
+        # a run's bag directory, or an output folder (identify/experiment --out) that is a file: only
+        # run has a --bag to choose again
+        hint = '; choose a new --bag directory' if getattr(a, 'command', None) == 'run' else ''
+        print(f'error: {e.filename or e} already exists{hint}', file=sys.stderr)
         return 2
     except OSError as e:
         if e.filename is None:  # not a path the user named: a defect, keep its traceback

@@ -158,6 +158,16 @@ def test_an_output_path_that_cannot_be_made_is_a_clear_error(tmp_path) -> None:
         assert 'Traceback' not in p.stderr
 
 
+def test_an_output_folder_that_is_a_file_is_named_without_the_run_only_bag_hint(tmp_path, capsys) -> None:
+    """experiment --out FILE told the user to 'choose a new --bag directory', an option it does not have."""
+    from sma_wrist.cli import main
+    f = tmp_path / 'file'
+    f.write_text('')
+    assert main(['experiment', '--duration', '0.5', '--payloads', '0.3', '--family', '0', '--out', str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err == f'error: {f} already exists\n'
+
+
 def test_an_os_error_without_a_path_keeps_its_traceback(monkeypatch) -> None:
     """main turns a user's unusable path into one line; an OSError that names no path is a defect, not hidden."""
     import argparse
