@@ -12,7 +12,7 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import diagnose_arguments, emulator_arguments, sweep_arguments
+from sma_wrist.cli_options import diagnose_arguments, emulator_arguments, nonnegative_int, sweep_arguments
 from sma_wrist.core.errors import SmaWristError
 
 
@@ -23,16 +23,6 @@ def _positive_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f'{text!r} must be a finite number > 0')
-    return v
-
-
-def _nonnegative_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f'{text!r} must be >= 0')
     return v
 
 
@@ -163,6 +153,10 @@ def cmd_experiment(a: argparse.Namespace) -> int:
 def cmd_compare(a: argparse.Namespace) -> int:
     from sma_wrist.runs import compare_runs
     rows = compare_runs(a.bags, a.plot)
+    for r in rows:  # a truncated bag's metrics cover only what was recorded before the cut
+        if r['damaged']:
+            print(f'warning: {r["bag"]}: {r["damaged"]}; its metrics cover only the {r["duration_s"]:.1f} s read',
+                  file=sys.stderr)
     if a.json:
         print(json.dumps(rows, indent=2))
         return 0
@@ -231,14 +225,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument('--payloads', type=_csv(_payload), default=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], help='kg, comma separated')
     e.add_argument('--out', default='runs/ch6')
     e.add_argument('--duration', type=_positive_float, default=4 * math.pi / 0.1, help='s (default two periods)')
-    e.add_argument('--workers', type=int, default=None, help='parallel processes (default: CPU count)')
+    e.add_argument('--workers', type=nonnegative_int, default=None,
+                   help='parallel processes (default and 0: CPU count)')
     e.add_argument('--params-file', action='append', help='params file for every run (e.g. config/paper_table_6_1.yaml)')
     e.add_argument('--no-plots', action='store_true')
     e.add_argument('--json', action='store_true')
-    e.add_argument('--family', type=_nonnegative_int, default=8,
+    e.add_argument('--family', type=nonnegative_int, default=8,
                    help='also run every controller x payload on this many sampled off-model plants (the sweep '
                         'engine) and report them beside the nominal figures (0: none; default 8)')
-    e.add_argument('--family-seed', type=int, default=1, help='seed of the sampled plants (default 1)')
+    e.add_argument('--family-seed', type=nonnegative_int, default=1, help='seed of the sampled plants (default 1)')
     e.set_defaults(func=cmd_experiment)
 
     c = sub.add_parser('compare', help='tracking metrics of recorded runs (sim or hardware), aligned on time')
@@ -285,7 +280,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f'error: {e}', file=sys.stderr)
         return 2
     except FileExistsError as e:
-        print(f'error: {e.filename or e} already exists; choose a new --bag directory', file=sys.stderr)
+        # a run's bag directory, or an output folder (identify/experiment --out) that is a file: only
+        # run has a --bag to choose again
+        hint = '; choose a new --bag directory' if getattr(a, 'command', None) == 'run' else ''
+        print(f'error: {e.filename or e} already exists{hint}', file=sys.stderr)
         return 2
     except OSError as e:
         if e.filename is None:  # not a path the user named: a defect, keep its traceback

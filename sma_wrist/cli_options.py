@@ -9,6 +9,17 @@ from __future__ import annotations
 import argparse
 
 
+def nonnegative_int(text: str) -> int:
+    """An integer >= 0: seeds (numpy's SeedSequence raises on a negative one, deep in a run) and counts."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not an integer') from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f'{text!r} must be >= 0')
+    return v
+
+
 def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The ``diagnose`` options (shared by ``sma-wrist diagnose`` and ``python -m sma_wrist.diagnose``)."""
     ap.add_argument('bag', help='rosbag2 directory (or .mcap) recorded per msg_defs/topics.yaml')
@@ -30,7 +41,7 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--noise-counts', type=float, default=2.0, help='ADC noise, std dev [counts] (default 2)')
     ap.add_argument('--latency-ms', type=float, default=1.0, help='command -> drive delay, device time [ms]')
     ap.add_argument('--watchdog-s', type=float, default=0.5, help='zero drive without commands [device s]')
-    ap.add_argument('--seed', type=int, default=0)
+    ap.add_argument('--seed', type=nonnegative_int, default=0)
     ap.add_argument('--thermocouple-offsets-C', default='0,0,0,0',
                     help='sensor errors of muscle 1, muscle 2, TEM face 1, TEM face 2 [degC]')
     ap.add_argument('--garbage-rate', type=float, default=0.0, help='probability of garbage before a line')
@@ -45,7 +56,7 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
 def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """Options of ``sma-wrist sweep`` (docs/sweep.md)."""
     p.add_argument('--plants', type=int, default=20, help='number of sampled plants N (default 20)')
-    p.add_argument('--seed', type=int, default=0, help='seed of the plant sample and the sensor noise (default 0)')
+    p.add_argument('--seed', type=nonnegative_int, default=0, help='seed of the plant sample and the sensor noise (default 0)')
     p.add_argument('--controllers', default='inverse_adaptive,direct_adaptive,pid', help='comma separated')
     p.add_argument('--payloads', default=None,
                    help='kg, comma separated: every plant at each (default: each plant\'s sampled 0.1-0.6 kg)')

@@ -118,7 +118,9 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
                  delivery=delivery) as rt:
         if bag is not None:
             rec = rt.record(bag, topics)
-        rt.add_nodes(nodes)
+        from sma_wrist.nodes.common import add_or_refuse
+        for cls in nodes:  # a value a node refuses (a params file's): its reason, not rclpy's traceback
+            add_or_refuse(rt, cls)
         chunk = max(duration_s / 100.0, 0.01)
         t = 0.0
         stall = _Stall(rt, DEVICE_STALL_S) if hardware else None

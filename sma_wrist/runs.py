@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.bag import BagData, BagError, read_bag
+from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.metrics import SEED_PERIOD_S, TrackingMetrics, tracking_metrics
 
 FloatArray = NDArray[np.float64]
@@ -34,6 +35,7 @@ class RunData:
     command_t: FloatArray  # s, receive times of TEM commands
     command_V: FloatArray  # (K_c, 2)
     payload_kg: float | None
+    damage: str = ''  # what read_bag found wrong with a truncated / corrupt bag read up to its cut ('' intact)
 
 
 def _stamp(msg: Any) -> float:
@@ -48,8 +50,14 @@ def _series(data: BagData, topic: str) -> list[tuple[int, Any]]:
 
 
 def load_run(path: str | Path) -> RunData:
-    """Read a run bag; BagError names what is missing. A truncated bag is read up to its cut."""
-    data = read_bag(path, TOPICS, salvage=True)
+    """Read a run bag; BagError names what is missing. A truncated bag is read up to its cut and
+    ``damage`` says so: its metrics cover only part of the run, which compare must not hide."""
+    try:
+        data, damage = read_bag(path, TOPICS), ''
+    except BagError as exc:
+        if not exc.salvaged:  # nothing of the run could be read: the bag's own problem is the reason
+            raise
+        data, damage = exc.salvaged, exc.problem
     js = _series(data, '/wrist/joint_states')
     ref = _series(data, '/wrist/reference')
     if not js or not ref:
@@ -80,7 +88,8 @@ def load_run(path: str | Path) -> RunData:
     command_t = np.array([ns * 1e-9 for ns, _ in cmd[0][:n]])
     command_V = np.array([[cmd[0][k][1].data, cmd[1][k][1].data] for k in range(n)]).reshape(n, 2)
     pay = _series(data, '/wrist/payload')
-    return RunData(str(path), t, q, q_d, temps, command_t, command_V, float(pay[-1][1].data) if pay else None)
+    return RunData(str(path), t, q, q_d, temps, command_t, command_V, float(pay[-1][1].data) if pay else None,
+                   damage)
 
 
 def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]:
@@ -146,9 +155,14 @@ def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: s
 
 
 def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> list[dict[str, Any]]:
-    """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot."""
+    """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot.
+
+    A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one).
+    """
+    if plot is not None and Path(plot).is_dir():  # savefig would write <folder>.png beside it, silently
+        raise SmaWristError(f'--plot {plot} is a folder; give the PNG file to write, e.g. {Path(plot) / "compare.png"}')
     runs = [load_run(p) for p in paths]
-    rows = [{'bag': str(p), **run_metrics(r)} for p, r in zip(paths, runs)]
+    rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None} for p, r in zip(paths, runs)]
     if plot is not None:
         plot_runs(runs, [Path(p).name for p in paths], plot, 'compare')
     return rows

@@ -2,6 +2,8 @@
 byte-identical determinism, interrupted runs, truncated files."""
 from __future__ import annotations
 
+import json
+
 import pytest
 import yaml
 
@@ -302,3 +304,23 @@ def test_one_pass_reader_checks_counts_against_metadata(tmp_path):
     meta.write_text(yaml.safe_dump(doc))
     with pytest.raises(BagError, match='metadata|messages'):
         read_bag(bag)
+
+
+def test_compare_says_a_bag_is_truncated_and_refuses_a_folder_as_plot(tmp_path, capsys):
+    """compare read a truncated bag up to its cut and printed its metrics as if it were the whole run;
+    --plot DIR wrote DIR.png beside the folder. Now a warning naming the damage, and an error."""
+    from sma_wrist.cli import main
+    bag = tmp_path / 'run'
+    assert main(['run', '--duration', '2', '--bag', str(bag), '--quiet']) == 0
+    mcap_file = next(bag.glob('*.mcap'))
+    raw = mcap_file.read_bytes()
+    mcap_file.write_bytes(raw[: len(raw) // 2])
+    capsys.readouterr()
+    assert main(['compare', str(bag)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(f'warning: {bag}: ') and 'truncated' in err and 'its metrics cover only the' in err, err
+    assert main(['compare', str(bag), '--json']) == 0
+    assert 'truncated' in json.loads(capsys.readouterr().out)[0]['damaged']
+    assert main(['compare', str(bag), '--plot', str(tmp_path)]) == 2
+    assert capsys.readouterr().err.startswith(f'error: --plot {tmp_path} is a folder')
+    assert not tmp_path.with_suffix('.png').exists()

@@ -323,6 +323,19 @@ def test_malformed_parameter_updates_rejected_node_keeps_running(emulator, graph
     assert probe.got['/wrist/payload'][-1].data == 0.5
 
 
+def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
+    """--port at an existing regular file: os.replace deleted the file (it became the pty link and was
+    removed on exit). Refused with exit 2 and the file kept; a folder that does not exist is named too."""
+    from sma_wrist.cli import main
+    f = tmp_path / 'notes.txt'
+    f.write_text('keep me')
+    assert main(['emulate-device', '--port', str(f), '--duration', '0.1']) == 2
+    assert f.read_text() == 'keep me' and not f.is_symlink()
+    assert capsys.readouterr().out.startswith(f'error: --port {f} exists and is not a symlink')
+    assert main(['emulate-device', '--port', str(tmp_path / 'no' / 'dev'), '--duration', '0.1']) == 2
+    assert f'the folder {tmp_path / "no"} does not exist' in capsys.readouterr().out
+
+
 def test_cli_emulator_on_a_pty(tmp_path):
     import serial
     link = str(tmp_path / 'dev')

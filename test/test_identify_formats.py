@@ -220,6 +220,20 @@ def test_malformed_files_are_json_errors_naming_file_and_need(tmp_path: Path, ca
     assert doc['error'].startswith(str(f)) and needed in doc['error'], doc['error']
 
 
+@pytest.mark.parametrize('option, value, needed', [
+    ('--length-mm', '-1', '--length-mm -1.0 must be a finite number > 0'),  # flipped every strain, fitted anyway
+    ('--wire-diameter-mm', 'nan', '--wire-diameter-mm nan must be a finite number > 0'),  # the fit never ended
+    ('--stress-mpa', 'inf', '--stress-mpa inf must be a finite number'),
+])
+def test_non_finite_or_negative_scale_options_are_json_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                              option: str, value: str, needed: str) -> None:
+    flex = DATA / 'flexinol'
+    code = cli_main(['identify', 'hysteresis', str(flex / '50MPa.txt'), str(flex / '100MPa.txt'),
+                     str(flex / '200MPa.txt'), option, value, '--json', '--no-plots', '--no-loo', '--out', str(tmp_path)])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 2 and doc == {'error': needed}
+
+
 def test_temperature_dropouts_are_dropped_and_counted_not_read(tmp_path: Path, loop: np.ndarray) -> None:
     """A logger that drops to 0 for a few samples: dropped and counted, and a kelvin file stays in kelvin."""
     m = read_measurement(NITIPD, Units(length_mm=200.0))  # the real export: its chamber channel reads 0.00 at times

@@ -103,6 +103,21 @@ def test_bad_startup_parameters_exit_2_with_the_reason_not_a_traceback(capsys, a
     assert out.startswith('error: ') and message in out and 'Traceback' not in out
 
 
+@pytest.mark.parametrize('value, message', [
+    ('.nan', 'invalid parameter dt_s'),  # outside the descriptor's range
+    ('"fast"', "Trying to set parameter 'dt_s' to 'fast'"),  # a string for a double
+])
+def test_sma_wrist_run_refuses_a_bad_params_file_value_with_the_reason_not_a_traceback(tmp_path, capsys, value,
+                                                                                       message):
+    """sma-wrist run builds the nodes in-process: rclpy's refusal must reach the user as ros2 run's one line."""
+    from sma_wrist.cli import main
+    f = tmp_path / 'bad.yaml'
+    f.write_text(f'plant_sim:\n  ros__parameters:\n    dt_s: {value}\n')
+    assert main(['run', '--duration', '1', '--quiet', '--params-file', str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith('error: PlantSim: ') and message in err and err.count('\n') == 1, err
+
+
 def test_clock_owner_refuses_use_sim_time_at_run_time(probe_factory):
     from rclpy.parameter import Parameter
 

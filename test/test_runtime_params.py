@@ -199,3 +199,17 @@ def test_bad_argument_is_a_typed_error(ros):
     from sma_wrist.runtime.errors import ArgumentError
     with pytest.raises(ArgumentError):
         rclpy.init(args=['--ros-args', '--bogus'])
+
+
+@pytest.mark.parametrize('content, message', [
+    (b'\xff\xfe\x00garbage\x80: 1\n', 'not a UTF-8 text file'),  # a binary file named .yaml
+    (b'a: [unclosed\n', "invalid YAML: expected ',' or ']'"),
+])
+def test_unreadable_params_file_is_one_line_error_naming_it(tmp_path, capsys, content, message):
+    """sma-wrist run --params-file: a binary or malformed file is `error: FILE: ...` on one line, exit 2."""
+    from sma_wrist.cli import main
+    f = tmp_path / 'params.yaml'
+    f.write_bytes(content)
+    assert main(['run', '--duration', '1', '--quiet', '--params-file', str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f'error: {f}: ') and message in err and err.count('\n') == 1, err

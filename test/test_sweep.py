@@ -132,6 +132,17 @@ def test_cli_reports_bad_input_without_traceback() -> None:
         assert p.returncode == 2 and text in p.stderr and 'Traceback' not in p.stderr
 
 
+@pytest.mark.parametrize('argv', [['sweep', '--seed', '-1'], ['experiment', '--family-seed', '-1'],
+                                  ['experiment', '--workers', '-3'], ['emulate-device', '--seed', '-1']])
+def test_negative_seeds_and_worker_counts_are_refused_by_the_parser(argv, capsys) -> None:
+    """A negative seed reached numpy's SeedSequence (ValueError traceback after the set-up), a negative
+    --workers the process pool; both are usage errors naming the option, exit 2, before anything runs."""
+    from sma_wrist.cli import build_parser
+    with pytest.raises(SystemExit) as e:
+        build_parser().parse_args(argv)
+    assert e.value.code == 2 and f'argument {argv[1]}: {argv[2]!r} must be >= 0' in capsys.readouterr().err
+
+
 def test_an_output_path_that_cannot_be_made_is_a_clear_error(tmp_path) -> None:
     """sweep --out, run --bag, experiment --out under a regular file: the path and the reason, exit 2, before
     any loop runs (a traceback from mkdir before)."""
@@ -145,6 +156,16 @@ def test_an_output_path_that_cannot_be_made_is_a_clear_error(tmp_path) -> None:
                            env={**os.environ, 'PYTHONPATH': os.getcwd()}, timeout=120)
         assert p.returncode == 2 and f'error: cannot use {under_file}' in p.stderr, (args, p.stderr[-500:])
         assert 'Traceback' not in p.stderr
+
+
+def test_an_output_folder_that_is_a_file_is_named_without_the_run_only_bag_hint(tmp_path, capsys) -> None:
+    """experiment --out FILE told the user to 'choose a new --bag directory', an option it does not have."""
+    from sma_wrist.cli import main
+    f = tmp_path / 'file'
+    f.write_text('')
+    assert main(['experiment', '--duration', '0.5', '--payloads', '0.3', '--family', '0', '--out', str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err == f'error: {f} already exists\n'
 
 
 def test_an_os_error_without_a_path_keeps_its_traceback(monkeypatch) -> None:

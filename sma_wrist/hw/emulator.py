@@ -28,6 +28,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from sma_wrist.cli_options import emulator_arguments as add_arguments
+from sma_wrist.core.errors import SmaWristError
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration, quantise
 
@@ -106,7 +107,18 @@ class DeviceEmulator:
 
     # ------------------------------------------------------------------ pty
     def open(self) -> str:
-        """Open a new pty (raw, non-blocking master); link it at ``self.link``; return the slave path."""
+        """Open a new pty (raw, non-blocking master); link it at ``self.link``; return the slave path.
+
+        The link replaces only an earlier symlink (a previous emulator's): a regular file or a device
+        at ``--port`` is the user's, and os.replace would have deleted it (SmaWristError instead).
+        """
+        if self.link:
+            folder = os.path.dirname(os.path.abspath(self.link))
+            if not os.path.isdir(folder):
+                raise SmaWristError(f'--port {self.link}: the folder {folder} does not exist')
+            if os.path.lexists(self.link) and not os.path.islink(self.link):
+                raise SmaWristError(f'--port {self.link} exists and is not a symlink (a file, folder or device); '
+                                    'refusing to replace it: give a new path')
         master, slave = os.openpty()
         tty.setraw(slave)
         os.set_blocking(master, False)
@@ -353,7 +365,11 @@ def run_from_args(a: argparse.Namespace) -> int:
         print(f'error: {e}', flush=True)
         return 2
     emu = DeviceEmulator(cfg, link=a.port)
-    path = emu.open()
+    try:
+        path = emu.open()
+    except SmaWristError as e:
+        print(f'error: {e}', flush=True)
+        return 2
     print(f'emulated wrist on {emu.slave_path}' + (f' (linked at {a.port})' if a.port else '')
           + f', {cfg.rate_hz:g} Hz, time x{cfg.time_scale:g}', flush=True)
     print(path, flush=True)

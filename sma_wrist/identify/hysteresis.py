@@ -95,6 +95,22 @@ def choose_edges(loads_kgf: Any) -> Any:
     return np.array([u[0], u[-1]])
 
 
+def check_numbers(o: Options) -> None:
+    """IdentifyInputError for a non-finite number option, or a length or diameter <= 0.
+
+    They scale every strain or stress of the files: --length-mm -1 flipped the strains and fitted
+    a wrong model without a word, --wire-diameter-mm nan made every stress NaN and the fit never
+    ended.
+    """
+    import math
+
+    from sma_wrist.identify.io import IdentifyInputError
+    for flag, v, positive in (('--length-mm', o.length_mm, True), ('--wire-diameter-mm', o.wire_diameter_mm, True),
+                              ('--stress-mpa', o.stress_mpa, False)):
+        if v is not None and not (math.isfinite(v) and (v > 0 or not positive)):
+            raise IdentifyInputError(f'{flag} {v!r} must be a finite number' + (' > 0' if positive else ''))
+
+
 def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     """The whole identification; returns the JSON document (see docs/identification.md)."""
     import dataclasses
@@ -110,6 +126,7 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     from sma_wrist.identify.segment import loops_of
 
     t0 = time.perf_counter()
+    check_numbers(o)
     units = Units(o.temperature_unit, o.strain_unit, o.stress_unit, o.length_mm, o.wire_diameter_mm)
     warnings: list[str] = []
     cleaning: dict[str, dict[str, int]] = {}

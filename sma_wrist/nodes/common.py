@@ -372,6 +372,26 @@ def start_up_refusal(e: BaseException, node_class: type) -> str | None:
     return None
 
 
+def add_or_refuse(rt: Any, node_class: type) -> Any:
+    """``rt.add(node_class)`` on an embedded Runtime; a refusal to start is a ParameterError with its one-line reason.
+
+    The in-process tools (``sma-wrist run``, ``experiment``, ``sweep``) build the nodes the way
+    ``ros2 run`` does; an override rclpy refuses in declare_parameter (out of its range, wrong
+    type) must reach the user as that reason, not as a traceback. A ParameterError (unlike
+    rclpy's exceptions) also pickles, so it crosses experiment's process pool intact.
+    """
+    from sma_wrist.core.errors import ParameterError
+    try:
+        return rt.add(node_class)
+    except ParameterError:
+        raise
+    except Exception as e:  # noqa: BLE001 - start_up_refusal says which ones are the node's refusal
+        why = start_up_refusal(e, node_class)
+        if why is None:
+            raise
+        raise ParameterError(why.removeprefix('error: ')) from None
+
+
 def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     """ros2/demos-style main: init, spin, clean shutdown; errors reported, not tracebacks.
 
@@ -402,4 +422,5 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     return 0
 
 
-__all__ = ['Param', 'WristNode', 'Freshness', 'finite', 'main_for', 'message_class', 'qos_for', 'start_up_refusal']
+__all__ = ['Param', 'WristNode', 'Freshness', 'add_or_refuse', 'finite', 'main_for', 'message_class', 'qos_for',
+           'start_up_refusal']

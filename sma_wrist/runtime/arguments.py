@@ -69,6 +69,16 @@ def _construct_str(loader: _RclLoader, node: yaml.ScalarNode) -> Any:
 _RclLoader.add_constructor('tag:yaml.org,2002:str', _construct_str)
 
 
+def yaml_problem(exc: yaml.YAMLError) -> str:
+    """PyYAML's error in one line: the problem and where (its message spans several lines
+    with a copy of the offending text, which a CLI's one-line ``error:`` cannot hold)."""
+    problem = getattr(exc, 'problem', None)
+    mark = getattr(exc, 'problem_mark', None)
+    if not problem:
+        return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    return problem + (f' at line {mark.line + 1}, column {mark.column + 1}' if mark is not None else '')
+
+
 def load_yaml(text: str) -> Any:
     return yaml.load(text, Loader=_RclLoader)  # noqa: S506 - SafeLoader subclass
 
@@ -126,13 +136,16 @@ def load_params_file(path: str | Path) -> list[ParamRule]:
     p = Path(path)
     where = str(p)
     try:
-        text = p.read_text()
+        text = p.read_text(encoding='utf-8')
     except OSError as exc:
         raise ArgumentError(f'cannot read params file: {exc.strerror}', where) from None
+    except UnicodeDecodeError as exc:  # a binary file or another encoding: rcl reads UTF-8 YAML only
+        raise ArgumentError(f'not a UTF-8 text file (byte {exc.start}: {exc.reason}); '
+                            'a params file is YAML text', where) from None
     try:
         doc = load_yaml(text)
     except yaml.YAMLError as exc:
-        raise ArgumentError(f'invalid YAML: {exc}', where) from None
+        raise ArgumentError(f'invalid YAML: {yaml_problem(exc)}', where) from None
     return params_from_tree(doc, where)
 
 

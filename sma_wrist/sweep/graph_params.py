@@ -107,22 +107,14 @@ def _build_graph(params_files: Sequence[str | Path]) -> dict[str, _Built]:
     for f in params_files:
         if not Path(f).is_file():
             raise ParameterError(f'params file {f}: no such file')
-    from sma_wrist.nodes.common import start_up_refusal
+    from sma_wrist.nodes.common import add_or_refuse
     from sma_wrist.runtime.rclpy import logging as rlog
     built: dict[str, _Built] = {}
     with rlog.silenced():  # the nodes' start-up lines are not the sweep's
         with Runtime(ros_args(params_files), params={'/**': {'use_sim_time': True},
                                                      '/plant_sim': {'use_sim_time': False}}) as rt:
             for cls in graph_nodes('inverse_adaptive'):
-                try:
-                    node = rt.add(cls)
-                except ParameterError:
-                    raise
-                except Exception as e:  # a node's refusal (its values, a wrong type or range): ros2 run's reason
-                    why = start_up_refusal(e, cls)
-                    if why is None:
-                        raise
-                    raise ParameterError(why.removeprefix('error: ')) from None
+                node = add_or_refuse(rt, cls)  # a node's refusal (its values, a wrong type or range): ros2 run's reason
                 built[node.get_name()] = _Built.of(node)
     return built
 
