@@ -336,6 +336,21 @@ def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
     assert f'the folder {tmp_path / "no"} does not exist' in capsys.readouterr().out
 
 
+@pytest.mark.parametrize('args, named', [
+    (['--noise-counts', '-1'], '--noise-counts'), (['--latency-ms', 'inf'], '--latency-ms'),
+    (['--watchdog-s', 'nan'], '--watchdog-s'), (['--watchdog-s', '0'], '--watchdog-s'),
+    (['--garbage-rate', '2'], '--garbage-rate'), (['--checksum-error-rate', 'nan'], '--checksum-error-rate'),
+    (['--thermocouple-offsets-C', 'a,b,c,d'], '--thermocouple-offsets-C'),
+])
+def test_emulator_refuses_a_fault_or_noise_option_it_cannot_be(tmp_path, capsys, args, named):
+    """A NaN or negative noise, latency or watchdog, or a fault rate outside [0, 1], made a device without that
+    behaviour in silence (a NaN watchdog never fires); now exit 2 naming the option, before any pty is made."""
+    from sma_wrist.cli import main
+    link = tmp_path / 'dev'
+    assert main(['emulate-device', '--port', str(link), '--duration', '0.1', *args]) == 2
+    assert capsys.readouterr().out.startswith(f'error: {named}') and not os.path.lexists(link)
+
+
 def test_cli_emulator_on_a_pty(tmp_path):
     import serial
     link = str(tmp_path / 'dev')

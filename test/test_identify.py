@@ -117,6 +117,9 @@ def test_hysteresis_file_errors_name_the_file_and_key(tmp_path: Path) -> None:
     f.write_text('format: other\n')
     with pytest.raises(ParameterError, match=str(f)):
         load_hysteresis(f)
+    f.write_bytes(b'\x89HDF\r\n\x1a\n\xff\xfe' * 8)  # a binary file given by mistake: named, not a traceback
+    with pytest.raises(ParameterError, match='not a UTF-8 text file'):
+        load_hysteresis(f)
 
 
 # ----------------------------------------------------------------------------- real data

@@ -127,10 +127,13 @@ def test_thermal_file_round_trip_and_hold_limits(tmp_path: Path) -> None:
     ('format: other\nversion: 1\n', 'not a thermal file'),
     ('format: sma_wrist/thermal\nversion: 7\n', 'version 7'),
     ('format: sma_wrist/thermal\nversion: 1\nmuscle_fase: {}\n', 'unknown key'),
+    (b'\x89HDF\r\n\x1a\n\xff\xfe' * 8, 'not a UTF-8 text'),
 ])
-def test_thermal_file_errors_name_the_file(tmp_path: Path, text: str | None, match: str) -> None:
+def test_thermal_file_errors_name_the_file(tmp_path: Path, text: str | bytes | None, match: str) -> None:
     f = tmp_path / 'thermal.yaml'
-    if text is not None:
+    if isinstance(text, bytes):
+        f.write_bytes(text)
+    elif text is not None:
         f.write_text(text)
     with pytest.raises(ParameterError, match=match) as e:
         load_thermal_file(f)

@@ -16,6 +16,7 @@ boots again on a new pty at the same link), freezes (no samples), forced ADC cou
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import threading
@@ -342,11 +343,28 @@ class DeviceEmulator:
 
 # --------------------------------------------------------------------------- command line
 def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
-    offsets = tuple(float(x) for x in a.thermocouple_offsets_C.split(','))
-    if len(offsets) != 4:
-        raise ValueError('--thermocouple-offsets-C needs 4 comma-separated values')
+    """The device's configuration from the command line; ValueError naming the option for a value it cannot be."""
+    try:
+        offsets = tuple(float(x) for x in a.thermocouple_offsets_C.split(','))
+    except ValueError:
+        raise ValueError(f'--thermocouple-offsets-C {a.thermocouple_offsets_C!r}: 4 numbers [degC], comma separated') \
+            from None
+    if len(offsets) != 4 or not all(math.isfinite(o) for o in offsets):
+        raise ValueError('--thermocouple-offsets-C needs 4 finite comma-separated values')
     if not (a.rate_hz > 0 and a.time_scale > 0 and 0 <= a.payload_kg <= 1.5):
         raise ValueError('--rate-hz and --time-scale must be > 0, --payload-kg in [0, 1.5]')
+    # a NaN or negative value here did not fail: it made a device without noise, latency or watchdog in silence
+    if not (math.isfinite(a.watchdog_s) and a.watchdog_s > 0):
+        raise ValueError(f'--watchdog-s {a.watchdog_s!r} must be a finite number > 0')
+    for flag, v in (('--noise-counts', a.noise_counts), ('--latency-ms', a.latency_ms),
+                    ('--reset-every-s', a.reset_every_s), ('--unplug-every-s', a.unplug_every_s),
+                    ('--unplug-wall-s', a.unplug_wall_s)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f'{flag} {v!r} must be a finite number >= 0')
+    for flag, v in (('--garbage-rate', a.garbage_rate), ('--checksum-error-rate', a.checksum_error_rate),
+                    ('--partial-rate', a.partial_rate)):
+        if not 0 <= v <= 1:  # a probability per line (False for NaN)
+            raise ValueError(f'{flag} {v!r} must be a probability in [0, 1]')
     # the device's sensor error: it reads `offset` too high, i.e. counts of (T + offset)
     cal = Calibration(offsets_C=tuple(-o for o in offsets))  # type: ignore[arg-type]
     return EmulatorConfig(rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,

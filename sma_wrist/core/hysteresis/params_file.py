@@ -121,9 +121,12 @@ def load_hysteresis(path: str | Path) -> SDGPIParams:
 
     p = Path(path)
     try:
-        doc = yaml.safe_load(p.read_text())
+        doc = yaml.safe_load(p.read_text(encoding='utf-8'))
     except OSError as e:
         raise ParameterError(f'hysteresis_file {p}: cannot read it ({e.strerror or e})') from None
+    except UnicodeDecodeError as e:  # a binary file given by mistake (a bag, a .mat)
+        raise ParameterError(f'hysteresis_file {p}: not a UTF-8 text file (byte {e.start}: {e.reason}); '
+                             'write one with `sma-wrist identify hysteresis ... --out DIR`') from None
     except yaml.YAMLError as e:
         raise ParameterError(f'hysteresis_file {p}: not valid YAML ({str(e).splitlines()[0]})') from None
     return params_from_dict(doc, str(p))

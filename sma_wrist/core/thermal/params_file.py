@@ -80,9 +80,12 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
     import yaml
     p = Path(path)
     try:
-        data = yaml.safe_load(p.read_text())
+        data = yaml.safe_load(p.read_text(encoding='utf-8'))
     except OSError as e:
         raise ParameterError(f'{p}: cannot read the thermal file ({e.strerror or e}); write one with '
+                             '`sma-wrist identify thermal ... --out DIR`') from None
+    except UnicodeDecodeError as e:  # a binary file given by mistake
+        raise ParameterError(f'{p}: not a UTF-8 text thermal file (byte {e.start}: {e.reason}); write one with '
                              '`sma-wrist identify thermal ... --out DIR`') from None
     except yaml.YAMLError as e:
         raise ParameterError(f'{p}: not a YAML thermal file ({str(e).splitlines()[0]})') from None
