@@ -426,6 +426,7 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
         if fast is not None:
             return fast
         try:
+            _metadata(p)  # rosbags' own error for an empty file is a bare TypeError
             with Reader(p) as reader:
                 conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
                 rows = [(c.topic, c.msgtype, t, bytes(raw)) for c, t, raw in reader.messages(connections=conns)]
@@ -434,6 +435,8 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
                 problem = f'metadata.yaml lists {expected} messages but the storage holds {len(rows)}'
             else:
                 return select(_to_bagdata(rows))
+        except _NotMetadata as exc:
+            problem = str(exc)
         except Exception as exc:  # noqa: BLE001 - rosbags raises several error types
             problem = f'{type(exc).__name__}: {exc}'
     elif p.is_dir():
@@ -450,6 +453,19 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
     raise BagError(p, problem, select(data))
 
 
+class _NotMetadata(Exception):
+    """metadata.yaml is there but is not rosbag2's (empty, another document): said so, not as a TypeError."""
+
+
+def _metadata(p: Path) -> dict[str, Any]:
+    """The ``rosbag2_bagfile_information`` mapping of a bag directory's metadata.yaml."""
+    doc = yaml.safe_load((p / 'metadata.yaml').read_text())
+    meta = doc.get('rosbag2_bagfile_information') if isinstance(doc, dict) else None
+    if not isinstance(meta, dict):
+        raise _NotMetadata('metadata.yaml is empty or not rosbag2 metadata (no rosbag2_bagfile_information)')
+    return meta
+
+
 def bag_info(path: str | Path) -> BagInfo:
     """Topics, types, counts, start/end/duration of a bag (BagError if unreadable)."""
     from rosbags.rosbag2 import Reader
@@ -459,7 +475,7 @@ def bag_info(path: str | Path) -> BagInfo:
         data, problem = _salvage(p)
         raise BagError(p, problem or 'metadata.yaml is missing', data)
     try:
-        meta = yaml.safe_load((p / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        meta = _metadata(p)
         with Reader(p) as reader:
             info = BagInfo(path=str(p), version=int(meta['version']),
                            storage=str(meta['storage_identifier']),
@@ -477,4 +493,5 @@ def bag_info(path: str | Path) -> BagInfo:
         raise
     except Exception as exc:  # noqa: BLE001
         data, problem = _salvage(p)
-        raise BagError(p, f'{type(exc).__name__}: {exc}' + (f'; {problem}' if problem else ''), data) from None
+        why = str(exc) if isinstance(exc, _NotMetadata) else f'{type(exc).__name__}: {exc}'
+        raise BagError(p, why + (f'; {problem}' if problem else ''), data) from None

@@ -201,6 +201,21 @@ def test_unclosed_recording_is_salvageable(tmp_path):
     rec._writer.storage.bio.close()  # what the OS does with a killed process's file
 
 
+@pytest.mark.parametrize('meta', ['', '- a list\n', 'other: 1\n'])
+def test_a_metadata_file_that_is_not_rosbag2_is_named_and_the_messages_salvaged(tmp_path, meta):
+    """An empty (or foreign) metadata.yaml beside a good .mcap: read_bag and bag_info say what is wrong with it
+    (it was "TypeError: 'NoneType' object is not subscriptable") and keep every message."""
+    bag = tmp_path / 'run'
+    run_nodes([Plant, Controller], 1.0, params=PARAMS, bag=bag)
+    full = read_bag(bag)
+    (bag / 'metadata.yaml').write_text(meta)
+    for read in (read_bag, bag_info):
+        with pytest.raises(BagError, match='metadata.yaml is empty or not rosbag2 metadata') as err:
+            read(bag)
+        assert 'TypeError' not in str(err.value)
+    assert err.value.salvaged['/wrist/joint_states'][1] == full['/wrist/joint_states'][1]
+
+
 def test_missing_bag_and_garbage_are_typed_errors(tmp_path):
     with pytest.raises(BagError, match='does not exist'):
         read_bag(tmp_path / 'nope')
