@@ -164,7 +164,7 @@ def test_unusable_bag_names_what_is_needed(tmp_path, corrupt, needle):
         diagnose(tmp_path / 'b')
     r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'diagnose', str(tmp_path / 'b')],
                        capture_output=True, text=True, timeout=300)
-    assert r.returncode == 2 and needle in r.stderr and 'Traceback' not in r.stderr
+    assert r.returncode == 2 and r.stderr.startswith('error: ') and needle in r.stderr and 'Traceback' not in r.stderr
 
 
 def test_too_short_and_truncated_bags(tmp_path):

@@ -397,11 +397,11 @@ def run_cli(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps({'error': str(exc)}))
         else:
-            print(f'sma-wrist diagnose: {exc}', file=sys.stderr)
+            print(f'error: {exc}', file=sys.stderr)  # every sma-wrist command's one-line form
         return 2
     except Exception as exc:  # noqa: BLE001 - the command never shows a traceback
         msg = f'internal error {type(exc).__name__}: {exc} (please report with the bag)'
-        print(json.dumps({'error': msg}) if args.json else f'sma-wrist diagnose: {msg}', file=sys.stderr if not args.json else sys.stdout)
+        print(json.dumps({'error': msg}) if args.json else f'error: {msg}', file=sys.stderr if not args.json else sys.stdout)
         return 1
     if args.json:
         print(json.dumps(res.to_json()))
