@@ -117,6 +117,10 @@ def test_bad_input_gives_clear_errors() -> None:
         parse_perturbations(['stroke_scale=0.1:1.2'])
     with pytest.raises(ParameterError, match='controllers'):
         SweepConfig(controllers=('bang_bang',))
+    with pytest.raises(ParameterError, match=r'^controllers \(an empty name: a stray comma\?\): choose'):
+        SweepConfig(controllers=('pid', '', ''))  # --controllers pid,,
+    with pytest.raises(ParameterError, match='named twice'):
+        SweepConfig(controllers=('pid', 'pid'))
     with pytest.raises(ParameterError, match='no closed loops'):
         simulate([], 1.0)
     with pytest.raises(ParameterError, match='reach floor is computed on the project'):

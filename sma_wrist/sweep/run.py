@@ -62,9 +62,12 @@ class SweepConfig:
     def __post_init__(self) -> None:
         if not (isinstance(self.n_plants, int) and self.n_plants >= 1):
             raise ParameterError(f'number of plants N = {self.n_plants!r} must be an integer >= 1')
-        bad = [c for c in self.controllers if c not in MODES]
+        bad = list(dict.fromkeys(repr(c) if c else '(an empty name: a stray comma?)'
+                                 for c in self.controllers if c not in MODES))
         if bad or not self.controllers:
-            raise ParameterError(f'controllers {bad or "(none)"}: choose from {", ".join(MODES)}')
+            raise ParameterError(f'controllers {", ".join(bad) or "(none)"}: choose from {", ".join(MODES)}')
+        if len(set(self.controllers)) != len(self.controllers):  # each loop would run twice under one name
+            raise ParameterError(f'controllers {", ".join(self.controllers)}: a controller is named twice')
         if self.plant not in PLANTS:
             raise ParameterError(f'unknown plant {self.plant!r}; registered: {", ".join(sorted(PLANTS))}')
         if not (math.isfinite(self.duration_s) and self.duration_s >= 1.0):
