@@ -234,6 +234,26 @@ def test_non_finite_or_negative_scale_options_are_json_errors(tmp_path: Path, ca
     assert code == 2 and doc == {'error': needed}
 
 
+def test_an_out_that_is_a_file_is_refused_before_any_fit(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """identify hysteresis / thermal --out FILE failed only at the write, after the whole fit (~15 s)."""
+    from sma_wrist.core.hysteresis import identification as hid
+    from sma_wrist.core.thermal import identification as tid
+
+    def no_fit(*a: object, **k: object) -> None:
+        raise AssertionError('fitted before checking --out')
+    for mod, name in ((hid, 'fit_gpi'), (hid, 'fit_sdgpi'), (hid, 'fit_sdgpi_cc'), (tid, 'identify_thermal')):
+        monkeypatch.setattr(mod, name, no_fit)
+    f = tmp_path / 'report'
+    f.write_text('mine')
+    flex = DATA / 'flexinol'
+    for cmd in (['hysteresis', str(flex / '50MPa.txt'), str(flex / '100MPa.txt')], ['thermal', str(flex / '50MPa.txt')]):
+        assert cli_main(['identify', *cmd, '--json', '--out', str(f)]) == 2
+        assert json.loads(capsys.readouterr().out) == {'error': f'--out {f} is a file; give a folder for the report '
+                                                                 'and the params file'}
+    assert f.read_text() == 'mine'
+
+
 def test_temperature_dropouts_are_dropped_and_counted_not_read(tmp_path: Path, loop: np.ndarray) -> None:
     """A logger that drops to 0 for a few samples: dropped and counted, and a kelvin file stays in kelvin."""
     m = read_measurement(NITIPD, Units(length_mm=200.0))  # the real export: its chamber channel reads 0.00 at times

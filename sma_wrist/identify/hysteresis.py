@@ -120,13 +120,14 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     from sma_wrist.core.hysteresis.identification import (fit_gpi, fit_sdgpi, fit_sdgpi_cc, gpi_vector,
                                                           sdgpi_gpi_vectors, simulate_batch)
     from sma_wrist.core.hysteresis.params_file import hysteresis_params, save_hysteresis
-    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, expand_folders, load_kgf_to_stress,
-                                       read_measurement, stress_to_load_kgf)
+    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, check_output_folder, expand_folders,
+                                       load_kgf_to_stress, read_measurement, stress_to_load_kgf)
     from sma_wrist.identify.loops import errors_pct, slope, transitions
     from sma_wrist.identify.segment import loops_of
 
     t0 = time.perf_counter()
     check_numbers(o)
+    check_output_folder(o.out)
     units = Units(o.temperature_unit, o.strain_unit, o.stress_unit, o.length_mm, o.wire_diameter_mm)
     warnings: list[str] = []
     cleaning: dict[str, dict[str, int]] = {}

@@ -47,6 +47,12 @@ class IdentifyInputError(SmaWristError):
     """A measurement file cannot be used; the message names the file and what is needed."""
 
 
+def check_output_folder(out: str | None, flag: str = '--out') -> None:
+    """IdentifyInputError if ``out`` exists and is not a folder: found before the fit, not after it (~15 s)."""
+    if out and Path(out).exists() and not Path(out).is_dir():
+        raise IdentifyInputError(f'{flag} {out} is a file; give a folder for the report and the params file')
+
+
 def area_mm2(diameter_mm: float) -> float:
     return math.pi * diameter_mm ** 2 / 4.0
 
