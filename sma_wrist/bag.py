@@ -466,12 +466,33 @@ def _metadata(p: Path) -> dict[str, Any]:
     return meta
 
 
+def _bare_mcap_info(p: Path) -> BagInfo | None:
+    """bag_info of a bare, complete .mcap file (no rosbag2 metadata: ``version`` 0), as read_bag reads one;
+    None for anything else (a directory without metadata.yaml, a damaged file)."""
+    if not (p.is_file() and p.suffix == '.mcap'):
+        return None
+    rows, problem = salvage_mcap(p)
+    if problem:
+        return None
+    info = BagInfo(path=str(p), version=0, storage='mcap', message_count=len(rows))
+    for topic, msgtype, _, _ in rows:
+        prev = info.topics.get(topic)
+        info.topics[topic] = TopicSummary(msgtype, 1 + (prev.count if prev else 0))
+    if rows:
+        t = [r[2] for r in rows]
+        info.start_ns, info.end_ns = min(t), max(t)
+    return info
+
+
 def bag_info(path: str | Path) -> BagInfo:
     """Topics, types, counts, start/end/duration of a bag (BagError if unreadable)."""
     from rosbags.rosbag2 import Reader
 
     p = _bag_dir(path)
     if not (p.is_dir() and (p / 'metadata.yaml').exists()):
+        bare = _bare_mcap_info(p)
+        if bare is not None:
+            return bare
         data, problem = _salvage(p)
         raise BagError(p, problem or 'metadata.yaml is missing', data)
     try:

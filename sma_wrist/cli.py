@@ -104,7 +104,8 @@ def cmd_info(a: argparse.Namespace) -> int:
                           'topics': {k: {'type': v.type, 'count': v.count} for k, v in info.topics.items()}},
                          indent=2))
         return 0
-    print(f'bag:      {info.path} (rosbag2 metadata v{info.version}, {info.storage})')
+    kind = f'rosbag2 metadata v{info.version}' if info.version else 'a bare file, no rosbag2 metadata'
+    print(f'bag:      {info.path} ({kind}, {info.storage})')
     print(f'duration: {info.duration:.3f} s    messages: {info.message_count}')
     width = max((len(k) for k in info.topics), default=5)
     for name, t in sorted(info.topics.items()):
@@ -279,6 +280,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SmaWristError as e:
         print(f'error: {e}', file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # the reader went away (`sma-wrist info BAG | head`): stop quietly as Unix tools do; stdout is pointed at
+        # devnull so the interpreter's final flush does not raise again
+        import os
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141  # 128 + SIGPIPE, what the shell reports for a tool killed by it
     except FileExistsError as e:
         # a run's bag directory, or an output folder (identify/experiment --out) that is a file: only
         # run has a --bag to choose again

@@ -216,6 +216,31 @@ def test_a_metadata_file_that_is_not_rosbag2_is_named_and_the_messages_salvaged(
     assert err.value.salvaged['/wrist/joint_states'][1] == full['/wrist/joint_states'][1]
 
 
+def test_info_summarises_a_bare_complete_mcap_as_compare_reads_it(tmp_path):
+    """bag_info refused a bare .mcap ("metadata.yaml is missing (N messages salvaged)") that read_bag and compare
+    read whole; it now gives the same topics and counts as the bag's metadata, version 0 (no metadata)."""
+    bag = tmp_path / 'run'
+    run_nodes([Plant, Controller], 1.0, params=PARAMS, bag=bag)
+    full = bag_info(bag)
+    bare = bag_info(next(bag.glob('*.mcap')))
+    assert (bare.version, full.version) == (0, 5) and bare.message_count == full.message_count
+    assert {k: (v.type, v.count) for k, v in bare.topics.items()} == {k: (v.type, v.count) for k, v in full.topics.items()}
+    assert (bare.start_ns, bare.end_ns) == (full.start_ns, full.end_ns)
+
+
+def test_a_reader_that_goes_away_ends_the_cli_quietly(tmp_path):
+    """`sma-wrist info BAG | head`: a closed pipe was a BrokenPipeError traceback; now exit 141, nothing on stderr."""
+    import subprocess
+    import sys
+    bag = tmp_path / 'run'
+    run_nodes([Plant, Controller], 1.0, params=PARAMS, bag=bag)
+    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'info', str(bag)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # before the command has written anything: its first print meets a closed pipe
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=60) == 141 and err == ''
+
+
 def test_missing_bag_and_garbage_are_typed_errors(tmp_path):
     with pytest.raises(BagError, match='does not exist'):
         read_bag(tmp_path / 'nope')
