@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from sma_wrist.bag import BagData, BagError, read_bag
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.metrics import SEED_PERIOD_S, TrackingMetrics, tracking_metrics
+from sma_wrist.core.metrics import SEED_PERIOD_S, SEED_REFERENCE_RANGE_RAD, TrackingMetrics, tracking_metrics
 
 FloatArray = NDArray[np.float64]
 
@@ -98,9 +98,14 @@ def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]
     Table 6.2 reports "a full cycle of wrist movement"; the first cycle of a run from rest
     holds the start-up transient (the wrist rests at its gravity equilibrium, q_d starts at
     0.524 rad), so max and RMS are taken over the last full cycle when the run has one
-    (``window`` says which), and over the whole run as ``*_all``.
+    (``window`` says which), and over the whole run as ``*_all``. The % are of the reference's range, or of the
+    Sec. 6.1 sine's 1.048 rad for a reference that does not move (``range_of`` says which).
     """
-    whole: TrackingMetrics = tracking_metrics(run.t, run.q, run.q_d)
+    # a constant reference (trajectory_generator shape: constant) has no range to take a % of: that of the
+    # Sec. 6.1 sine, so a set-point run reads on the same scale as the seed's figures
+    still = run.q_d.size > 0 and float(np.ptp(run.q_d)) <= 0.0
+    whole: TrackingMetrics = tracking_metrics(run.t, run.q, run.q_d,
+                                              reference_range_rad=SEED_REFERENCE_RANGE_RAD if still else None)
     span = run.t[-1] - run.t[0] if run.t.size else 0.0
     if span >= period_s:
         last = run.t >= run.t[-1] - period_s
@@ -118,6 +123,7 @@ def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]
     out['peak_command_V'] = float(np.abs(run.command_V).max()) if run.command_V.size else None
     out['payload_kg'] = run.payload_kg
     out['duration_s'] = float(run.t[-1] - run.t[0]) if run.t.size else 0.0
+    out['range_of'] = 'the Sec. 6.1 sine (the reference does not move)' if still else 'the reference'
     return out
 
 

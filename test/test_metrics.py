@@ -128,3 +128,18 @@ def test_seed_claims_are_checked_against_the_rows_not_asserted():
     assert claims[3] == 'Seed: max errors 8.4-10.4 %. Here: inverse_adaptive 2.00-3.50 %; pid 8.50-11.00 %.'
     rows[3]['total_abs_error_pct'] = 9.5
     assert seed_claims(rows)[2].endswith('-- agrees.')
+
+
+def test_a_run_whose_reference_does_not_move_reads_on_the_seed_sines_scale() -> None:
+    """run_metrics of a set-point run (trajectory_generator shape: constant): `sma-wrist run` and `compare` failed
+    after the whole run with "max(q_d) - min(q_d) = 0.0 rad is outside the valid range"; the % are now of the
+    Sec. 6.1 sine's 1.048 rad and say so, and a moving reference keeps its own range."""
+    from sma_wrist.runs import RunData, run_metrics
+    t = np.arange(0.0, 5.0, 0.01)
+    still = RunData('b', t, np.full(t.size, 0.3), np.full(t.size, 0.5), np.zeros((t.size, 2)), t, np.zeros((t.size, 2)),
+                    0.3)
+    m = run_metrics(still)
+    assert m['max_error_pct'] == pytest.approx(100 * 0.2 / 1.048) and m['range_of'].startswith('the Sec. 6.1 sine')
+    moving = RunData('b', t, np.full(t.size, 0.3), 0.5 + 0.1 * t, np.zeros((t.size, 2)), t, np.zeros((t.size, 2)), 0.3)
+    m = run_metrics(moving)
+    assert m['range_of'] == 'the reference' and m['reference_range_rad'] == pytest.approx(0.1 * t[-1])

@@ -36,6 +36,8 @@ from numpy.typing import ArrayLike
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 
 SEED_PERIOD_S = 2.0 * math.pi / 0.1
+#: the Sec. 6.1 sine's full range, 2 x 0.524 rad: the denominator of a run whose reference does not move
+SEED_REFERENCE_RANGE_RAD = 2 * 0.524
 SEED_TOTAL_RATE_HZ = 1000.0
 
 
