@@ -386,12 +386,12 @@ def _read_closed_mcap(p: Path, wanted: Optional[frozenset[str]]) -> Optional[Bag
     if not files:
         return None
     try:
-        meta = yaml.safe_load((p / 'metadata.yaml').read_text())['rosbag2_bagfile_information']
+        meta = _metadata(p)
         if meta.get('storage_identifier') != 'mcap':
             return None
         expected = sum(int(t['message_count']) for t in meta['topics_with_message_count']
                        if wanted is None or t['topic_metadata']['name'] in wanted)
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):
+    except (OSError, yaml.YAMLError, _NotMetadata, KeyError, TypeError, ValueError):
         return None
     rows: list[tuple[str, str, int, bytes]] = []
     for f in files:

@@ -240,9 +240,7 @@ class TemLoopBank:
         if self.guard is not None:
             changed = self.guard.update(t, self.command_V)
             if changed.any():
-                p = self.params
-                self.cfg_rows[changed, 1] = np.where(self.guard.engaged[changed], p.chatter_rate_filter_s,
-                                                     p.rate_filter_s)
+                self.cfg_rows[changed, 1] = self.params.rate_filter_for(self.guard.engaged[changed])
         self._learn(t, T_meas)
 
     def _learn(self, t: float, T_meas: FloatArray) -> None:

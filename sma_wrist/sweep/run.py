@@ -200,14 +200,12 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     if not (isinstance(workers, int) and workers >= 0):
         raise ParameterError(f'workers = {workers!r} must be an integer >= 0 (0: one per available core)')
     workers = workers or available_cores()
-    kwargs: dict[str, Any] = {}  # simulate's, for the graph's parameters
     if not cfg.params_files:
         settings = None
     elif settings is None:  # before any loop runs: a parameter the sweep cannot honour stops it here
         from sma_wrist.sweep.graph_params import loop_settings
         settings = loop_settings(cfg.params_files, cfg.plant)
-    if settings is not None:
-        kwargs = settings.kwargs
+    kwargs: dict[str, Any] = {} if settings is None else settings.kwargs  # simulate's: the graph's parameters
     cases = make_cases(cfg)
     chunks = split_chunks(cases, cfg.chunk, 1 if scheduler else workers)
     out = Path(out_dir) if out_dir is not None else None
@@ -423,8 +421,9 @@ def format_table(summary: Sequence[dict[str, Any]]) -> str:
                  '(docs/control.md "How hard the modes pull on the wires")')
     over = [s for s in summary if s.get('overloaded_loops')]
     if over:
-        lines.append('not physics: ' + ', '.join(f'{s["overloaded_loops"]} {s["group"]} {s["controller"]}' for s in over)
-                     + ' loop(s) held a wire at the wire model\'s load bound (overload_s in results.jsonl)')
+        which = ', '.join(f'{s["overloaded_loops"]} {s["group"]} {s["controller"]}' for s in over)
+        lines.append(f'not physics: {which} loop(s) held a wire at the wire model\'s load bound '
+                     '(overload_s in results.jsonl)')
     reach = [s for s in summary if 'reachable_loops' in s]
     if reach:
         lines += ['', 'plants whose reach floor is under 15 % (the rest: no controller can track the sine on them '

@@ -93,15 +93,12 @@ class Trace:
     extra: dict[str, Any] = field(default_factory=dict)
 
 
-#: commands within +-CHATTER_DEADBAND_V [V] carry the previous sign in :func:`sign_changes_per_s` (and in
-#: tem_controller's chatter guard, core.control.tem.ChatterGuard): a law settling about 0 V flips sign without
-#: moving heat; chattering is the driver swinging between heating and cooling
-
-
 def sign_changes_per_s(u: FloatArray, dt: float, deadband: float = CHATTER_DEADBAND_V) -> FloatArray:
     """Sign changes per second of each command column of u (K, ...) sampled every dt [s].
 
-    Commands within +-deadband carry the previous sign (a + 0 - sequence is one change): TEM chattering.
+    Commands within +-deadband carry the previous sign (a + 0 - sequence is one change), as in tem_controller's
+    chatter guard (core.control.tem.ChatterGuard): a law settling about 0 V flips sign without moving heat;
+    chattering is the driver swinging between heating and cooling.
     """
     s = np.where(np.abs(u) > deadband, np.sign(u), 0.0)
     # carry the last nonzero sign forward through zeros

@@ -100,6 +100,10 @@ class TemControlParams:
         if not (np.isfinite(self.chatter_rate_filter_s) and self.chatter_rate_filter_s >= 0):
             raise ParameterError(f'chatter_rate_filter_s = {self.chatter_rate_filter_s!r} must be finite and >= 0')
 
+    def rate_filter_for(self, engaged: ArrayLike) -> FloatArray:
+        """The rate filter [s] of a wrist whose chatter guard is ``engaged`` (a bool, or one per wrist)."""
+        return np.where(engaged, self.chatter_rate_filter_s, self.rate_filter_s)
+
 
 #: commands inside +-this band keep the last sign: the chattering metric's band [V] (docs/control.md
 #: "Chattering metric and limit"; sweep.simulate.sign_changes_per_s counts with it)
@@ -752,8 +756,7 @@ class TemLoop:
 
     def _guarded_rate_filter(self) -> None:
         """The rate filter the guard's state asks for, in the compiled law's constants and the numpy law's."""
-        p = self.params
-        rf = p.chatter_rate_filter_s if self.chattering else p.rate_filter_s
+        rf = float(self.params.rate_filter_for(self.chattering))
         self._cfg[1] = rf
         self.law.params = replace(self.law.params, rate_filter_s=rf)
 
