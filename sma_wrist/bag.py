@@ -29,6 +29,14 @@ message objects; :func:`bag_info` summarises a bag.  Truncated or corrupt bags r
 :class:`BagError` naming the file and the problem; ``BagError.salvaged`` holds the
 messages that could still be read from complete MCAP chunks (``read_bag(...,
 salvage=True)`` returns them instead of raising).
+
+Both rosbag2 storages are read: MCAP (this package's recordings, Jazzy's default) and SQLite
+(``.db3``, what ``ros2 bag record`` writes on Humble by default).  A closed bag of either is read
+directly (:func:`salvage_mcap`, :func:`salvage_db3`), its message counts checked against
+metadata.yaml; anything else goes through rosbags' reader.  A SQLite file is read through its own
+``topics`` table, so a recorder killed before it wrote metadata.yaml, a file cut short, or a
+metadata.yaml whose topics do not match the storage's (rosbags then reads no message) loses only
+what is really gone.
 """
 from __future__ import annotations
 
@@ -45,6 +53,10 @@ BagData = dict[str, tuple[np.ndarray, list[Any]]]
 
 HUMBLE_METADATA_VERSION = 5
 MCAP_MAGIC = b'\x89MCAP0\r\n'
+SQLITE_MAGIC = b'SQLite format 3\x00'
+ZSTD_MAGIC = b'\x28\xb5\x2f\xfd'  # rosbag2's message compression (``--compression-mode message``)
+#: rosbag2 storage identifier -> its files' suffix
+STORAGE_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3'}
 
 
 class BagError(SmaWristError):
@@ -231,14 +243,25 @@ class BagInfo:
 def _bag_dir(path: str | Path) -> Path:
     p = Path(path)
     if not p.exists():
-        raise BagError(p, 'no such bag (directory or .mcap file does not exist)')
+        raise BagError(p, 'no such bag (directory, .mcap or .db3 file does not exist)')
     return p
 
 
-def _mcap_files(p: Path) -> list[Path]:
+def _storage_files(p: Path, suffixes: Iterable[str] = STORAGE_SUFFIX.values()) -> list[Path]:
+    """The storage files of a bag directory (or the file itself) with one of ``suffixes``."""
     if p.is_file():
         return [p]
-    return sorted(p.glob('*.mcap'))
+    return sorted(f for f in p.iterdir() if f.suffix in set(suffixes) and f.is_file())
+
+
+def _salvage_file(file: Path, topics: Optional[frozenset[str]] = None
+                  ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+    """(messages, problem) of one storage file, MCAP or SQLite as its first bytes say."""
+    with open(file, 'rb') as f:
+        head = f.read(16)
+    if head == SQLITE_MAGIC:
+        return salvage_db3(file, topics)
+    return salvage_mcap(file, topics)
 
 
 def iter_mcap(file: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
@@ -259,8 +282,9 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
     order, problem); problem is '' for a clean, closed file.
 
     It is also :func:`read_bag`'s fast path for closed bags: one pass over the bytes, about 2x
-    faster than rosbags' indexed reader on a run bag; anything it does not handle (compressed
-    chunks) is reported as a problem and read_bag falls back to rosbags."""
+    faster than rosbags' indexed reader on a run bag. A file with compressed chunks (``ros2 bag
+    record`` compresses its MCAP chunks with zstd by default) is read by the `mcap` library's
+    stream reader instead (:func:`_stream_mcap`), which decompresses them."""
     data = Path(file).read_bytes()
     out: list[tuple[str, str, int, bytes]] = []
     schemas: dict[int, str] = {}
@@ -325,23 +349,113 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
                 return
             pos += 9 + length
 
+    class Compressed(Exception):
+        pass
+
     def chunk(body: bytes, pos: int) -> None:
         comp, o = string(body, 28)
         if comp:
-            state['problem'] = f'compressed chunk ({comp}) at offset {pos} cannot be salvaged'
-            return
+            raise Compressed
         records(body[o + 8:], 0, f'chunk at offset {pos}')
 
     try:
         records(data, 8, 'file')
     except (ValueError, UnicodeDecodeError) as exc:
         state['problem'] = state['problem'] or f'corrupt record: {exc}'
+    except Compressed:
+        del data
+        return _stream_mcap(file, topics)
     problem = state['problem']
     if problem:
         problem = f'MCAP data is truncated or corrupt after {len(out)} messages ({problem})'
     elif not state['footer']:
         problem = f'MCAP file has no footer (recording was not closed) after {len(out)} messages'
     return out, problem
+
+
+def _stream_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
+                 ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+    """:func:`salvage_mcap` of a file with compressed chunks (zstd, lz4): the `mcap` library's stream reader,
+    record by record without the index, up to the first record it cannot read (a chunk cut short is lost
+    whole: its compressed bytes cannot be read in part)."""
+    from mcap.records import Channel, Footer, Message, Schema
+    from mcap.stream_reader import StreamReader
+    out: list[tuple[str, str, int, bytes]] = []
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str]] = {}
+    footer = False
+    try:
+        with open(file, 'rb') as f:
+            for rec in StreamReader(f).records:
+                if isinstance(rec, Message):
+                    topic, msgtype = channels.get(rec.channel_id, ('', ''))
+                    if topics is None or topic in topics:
+                        out.append((topic, msgtype, rec.log_time, rec.data))
+                elif isinstance(rec, Channel):
+                    channels[rec.id] = (rec.topic, schemas.get(rec.schema_id, ''))
+                elif isinstance(rec, Schema):
+                    schemas[rec.id] = rec.name
+                elif isinstance(rec, Footer):
+                    footer = True
+    except Exception as exc:  # noqa: BLE001 - the mcap library raises several error types on damaged data
+        return out, f'MCAP data is truncated or corrupt after {len(out)} messages ({type(exc).__name__}: {exc})'
+    if not footer:
+        return out, f'MCAP file has no footer (recording was not closed) after {len(out)} messages'
+    return out, ''
+
+
+def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None
+                ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+    """Read a rosbag2 SQLite file (``.db3``) through its own ``topics`` and ``messages`` tables, without
+    metadata.yaml: (messages of ``topics``, default all, in recording order, problem); problem is '' for a
+    file read to its end. Humble's and Jazzy's schemas (and earlier ones) share these two tables.
+
+    A file cut short (a copy or a disk that ran out) is refused whole by SQLite ("database disk image is
+    malformed": its header promises more pages). It is then read from a temporary copy whose header gives the
+    pages that are there, up to the first page that is not. Messages compressed by rosbag2
+    (``--compression-mode message``, zstd) are not decoded here: reported as a problem."""
+    import sqlite3
+    import tempfile
+    file = Path(file)
+    out: list[tuple[str, str, int, bytes]] = []
+    with open(file, 'rb') as f:
+        head = f.read(100)
+    if head[:16] != SQLITE_MAGIC or len(head) < 100:
+        return out, 'not a SQLite file (bad magic)'
+    page = int.from_bytes(head[16:18], 'big')
+    page = 65536 if page == 1 else page
+    promised, size = int.from_bytes(head[28:32], 'big'), file.stat().st_size
+    notes: list[str] = []
+    with tempfile.TemporaryDirectory(prefix='sma_wrist_db3_') as tmp:
+        path = file
+        if page >= 512 and promised * page > size:
+            notes.append(f'the file is cut short: {size} of {promised * page} bytes')
+            path = Path(tmp) / file.name
+            with open(file, 'rb') as src:
+                data = bytearray(src.read(size - size % page))
+            data[28:32] = (len(data) // page).to_bytes(4, 'big')
+            path.write_bytes(data)
+            del data
+        try:
+            con = sqlite3.connect(f'{path.resolve().as_uri()}?mode=ro', uri=True)
+        except sqlite3.Error as exc:
+            return out, f'SQLite file cannot be opened: {exc}'
+        try:
+            names = {int(i): (str(n), str(t)) for i, n, t in con.execute('SELECT id, name, type FROM topics')}
+            ids = [i for i, (n, _) in names.items() if topics is None or n in topics]
+            where = '' if topics is None else f" WHERE topic_id IN ({','.join(map(str, ids)) or 'NULL'})"
+            for tid, t, data in con.execute(f'SELECT topic_id, timestamp, data FROM messages{where} ORDER BY id'):
+                if data[:4] == ZSTD_MAGIC:
+                    notes.append('compressed messages (zstd) cannot be salvaged')
+                    break
+                topic, msgtype = names.get(tid, ('', ''))
+                out.append((topic, msgtype, int(t), bytes(data)))
+        except sqlite3.DatabaseError as exc:
+            notes.append(f'{exc} after {len(out)} messages')
+        finally:
+            con.close()
+    problem = '; '.join(notes)
+    return out, (f'SQLite data is truncated or corrupt ({problem})' if problem else '')
 
 
 def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> BagData:
@@ -365,11 +479,11 @@ def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> BagData:
 def _salvage(p: Path) -> tuple[BagData, str]:
     rows: list[tuple[str, str, int, bytes]] = []
     problems = []
-    files = _mcap_files(p)
+    files = _storage_files(p)
     if not files:
-        return {}, 'no .mcap file in the bag directory'
+        return {}, 'no .mcap or .db3 file in the bag directory'
     for f in files:
-        r, problem = salvage_mcap(f)
+        r, problem = _salvage_file(f)
         rows.extend(r)
         if problem:
             problems.append(f'{f.name}: {problem}')
@@ -377,17 +491,16 @@ def _salvage(p: Path) -> tuple[BagData, str]:
     return _to_bagdata(rows), '; '.join(problems)
 
 
-def _read_closed_mcap(p: Path, wanted: Optional[frozenset[str]]) -> Optional[BagData]:
-    """read_bag's fast path: a closed bag of uncompressed MCAP files (BagRecorder's) in one pass
-    each (:func:`salvage_mcap`), its message counts checked against metadata.yaml. None for
-    anything else (other storage, compression, a damaged file, counts that differ): read_bag
-    then uses rosbags' reader and its error reporting."""
-    files = _mcap_files(p)
-    if not files:
-        return None
+def _read_closed(p: Path, wanted: Optional[frozenset[str]]) -> Optional[BagData]:
+    """read_bag's fast path: a closed bag of uncompressed MCAP files (BagRecorder's, in one pass each:
+    :func:`salvage_mcap`) or of SQLite files (``ros2 bag record`` on Humble: :func:`salvage_db3`), its message
+    counts checked against metadata.yaml. None for anything else (another storage, compression, a damaged
+    file, counts that differ): read_bag then uses rosbags' reader and its error reporting."""
     try:
         meta = _metadata(p)
-        if meta.get('storage_identifier') != 'mcap':
+        suffix = STORAGE_SUFFIX.get(meta.get('storage_identifier'))
+        files = _storage_files(p, [suffix]) if suffix else []
+        if not files:
             return None
         expected = sum(int(t['message_count']) for t in meta['topics_with_message_count']
                        if wanted is None or t['topic_metadata']['name'] in wanted)
@@ -395,7 +508,7 @@ def _read_closed_mcap(p: Path, wanted: Optional[frozenset[str]]) -> Optional[Bag
         return None
     rows: list[tuple[str, str, int, bytes]] = []
     for f in files:
-        r, problem = salvage_mcap(f, wanted)
+        r, problem = _salvage_file(f, wanted)
         if problem:
             return None
         rows.extend(r)
@@ -422,7 +535,7 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
 
     problem = ''
     if p.is_dir() and (p / 'metadata.yaml').exists():
-        fast = _read_closed_mcap(p, None if wanted is None else frozenset(wanted))
+        fast = _read_closed(p, None if wanted is None else frozenset(wanted))
         if fast is not None:
             return fast
         try:
@@ -440,11 +553,11 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
         except Exception as exc:  # noqa: BLE001 - rosbags raises several error types
             problem = f'{type(exc).__name__}: {exc}'
     elif p.is_dir():
-        problem = 'metadata.yaml is missing (the recording was not closed)'
+        problem = 'metadata.yaml is missing (the recording was not closed; `ros2 bag reindex` rebuilds it)'
     data, salvage_problem = _salvage(p)
     if not problem:
         if not salvage_problem:
-            return select(data)  # a bare, complete .mcap file
+            return select(data)  # a bare, complete .mcap or .db3 file
         problem = salvage_problem
     elif salvage_problem:
         problem = f'{problem}; {salvage_problem}'
@@ -466,15 +579,16 @@ def _metadata(p: Path) -> dict[str, Any]:
     return meta
 
 
-def _bare_mcap_info(p: Path) -> BagInfo | None:
-    """bag_info of a bare, complete .mcap file (no rosbag2 metadata: ``version`` 0), as read_bag reads one;
-    None for anything else (a directory without metadata.yaml, a damaged file)."""
-    if not (p.is_file() and p.suffix == '.mcap'):
+def _bare_file_info(p: Path) -> BagInfo | None:
+    """bag_info of a bare, complete .mcap or .db3 file (no rosbag2 metadata: ``version`` 0), as read_bag reads
+    one; None for anything else (a directory without metadata.yaml, a damaged file)."""
+    storage = {v: k for k, v in STORAGE_SUFFIX.items()}.get(p.suffix)
+    if not (p.is_file() and storage):
         return None
-    rows, problem = salvage_mcap(p)
+    rows, problem = _salvage_file(p)
     if problem:
         return None
-    info = BagInfo(path=str(p), version=0, storage='mcap', message_count=len(rows))
+    info = BagInfo(path=str(p), version=0, storage=storage, message_count=len(rows))
     for topic, msgtype, _, _ in rows:
         prev = info.topics.get(topic)
         info.topics[topic] = TopicSummary(msgtype, 1 + (prev.count if prev else 0))
@@ -490,7 +604,7 @@ def bag_info(path: str | Path) -> BagInfo:
 
     p = _bag_dir(path)
     if not (p.is_dir() and (p / 'metadata.yaml').exists()):
-        bare = _bare_mcap_info(p)
+        bare = _bare_file_info(p)
         if bare is not None:
             return bare
         data, problem = _salvage(p)
