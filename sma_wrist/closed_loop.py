@@ -98,6 +98,24 @@ def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
     return out
 
 
+def check_params(nodes: Sequence[type], args: Sequence[str], params_files: Sequence[str | Path],
+                 params: dict[str, dict[str, Any]]) -> None:
+    """Build ``nodes`` (all but hardware_bridge, which would open its port) with ``args`` and ``params`` on a
+    throwaway runtime, before anything is recorded: a value a node refuses, or a key of ``params_files`` that no node
+    of the graph declares (ROS ignores it, so a misspelt name would run the defaults in silence), is a ParameterError.
+    A refusal met only when the run started left its bag behind, which then blocked the rerun ("already exists")."""
+    from sma_wrist.nodes.common import add_or_refuse, refuse_undeclared
+    from sma_wrist.runtime.rclpy import logging as rlog
+    declared: dict[str, set[str]] = {}
+    with rlog.silenced(), Runtime(list(args), params=params) as rt:
+        for cls in nodes:
+            if cls.__name__ == 'HardwareBridge':
+                continue
+            node = add_or_refuse(rt, cls)
+            declared[node.get_name()] = set(node.get_parameters_by_prefix(''))
+    refuse_undeclared(params_files, declared)
+
+
 def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.3, duration_s: float = 126.0,
                     bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
                     extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
@@ -110,6 +128,8 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     """
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
+    if params_files:
+        check_params(nodes, ros_args(params_files), params_files, overrides(controller, payload_kg, source, extra_params))
     wall0 = time.perf_counter()
     interrupted = stalled = False
     recorded = 0
@@ -165,7 +185,7 @@ def print_progress(t: float, total: float, wall: float) -> None:
     sys.stderr.flush()
 
 
-__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'run_closed_loop', 'print_progress', 'ros_args', 'overrides']
+__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'check_params', 'run_closed_loop', 'print_progress', 'ros_args', 'overrides']
 
 
 def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:

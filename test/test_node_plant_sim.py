@@ -118,6 +118,31 @@ def test_sma_wrist_run_refuses_a_bad_params_file_value_with_the_reason_not_a_tra
     assert err.startswith('error: PlantSim: ') and message in err and err.count('\n') == 1, err
 
 
+@pytest.mark.parametrize('body, message', [
+    ('plant_sim:\n  ros__parameters:\n    dt_s: .nan\n', 'error: PlantSim: invalid parameter dt_s'),
+    ('plant_sim:\n  ros__parameters:\n    payload_kgs: 0.5\n',
+     'error: not a parameter of the node graph (misspelt?): payload_kgs under plant_sim'),
+    ('/**:\n  ros__parameters:\n    gain: 2.0\n', 'error: not a parameter of the node graph (misspelt?): gain under /**'),
+])
+def test_sma_wrist_run_refuses_a_params_file_before_it_records(tmp_path, capsys, body, message):
+    """A value a node refused was met only after the bag had been opened: the bag was left behind and the rerun
+    failed with "already exists". A misspelt name (ROS ignores it) ran the defaults in silence, as the sweep refuses
+    it. Both are now refused before anything is recorded; a name of a node that is not in this graph (the hardware
+    bridge's, in a simulated run) is not this run's business."""
+    from sma_wrist.cli import main
+    f = tmp_path / 'params.yaml'
+    f.write_text(body)
+    bag = tmp_path / 'bag'
+    assert main(['run', '--duration', '1', '--quiet', '--params-file', str(f), '--bag', str(bag)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(message) and err.count('\n') == 1, err
+    assert not bag.exists()
+    f.write_text('hardware_bridge:\n  ros__parameters:\n    no_such_name: 1\nplant_sim:\n  ros__parameters:\n'
+                 '    payload_kg: 0.2\n')
+    assert main(['run', '--duration', '0.5', '--quiet', '--params-file', str(f), '--bag', str(bag)]) == 0
+    assert bag.is_dir()
+
+
 def test_clock_owner_refuses_use_sim_time_at_run_time(probe_factory):
     from rclpy.parameter import Parameter
 

@@ -15,6 +15,7 @@ import math
 import signal
 import threading
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
 import rclpy
@@ -390,6 +391,30 @@ def add_or_refuse(rt: Any, node_class: type) -> Any:
         if why is None:
             raise
         raise ParameterError(why.removeprefix('error: ')) from None
+
+
+def undeclared_parameters(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:
+    """Keys of ``params_files`` under a node of ``declared`` ({node name: its parameter names}), or under ``/**``,
+    that no such node declares: ROS ignores them, so a misspelt name runs the defaults in silence."""
+    from sma_wrist.runtime.arguments import load_params_file
+    everyone = set().union(*declared.values()) | {'use_sim_time'}
+    out = []
+    for f in params_files:
+        for rule in load_params_file(f):
+            node = rule.node.strip('/')
+            names = everyone if node in ('**', '*') else declared[node] | {'use_sim_time'} if node in declared else None
+            if names is not None and rule.name not in names:
+                out.append(f'{rule.name} under {rule.node} in {f}')
+    return out
+
+
+def refuse_undeclared(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> None:
+    """ParameterError listing :func:`undeclared_parameters`, if any (the in-process tools' rule: ``run``,
+    ``experiment``, ``sweep``)."""
+    from sma_wrist.core.errors import ParameterError
+    unknown = undeclared_parameters(params_files, declared)
+    if unknown:
+        raise ParameterError('not a parameter of the node graph (misspelt?): ' + '; '.join(unknown))
 
 
 def main_for(node_class: type, args: Sequence[str] | None = None) -> int:

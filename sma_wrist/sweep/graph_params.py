@@ -119,28 +119,12 @@ def _build_graph(params_files: Sequence[str | Path]) -> dict[str, _Built]:
     return built
 
 
-def _undeclared(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:
-    """Keys of ``params_files`` under a graph node (or ``/**``) that no such node declares: ROS ignores them,
-    so a misspelt name would sweep the defaults in silence."""
-    from sma_wrist.runtime.arguments import load_params_file
-    everyone = set().union(*declared.values()) | {'use_sim_time'}
-    out = []
-    for f in params_files:
-        for rule in load_params_file(f):
-            node = rule.node.strip('/')
-            names = everyone if node in ('**', '*') else declared[node] | {'use_sim_time'} if node in declared else None
-            if names is not None and rule.name not in names:
-                out.append(f'{rule.name} under {rule.node} in {f}')
-    return out
-
-
 def changed_parameters(params_files: Sequence[str | Path]) -> tuple[dict[str, _Built], dict[str, dict[str, Any]]]:
     """The graph's nodes built with ``params_files``, and per node the parameters whose values differ from
     config/wrist.yaml's."""
     user = _build_graph(params_files)
-    unknown = _undeclared(params_files, {name: set(b.values) for name, b in user.items()})
-    if unknown:
-        raise ParameterError('not a parameter of the node graph (misspelt?): ' + '; '.join(unknown))
+    from sma_wrist.nodes.common import refuse_undeclared
+    refuse_undeclared(params_files, {name: set(b.values) for name, b in user.items()})
     default = _build_graph(())
     changed = {name: {k: v for k, v in b.values.items() if default[name].values.get(k) != v}
                for name, b in user.items()}
