@@ -91,4 +91,17 @@ def load_contract(path: str | None = None) -> Contract:
         raise ContractError(f'{p}: malformed interface contract ({type(e).__name__}: {e})') from None
 
 
-__all__ = ['Contract', 'ContractError', 'Topic', 'contract_path', 'load_contract']
+def joint_positions(msgs: Any, joint_name: str | None = None) -> list[float]:
+    """The wrist's angle [rad] in each sensor_msgs/JointState of ``msgs``: the position of ``joint_name`` (default
+    the contract's) where a message names it -- a robot's /joint_states may carry several joints, in any order --
+    else the first; NaN where a message has no such position (a driver that sends velocities only)."""
+    name = load_contract().joint_name if joint_name is None else joint_name
+    out = []
+    for m in msgs:
+        names = list(m.name)
+        i = names.index(name) if name in names else 0
+        out.append(float(m.position[i]) if len(m.position) > i else float('nan'))
+    return out
+
+
+__all__ = ['Contract', 'ContractError', 'Topic', 'contract_path', 'joint_positions', 'load_contract']

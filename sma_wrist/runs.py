@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.bag import BagData, BagError, read_bag
+from sma_wrist.contract import joint_positions
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.metrics import SEED_PERIOD_S, SEED_REFERENCE_RANGE_RAD, TrackingMetrics, tracking_metrics
 
@@ -65,9 +66,13 @@ def load_run(path: str | Path) -> RunData:
         raise BagError(path, f'no messages on {", ".join(missing)}: a run bag needs the measured joint state '
                              'and the reference (see msg_defs/topics.yaml)')
     t = np.array([_stamp(m) for _, m in js])
-    q = np.array([m.position[0] for _, m in js])
+    q = np.array(joint_positions(m for _, m in js))
     tr = np.array([_stamp(m) for _, m in ref])
-    qr = np.array([m.position[0] for _, m in ref])
+    qr = np.array(joint_positions(m for _, m in ref))
+    good = np.isfinite(qr)
+    if not good.any():
+        raise BagError(path, '/wrist/reference holds no finite position: no error to measure')
+    tr, qr = tr[good], qr[good]
     keep = (t >= tr[0]) & (t <= tr[-1]) & np.isfinite(q)
     t, q = t[keep], q[keep]
     order = np.argsort(t, kind='stable')

@@ -434,6 +434,36 @@ def test_a_run_in_the_sqlite_storage_reads_as_in_mcap(tmp_path):
         assert list(a[topic][0]) == list(b[topic][0]) and a[topic][1] == b[topic][1], topic
 
 
+def test_a_joint_state_with_several_joints_is_read_by_the_wrists_name(tmp_path):
+    """compare and load_run took position[0] of every JointState: on a robot's /joint_states that lists another joint
+    first they measured that joint, and a message without positions was an IndexError traceback. They now read the
+    contract's joint ('wrist') by name, as diagnose did, and skip a message without its position."""
+    from rosbags.rosbag2 import Reader, Writer
+    from sma_wrist.cli import main
+    from sma_wrist.runs import load_run, run_metrics
+    bag, other = tmp_path / 'run', tmp_path / 'robot'
+    assert main(['run', '--duration', '3', '--bag', str(bag), '--quiet']) == 0
+    with Reader(bag) as r, Writer(other, version=8) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
+        k = 0
+        for c, t, raw in r.messages():
+            if c.topic == '/wrist/joint_states':
+                k += 1
+                m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
+                if k % 50 == 7:  # a driver's message without positions
+                    m.name, m.position = ['elbow', 'wrist'], np.array([], dtype=float)
+                else:  # another joint listed first
+                    m.name, m.position = ['elbow', 'wrist'], np.array([9.9, m.position[0]])
+                    m.velocity, m.effort = np.array([0.0, m.velocity[0]]), np.array([0.0, m.effort[0]])
+                raw = TYPESTORE.serialize_cdr(m, c.msgtype)
+            w.write(conns[c.id], t, raw)
+    a, b = load_run(bag), load_run(other)
+    assert 0 < b.q.size < a.q.size and np.all(b.q < 2.0)
+    np.testing.assert_array_equal(b.q, a.q[np.isin(a.t, b.t)])
+    # the elbow's 9.9 rad would be ~1600 % of this run's reference range
+    assert run_metrics(b)['max_error_pct'] == pytest.approx(run_metrics(a)['max_error_pct'], rel=0.02)
+
+
 def test_compare_says_a_bag_is_truncated_and_refuses_a_folder_as_plot(tmp_path, capsys):
     """compare read a truncated bag up to its cut and printed its metrics as if it were the whole run;
     --plot DIR wrote DIR.png beside the folder. Now a warning naming the damage, and an error."""

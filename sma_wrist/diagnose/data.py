@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from sma_wrist.bag import BagError, read_bag
+from sma_wrist.contract import joint_positions
 from sma_wrist.core.errors import SmaWristError
 
 TOPICS = {
@@ -76,17 +77,12 @@ def _stamp_ns(msg: Any) -> int:
 
 
 def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: list[str],
-            joint_name: str = 'wrist') -> tuple[np.ndarray, np.ndarray]:
+            joint_name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], values) of one topic, cleaned: NaNs dropped, sorted, de-duplicated."""
     if kind == 'temperature':
         vals = np.array([float(m.temperature) for m in msgs])
     elif kind == 'joint':
-        out = []
-        for m in msgs:
-            names = list(m.name)
-            i = names.index(joint_name) if joint_name in names else 0
-            out.append(float(m.position[i]) if len(m.position) > i else np.nan)
-        vals = np.array(out)
+        vals = np.array(joint_positions(msgs, joint_name))
     else:
         vals = np.array([float(m.data) for m in msgs])
     stamps = np.array([_stamp_ns(m) for m in msgs], dtype=np.int64) if kind in ('temperature', 'joint') else None
