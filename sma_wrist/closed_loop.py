@@ -129,7 +129,8 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
     if params_files:
-        check_params(nodes, ros_args(params_files), params_files, overrides(controller, payload_kg, source, extra_params))
+        check_params(nodes, ros_args(params_files), params_files,
+                     overrides(controller, payload_kg, source, extra_params))
     wall0 = time.perf_counter()
     interrupted = stalled = False
     recorded = 0

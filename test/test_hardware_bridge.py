@@ -13,7 +13,7 @@ import pytest
 
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
-from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig
+from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig, config_from_args
 
 TOPICS = ('/wrist/joint_states', '/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature',
           '/wrist/muscle_1/stress', '/wrist/muscle_2/stress', '/wrist/payload', '/clock')
@@ -349,6 +349,58 @@ def test_emulator_refuses_a_fault_or_noise_option_it_cannot_be(tmp_path, capsys,
     link = tmp_path / 'dev'
     assert main(['emulate-device', '--port', str(link), '--duration', '0.1', *args]) == 2
     assert capsys.readouterr().out.startswith(f'error: {named}') and not os.path.lexists(link)
+
+
+def _device_readings(emu: DeviceEmulator, n: int) -> np.ndarray:
+    """(n, 5) muscle 1/2 and TEM face 1/2 temperatures [degC] and angle [rad] the device reports at zero drive."""
+    out = []
+    for _ in range(n):
+        frame, = P.Parser().feed(emu._sample())
+        temps, q = emu.cfg.calibration.to_physical(frame.adc)
+        out.append([*temps, q])
+    return np.array(out)
+
+
+def test_the_emulated_device_can_hold_a_plant_that_is_not_the_model(tmp_path, capsys):
+    """--plant puts a registered plant behind the device (the issue's "independent device": another wire model
+    through hardware_bridge), in a scenario's perturbations, its sensors' lag and noise on what is reported. The
+    device then reports that plant, to the ADC's resolution: here the phase-fraction wrist's own rest angle and its
+    thermocouple, not the model's."""
+    from sma_wrist.cli import main
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.plants import make_plant
+    from sma_wrist.plants.spread import Scenario
+    model = _device_readings(DeviceEmulator(EmulatorConfig(noise_counts=0.0)), 50)
+    pf = _device_readings(DeviceEmulator(EmulatorConfig(noise_counts=0.0, plant='phase_fraction')), 50)
+    ref = make_plant('phase_fraction', [Scenario(payload_kg=0.3)], PlantParams(dt=1e-3))
+    for k in range(50):
+        ref.advance(np.zeros((1, 2)), 1)
+        cal = Calibration()
+        assert abs(pf[k, 4] - ref.state.q[0]) <= cal.angle_gain_rad_per_count  # quantisation
+        assert np.all(np.abs(pf[k, :2] - ref.muscle_temperature_C[0]) <= cal.temperature_gain_C_per_count)
+    assert abs(pf[-1, 4] - model[-1, 4]) > 0.01  # another wrist: another rest angle
+    # a scenario file (a row of a sweep's results) perturbs it; its thermocouple noise reaches the readings
+    f = tmp_path / 'sc.json'
+    f.write_text('{"transition_shift_C": 5.0, "temp_noise_C": 0.3}')
+    a = argparse_for(['--plant', 'sdgpi', '--scenario-file', str(f), '--noise-counts', '0'])
+    noisy = _device_readings(DeviceEmulator(config_from_args(a)), 50)
+    assert np.std(np.diff(noisy[:, 0])) > 0.1 and np.std(np.diff(model[:, 0])) < 0.01
+    for bad, named in ((['--scenario-file', str(f)], 'give --plant'),
+                       (['--plant', 'sdgpi', '--scenario-file', str(tmp_path / 'none.json')], 'scenario file'),
+                       (['--plant', 'sdgpi', '--scenario-file', str(f.with_name('bad.json'))], 'unknown perturbation')):
+        f.with_name('bad.json').write_text('{"shift": 5}')
+        assert main(['emulate-device', '--duration', '0.1', *bad]) == 2
+        out = capsys.readouterr().out
+        assert out.startswith('error: ') and named in out, (bad, out)
+
+
+def argparse_for(argv):
+    import argparse
+
+    from sma_wrist.hw.emulator import add_arguments
+    ap = argparse.ArgumentParser()
+    add_arguments(ap)
+    return ap.parse_args(argv)
 
 
 def test_cli_emulator_on_a_pty(tmp_path):

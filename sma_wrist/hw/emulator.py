@@ -3,7 +3,10 @@
 ``sma-wrist emulate-device --port /tmp/wrist`` opens a pty, links its slave end at
 ``--port`` and behaves like the firmware of docs/protocol.md: boot notice and hello,
 then ``$S`` samples at ``--rate-hz`` (1 kHz) of device time with 16-bit ADC quantisation
-and Gaussian noise of the plant :class:`sma_wrist.core.plant.wrist.WristPlant`; ``$C`` commands
+and Gaussian noise of the plant :class:`sma_wrist.core.plant.wrist.WristPlant` (the controllers' own
+model), or with ``--plant`` of a registered plant that is not the model (:mod:`sma_wrist.plants`:
+``phase_fraction`` a structurally different wire, ``sdgpi`` the model with a parameter spread), in the
+scenario ``--scenario-file`` gives (its sensor lag and noise act on what the device reports); ``$C`` commands
 take effect ``--latency-ms`` after they arrive; no command for ``--watchdog-s`` of device
 time -> zero drive (flag ``FLAG_WATCHDOG``). Device time runs ``--time-scale`` times
 faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
@@ -58,6 +61,10 @@ class EmulatorConfig:
     reset_every_s: float = 0.0
     unplug_every_s: float = 0.0
     unplug_wall_s: float = 0.5
+    # the wrist behind the device: 'model' (WristPlant) or a registered plant (sma_wrist.plants.PLANTS) in the
+    # scenario {perturbation: value} (sma_wrist.plants.spread.Scenario fields; a payload_kg there overrides the above)
+    plant: str = 'model'
+    scenario: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -85,7 +92,16 @@ class DeviceEmulator:
         self.link = link
         dt = min(1e-3, 1.0 / c.rate_hz)
         self.steps_per_sample = max(1, int(round(1.0 / (c.rate_hz * dt))))
-        self.plant = WristPlant(PlantParams(dt=1.0 / (c.rate_hz * self.steps_per_sample)), payload_kg=c.payload_kg)
+        base = PlantParams(dt=1.0 / (c.rate_hz * self.steps_per_sample))
+        self.sensors: Any = None  # a registered plant's scenario sensors (lag, noise) on what the device reports
+        if c.plant == 'model':
+            self.plant: Any = WristPlant(base, payload_kg=c.payload_kg)
+        else:
+            from sma_wrist.plants import make_plant
+            from sma_wrist.plants.spread import Scenario, SensorBank
+            sc = Scenario.from_mapping({'payload_kg': c.payload_kg, **c.scenario})
+            self.plant = make_plant(c.plant, [sc], base)
+            self.sensors = SensorBank([sc], 1.0 / c.rate_hz)
         self.rng = np.random.default_rng(c.seed)
         self.stats = EmulatorStats()
         self.parser = P.Parser()
@@ -249,9 +265,13 @@ class DeviceEmulator:
             flags |= P.FLAG_BOOT
             self._boot_flag = False
         self.plant.advance(u, self.steps_per_sample)
-        th = self.plant.state.thermal[0]  # (layer, face)
-        temps = np.array([th[0, 0], th[1, 0], th[0, 1], th[1, 1]])
-        counts = c.calibration.to_counts(temps, float(self.plant.state.q[0]))
+        st = self.plant.state
+        T, q = self.plant.muscle_temperature_C, st.q
+        if self.sensors is not None:
+            T, q, _ = self.sensors.measure(T, q.copy(), st.qd.copy())
+        th = st.thermal[0]  # (layer, face): the TEMs' exchanger faces
+        temps = np.array([T[0, 0], T[0, 1], th[0, 1], th[1, 1]])
+        counts = c.calibration.to_counts(temps, float(q[0]))
         if c.noise_counts > 0:
             counts = counts + self.rng.normal(0.0, c.noise_counts, 5)
         adc = list(quantise(counts))
@@ -367,7 +387,15 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
             raise ValueError(f'{flag} {v!r} must be a probability in [0, 1]')
     # the device's sensor error: it reads `offset` too high, i.e. counts of (T + offset)
     cal = Calibration(offsets_C=tuple(-o for o in offsets))  # type: ignore[arg-type]
-    return EmulatorConfig(rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,
+    scenario: dict[str, Any] = {}
+    if getattr(a, 'scenario_file', None):
+        if a.plant == 'model':
+            raise ValueError('--scenario-file perturbs a registered plant: give --plant sdgpi or phase_fraction too')
+        from sma_wrist.plants.spread import Scenario
+        # as plant_sim's scenario_file: axes it names (a sweep row's payload too) win; ParameterError is a ValueError
+        scenario = Scenario.from_file(a.scenario_file, {'payload_kg': a.payload_kg}).to_dict()
+    return EmulatorConfig(plant=getattr(a, 'plant', 'model'), scenario=scenario,
+                          rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,
                           noise_counts=a.noise_counts, latency_s=a.latency_ms / 1000.0, watchdog_s=a.watchdog_s,
                           seed=a.seed, calibration=cal, garbage_rate=a.garbage_rate,
                           checksum_error_rate=a.checksum_error_rate, partial_rate=a.partial_rate,
