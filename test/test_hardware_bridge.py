@@ -299,6 +299,36 @@ def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, pr
         assert 0.05 < bridge.link.stats.backoff_s <= 2.0  # exponential, bounded
 
 
+def test_the_stress_estimate_is_the_identified_wires(tmp_path, ros_shutdown):
+    """The device measures no stress: the bridge publishes the wire model's load solve, which the inverse mode takes
+    as its stress. It was always the built-in wire at the built-in pre-load, whatever wire the user had identified
+    (identify's wrist_params.yaml set the other nodes only). It now takes hysteresis_file and preload_elongation_mm,
+    as plant_sim and the compensator do, and identify writes them for it; a file it cannot read stops it with the
+    reason, as for plant_sim."""
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.params_file import save_hysteresis
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.hw.estimate import StressEstimator
+    from sma_wrist.identify.wrist import shifted_wire
+    from sma_wrist.nodes.common import add_or_refuse
+    from sma_wrist.nodes.hardware_bridge import HardwareBridge
+    from sma_wrist.runtime.launch import Runtime
+    from sma_wrist.core.errors import ParameterError
+    hot = shifted_wire(default_sdgpi(), 20.0)
+    wire = save_hysteresis(tmp_path / 'wire.yaml', hot)
+    port = str(tmp_path / 'nothing')
+    with Runtime(params={'/hardware_bridge': {'port': port, 'hysteresis_file': str(wire),
+                                              'preload_elongation_mm': 1.6}}) as rt:
+        est = rt.add(HardwareBridge).estimator.update(75.0, 40.0, 0.6)
+    own = StressEstimator(PlantParams(hysteresis=hot, preload_elongation_mm=1.6)).update(75.0, 40.0, 0.6)
+    builtin = StressEstimator().update(75.0, 40.0, 0.6)
+    assert est == own and abs(est[0] - builtin[0]) > 1e6  # [Pa]: another wire, another stress
+    (tmp_path / 'bad.yaml').write_text('not: a wire')
+    with Runtime(params={'/hardware_bridge': {'port': port, 'hysteresis_file': str(tmp_path / 'bad.yaml')}}) as rt:
+        with pytest.raises(ParameterError, match='bad.yaml'):
+            add_or_refuse(rt, HardwareBridge)
+
+
 def test_malformed_parameter_updates_rejected_node_keeps_running(emulator, graph):
     from rclpy.parameter import Parameter
     emu = emulator()

@@ -347,9 +347,20 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     lo, hi = operating_window(hot)
     assert lo == pytest.approx(40.1, abs=0.2) and hi == pytest.approx(100.0, abs=0.2)  # defaults + 20 degC
     nodes, problems = wrist_params('wire.yaml', hot, preload_mm=1.98)  # the seed's TEMs: 0-80 degC
-    assert len(problems) == 1 and 'TEMs work only up to 80' in problems[0]
+    assert len(problems) == 2 and 'TEMs work only up to 80' in problems[0]
+    # a device cuts its TEMs off at hardware_bridge's limit: named, not raised (a safety limit is the owner's)
+    assert 'hardware_bridge cuts the TEMs off above max_muscle_temperature_C 90' in problems[1]
     nodes, problems = wrist_params('wire.yaml', hot, 'tems.yaml', (0.0, 120.0), preload_mm=1.98)
-    assert problems == []
+    assert len(problems) == 1 and 'hardware_bridge' in problems[0]
+    assert 'max_muscle_temperature_C' not in nodes['hardware_bridge']
+    assert wrist_params('wire.yaml', default_sdgpi(), preload_mm=1.98)[1] == []  # the built-in wire: nothing to say
+    from sma_wrist import runtime
+    runtime.activate()
+    from sma_wrist.identify.wrist import BRIDGE_MUSCLE_CUTOFF_C
+    from sma_wrist.nodes.hardware_bridge import HardwareBridge
+    assert {q.name: q.default for q in HardwareBridge.PARAMS}['max_muscle_temperature_C'] == BRIDGE_MUSCLE_CUTOFF_C
+    # the bridge estimates the wires' stress with this wire and pre-load
+    assert nodes['hardware_bridge'] == {'hysteresis_file': 'wire.yaml', 'preload_elongation_mm': 1.98}
     assert nodes['hysteresis_compensator']['temperature_max_C'] == pytest.approx(hi, abs=0.05)
     assert nodes['adaptive_controller']['temperature_min_C'] == pytest.approx(lo, abs=0.05)
     assert nodes['tem_controller']['max_muscle_temperature_C'] == pytest.approx(hi + 5.0, abs=0.05)

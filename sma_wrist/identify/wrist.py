@@ -33,6 +33,8 @@ TEM_MUSCLE_MARGIN_C = 5.0  # tem_controller max_muscle_temperature_C 85 = window
 PLANT_MUSCLE_MARGIN_C = 10.0  # plant_sim max_muscle_temperature_C 90 = window top + 10
 #: upper bounds of the nodes' temperature parameters (their descriptors)
 NODE_MAX_C = 120.0
+#: hardware_bridge's max_muscle_temperature_C default: on a device the TEMs are cut off above it (a safety limit)
+BRIDGE_MUSCLE_CUTOFF_C = 90.0
 
 
 def shifted_wire(params: SDGPIParams, dT_C: float) -> SDGPIParams:
@@ -110,6 +112,10 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
                         'and give their heat balance as thermal_file (sma-wrist identify thermal, window_C)')
     if lo < face[0]:
         problems.append(f'the wire needs its muscle down to {lo:.0f} degC but the TEMs work only from {face[0]:g} degC')
+    if hi > BRIDGE_MUSCLE_CUTOFF_C:  # not written: a safety limit is the device owner's to raise
+        problems.append(f'on hardware, hardware_bridge cuts the TEMs off above max_muscle_temperature_C '
+                        f'{BRIDGE_MUSCLE_CUTOFF_C:g} degC, below this wire\'s window top {hi:.0f} degC: raise it on your '
+                        'device only if the wire, its crimps and the TEMs are rated for that (not written here)')
     if hi + TEM_MUSCLE_MARGIN_C > NODE_MAX_C:
         problems.append(f'the window top {hi:.0f} degC + {TEM_MUSCLE_MARGIN_C:g} exceeds the nodes\' limit '
                         f'{NODE_MAX_C:g} degC')
@@ -132,6 +138,8 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
                                 'temperature_mid_C': round(0.5 * (lo_a + hi_a), 1),
                                 'preload_elongation_mm': preload_mm},
         'tem_controller': {'max_muscle_temperature_C': round(min(hi + TEM_MUSCLE_MARGIN_C, NODE_MAX_C), 1)},
+        # on a device: the wire behind hardware_bridge's stress estimate (the compensator's input there)
+        'hardware_bridge': {'hysteresis_file': f, 'preload_elongation_mm': preload_mm},
     }
     if thermal_file is not None:
         out['plant_sim']['thermal_file'] = str(thermal_file)

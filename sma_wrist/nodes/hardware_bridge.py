@@ -53,11 +53,14 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64
 
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.hysteresis.params_file import hysteresis_params
+from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.estimate import StressEstimator, slope
 from sma_wrist.hw.link import SerialLink
-from sma_wrist.nodes.common import LOG_THROTTLE_S, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, LOG_THROTTLE_S, PRELOAD_PARAM, Param, WristNode,
+                                   finite, main_for)
 
 #: while the TEMs are off for a fault, a reminder is logged this often (wall time) [s]
 FAULT_REMINDER_S = LOG_THROTTLE_S
@@ -75,6 +78,9 @@ class HardwareBridge(WristNode):
               (0.0, 1.5)),
         Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in device time', 'Hz',
               (1.0, 500.0), runtime=False),
+        # the wire behind the stress estimate (hw/estimate.py): identify writes both into wrist_params.yaml
+        HYSTERESIS_FILE_PARAM,
+        PRELOAD_PARAM,
         Param('sample_wait_s', 0.05, 'longest a tick waits for the device to complete a window (wall time)', 's',
               (0.001, 1.0)),
         Param('max_backlog_windows', 5, 'more queued data than this many windows: skip to the newest', '',
@@ -120,7 +126,10 @@ class HardwareBridge(WristNode):
         self.period_s = 1.0 / p['publish_rate_hz']
         self.command_V = np.zeros(2)
         self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
-        self.estimator = StressEstimator(payload_kg=p['payload_kg'])
+        # the stresses are the wire model's (the device measures none): the identified wire's when given
+        self.estimator = StressEstimator(PlantParams(hysteresis=hysteresis_params(p['hysteresis_file']),
+                                                     preload_elongation_mm=p['preload_elongation_mm']),
+                                         payload_kg=p['payload_kg'])
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
                          'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}

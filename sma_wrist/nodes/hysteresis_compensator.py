@@ -43,8 +43,8 @@ from sma_wrist.core.stamps import stamp_seconds
 from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.core.thermal.online import ThermalScaleEstimator
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import (PRELOAD_PARAM, THERMAL_ADAPTATION_PARAMS, Param, WristNode, finite, main_for,
-                                   online_thermal)
+from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, PRELOAD_PARAM, THERMAL_ADAPTATION_PARAMS, Param, WristNode,
+                                   finite, main_for, online_thermal)
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 #: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
@@ -76,8 +76,7 @@ class HysteresisCompensator(WristNode):
               "model's valid range)", 'degC', (-60.0, 400.0)),
         Param('temperature_max_C', 80.0, 'highest temperature the compensator asks for (inside the wire '
               "model's valid range)", 'degC', (-60.0, 400.0)),
-        Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
-              '(empty: the built-in set)', runtime=False),
+        HYSTERESIS_FILE_PARAM,
         PRELOAD_PARAM,
         Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
               choices=('numerical', 'analytic', 'auto')),

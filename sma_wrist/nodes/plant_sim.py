@@ -40,7 +40,8 @@ from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import MUSCLE_FRAMES, PRELOAD_PARAM, Freshness, Param, WristNode, finite, main_for
+from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, PRELOAD_PARAM, Freshness, Param,
+                                   WristNode, finite, main_for)
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import VALIDITY as SCENARIO_AXES
 
@@ -90,8 +91,7 @@ class PlantSim(WristNode):
               (30.0, 120.0)),
         Param('thermal_file', '', 'identified TEM heat balance (sma-wrist identify thermal; empty: Table 4.9)',
               runtime=False),
-        Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis '
-              '(empty: the built-in set)', runtime=False),
+        HYSTERESIS_FILE_PARAM,
         PRELOAD_PARAM,
     ) + tuple(
         # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
