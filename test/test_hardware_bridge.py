@@ -424,6 +424,30 @@ def test_the_emulated_device_can_hold_a_plant_that_is_not_the_model(tmp_path, ca
         assert out.startswith('error: ') and named in out, (bad, out)
 
 
+def test_the_emulated_device_can_hold_the_wrist_a_params_file_describes(tmp_path, capsys):
+    """--params-file: the wire, TEMs and pre-load plant_sim would simulate with that file (an identified wire's
+    wrist_params.yaml) are the device's; a value plant_sim refuses is refused here too, before any pty."""
+    from sma_wrist.cli import main
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+    from sma_wrist.core.hysteresis.params_file import save_hysteresis
+    from sma_wrist.identify.wrist import shifted_wire
+    wire = save_hysteresis(tmp_path / 'wire.yaml', shifted_wire(default_sdgpi(), 10.0))
+    f = tmp_path / 'wrist.yaml'
+    f.write_text(f'plant_sim:\n  ros__parameters:\n    hysteresis_file: {wire}\n    preload_elongation_mm: 1.7\n')
+    emu = DeviceEmulator(config_from_args(argparse_for(['--params-file', str(f), '--noise-counts', '0'])))
+    p = emu.plant.params
+    assert p.preload_elongation_mm == 1.7 and p.dt == 1e-3
+    assert np.array_equal(p.hysteresis.c, shifted_wire(default_sdgpi(), 10.0).c)
+    hot = _device_readings(emu, 20)
+    cold = _device_readings(DeviceEmulator(EmulatorConfig(noise_counts=0.0)), 20)
+    assert abs(hot[-1, 4] - cold[-1, 4]) > 0.005  # another wire and pre-load: another rest angle
+    f.write_text('plant_sim:\n  ros__parameters:\n    preload_elongation_mm: 50.0\n')
+    link = tmp_path / 'dev'
+    assert main(['emulate-device', '--port', str(link), '--duration', '0.1', '--params-file', str(f)]) == 2
+    out = capsys.readouterr().out
+    assert out.startswith('error: ') and 'preload_elongation_mm' in out and not os.path.lexists(link)
+
+
 def argparse_for(argv):
     import argparse
 

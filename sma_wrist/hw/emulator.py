@@ -6,7 +6,9 @@ then ``$S`` samples at ``--rate-hz`` (1 kHz) of device time with 16-bit ADC quan
 and Gaussian noise of the plant :class:`sma_wrist.core.plant.wrist.WristPlant` (the controllers' own
 model), or with ``--plant`` of a registered plant that is not the model (:mod:`sma_wrist.plants`:
 ``phase_fraction`` a structurally different wire, ``sdgpi`` the model with a parameter spread), in the
-scenario ``--scenario-file`` gives (its sensor lag and noise act on what the device reports); ``$C`` commands
+scenario ``--scenario-file`` gives (its sensor lag and noise act on what the device reports), and with
+``--params-file`` the wire, TEMs and pre-load plant_sim would simulate with those ROS params files (an
+identified wire's ``wrist_params.yaml``); ``$C`` commands
 take effect ``--latency-ms`` after they arrive; no command for ``--watchdog-s`` of device
 time -> zero drive (flag ``FLAG_WATCHDOG``). Device time runs ``--time-scale`` times
 faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
@@ -19,6 +21,7 @@ boots again on a new pty at the same link), freezes (no samples), forced ADC cou
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import signal
@@ -65,6 +68,8 @@ class EmulatorConfig:
     # scenario {perturbation: value} (sma_wrist.plants.spread.Scenario fields; a payload_kg there overrides the above)
     plant: str = 'model'
     scenario: dict[str, Any] = field(default_factory=dict)
+    # its wire, TEMs, pre-load (a PlantParams; its dt is the emulator's): None = the built-in wrist
+    base: Any = None
 
 
 @dataclass
@@ -92,7 +97,7 @@ class DeviceEmulator:
         self.link = link
         dt = min(1e-3, 1.0 / c.rate_hz)
         self.steps_per_sample = max(1, int(round(1.0 / (c.rate_hz * dt))))
-        base = PlantParams(dt=1.0 / (c.rate_hz * self.steps_per_sample))
+        base = dataclasses.replace(c.base or PlantParams(), dt=1.0 / (c.rate_hz * self.steps_per_sample))
         self.sensors: Any = None  # a registered plant's scenario sensors (lag, noise) on what the device reports
         if c.plant == 'model':
             self.plant: Any = WristPlant(base, payload_kg=c.payload_kg)
@@ -394,7 +399,13 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         from sma_wrist.plants.spread import Scenario
         # as plant_sim's scenario_file: axes it names (a sweep row's payload too) win; ParameterError is a ValueError
         scenario = Scenario.from_file(a.scenario_file, {'payload_kg': a.payload_kg}).to_dict()
-    return EmulatorConfig(plant=getattr(a, 'plant', 'model'), scenario=scenario,
+    base = None
+    if getattr(a, 'params_file', None):  # the wrist plant_sim would simulate with these files
+        from sma_wrist import runtime
+        runtime.activate()
+        from sma_wrist.sweep.graph_params import plant_params
+        base = plant_params(a.params_file)  # ParameterError (a ValueError) names a bad file or value
+    return EmulatorConfig(plant=getattr(a, 'plant', 'model'), scenario=scenario, base=base,
                           rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,
                           noise_counts=a.noise_counts, latency_s=a.latency_ms / 1000.0, watchdog_s=a.watchdog_s,
                           seed=a.seed, calibration=cal, garbage_rate=a.garbage_rate,

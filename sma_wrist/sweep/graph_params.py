@@ -193,4 +193,10 @@ def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> L
     return LoopSettings(out, changed)
 
 
-__all__ = ['HONOURED', 'NO_EFFECT', 'LoopSettings', 'changed_parameters', 'loop_settings']
+def plant_params(params_files: Sequence[str | Path]) -> Any:
+    """The PlantParams plant_sim builds from config/wrist.yaml and ``params_files`` (its wire, TEMs, pre-load,
+    ``model.*``): what ``sma-wrist emulate-device --params-file`` puts behind the serial line."""
+    return _build_graph(params_files)['plant_sim'].objects['plant']
+
+
+__all__ = ['HONOURED', 'NO_EFFECT', 'LoopSettings', 'changed_parameters', 'loop_settings', 'plant_params']
