@@ -425,10 +425,12 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None
     page = int.from_bytes(head[16:18], 'big')
     page = 65536 if page == 1 else page
     promised, size = int.from_bytes(head[28:32], 'big'), file.stat().st_size
+    # SQLite trusts the header's page count only while its "version-valid-for" equals the change counter
+    trusted = head[92:96] == head[24:28]
     notes: list[str] = []
     with tempfile.TemporaryDirectory(prefix='sma_wrist_db3_') as tmp:
         path = file
-        if page >= 512 and promised * page > size:
+        if trusted and page >= 512 and promised * page > size:
             notes.append(f'the file is cut short: {size} of {promised * page} bytes')
             path = Path(tmp) / file.name
             with open(file, 'rb') as src:
