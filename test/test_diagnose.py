@@ -95,6 +95,23 @@ def test_structure_outside_the_catalogue_is_reported_unexplained_not_named():
     assert res.correlates and 'no catalogue effect explains it' in res.summary
 
 
+def test_a_wrist_of_another_wire_model_is_unexplained_and_its_figures_are_its_channels(tmp_path):
+    """The phase-fraction wrist (another wire and TEM model, sma_wrist/plants/phase_fraction.py) in the node graph:
+    no catalogue effect is named; the verdict's channel is the thermal one, 17-22 degC RMS off. The result printed
+    the best candidate's channel's figures (mechanics, 0.33 rad) under "thermal"."""
+    from sma_wrist import runtime
+    runtime.activate()
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.diagnose import diagnose
+    run_closed_loop('direct_adaptive', 0.3, 40.0, tmp_path / 'pf',
+                    extra_params={'/plant_sim': {'plant': 'phase_fraction'}})
+    res = diagnose(tmp_path / 'pf')
+    assert res.discrepancy and res.unexplained and res.cause is None, res.summary
+    assert res.channel == 'thermal' and res.rmse_before > 5.0  # degC
+    assert (res.rmse_before, res.rmse_after) == (res.channels['thermal']['rmse_before'],
+                                                 res.channels['thermal']['rmse_after'])
+
+
 # ------------------------------------------------------------------------- bags and CLI
 
 def test_cli_on_a_bag_json_report_and_params_file(tmp_path):

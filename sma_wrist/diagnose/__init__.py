@@ -307,12 +307,15 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         subsystem = {'thermal': 'thermal', 'mechanics': 'hysteresis/joint', 'chain': 'chain'}[structure[0]]
     else:
         subsystem = None
+    # the channel the verdict is about: the named cause's, else the one with structure left (its figures, not
+    # those of the best fit's channel: the report printed mechanics' RMS under "thermal")
+    shown = channel if significant else (structure[0] if structure else channel)
     res = DiagnosisResult(
         discrepancy=significant or unexplained, subsystem=subsystem, cause=best.effect.id if significant else None,
         parameters=_param_dict(best.row, best.effect.params) if significant else {},
-        channel=channel if significant else (structure[0] if structure else channel),
-        rmse_before=chan_gains[channel]['rmse_before'] if not significant else g_best['rmse_before'],
-        rmse_after=(g_best['rmse_after'] if significant else chan_gains[channel]['rmse_after']),
+        channel=shown,
+        rmse_before=g_best['rmse_before'] if significant else chan_gains[shown]['rmse_before'],
+        rmse_after=g_best['rmse_after'] if significant else chan_gains[shown]['rmse_after'],
         gain_pct=g_best['gain_pct'] if significant else 0.0,
         gain_ci=(g_best['gain_pct_p05'], g_best['gain_pct_p95']) if significant else (0.0, 0.0),
         alternatives=alternatives, unexplained=unexplained, correlates=corr, channels=chan_gains,
