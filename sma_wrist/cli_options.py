@@ -29,6 +29,9 @@ def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
     ap.add_argument('--hysteresis-file', metavar='FILE',
                     help='the wire model to replay: hysteresis.yaml from sma-wrist identify (default: built-in set)')
+    ap.add_argument('--thermal-file', metavar='FILE',
+                    help="the TEMs' heat balance to replay: thermal.yaml from sma-wrist identify thermal (default: "
+                         'Table 4.9)')
     return ap
 
 

@@ -110,6 +110,19 @@ def test_a_wrist_of_another_wire_model_is_unexplained_and_its_figures_are_its_ch
     assert res.channel == 'thermal' and res.rmse_before > 5.0  # degC
     assert (res.rmse_before, res.rmse_after) == (res.channels['thermal']['rmse_before'],
                                                  res.channels['thermal']['rmse_after'])
+    # the user's next step: the TEMs identified from another run of that wrist (identify thermal), replayed with
+    # --thermal-file: the thermal channel comes down to the TEMs' own error, what is left is the wire's
+    from sma_wrist.cli import main
+    run_closed_loop('direct_adaptive', 0.3, 70.0, tmp_path / 'pf_train',
+                    extra_params={'/plant_sim': {'plant': 'phase_fraction'}})
+    assert main(['identify', 'thermal', str(tmp_path / 'pf_train'), '--out', str(tmp_path / 'tems'), '--no-plots',
+                 '--quiet']) == 0
+    tems = tmp_path / 'tems' / 'thermal.yaml'
+    again = diagnose(tmp_path / 'pf', thermal_file=str(tems), params_out=tmp_path / 'ext.yaml')
+    # 22.2 -> 6.5 degC here (from a 70 s run of the same wrist to this 40 s one)
+    assert again.channels['thermal']['rmse_before'] < res.channels['thermal']['rmse_before'] / 3
+    assert again.channels['mechanics']['rmse_before'] > 0.1  # rad: the wire is still not the model's
+    assert f'thermal_file: {tems.resolve()}' in (tmp_path / 'ext.yaml').read_text()  # the plant it replayed
 
 
 # ------------------------------------------------------------------------- bags and CLI

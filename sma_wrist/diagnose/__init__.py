@@ -155,14 +155,22 @@ def _regressors(ev: ft.Evaluator, q_model: np.ndarray | None, load: np.ndarray |
 
 
 def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str | Path | None = None,
-                 candidates: Sequence[str] | None = None, hysteresis_file: str | None = None) -> DiagnosisResult:
-    """Diagnose an aligned run (see :func:`diagnose` for a bag); ``hysteresis_file``: the wire's SD-GPI."""
+                 candidates: Sequence[str] | None = None, hysteresis_file: str | None = None,
+                 thermal_file: str | None = None) -> DiagnosisResult:
+    """Diagnose an aligned run (see :func:`diagnose` for a bag); ``hysteresis_file``: the wire's SD-GPI;
+    ``thermal_file``: the TEMs' heat balance (``sma-wrist identify thermal``), so that what is left is the rest."""
     t_start = time.perf_counter()
     base = None
-    if hysteresis_file:
+    if hysteresis_file or thermal_file:
+        from dataclasses import replace
+
         from sma_wrist.core.hysteresis.params_file import hysteresis_params
         from sma_wrist.core.plant.wrist import PlantParams
-        base = PlantParams(dt=min(run.dt, 0.01), hysteresis=hysteresis_params(hysteresis_file))
+        from sma_wrist.core.thermal.params_file import load_thermal_file
+        base = PlantParams(dt=min(run.dt, 0.01), hysteresis=hysteresis_params(hysteresis_file or None))
+        if thermal_file:  # identified TEMs at the driver rating, as plant_sim takes them
+            lim = base.thermal
+            base = replace(base, thermal=load_thermal_file(thermal_file).with_limits(lim.u_min_V, lim.u_max_V))
     model = fx.ExtendedModel(run, base)
     ev = ft.Evaluator(model)
     if not ev.channels:
@@ -323,12 +331,12 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         separating_measurement=separating, bound_hits=hits, warnings=list(run.warnings), source=run.source,
         duration_s=run.duration)
     if params_out is not None:
-        res.params_file = str(write_params(res, params_out, run, hysteresis_file))
+        res.params_file = str(write_params(res, params_out, run, hysteresis_file, thermal_file))
     if report_dir is not None:
         d = Path(report_dir)
         d.mkdir(parents=True, exist_ok=True)
         if res.params_file is None:
-            res.params_file = str(write_params(res, d / 'extended_params.yaml', run, hysteresis_file))
+            res.params_file = str(write_params(res, d / 'extended_params.yaml', run, hysteresis_file, thermal_file))
         traces = {'t': run.t[sl], 'i_train': ev.i_train - ev.i0, 'regressors': reg,
                   'meas': {c: ev.measured(c)[sl] for c in ev.channels},
                   'nominal': {c: ev.pred_nom[c][sl, 0] for c in ev.channels},
@@ -352,11 +360,12 @@ def at_bound(f: ft.Fit) -> list[dict[str, Any]]:
     return out
 
 
-def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_file: str | Path | None = None) -> Path:
+def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_file: str | Path | None = None,
+                 thermal_file: str | Path | None = None) -> Path:
     """The extended model as a ROS 2 params file for plant_sim (schema: docs/diagnose.md).
 
-    ``hysteresis_file``: the wire the diagnosis replayed; carried (absolute) so that the file
-    runs the same wire instead of silently falling back to the built-in one.
+    ``hysteresis_file``, ``thermal_file``: the wire and TEMs the diagnosis replayed; carried (absolute) so that
+    the file runs the same plant instead of silently falling back to the built-in one.
     """
     import yaml
 
@@ -366,6 +375,8 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
     params: dict[str, Any] = {'payload_kg': float(run.payload_kg)}
     if hysteresis_file:
         params['hysteresis_file'] = str(Path(hysteresis_file).resolve())
+    if thermal_file:
+        params['thermal_file'] = str(Path(thermal_file).resolve())
     params.update({f'model.{k}': float(d['value']) for k, d in res.parameters.items()})
     replay_only = [k for k in res.parameters if k in mx.REPLAY_ONLY]
     doc = {'plant_sim': {'ros__parameters': params}}
@@ -381,10 +392,11 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
 
 
 def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out: str | Path | None = None,
-             candidates: Sequence[str] | None = None, hysteresis_file: str | None = None) -> DiagnosisResult:
+             candidates: Sequence[str] | None = None, hysteresis_file: str | None = None,
+             thermal_file: str | None = None) -> DiagnosisResult:
     """Diagnose the bag at `path`; raises DiagnoseInputError for unusable input."""
     run = load_run(path)
-    return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file)
+    return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file, thermal_file)
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -395,7 +407,8 @@ def run_cli(args: argparse.Namespace) -> int:
             unknown = [c for c in cands if c not in fx.EFFECTS]
             if unknown:
                 raise DiagnoseInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
-        res = diagnose(args.bag, args.report, args.params, cands, getattr(args, 'hysteresis_file', None))
+        res = diagnose(args.bag, args.report, args.params, cands, getattr(args, 'hysteresis_file', None),
+                       getattr(args, 'thermal_file', None))
     except (DiagnoseInputError, ParameterError) as exc:
         if args.json:
             print(json.dumps({'error': str(exc)}))
