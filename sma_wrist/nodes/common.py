@@ -83,9 +83,10 @@ def qos_for(topic: Topic) -> QoSProfile:
 #: must agree on it; `sma-wrist identify hysteresis` writes the one calibrated for the wire (core/plant/preload.py)
 HYSTERESIS_FILE_PARAM = Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify '
                               'hysteresis (empty: the built-in set)', runtime=False)
-PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm, "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; "
-                      'the same value in plant_sim, hysteresis_compensator and adaptive_controller; the identified '
-                      "wire's in its wrist_params.yaml, docs/identification.md)", 'mm', (0.1, 10.0), runtime=False)
+PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm,
+                      "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; the same value in plant_sim, "
+                      'hysteresis_compensator, adaptive_controller and hardware_bridge; the identified wire\'s in its '
+                      'wrist_params.yaml, docs/identification.md)', 'mm', (0.1, 10.0), runtime=False)
 
 #: the online heat-balance estimate (core.thermal.online): the same values in tem_controller and
 #: hysteresis_compensator, which each run one on the same samples (docs/control.md "Learning the TEMs online")
