@@ -54,8 +54,8 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--unplug-every-s', type=float, default=0.0, help='unplug period [device s] (0: never)')
     ap.add_argument('--unplug-wall-s', type=float, default=0.5, help='how long an unplug lasts [wall s]')
     ap.add_argument('--duration', type=float, default=None, help='stop after this many wall seconds')
-    from sma_wrist.plants import PLANTS
-    ap.add_argument('--plant', default='model', choices=('model', *PLANTS),
+    # checked in config_from_args: the registry's import would load the plant into every command's start-up
+    ap.add_argument('--plant', default='model',
                     help="the wrist behind the device: 'model' the controllers' own (default), or a registered plant "
                          'that is not (phase_fraction: another wire model; sdgpi: the model perturbed)')
     ap.add_argument('--scenario-file', default=None, metavar='JSON',

@@ -371,6 +371,7 @@ def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
     (['--watchdog-s', 'nan'], '--watchdog-s'), (['--watchdog-s', '0'], '--watchdog-s'),
     (['--garbage-rate', '2'], '--garbage-rate'), (['--checksum-error-rate', 'nan'], '--checksum-error-rate'),
     (['--thermocouple-offsets-C', 'a,b,c,d'], '--thermocouple-offsets-C'),
+    (['--plant', 'nope'], "--plant 'nope': one of model, phase_fraction, sdgpi"),
 ])
 def test_emulator_refuses_a_fault_or_noise_option_it_cannot_be(tmp_path, capsys, args, named):
     """A NaN or negative noise, latency or watchdog, or a fault rate outside [0, 1], made a device without that

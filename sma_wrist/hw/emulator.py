@@ -392,6 +392,10 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
             raise ValueError(f'{flag} {v!r} must be a probability in [0, 1]')
     # the device's sensor error: it reads `offset` too high, i.e. counts of (T + offset)
     cal = Calibration(offsets_C=tuple(-o for o in offsets))  # type: ignore[arg-type]
+    plant = getattr(a, 'plant', 'model')
+    from sma_wrist.plants import PLANTS
+    if plant != 'model' and plant not in PLANTS:
+        raise ValueError(f'--plant {plant!r}: one of model, {", ".join(sorted(PLANTS))}')
     scenario: dict[str, Any] = {}
     if getattr(a, 'scenario_file', None):
         if a.plant == 'model':
@@ -405,7 +409,7 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         runtime.activate()
         from sma_wrist.sweep.graph_params import plant_params
         base = plant_params(a.params_file)  # ParameterError (a ValueError) names a bad file or value
-    return EmulatorConfig(plant=getattr(a, 'plant', 'model'), scenario=scenario, base=base,
+    return EmulatorConfig(plant=plant, scenario=scenario, base=base,
                           rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,
                           noise_counts=a.noise_counts, latency_s=a.latency_ms / 1000.0, watchdog_s=a.watchdog_s,
                           seed=a.seed, calibration=cal, garbage_rate=a.garbage_rate,
