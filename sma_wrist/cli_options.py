@@ -61,8 +61,8 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--scenario-file', default=None, metavar='JSON',
                     help="that plant's perturbations {name: value} (a row of sma-wrist sweep's results.jsonl will do)")
     ap.add_argument('--params-file', action='append', default=[], metavar='FILE',
-                    help="the wire, TEMs and pre-load plant_sim would simulate with this ROS params file (applied after "
-                         "config/wrist.yaml; repeatable), e.g. an identified wire's wrist_params.yaml")
+                    help="the wire, TEMs and pre-load plant_sim would simulate with this ROS params file "
+                         "(applied after config/wrist.yaml; repeatable), e.g. an identified wire's wrist_params.yaml")
 
 
 def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:

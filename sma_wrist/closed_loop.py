@@ -186,7 +186,8 @@ def print_progress(t: float, total: float, wall: float) -> None:
     sys.stderr.flush()
 
 
-__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'check_params', 'run_closed_loop', 'print_progress', 'ros_args', 'overrides']
+__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'check_params', 'run_closed_loop', 'print_progress', 'ros_args',
+           'overrides']
 
 
 def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:

@@ -114,8 +114,8 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
         problems.append(f'the wire needs its muscle down to {lo:.0f} degC but the TEMs work only from {face[0]:g} degC')
     if hi > BRIDGE_MUSCLE_CUTOFF_C:  # not written: a safety limit is the device owner's to raise
         problems.append(f'on hardware, hardware_bridge cuts the TEMs off above max_muscle_temperature_C '
-                        f'{BRIDGE_MUSCLE_CUTOFF_C:g} degC, below this wire\'s window top {hi:.0f} degC: raise it on your '
-                        'device only if the wire, its crimps and the TEMs are rated for that (not written here)')
+                        f'{BRIDGE_MUSCLE_CUTOFF_C:g} degC, below this wire\'s window top {hi:.0f} degC: raise it on '
+                        'your device only if the wire, its crimps and the TEMs are rated for that (not written here)')
     if hi + TEM_MUSCLE_MARGIN_C > NODE_MAX_C:
         problems.append(f'the window top {hi:.0f} degC + {TEM_MUSCLE_MARGIN_C:g} exceeds the nodes\' limit '
                         f'{NODE_MAX_C:g} degC')
