@@ -283,7 +283,7 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
 
     It is also :func:`read_bag`'s fast path for closed bags: one pass over the bytes, about 2x
     faster than rosbags' indexed reader on a run bag. A file with compressed chunks (``ros2 bag
-    record`` compresses its MCAP chunks with zstd by default) is read by the `mcap` library's
+    record``'s ``zstd_fast`` / ``zstd_small`` storage presets) is read by the `mcap` library's
     stream reader instead (:func:`_stream_mcap`), which decompresses them."""
     data = Path(file).read_bytes()
     out: list[tuple[str, str, int, bytes]] = []
