@@ -414,6 +414,7 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None
     malformed": its header promises more pages). It is then read from a temporary copy whose header gives the
     pages that are there, up to the first page that is not. Messages compressed by rosbag2
     (``--compression-mode message``, zstd) are not decoded here: reported as a problem."""
+    import contextlib
     import sqlite3
     import tempfile
     file = Path(file)
@@ -428,11 +429,11 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None
     # SQLite trusts the header's page count only while its "version-valid-for" equals the change counter
     trusted = head[92:96] == head[24:28]
     notes: list[str] = []
-    with tempfile.TemporaryDirectory(prefix='sma_wrist_db3_') as tmp:
+    with contextlib.ExitStack() as stack:
         path = file
-        if trusted and page >= 512 and promised * page > size:
+        if trusted and page >= 512 and promised * page > size:  # a copy only for a file cut short
             notes.append(f'the file is cut short: {size} of {promised * page} bytes')
-            path = Path(tmp) / file.name
+            path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix='sma_wrist_db3_'))) / file.name
             with open(file, 'rb') as src:
                 data = bytearray(src.read(size - size % page))
             data[28:32] = (len(data) // page).to_bytes(4, 'big')

@@ -11,11 +11,13 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Sequence, TypeVar
 
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.runtime.launch import Runtime
 from sma_wrist.share import share_path
+
+T = TypeVar('T')
 
 CONTROLLERS = ('inverse_adaptive', 'direct_adaptive', 'pid')
 
@@ -98,22 +100,29 @@ def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
     return out
 
 
-def check_params(nodes: Sequence[type], args: Sequence[str], params_files: Sequence[str | Path],
-                 params: dict[str, dict[str, Any]]) -> None:
-    """Build ``nodes`` (all but hardware_bridge, which would open its port) with ``args`` and ``params`` on a
-    throwaway runtime, before anything is recorded: a value a node refuses, or a key of ``params_files`` that no node
-    of the graph declares (ROS ignores it, so a misspelt name would run the defaults in silence), is a ParameterError.
-    A refusal met only when the run started left its bag behind, which then blocked the rerun ("already exists")."""
-    from sma_wrist.nodes.common import add_or_refuse, refuse_undeclared
+def build_nodes(nodes: Sequence[type], args: Sequence[str], params: dict[str, dict[str, Any]],
+                take: Callable[[Any], T]) -> dict[str, T]:
+    """{node name: ``take(node)``} of ``nodes`` built, not run, on a throwaway embedded runtime with ``args`` and
+    ``params``, their start-up lines silenced; a node that refuses its values raises ParameterError with its reason
+    (ros2 run's). How ``run`` checks a params file and ``sweep`` reads one."""
+    from sma_wrist.nodes.common import add_or_refuse
     from sma_wrist.runtime.rclpy import logging as rlog
-    declared: dict[str, set[str]] = {}
+    out: dict[str, T] = {}
     with rlog.silenced(), Runtime(list(args), params=params) as rt:
         for cls in nodes:
-            if cls.__name__ == 'HardwareBridge':
-                continue
             node = add_or_refuse(rt, cls)
-            declared[node.get_name()] = set(node.get_parameters_by_prefix(''))
-    refuse_undeclared(params_files, declared)
+            out[node.get_name()] = take(node)
+    return out
+
+
+def check_params(nodes: Sequence[type], args: Sequence[str], params_files: Sequence[str | Path],
+                 params: dict[str, dict[str, Any]]) -> None:
+    """Build ``nodes`` (:func:`build_nodes`) before anything is recorded: a value a node refuses, or a key of
+    ``params_files`` that no node of the graph declares (ROS ignores it, so a misspelt name would run the defaults in
+    silence), is a ParameterError. A refusal met only when the run started left its bag behind, which then blocked
+    the rerun ("already exists")."""
+    from sma_wrist.nodes.common import refuse_undeclared
+    refuse_undeclared(params_files, build_nodes(nodes, args, params, lambda n: set(n.get_parameters_by_prefix(''))))
 
 
 def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.3, duration_s: float = 126.0,
@@ -128,8 +137,8 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     """
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
-    if params_files:
-        check_params(nodes, ros_args(params_files), params_files,
+    if params_files:  # all but hardware_bridge (graph_nodes puts the source first), which would open its port
+        check_params(nodes[1:] if hardware else nodes, ros_args(params_files), params_files,
                      overrides(controller, payload_kg, source, extra_params))
     wall0 = time.perf_counter()
     interrupted = stalled = False
@@ -186,7 +195,7 @@ def print_progress(t: float, total: float, wall: float) -> None:
     sys.stderr.flush()
 
 
-__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'check_params', 'run_closed_loop', 'print_progress', 'ros_args',
+__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'build_nodes', 'check_params', 'run_closed_loop', 'print_progress', 'ros_args',
            'overrides']
 
 

@@ -161,16 +161,9 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
     ``thermal_file``: the TEMs' heat balance (``sma-wrist identify thermal``), so that what is left is the rest."""
     t_start = time.perf_counter()
     base = None
-    if hysteresis_file or thermal_file:
-        from dataclasses import replace
-
-        from sma_wrist.core.hysteresis.params_file import hysteresis_params
+    if hysteresis_file or thermal_file:  # the plant plant_sim would run with these files
         from sma_wrist.core.plant.wrist import PlantParams
-        from sma_wrist.core.thermal.params_file import load_thermal_file
-        base = PlantParams(dt=min(run.dt, 0.01), hysteresis=hysteresis_params(hysteresis_file or None))
-        if thermal_file:  # identified TEMs at the driver rating, as plant_sim takes them
-            lim = base.thermal
-            base = replace(base, thermal=load_thermal_file(thermal_file).with_limits(lim.u_min_V, lim.u_max_V))
+        base = PlantParams.from_files(hysteresis_file, thermal_file, dt=min(run.dt, 0.01))
     model = fx.ExtendedModel(run, base)
     ev = ft.Evaluator(model)
     if not ev.channels:

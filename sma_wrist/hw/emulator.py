@@ -398,7 +398,7 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         raise ValueError(f'--plant {plant!r}: one of model, {", ".join(sorted(PLANTS))}')
     scenario: dict[str, Any] = {}
     if getattr(a, 'scenario_file', None):
-        if a.plant == 'model':
+        if plant == 'model':
             raise ValueError('--scenario-file perturbs a registered plant: give --plant sdgpi or phase_fraction too')
         from sma_wrist.plants.spread import Scenario
         # as plant_sim's scenario_file: axes it names (a sweep row's payload too) win; ParameterError is a ValueError

@@ -53,7 +53,6 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64
 
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
@@ -127,8 +126,8 @@ class HardwareBridge(WristNode):
         self.command_V = np.zeros(2)
         self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
         # the stresses are the wire model's (the device measures none): the identified wire's when given
-        self.estimator = StressEstimator(PlantParams(hysteresis=hysteresis_params(p['hysteresis_file']),
-                                                     preload_elongation_mm=p['preload_elongation_mm']),
+        self.estimator = StressEstimator(PlantParams.from_files(p['hysteresis_file'],
+                                                                preload_elongation_mm=p['preload_elongation_mm']),
                                          payload_kg=p['payload_kg'])
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,

@@ -36,10 +36,8 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64, Header
 
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
-from sma_wrist.core.thermal.params_file import load_thermal_file
 from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, PRELOAD_PARAM, Freshness, Param,
                                    WristNode, finite, main_for)
 from sma_wrist.plants import PLANTS
@@ -111,12 +109,9 @@ class PlantSim(WristNode):
         super().__init__('plant_sim', **kwargs)
         p = self.p
         ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
-        base = PlantParams(dt=p['dt_s'], max_muscle_temperature_C=p['max_muscle_temperature_C'],
-                           hysteresis=hysteresis_params(p['hysteresis_file']),
-                           preload_elongation_mm=p['preload_elongation_mm'])
-        if p['thermal_file']:  # identified TEMs; the plant still clips at the driver rating
-            lim = base.thermal
-            base = replace(base, thermal=load_thermal_file(p['thermal_file']).with_limits(lim.u_min_V, lim.u_max_V))
+        base = PlantParams.from_files(p['hysteresis_file'], p['thermal_file'], dt=p['dt_s'],
+                                      max_muscle_temperature_C=p['max_muscle_temperature_C'],
+                                      preload_elongation_mm=p['preload_elongation_mm'])
         self.sim_params = mx.plant_params(ext, base)
         # /wrist/payload publishes payload_kg (what the user believes); the joint carries the true mass
         self.payload_err_kg = ext['payload_err_kg']

@@ -102,21 +102,12 @@ def _build_graph(params_files: Sequence[str | Path]) -> dict[str, _Built]:
     runtime from config/wrist.yaml and ``params_files``; a node that refuses its values raises
     ParameterError with the node's reason."""
     _activate()
-    from sma_wrist.closed_loop import graph_nodes, ros_args
-    from sma_wrist.runtime.launch import Runtime
+    from sma_wrist.closed_loop import build_nodes, graph_nodes, ros_args
     for f in params_files:
         if not Path(f).is_file():
             raise ParameterError(f'params file {f}: no such file')
-    from sma_wrist.nodes.common import add_or_refuse
-    from sma_wrist.runtime.rclpy import logging as rlog
-    built: dict[str, _Built] = {}
-    with rlog.silenced():  # the nodes' start-up lines are not the sweep's
-        with Runtime(ros_args(params_files), params={'/**': {'use_sim_time': True},
-                                                     '/plant_sim': {'use_sim_time': False}}) as rt:
-            for cls in graph_nodes('inverse_adaptive'):
-                node = add_or_refuse(rt, cls)  # a node's refusal (its values, a wrong type or range): ros2 run's reason
-                built[node.get_name()] = _Built.of(node)
-    return built
+    return build_nodes(graph_nodes('inverse_adaptive'), ros_args(params_files),
+                       {'/**': {'use_sim_time': True}, '/plant_sim': {'use_sim_time': False}}, _Built.of)
 
 
 def changed_parameters(params_files: Sequence[str | Path]) -> tuple[dict[str, _Built], dict[str, dict[str, Any]]]:

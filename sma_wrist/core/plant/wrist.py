@@ -16,7 +16,9 @@ muscles of all scenarios are stacked on one axis (2N) so each numpy call serves 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -62,6 +64,20 @@ class PlantParams:
             raise ModelInputError('plant engine', self.engine, "{'auto', 'numpy'}")
         if not (0 < self.load_tolerance_mm <= 1e-3):
             raise ModelInputError('load_tolerance_mm', self.load_tolerance_mm, '(0, 1e-3]', 'mm')
+
+    @classmethod
+    def from_files(cls, hysteresis_file: str | Path | None = None, thermal_file: str | Path | None = None,
+                   **fields: Any) -> 'PlantParams':
+        """The wrist with the wire of ``hysteresis_file`` (``sma-wrist identify hysteresis``; empty: the built-in set)
+        and the TEMs of ``thermal_file`` (``identify thermal``; empty: Table 4.9), still clipped at the driver rating;
+        ``fields``: the other fields. What plant_sim, hardware_bridge and diagnose build from their parameters."""
+        from sma_wrist.core.hysteresis.params_file import hysteresis_params
+        p = cls(hysteresis=hysteresis_params(hysteresis_file or None), **fields)
+        if thermal_file:  # identified TEMs; the plant still clips at the driver rating
+            from sma_wrist.core.thermal.params_file import load_thermal_file
+            lim = p.thermal
+            p = replace(p, thermal=load_thermal_file(thermal_file).with_limits(lim.u_min_V, lim.u_max_V))
+        return p
 
 
 @dataclass
