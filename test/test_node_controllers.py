@@ -627,9 +627,10 @@ def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_facto
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.nodes import plant_sim
+    real = PlantParams.from_files.__func__  # plant_sim builds its plant with it
     for bound in (0.8, MuscleGeometry().max_load_kgf):
-        monkeypatch.setattr(plant_sim, 'PlantParams',
-                            lambda bound=bound, **kw: PlantParams(muscle=MuscleGeometry(max_load_kgf=bound), **kw))
+        monkeypatch.setattr(PlantParams, 'from_files', classmethod(
+            lambda cls, *a, bound=bound, **kw: real(cls, *a, muscle=MuscleGeometry(max_load_kgf=bound), **kw)))
         with Runtime() as rt:
             probe = probe_factory(rt, (), sim_time=True)
             node = rt.add(plant_sim.PlantSim)
