@@ -11,7 +11,9 @@ Measurements: every ``1 / publish_rate_hz`` of device time the samples of that w
 temperatures as the window mean (variance = the window's), the angle as the least-squares
 line's value at the window end and its slope, low-pass filtered over ``velocity_filter_s``,
 as velocity. **The stresses and the effort are estimates**, not measurements: the SD-GPI
-wire-load solve at the measured temperatures and angle (sma_wrist/hw/estimate.py).
+wire-load solve at the measured temperatures and angle (sma_wrist/hw/estimate.py), taken
+through a Kalman filter first whose measurement noise is each window's own spread and whose
+process noise is ``stress_filter.*`` (the stiff wires multiply the sensors' noise).
 
 Time: the device clock is the graph's clock. /clock is the device time stamp of the last
 sample of each window, rebased to 0 at the first sample and kept continuous (spliced one
@@ -99,6 +101,11 @@ class HardwareBridge(WristNode):
         Param('u_min_V', -24.0, 'most negative TEM command sent (driver rating, cooling)', 'V', (-30.0, 0.0)),
         Param('u_max_V', 24.0, 'most positive TEM command sent (driver rating, heating)', 'V', (0.0, 30.0)),
         Param('velocity_filter_s', 0.02, 'time constant of the velocity low-pass', 's', (0.0, 1.0)),
+        # the stress estimate's input filter (hw/estimate.py InputFilter): how far the true values may wander
+        Param('stress_filter.temperature_drift_C', 0.175, 'muscle temperature random walk per sqrt(s) the stress '
+              "estimate's Kalman filter assumes (larger: follows faster, smooths less)", 'degC', (1e-4, 100.0)),
+        Param('stress_filter.angle_drift_rad', 0.00275, 'joint angle random walk per sqrt(s) the stress '
+              "estimate's Kalman filter assumes (larger: follows faster, smooths less)", 'rad', (1e-6, 10.0)),
         Param('reconnect_backoff_initial_s', 0.05, 'first reconnect delay; doubles per failure', 's', (0.001, 10.0),
               runtime=False),
         Param('reconnect_backoff_max_s', 2.0, 'longest reconnect delay', 's', (0.01, 60.0), runtime=False),
@@ -128,7 +135,7 @@ class HardwareBridge(WristNode):
         # the stresses are the wire model's (the device measures none): the identified wire's when given
         self.estimator = StressEstimator(PlantParams.from_files(p['hysteresis_file'],
                                                                 preload_elongation_mm=p['preload_elongation_mm']),
-                                         payload_kg=p['payload_kg'])
+                                         payload_kg=p['payload_kg'], drift=self._drift())
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
                          'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}
@@ -137,6 +144,7 @@ class HardwareBridge(WristNode):
         self._last_t_us: int | None = None
         self._anchor: tuple[int, float] | None = None  # (device t_us, sim s) of the time base
         self._last_pub_s: float | None = None
+        self._est_t_s: float | None = None  # device time of the stress estimate's last input
         self._next_pub_s = 0.0
         self._last_valid_wall: float | None = None
         self._latest: tuple[tuple[float, ...], float, bool] | None = None  # temps, q, adc at a rail
@@ -313,6 +321,10 @@ class HardwareBridge(WristNode):
         self._send()
         self._report()
 
+    def _drift(self) -> tuple[float, float, float]:
+        d_T, d_q = self.p['stress_filter.temperature_drift_C'], self.p['stress_filter.angle_drift_rad']
+        return d_T, d_T, d_q
+
     def _publish_window(self) -> None:
         t_end = self._window[-1][0]
         w = [x for x in self._window if x[0] > t_end - self.period_s + 1e-9]
@@ -335,18 +347,24 @@ class HardwareBridge(WristNode):
         t = np.array([x[0] for x in w])
         temps = np.array([x[1] for x in w])
         qs = np.array([x[2] for x in w])
-        q, qd_raw = slope(t, qs)
+        q, qd_raw, q_var = slope(t, qs)
         tau = self.p['velocity_filter_s']
         a = 1.0 if tau <= 0 or first else self.period_s / (tau + self.period_s)
         self._qd += a * (qd_raw - self._qd)
         T = temps.mean(axis=0)
         var = temps.var(axis=0) if len(w) > 1 else np.zeros(4)
-        s1, s2, torque = self.estimator.update(float(T[0]), float(T[1]), q)
-        values = (*T, *var, q, self._qd, s1, s2, torque)
-        if not all(math.isfinite(v) for v in values):
+        estimate = None
+        if all(math.isfinite(v) for v in (*T, *var, q, self._qd)):  # a NaN would stay in the estimate's filter
+            self.estimator.filter.set_drift(self._drift())
+            t_est, self._est_t_s = self._est_t_s, t_end  # withheld windows leave a longer step
+            estimate = self.estimator.update(float(T[0]), float(T[1]), q,
+                                             dt_s=self.period_s if t_est is None else t_end - t_est,
+                                             variance=(var[0] / len(w), var[1] / len(w), q_var))
+        if estimate is None or not all(math.isfinite(v) for v in estimate):
             self.counters['invalid_samples'] += len(w)
             self.diagnose('estimate', ERROR, 'non-finite value in a window: not published')
             return
+        s1, s2, torque = estimate
         self.diagnose('measurement', OK, 'published')
         self.counters['windows'] += 1
         for i in range(2):
