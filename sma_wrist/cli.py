@@ -51,6 +51,8 @@ def _print_metrics(summary: Any) -> None:
           + (' -- INTERRUPTED' if summary.interrupted else ''))
     if summary.bag:
         print(f'bag: {summary.bag} ({summary.messages_recorded} messages, rosbag2/MCAP)')
+    else:  # the metrics are read back from the recording: without one a run printed nothing to compare
+        print('no tracking metrics: they are computed from the recording; run again with --bag DIR')
     if m:
         total = m['total_abs_error_pct']
         where = 'over the last full cycle' if m.get('window') == 'last_cycle' else 'over the run'

@@ -173,6 +173,14 @@ def test_cli_run_json_and_info(tmp_path):
     assert json.loads(info.stdout)['topics']['/wrist/payload']['count'] == 1
 
 
+def test_cli_run_without_a_bag_says_where_the_metrics_are():
+    """The metrics are read back from the recording. `sma-wrist run` without --bag printed only its
+    timing line, and nothing said why there was no tracking error."""
+    r = _cli('run', '--duration', '0.5', '--quiet')
+    assert r.returncode == 0, r.stderr
+    assert 'max error' not in r.stdout and 'no tracking metrics' in r.stdout and '--bag DIR' in r.stdout
+
+
 @pytest.mark.parametrize('args, message', [
     (('run', '--payload-kg', 'nan'), 'outside [0, 1.5] kg'),
     (('run', '--payload-kg', '3'), 'outside [0, 1.5] kg'),
