@@ -387,14 +387,17 @@ def test_malformed_parameter_updates_rejected_node_keeps_running(emulator, graph
     bad = [Parameter('sensor_timeout_s', value='fast'), Parameter('sensor_timeout_s', value=-1.0),
            Parameter('max_muscle_temperature_C', value=float('nan')), Parameter('angle_min_rad', value=2.0),
            Parameter('calibration.angle_gain_rad_per_count', value=0.0), Parameter('port', value='/dev/other'),
-           Parameter('publish_rate_hz', value=50.0), Parameter('adc.temperature_gain_C_per_count', value=5.0)]
+           Parameter('publish_rate_hz', value=50.0), Parameter('adc.temperature_gain_C_per_count', value=5.0),
+           Parameter('stress_filter.angle_drift_rad', value=0.0)]
     for p in bad:
         res = bridge.set_parameters([p])[0]
         assert not res.successful, p.name
     assert bridge.p['sensor_timeout_s'] == 0.1 and bridge.p['angle_min_rad'] == -0.45
+    assert bridge.estimator.filter.q_c[2] == pytest.approx(0.00275 ** 2)
     ok = bridge.set_parameters([Parameter('calibration.muscle_1_offset_C', value=2.0),
-                                Parameter('payload_kg', value=0.5)])
+                                Parameter('payload_kg', value=0.5), Parameter('stress_filter.angle_drift_rad', value=0.01)])
     assert all(r.successful for r in ok)
+    assert bridge.estimator.filter.q_c[2] == pytest.approx(0.01 ** 2)  # the estimate's filter took the change
     n = len(probe.got['/wrist/joint_states'])
     T_before = probe.got['/wrist/muscle_1/temperature'][-1].temperature
     rt.spin_for(0.2, until='sim')

@@ -10,11 +10,10 @@ noise. The wire is stiff, so a stress solved from measured temperatures and angl
 their noise (and noise that flips a temperature's direction moves the SD-GPI between its
 branches): the solve takes them through :class:`InputFilter`, a random-walk Kalman filter whose
 measurement noise is each window's own spread, so clean sensors pass unfiltered and noisy ones
-are smoothed (the published measurements are not filtered). Velocity is a least-squares slope over the samples of one publish window, low-pass
-filtered.
+are smoothed (the published measurements are not filtered). Velocity is a least-squares
+slope over the samples of one publish window, low-pass filtered.
 """
 from __future__ import annotations
-
 
 import numpy as np
 

@@ -205,6 +205,8 @@ class HardwareBridge(WristNode):
             self.cal = self._calibration(self.p)
         if 'payload_kg' in changed:
             self._publish_payload()
+        if any(k.startswith('stress_filter.') for k in changed):
+            self.estimator.filter.set_drift(self._drift())
 
     # -- inputs ----------------------------------------------------------------
     def _on_command(self, i: int, msg: Any) -> None:
@@ -355,7 +357,6 @@ class HardwareBridge(WristNode):
         var = temps.var(axis=0) if len(w) > 1 else np.zeros(4)
         estimate = None
         if all(math.isfinite(v) for v in (*T, *var, q, self._qd)):  # a NaN would stay in the estimate's filter
-            self.estimator.filter.set_drift(self._drift())
             t_est, self._est_t_s = self._est_t_s, t_end  # withheld windows leave a longer step
             estimate = self.estimator.update(float(T[0]), float(T[1]), q,
                                              dt_s=self.period_s if t_est is None else t_end - t_est,
