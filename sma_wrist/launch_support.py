@@ -10,18 +10,38 @@ name, a later file's value replaces the earlier one in that node's entry.
 """
 from __future__ import annotations
 
+import atexit
 import os
 import re
+import shutil
 import tempfile
 from typing import Any, Mapping
 
 import yaml
 
+_params_dir: str | None = None
+
+
+def _launch_dir() -> str:
+    """This process's folder for the files below, removed when it exits. The launch process outlives
+    every node it starts (they read their files at start-up), and a file per node and launch left
+    in the temporary folder adds up over many runs."""
+    global _params_dir
+    if _params_dir is None or not os.path.isdir(_params_dir):
+        _params_dir = tempfile.mkdtemp(prefix='sma_wrist_launch_')
+        atexit.register(_remove, _params_dir, os.getpid())
+    return _params_dir
+
+
+def _remove(path: str, owner_pid: int) -> None:
+    if os.getpid() == owner_pid:  # a forked child that exits normally inherits the hook, not the folder
+        shutil.rmtree(path, ignore_errors=True)
+
 
 def node_params_file(node_name: str, values: Mapping[str, Any]) -> str:
-    """Path of a new params file that sets ``values`` under ``node_name``."""
+    """Path of a new params file that sets ``values`` under ``node_name`` (deleted when this process exits)."""
     safe = re.sub(r'\W', '_', node_name)  # '/**' is a valid node key, not a file name
-    fd, path = tempfile.mkstemp(prefix=f'sma_wrist_{safe}_', suffix='.yaml')
+    fd, path = tempfile.mkstemp(prefix=f'{safe}_', suffix='.yaml', dir=_launch_dir())
     with os.fdopen(fd, 'w') as f:
         yaml.safe_dump({node_name: {'ros__parameters': dict(values)}}, f)
     return path

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import ast
+import os
 from pathlib import Path
 
 import pytest
@@ -99,6 +100,31 @@ def test_launch_overrides_written_under_the_node_name_beat_config_wrist_yaml():
             assert rt.add(PlantSim).get_parameter('payload_kg').value == 0.3  # the trap
     finally:
         rclpy.try_shutdown()
+
+
+def test_launch_params_files_are_removed_when_the_launch_process_exits(tmp_path):
+    """Each launch wrote a file per node into the temporary folder and left it there (hundreds
+    after a day of runs); they now live in one folder per launch process, removed at its exit
+    (a forked child that exits normally keeps the parent's)."""
+    import subprocess
+    import sys
+    code = ('import os, sys\n'
+            'from sma_wrist.launch_support import node_params_file\n'
+            'paths = [node_params_file(n, {"payload_kg": 0.5}) for n in ("plant_sim", "/**")]\n'
+            'assert all(os.path.isfile(p) for p in paths)\n'
+            'pid = os.fork()\n'
+            'if pid == 0:\n'
+            '    sys.exit(0)\n'
+            'os.waitpid(pid, 0)\n'
+            'assert all(os.path.isfile(p) for p in paths), "a child removed the parent\'s files"\n'
+            'print("\\n".join(paths))\n')
+    env = {**os.environ, 'TMPDIR': str(tmp_path)}
+    r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 0, r.stderr
+    paths = r.stdout.split()
+    assert len(paths) == 2 and all(p.startswith(str(tmp_path)) for p in paths)
+    assert not any(os.path.exists(p) for p in paths)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_every_adaptive_controller_parameter_says_what_it_is():
