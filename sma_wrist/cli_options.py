@@ -47,6 +47,11 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--seed', type=nonnegative_int, default=0)
     ap.add_argument('--thermocouple-offsets-C', default='0,0,0,0',
                     help='sensor errors of muscle 1, muscle 2, TEM face 1, TEM face 2 [degC]')
+    ap.add_argument('--thermocouple-rate-hz', type=float, default=0.0, metavar='HZ',
+                    help='the muscle thermocouples read by a converter chip at this rate, each sample repeating its '
+                         'last reading (a MAX31855: ~10 Hz; default 0: through the ADC at every sample)')
+    ap.add_argument('--thermocouple-resolution-C', type=float, default=0.0, metavar='DEGC',
+                    help="that chip's resolution (a MAX31855: 0.25 degC; default 0: none)")
     ap.add_argument('--garbage-rate', type=float, default=0.0, help='probability of garbage before a line')
     ap.add_argument('--checksum-error-rate', type=float, default=0.0, help='probability of a wrong CRC per line')
     ap.add_argument('--partial-rate', type=float, default=0.0, help='probability of a cut line')

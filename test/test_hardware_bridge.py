@@ -425,6 +425,9 @@ def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
     (['--garbage-rate', '2'], '--garbage-rate'), (['--checksum-error-rate', 'nan'], '--checksum-error-rate'),
     (['--thermocouple-offsets-C', 'a,b,c,d'], '--thermocouple-offsets-C'),
     (['--plant', 'nope'], "--plant 'nope': one of model, phase_fraction, sdgpi"),
+    (['--thermocouple-rate-hz', '-10'], '--thermocouple-rate-hz'),
+    (['--thermocouple-rate-hz', '2000'], '--thermocouple-rate-hz 2000 is above the sample rate'),
+    (['--thermocouple-resolution-C', '0.25'], '--thermocouple-resolution-C models a converter chip'),
 ])
 def test_emulator_refuses_a_fault_or_noise_option_it_cannot_be(tmp_path, capsys, args, named):
     """A NaN or negative noise, latency or watchdog, or a fault rate outside [0, 1], made a device without that
@@ -443,6 +446,25 @@ def _device_readings(emu: DeviceEmulator, n: int) -> np.ndarray:
         temps, q = emu.cfg.calibration.to_physical(frame.adc)
         out.append([*temps, q])
     return np.array(out)
+
+
+def test_the_emulated_thermocouple_chip_holds_and_rounds_its_readings():
+    """--thermocouple-rate-hz / --thermocouple-resolution-C: the muscle thermocouples as a converter chip reports
+    them (a MAX31855: 0.25 degC, ~10 conversions a second). Every 1 kHz sample repeats the last conversion, to the
+    chip's resolution; the noise of the thermocouple (the scenario's) changes only at a conversion, and the ADC's
+    per-sample noise is not on them. The angle is still sampled through the ADC at every sample."""
+    scen = {'temp_noise_C': 0.3, 'angle_noise_rad': 0.003}
+    r = _device_readings(DeviceEmulator(EmulatorConfig(plant='sdgpi', scenario=scen, thermocouple_rate_hz=10.0,
+                                                       thermocouple_resolution_C=0.25)), 400)
+    T = r[:, :2]
+    changes = np.flatnonzero(np.any(np.diff(T, axis=0) != 0, axis=1)) + 1
+    assert changes.size >= 3 and set(np.diff(changes)) <= {100, 101}  # one conversion per 100 samples
+    steps = (T - T[0]) / 0.25
+    assert np.abs(steps - np.round(steps)).max() < 0.02 + 1e-9  # multiples of 0.25 degC, to the ADC's 4 mdegC
+    # the potentiometer: a new noisy reading every sample (3 mrad of noise in 0.1 mrad counts: rarely equal)
+    assert np.count_nonzero(np.diff(r[:, 4])) > 380
+    plain = _device_readings(DeviceEmulator(EmulatorConfig(plant='sdgpi', scenario=scen)), 400)[:, :2]
+    assert np.count_nonzero(np.any(np.diff(plain, axis=0) != 0, axis=1)) > 390  # the ADC path: every sample
 
 
 def test_the_emulated_device_can_hold_a_plant_that_is_not_the_model(tmp_path, capsys):

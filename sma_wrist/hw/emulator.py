@@ -70,6 +70,11 @@ class EmulatorConfig:
     scenario: dict[str, Any] = field(default_factory=dict)
     # its wire, TEMs, pre-load (a PlantParams; its dt is the emulator's): None = the built-in wrist
     base: Any = None
+    # muscle thermocouples read by a converter chip (as a MAX31855: 0.25 degC steps, ~10 conversions a second):
+    # each sample repeats the last conversion, rounded to the resolution, without the ADC's per-sample noise.
+    # 0 = the thermocouples sampled through the ADC like the other channels
+    thermocouple_rate_hz: float = 0.0
+    thermocouple_resolution_C: float = 0.0
 
 
 @dataclass
@@ -172,6 +177,8 @@ class DeviceEmulator:
         """(Re)boot: time and sequence restart at 0, drive off, boot notice + hello queued."""
         self._t_boot_wall = time.monotonic()
         self._n = 0  # samples since boot
+        self._tc_next_s: float | None = None  # device time of the thermocouple chip's next conversion
+        self._tc_held = np.zeros(2)
         self._last_cmd_t = -1e9
         self._u[:] = 0.0
         self._pending.clear()
@@ -251,6 +258,17 @@ class DeviceEmulator:
             elif isinstance(f, P.Query):
                 self._out += P.encode(P.Hello(self.cfg.device_id, self.cfg.firmware, int(round(self.cfg.rate_hz))))
 
+    def _convert(self, t: float, T: np.ndarray) -> np.ndarray:
+        """The thermocouple chip's latest conversion (2,) [degC] at device time t [s]: it samples the
+        thermocouples every 1 / thermocouple_rate_hz and holds the value, rounded to its resolution."""
+        c = self.cfg
+        if self._tc_next_s is None or t >= self._tc_next_s:
+            res = c.thermocouple_resolution_C
+            self._tc_held = np.round(T / res) * res if res > 0 else np.array(T, float)
+            period = 1.0 / c.thermocouple_rate_hz
+            self._tc_next_s = t + period if self._tc_next_s is None else self._tc_next_s + period
+        return self._tc_held
+
     def _sample(self) -> bytes:
         c = self.cfg
         self._n += 1
@@ -274,11 +292,17 @@ class DeviceEmulator:
         T, q = self.plant.muscle_temperature_C, st.q
         if self.sensors is not None:
             T, q, _ = self.sensors.measure(T, q.copy(), st.qd.copy())
+        chip = c.thermocouple_rate_hz > 0
+        if chip:
+            T = self._convert(t, T[0])[None]
         th = st.thermal[0]  # (layer, face): the TEMs' exchanger faces
         temps = np.array([T[0, 0], T[0, 1], th[0, 1], th[1, 1]])
         counts = c.calibration.to_counts(temps, float(q[0]))
         if c.noise_counts > 0:
-            counts = counts + self.rng.normal(0.0, c.noise_counts, 5)
+            noise = self.rng.normal(0.0, c.noise_counts, 5)
+            if chip:  # the chip's reading reaches the firmware as a number, not through the ADC
+                noise[:2] = 0.0
+            counts = counts + noise
         adc = list(quantise(counts))
         for ch, v in self._forced.items():
             adc[ch] = v
@@ -386,6 +410,14 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
                     ('--unplug-wall-s', a.unplug_wall_s)):
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f'{flag} {v!r} must be a finite number >= 0')
+    tc_rate, tc_res = getattr(a, 'thermocouple_rate_hz', 0.0), getattr(a, 'thermocouple_resolution_C', 0.0)
+    for flag, v in (('--thermocouple-rate-hz', tc_rate), ('--thermocouple-resolution-C', tc_res)):
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f'{flag} {v!r} must be a finite number >= 0')
+    if tc_rate > a.rate_hz:
+        raise ValueError(f'--thermocouple-rate-hz {tc_rate:g} is above the sample rate {a.rate_hz:g} Hz')
+    if tc_res > 0 and not tc_rate > 0:
+        raise ValueError('--thermocouple-resolution-C models a converter chip: give --thermocouple-rate-hz too')
     for flag, v in (('--garbage-rate', a.garbage_rate), ('--checksum-error-rate', a.checksum_error_rate),
                     ('--partial-rate', a.partial_rate)):
         if not 0 <= v <= 1:  # a probability per line (False for NaN)
@@ -415,7 +447,8 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
                           seed=a.seed, calibration=cal, garbage_rate=a.garbage_rate,
                           checksum_error_rate=a.checksum_error_rate, partial_rate=a.partial_rate,
                           reset_every_s=a.reset_every_s, unplug_every_s=a.unplug_every_s,
-                          unplug_wall_s=a.unplug_wall_s)
+                          unplug_wall_s=a.unplug_wall_s, thermocouple_rate_hz=tc_rate,
+                          thermocouple_resolution_C=tc_res)
 
 
 def run_from_args(a: argparse.Namespace) -> int:
