@@ -363,6 +363,70 @@ def test_the_stress_estimate_filters_noisy_inputs_and_passes_clean_ones():
             InputFilter(bad)
 
 
+def _chip_windows(rng, n_win, noise_C=0.3, resolution_C=0.25, rate_hz=10.0, adc=False):
+    """(n_win, 10, 2) windows of 1 kHz samples of two thermocouples at 70 / 40 degC: read through the ADC (a new
+    noisy sample each ms) or by a converter chip (a new reading every 1 / rate_hz s, rounded, then repeated)."""
+    k = np.arange(n_win * 10)
+    if adc:
+        T = np.array([70.0, 40.0]) + noise_C * rng.standard_normal((k.size, 2))
+    else:
+        conv = (k * 1e-3 * rate_hz).astype(int)
+        R = np.array([70.0, 40.0]) + noise_C * rng.standard_normal((conv[-1] + 1, 2))
+        T = (np.round(R / resolution_C) * resolution_C)[conv]
+    return T.reshape(n_win, 10, 2)
+
+
+def test_new_readings_take_a_chips_repeats_as_no_measurement():
+    """A thermocouple chip (MAX31855-like: 10 conversions a second, 0.25 degC) repeats its reading in every
+    1 kHz sample: a window of ten equal samples has no spread, and was taken as an exact measurement. NewReadings
+    gives such a window no measurement (variance inf), a window with a conversion its new reading with the
+    noise of one reading; through the ADC (every sample new) the samples' mean with their variance / n."""
+    from sma_wrist.hw.estimate import NewReadings
+    rng = np.random.default_rng(3)
+    adc, nr = _chip_windows(rng, 300, adc=True), NewReadings(2)
+    out = [nr.window(w) for w in adc]
+    assert np.allclose(out[-1][0], adc[-1].mean(axis=0))
+    assert np.allclose(nr.noise, 0.09, rtol=0.25)  # one sample's variance, 0.3 degC
+    assert np.allclose(out[-1][1], nr.noise / 10)
+    chip, nr = _chip_windows(rng, 600), NewReadings(2)
+    out = [nr.window(w) for w in chip]
+    held = [np.isinf(v) for _, v in out[1:]]
+    assert 0.8 < np.mean(held) < 0.95  # 9 of 10 windows repeat (a conversion may also repeat the last value)
+    # one reading's noise: 0.3 degC and the rounding's 0.25 / sqrt(12), over-estimated (1.48x here): a conversion
+    # that repeats the value is invisible, and its zero difference is missing from the mean (the side of caution)
+    true = 0.09 + 0.25 ** 2 / 12
+    assert np.all((nr.noise > true) & (nr.noise < 1.8 * true))
+    with pytest.raises(ValueError, match='memory'):
+        NewReadings(2, memory=0.5)
+
+
+def test_the_stress_estimate_on_a_thermocouple_chip_is_filtered_like_an_adcs():
+    """At a fixed state with 0.3 degC thermocouples and a 3 mrad angle: the estimate from a chip's repeated
+    readings, each window's spread taken as its noise, let the readings through unfiltered (K = 1 on a window of
+    equal samples) and sat +5.5 MPa off on the hot wire (+2.6 through an ADC). With NewReadings: +2.9 MPa."""
+    from sma_wrist.hw.estimate import NewReadings, StressEstimator, slope
+    from sma_wrist.nodes.hardware_bridge import HardwareBridge
+    defaults = {p.name: p.default for p in HardwareBridge.PARAMS}
+    drift = (defaults['stress_filter.temperature_drift_C'],) * 2 + (defaults['stress_filter.angle_drift_rad'],)
+    quiet = StressEstimator()
+    for _ in range(50):
+        rest = np.array(quiet.update(70.0, 40.0, 0.6)[:2])
+    t = np.arange(10) * 1e-3
+
+    def bias(windows, new_readings):
+        rng = np.random.default_rng(0)
+        est, nr, out = StressEstimator(drift=drift), NewReadings(2), []
+        for w in windows:
+            q, _, q_var = slope(t, 0.6 + 0.003 * rng.standard_normal(10))
+            T, var = nr.window(w) if new_readings else (w.mean(axis=0), w.var(axis=0) / len(w))
+            out.append(est.update(T[0], T[1], q, dt_s=0.01, variance=(var[0], var[1], q_var))[:2])
+        return np.mean(out[200:], axis=0) - rest
+
+    chip, adc = _chip_windows(np.random.default_rng(1), 600), _chip_windows(np.random.default_rng(1), 600, adc=True)
+    before, after, through_adc = bias(chip, False)[0], bias(chip, True)[0], bias(adc, True)[0]
+    assert after < 0.6 * before and after < 1.5 * through_adc
+
+
 def test_the_window_line_reports_the_variance_of_its_end_value():
     """The bridge's angle is a least-squares line's value at the window's end; the filter is told its
     variance, from the residuals. Checked against the spread of that value over many noisy windows."""
