@@ -85,6 +85,11 @@ def cmd_run(a: argparse.Namespace) -> int:
     _prepare_bag(a.bag, a.overwrite)
     _activate()
     from sma_wrist.closed_loop import print_progress, run_closed_loop
+    if a.controller is None or a.payload_kg is None:  # the params files' choice, else config/wrist.yaml's
+        from sma_wrist.closed_loop import file_choices
+        mode, payload = file_choices(a.params_file or (), a.hardware is not None)
+        a.controller = a.controller or mode
+        a.payload_kg = payload if a.payload_kg is None else a.payload_kg
     summary = run_closed_loop(a.controller, a.payload_kg, a.duration, a.bag, a.params_file or (),
                               progress=None if a.quiet else print_progress, hardware=a.hardware is not None,
                               extra_params={'/hardware_bridge': {'port': a.hardware}} if a.hardware else None)
@@ -212,8 +217,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = ap.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     r = sub.add_parser('run', help='run the closed loop on the embedded runtime, record a bag, print metrics')
-    r.add_argument('--controller', default='inverse_adaptive', choices=('inverse_adaptive', 'direct_adaptive', 'pid'))
-    r.add_argument('--payload-kg', type=_payload, default=0.3, help='payload at 0.09 m [kg] (default 0.3)')
+    r.add_argument('--controller', default=None, choices=('inverse_adaptive', 'direct_adaptive', 'pid'),
+                   help="default: adaptive_controller's mode in the params files (config/wrist.yaml: inverse_adaptive)")
+    r.add_argument('--payload-kg', type=_payload, default=None,
+                   help="payload at 0.09 m [kg] (default: plant_sim's payload_kg in the params files, 0.3)")
     r.add_argument('--duration', type=_positive_float, default=126.0, help='simulated seconds (default 126)')
     r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist)')
     r.add_argument('--overwrite', action='store_true', help='replace an existing bag at --bag')

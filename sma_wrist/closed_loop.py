@@ -87,6 +87,23 @@ def ros_args(params_files: Sequence[str | Path] = ()) -> list[str]:
     return args
 
 
+def file_choices(params_files: Sequence[str | Path], hardware: bool = False) -> tuple[str, float]:
+    """(controller mode, payload [kg]) the params files give the graph (after config/wrist.yaml, merged as rcl
+    merges them): what ``run`` uses where the command line names neither. ``run --params-file`` with a file's
+    ``payload_kg: 0.6`` ran 0.3 kg, the option's default, and never checked the file's value."""
+    from sma_wrist.runtime.arguments import overrides_for, parse_ros_args
+    args = [parse_ros_args(ros_args(params_files))]
+    source = '/hardware_bridge' if hardware else '/plant_sim'
+    mode = overrides_for('/adaptive_controller', args).get('mode', 'inverse_adaptive')
+    payload = overrides_for(source, args).get('payload_kg', 0.3)
+    where = ', '.join(map(str, params_files)) or 'config/wrist.yaml'
+    if mode not in CONTROLLERS:
+        raise SmaWristError(f'adaptive_controller mode {mode!r} ({where}) is not one of {", ".join(CONTROLLERS)}')
+    if isinstance(payload, bool) or not isinstance(payload, (int, float)) or not 0.0 <= payload <= 1.5:
+        raise SmaWristError(f'{source[1:]} payload_kg {payload!r} ({where}) must be a number in [0, 1.5] kg')
+    return mode, float(payload)
+
+
 def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
               extra: dict[str, dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:
     """What the launch file sets on top of the params files."""

@@ -214,3 +214,24 @@ def test_cli_parser_does_not_import_the_heavy_subcommands():
             'print(sorted(m for m in ("scipy.signal", "sma_wrist.diagnose", "sma_wrist.core.plant.wrist") if m in sys.modules))')
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == '[]'
+
+
+def test_cli_run_takes_the_payload_and_mode_of_its_params_file(tmp_path):
+    """config/wrist.yaml (which users copy) sets plant_sim's payload_kg and adaptive_controller's mode; `run
+    --params-file` ran the options' defaults (0.3 kg, inverse_adaptive) over them and never checked their values.
+    Now the file's values are used where the command line names none, checked, and the command line still wins."""
+    f = tmp_path / 'mine.yaml'
+    f.write_text('plant_sim:\n  ros__parameters:\n    payload_kg: 0.6\n'
+                 'adaptive_controller:\n  ros__parameters:\n    mode: pid\n')
+    r = _cli('run', '--duration', '0.5', '--quiet', '--json', '--params-file', str(f))
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert (out['controller'], out['payload_kg']) == ('pid', 0.6)
+    r = _cli('run', '--duration', '0.5', '--quiet', '--json', '--params-file', str(f), '--payload-kg', '0.1')
+    assert json.loads(r.stdout)['payload_kg'] == 0.1 and json.loads(r.stdout)['controller'] == 'pid'
+    for text, named in (('plant_sim:\n  ros__parameters:\n    payload_kg: heavy\n', "payload_kg 'heavy'"),
+                        ('plant_sim:\n  ros__parameters:\n    payload_kg: .nan\n', 'payload_kg nan'),
+                        ('adaptive_controller:\n  ros__parameters:\n    mode: foo\n', "mode 'foo'")):
+        f.write_text(text)
+        r = _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f))
+        assert r.returncode == 2 and named in r.stderr and 'Traceback' not in r.stderr, r.stderr
