@@ -73,7 +73,18 @@ def load_run(path: str | Path) -> RunData:
     if not good.any():
         raise BagError(path, '/wrist/reference holds no finite position: no error to measure')
     tr, qr = tr[good], qr[good]
+    for topic, stamps in (('/wrist/joint_states', t), ('/wrist/reference', tr)):
+        if stamps.size > 2 and np.unique(stamps).size < 0.5 * stamps.size:  # one pair would be all the metrics
+            raise BagError(path, f'the header stamps of {topic} do not advance ({np.unique(stamps).size} distinct '
+                                 f'in {stamps.size} messages): its publisher does not stamp them, and the error '
+                                 'is measured by stamp')
     keep = (t >= tr[0]) & (t <= tr[-1]) & np.isfinite(q)
+    if not keep.any():
+        finite = np.isfinite(q)
+        why = ('no joint state has a finite position' if not finite.any() else
+               f'the joint states are stamped {t[finite].min():.6g}..{t[finite].max():.6g} s and the reference '
+               f'{tr[0]:.6g}..{tr[-1]:.6g} s: different clocks (sim time and wall time?)')
+        raise BagError(path, f'no measured angle inside the reference\'s time span: {why}')
     t, q = t[keep], q[keep]
     order = np.argsort(t, kind='stable')
     t, q = t[order], q[order]

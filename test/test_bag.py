@@ -464,6 +464,38 @@ def test_a_joint_state_with_several_joints_is_read_by_the_wrists_name(tmp_path):
     assert run_metrics(b)['max_error_pct'] == pytest.approx(run_metrics(a)['max_error_pct'], rel=0.02)
 
 
+@pytest.mark.parametrize('fault, named', [
+    ('nan', 'no joint state has a finite position'),
+    ('wall', 'different clocks'),
+    ('zero', 'the header stamps of /wrist/joint_states do not advance'),
+])
+def test_compare_names_joint_states_it_cannot_pair_with_the_reference(tmp_path, capsys, fault, named):
+    """A potentiometer that sends only NaN, joint states stamped on the wall clock while the reference is on sim
+    time: compare ended in an IndexError traceback. Joint states all stamped 0 (a driver that does not stamp them):
+    compare printed the error of one sample (4.5 % for a run at 99 %) and exit 0. Now an error that says which."""
+    from rosbags.rosbag2 import Reader, Writer
+    from sma_wrist.cli import main
+    bag, bad = tmp_path / 'run', tmp_path / 'bad'
+    assert main(['run', '--duration', '2', '--bag', str(bag), '--quiet']) == 0
+    with Reader(bag) as r, Writer(bad, version=8) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
+        for c, t, raw in r.messages():
+            if c.topic == '/wrist/joint_states':
+                m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
+                if fault == 'nan':
+                    m.position = np.array([np.nan])
+                elif fault == 'wall':
+                    m.header.stamp.sec += 1_700_000_000
+                else:
+                    m.header.stamp.sec, m.header.stamp.nanosec = 0, 0
+                raw = TYPESTORE.serialize_cdr(m, c.msgtype)
+            w.write(conns[c.id], t, raw)
+    capsys.readouterr()
+    assert main(['compare', str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert named in err and 'Traceback' not in err, err
+
+
 def test_compare_says_a_bag_is_truncated_and_refuses_a_folder_as_plot(tmp_path, capsys):
     """compare read a truncated bag up to its cut and printed its metrics as if it were the whole run;
     --plot DIR wrote DIR.png beside the folder. Now a warning naming the damage, and an error."""
