@@ -176,6 +176,15 @@ def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: s
     plt.close(fig)
 
 
+def _plot_formats() -> list[str]:
+    """The file suffixes matplotlib's savefig writes ([] without matplotlib: plotting then says so itself)."""
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError:
+        return []
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
 def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> list[dict[str, Any]]:
     """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot.
 
@@ -183,6 +192,14 @@ def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> lis
     """
     if plot is not None and Path(plot).is_dir():  # savefig would write <folder>.png beside it, silently
         raise SmaWristError(f'--plot {plot} is a folder; give the PNG file to write, e.g. {Path(plot) / "compare.png"}')
+    if plot is not None:
+        from sma_wrist.outputs import check_output_file
+        check_output_file(plot, '--plot', paths)
+        suffix = Path(plot).suffix.lower().lstrip('.')
+        formats = _plot_formats()
+        if suffix and formats and suffix not in formats:  # savefig's ValueError traceback, after every bag was read
+            raise SmaWristError(f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
+                                f'{", ".join("." + f for f in formats)} (no suffix: PNG)')
     runs = [load_run(p) for p in paths]
     rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None} for p, r in zip(paths, runs)]
     if plot is not None:

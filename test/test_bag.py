@@ -514,3 +514,25 @@ def test_compare_says_a_bag_is_truncated_and_refuses_a_folder_as_plot(tmp_path, 
     assert main(['compare', str(bag), '--plot', str(tmp_path)]) == 2
     assert capsys.readouterr().err.startswith(f'error: --plot {tmp_path} is a folder')
     assert not tmp_path.with_suffix('.png').exists()
+
+
+def test_diagnose_and_compare_check_where_they_write_before_reading(tmp_path, capsys):
+    """diagnose --params BAG/metadata.yaml replaced the bag's metadata (the bag was then unreadable); --params DIR
+    and --report FILE were 'internal error' tracebacks after the diagnosis; compare --plot x.txt a matplotlib
+    traceback after every bag was read. Each is now refused first, naming the option."""
+    from sma_wrist.cli import main
+    bag = tmp_path / 'run'
+    assert main(['run', '--duration', '2', '--bag', str(bag), '--quiet']) == 0
+    meta = (bag / 'metadata.yaml').read_bytes()
+    note = tmp_path / 'note.txt'
+    note.write_text('mine')
+    capsys.readouterr()
+    for args, needed in ((['diagnose', str(bag), '--params', str(bag / 'metadata.yaml')], 'is inside the input'),
+                         (['diagnose', str(bag), '--params', str(tmp_path)], 'is a folder'),
+                         (['diagnose', str(bag), '--report', str(note)], 'is a file'),
+                         (['compare', str(bag), '--plot', str(tmp_path / 'cmp.txt')], 'not an image format')):
+        assert main(args) == 2, args
+        err = capsys.readouterr().err
+        assert needed in err and 'internal error' not in err and 'Traceback' not in err, err
+    assert (bag / 'metadata.yaml').read_bytes() == meta and note.read_text() == 'mine'
+    assert not (tmp_path / 'cmp.txt').exists()

@@ -252,6 +252,20 @@ def test_an_out_that_is_a_file_is_refused_before_any_fit(tmp_path: Path, capsys:
         assert json.loads(capsys.readouterr().out) == {'error': f'--out {f} is a file; give a folder for the report '
                                                                  'and the params file'}
     assert f.read_text() == 'mine'
+    # a folder under a file; an output that is an input (the measured table was overwritten by --params-out);
+    # a thermal file that cannot be read (found after the fit, which had replaced hysteresis.yaml by then)
+    csv = tmp_path / 'run.csv'
+    csv.write_text('time,u,T1\n0,0,20\n')
+    for cmd, needed in (
+            (['hysteresis', str(flex / '50MPa.txt'), '--out', str(f / 'sub')], f'--out {f / "sub"}: {f} is a file'),
+            (['thermal', str(csv), '--out', str(tmp_path / 'o'), '--params-out', str(csv)],
+             f'--params-out {csv} is the input {csv}'),
+            (['thermal', str(csv), '--params-out', str(tmp_path)], f'--params-out {tmp_path} is a folder'),
+            (['hysteresis', str(flex / '50MPa.txt'), str(flex / '100MPa.txt'), str(flex / '200MPa.txt'),
+              '--thermal-file', str(tmp_path / 'nope.yaml'), '--out', str(tmp_path / 'o2')], 'nope.yaml')):
+        assert cli_main(['identify', *cmd, '--json']) == 2
+        assert needed in json.loads(capsys.readouterr().out)['error']
+    assert csv.read_text() == 'time,u,T1\n0,0,20\n' and not (tmp_path / 'o2').exists()
 
 
 def test_temperature_dropouts_are_dropped_and_counted_not_read(tmp_path: Path, loop: np.ndarray) -> None:

@@ -400,6 +400,10 @@ def run_cli(args: argparse.Namespace) -> int:
             unknown = [c for c in cands if c not in fx.EFFECTS]
             if unknown:
                 raise DiagnoseInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
+        from sma_wrist.outputs import check_output_file, check_output_folder
+        models = [f for f in (getattr(args, 'hysteresis_file', None), getattr(args, 'thermal_file', None)) if f]
+        check_output_file(args.params, '--params', [args.bag, *models], DiagnoseInputError)
+        check_output_folder(args.report, '--report', [args.bag, *models], DiagnoseInputError)
         res = diagnose(args.bag, args.report, args.params, cands, getattr(args, 'hysteresis_file', None),
                        getattr(args, 'thermal_file', None))
     except (DiagnoseInputError, ParameterError) as exc:

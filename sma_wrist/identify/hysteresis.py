@@ -127,7 +127,10 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
 
     t0 = time.perf_counter()
     check_numbers(o)
-    check_output_folder(o.out)
+    check_output_folder(o.out, inputs=[*o.files, *o.holdout])
+    if o.thermal_file:  # read before the fit: a bad file found after it left a new hysteresis.yaml beside an old
+        from sma_wrist.core.thermal.params_file import load_thermal_file  # wrist_params.yaml
+        load_thermal_file(o.thermal_file)
     units = Units(o.temperature_unit, o.strain_unit, o.stress_unit, o.length_mm, o.wire_diameter_mm)
     warnings: list[str] = []
     cleaning: dict[str, dict[str, int]] = {}

@@ -47,10 +47,11 @@ class IdentifyInputError(SmaWristError):
     """A measurement file cannot be used; the message names the file and what is needed."""
 
 
-def check_output_folder(out: str | None, flag: str = '--out') -> None:
-    """IdentifyInputError if ``out`` exists and is not a folder: found before the fit, not after it (~15 s)."""
-    if out and Path(out).exists() and not Path(out).is_dir():
-        raise IdentifyInputError(f'{flag} {out} is a file; give a folder for the report and the params file')
+def check_output_folder(out: str | None, flag: str = '--out', inputs: Sequence[str] = ()) -> None:
+    """IdentifyInputError if ``out`` cannot be the output folder (sma_wrist.outputs): found before the fit, not
+    after it (~15 s)."""
+    from sma_wrist.outputs import check_output_folder as check
+    check(out, flag, inputs, IdentifyInputError)
 
 
 def area_mm2(diameter_mm: float) -> float:

@@ -560,7 +560,10 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     if not (math.isfinite(a.dt) and 0.001 <= a.dt <= 1.0):
         raise ThermalInputError(f'--dt {a.dt} must be in [0.001, 1] s (the RK4 step limit of the model)')
     from sma_wrist.identify.io import check_output_folder
-    check_output_folder(a.out)
+    from sma_wrist.outputs import check_output_file
+    inputs = [*a.inputs, *a.holdout, *([a.base] if a.base else [])]
+    check_output_folder(a.out, inputs=inputs)
+    check_output_file(a.params_out, '--params-out', inputs, ThermalInputError)
     base = load_thermal_file(a.base) if a.base else th.ThermalParams()
     records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold)
     hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold) if a.holdout

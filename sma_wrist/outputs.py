@@ -1,0 +1,69 @@
+"""Where the commands write, checked before their work (a fit, a diagnosis), not after it.
+
+An output path that is one of the command's inputs (a measured table, a bag's metadata.yaml) was
+overwritten; a folder given as a file, or a file as a folder, failed with a traceback once the work
+was done. These checks name the option and the path instead.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable
+
+from sma_wrist.core.errors import SmaWristError
+
+
+def _under_a_file(path: Path) -> Path | None:
+    """The first ancestor of ``path`` that is a file (so nothing can be created there), or None."""
+    for parent in path.absolute().parents:
+        if parent.exists():
+            return parent if not parent.is_dir() else None
+    return None
+
+
+def _input_hit(path: Path, inputs: Iterable[str | Path]) -> Path | None:
+    """The input that ``path`` is, or is inside of (a bag folder), or None."""
+    target = path.resolve()
+    for inp in inputs:
+        p = Path(inp).resolve()
+        if target == p or (p.is_dir() and p in target.parents):
+            return Path(inp)
+    return None
+
+
+def check_output_file(path: str | Path | None, flag: str, inputs: Iterable[str | Path] = (),
+                      error: type[SmaWristError] = SmaWristError) -> None:
+    """``error`` if the file ``path`` cannot be written without harm: it is a folder, it would be created under a
+    file, or it is (or is inside) one of ``inputs``."""
+    if not path:
+        return
+    p = Path(path)
+    if p.is_dir():
+        raise error(f'{flag} {p} is a folder; give a file name')
+    blocked = _under_a_file(p)
+    if blocked is not None:
+        raise error(f'{flag} {p}: {blocked} is a file, not a folder')
+    hit = _input_hit(p, inputs)
+    if hit is not None:
+        raise error(f'{flag} {p} is {"inside " if hit.resolve() != p.resolve() else ""}the input {hit}: '
+                    'it would be overwritten; give another path')
+
+
+def check_output_folder(path: str | Path | None, flag: str = '--out', inputs: Iterable[str | Path] = (),
+                        error: type[SmaWristError] = SmaWristError) -> None:
+    """``error`` if the folder ``path`` cannot be used: it is a file, would be created under a file, or is (or is
+    inside) one of ``inputs``."""
+    if not path:
+        return
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise error(f'{flag} {p} is a file; give a folder for the report and the params file')
+    blocked = _under_a_file(p)
+    if blocked is not None:
+        raise error(f'{flag} {p}: {blocked} is a file, not a folder')
+    hit = _input_hit(p, inputs)
+    if hit is not None:
+        raise error(f'{flag} {p} is {"inside " if hit.resolve() != p.resolve() else ""}the input {hit}; '
+                    'give another folder')
+
+
+__all__ = ['check_output_file', 'check_output_folder']
