@@ -25,8 +25,8 @@ class InputFilter:
     """Scalar random-walk Kalman filter per channel (T1 [degC], T2 [degC], q [rad]).
 
     Each true value wanders as a random walk of ``drift`` per sqrt(s) (process noise drift**2 dt);
-    each measurement comes with its variance (for a window mean: the samples' variance / n; inf: no
-    measurement, the channel is only predicted). A measurement without variance is taken as it is; the noisier it is against the drift, the longer
+    each measurement comes with its variance (for a window mean: the samples' variance / n). A
+    measurement without variance is taken as it is; the noisier it is against the drift, the longer
     the filter's memory (steady gain K = (-l + sqrt(l**2 + 4 l)) / 2, l = drift**2 dt / variance).
     """
 
@@ -46,7 +46,7 @@ class InputFilter:
         z = np.asarray(z, float)
         R = np.maximum(np.asarray(variance, float), 0.0)
         if self.x is None:
-            self.x, self.P = z.copy(), np.where(np.isfinite(R), R, 0.0)
+            self.x, self.P = z.copy(), R.copy()
             return self.x
         P = self.P + self.q_c * max(dt_s, 0.0)
         K = np.divide(P, P + R, out=np.ones(3), where=P + R > 0)
@@ -99,57 +99,6 @@ class StressEstimator:
         return float(stress[0]), float(stress[1]), torque
 
 
-class NewReadings:
-    """Each window's new readings of channels a device may repeat between conversions, and their noise.
-
-    A thermocouple converter chip (a MAX31855: ~10 conversions a second, 0.25 degC) is read far slower
-    than the device samples: each sample repeats the last conversion, so a window of ten identical
-    samples has no spread and no new information. Taken as ten exact measurements it let the stress
-    estimate follow the chip's staircase and its noise unfiltered (docs/control.md "A thermocouple
-    chip"). Here a sample is a new reading where it differs from the one before it; a window gives
-    the mean of its new readings with variance noise / n_new, and no measurement (variance inf) when it
-    has none. The noise of one reading is the von Neumann estimate, half the mean squared difference of
-    successive readings (exponentially forgetting over ``memory`` readings): a motion between readings
-    adds to it only its square, and for samples through an ADC, all new, it is the samples' variance.
-    A conversion that repeats the last value cannot be told from a repeat: its zero difference is
-    missed, so a coarse chip's noise comes out high (1.5x for 0.3 degC noise in 0.25 degC steps), on
-    the side of more smoothing.
-    """
-
-    def __init__(self, channels: int, memory: float = 200.0) -> None:
-        if not (memory >= 1.0 and np.isfinite(memory)):
-            raise ValueError(f'memory must be a finite number of readings >= 1, got {memory!r}')
-        self.channels = channels
-        self.alpha = 1.0 / memory
-        self.last: np.ndarray | None = None  # the last sample of each channel
-        self.noise = np.zeros(channels)  # variance of one reading [unit^2]
-        self.pairs = np.zeros(channels)  # how many successive-reading differences the noise has seen
-
-    def window(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(mean of the new readings (channels,), its variance (channels,); inf: no new reading) of a
-        window's samples x (n, channels), in order."""
-        x = np.asarray(x, float)
-        first = self.last is None
-        # a sample repeating the one before it (the previous window's last for the first) is no reading
-        before = np.vstack([x[:1] if first else self.last[None], x[:-1]])
-        new = x != before
-        new[0] |= first
-        value, var = x.mean(axis=0), np.full(self.channels, np.inf)
-        for c in range(self.channels):
-            r = x[new[:, c], c]
-            if r.size == 0:
-                continue
-            # the last sample is always the last reading: the successive differences run across windows
-            for d in np.diff(r if first else np.concatenate([before[:1, c], r])):  # an ADC's ten, a chip's one
-                self.pairs[c] += 1
-                a = max(self.alpha, 1.0 / self.pairs[c])  # the plain mean until `memory` readings are in
-                self.noise[c] += a * (0.5 * d * d - self.noise[c])
-            value[c] = r.mean()
-            var[c] = self.noise[c] / r.size
-        self.last = x[-1].copy()
-        return value, var
-
-
 def slope(t: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     """Least-squares line through (t, y): (value at t[-1], slope, that value's variance from the
     residuals); fewer than three points or no spread in t -> a variance of 0 (unknown)."""
@@ -169,4 +118,4 @@ def slope(t: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     return end, b, s2 * (1.0 / t.size + (t[-1] - tm) ** 2 / den)
 
 
-__all__ = ['InputFilter', 'NewReadings', 'StressEstimator', 'slope']
+__all__ = ['InputFilter', 'StressEstimator', 'slope']

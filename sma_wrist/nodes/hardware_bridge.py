@@ -12,8 +12,7 @@ temperatures as the window mean (variance = the window's), the angle as the leas
 line's value at the window end and its slope, low-pass filtered over ``velocity_filter_s``,
 as velocity. **The stresses and the effort are estimates**, not measurements: the SD-GPI
 wire-load solve at the measured temperatures and angle (sma_wrist/hw/estimate.py), taken
-through a Kalman filter first whose measurement noise is the sensors' own (the thermocouples'
-from their successive new readings, the angle's from the window line's residuals) and whose
+through a Kalman filter first whose measurement noise is each window's own spread and whose
 process noise is ``stress_filter.*`` (the stiff wires multiply the sensors' noise).
 
 Time: the device clock is the graph's clock. /clock is the device time stamp of the last
@@ -59,7 +58,7 @@ from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
-from sma_wrist.hw.estimate import NewReadings, StressEstimator, slope
+from sma_wrist.hw.estimate import StressEstimator, slope
 from sma_wrist.hw.link import SerialLink
 from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, LOG_THROTTLE_S, PRELOAD_PARAM, Param, WristNode,
                                    finite, main_for)
@@ -137,9 +136,6 @@ class HardwareBridge(WristNode):
         self.estimator = StressEstimator(PlantParams.from_files(p['hysteresis_file'],
                                                                 preload_elongation_mm=p['preload_elongation_mm']),
                                          payload_kg=p['payload_kg'], drift=self._drift())
-        # the muscle thermocouples' new readings and their noise: a converter chip repeats its reading between
-        # conversions, and a repeat is no new measurement for the estimate's filter
-        self._readings = NewReadings(2)
         self.seq = P.SequenceTracker()
         self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
                          'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}
@@ -362,10 +358,9 @@ class HardwareBridge(WristNode):
         estimate = None
         if all(math.isfinite(v) for v in (*T, *var, q, self._qd)):  # a NaN would stay in the estimate's filter
             t_est, self._est_t_s = self._est_t_s, t_end  # withheld windows leave a longer step
-            T_in, T_in_var = self._readings.window(temps[:, :2])
-            estimate = self.estimator.update(float(T_in[0]), float(T_in[1]), q,
+            estimate = self.estimator.update(float(T[0]), float(T[1]), q,
                                              dt_s=self.period_s if t_est is None else t_end - t_est,
-                                             variance=(float(T_in_var[0]), float(T_in_var[1]), q_var))
+                                             variance=(var[0] / len(w), var[1] / len(w), q_var))
         if estimate is None or not all(math.isfinite(v) for v in estimate):
             self.counters['invalid_samples'] += len(w)
             self.diagnose('estimate', ERROR, 'non-finite value in a window: not published')
