@@ -314,3 +314,28 @@ def test_nodes_refuse_a_bad_thermal_file(tmp_path: Path) -> None:
     with Runtime(params={'/tem_controller': {'thermal_file': str(tmp_path / 'missing.yaml')}}) as rt:
         with pytest.raises(SmaWristError, match='missing.yaml'):
             rt.add(TemController)
+
+
+def test_a_frequency_column_with_blank_cells_takes_the_frequency_above(tmp_path: Path) -> None:
+    """A blank frequency cell (or a frequency written on each block's first row only, as spreadsheets are often
+    filled) made a run of no rows and an IndexError traceback. A blank now takes the frequency above it, rows
+    before the first frequency are dropped, and the warning says how many."""
+    from sma_wrist.identify.thermal import load_table
+    t = np.arange(0.0, 80.0, 0.1)
+    rows = [(0.0625 if k < t.size // 2 else 0.125, tk, 3.0 * math.sin(tk), 30.0 + math.sin(tk), 25.0)
+            for k, tk in enumerate(t)]
+    lines = ['frequency,time,u,T1,T2'] + [','.join(f'{x:.4f}' for x in r) for r in rows]
+    blank = [1, 3, 5, 200, t.size // 2 + 7]  # the first row keeps its frequency; one blank in the second block
+    for i in blank:
+        lines[1 + i] = lines[1 + i].split(',', 1)[1].join([',', ''])
+    f = tmp_path / 'blocks.csv'
+    f.write_text('\n'.join(lines) + '\n')
+    series, cl = load_table(f)
+    assert [s.frequency_Hz for s in series] == [0.0625, 0.125]
+    assert sum(s.t.size for s in series) == t.size  # no row lost
+    assert any('5 row(s) without a frequency took the one above' in w for w in cl.warnings)
+    lines[1] = lines[1].split(',', 1)[1].join([',', ''])  # now rows 0 and 1 come before any frequency: dropped
+    f.write_text('\n'.join(lines) + '\n')
+    series, cl = load_table(f)
+    assert sum(s.t.size for s in series) == t.size - 2
+    assert any('2 before the first frequency dropped' in w for w in cl.warnings)

@@ -217,6 +217,18 @@ def load_table(path: Path, columns: dict[str, str] | None = None, units: dict[st
             T[:, f] = _convert_temperature(path, role, data[:, idx[role]],
                                            (units.get('temperature') or hdr_units.get(role, '')).lower(), cl.warnings)
     freq = data[:, idx['frequency']] if 'frequency' in idx else None
+    if freq is not None and not np.isfinite(freq).all():
+        # a blank cell (a spreadsheet writes each block's frequency on its first row only): the row above's; an
+        # empty group of NaN was an IndexError
+        blank = ~np.isfinite(freq)
+        last = np.maximum.accumulate(np.where(blank, -1, np.arange(freq.size)))
+        freq = np.where(last >= 0, freq[np.maximum(last, 0)], np.nan)
+        lead = ~np.isfinite(freq)
+        cl.warnings.append(f'{path.name}: {int(blank.sum())} row(s) without a frequency took the one above'
+                           + (f'; {int(lead.sum())} before the first frequency dropped' if lead.any() else ''))
+        t, u, T, freq = t[~lead], u[~lead], T[~lead], freq[~lead]
+        if t.size < 10:
+            raise ThermalInputError(f'{path}: no frequency in its frequency column')
     groups = [None] if freq is None else sorted(set(np.round(freq, 9).tolist()))
     out = []
     for g in groups:
