@@ -224,6 +224,9 @@ def test_malformed_files_are_json_errors_naming_file_and_need(tmp_path: Path, ca
     ('--length-mm', '-1', '--length-mm -1.0 must be a finite number > 0'),  # flipped every strain, fitted anyway
     ('--wire-diameter-mm', 'nan', '--wire-diameter-mm nan must be a finite number > 0'),  # the fit never ended
     ('--stress-mpa', 'inf', '--stress-mpa inf must be a finite number'),
+    ('--stress-mpa', '-50', '--stress-mpa -50.0 must be > 0 (the tensile stress of the test)'),  # was a section
+    ('--columns', '0', "--columns '0': give 2 to 4 columns T,STRAIN[,STRESS[,TIME]] (names or 0-based numbers)"),
+    ('--columns', '0,,1', "--columns '0,,1': give 2 to 4 columns T,STRAIN[,STRESS[,TIME]] (names or 0-based numbers)"),
 ])
 def test_non_finite_or_negative_scale_options_are_json_errors(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                               option: str, value: str, needed: str) -> None:

@@ -109,6 +109,11 @@ def check_numbers(o: Options) -> None:
                               ('--stress-mpa', o.stress_mpa, False)):
         if v is not None and not (math.isfinite(v) and (v > 0 or not positive)):
             raise IdentifyInputError(f'{flag} {v!r} must be a finite number' + (' > 0' if positive else ''))
+    if o.stress_mpa is not None and o.stress_mpa <= 0:  # a wire under test is in tension; -50 became a section
+        raise IdentifyInputError(f'--stress-mpa {o.stress_mpa!r} must be > 0 (the tensile stress of the test)')
+    if o.columns is not None and not (2 <= len(o.columns) <= 4 and all(o.columns)):  # '0' was an IndexError
+        raise IdentifyInputError(f'--columns {",".join(o.columns)!r}: give 2 to 4 columns T,STRAIN[,STRESS[,TIME]] '
+                                 '(names or 0-based numbers)')
 
 
 def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
