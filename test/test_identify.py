@@ -110,6 +110,11 @@ def test_a_single_stress_level_is_refused_for_an_sdgpi(capsys: pytest.CaptureFix
 def test_hysteresis_file_errors_name_the_file_and_key(tmp_path: Path) -> None:
     doc = params_to_dict(default_sdgpi())
     assert params_from_dict(doc).envelopes.a.shape == default_sdgpi().envelopes.a.shape
+    for n in (100_000_000, 15.5, 0):  # 1e8 operators ran for minutes at 4 GB; 15.5 was read as 15
+        bad = params_to_dict(default_sdgpi())
+        bad['model']['n'] = n
+        with pytest.raises(ParameterError, match='model.n = .* must be a whole number of play operators'):
+            params_from_dict(bad, 'w.yaml')
     doc['model']['rho'] = 'x'
     with pytest.raises(ParameterError, match='model.rho'):
         params_from_dict(doc, 'w.yaml')

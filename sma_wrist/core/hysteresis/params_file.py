@@ -38,6 +38,10 @@ FORMAT = 'sma_wrist.hysteresis'
 VERSION = 1
 UNITS = {'temperature': 'degC', 'load': 'kgf per 0.25 mm wire', 'elongation': 'mm of an 80 mm wire'}
 
+#: the most play operators a file may ask for: the seed finds little gain beyond 15 (Sec. 4.1.1), and each one
+#: is work in every plant step
+MAX_OPERATORS = 100
+
 
 def params_to_dict(params: SDGPIParams, identification: dict[str, Any] | None = None) -> dict[str, Any]:
     """The YAML document (plain lists and floats) of a parameter set."""
@@ -107,9 +111,11 @@ def params_from_dict(doc: Any, where: str = 'hysteresis file') -> SDGPIParams:
     T_valid = arr('T_valid_C', (2,))
     if not T_valid[0] < T_valid[1]:
         raise ParameterError(f'{where}: model.T_valid_C must be [low, high] with low < high')
-    n = int(num('n'))
-    if n < 1:
-        raise ParameterError(f'{where}: model.n must be >= 1')
+    n_raw = num('n')
+    if n_raw != int(n_raw) or not 1 <= n_raw <= MAX_OPERATORS:  # n: 1e8 ran for minutes at 4 GB; 15.5 was cut to 15
+        raise ParameterError(f'{where}: model.n = {n_raw:g} must be a whole number of play operators in '
+                             f'[1, {MAX_OPERATORS}] (the seed uses 15, Sec. 4.1.1)')
+    n = int(n_raw)
     return SDGPIParams(env, arr('c', (4,)), arr('d', (4,)), num('rho'), num('tau_per_mm'), num('c_thr_mm'), n=n,
                        p0=num('p0'), k_f=num('k_f_mm'), T_valid=(float(T_valid[0]), float(T_valid[1])),
                        name=str(doc.get('name', Path(where).stem)))
