@@ -339,3 +339,31 @@ def test_a_frequency_column_with_blank_cells_takes_the_frequency_above(tmp_path:
     series, cl = load_table(f)
     assert sum(s.t.size for s in series) == t.size - 2
     assert any('2 before the first frequency dropped' in w for w in cl.warnings)
+
+
+def test_a_humble_sqlite_bag_is_read_as_a_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """identify thermal took a .db3 file (what `ros2 bag record` writes on Humble) for a text table ("a binary
+    file") and a .db3 folder without metadata.yaml (a recorder that was killed) for no bag, while diagnose and
+    compare read both. Both now identify as the MCAP bag they were converted from does."""
+    import shutil
+
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+
+    from sma_wrist.cli import main
+    from sma_wrist.runtime.messages import TYPESTORE as store
+    bag, db3 = tmp_path / 'run', tmp_path / 'run_db3'
+    assert main(['run', '--duration', '40', '--bag', str(bag), '--quiet']) == 0
+    with Reader(bag) as r, Writer(db3, version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=store) for c in r.connections}
+        for c, t, raw in r.messages():
+            w.write(conns[c.id], t, raw)
+    bare = tmp_path / 'killed'
+    bare.mkdir()
+    shutil.copy(next(db3.glob('*.db3')), bare)
+    capsys.readouterr()
+    fits = []
+    for source in (bag, next(db3.glob('*.db3')), bare):
+        code, doc = _cli([str(source), '--dt', '0.2', '--out', str(tmp_path / f'out_{len(fits)}')], capsys)
+        assert code == 0, doc
+        fits.append(doc['fit']['rms_C'])
+    assert fits[1] == fits[0] and fits[2] == fits[0]

@@ -89,7 +89,7 @@ def read_table(path: Path) -> tuple[list[str] | None, Any]:
     """(header or None, (rows, columns) numbers with NaN for unreadable rows) by :func:`io.read_table`."""
     from sma_wrist.identify import io
     if path.is_dir():
-        raise ThermalInputError(f'{path}: is a directory but not a rosbag2 (no metadata.yaml or .mcap)')
+        raise ThermalInputError(f'{path}: is a directory but not a rosbag2 (no metadata.yaml, .mcap or .db3)')
     t = io.read_table(path, need='time, voltage, T1[, T2]', error=ThermalInputError)
     return t.header, t.data
 
@@ -309,7 +309,9 @@ def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning, hold: st
 
 
 def _is_bag(p: Path) -> bool:
-    return p.suffix == '.mcap' or (p.is_dir() and ((p / 'metadata.yaml').exists() or any(p.glob('*.mcap'))))
+    """A rosbag2 folder, or one of its storage files (MCAP, or SQLite: ``ros2 bag record`` on Humble)."""
+    return p.suffix in ('.mcap', '.db3') or (p.is_dir() and ((p / 'metadata.yaml').exists()
+                                                             or any(p.glob('*.mcap')) or any(p.glob('*.db3'))))
 
 
 def load_bag(path: Path, dt: float, hold: str = 'zoh') -> tuple[list[Any], Cleaning]:
