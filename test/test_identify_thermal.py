@@ -367,3 +367,28 @@ def test_a_humble_sqlite_bag_is_read_as_a_bag(tmp_path: Path, capsys: pytest.Cap
         assert code == 0, doc
         fits.append(doc['fit']['rms_C'])
     assert fits[1] == fits[0] and fits[2] == fits[0]
+
+
+def test_a_text_column_or_an_empty_t2_column_does_not_empty_the_table(tmp_path: Path) -> None:
+    """A logger's status column ('OK' in every row) made every row non-numeric: "no numeric rows found", even with
+    --columns. A T2 channel left empty dropped every row ("only 0 complete rows"). The text column is now read as
+    no value and the empty T2 as absent, with a warning; the numbers are the same as without those columns."""
+    from sma_wrist.identify.io import read_table
+    from sma_wrist.identify.thermal import load_table
+    t = np.arange(0.0, 60.0, 0.1)
+    plain = tmp_path / 'plain.csv'
+    plain.write_text('time,u,T1\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f}\n' for x in t))
+    status = tmp_path / 'status.csv'
+    status.write_text('time,u,T1,status\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f},OK\n'
+                                                      for x in t))
+    empty = tmp_path / 'empty_t2.csv'
+    empty.write_text('time,u,T1,T2\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f},\n' for x in t))
+    table = read_table(status)
+    assert table.header == ['time', 'u', 'T1', 'status'] and np.isnan(table.data[:, 3]).all()
+    np.testing.assert_array_equal(table.data[:, :3], read_table(plain).data)
+    ref = load_table(plain)[0][0]
+    for f in (status, empty):
+        (s,), cl = load_table(f)
+        np.testing.assert_array_equal(s.T, ref.T)
+        np.testing.assert_array_equal(s.u, ref.u)
+    assert any('T2 column (T2) has no value in any row' in w for w in load_table(empty)[1].warnings)

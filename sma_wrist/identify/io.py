@@ -114,9 +114,26 @@ def _is_number(c: str) -> bool:
     return bool(_NUM.match(c) or _CLOCK.match(c))
 
 
-def _is_numeric(cells: list[str]) -> bool:
-    return (len(cells) >= 2 and all(_is_number(c) or c.lower() in _MISSING for c in cells)
-            and sum(_is_number(c) for c in cells) >= 2)
+def _is_numeric(cells: list[str], text_columns: frozenset[int] = frozenset()) -> bool:
+    """Every cell a number or "no value", at least two numbers; cells of ``text_columns`` are not looked at."""
+    kept = [c for j, c in enumerate(cells) if j not in text_columns]
+    return (len(kept) >= 2 and all(_is_number(c) or c.lower() in _MISSING for c in kept)
+            and sum(_is_number(c) for c in kept) >= 2)
+
+
+def _text_columns(rows: list[list[str]]) -> frozenset[int]:
+    """Columns of the table's data rows (the most common width among rows with two numbers or more) that hold
+    text in most rows: a logger's status column ('OK'), a comment. Their cells are read as NaN, so one such
+    column does not make every row unreadable."""
+    wide = [r for r in rows if sum(_is_number(c) for c in r) >= 2]
+    if not wide:
+        return frozenset()
+    widths = [len(r) for r in wide]
+    ncol = max(set(widths), key=widths.count)
+    data = [r for r in wide if len(r) == ncol]
+    text = frozenset(j for j in range(ncol)
+                     if sum(not (_is_number(r[j]) or r[j].lower() in _MISSING) for r in data) > len(data) / 2)
+    return text if len(text) <= ncol - 2 else frozenset()
 
 
 def _cell(c: str) -> float:
@@ -305,7 +322,8 @@ def read_table(path: str | Path, need: str = 'temperature, strain and stress', e
                 delim = d
                 break
     rows = [_split(ln, delim) for ln in lines]
-    first = next((i for i, r in enumerate(rows) if _is_numeric(r)), None)
+    text_cols = _text_columns(rows)
+    first = next((i for i, r in enumerate(rows) if _is_numeric(r, text_cols)), None)
     if first is None:
         raise error(f'{p}: no numeric rows found; a table of numbers ({need}) is needed')
     ncol = len(rows[first])
@@ -320,13 +338,13 @@ def read_table(path: str | Path, need: str = 'temperature, strain and stress', e
     bad = 0
     first_bad = None
     for i, (n, r, ln) in enumerate(body):
-        if len(r) != ncol or not _is_numeric(r):
+        if len(r) != ncol or not _is_numeric(r, text_cols):
             bad += 1
             if first_bad is None:
                 first_bad = (f'line {n}: {ln.strip()[:60]!r} ({len(r)} cells, {ncol} expected)' if len(r) != ncol
                              else f'line {n}: {ln.strip()[:60]!r} (not a number in every column)')
             continue
-        data[i] = [_cell(c) for c in r]
+        data[i] = [np.nan if j in text_cols else _cell(c) for j, c in enumerate(r)]
     for j in range(ncol):  # times of day without a date: a run past midnight goes on counting
         if any(_CLOCK.match(r[j]) and not r[j][:4].isdigit() for _, r, _ in body[:50] if len(r) == ncol):
             col = data[:, j]

@@ -193,6 +193,10 @@ def load_table(path: Path, columns: dict[str, str] | None = None, units: dict[st
     idx, hdr_units, warnings = _roles(path, header, columns, ncol)
     cl = Cleaning(rows=data.shape[0], warnings=warnings)
     units = dict(units or {})
+    if 'T2' in idx and not np.isfinite(data[:, idx['T2']]).any():  # a logger's unused channel: every row dropped
+        warnings.append(f'{path.name}: the T2 column ({header[idx["T2"]] if header else idx["T2"]}) has no value in '
+                        'any row; fitting T1 only')
+        del idx['T2']
     need = [idx['time'], idx['u'], idx['T1']] + ([idx['T2']] if 'T2' in idx else [])
     bad = ~np.isfinite(data[:, need]).all(axis=1)
     cl.dropped_nan = int(bad.sum())
