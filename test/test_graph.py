@@ -7,6 +7,7 @@ import os
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -235,3 +236,22 @@ def test_cli_run_takes_the_payload_and_mode_of_its_params_file(tmp_path):
         f.write_text(text)
         r = _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f))
         assert r.returncode == 2 and named in r.stderr and 'Traceback' not in r.stderr, r.stderr
+
+
+def test_a_params_file_naming_no_node_of_the_package_is_refused(tmp_path):
+    """A misspelt node name (`plant_simm:`) was ignored by run, sweep and emulate-device, while a misspelt
+    parameter name was refused: the file's values never reached a node. The package's node names are setup.py's
+    console scripts."""
+    import ast
+
+    from sma_wrist.nodes.common import NODE_NAMES
+    tree = ast.parse((Path(__file__).parents[1] / 'setup.py').read_text())
+    nodes = next(n.value for n in ast.walk(tree) if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'NODES')
+    assert sorted(ast.literal_eval(nodes)) == sorted(NODE_NAMES)
+    f = tmp_path / 'typo.yaml'
+    f.write_text('plant_simm:\n  ros__parameters:\n    payload_kg: 0.5\n')
+    r = _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f))
+    assert r.returncode == 2 and 'node plant_simm in' in r.stderr and 'Traceback' not in r.stderr, r.stderr
+    f.write_text('/wrist/plant_sim:\n  ros__parameters:\n    payload_kg: 0.5\n/**:\n  ros__parameters:\n'
+                 '    use_sim_time: true\n')  # a namespace and a wildcard are the user's business
+    assert _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f)).returncode == 0

@@ -396,19 +396,29 @@ def add_or_refuse(rt: Any, node_class: type) -> Any:
         raise ParameterError(why.removeprefix('error: ')) from None
 
 
+#: the package's nodes (setup.py's console scripts; test_config checks they agree)
+NODE_NAMES = ('plant_sim', 'hardware_bridge', 'trajectory_generator', 'adaptive_controller', 'hysteresis_compensator',
+              'tem_controller')
+
+
 def undeclared_parameters(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:
     """Keys of ``params_files`` under a node of ``declared`` ({node name: its parameter names}), or under ``/**``,
-    that no such node declares: ROS ignores them, so a misspelt name runs the defaults in silence."""
+    that no such node declares, and node names that are none of the package's (:data:`NODE_NAMES`): ROS ignores
+    them, so a misspelt name runs the defaults in silence."""
     from sma_wrist.runtime.arguments import load_params_file
     everyone = set().union(*declared.values()) | {'use_sim_time'}
-    out = []
+    out, strangers = [], []
     for f in params_files:
         for rule in load_params_file(f):
             node = rule.node.strip('/')
+            if '*' not in node and node.rsplit('/', 1)[-1] not in NODE_NAMES:  # a namespace before it is the user's
+                if (rule.node, f) not in strangers:
+                    strangers.append((rule.node, f))
+                continue
             names = everyone if node in ('**', '*') else declared[node] | {'use_sim_time'} if node in declared else None
             if names is not None and rule.name not in names:
                 out.append(f'{rule.name} under {rule.node} in {f}')
-    return out
+    return out + [f'node {node} in {f} (the nodes are {", ".join(NODE_NAMES)})' for node, f in strangers]
 
 
 def refuse_undeclared(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> None:
@@ -450,5 +460,5 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     return 0
 
 
-__all__ = ['Param', 'WristNode', 'Freshness', 'add_or_refuse', 'finite', 'main_for', 'message_class', 'qos_for',
+__all__ = ['NODE_NAMES', 'Param', 'WristNode', 'Freshness', 'add_or_refuse', 'finite', 'main_for', 'message_class', 'qos_for',
            'start_up_refusal']

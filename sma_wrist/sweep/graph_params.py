@@ -187,7 +187,10 @@ def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> L
 def plant_params(params_files: Sequence[str | Path]) -> Any:
     """The PlantParams plant_sim builds from config/wrist.yaml and ``params_files`` (its wire, TEMs, pre-load,
     ``model.*``): what ``sma-wrist emulate-device --params-file`` puts behind the serial line."""
-    return _build_graph(params_files)['plant_sim'].objects['plant']
+    built = _build_graph(params_files)
+    from sma_wrist.nodes.common import refuse_undeclared  # a misspelt hysteresis_file emulated the built-in wire
+    refuse_undeclared(params_files, {name: set(b.values) for name, b in built.items()})
+    return built['plant_sim'].objects['plant']
 
 
 __all__ = ['HONOURED', 'NO_EFFECT', 'LoopSettings', 'changed_parameters', 'loop_settings', 'plant_params']
