@@ -392,3 +392,19 @@ def test_a_text_column_or_an_empty_t2_column_does_not_empty_the_table(tmp_path: 
         np.testing.assert_array_equal(s.T, ref.T)
         np.testing.assert_array_equal(s.u, ref.u)
     assert any('T2 column (T2) has no value in any row' in w for w in load_table(empty)[1].warnings)
+
+
+def test_files_of_one_name_in_two_folders_are_two_runs(tmp_path: Path, peltier_runs: list[ti.ThermalRecord],
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """A rig that writes a folder per wire (sn/a/data.csv, sn/b/data.csv) was refused: "two runs have the same
+    name". identify hysteresis takes that layout; now thermal names those runs by their path. The same file given
+    twice is still refused."""
+    files = []
+    for j, sub in enumerate(('a', 'b')):
+        (tmp_path / sub).mkdir()
+        files.append(str(_write_csv(tmp_path / sub / 'data.csv', peltier_runs[j])))
+    code, doc = _cli([*files, '--dt', '0.2', '--out', str(tmp_path / 'out')], capsys)
+    assert code == 0, doc
+    assert sorted(r['record'] for r in doc['fit']['runs']) == sorted(files)
+    code, doc = _cli([files[0], files[0], '--dt', '0.2'], capsys)
+    assert code == 2 and 'two runs have the same name' in doc['error']

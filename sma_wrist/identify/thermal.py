@@ -373,6 +373,23 @@ def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None,
     return records, cleaning, warnings
 
 
+def _distinct_names(records: list[Any], hold: list[Any]) -> tuple[list[Any], list[Any]]:
+    """Runs named by their file name, except where two files share it (sn/a/data.csv, sn/b/data.csv: a rig's
+    folder per serial number): those are named by the path as given. The same file given twice keeps one name."""
+    import dataclasses
+    from collections import defaultdict
+    sources: dict[str, set[str]] = defaultdict(set)
+    for r in records + hold:
+        sources[Path(r.source).name].add(str(Path(r.source).resolve()))
+
+    def named(r: Any) -> Any:
+        base = Path(r.source).name
+        if len(sources[base]) > 1 and r.name.startswith(base):
+            return dataclasses.replace(r, name=str(r.source) + r.name[len(base):])
+        return r
+    return [named(r) for r in records], [named(r) for r in hold]
+
+
 # ------------------------------------------------------------------------------ report
 
 def _params_json(params: Any) -> dict[str, dict[str, float]]:
@@ -586,6 +603,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold)
     hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold) if a.holdout
                                         else ([], {}, []))
+    records, hold_recs = _distinct_names(records, hold_recs)
     names = [r.name for r in records + hold_recs]
     if len(set(names)) != len(names):
         raise ThermalInputError('two runs have the same name (the same file given twice?): '
