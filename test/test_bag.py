@@ -536,3 +536,27 @@ def test_diagnose_and_compare_check_where_they_write_before_reading(tmp_path, ca
         assert needed in err and 'internal error' not in err and 'Traceback' not in err, err
     assert (bag / 'metadata.yaml').read_bytes() == meta and note.read_text() == 'mine'
     assert not (tmp_path / 'cmp.txt').exists()
+
+
+def test_a_nan_command_is_no_peak_and_compare_json_stays_json(tmp_path, capsys):
+    """One NaN TEM command in a bag made compare's peak command NaN, and --json wrote a bare NaN, which no strict
+    JSON reader takes. The peak is now over the finite commands."""
+    from rosbags.rosbag2 import Reader, Writer
+    from sma_wrist.cli import main
+    bag, bad = tmp_path / 'run', tmp_path / 'bad'
+    assert main(['run', '--duration', '2', '--bag', str(bag), '--quiet']) == 0
+    with Reader(bag) as r, Writer(bad, version=8) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
+        k = 0
+        for c, t, raw in r.messages():
+            if c.topic == '/wrist/tem_1/command':
+                k += 1
+                if k == 50:
+                    m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
+                    m.data = float('nan')
+                    raw = TYPESTORE.serialize_cdr(m, c.msgtype)
+            w.write(conns[c.id], t, raw)
+    capsys.readouterr()
+    assert main(['compare', str(bag), str(bad), '--json']) == 0
+    rows = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f'{c} in the JSON'))
+    assert rows[1]['peak_command_V'] == rows[0]['peak_command_V'] > 0
