@@ -560,3 +560,33 @@ def test_a_nan_command_is_no_peak_and_compare_json_stays_json(tmp_path, capsys):
     assert main(['compare', str(bag), str(bad), '--json']) == 0
     rows = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f'{c} in the JSON'))
     assert rows[1]['peak_command_V'] == rows[0]['peak_command_V'] > 0
+
+
+def test_one_impossible_sample_is_dropped_not_a_crash_or_a_refused_bag(tmp_path, capsys):
+    """One temperature of 1e300 (a glitch) overflowed diagnose's fit: 'internal error OverflowError'; one angle
+    of 1e6 rad refused the whole bag as 'not radians'. Such samples are now dropped and counted, as NaNs are,
+    and the diagnosis runs on the rest."""
+    from rosbags.rosbag2 import Reader, Writer
+    from sma_wrist.cli import main
+    bag, bad = tmp_path / 'run', tmp_path / 'bad'
+    assert main(['run', '--duration', '40', '--bag', str(bag), '--quiet']) == 0
+    with Reader(bag) as r, Writer(bad, version=8) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
+        k = {'/wrist/muscle_2/temperature': 0, '/wrist/joint_states': 0}
+        for c, t, raw in r.messages():
+            if c.topic in k:
+                k[c.topic] += 1
+                if k[c.topic] == 700:
+                    m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
+                    if c.topic == '/wrist/joint_states':
+                        m.position = np.array([1e6])
+                    else:
+                        m.temperature = 1e300
+                    raw = TYPESTORE.serialize_cdr(m, c.msgtype)
+            w.write(conns[c.id], t, raw)
+    capsys.readouterr()
+    assert main(['diagnose', str(bad)]) == 0
+    out = capsys.readouterr()
+    assert 'internal error' not in out.err + out.out
+    for topic, value in (('/wrist/muscle_2/temperature', '1e+300'), ('/wrist/joint_states', '1e+06')):
+        assert f'{topic}: 1 of' in out.out and f'(up to {value}) are no measurement of this wrist' in out.out

@@ -76,6 +76,11 @@ def _stamp_ns(msg: Any) -> int:
     return int(h.stamp.sec) * 10**9 + int(h.stamp.nanosec)
 
 
+#: the largest magnitude a sample of each kind can have and still be one: temperatures in degC, K or degF, angles in
+#: rad or degrees, commands in V (a TEM driver's are within +-24 V) and the payload in kg
+IMPOSSIBLE = {'temperature': 1000.0, 'joint': 400.0, 'float': 1000.0}
+
+
 def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: list[str],
             joint_name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], values) of one topic, cleaned: NaNs dropped, sorted, de-duplicated."""
@@ -92,6 +97,13 @@ def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: 
         warnings.append(f'{name}: {int(bad.sum())} of {vals.size} samples are NaN/inf and were dropped '
                         f'(need finite values; the gaps they leave are handled like missing samples)')
         t, vals = t[~bad], vals[~bad]
+    # a glitch no sensor of this wrist can give, in any unit the checks below recognise (K, degF, degrees): one
+    # 1e300 overflowed the fit ('internal error'), one 1e6 rad refused the whole bag as 'not radians'
+    wild = np.abs(vals) > IMPOSSIBLE[kind]
+    if wild.any():
+        warnings.append(f'{name}: {int(wild.sum())} of {vals.size} samples beyond +-{IMPOSSIBLE[kind]:g} (up to '
+                        f'{np.abs(vals[wild]).max():.3g}) are no measurement of this wrist and were dropped')
+        t, vals = t[~wild], vals[~wild]
     if t.size > 1 and np.any(np.diff(t) < 0):
         warnings.append(f'{name}: stamps are not sorted ({int((np.diff(t) < 0).sum())} steps back in time); '
                         f'samples were sorted by stamp (need monotonic header stamps)')
