@@ -30,14 +30,14 @@ def _input_hit(path: Path, inputs: Iterable[str | Path]) -> Path | None:
     return None
 
 
-def check_output_file(path: str | Path | None, flag: str, inputs: Iterable[str | Path] = (),
-                      error: type[SmaWristError] = SmaWristError) -> None:
-    """``error`` if the file ``path`` cannot be written without harm: it is a folder, it would be created under a
-    file, or it is (or is inside) one of ``inputs``."""
+def _check(path: str | Path | None, flag: str, inputs: Iterable[str | Path], error: type[SmaWristError],
+           folder: bool) -> None:
     if not path:
         return
     p = Path(path)
-    if p.is_dir():
+    if folder and p.exists() and not p.is_dir():
+        raise error(f'{flag} {p} is a file; give a folder for the report and the params file')
+    if not folder and p.is_dir():
         raise error(f'{flag} {p} is a folder; give a file name')
     blocked = _under_a_file(p)
     if blocked is not None:
@@ -45,25 +45,21 @@ def check_output_file(path: str | Path | None, flag: str, inputs: Iterable[str |
     hit = _input_hit(p, inputs)
     if hit is not None:
         raise error(f'{flag} {p} is {"inside " if hit.resolve() != p.resolve() else ""}the input {hit}: '
-                    'it would be overwritten; give another path')
+                    f'it would be overwritten; give another {"folder" if folder else "path"}')
+
+
+def check_output_file(path: str | Path | None, flag: str, inputs: Iterable[str | Path] = (),
+                      error: type[SmaWristError] = SmaWristError) -> None:
+    """``error`` if the file ``path`` cannot be written without harm: it is a folder, it would be created under a
+    file, or it is (or is inside) one of ``inputs``."""
+    _check(path, flag, inputs, error, folder=False)
 
 
 def check_output_folder(path: str | Path | None, flag: str = '--out', inputs: Iterable[str | Path] = (),
                         error: type[SmaWristError] = SmaWristError) -> None:
     """``error`` if the folder ``path`` cannot be used: it is a file, would be created under a file, or is (or is
     inside) one of ``inputs``."""
-    if not path:
-        return
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise error(f'{flag} {p} is a file; give a folder for the report and the params file')
-    blocked = _under_a_file(p)
-    if blocked is not None:
-        raise error(f'{flag} {p}: {blocked} is a file, not a folder')
-    hit = _input_hit(p, inputs)
-    if hit is not None:
-        raise error(f'{flag} {p} is {"inside " if hit.resolve() != p.resolve() else ""}the input {hit}; '
-                    'give another folder')
+    _check(path, flag, inputs, error, folder=True)
 
 
 __all__ = ['check_output_file', 'check_output_folder']

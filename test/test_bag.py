@@ -434,29 +434,37 @@ def test_a_run_in_the_sqlite_storage_reads_as_in_mcap(tmp_path):
         assert list(a[topic][0]) == list(b[topic][0]) and a[topic][1] == b[topic][1], topic
 
 
+def _rewrite(src, dst, change):
+    """Copy the bag src to dst, each message of a topic passed as change(topic, k, msg) (k counts that topic's
+    messages from 1); a message change returns is written in place of the original (None: unchanged)."""
+    from rosbags.rosbag2 import Reader, Writer
+    seen: dict[str, int] = {}
+    with Reader(src) as r, Writer(dst, version=8) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
+        for c, t, raw in r.messages():
+            seen[c.topic] = k = seen.get(c.topic, 0) + 1
+            m = change(c.topic, k, TYPESTORE.deserialize_cdr(raw, c.msgtype))
+            w.write(conns[c.id], t, raw if m is None else TYPESTORE.serialize_cdr(m, c.msgtype))
+
+
 def test_a_joint_state_with_several_joints_is_read_by_the_wrists_name(tmp_path):
     """compare and load_run took position[0] of every JointState: on a robot's /joint_states that lists another joint
     first they measured that joint, and a message without positions was an IndexError traceback. They now read the
     contract's joint ('wrist') by name, as diagnose did, and skip a message without its position."""
-    from rosbags.rosbag2 import Reader, Writer
     from sma_wrist.cli import main
     from sma_wrist.runs import load_run, run_metrics
     bag, other = tmp_path / 'run', tmp_path / 'robot'
     assert main(['run', '--duration', '3', '--bag', str(bag), '--quiet']) == 0
-    with Reader(bag) as r, Writer(other, version=8) as w:
-        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
-        k = 0
-        for c, t, raw in r.messages():
-            if c.topic == '/wrist/joint_states':
-                k += 1
-                m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
-                if k % 50 == 7:  # a driver's message without positions
-                    m.name, m.position = ['elbow', 'wrist'], np.array([], dtype=float)
-                else:  # another joint listed first
-                    m.name, m.position = ['elbow', 'wrist'], np.array([9.9, m.position[0]])
-                    m.velocity, m.effort = np.array([0.0, m.velocity[0]]), np.array([0.0, m.effort[0]])
-                raw = TYPESTORE.serialize_cdr(m, c.msgtype)
-            w.write(conns[c.id], t, raw)
+    def elbow_first(topic, k, m):
+        if topic != '/wrist/joint_states':
+            return None
+        if k % 50 == 7:  # a driver's message without positions
+            m.name, m.position = ['elbow', 'wrist'], np.array([], dtype=float)
+        else:  # another joint listed first
+            m.name, m.position = ['elbow', 'wrist'], np.array([9.9, m.position[0]])
+            m.velocity, m.effort = np.array([0.0, m.velocity[0]]), np.array([0.0, m.effort[0]])
+        return m
+    _rewrite(bag, other, elbow_first)
     a, b = load_run(bag), load_run(other)
     assert 0 < b.q.size < a.q.size and np.all(b.q < 2.0)
     np.testing.assert_array_equal(b.q, a.q[np.isin(a.t, b.t)])
@@ -473,23 +481,20 @@ def test_compare_names_joint_states_it_cannot_pair_with_the_reference(tmp_path, 
     """A potentiometer that sends only NaN, joint states stamped on the wall clock while the reference is on sim
     time: compare ended in an IndexError traceback. Joint states all stamped 0 (a driver that does not stamp them):
     compare printed the error of one sample (4.5 % for a run at 99 %) and exit 0. Now an error that says which."""
-    from rosbags.rosbag2 import Reader, Writer
     from sma_wrist.cli import main
     bag, bad = tmp_path / 'run', tmp_path / 'bad'
     assert main(['run', '--duration', '2', '--bag', str(bag), '--quiet']) == 0
-    with Reader(bag) as r, Writer(bad, version=8) as w:
-        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
-        for c, t, raw in r.messages():
-            if c.topic == '/wrist/joint_states':
-                m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
-                if fault == 'nan':
-                    m.position = np.array([np.nan])
-                elif fault == 'wall':
-                    m.header.stamp.sec += 1_700_000_000
-                else:
-                    m.header.stamp.sec, m.header.stamp.nanosec = 0, 0
-                raw = TYPESTORE.serialize_cdr(m, c.msgtype)
-            w.write(conns[c.id], t, raw)
+    def fault_in(topic, k, m):
+        if topic != '/wrist/joint_states':
+            return None
+        if fault == 'nan':
+            m.position = np.array([np.nan])
+        elif fault == 'wall':
+            m.header.stamp.sec += 1_700_000_000
+        else:
+            m.header.stamp.sec, m.header.stamp.nanosec = 0, 0
+        return m
+    _rewrite(bag, bad, fault_in)
     capsys.readouterr()
     assert main(['compare', str(bad)]) == 2
     err = capsys.readouterr().err
@@ -541,21 +546,15 @@ def test_diagnose_and_compare_check_where_they_write_before_reading(tmp_path, ca
 def test_a_nan_command_is_no_peak_and_compare_json_stays_json(tmp_path, capsys):
     """One NaN TEM command in a bag made compare's peak command NaN, and --json wrote a bare NaN, which no strict
     JSON reader takes. The peak is now over the finite commands."""
-    from rosbags.rosbag2 import Reader, Writer
     from sma_wrist.cli import main
     bag, bad = tmp_path / 'run', tmp_path / 'bad'
     assert main(['run', '--duration', '2', '--bag', str(bag), '--quiet']) == 0
-    with Reader(bag) as r, Writer(bad, version=8) as w:
-        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
-        k = 0
-        for c, t, raw in r.messages():
-            if c.topic == '/wrist/tem_1/command':
-                k += 1
-                if k == 50:
-                    m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
-                    m.data = float('nan')
-                    raw = TYPESTORE.serialize_cdr(m, c.msgtype)
-            w.write(conns[c.id], t, raw)
+    def one_nan(topic, k, m):
+        if topic == '/wrist/tem_1/command' and k == 50:
+            m.data = float('nan')
+            return m
+        return None
+    _rewrite(bag, bad, one_nan)
     capsys.readouterr()
     assert main(['compare', str(bag), str(bad), '--json']) == 0
     rows = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f'{c} in the JSON'))
@@ -566,24 +565,18 @@ def test_one_impossible_sample_is_dropped_not_a_crash_or_a_refused_bag(tmp_path,
     """One temperature of 1e300 (a glitch) overflowed diagnose's fit: 'internal error OverflowError'; one angle
     of 1e6 rad refused the whole bag as 'not radians'. Such samples are now dropped and counted, as NaNs are,
     and the diagnosis runs on the rest."""
-    from rosbags.rosbag2 import Reader, Writer
     from sma_wrist.cli import main
     bag, bad = tmp_path / 'run', tmp_path / 'bad'
     assert main(['run', '--duration', '40', '--bag', str(bag), '--quiet']) == 0
-    with Reader(bag) as r, Writer(bad, version=8) as w:
-        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
-        k = {'/wrist/muscle_2/temperature': 0, '/wrist/joint_states': 0}
-        for c, t, raw in r.messages():
-            if c.topic in k:
-                k[c.topic] += 1
-                if k[c.topic] == 700:
-                    m = TYPESTORE.deserialize_cdr(raw, c.msgtype)
-                    if c.topic == '/wrist/joint_states':
-                        m.position = np.array([1e6])
-                    else:
-                        m.temperature = 1e300
-                    raw = TYPESTORE.serialize_cdr(m, c.msgtype)
-            w.write(conns[c.id], t, raw)
+    def glitch(topic, k, m):
+        if k != 700 or topic not in ('/wrist/joint_states', '/wrist/muscle_2/temperature'):
+            return None
+        if topic == '/wrist/joint_states':
+            m.position = np.array([1e6])
+        else:
+            m.temperature = 1e300
+        return m
+    _rewrite(bag, bad, glitch)
     capsys.readouterr()
     assert main(['diagnose', str(bad)]) == 0
     out = capsys.readouterr()
