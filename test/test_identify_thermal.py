@@ -408,3 +408,17 @@ def test_files_of_one_name_in_two_folders_are_two_runs(tmp_path: Path, peltier_r
     assert sorted(r['record'] for r in doc['fit']['runs']) == sorted(files)
     code, doc = _cli([files[0], files[0], '--dt', '0.2'], capsys)
     assert code == 2 and 'two runs have the same name' in doc['error']
+
+
+def test_a_time_column_in_milliseconds_is_named_as_the_likely_cause(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A time column in ms (or ns, as ROS stamps are) read as seconds made every row a gap: 'covers only 0.0 s;
+    need at least 30 s'. The error now says how far apart the rows are and names --time-unit (now with ns)."""
+    t = np.arange(0.0, 60.0, 0.1)
+    body = ''.join(f'{x * 1e9:.0f},{math.sin(x):.4f},{30 + math.sin(x):.4f}\n' for x in t)
+    f = tmp_path / 'stamps.csv'
+    f.write_text('time,u,T1\n' + body)
+    code, doc = _cli([str(f)], capsys)
+    assert code == 2 and 'its rows are 1e+08 s apart' in doc['error'] and '--time-unit' in doc['error']
+    code, doc = _cli([str(f), '--time-unit', 'ns', '--out', str(tmp_path / 'o')], capsys)
+    assert code == 0, doc

@@ -47,7 +47,7 @@ _NAMES = {
            'face2', 'face_2', 't_2', 'exchanger_temperature', 'tem_face_2'),
     'frequency': ('f', 'freq', 'frequency', 'f_hz', 'frequency_hz'),
 }
-TIME_UNITS = {'s': 1.0, 'sec': 1.0, 'ms': 1e-3, 'us': 1e-6, 'min': 60.0}
+TIME_UNITS = {'s': 1.0, 'sec': 1.0, 'ms': 1e-3, 'us': 1e-6, 'ns': 1e-9, 'min': 60.0}
 VOLT_UNITS = {'v': 1.0, 'mv': 1e-3}
 TEMP_UNITS = ('degc', 'c', 'k', 'degf', 'f')
 MAX_GAP_S = 2.0
@@ -289,6 +289,11 @@ def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning, hold: st
     out = []
     for s in series:
         t, u, T = s.t, s.u, s.T
+        step = float(np.median(np.diff(t))) if t.size > 1 else 0.0
+        if step > max(MAX_GAP_S, 5 * dt):  # every row a gap: 'covers only 0.0 s' said nothing of the cause
+            raise ThermalInputError(f'{s.name}: its rows are {step:g} s apart (the time column read as '
+                                    'seconds); a thermal log samples far faster. If the time is in ms, us or ns '
+                                    '(ROS stamps), give --time-unit or a unit in its header, e.g. "time [ms]"')
         gaps = np.flatnonzero(np.diff(t) > max(MAX_GAP_S, 5 * dt))
         if gaps.size:
             edges = np.r_[0, gaps + 1, t.size]
