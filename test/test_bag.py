@@ -583,3 +583,28 @@ def test_one_impossible_sample_is_dropped_not_a_crash_or_a_refused_bag(tmp_path,
     assert 'internal error' not in out.err + out.out
     for topic, value in (('/wrist/muscle_2/temperature', '1e+300'), ('/wrist/joint_states', '1e+06')):
         assert f'{topic}: 1 of' in out.out and f'(up to {value}) are no measurement of this wrist' in out.out
+
+
+def test_a_thermocouple_that_stops_while_its_tem_is_driven_is_named_stale(tmp_path, capsys):
+    """A muscle thermocouple frozen at its last value (a stale sensor) was fitted as a measurement: diagnose said
+    'unexplained discrepancy', identify thermal moved the TEMs' hold limits. A value repeated for over 5 s while
+    the TEM is driven is now left out as a gap and named; the same bag unfrozen has no such warning."""
+    from sma_wrist.cli import main
+    bag, bad = tmp_path / 'run', tmp_path / 'bad'
+    assert main(['run', '--duration', '75', '--bag', str(bag), '--quiet']) == 0
+    frozen = {}
+
+    def freeze(topic, k, m):
+        if topic != '/wrist/muscle_1/temperature' or m.header.stamp.sec < 40:
+            return None
+        m.temperature = frozen.setdefault('T', m.temperature)
+        return m
+    _rewrite(bag, bad, freeze)
+    capsys.readouterr()
+    assert main(['diagnose', str(bag)]) == 0
+    assert 'stale sensor' not in capsys.readouterr().out
+    assert main(['diagnose', str(bad)]) == 0
+    out = capsys.readouterr().out
+    assert f'/wrist/muscle_1/temperature: the same value {frozen["T"]:.4g} for 35.0 s while its TEM was driven' in out
+    # the 40 s before it are the model's own run again: nothing to find (the frozen stretch was 'unexplained')
+    assert 'a stale sensor? Those samples are left out' in out and 'no significant discrepancy' in out

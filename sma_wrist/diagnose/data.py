@@ -38,6 +38,10 @@ DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
 #: gaps up to this long [s] are bridged (and masked); longer ones cut the run
 MAX_BRIDGE_S = 5.0
+#: a temperature repeated exactly for longer than this [s] while its TEM is driven harder than STALE_DRIVE_V [V]
+#: (mean |u|) is a stale sensor (a converter chip repeats its reading for ~0.1 s)
+STALE_S = 5.0
+STALE_DRIVE_V = 2.0
 
 
 class DiagnoseInputError(SmaWristError):
@@ -114,6 +118,33 @@ def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: 
         warnings.append(f'{name}: {int(dup.sum())} duplicate stamps; the last sample of each stamp was kept')
         t, vals = t[~dup], vals[~dup]
     return t, vals
+
+
+def _without_frozen(key: str, temp: tuple[np.ndarray, np.ndarray], drive: tuple[np.ndarray, np.ndarray],
+                    warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """The temperature series without the samples of a sensor that stopped: one value repeated exactly for more
+    than STALE_S while its TEM was driven (mean |u| over STALE_DRIVE_V). Such a stretch is no measurement; it
+    was fitted as one (a frozen thermocouple moved identify's hold limits, and diagnose called it an
+    unexplained discrepancy). Left as a gap, the usual gap rules apply. A quiet, quantised sensor at rest
+    repeats its value too, so an idle TEM is no sign."""
+    t, v = temp
+    if t.size < 3:
+        return temp
+    change = np.r_[True, v[1:] != v[:-1]]
+    starts = np.flatnonzero(change)
+    ends = np.r_[starts[1:], t.size] - 1
+    keep = np.ones(t.size, bool)
+    tu, vu = drive
+    for a, b in zip(starts, ends):
+        if t[b] - t[a] <= STALE_S:
+            continue
+        inside = (tu >= t[a]) & (tu <= t[b])
+        if not inside.any() or float(np.mean(np.abs(vu[inside]))) <= STALE_DRIVE_V:
+            continue
+        keep[a + 1:b + 1] = False
+        warnings.append(f'{TOPICS[key]}: the same value {v[a]:.4g} for {t[b] - t[a]:.1f} s while its TEM was driven '
+                        f'(mean |u| {np.mean(np.abs(vu[inside])):.1f} V): a stale sensor? Those samples are left out')
+    return (t[keep], v[keep]) if not keep.all() else temp
 
 
 def _longest_gap_free(t: np.ndarray, dt: float) -> tuple[float, float, int, list[tuple[float, float]]]:
@@ -209,6 +240,10 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
                 raise DiagnoseInputError(f'{TOPICS[k]}: commands up to {mx:g} are not volts (the TEM drive is '
                                          f'within +-{MAX_COMMAND_V:g} V; mV or a duty cycle in % ?)')
 
+    if have_T and have_u:
+        for k, ku in (('T1', 'u1'), ('T2', 'u2')):
+            series[k] = _without_frozen(k, series[k], series[ku], warnings)
+
     # grid: the measurement stamps of the reference topic
     ref_key = 'joint' if have_q else 'T1'
     t_ref = series[ref_key][0]
@@ -240,7 +275,8 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
     if hi - lo < MIN_DURATION_S:
         raise DiagnoseInputError(
             f'{p}: only {max(hi - lo, 0):.1f} s of overlapping, gap-free data; need at least {MIN_DURATION_S:g} s '
-            f'(better several minutes with the muscles cycling through their transitions)')
+            f'(better several minutes with the muscles cycling through their transitions)'
+            + ''.join(f'. {w}' for w in warnings if 'stale sensor' in w))
     step = max(1, int(round((1.0 / max_rate_hz) / dt_med)))
     dt = dt_med * step
     grid = np.arange(lo, hi + 1e-9, dt)
