@@ -166,6 +166,8 @@ def cmd_compare(a: argparse.Namespace) -> int:
         if r['damaged']:
             print(f'warning: {r["bag"]}: {r["damaged"]}; its metrics cover only the {r["duration_s"]:.1f} s read',
                   file=sys.stderr)
+        if r['dropped']:
+            print(f'warning: {r["bag"]}: {r["dropped"]}', file=sys.stderr)
     if a.json:
         print(json.dumps(rows, indent=2))
         return 0

@@ -91,6 +91,12 @@ def load_contract(path: str | None = None) -> Contract:
         raise ContractError(f'{p}: malformed interface contract ({type(e).__name__}: {e})') from None
 
 
+#: the largest magnitude a measured sample of each kind can have and still be one (readers drop and count the rest):
+#: temperatures in degC, K or degF, angles in rad or degrees, commands in V (a TEM driver's are within +-24 V), the
+#: payload in kg. One 1e300 overflowed diagnose's fit; one 1e6 rad angle refused a bag or read as a 1e8 % error
+IMPOSSIBLE = {'temperature': 1000.0, 'joint': 400.0, 'float': 1000.0}
+
+
 def joint_positions(msgs: Any, joint_name: str | None = None) -> list[float]:
     """The wrist's angle [rad] in each sensor_msgs/JointState of ``msgs``: the position of ``joint_name`` (default
     the contract's) where a message names it -- a robot's /joint_states may carry several joints, in any order --
@@ -104,4 +110,4 @@ def joint_positions(msgs: Any, joint_name: str | None = None) -> list[float]:
     return out
 
 
-__all__ = ['Contract', 'ContractError', 'Topic', 'contract_path', 'joint_positions', 'load_contract']
+__all__ = ['IMPOSSIBLE', 'Contract', 'ContractError', 'Topic', 'contract_path', 'joint_positions', 'load_contract']

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.bag import BagData, BagError, read_bag
-from sma_wrist.contract import joint_positions
+from sma_wrist.contract import IMPOSSIBLE, joint_positions
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.metrics import SEED_PERIOD_S, SEED_REFERENCE_RANGE_RAD, TrackingMetrics, tracking_metrics
 
@@ -37,6 +37,7 @@ class RunData:
     command_V: FloatArray  # (K_c, 2)
     payload_kg: float | None
     damage: str = ''  # what read_bag found wrong with a truncated / corrupt bag read up to its cut ('' intact)
+    dropped: str = ''  # measured samples left out as no measurement (sma_wrist.contract.IMPOSSIBLE), or ''
 
 
 def _stamp(msg: Any) -> float:
@@ -67,6 +68,10 @@ def load_run(path: str | Path) -> RunData:
                              'and the reference (see msg_defs/topics.yaml)')
     t = np.array([_stamp(m) for _, m in js])
     q = np.array(joint_positions(m for _, m in js))
+    wild = np.abs(q) > IMPOSSIBLE['joint']  # a glitch read as an angle was a 1e8 % error
+    dropped = (f'{int(wild.sum())} of {q.size} joint states with angles beyond +-{IMPOSSIBLE["joint"]:g} (up to '
+               f'{np.abs(q[wild]).max():.3g}) are no measurement and were left out' if wild.any() else '')
+    q[wild] = np.nan
     tr = np.array([_stamp(m) for _, m in ref])
     qr = np.array(joint_positions(m for _, m in ref))
     good = np.isfinite(qr)
@@ -105,7 +110,7 @@ def load_run(path: str | Path) -> RunData:
     command_V = np.array([[cmd[0][k][1].data, cmd[1][k][1].data] for k in range(n)]).reshape(n, 2)
     pay = _series(data, '/wrist/payload')
     return RunData(str(path), t, q, q_d, temps, command_t, command_V, float(pay[-1][1].data) if pay else None,
-                   damage)
+                   damage, dropped)
 
 
 def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]:
@@ -202,7 +207,8 @@ def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> lis
             raise SmaWristError(f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
                                 f'{", ".join("." + f for f in formats)} (no suffix: PNG)')
     runs = [load_run(p) for p in paths]
-    rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None} for p, r in zip(paths, runs)]
+    rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None, 'dropped': r.dropped or None}
+            for p, r in zip(paths, runs)]
     if plot is not None:
         plot_runs(runs, [Path(p).name for p in paths], plot, 'compare')
     return rows

@@ -583,6 +583,12 @@ def test_one_impossible_sample_is_dropped_not_a_crash_or_a_refused_bag(tmp_path,
     assert 'internal error' not in out.err + out.out
     for topic, value in (('/wrist/muscle_2/temperature', '1e+300'), ('/wrist/joint_states', '1e+06')):
         assert f'{topic}: 1 of' in out.out and f'(up to {value}) are no measurement of this wrist' in out.out
+    # compare read the 1e6 rad as an angle: a 1e8 % max error without a word
+    assert main(['compare', str(bag), str(bad), '--json']) == 0
+    out = capsys.readouterr()
+    clean, glitched = json.loads(out.out)
+    assert glitched['max_error_pct'] == pytest.approx(clean['max_error_pct'], rel=0.05)
+    assert 'joint states with angles beyond +-400 (up to 1e+06) are no measurement' in out.err
 
 
 def test_a_thermocouple_that_stops_while_its_tem_is_driven_is_named_stale(tmp_path, capsys):

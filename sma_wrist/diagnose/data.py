@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from sma_wrist.bag import BagError, read_bag
-from sma_wrist.contract import joint_positions
+from sma_wrist.contract import IMPOSSIBLE, joint_positions
 from sma_wrist.core.errors import SmaWristError
 
 TOPICS = {
@@ -80,11 +80,6 @@ def _stamp_ns(msg: Any) -> int:
     return int(h.stamp.sec) * 10**9 + int(h.stamp.nanosec)
 
 
-#: the largest magnitude a sample of each kind can have and still be one: temperatures in degC, K or degF, angles in
-#: rad or degrees, commands in V (a TEM driver's are within +-24 V) and the payload in kg
-IMPOSSIBLE = {'temperature': 1000.0, 'joint': 400.0, 'float': 1000.0}
-
-
 def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: list[str],
             joint_name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], values) of one topic, cleaned: NaNs dropped, sorted, de-duplicated."""
@@ -103,7 +98,7 @@ def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: 
         t, vals = t[~bad], vals[~bad]
     # a glitch no sensor of this wrist can give, in any unit the checks below recognise (K, degF, degrees): one
     # 1e300 overflowed the fit ('internal error'), one 1e6 rad refused the whole bag as 'not radians'
-    wild = np.abs(vals) > IMPOSSIBLE[kind]
+    wild = np.abs(vals) > IMPOSSIBLE[kind]  # sma_wrist.contract.IMPOSSIBLE
     if wild.any():
         warnings.append(f'{name}: {int(wild.sum())} of {vals.size} samples beyond +-{IMPOSSIBLE[kind]:g} (up to '
                         f'{np.abs(vals[wild]).max():.3g}) are no measurement of this wrist and were dropped')
