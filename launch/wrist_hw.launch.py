@@ -14,19 +14,19 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from sma_wrist.launch_support import graph_specs, node_params_file, on_exit_actions
+from sma_wrist.launch_support import graph_specs, node_params_file, on_exit_actions, payload_override
 
 
 def _graph(context) -> list:
     controller = LaunchConfiguration('controller').perform(context)
-    payload = float(LaunchConfiguration('payload_kg').perform(context))
+    payload = LaunchConfiguration('payload_kg').perform(context)
     defaults = PathJoinSubstitution([FindPackageShare('sma_wrist'), 'config', 'wrist.yaml']).perform(context)
     extra = LaunchConfiguration('params_file').perform(context)
     port = LaunchConfiguration('port').perform(context)
 
     return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
                  parameters=[defaults, extra, node_params_file(exe, values)], on_exit=on_exit_actions(exe))
-            for exe, values in graph_specs('hardware_bridge', {'payload_kg': payload, 'port': port}, controller)]
+            for exe, values in graph_specs('hardware_bridge', {**payload_override(payload), 'port': port}, controller)]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -38,7 +38,8 @@ def generate_launch_description() -> LaunchDescription:
         # wires and on the bridge's stress *estimate*; check that with `sma-wrist diagnose` first
         DeclareLaunchArgument('controller', default_value='direct_adaptive',
                               choices=['inverse_adaptive', 'direct_adaptive', 'pid']),
-        DeclareLaunchArgument('payload_kg', default_value='0.3', description='payload at 0.09 m [kg]'),
+        DeclareLaunchArgument('payload_kg', default_value='',
+                              description='payload at 0.09 m [kg] (default: payload_kg of the params files, 0.3)'),
         DeclareLaunchArgument('params_file', default_value=defaults,
                               description='params file applied after config/wrist.yaml'),
         OpaqueFunction(function=_graph),

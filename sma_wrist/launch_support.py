@@ -47,6 +47,12 @@ def node_params_file(node_name: str, values: Mapping[str, Any]) -> str:
     return path
 
 
+def payload_override(text: str) -> dict[str, float]:
+    """The source node's override for payload_kg:= (``''``, the default: none, so the params files' payload stands;
+    a payload_kg:= default of 0.3 overrode a params_file's payload_kg in silence)."""
+    return {} if text.strip() == '' else {'payload_kg': float(text)}
+
+
 #: nodes whose exit leaves the rest of the graph meaningless (no plant or device, no /clock: every
 #: other node would wait forever); each launch file gives them ``on_exit`` = log + Shutdown with
 #: this reason, and the embedded launcher (sma_wrist.runtime.launch_file) honours the same actions
@@ -81,4 +87,4 @@ def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: st
     return specs
 
 
-__all__ = ['REQUIRED_EXIT_REASONS', 'node_params_file', 'graph_specs', 'on_exit_actions']
+__all__ = ['REQUIRED_EXIT_REASONS', 'node_params_file', 'graph_specs', 'on_exit_actions', 'payload_override']

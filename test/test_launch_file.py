@@ -37,3 +37,17 @@ def test_nominal_launch_runs_every_node_of_the_graph_on_its_clock():
 def test_launch_argument_choices_are_enforced():
     with pytest.raises(LaunchFileError, match="Argument 'controller' provided value 'bogus' is not valid"):
         run_launch_file(_launch('wrist_sim.launch.py'), {'controller': 'bogus'}, 0.1)
+
+
+def test_a_params_files_payload_stands_unless_payload_kg_is_given(tmp_path, capfd):
+    """payload_kg:= defaulted to 0.3 and was written over every params file, so a params_file:= with its own
+    payload_kg ran 0.3 kg in silence (as `sma-wrist run --params-file` did). Its default is now empty: the params
+    files' payload stands; payload_kg:= given still wins."""
+    f = tmp_path / 'mine.yaml'
+    f.write_text('plant_sim:\n  ros__parameters:\n    payload_kg: 0.6\n')
+    for arguments, kg in (({'params_file': str(f)}, '0.6'), ({'params_file': str(f), 'payload_kg': '0.1'}, '0.1'),
+                          ({}, '0.3')):
+        capfd.readouterr()
+        run_launch_file(_launch('wrist_sim.launch.py'), {'controller': 'pid', **arguments}, 0.1)
+        out = capfd.readouterr()
+        assert f'plant_sim: payload {kg} kg' in out.out + out.err, arguments  # plant_sim's start-up line
