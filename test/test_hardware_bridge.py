@@ -608,3 +608,36 @@ def test_hardware_run_without_a_device_stops_with_a_clear_error(tmp_path, monkey
         closed_loop.run_closed_loop('pid', 0.3, 5.0, tmp_path / 'bag', hardware=True,
                                     extra_params={'/hardware_bridge': {'port': str(tmp_path / 'absent')}})
     assert (tmp_path / 'bag' / 'metadata.yaml').exists()  # the bag was closed, not lost
+
+
+def test_a_stuck_thermocouple_under_drive_turns_the_tems_off(emulator, graph):
+    """A thermocouple whose converter keeps returning its last reading was invisible to the over-temperature
+    limit, which saw the frozen value while the TEM went on heating. A reading that stays exactly the same for
+    stuck_sensor_s under a mean drive over stuck_sensor_drive_V is now a fault: 0 V, ERROR, its samples not
+    published, until the reading changes. An idle TEM with a repeating reading is no fault."""
+    from sma_wrist.hw.safety import StuckSensor
+    emu = emulator(noise_counts=0.0)
+    rt, bridge, probe = graph(emu, (20.0, 20.0), stuck_sensor_s=0.3)
+    rt.run_until(0.2, until='sim')
+    assert bridge.command_to_send() == (20.0, 20.0)
+    counts = int(Calibration().to_counts(np.array([40.0, 0, 0, 0]), 0.0)[0])
+    emu.inject('force', (0, counts))  # muscle 1's reading freezes at 40 degC
+    rt.spin_for(0.6, until='sim')
+    assert bridge.command_to_send() == (0.0, 0.0) and levels(probe, 'safety')[-1] == 2
+    assert any('muscle 1 thermocouple stuck' in m for name, lvl, m in probe.diagnostics()
+               if name == 'hardware_bridge: safety')
+    n_js = len(probe.got['/wrist/joint_states'])
+    rt.spin_for(0.3, until='sim')  # the TEMs are off now, and the reading is still stuck: still a fault
+    assert bridge.command_to_send() == (0.0, 0.0) and len(probe.got['/wrist/joint_states']) < n_js + 5
+    emu.inject('force', (0, None))
+    rt.spin_for(0.3, until='sim')
+    assert levels(probe, 'safety')[-1] == 0 and bridge.command_to_send() == (20.0, 20.0)
+    # the rule itself: an idle TEM, a drive under the threshold or one swinging both ways (heat in and out) never
+    # flags a repeated reading; a one-way drive beyond it does, until the reading changes
+    s = StuckSensor(1, hold_s=1.0, drive_V=18.0)
+    assert not any(s.update(0.01 * k, np.array([40.0]), np.array([0.0]))[0] for k in range(500))
+    assert not any(s.update(5.0 + 0.01 * k, np.array([40.0]), np.array([15.0]))[0] for k in range(500))
+    assert not any(s.update(10.0 + 0.01 * k, np.array([40.0]), np.array([24.0 * (-1) ** (k // 20)]))[0]
+                   for k in range(500))
+    assert any(s.update(15.0 + 0.01 * k, np.array([40.0]), np.array([-22.0]))[0] for k in range(500))
+    assert not s.update(25.0, np.array([40.25]), np.array([-22.0]))[0]  # a new reading clears it

@@ -33,7 +33,11 @@ also zeroes the drive without commands) and reports ERROR on /diagnostics until 
 * a muscle above ``max_muscle_temperature_C`` or a TEM face above
   ``max_tem_face_temperature_C`` (clears ``over_temperature_hysteresis_C`` lower);
 * angle outside [``angle_min_rad``, ``angle_max_rad``];
-* an ADC channel at 0 or full scale (open thermocouple, broken wiper) or a non-finite value.
+* an ADC channel at 0 or full scale (open thermocouple, broken wiper) or a non-finite value;
+* a muscle thermocouple whose reading stays exactly the same for ``stuck_sensor_s`` while its
+  TEM is driven one way harder than ``stuck_sensor_drive_V`` on average (a stuck converter or sensor:
+  the over-temperature limit cannot see through it); until the reading changes
+  (sma_wrist/hw/safety.py). Its samples are not published.
 
 Commands: clipped to [``u_min_V``, ``u_max_V``]; NaN/inf commands are rejected and that
 TEM gets 0 V until a finite one arrives; a command older than ``command_timeout_s`` (sim
@@ -59,6 +63,7 @@ from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.estimate import StressEstimator, slope
+from sma_wrist.hw.safety import StuckSensor
 from sma_wrist.hw.link import SerialLink
 from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, LOG_THROTTLE_S, PRELOAD_PARAM, Param, WristNode,
                                    finite, main_for)
@@ -88,6 +93,12 @@ class HardwareBridge(WristNode):
               (1, 1000)),
         Param('sensor_timeout_s', 0.1, 'no valid sample for this long (wall time): TEMs off, ERROR', 's',
               (0.005, 10.0)),
+        Param('stuck_sensor_s', 5.0, 'a muscle thermocouple reading exactly the same this long (device time) while '
+              'its TEM is driven harder than stuck_sensor_drive_V: a stuck sensor, TEMs off, ERROR, not published '
+              '(0: off)', 's', (0.0, 600.0)),
+        Param('stuck_sensor_drive_V', 18.0, 'mean TEM drive (one way, over about stuck_sensor_s) beyond which an '
+              'unchanged reading is a stuck sensor: beyond the drive that holds any temperature (~13 V), it moves a '
+              'muscle by degrees in that time', 'V', (0.0, 30.0)),
         Param('command_timeout_s', 0.5, 'a TEM command older than this (sim time) is replaced by 0 V', 's',
               (0.01, 60.0)),
         Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature: TEMs off above this', 'degC',
@@ -149,6 +160,8 @@ class HardwareBridge(WristNode):
         self._last_valid_wall: float | None = None
         self._latest: tuple[tuple[float, ...], float, bool] | None = None  # temps, q, adc at a rail
         self._hot = False
+        self._stuck = StuckSensor(2, p['stuck_sensor_s'], p['stuck_sensor_drive_V'])  # muscle thermocouples
+        self._sent_V = np.zeros(2)  # the drive last sent to the device [V]
         self._qd = 0.0
         self._device = ''
         self._await_hello_until = 0.0
@@ -207,6 +220,8 @@ class HardwareBridge(WristNode):
             self._publish_payload()
         if any(k.startswith('stress_filter.') for k in changed):
             self.estimator.filter.set_drift(self._drift())
+        if any(k.startswith('stuck_sensor_') for k in changed):
+            self._stuck.set_limits(self.p['stuck_sensor_s'], self.p['stuck_sensor_drive_V'])
 
     # -- inputs ----------------------------------------------------------------
     def _on_command(self, i: int, msg: Any) -> None:
@@ -285,7 +300,8 @@ class HardwareBridge(WristNode):
         t = self._anchor[1] + (s.t_us - self._anchor[0]) * 1e-6
         # the safety check sees every sample (_latest); a railed channel or an angle outside the safe
         # range is a faulty reading, never published as a measurement (issue 15 item 7)
-        usable = not rail and self.p['angle_min_rad'] <= q <= self.p['angle_max_rad']
+        stuck = self._stuck.update(t, temps[:2], self._sent_V).any()
+        usable = not rail and not stuck and self.p['angle_min_rad'] <= q <= self.p['angle_max_rad']
         self.counters['rejected_samples'] += not usable
         self._window.append((t, temps, q, usable))
         self._latest = (temps, q, rail)
@@ -342,7 +358,8 @@ class HardwareBridge(WristNode):
         if not w:
             self.counters['windows_withheld'] += 1
             self.diagnose('measurement', ERROR, 'every sample of the window was rejected for safety '
-                          '(ADC at 0 or full scale, or angle outside the safe range): nothing published',
+                          '(ADC at 0 or full scale, angle outside the safe range, or a stuck thermocouple): nothing '
+                          'published',
                           {'rejected_samples': self.counters['rejected_samples'],
                            'windows_withheld': self.counters['windows_withheld']})
             return
@@ -412,6 +429,9 @@ class HardwareBridge(WristNode):
             out.append(f'angle {q:.3f} rad outside [{p["angle_min_rad"]}, {p["angle_max_rad"]}]')
         if rail:
             out.append('ADC channel at 0 or full scale (open or shorted sensor)')
+        for i in np.flatnonzero(self._stuck.stuck):
+            out.append(f'muscle {i + 1} thermocouple stuck (the same reading for over {p["stuck_sensor_s"]:g} s while '
+                       f'its TEM was driven one way at over {p["stuck_sensor_drive_V"]:g} V on average)')
         return out
 
     def _check_safety(self) -> None:
@@ -443,6 +463,7 @@ class HardwareBridge(WristNode):
         if self.link.connected:
             u1, u2 = self.command_to_send()
             self.link.send_command(u1, u2)
+            self._sent_V[:] = (u1, u2)
 
     def status_values(self) -> dict[str, Any]:
         st = self.link.parser.stats
