@@ -70,6 +70,8 @@ from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, LOG_THROTTLE_S, PRELO
 
 #: while the TEMs are off for a fault, a reminder is logged this often (wall time) [s]
 FAULT_REMINDER_S = LOG_THROTTLE_S
+#: how far before a window's edge [s] a sample still closes it: timestamp jitter, well under a sample period
+WINDOW_EDGE_TOLERANCE_S = 1e-4
 HELLO_WAIT_S = 0.5  # after connecting, samples before the device's hello (or this long, wall) are stale
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -310,7 +312,8 @@ class HardwareBridge(WristNode):
 
     # -- the tick ----------------------------------------------------------------
     def _window_ready(self) -> bool:
-        return bool(self._window) and self._window[-1][0] >= self._next_pub_s - 1e-9
+        # a sample a few microseconds early (a timer read in an interrupt) still closes the window on its grid point
+        return bool(self._window) and self._window[-1][0] >= self._next_pub_s - WINDOW_EDGE_TOLERANCE_S
 
     def _tick(self) -> None:
         events = self.link.events
@@ -351,7 +354,9 @@ class HardwareBridge(WristNode):
         self._window.clear()
         first = self._last_pub_s is None
         self._last_pub_s = t_end
-        self._next_pub_s = t_end + self.period_s
+        # the next edge on the fixed grid: from t_end, each window started where the last overshot, and a few
+        # microseconds of timestamp jitter cost one sample per window and 5 % of the windows
+        self._next_pub_s += self.period_s * (max(0, skipped) + 1)
         stamp = Time(nanoseconds=int(round(t_end * 1e9))).to_msg()
         self.pub_clock.publish(Clock(clock=stamp))  # device time goes on: the graph's clock keeps running
         w = [x for x in w if x[3]]
