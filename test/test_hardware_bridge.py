@@ -664,3 +664,29 @@ def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):
     clock = np.array([c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']])
     steps = np.diff(clock) / 0.01  # whole windows; a skip (host late) is a whole multiple
     assert len(clock) > 50 and np.all(np.abs(steps - np.round(steps)) < 0.01), np.unique(np.round(steps, 3))
+
+
+def test_the_devices_own_drive_cut_is_reported(tmp_path, graph):
+    """The device's flags were never read: a device cutting the drive on its own over-temperature check (flag 4)
+    while the controllers went on commanding 24 V left nothing on /diagnostics. Now a WARN while it lasts."""
+    class Cutting(DeviceEmulator):
+        cut = False
+
+        def _sample(self) -> bytes:
+            s, = P.Parser().feed(super()._sample())
+            return P.encode(P.Sample(s.seq, s.t_us, s.adc, s.flags | (P.FLAG_OVERTEMP if self.cut else 0)))
+    emu = Cutting(EmulatorConfig(), link=str(tmp_path / 'cutting'))
+    emu.start()
+    try:
+        rt, bridge, probe = graph(emu, (5.0, 5.0))
+        rt.run_until(0.3, until='sim')
+        emu.cut = True
+        rt.spin_for(0.3, until='sim')
+        during = levels(probe, 'device_drive')[-1]
+        emu.cut = False
+        rt.spin_for(0.3, until='sim')
+    finally:
+        emu.stop()
+    assert during == 1 and levels(probe, 'device_drive')[-1] == 0
+    assert any('over-temperature check' in m for name, lvl, m in probe.diagnostics()
+               if name == 'hardware_bridge: device_drive')

@@ -307,8 +307,18 @@ class HardwareBridge(WristNode):
         self.counters['rejected_samples'] += not usable
         self._window.append((t, temps, q, usable))
         self._latest = (temps, q, rail)
+        self._device_cut(s.flags)
         self._last_valid_wall = wall
         self.counters['samples'] += 1
+
+    def _device_cut(self, flags: int) -> None:
+        """The device's own over-temperature cut (FLAG_OVERTEMP) on /diagnostics: the controllers' commands do not
+        reach the TEMs while it lasts, and nothing else said so. (Its watchdog flag is set at every start, before
+        the first command arrives; the bridge's own timeouts cover a host that stops commanding.)"""
+        cut = bool(flags & P.FLAG_OVERTEMP)
+        self.diagnose('device_drive', WARN if cut else OK,
+                      'the device cut the TEM drive on its own over-temperature check' if cut
+                      else 'the device drives the TEMs')
 
     # -- the tick ----------------------------------------------------------------
     def _window_ready(self) -> bool:
