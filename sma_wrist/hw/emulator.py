@@ -405,13 +405,11 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
     # a NaN or negative value here did not fail: it made a device without noise, latency or watchdog in silence
     if not (math.isfinite(a.watchdog_s) and a.watchdog_s > 0):
         raise ValueError(f'--watchdog-s {a.watchdog_s!r} must be a finite number > 0')
+    tc_rate, tc_res = getattr(a, 'thermocouple_rate_hz', 0.0), getattr(a, 'thermocouple_resolution_C', 0.0)
     for flag, v in (('--noise-counts', a.noise_counts), ('--latency-ms', a.latency_ms),
                     ('--reset-every-s', a.reset_every_s), ('--unplug-every-s', a.unplug_every_s),
-                    ('--unplug-wall-s', a.unplug_wall_s)):
-        if not (math.isfinite(v) and v >= 0):
-            raise ValueError(f'{flag} {v!r} must be a finite number >= 0')
-    tc_rate, tc_res = getattr(a, 'thermocouple_rate_hz', 0.0), getattr(a, 'thermocouple_resolution_C', 0.0)
-    for flag, v in (('--thermocouple-rate-hz', tc_rate), ('--thermocouple-resolution-C', tc_res)):
+                    ('--unplug-wall-s', a.unplug_wall_s), ('--thermocouple-rate-hz', tc_rate),
+                    ('--thermocouple-resolution-C', tc_res)):
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f'{flag} {v!r} must be a finite number >= 0')
     if tc_rate > a.rate_hz:

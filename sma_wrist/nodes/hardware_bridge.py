@@ -163,7 +163,7 @@ class HardwareBridge(WristNode):
         self._latest: tuple[tuple[float, ...], float, bool] | None = None  # temps, q, adc at a rail
         self._hot = False
         self._stuck = StuckSensor(2, p['stuck_sensor_s'], p['stuck_sensor_drive_V'])  # muscle thermocouples
-        self._sent_V = np.zeros(2)  # the drive last sent to the device [V]
+        self._sent_V = [0.0, 0.0]  # the drive last sent to the device [V]
         self._qd = 0.0
         self._device = ''
         self._await_hello_until = 0.0
@@ -302,7 +302,7 @@ class HardwareBridge(WristNode):
         t = self._anchor[1] + (s.t_us - self._anchor[0]) * 1e-6
         # the safety check sees every sample (_latest); a railed channel or an angle outside the safe
         # range is a faulty reading, never published as a measurement (issue 15 item 7)
-        stuck = self._stuck.update(t, temps[:2], self._sent_V).any()
+        stuck = any(self._stuck.update(t, temps[:2], self._sent_V))
         usable = not rail and not stuck and self.p['angle_min_rad'] <= q <= self.p['angle_max_rad']
         self.counters['rejected_samples'] += not usable
         self._window.append((t, temps, q, usable))
@@ -444,9 +444,10 @@ class HardwareBridge(WristNode):
             out.append(f'angle {q:.3f} rad outside [{p["angle_min_rad"]}, {p["angle_max_rad"]}]')
         if rail:
             out.append('ADC channel at 0 or full scale (open or shorted sensor)')
-        for i in np.flatnonzero(self._stuck.stuck):
-            out.append(f'muscle {i + 1} thermocouple stuck (the same reading for over {p["stuck_sensor_s"]:g} s while '
-                       f'its TEM was driven one way at over {p["stuck_sensor_drive_V"]:g} V on average)')
+        for i, stuck in enumerate(self._stuck.stuck):
+            if stuck:
+                out.append(f'muscle {i + 1} thermocouple stuck (the same reading for over {p["stuck_sensor_s"]:g} s '
+                           f'while its TEM was driven one way at over {p["stuck_sensor_drive_V"]:g} V on average)')
         return out
 
     def _check_safety(self) -> None:
