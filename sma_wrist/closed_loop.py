@@ -166,8 +166,8 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         if bag is not None:
             rec = rt.record(bag, topics)
         from sma_wrist.nodes.common import add_or_refuse
-        for cls in nodes:  # a value a node refuses (a params file's): its reason, not rclpy's traceback
-            add_or_refuse(rt, cls)
+        # a value a node refuses (a params file's): its reason, not rclpy's traceback
+        source_node = [add_or_refuse(rt, cls) for cls in nodes][0]
         chunk = max(duration_s / 100.0, 0.01)
         t = 0.0
         stall = _Stall(rt, DEVICE_STALL_S) if hardware else None
@@ -183,13 +183,15 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         except KeyboardInterrupt:
             interrupted = True
         sim_s = (rt.sim_ns or 0) / 1e9
+        why = source_node.why_no_data() if stalled else ''
         if bag is not None:
             recorded = rec.count
     if stalled:
         raise SmaWristError(
             f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {sim_s:.2f} s of device time: check '
             f"hardware_bridge's port, that the device is powered and streaming (docs/protocol.md); TEMs were "
-            f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if bag is not None else ''))
+            f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if bag is not None else '') +
+            (f'. What the line carried: {why}' if why else ''))
     summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
                          time.perf_counter() - wall0, recorded, interrupted)
     if bag is not None:

@@ -251,6 +251,7 @@ class Parser:
     def __init__(self, version: int = PROTOCOL_VERSION) -> None:
         self.version = version
         self.stats = ParserStats()
+        self.foreign_version: int | None = None  # the version of the last frame of another version
         self._buf = bytearray()
 
     def reset(self) -> None:
@@ -313,6 +314,7 @@ class Parser:
         g = m.groups()
         if int(g[0]) != self.version:
             st.version_mismatch += 1
+            self.foreign_version = int(g[0])
             return None
         frame = _build(body[0], g)
         if frame is None:

@@ -17,7 +17,10 @@ process noise is ``stress_filter.*`` (the stiff wires multiply the sensors' nois
 
 Time: the device clock is the graph's clock. /clock is the device time stamp of the last
 sample of each window, rebased to 0 at the first sample and kept continuous (spliced one
-window after the last published time) across device resets and reconnects; the other
+window after the last published time) across device resets and reconnects. Samples are ordered
+by their sequence number and timed by their stamp: a late line is dropped, a stamp that repeats or
+trails a little (a millisecond clock) is taken at the newest time, and a boot flag or a stamp more
+than 50 ms back is a device restart (docs/protocol.md, "Error handling"). The other
 nodes run with use_sim_time as with plant_sim, so an emulator running N x faster than
 wall time (--time-scale) makes the whole graph run N x faster. The bridge itself runs on
 its steady clock (use_sim_time false): its timer polls every half window; each tick waits
@@ -72,6 +75,9 @@ from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, LOG_THROTTLE_S, PRELO
 FAULT_REMINDER_S = LOG_THROTTLE_S
 #: how far before a window's edge [s] a sample still closes it: timestamp jitter, well under a sample period
 WINDOW_EDGE_TOLERANCE_S = 1e-4
+#: a sample whose stamp is further back than this [us] (without being a repeat) is from a restarted device;
+#: late lines, millisecond clocks and interrupt latency stay well within it
+REORDER_TOLERANCE_US = 50_000
 HELLO_WAIT_S = 0.5  # after connecting, samples before the device's hello (or this long, wall) are stale
 OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.ERROR
 
@@ -150,7 +156,8 @@ class HardwareBridge(WristNode):
                                                                 preload_elongation_mm=p['preload_elongation_mm']),
                                          payload_kg=p['payload_kg'], drift=self._drift())
         self.seq = P.SequenceTracker()
-        self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0, 'stale_discarded': 0, 'invalid_samples': 0,
+        self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0,
+                         'out_of_order': 0, 'stale_discarded': 0, 'invalid_samples': 0,
                          'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}
         # (sim t [s], temps (4,), q, usable): a sample rejected for safety keeps time but is no measurement
         self._window: list[tuple[float, tuple[float, ...], float, bool]] = []
@@ -168,6 +175,8 @@ class HardwareBridge(WristNode):
         self._device = ''
         self._await_hello_until = 0.0
         self._diag_wall = 0.0
+        self._line_at_sample = (0, 0)  # the parser's (version mismatches, rejected lines + garbage) at the last sample
+        self._prev_end: tuple[float, float] | None = None  # (t, q) at the end of the last published window
 
         self.pub_clock = self.publisher('/clock')
         self.pub_joint = self.publisher('/wrist/joint_states')
@@ -241,6 +250,7 @@ class HardwareBridge(WristNode):
         self._anchor = None
         self._window.clear()
         self._last_t_us = None
+        self._prev_end = None
         self.seq.restart()
 
     def _handle(self, ev: tuple[str, float, Any]) -> None:
@@ -259,47 +269,85 @@ class HardwareBridge(WristNode):
         if isinstance(x, P.Sample):
             self._on_sample(x, wall)
         elif isinstance(x, P.Reset):
-            self.counters['resets'] += 1
-            self._resync()
-            self.diagnose('device', WARN, f'device reset ({x.reason}); time base spliced',
-                          {'resets': self.counters['resets']})
+            self._device_restarted(x.reason)
         elif isinstance(x, P.Hello):
             self._await_hello_until = 0.0
             self._device = f'{x.device_id} {x.firmware} at {x.rate_hz} Hz'
-            self.diagnose('device', OK, f'device {self._device}, protocol v{x.version}')
+            slow = self._slow_device(x.rate_hz)
+            self.diagnose('device', WARN if slow else OK, f'device {self._device}, protocol v{x.version}' +
+                          (': ' + '; '.join(slow) if slow else ''))
         elif isinstance(x, P.Error):
             self.diagnose('device', WARN, f'device error {x.code}: {x.text}')
+
+    def _slow_device(self, rate_hz: int) -> list[str]:
+        """What a device sampling at ``rate_hz`` leaves unmet of this bridge's settings (empty: nothing)."""
+        p = self.p
+        out = []
+        if rate_hz < 2.0 * p['publish_rate_hz']:  # a one-sample window has no spread and no slope
+            out.append(f'under two samples per publish window: lower publish_rate_hz ({p["publish_rate_hz"]:g}) to '
+                       f'{rate_hz / 2.0:g} or less (velocity is taken between windows meanwhile)')
+        if 2.0 / rate_hz > p['sensor_timeout_s']:  # one late sample would turn the TEMs off
+            out.append(f'sensor_timeout_s ({p["sensor_timeout_s"]:g} s) is under two sample periods: raise it to '
+                       f'{2.0 / rate_hz:g} s or more')
+        return out
+
+    def why_no_data(self) -> str:
+        """What the line carried since the last valid sample instead of samples ('' if nothing): a device on
+        another protocol version or baud rate sends lines, none of them usable."""
+        st = self.link.parser.stats
+        seen = self._line_at_sample
+        if st.version_mismatch > seen[0]:
+            return (f'the device speaks protocol version {self.link.parser.foreign_version}, this bridge '
+                    f'{P.PROTOCOL_VERSION} '
+                    f'({st.version_mismatch - seen[0]} frames ignored): update the firmware or sma_wrist to match')
+        bad = st.rejected_lines + st.garbage_bytes - seen[1]
+        if bad > 0:
+            return ('bytes arrive but no valid sample (bad checksums, cut or malformed lines, garbage): check the '
+                    'baud rate, the port and docs/protocol.md')
+        return ''
+
+    def _device_restarted(self, why: str) -> None:
+        self.counters['resets'] += 1
+        self._resync()
+        self.diagnose('device', WARN, f'device reset ({why}); time base spliced', {'resets': self.counters['resets']})
 
     def _on_sample(self, s: P.Sample, wall: float) -> None:
         if wall < self._await_hello_until:
             self.counters['stale_discarded'] += 1
             return
+        last_t = self._last_t_us
+        if last_t is not None and s.seq != self.seq.last and \
+                (s.flags & P.FLAG_BOOT or last_t - s.t_us > REORDER_TOLERANCE_US):
+            # a boot sample, or device time far back: the device restarted and its reset line was lost (or its
+            # clock wrapped). A late line or a coarse clock goes back a little, never this far.
+            self._device_restarted('no reset line; ' + ('a boot flag' if s.flags & P.FLAG_BOOT else
+                                                         f'device time went back {(last_t - s.t_us) * 1e-6:.3f} s'))
+            last_t = None
         gap = self.seq.update(s.seq)
-        if self._last_t_us is not None and (gap < 0 or s.t_us <= self._last_t_us):
-            if s.t_us < self._last_t_us:  # time went back without a reset notice: the device restarted
-                self.counters['resets'] += 1
-                self._resync()
-                self.seq.update(s.seq)
-            else:  # repeated or reordered sample: drop
-                self.counters['invalid_samples'] += 1
-                return
-        if self._last_t_us is not None and \
-                s.t_us - self._last_t_us > 1e6 * self.p['max_backlog_windows'] * self.period_s:
+        if last_t is not None and gap < 0:  # a repeated or late (reordered) line: its window may be gone
+            self.counters['out_of_order'] += 1
+            return
+        if last_t is not None and \
+                s.t_us - last_t > 1e6 * self.p['max_backlog_windows'] * self.period_s:
             # device time jumped (samples lost in an overrun or a stall): splice, /clock stays continuous
             self.counters['time_gaps'] += 1
             self._resync()
             self.seq.update(s.seq)
+            last_t = None
         temps, q = self.cal.to_physical_fast(s.adc)
         rail = min(s.adc) == 0 or max(s.adc) == P.ADC_MAX
         if not (math.isfinite(sum(temps)) and math.isfinite(q)):
             self.counters['invalid_samples'] += 1
             return
-        self._last_t_us = s.t_us
+        # a newer sample whose stamp repeats or trails a little (a millisecond clock, interrupt latency) is taken
+        # at the newest time: the sequence number orders samples, the stamp only times them
+        t_us = s.t_us if last_t is None else max(s.t_us, last_t)
+        self._last_t_us = t_us
         if self._anchor is None:
             start = 0.0 if self._last_pub_s is None else self._last_pub_s + self.period_s
-            self._anchor = (s.t_us, start)
+            self._anchor = (t_us, start)
             self._next_pub_s = start
-        t = self._anchor[1] + (s.t_us - self._anchor[0]) * 1e-6
+        t = self._anchor[1] + (t_us - self._anchor[0]) * 1e-6
         # the safety check sees every sample (_latest); a railed channel or an angle outside the safe
         # range is a faulty reading, never published as a measurement (issue 15 item 7)
         stuck = any(self._stuck.update(t, temps[:2], self._sent_V))
@@ -309,6 +357,8 @@ class HardwareBridge(WristNode):
         self._latest = (temps, q, rail)
         self._device_cut(s.flags)
         self._last_valid_wall = wall
+        st = self.link.parser.stats
+        self._line_at_sample = (st.version_mismatch, st.rejected_lines + st.garbage_bytes)
         self.counters['samples'] += 1
 
     def _device_cut(self, flags: int) -> None:
@@ -382,6 +432,9 @@ class HardwareBridge(WristNode):
         temps = np.array([x[1] for x in w])
         qs = np.array([x[2] for x in w])
         q, qd_raw, q_var = slope(t, qs)
+        if len(w) < 2 and self._prev_end is not None and t[-1] > self._prev_end[0]:  # a slow device: no slope within
+            qd_raw = (q - self._prev_end[1]) / (t[-1] - self._prev_end[0])
+        self._prev_end = (float(t[-1]), q)
         tau = self.p['velocity_filter_s']
         a = 1.0 if tau <= 0 or first else self.period_s / (tau + self.period_s)
         self._qd += a * (qd_raw - self._qd)
@@ -427,7 +480,9 @@ class HardwareBridge(WristNode):
         now = time.monotonic()
         if self._last_valid_wall is None or now - self._last_valid_wall > p['sensor_timeout_s']:
             # a fixed text: the age is in the status values (a text changing every tick was one log line per tick)
-            out.append(f'sensor timeout (no valid sample for more than {p["sensor_timeout_s"]:g} s)')
+            why = self.why_no_data()
+            out.append(f'sensor timeout (no valid sample for more than {p["sensor_timeout_s"]:g} s)' +
+                       (f': {why}' if why else ''))
             return out
         assert self._latest is not None
         temps, q, rail = self._latest
