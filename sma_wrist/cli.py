@@ -13,6 +13,7 @@ import sys
 from typing import Any, Callable, Sequence
 
 from sma_wrist.cli_options import diagnose_arguments, emulator_arguments, nonnegative_int, sweep_arguments
+from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 
 
@@ -31,8 +32,9 @@ def _payload(text: str) -> float:
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
-    if not (math.isfinite(v) and 0.0 <= v <= 1.5):
-        raise argparse.ArgumentTypeError(f'payload {text!r} kg is outside [0, 1.5] kg')
+    lo, hi = PAYLOAD_RANGE_KG
+    if not (math.isfinite(v) and lo <= v <= hi):
+        raise argparse.ArgumentTypeError(f'payload {text!r} kg is outside [{lo:g}, {hi:g}] kg')
     return v
 
 

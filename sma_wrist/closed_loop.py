@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence, TypeVar
 
+from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.runtime.launch import Runtime
 from sma_wrist.share import share_path
@@ -99,8 +100,9 @@ def file_choices(params_files: Sequence[str | Path], hardware: bool = False) -> 
     where = ', '.join(map(str, params_files)) or 'config/wrist.yaml'
     if mode not in CONTROLLERS:
         raise SmaWristError(f'adaptive_controller mode {mode!r} ({where}) is not one of {", ".join(CONTROLLERS)}')
-    if isinstance(payload, bool) or not isinstance(payload, (int, float)) or not 0.0 <= payload <= 1.5:
-        raise SmaWristError(f'{source[1:]} payload_kg {payload!r} ({where}) must be a number in [0, 1.5] kg')
+    lo, hi = PAYLOAD_RANGE_KG
+    if isinstance(payload, bool) or not isinstance(payload, (int, float)) or not lo <= payload <= hi:
+        raise SmaWristError(f'{source[1:]} payload_kg {payload!r} ({where}) must be a number in [{lo:g}, {hi:g}] kg')
     return mode, float(payload)
 
 

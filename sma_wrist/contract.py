@@ -91,6 +91,9 @@ def load_contract(path: str | None = None) -> Contract:
         raise ContractError(f'{p}: malformed interface contract ({type(e).__name__}: {e})') from None
 
 
+#: the payload [kg] the wrist is rated for at its lever (0.09 m): every place that takes one checks it against this
+PAYLOAD_RANGE_KG = (0.0, 1.5)
+
 #: the largest magnitude a measured sample of each kind can have and still be one (readers drop and count the rest):
 #: temperatures in degC, K or degF, angles in rad or degrees, commands in V (a TEM driver's are within +-24 V), the
 #: payload in kg. One 1e300 overflowed diagnose's fit; one 1e6 rad angle refused a bag or read as a 1e8 % error

@@ -31,14 +31,14 @@ def _input_hit(path: Path, inputs: Iterable[str | Path]) -> Path | None:
 
 
 def _check(path: str | Path | None, flag: str, inputs: Iterable[str | Path], error: type[SmaWristError],
-           folder: bool) -> None:
+           folder: bool, example: str | None = None) -> None:
     if not path:
         return
     p = Path(path)
     if folder and p.exists() and not p.is_dir():
         raise error(f'{flag} {p} is a file; give a folder for the report and the params file')
     if not folder and p.is_dir():
-        raise error(f'{flag} {p} is a folder; give a file name')
+        raise error(f'{flag} {p} is a folder; give a file name' + (f', e.g. {p / example}' if example else ''))
     blocked = _under_a_file(p)
     if blocked is not None:
         raise error(f'{flag} {p}: {blocked} is a file, not a folder')
@@ -49,10 +49,10 @@ def _check(path: str | Path | None, flag: str, inputs: Iterable[str | Path], err
 
 
 def check_output_file(path: str | Path | None, flag: str, inputs: Iterable[str | Path] = (),
-                      error: type[SmaWristError] = SmaWristError) -> None:
-    """``error`` if the file ``path`` cannot be written without harm: it is a folder, it would be created under a
-    file, or it is (or is inside) one of ``inputs``."""
-    _check(path, flag, inputs, error, folder=False)
+                      error: type[SmaWristError] = SmaWristError, example: str | None = None) -> None:
+    """``error`` if the file ``path`` cannot be written without harm: it is a folder (the message suggests
+    ``example`` inside it), it would be created under a file, or it is (or is inside) one of ``inputs``."""
+    _check(path, flag, inputs, error, folder=False, example=example)
 
 
 def check_output_folder(path: str | Path | None, flag: str = '--out', inputs: Iterable[str | Path] = (),

@@ -196,11 +196,9 @@ def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> lis
 
     A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one).
     """
-    if plot is not None and Path(plot).is_dir():  # savefig would write <folder>.png beside it, silently
-        raise SmaWristError(f'--plot {plot} is a folder; give the PNG file to write, e.g. {Path(plot) / "compare.png"}')
     if plot is not None:
         from sma_wrist.outputs import check_output_file
-        check_output_file(plot, '--plot', paths)
+        check_output_file(plot, '--plot', paths, example='compare.png')  # a folder: savefig wrote <folder>.png
         suffix = Path(plot).suffix.lower().lstrip('.')
         formats = _plot_formats()
         if suffix and formats and suffix not in formats:  # savefig's ValueError traceback, after every bag was read

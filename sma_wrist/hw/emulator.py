@@ -35,6 +35,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from sma_wrist.cli_options import emulator_arguments as add_arguments
+from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration, quantise
@@ -400,8 +401,8 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
             from None
     if len(offsets) != 4 or not all(math.isfinite(o) for o in offsets):
         raise ValueError('--thermocouple-offsets-C needs 4 finite comma-separated values')
-    if not (a.rate_hz > 0 and a.time_scale > 0 and 0 <= a.payload_kg <= 1.5):
-        raise ValueError('--rate-hz and --time-scale must be > 0, --payload-kg in [0, 1.5]')
+    if not (a.rate_hz > 0 and a.time_scale > 0 and PAYLOAD_RANGE_KG[0] <= a.payload_kg <= PAYLOAD_RANGE_KG[1]):
+        raise ValueError('--rate-hz and --time-scale must be > 0, --payload-kg in [%g, %g]' % PAYLOAD_RANGE_KG)
     # a NaN or negative value here did not fail: it made a device without noise, latency or watchdog in silence
     if not (math.isfinite(a.watchdog_s) and a.watchdog_s > 0):
         raise ValueError(f'--watchdog-s {a.watchdog_s!r} must be a finite number > 0')

@@ -61,6 +61,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64
 
+from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
@@ -89,7 +90,7 @@ class HardwareBridge(WristNode):
         Param('baud_rate', 921600, 'serial baud rate (1 kHz samples need >= 921600; ignored by USB CDC/pty)',
               'bit/s', (9600, 4000000), runtime=False),
         Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m, as mounted (published latched)', 'kg',
-              (0.0, 1.5)),
+              PAYLOAD_RANGE_KG),
         Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in device time', 'Hz',
               (1.0, 500.0), runtime=False),
         # the wire behind the stress estimate (hw/estimate.py): identify writes both into wrist_params.yaml

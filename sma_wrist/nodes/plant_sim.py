@@ -35,6 +35,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64, Header
 
+from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
@@ -76,7 +77,7 @@ class RealTimeMonitor:
 class PlantSim(WristNode):
     OWNS_CLOCK = True
     PARAMS = (
-        Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m', 'kg', (0.0, 1.5)),
+        Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m', 'kg', PAYLOAD_RANGE_KG),
         Param('dt_s', 1e-3, 'plant integration step', 's', (1e-4, 1e-2), runtime=False),
         Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in simulated time', 'Hz',
               (1.0, 1000.0), runtime=False),
