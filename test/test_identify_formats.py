@@ -17,8 +17,9 @@ import pytest
 import scipy.io
 
 from sma_wrist.cli import main as cli_main
+from sma_wrist.core.errors import SmaWristError
 from sma_wrist.identify.hysteresis import Options, run
-from sma_wrist.identify.io import G, Units, area_mm2, read_measurement, read_table
+from sma_wrist.identify.io import G, Units, area_mm2, read_measurement, read_table, scale_switch
 from sma_wrist.identify.segment import stress_levels
 
 DATA = Path(__file__).parent / 'data'
@@ -353,3 +354,38 @@ def test_a_folder_of_loops_is_its_tables_and_a_held_out_loop_is_never_fitted(tmp
               progress=_quiet)
     fitted = sorted(round(r['stress_MPa']) for r in doc['fit']['per_load'])
     assert fitted == [50, 100, 150, 172] and [round(h['stress_MPa']) for h in doc['holdout']] == [200]
+
+
+@pytest.mark.parametrize('first,second', [(1.0, 100.0), (100.0, 1.0)])
+def test_a_strain_column_that_switches_between_fraction_and_percent_is_refused(tmp_path: Path, loop: np.ndarray,
+                                                                               first: float, second: float) -> None:
+    """A logger switched its strain column from fraction to % (or back) halfway through the measured loop: the whole
+    column was read as % (its largest value says so), the fraction half 100x too small, without a word."""
+    half = len(loop) // 2
+    strain = np.concatenate([first * loop[:half, 1], second * loop[half:, 1]])
+    p = tmp_path / 'switched.csv'
+    p.write_text('temperature,strain,stress\n' + ''.join(f'{a:.4f},{b:.6g},{c:.3f}\n'
+                                                          for a, b, c in zip(loop[:, 0], strain, loop[:, 2])))
+    with pytest.raises(SmaWristError, match=f'strain column changes scale at row {half}'):
+        read_measurement(str(p), Units())
+    p.write_text('temperature,strain,stress\n' + ''.join(f'{a:.4f},{b:.6g},{c:.3f}\n' for a, b, c in loop))
+    m = read_measurement(str(p), Units())  # the same loop in one unit reads
+    assert np.allclose(m.strain, loop[:, 1], atol=1e-6)
+
+
+def test_no_measured_column_is_taken_for_a_unit_switch() -> None:
+    """Every column of every measured table in test/data (strains, temperatures, stresses, times of wires this
+    project did not make, sharp NiTiHf transformations among them) is free of the switch scale_switch looks for."""
+    tables = 0
+    for f in sorted(DATA.rglob('*')):
+        if f.suffix not in ('.txt', '.csv') or f.name in ('SOURCE.txt',):
+            continue
+        try:
+            t = read_table(str(f))
+        except SmaWristError:
+            continue
+        tables += 1
+        for j in range(t.data.shape[1]):
+            col = t.data[:, j]
+            assert scale_switch(col[np.isfinite(col)]) is None, (f, j)
+    assert tables >= 30

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 
 from sma_wrist.core.errors import SmaWristError
@@ -474,7 +475,6 @@ def temperature_spikes(T: FloatArray, half_window: int = 10, floor: float = 1.0,
     flagged (with 3.5 sigma; 87 of the NiTiPd export's 138 zeros are, the others lie within
     ~1-4 degC of the air's temperature, where the spread of the zeros around them hides them).
     """
-    from numpy.lib.stride_tricks import sliding_window_view
 
     T = np.asarray(T, float)
     if T.size < 2 * half_window + 1:
@@ -483,6 +483,36 @@ def temperature_spikes(T: FloatArray, half_window: int = 10, floor: float = 1.0,
     med = np.median(W, axis=1)
     mad = 1.4826 * np.median(np.abs(W - med[:, None]), axis=1)
     return np.abs(T - med) > np.maximum(floor, n_sigma * mad)
+
+
+def scale_switch(x: FloatArray, factor: float = 100.0, limit: float = 0.1,
+                 block: int = 25) -> tuple[int, float, float] | None:
+    """(row, largest |x| before, after) where a column goes on in a unit ``factor`` times another (a logger
+    switched its strain from fraction to %, or back, mid-file), else None.
+
+    Such a row is a jump far larger than any step of the ``block`` rows before it, that lands where the previous
+    value times ``factor`` would (within the steps of the ``block`` rows after it), and the column stays within
+    ``limit`` on one side of it only (a strain fraction is under 0.1; in % it goes beyond). A measured column
+    changes smoothly, and a transformation's jump neither multiplies the value it starts from nor changes the
+    range a unit allows."""
+    n = x.size
+    if n < 2 * block + 2:
+        return None
+    for reverse in (False, True):  # % -> fraction is fraction -> % read backwards
+        y = x[::-1] if reverse else x
+        a = np.abs(y)
+        step = np.abs(np.diff(y))
+        k = np.arange(block, n - 1 - block)  # the jump y[k] -> y[k + 1]
+        W = sliding_window_view(step, block)
+        small_before = np.maximum.accumulate(a)[k] <= limit
+        large_after = np.maximum.accumulate(a[::-1])[::-1][k + 1] > limit
+        hit = (small_before & large_after & (step[k] > 30.0 * W[k - block].max(axis=1))
+               & (np.abs(y[k + 1] - factor * y[k]) <= 3.0 * W[k + 1].max(axis=1)))
+        if hit.any():
+            j = int(k[np.argmax(hit)])
+            before, after = float(a[:j + 1].max()), float(a[j + 1:].max())
+            return (n - 1 - j, after, before) if reverse else (j + 1, before, after)
+    return None
 
 
 def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
@@ -570,6 +600,13 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
     raw = d[:, iS].astype(float)
     su = units.strain or _unit_from_header(name(iS), 'strain', path)
     if su is None:
+        switch = scale_switch(raw)
+        if switch is not None:  # read by its largest value, the fraction half would be 100x too small
+            row, before, after = switch
+            raise IdentifyInputError(
+                f'{path}: the strain column changes scale at row {row} of the cleaned table (up to {before:.3g} '
+                f'before, {after:.3g} after): a fraction and a % in one file? Split the file, or give --strain-unit '
+                'if the change is real')
         mx = float(np.max(np.abs(raw)))
         if mx <= 0.1:
             su = 'fraction'
