@@ -254,13 +254,35 @@ def _storage_files(p: Path, suffixes: Iterable[str] = STORAGE_SUFFIX.values()) -
     return sorted(f for f in p.iterdir() if f.suffix in set(suffixes) and f.is_file())
 
 
-def _salvage_file(file: Path, topics: Optional[frozenset[str]] = None
+@dataclass
+class _MetaCounts:
+    """What metadata.yaml says a bag holds, to check a read against (absent: all empty)."""
+    total: Optional[int] = None
+    per_file: dict[str, int] = field(default_factory=dict)
+    topics: list[tuple[str, str]] = field(default_factory=list)  # (name, type) in metadata.yaml's order
+
+
+def _meta_counts(p: Path) -> _MetaCounts:
+    """metadata.yaml's message counts of a bag directory, if it has a usable one."""
+    try:
+        meta = _metadata(p)
+        listed = meta.get('topics_with_message_count') or []
+        return _MetaCounts(
+            sum(int(t['message_count']) for t in listed),
+            {Path(str(f['path'])).name: int(f['message_count']) for f in meta.get('files') or []},
+            [(str(t['topic_metadata']['name']), str(t['topic_metadata']['type'])) for t in listed])
+    except (OSError, yaml.YAMLError, _NotMetadata, KeyError, TypeError, ValueError):
+        return _MetaCounts()
+
+
+def _salvage_file(file: Path, topics: Optional[frozenset[str]] = None, meta: Optional[_MetaCounts] = None
                   ) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """(messages, problem) of one storage file, MCAP or SQLite as its first bytes say."""
     with open(file, 'rb') as f:
         head = f.read(16)
-    if head == SQLITE_MAGIC:
-        return salvage_db3(file, topics)
+    if head == SQLITE_MAGIC or file.suffix == '.db3':  # a .db3 whose header is destroyed is still page-scanned
+        meta = meta or _MetaCounts()
+        return salvage_db3(file, topics, meta.per_file.get(file.name), meta.topics)
     return salvage_mcap(file, topics)
 
 
@@ -404,7 +426,8 @@ def _stream_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
     return out, ''
 
 
-def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None
+def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None, expected: Optional[int] = None,
+                guess_topics: Optional[list[tuple[str, str]]] = None
                 ) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """Read a rosbag2 SQLite file (``.db3``) through its own ``topics`` and ``messages`` tables, without
     metadata.yaml: (messages of ``topics``, default all, in recording order, problem); problem is '' for a
@@ -412,113 +435,395 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None
 
     A file cut short (a copy or a disk that ran out) is refused whole by SQLite ("database disk image is
     malformed": its header promises more pages). It is then read from a temporary copy whose header gives the
-    pages that are there, up to the first page that is not. Messages compressed by rosbag2
-    (``--compression-mode message``, zstd) are not decoded here: reported as a problem."""
+    pages that are there. Where SQLite still stops early (the cut took b-tree interior pages: it then reads
+    nothing past them), gives fewer rows than ``expected`` (metadata.yaml's count for this file), or cannot read
+    the file at all (header destroyed), the file is scanned page by page (:func:`_scan_db3`) for the rows that
+    are physically there. Without a readable ``topics`` table the topic ids are named after ``guess_topics``
+    (metadata.yaml's topics, in its order: rosbags' writer gives ids in that order) where their messages decode
+    as that type, and the problem says so. Messages compressed by rosbag2 (``--compression-mode message``, zstd)
+    are not decoded here: reported as a problem."""
     import contextlib
     import sqlite3
     import tempfile
     file = Path(file)
-    out: list[tuple[str, str, int, bytes]] = []
     with open(file, 'rb') as f:
         head = f.read(100)
-    if head[:16] != SQLITE_MAGIC or len(head) < 100:
-        return out, 'not a SQLite file (bad magic)'
-    page = int.from_bytes(head[16:18], 'big')
-    page = 65536 if page == 1 else page
-    promised, size = int.from_bytes(head[28:32], 'big'), file.stat().st_size
-    # SQLite trusts the header's page count only while its "version-valid-for" equals the change counter
-    trusted = head[92:96] == head[24:28]
     notes: list[str] = []
-    with contextlib.ExitStack() as stack:
-        path = file
-        if trusted and page >= 512 and promised * page > size:  # a copy only for a file cut short
-            notes.append(f'the file is cut short: {size} of {promised * page} bytes')
-            path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix='sma_wrist_db3_'))) / file.name
-            with open(file, 'rb') as src:
-                data = bytearray(src.read(size - size % page))
-            data[28:32] = (len(data) // page).to_bytes(4, 'big')
-            path.write_bytes(data)
-            del data
-        try:
-            con = sqlite3.connect(f'{path.resolve().as_uri()}?mode=ro', uri=True)
-        except sqlite3.Error as exc:
-            return out, f'SQLite file cannot be opened: {exc}'
-        try:
-            names = {int(i): (str(n), str(t)) for i, n, t in con.execute('SELECT id, name, type FROM topics')}
-            ids = [i for i, (n, _) in names.items() if topics is None or n in topics]
-            where = '' if topics is None else f" WHERE topic_id IN ({','.join(map(str, ids)) or 'NULL'})"
-            for tid, t, data in con.execute(f'SELECT topic_id, timestamp, data FROM messages{where} ORDER BY id'):
-                if data[:4] == ZSTD_MAGIC:
-                    notes.append('compressed messages (zstd) cannot be salvaged')
-                    break
-                topic, msgtype = names.get(tid, ('', ''))
-                out.append((topic, msgtype, int(t), bytes(data)))
-        except sqlite3.DatabaseError as exc:
-            notes.append(f'{exc} after {len(out)} messages')
-        finally:
-            con.close()
+    rows: dict[int, tuple[int, int, bytes]] = {}  # message id -> (topic id, timestamp, data): read by SQLite
+    names: dict[int, tuple[str, str]] = {}
+    sqlite_ok = False
+    if head[:16] != SQLITE_MAGIC or len(head) < 100:
+        if file.suffix != '.db3':
+            return [], 'not a SQLite file (bad magic)'
+        notes.append('the SQLite header is destroyed (bad magic)')
+    else:
+        page = int.from_bytes(head[16:18], 'big')
+        page = 65536 if page == 1 else page
+        promised, size = int.from_bytes(head[28:32], 'big'), file.stat().st_size
+        # SQLite trusts the header's page count only while its "version-valid-for" equals the change counter
+        trusted = head[92:96] == head[24:28]
+        with contextlib.ExitStack() as stack:
+            path = file
+            if trusted and page >= 512 and promised * page > size:  # a copy only for a file cut short
+                notes.append(f'the file is cut short: {size} of {promised * page} bytes')
+                path = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix='sma_wrist_db3_'))) / file.name
+                with open(file, 'rb') as src:
+                    data = bytearray(src.read(size - size % page))
+                data[28:32] = (len(data) // page).to_bytes(4, 'big')
+                path.write_bytes(data)
+                del data
+            try:
+                con = sqlite3.connect(f'{path.resolve().as_uri()}?mode=ro', uri=True)
+                try:
+                    names = {int(i): (str(n), str(t)) for i, n, t in con.execute('SELECT id, name, type FROM topics')}
+                    for i, tid, t, data in con.execute('SELECT id, topic_id, timestamp, data FROM messages ORDER BY id'):
+                        rows[int(i)] = (int(tid), int(t), bytes(data))
+                    sqlite_ok = True
+                finally:
+                    con.close()
+            except sqlite3.Error as exc:
+                notes.append(f'SQLite stopped after {len(rows)} messages ({exc})')
+    short = expected is not None and len(rows) < expected
+    if sqlite_ok and short:
+        notes.append(f'SQLite reads {len(rows)} of the {expected} messages metadata.yaml lists for it')
+    scanned = ''
+    if not sqlite_ok or short:
+        # what SQLite cannot reach may still be on the pages that are there
+        wal = file.with_name(file.name + '-wal')
+        scan = _scan_db3(file.read_bytes(), wal.read_bytes() if wal.is_file() else None)
+        found = sum(1 for i in scan.messages if i not in rows)
+        for i, r in scan.messages.items():
+            rows.setdefault(i, r)
+        scanned = f'a page-by-page scan found {found} more'
+        if scan.lost:
+            scanned += (f'; {len(scan.lost)} messages (t {scan.lost[0] / 1e9:.3f} .. {scan.lost[-1] / 1e9:.3f} s) are '
+                        f'lost with their overflow pages')
+        if not names:
+            names = scan.topics
+        if not names and rows:
+            names = _guess_topic_ids(rows, guess_topics or [])
+            scanned += ('; the topics table is lost: ' + (
+                'topic names guessed from metadata.yaml (its order, checked by decoding each id\'s first message)'
+                if names else 'the messages cannot be named (no metadata.yaml topics match them) and are not read'))
+        notes.append(scanned)
+    out: list[tuple[str, str, int, bytes]] = []
+    for i in sorted(rows):
+        tid, t, data = rows[i]
+        topic, msgtype = names.get(tid, ('', ''))
+        if topics is not None and topic not in topics:
+            continue
+        if data[:4] == ZSTD_MAGIC:
+            notes.append('compressed messages (zstd) cannot be salvaged')
+            break
+        out.append((topic, msgtype, t, data))
     problem = '; '.join(notes)
     return out, (f'SQLite data is truncated or corrupt ({problem})' if problem else '')
 
 
-def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> BagData:
+def _guess_topic_ids(rows: dict[int, tuple[int, int, bytes]], topics: list[tuple[str, str]]
+                     ) -> dict[int, tuple[str, str]]:
+    """Topic id -> (name, type) when the ``topics`` table is lost: id k is metadata.yaml's k-th topic, kept only if
+    every id's first message decodes as that type ({} when any does not: a wrong guess would misfile data)."""
+    from sma_wrist.runtime.fastcdr import decoder_for
+    first: dict[int, bytes] = {}
+    for tid, _, data in rows.values():
+        first.setdefault(tid, data)
+    guess = {k + 1: topics[k] for k in range(len(topics))}
+    try:
+        for tid, data in first.items():
+            decoder_for(guess[tid][1])(data)
+    except Exception:  # noqa: BLE001 - an id out of range, an unknown type or bytes that are not that type
+        return {}
+    return guess
+
+
+# --------------------------------------------------------------------------- SQLite page scan
+# SQLite's file format (https://www.sqlite.org/fileformat2.html), read without SQLite: a file whose b-tree interior
+# pages are gone (cut short, a damaged header) still holds its rows on the leaf pages that are there.
+_DB3_LEAF, _DB3_INTERIOR = 0x0D, 0x05  # table b-tree page types
+_SERIAL_SIZE = (0, 1, 2, 3, 4, 6, 8, 8, 0, 0)  # bytes of the fixed-size serial types 0..9
+
+
+def _varint(b: bytes, o: int) -> tuple[int, int]:
+    """SQLite's big-endian varint (1-9 bytes) at ``b[o]``: (value, offset after it)."""
+    c = b[o]
+    if c < 0x80:  # the common case: one byte
+        return c, o + 1
+    v = 0
+    for i in range(8):
+        c = b[o + i]
+        v = (v << 7) | (c & 0x7F)
+        if c < 0x80:
+            return v, o + i + 1
+    return (v << 8) | b[o + 8], o + 9
+
+
+def _record(payload: bytes) -> list[Any]:
+    """The values of one SQLite record (header of serial types, then the values); ValueError if it is not one."""
+    hsize, o = _varint(payload, 0)
+    if not 0 < hsize <= len(payload):
+        raise ValueError('record header runs past the payload')
+    values: list[Any] = []
+    p = hsize
+    while o < hsize:
+        t, o = _varint(payload, o)
+        if t >= 12:
+            n = (t - 12) >> 1
+            v: Any = payload[p:p + n] if t % 2 == 0 else payload[p:p + n].decode()
+        elif t in (10, 11):
+            raise ValueError('reserved serial type')
+        else:
+            n = _SERIAL_SIZE[t]
+            if t == 7:
+                v = float(np.frombuffer(payload[p:p + 8], '>f8')[0]) if p + 8 <= len(payload) else 0.0
+            else:
+                v = None if t == 0 else t - 8 if t >= 8 else int.from_bytes(payload[p:p + n], 'big', signed=True)
+        p += n
+        values.append(v)
+    if o != hsize or p != len(payload):
+        raise ValueError('record sizes do not add up to its payload')
+    return values
+
+
+def _message_head(local: bytes) -> Optional[int]:
+    """The timestamp of a ``messages`` row from the first bytes of its record (its blob may be cut off), None if the
+    record is not of that shape (id, topic_id, timestamp, data)."""
+    try:
+        hsize, o = _varint(local, 0)
+        types = []
+        while o < hsize and len(types) < 5:
+            t, o = _varint(local, o)
+            types.append(t)
+    except IndexError:
+        return None
+    if len(types) != 4 or types[0] > 6 or not (1 <= types[1] <= 6 and 1 <= types[2] <= 6) or types[3] < 12 \
+            or types[3] % 2:
+        return None
+    p = hsize + _SERIAL_SIZE[types[0]] + _SERIAL_SIZE[types[1]]
+    return int.from_bytes(local[p:p + _SERIAL_SIZE[types[2]]], 'big', signed=True)
+
+
+@dataclass
+class _Db3Scan:
+    """What a page scan of a rosbag2 SQLite file found."""
+    messages: dict[int, tuple[int, int, bytes]]  # message id -> (topic id, timestamp, data)
+    topics: dict[int, tuple[str, str]]  # topic id -> (name, type)
+    lost: list[int] = field(default_factory=list)  # timestamps of rows whose overflow pages are missing
+    page_size: int = 0
+
+
+def _db3_page_size(data: bytes) -> int:
+    """The page size of a SQLite file whose header is destroyed: the smallest power of two at whose multiples most
+    slots hold a b-tree page header (a larger size also fits them, a smaller one does not)."""
+    for size in (512, 1024, 2048, 4096, 8192, 16384, 32768, 65536):
+        slots = range(size, len(data) - size + 1, size)
+        if not slots:
+            break
+        ok = sum(1 for o in slots if data[o] in (2, 5, 10, 13) and data[o + 7] < 128
+                 and int.from_bytes(data[o + 3:o + 5], 'big') * 2 + 8 <= size)
+        if ok >= 0.6 * len(slots):
+            return size
+    return 0
+
+
+def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
+    """Every row of rosbag2's ``messages`` and ``topics`` tables on the table-leaf pages physically in ``data`` (and in
+    the frames of a ``-wal`` file), told from other tables' rows by their shape. Rows on pages the ``messages``
+    b-tree still reaches come first, then other pages, then free-list pages (stale copies); de-duplicated by id."""
+    header_ok = data[:16] == SQLITE_MAGIC and len(data) >= 100
+    if header_ok:
+        size = int.from_bytes(data[16:18], 'big')
+        size = 65536 if size == 1 else size
+        usable = size - data[20]
+    else:
+        size = usable = _db3_page_size(data)
+    scan = _Db3Scan({}, {}, page_size=size)
+    if size < 512:
+        return scan
+    npages = len(data) // size
+    pages: dict[int, bytes] = {}  # page number (from 1) -> newest image in the write-ahead log
+    if wal and len(wal) >= 32 and header_ok and int.from_bytes(wal[8:12], 'big') == size:
+        for o in range(32, len(wal) - 24 - size + 1, 24 + size):
+            if wal[o + 8:o + 16] == wal[16:24]:  # the frame's salt is this log's: not a leftover of an older one
+                pages[int.from_bytes(wal[o:o + 4], 'big')] = wal[o + 24:o + 24 + size]
+        npages = max([npages, *pages])
+
+    def page(n: int) -> Optional[bytes]:
+        if n in pages:
+            return pages[n]
+        return data[(n - 1) * size:n * size] if 1 <= n and n * size <= len(data) else None
+
+    max_local = usable - 35  # payloads up to this size are whole on their leaf page
+    min_local = (usable - 12) * 32 // 255 - 23
+
+    def cells(pg: bytes, hdr: int) -> Iterator[tuple[int, Optional[bytes], bytes]]:
+        """(rowid, payload or None if its overflow pages are missing, local part) of a table leaf page's cells."""
+        n = int.from_bytes(pg[hdr + 3:hdr + 5], 'big')
+        for i in range(n):
+            off = int.from_bytes(pg[hdr + 8 + 2 * i:hdr + 10 + 2 * i], 'big')
+            if not hdr + 8 + 2 * n <= off < usable:
+                continue
+            try:
+                plen, o = _varint(pg, off)
+                rowid, o = _varint(pg, o)
+            except IndexError:
+                continue
+            if plen <= max_local:
+                if o + plen <= usable:
+                    yield rowid, pg[o:o + plen], pg[o:o + plen]
+                continue
+            local = min_local + (plen - min_local) % (usable - 4)
+            local = local if local <= max_local else min_local
+            if o + local + 4 > usable:
+                continue
+            parts, got = [pg[o:o + local]], local
+            nxt = int.from_bytes(pg[o + local:o + local + 4], 'big')
+            for _ in range(plen // (usable - 4) + 1):  # an overflow chain is never longer: no loop on garbage
+                ov = page(nxt) if nxt else None
+                if ov is None or got >= plen:
+                    break
+                parts.append(ov[4:4 + min(usable - 4, plen - got)])
+                got += len(parts[-1])
+                nxt = int.from_bytes(ov[:4], 'big')
+            yield rowid, (b''.join(parts) if got == plen else None), parts[0]
+
+    # the messages table's root page (sqlite_schema on page 1) and the leaves its b-tree still reaches
+    reachable: list[int] = []
+    free: set[int] = set()
+    if header_ok:
+        try:
+            root = next((int(r[3]) for _, p, _ in cells(data[:size], 100) if p is not None
+                         for r in [_record(p)] if len(r) == 5 and r[0] == 'table' and r[1] == 'messages'), 0)
+        except (ValueError, UnicodeDecodeError, IndexError):
+            root = 0
+        stack, seen = [root] if root else [], set()
+        while stack:
+            n = stack.pop()
+            pg = page(n)
+            if n in seen or pg is None:
+                continue
+            seen.add(n)
+            if pg[0] == _DB3_LEAF:
+                reachable.append(n)
+            elif pg[0] == _DB3_INTERIOR:
+                k = int.from_bytes(pg[3:5], 'big')
+                kids = [int.from_bytes(pg[o:o + 4], 'big')
+                        for o in (int.from_bytes(pg[12 + 2 * i:14 + 2 * i], 'big') for i in range(k)) if o + 4 <= size]
+                stack.extend(reversed([*kids, int.from_bytes(pg[8:12], 'big')]))
+        trunk = int.from_bytes(data[32:36], 'big')
+        while trunk and trunk not in free and (pg := page(trunk)) is not None:  # free-list trunk pages
+            free.add(trunk)
+            count = min(int.from_bytes(pg[4:8], 'big'), (usable - 8) // 4)
+            free.update(int.from_bytes(pg[8 + 4 * i:12 + 4 * i], 'big') for i in range(count))
+            trunk = int.from_bytes(pg[:4], 'big')
+    first = set(reachable)
+    order = reachable + [n for n in range(1, npages + 1) if n not in first and n not in free] + sorted(free)
+    msgs = scan.messages
+    lost: dict[int, int] = {}
+    for n in order:
+        pg = page(n)
+        hdr = 100 if n == 1 else 0
+        if pg is None or len(pg) < size or pg[hdr] != _DB3_LEAF:
+            continue
+        for rowid, payload, local in cells(pg, hdr):
+            if payload is None:  # a message cut off from its overflow pages: lost, but counted with its time
+                t = _message_head(local)
+                if t is not None:
+                    lost.setdefault(rowid, t)
+                continue
+            try:
+                r = _record(payload)
+            except (ValueError, UnicodeDecodeError, IndexError):
+                continue
+            if (len(r) == 4 and isinstance(r[1], int) and isinstance(r[2], int) and isinstance(r[3], bytes)
+                    and (r[0] is None or r[0] == rowid)):
+                msgs.setdefault(rowid, (r[1], r[2], r[3]))
+            elif (len(r) in (5, 6) and all(isinstance(v, str) for v in r[1:]) and r[1].startswith('/')
+                  and (r[0] is None or r[0] == rowid)):  # topics(id, name, type, serialization_format, qos[, hash])
+                scan.topics.setdefault(rowid, (r[1], r[2]))
+    scan.lost = sorted(t for i, t in lost.items() if i not in msgs)
+    return scan
+
+
+def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> tuple[BagData, str]:
+    """(decoded messages, problem): a message that does not decode (damaged bytes, an unknown type) is left out and
+    counted in the problem ('' when every one decodes), never dropped without a word."""
     from sma_wrist.runtime.fastcdr import decoder_for
     times: dict[str, list[int]] = {}
     msgs: dict[str, list[Any]] = {}
     decoders: dict[str, Any] = {}
+    bad: dict[str, int] = {}
     for topic, msgtype, t, data in rows:
         try:
             decode = decoders.get(msgtype)
             if decode is None:
                 decode = decoders[msgtype] = decoder_for(msgtype)
             m = decode(data)
-        except Exception:  # noqa: BLE001 - a damaged message (or unknown type) is skipped in salvage
+        except Exception:  # noqa: BLE001 - a damaged message (or unknown type) is counted, not a crash
+            bad[topic or '(unnamed)'] = bad.get(topic or '(unnamed)', 0) + 1
             continue
         times.setdefault(topic, []).append(t)
         msgs.setdefault(topic, []).append(m)
-    return {k: (np.asarray(times[k], dtype=np.int64), msgs[k]) for k in times}
+    problem = ''
+    if bad:
+        problem = (f'{sum(bad.values())} messages could not be decoded and were left out ('
+                   + ', '.join(f'{k}: {v}' for k, v in sorted(bad.items())) + ')')
+    return {k: (np.asarray(times[k], dtype=np.int64), msgs[k]) for k in times}, problem
 
 
 def _salvage(p: Path) -> tuple[BagData, str]:
+    """Every message that can be read from a bag's storage files, and what is wrong with them; the count read is
+    set against metadata.yaml's where there is one."""
     rows: list[tuple[str, str, int, bytes]] = []
     problems = []
     files = _storage_files(p)
     if not files:
         return {}, 'no .mcap or .db3 file in the bag directory'
+    meta = _meta_counts(p) if p.is_dir() else _MetaCounts()
     for f in files:
-        r, problem = _salvage_file(f)
+        r, problem = _salvage_file(f, None, meta)
         rows.extend(r)
         if problem:
             problems.append(f'{f.name}: {problem}')
     rows.sort(key=lambda r: r[2])
-    return _to_bagdata(rows), '; '.join(problems)
+    data, undecoded = _to_bagdata(rows)
+    if undecoded:
+        problems.append(undecoded)
+    got = sum(len(v[1]) for v in data.values())
+    if problems and meta.total is not None and got < meta.total:
+        problems.append(f'{got} of the {meta.total} messages metadata.yaml lists are read: {meta.total - got} lost')
+    return data, '; '.join(problems)
 
 
-def _read_closed(p: Path, wanted: Optional[frozenset[str]]) -> Optional[BagData]:
-    """read_bag's fast path: a closed bag of uncompressed MCAP files (BagRecorder's, in one pass each:
-    :func:`salvage_mcap`) or of SQLite files (``ros2 bag record`` on Humble: :func:`salvage_db3`), its message
-    counts checked against metadata.yaml. None for anything else (another storage, compression, a damaged
-    file, counts that differ): read_bag then uses rosbags' reader and its error reporting."""
+def _read_closed(p: Path, wanted: Optional[frozenset[str]]) -> tuple[Optional[BagData], str]:
+    """read_bag's fast path: a closed bag of MCAP files (BagRecorder's, in one pass each: :func:`salvage_mcap`) or
+    of SQLite files (``ros2 bag record`` on Humble: :func:`salvage_db3`), its message counts checked against
+    metadata.yaml. (data, '') when all is well; (None, problem) when a file is damaged (truncated, a chunk or page
+    that does not read, a message that does not decode): only a salvage can say more, rosbags' reader would read
+    the damaged bytes as messages; (None, '') for anything else (another storage, counts that differ): read_bag
+    then uses rosbags' reader and its error reporting."""
     try:
         meta = _metadata(p)
         suffix = STORAGE_SUFFIX.get(meta.get('storage_identifier'))
         files = _storage_files(p, [suffix]) if suffix else []
         if not files:
-            return None
+            return None, ''
         expected = sum(int(t['message_count']) for t in meta['topics_with_message_count']
                        if wanted is None or t['topic_metadata']['name'] in wanted)
     except (OSError, yaml.YAMLError, _NotMetadata, KeyError, TypeError, ValueError):
-        return None
+        return None, ''
     rows: list[tuple[str, str, int, bytes]] = []
+    counts = _meta_counts(p)
     for f in files:
-        r, problem = _salvage_file(f, wanted)
+        r, problem = _salvage_file(f, wanted, counts)
         if problem:
-            return None
+            return None, f'{f.name}: {problem}'
         rows.extend(r)
     if len(rows) != expected:
-        return None
+        return None, ''
     rows.sort(key=lambda r: r[2])  # stable, and linear on a recording already in time order
-    return _to_bagdata(rows)
+    data, undecoded = _to_bagdata(rows)
+    return (None, undecoded) if undecoded else (data, '')
 
 
 def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
@@ -536,12 +841,14 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
     def select(data: BagData) -> BagData:
         return data if wanted is None else {k: v for k, v in data.items() if k in wanted}
 
-    problem = ''
+    problem = damage = ''
     if p.is_dir() and (p / 'metadata.yaml').exists():
-        fast = _read_closed(p, None if wanted is None else frozenset(wanted))
+        fast, damage = _read_closed(p, None if wanted is None else frozenset(wanted))
         if fast is not None:
             return fast
         try:
+            if damage:  # rosbags would read a damaged chunk's bytes as messages: the salvage below says what is lost
+                raise _Damaged
             _metadata(p)  # rosbags' own error for an empty file is a bare TypeError
             with Reader(p) as reader:
                 conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
@@ -550,7 +857,12 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
             if len(rows) != expected:
                 problem = f'metadata.yaml lists {expected} messages but the storage holds {len(rows)}'
             else:
-                return select(_to_bagdata(rows))
+                data, undecoded = _to_bagdata(rows)
+                if not undecoded:
+                    return select(data)
+                damage = undecoded  # the salvage below reads the same messages and names those that do not decode
+        except _Damaged:
+            pass
         except _NotMetadata as exc:
             problem = str(exc)
         except Exception as exc:  # noqa: BLE001 - rosbags raises several error types
@@ -558,6 +870,7 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
     elif p.is_dir():
         problem = 'metadata.yaml is missing (the recording was not closed; `ros2 bag reindex` rebuilds it)'
     data, salvage_problem = _salvage(p)
+    salvage_problem = salvage_problem or damage
     if not problem:
         if not salvage_problem:
             return select(data)  # a bare, complete .mcap or .db3 file
@@ -567,6 +880,10 @@ def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
     if salvage:
         return select(data)
     raise BagError(p, problem, select(data))
+
+
+class _Damaged(Exception):
+    """read_bag's fast path found a file damaged: skip rosbags' reader."""
 
 
 class _NotMetadata(Exception):
