@@ -108,19 +108,23 @@ def cmd_run(a: argparse.Namespace) -> int:
 def cmd_info(a: argparse.Namespace) -> int:
     from sma_wrist.bag import bag_info
     info = bag_info(a.bag)
+    if info.damage:  # the counts below are what the bag should hold, not what can be read
+        print(f'warning: {info.path}: the bag is damaged: {info.damage}', file=sys.stderr)
     if a.json:
         print(json.dumps({'path': str(info.path), 'storage': info.storage, 'duration_s': info.duration,
-                          'messages': info.message_count,
+                          'messages': info.message_count, 'damaged': info.damage or None,
                           'topics': {k: {'type': v.type, 'count': v.count} for k, v in info.topics.items()}},
                          indent=2))
-        return 0
+        return 1 if info.damage else 0
     kind = f'rosbag2 metadata v{info.version}' if info.version else 'a bare file, no rosbag2 metadata'
     print(f'bag:      {info.path} ({kind}, {info.storage})')
     print(f'duration: {info.duration:.3f} s    messages: {info.message_count}')
+    if info.damage:
+        print(f'DAMAGED:  {info.damage}')
     width = max((len(k) for k in info.topics), default=5)
     for name, t in sorted(info.topics.items()):
         print(f'  {name:<{width}}  {t.count:8d}  {t.type}')
-    return 0
+    return 1 if info.damage else 0
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
@@ -166,7 +170,8 @@ def cmd_compare(a: argparse.Namespace) -> int:
     rows = compare_runs(a.bags, a.plot)
     for r in rows:  # a truncated bag's metrics cover only what was recorded before the cut
         if r['damaged']:
-            print(f'warning: {r["bag"]}: {r["damaged"]}; its metrics cover only the {r["duration_s"]:.1f} s read',
+            print(f'warning: {r["bag"]}: {r["damaged"]}; its metrics cover only the messages that could be read '
+                  f'({r["duration_s"]:.1f} s from the first to the last)',
                   file=sys.stderr)
         if r['dropped']:
             print(f'warning: {r["bag"]}: {r["dropped"]}', file=sys.stderr)

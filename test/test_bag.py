@@ -315,7 +315,9 @@ def test_direct_cdr_decoder_rejects_cut_messages():
 def test_one_pass_reader_equals_rosbags_reader_and_falls_back_to_it(tmp_path, monkeypatch):
     """read_bag reads a closed, uncompressed MCAP bag in one pass (salvage_mcap); it must give
     what rosbags' indexed reader gives, all topics and a subset, and hand anything it does not
-    handle (here: a file it reports a problem with, as for a compressed chunk) to rosbags."""
+    handle (here: a read whose counts are not metadata.yaml's) to rosbags. A file it finds damaged
+    is not handed on: rosbags would read a damaged chunk's bytes as messages
+    (test_a_corrupt_mcap_chunk_*)."""
     import sma_wrist.bag as bag_mod
     bag = tmp_path / 'run'
     _run(bag)
@@ -324,7 +326,7 @@ def test_one_pass_reader_equals_rosbags_reader_and_falls_back_to_it(tmp_path, mo
 
     def declined(*args, **kwargs):
         calls.append(args)
-        return [], 'compressed chunk (zstd) at offset 8 cannot be salvaged'
+        return [], ''
 
     monkeypatch.setattr(bag_mod, 'salvage_mcap', declined)
     slow_all, slow_sub = read_bag(bag), read_bag(bag, ['/wrist/joint_states', '/clock'])
@@ -614,3 +616,175 @@ def test_a_thermocouple_that_stops_while_its_tem_is_driven_is_named_stale(tmp_pa
     assert f'/wrist/muscle_1/temperature: the same value {frozen["T"]:.4g} for 35.0 s while its TEM was driven' in out
     # the 40 s before it are the model's own run again: nothing to find (the frozen stretch was 'unexplained')
     assert 'a stale sensor? Those samples are left out' in out and 'no significant discrepancy' in out
+
+
+def _run_db3(tmp_path, duration, page_size=None):
+    """A run bag rewritten in the SQLite storage (rosbags' writer, as test_a_run_in_the_sqlite_storage_reads_as_in_mcap),
+    optionally re-paged by SQLite itself: with 512-byte pages a short run has a three-level messages b-tree whose
+    interior pages lie all over the file, as a long run's do with 4096-byte pages."""
+    import sqlite3
+    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+    bag, db3 = tmp_path / 'run', tmp_path / 'run_db3'
+    _run(bag, duration)
+    with Reader(bag) as r, Writer(db3, version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
+        conns = {c.id: w.add_connection(c.topic, c.msgtype, typestore=TYPESTORE) for c in r.connections}
+        for c, t, raw in r.messages():
+            w.write(conns[c.id], t, raw)
+    if page_size:
+        con = sqlite3.connect(next(db3.glob('*.db3')))
+        con.execute(f'PRAGMA page_size = {page_size}')
+        con.execute('VACUUM')
+        con.close()
+    return db3
+
+
+def _pairs(data):
+    """{topic: {t_ns: [messages]}} of read_bag's result, to look messages up by topic and time."""
+    out = {}
+    for topic, (t, msgs) in data.items():
+        for ti, m in zip(t.tolist(), msgs):
+            out.setdefault(topic, {}).setdefault(ti, []).append(m)
+    return out
+
+
+@pytest.mark.parametrize('cut', ['30%', '50%', '80%', 'page boundary', 'mid-page'])
+def test_a_sqlite_file_cut_short_keeps_every_message_on_the_pages_that_are_left(tmp_path, cut):
+    """A db3 cut where the messages b-tree's interior pages are gone gave 0 messages (SQLite cannot reach a leaf
+    without them; a 40 s run bag cut at 50 %). The pages that are there are now scanned: nearly every message on a
+    leaf page that survived is read, each identical to the intact read, in time order, and the error counts what
+    is lost against metadata.yaml."""
+    import shutil
+    import sqlite3
+    db3 = _run_db3(tmp_path, 3.0, page_size=512)
+    full = read_bag(db3)
+    total = sum(len(v[1]) for v in full.values())
+    file = next(db3.glob('*.db3'))
+    raw = file.read_bytes()
+    page = 512
+    size = {'30%': len(raw) * 3 // 10, '50%': len(raw) // 2, '80%': len(raw) * 8 // 10,
+            'page boundary': len(raw) // 2 // page * page, 'mid-page': len(raw) // 2 // page * page + page // 2 + 7}[cut]
+    # SQLite's own account of the intact file: the messages on leaf pages wholly before the cut
+    con = sqlite3.connect(file)
+    leaves = con.execute("SELECT pageno, ncell FROM dbstat WHERE name = 'messages' AND pagetype = 'leaf'").fetchall()
+    con.close()
+    surviving = sum(c for n, c in leaves if n * page <= size)
+    cut_bag = tmp_path / 'cut'
+    shutil.copytree(db3, cut_bag)
+    (cut_bag / file.name).write_bytes(raw[:size])
+    with pytest.raises(BagError, match='cut short') as err:
+        read_bag(cut_bag)
+    assert f'of the {total} messages metadata.yaml lists are read' in str(err.value) and 'lost' in str(err.value)
+    got = err.value.salvaged
+    n = sum(len(v[1]) for v in got.values())
+    assert 0.95 * surviving <= n <= surviving, (n, surviving)
+    ref = _pairs(full)
+    for topic, (t, msgs) in got.items():
+        assert np.all(np.diff(t) >= 0), topic
+        for ti, m in zip(t.tolist(), msgs):
+            assert m in ref[topic][ti], (topic, ti)
+    assert read_bag(cut_bag, salvage=True).keys() == got.keys()
+
+
+def test_a_sqlite_file_whose_header_is_destroyed_is_named_and_read_page_by_page(tmp_path):
+    """Zeroed first bytes of a db3 (its header and the schema's start) went to the MCAP reader as 'not an MCAP
+    file'; the pages after them are intact. Now a BagError names the destroyed header and salvages every message
+    by a page scan with the page size guessed from the pages; garbage named .db3 is a BagError too."""
+    db3 = _run_db3(tmp_path, 1.0)
+    full = read_bag(db3)
+    file = next(db3.glob('*.db3'))
+    raw = bytearray(file.read_bytes())
+    raw[:100] = bytes(100)
+    file.write_bytes(bytes(raw))
+    with pytest.raises(BagError, match='SQLite header is destroyed') as err:
+        read_bag(db3)
+    got = err.value.salvaged
+    assert got.keys() == full.keys()
+    for topic in full:
+        assert list(got[topic][0]) == list(full[topic][0]) and got[topic][1] == full[topic][1], topic
+    with pytest.raises(BagError, match='SQLite header is destroyed'):
+        bag_info(db3)
+    (db3 / file.name).write_bytes(b'\x07' * 5000)
+    for read in (read_bag, bag_info):
+        with pytest.raises(BagError, match='SQLite header is destroyed'):
+            read(db3)
+
+
+def test_a_corrupt_mcap_chunk_is_named_and_the_intact_chunks_read_whole(tmp_path, capsys):
+    """5000 bytes overwritten inside one chunk of a closed run bag: `info` called it healthy and compare read what
+    rosbags' reader made of it without a word. bag_info and `sma-wrist info` now name the damaged chunk, the
+    messages lost and when; read_bag raises BagError with the count, its salvage holding every message of the other
+    chunks, identical to the intact read, and none from the damaged bytes."""
+    import io
+    import random
+    import shutil
+
+    from mcap.exceptions import EndOfFile
+    from mcap.reader import SeekingReader
+    from mcap.records import Chunk, Message
+    from mcap.stream_reader import StreamReader
+
+    from sma_wrist.cli import main
+    from sma_wrist.runtime.launch import Runtime
+    good, bad = tmp_path / 'run', tmp_path / 'bad'
+    with Runtime(params=PARAMS) as rt:  # a chunk every 200 messages, several chunks in 3 s
+        rt.record(good, flush_every=200)
+        rt.add_nodes([Plant, Controller])
+        rt.run_until(3.0)
+    full = read_bag(good)
+    total = sum(len(v[1]) for v in full.values())
+    mcap_file = next(good.glob('*.mcap'))
+    raw = bytearray(mcap_file.read_bytes())
+    with open(mcap_file, 'rb') as f:
+        summary = SeekingReader(f).get_summary()
+    chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+    assert len(chunks) >= 4
+    target = chunks[2]
+    # the messages of the target chunk in the intact file: (topic, log time, bytes)
+    topic_of, inside, n = {c.id: c.topic for c in summary.channels.values()}, [], 0
+    with open(mcap_file, 'rb') as f:
+        records = [r for r in StreamReader(f, emit_chunks=True).records if isinstance(r, Chunk)]
+    for rec in records:
+        n += 1
+        if n == 3:
+            try:  # the chunk's records end without a footer: the stream reader says so by EndOfFile
+                for m in StreamReader(io.BytesIO(rec.data), skip_magic=True).records:
+                    if isinstance(m, Message):
+                        inside.append((topic_of.get(m.channel_id), m.log_time, m.data))
+            except EndOfFile:
+                pass
+    assert inside and target.message_start_time == min(t for _, t, _ in inside)
+    body = target.chunk_start_offset + 80  # past the chunk's own header: inside its records
+    assert target.chunk_length > 5000 + 160
+    rng = random.Random(7)
+    raw[body:body + 5000] = bytes(rng.randrange(256) for _ in range(5000))
+    shutil.copytree(good, bad)
+    (bad / mcap_file.name).write_bytes(bytes(raw))
+
+    info = bag_info(bad)
+    assert f'chunk at offset {target.chunk_start_offset}' in info.damage and 'lost' in info.damage
+    assert bag_info(good).damage == ''
+    with pytest.raises(BagError) as err:
+        read_bag(bad)
+    got = err.value.salvaged
+    n_got = sum(len(v[1]) for v in got.values())
+    assert 0 < total - n_got <= len(inside)
+    assert f'{n_got} of the {total} messages metadata.yaml lists are read: {total - n_got} lost' in err.value.problem
+    assert f'{total - n_got} messages lost' in err.value.problem  # the chunk's own account agrees
+    # every message of the other chunks is there, identical; what is left of the damaged chunk is intact too
+    damaged = {}
+    for topic, t, _ in inside:
+        damaged[(topic, t)] = damaged.get((topic, t), 0) + 1
+    for topic, (t, msgs) in full.items():
+        g_t, g_m = (list(got[topic][0]), got[topic][1]) if topic in got else ([], [])
+        j = 0
+        for ti, m in zip(t.tolist(), msgs):
+            if j < len(g_m) and g_t[j] == ti and g_m[j] == m:
+                j += 1
+            else:
+                assert damaged.get((topic, ti), 0) > 0, (topic, ti)  # only the damaged chunk's messages are missing
+        assert j == len(g_m), topic  # nothing else was read, in time order
+    capsys.readouterr()
+    assert main(['info', str(bad)]) == 1
+    out = capsys.readouterr()
+    assert 'DAMAGED' in out.out and f'chunk at offset {target.chunk_start_offset}' in out.err
+    assert main(['info', str(good)]) == 0
