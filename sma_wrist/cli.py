@@ -12,7 +12,8 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import diagnose_arguments, emulator_arguments, nonnegative_int, sweep_arguments
+from sma_wrist.cli_options import (diagnose_arguments, emulator_arguments, nonnegative_int, recording_arguments,
+                                   sweep_arguments)
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 
@@ -166,8 +167,9 @@ def cmd_experiment(a: argparse.Namespace) -> int:
 
 
 def cmd_compare(a: argparse.Namespace) -> int:
+    from sma_wrist.contract import Recording
     from sma_wrist.runs import compare_runs
-    rows = compare_runs(a.bags, a.plot)
+    rows = compare_runs(a.bags, a.plot, Recording.from_options(a.topic, a.joint))
     for r in rows:  # a truncated bag's metrics cover only what was recorded before the cut
         if r['damaged']:
             print(f'warning: {r["bag"]}: {r["damaged"]}; its metrics cover only the messages that could be read '
@@ -260,6 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument('bags', nargs='+')
     c.add_argument('--json', action='store_true')
     c.add_argument('--plot', default=None, help='write an overlay PNG here')
+    recording_arguments(c)
     c.set_defaults(func=cmd_compare)
 
     i = sub.add_parser('info', help='summarise a bag: topics, counts, duration')

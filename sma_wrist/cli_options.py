@@ -32,7 +32,17 @@ def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument('--thermal-file', metavar='FILE',
                     help="the TEMs' heat balance to replay: thermal.yaml from sma-wrist identify thermal (default: "
                          'Table 4.9)')
+    recording_arguments(ap)
     return ap
+
+
+def recording_arguments(ap: argparse.ArgumentParser) -> None:
+    """``--topic`` / ``--joint``: read a bag recorded on another rig as if it followed msg_defs/topics.yaml."""
+    ap.add_argument('--topic', action='append', metavar='CONTRACT=RECORDED',
+                    help='the bag has the contract topic CONTRACT under the name RECORDED, e.g. '
+                         '/wrist/joint_states=/joint_states; repeatable')
+    ap.add_argument('--joint', metavar='NAME', help="the wrist's joint in the bag's sensor_msgs/JointState messages "
+                                                  "(default: the contract's; needed when they carry several joints)")
 
 
 def emulator_arguments(ap: argparse.ArgumentParser) -> None:

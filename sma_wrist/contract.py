@@ -9,9 +9,9 @@ The file is found by :func:`sma_wrist.share.share_path` under every install layo
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterable, Mapping
 
 import yaml
 
@@ -103,14 +103,62 @@ IMPOSSIBLE = {'temperature': 1000.0, 'joint': 400.0, 'float': 1000.0}
 def joint_positions(msgs: Any, joint_name: str | None = None) -> list[float]:
     """The wrist's angle [rad] in each sensor_msgs/JointState of ``msgs``: the position of ``joint_name`` (default
     the contract's) where a message names it -- a robot's /joint_states may carry several joints, in any order --
-    else the first; NaN where a message has no such position (a driver that sends velocities only)."""
+    else the only one; NaN where a message has no such position (a driver that sends velocities only).
+
+    ContractError when a message of several joints names none ``joint_name``: taking its first joint was a guess
+    that read another joint's angle as the wrist's without a word."""
     name = load_contract().joint_name if joint_name is None else joint_name
     out = []
     for m in msgs:
         names = list(m.name)
-        i = names.index(name) if name in names else 0
+        if name in names:
+            i = names.index(name)
+        elif len(names) <= 1:
+            i = 0
+        else:
+            raise ContractError(f'sensor_msgs/JointState names the joints {names}, none of them {name!r}: give the '
+                                "wrist's with --joint NAME")
         out.append(float(m.position[i]) if len(m.position) > i else float('nan'))
     return out
 
 
-__all__ = ['IMPOSSIBLE', 'Contract', 'ContractError', 'Topic', 'contract_path', 'joint_positions', 'load_contract']
+@dataclass(frozen=True)
+class Recording:
+    """How a bag recorded on another rig names the contract's topics and the wrist's joint (``--topic``,
+    ``--joint``), so that it reads as if it followed the contract."""
+
+    topics: Mapping[str, str] = field(default_factory=dict)  # contract topic -> recorded topic
+    joint: str | None = None  # the wrist's joint in its JointState (None: the contract's)
+
+    @classmethod
+    def from_options(cls, topic_specs: Iterable[str] | None = None, joint: str | None = None) -> 'Recording':
+        """From ``CONTRACT=RECORDED`` strings; ContractError names a malformed, unknown or doubled one."""
+        known = load_contract().topics
+        out: dict[str, str] = {}
+        for spec in topic_specs or ():
+            name, sep, recorded = (x.strip() for x in spec.partition('='))
+            if not sep or not name.startswith('/') or not recorded.startswith('/'):
+                raise ContractError(f'--topic {spec!r}: give CONTRACT=RECORDED, e.g. '
+                                    '/wrist/joint_states=/joint_states')
+            if name not in known:
+                raise ContractError(f'--topic {spec!r}: {name} is not a contract topic (one of '
+                                    f'{", ".join(sorted(known))})')
+            if name in out or recorded in out.values():
+                raise ContractError(f'--topic {spec!r}: {name if name in out else recorded} is mapped twice')
+            out[name] = recorded
+        if joint is not None and not joint.strip():
+            raise ContractError('--joint needs a joint name')
+        return cls(out, joint)
+
+    def recorded(self, topics: Iterable[str]) -> list[str]:
+        """The names under which ``topics`` (contract names) were recorded."""
+        return [self.topics.get(t, t) for t in topics]
+
+    def as_contract(self, data: Mapping[str, Any]) -> dict[str, Any]:
+        """``data`` keyed by recorded topic -> keyed by contract topic."""
+        back = {v: k for k, v in self.topics.items()}
+        return {back.get(k, k): v for k, v in data.items() if k in back or k not in self.topics}
+
+
+__all__ = ['IMPOSSIBLE', 'PAYLOAD_RANGE_KG', 'Contract', 'ContractError', 'Recording', 'Topic', 'contract_path',
+           'joint_positions', 'load_contract']

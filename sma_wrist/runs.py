@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.bag import BagData, BagError, read_bag
-from sma_wrist.contract import IMPOSSIBLE, joint_positions
+from sma_wrist.contract import IMPOSSIBLE, Recording, joint_positions
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.metrics import SEED_PERIOD_S, SEED_REFERENCE_RANGE_RAD, TrackingMetrics, tracking_metrics
 
@@ -51,29 +51,34 @@ def _series(data: BagData, topic: str) -> list[tuple[int, Any]]:
     return list(zip(t_ns.tolist(), msgs))
 
 
-def load_run(path: str | Path) -> RunData:
+def load_run(path: str | Path, recording: Recording | None = None) -> RunData:
     """Read a run bag; BagError names what is missing. A truncated bag is read up to its cut and
-    ``damage`` says so: its metrics cover only part of the run, which compare must not hide."""
+    ``damage`` says so: its metrics cover only part of the run, which compare must not hide. ``recording``: how a
+    bag of another rig names the contract's topics and the joint."""
+    rec = recording or Recording()
     try:
-        data, damage = read_bag(path, TOPICS), ''
+        data, damage = read_bag(path, rec.recorded(TOPICS)), ''
     except BagError as exc:
         if not exc.salvaged:  # nothing of the run could be read: the bag's own problem is the reason
             raise
         data, damage = exc.salvaged, exc.problem
+    data = rec.as_contract(data)
     js = _series(data, '/wrist/joint_states')
     ref = _series(data, '/wrist/reference')
     if not js or not ref:
-        missing = [t for t, s in (('/wrist/joint_states', js), ('/wrist/reference', ref)) if not s]
+        missing = [t + (f' (as {rec.topics[t]})' if t in rec.topics else '')
+                   for t, s in (('/wrist/joint_states', js), ('/wrist/reference', ref)) if not s]
         raise BagError(path, f'no messages on {", ".join(missing)}: a run bag needs the measured joint state '
-                             'and the reference (see msg_defs/topics.yaml)')
+                             'and the reference (see msg_defs/topics.yaml; --topic CONTRACT=RECORDED reads a bag '
+                             'that names them otherwise)')
     t = np.array([_stamp(m) for _, m in js])
-    q = np.array(joint_positions(m for _, m in js))
+    q = np.array(joint_positions((m for _, m in js), rec.joint))
     wild = np.abs(q) > IMPOSSIBLE['joint']  # a glitch read as an angle was a 1e8 % error
     dropped = (f'{int(wild.sum())} of {q.size} joint states with angles beyond +-{IMPOSSIBLE["joint"]:g} (up to '
                f'{np.abs(q[wild]).max():.3g}) are no measurement and were left out' if wild.any() else '')
     q[wild] = np.nan
     tr = np.array([_stamp(m) for _, m in ref])
-    qr = np.array(joint_positions(m for _, m in ref))
+    qr = np.array(joint_positions((m for _, m in ref), rec.joint))
     good = np.isfinite(qr)
     if not good.any():
         raise BagError(path, '/wrist/reference holds no finite position: no error to measure')
@@ -191,7 +196,8 @@ def _plot_formats() -> list[str]:
     return sorted(FigureCanvasBase.get_supported_filetypes())
 
 
-def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> list[dict[str, Any]]:
+def compare_runs(paths: list[str | Path], plot: str | Path | None = None,
+                 recording: Recording | None = None) -> list[dict[str, Any]]:
     """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot.
 
     A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one).
@@ -204,7 +210,7 @@ def compare_runs(paths: list[str | Path], plot: str | Path | None = None) -> lis
         if suffix and formats and suffix not in formats:  # savefig's ValueError traceback, after every bag was read
             raise SmaWristError(f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
                                 f'{", ".join("." + f for f in formats)} (no suffix: PNG)')
-    runs = [load_run(p) for p in paths]
+    runs = [load_run(p, recording) for p in paths]
     rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None, 'dropped': r.dropped or None}
             for p, r in zip(paths, runs)]
     if plot is not None:

@@ -23,6 +23,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from sma_wrist.cli_options import diagnose_arguments as add_arguments
+from sma_wrist.contract import ContractError, Recording
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
@@ -386,9 +387,10 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
 
 def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out: str | Path | None = None,
              candidates: Sequence[str] | None = None, hysteresis_file: str | None = None,
-             thermal_file: str | None = None) -> DiagnosisResult:
-    """Diagnose the bag at `path`; raises DiagnoseInputError for unusable input."""
-    run = load_run(path)
+             thermal_file: str | None = None, recording: Recording | None = None) -> DiagnosisResult:
+    """Diagnose the bag at `path` (``recording``: how it names the contract's topics and the joint, if otherwise);
+    raises DiagnoseInputError for unusable input."""
+    run = load_run(path, recording=recording)
     return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file, thermal_file)
 
 
@@ -404,9 +406,10 @@ def run_cli(args: argparse.Namespace) -> int:
         models = [f for f in (getattr(args, 'hysteresis_file', None), getattr(args, 'thermal_file', None)) if f]
         check_output_file(args.params, '--params', [args.bag, *models], DiagnoseInputError)
         check_output_folder(args.report, '--report', [args.bag, *models], DiagnoseInputError)
+        recording = Recording.from_options(getattr(args, 'topic', None), getattr(args, 'joint', None))
         res = diagnose(args.bag, args.report, args.params, cands, getattr(args, 'hysteresis_file', None),
-                       getattr(args, 'thermal_file', None))
-    except (DiagnoseInputError, ParameterError) as exc:
+                       getattr(args, 'thermal_file', None), recording)
+    except (DiagnoseInputError, ParameterError, ContractError) as exc:
         if args.json:
             print(json.dumps({'error': str(exc)}))
         else:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from sma_wrist.bag import BagError, read_bag
-from sma_wrist.contract import IMPOSSIBLE, joint_positions
+from sma_wrist.contract import IMPOSSIBLE, ContractError, Recording, joint_positions
 from sma_wrist.core.errors import SmaWristError
 
 TOPICS = {
@@ -156,15 +156,17 @@ def _longest_gap_free(t: np.ndarray, dt: float) -> tuple[float, float, int, list
     return float(t[a]), float(t[b - 1]), int(long_gaps.size), short
 
 
-def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
-    """Read and align a bag; raises DiagnoseInputError when nothing usable remains."""
+def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording | None = None) -> Run:
+    """Read and align a bag; raises DiagnoseInputError when nothing usable remains. ``recording``: how a bag of
+    another rig names the contract's topics and the joint."""
+    rec = recording or Recording()
     warnings: list[str] = []
     p = Path(path)
     if not p.exists():
         raise DiagnoseInputError(f'{p}: no such bag (need a rosbag2 directory with metadata.yaml and .mcap, '
                                  f'or an .mcap file)')
     try:
-        data = read_bag(p, list(TOPICS.values()))
+        data = read_bag(p, rec.recorded(TOPICS.values()))
     except BagError as exc:
         if not exc.salvaged:
             raise DiagnoseInputError(f'{p}: cannot read the bag: {exc.problem}') from None
@@ -173,6 +175,7 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
         data = exc.salvaged
     except Exception as exc:  # noqa: BLE001 - anything rosbags raises
         raise DiagnoseInputError(f'{p}: cannot read the bag: {type(exc).__name__}: {exc}') from None
+    data = rec.as_contract(data)
 
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     kinds = {'u1': 'float', 'u2': 'float', 'T1': 'temperature', 'T2': 'temperature', 'joint': 'joint',
@@ -180,7 +183,9 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
     for key, topic in TOPICS.items():
         if topic in data and len(data[topic][1]):
             try:
-                s = _series(topic, data[topic][0], data[topic][1], kinds[key], warnings)
+                s = _series(topic, data[topic][0], data[topic][1], kinds[key], warnings, rec.joint)
+            except ContractError as exc:
+                raise DiagnoseInputError(f'{topic}: {exc}') from None
             except (AttributeError, TypeError, ValueError) as exc:
                 raise DiagnoseInputError(f'{topic}: unexpected message content ({exc}); the contract type is '
                                          f'required (msg_defs/topics.yaml)') from None
@@ -205,7 +210,7 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0) -> Run:
             f'{p}: nothing to compare: found {sorted(TOPICS[k] for k in series) or "no contract topics"}; need the '
             f'TEM commands {TOPICS["u1"]}, {TOPICS["u2"]} (std_msgs/Float64, V) with the muscle temperatures '
             f'{TOPICS["T1"]}, {TOPICS["T2"]} (sensor_msgs/Temperature, degC), and/or {TOPICS["joint"]} '
-            f'(sensor_msgs/JointState, rad)')
+            f'(sensor_msgs/JointState, rad); a bag that names them otherwise: --topic CONTRACT=RECORDED')
 
     # units
     if have_T:

@@ -323,7 +323,7 @@ def _is_bag(p: Path) -> bool:
                                                              or any(p.glob('*.mcap')) or any(p.glob('*.db3'))))
 
 
-def load_bag(path: Path, dt: float, hold: str = 'zoh') -> tuple[list[Any], Cleaning]:
+def load_bag(path: Path, dt: float, hold: str = 'zoh', recording: Any = None) -> tuple[list[Any], Cleaning]:
     """Both muscles of a recorded bag as muscle-face-only runs on the grid dt.
 
     The bag is read on its measurement grid (sma_wrist.diagnose.data.load_run: cleaning, gaps,
@@ -333,7 +333,7 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh') -> tuple[list[Any], Clean
 
     from sma_wrist.core.thermal.identification import ThermalRecord, interval_means
     from sma_wrist.diagnose.data import load_run
-    run = load_run(path, max_rate_hz=1000.0)
+    run = load_run(path, max_rate_hz=1000.0, recording=recording)
     if run.u is None or run.T is None:
         raise ThermalInputError(f'{path}: need /wrist/tem_1/command, /wrist/tem_2/command (V) and '
                                 '/wrist/muscle_1/temperature, /wrist/muscle_2/temperature (degC) for identify thermal')
@@ -353,7 +353,7 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh') -> tuple[list[Any], Clean
 
 
 def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None, units: dict[str, str],
-                hold: str = 'auto') -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
+                hold: str = 'auto', recording: Any = None) -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
     """Records from every input, the cleaning counts per file, and all warnings."""
     records: list[Any] = []
     cleaning: dict[str, dict[str, Any]] = {}
@@ -363,7 +363,7 @@ def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None,
         if not p.exists():
             raise ThermalInputError(f'{p}: no such file (need a text table or a rosbag2 directory)')
         if _is_bag(p):
-            recs, cl = load_bag(p, dt, 'zoh' if hold == 'auto' else hold)
+            recs, cl = load_bag(p, dt, 'zoh' if hold == 'auto' else hold, recording)
         else:
             series, cl = load_table(p, columns, units)
             recs = to_records(series, dt, cl, 'linear' if hold == 'auto' else hold)
@@ -565,6 +565,8 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     ap.add_argument('--no-plots', action='store_true')
     ap.add_argument('--json', action='store_true', help='print one JSON object')
     ap.add_argument('--quiet', action='store_true')
+    from sma_wrist.cli_options import recording_arguments
+    recording_arguments(ap)
     ap.set_defaults(func=run_cli)
     return ap
 
@@ -605,9 +607,11 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     check_output_folder(a.out, inputs=inputs)
     check_output_file(a.params_out, '--params-out', inputs, ThermalInputError)
     base = load_thermal_file(a.base) if a.base else th.ThermalParams()
-    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold)
-    hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold) if a.holdout
-                                        else ([], {}, []))
+    from sma_wrist.contract import Recording
+    recording = Recording.from_options(a.topic, a.joint)  # bags of another rig (tables: --columns)
+    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold, recording)
+    hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold, recording)
+                                        if a.holdout else ([], {}, []))
     records, hold_recs = _distinct_names(records, hold_recs)
     names = [r.name for r in records + hold_recs]
     if len(set(names)) != len(names):
