@@ -94,9 +94,10 @@ def read_table(path: Path) -> tuple[list[str] | None, Any]:
     return t.header, t.data
 
 
-def _roles(path: Path, header: list[str] | None, columns: dict[str, str] | None, ncol: int
-           ) -> tuple[dict[str, int], dict[str, str], list[str]]:
-    """Column index and header unit per role."""
+def _roles(path: Path, header: list[str] | None, columns: dict[str, str] | None, ncol: int,
+           timed: bool = True) -> tuple[dict[str, int], dict[str, str], list[str]]:
+    """Column index and header unit per role; ``timed`` False: the table has no time column (its rows are
+    ``--sample-period-s`` apart), and one found is an error."""
     warnings: list[str] = []
     idx: dict[str, int] = {}
     units: dict[str, str] = {}
@@ -130,19 +131,28 @@ def _roles(path: Path, header: list[str] | None, columns: dict[str, str] | None,
                     break
         units = {role: normed[i][1] for role, i in idx.items()}
     elif not columns:
-        if ncol < 3:
-            raise ThermalInputError(f'{path}: {ncol} column(s) and no header; need time, voltage, T1[, T2] '
-                                    '(or a header naming them, or --columns)')
-        idx = {'time': 0, 'u': 1, 'T1': 2, **({'T2': 3} if ncol >= 4 else {})}
-        warnings.append(f'{path.name}: no header; columns taken as time [s], u [V], T1 [degC]'
-                        + (', T2 [degC]' if ncol >= 4 else '') + ' (name them or use --columns)')
+        first = 0 if timed else 1  # the roles' columns from the left: time, u, T1[, T2]
+        if ncol < 3 - first:
+            raise ThermalInputError(f'{path}: {ncol} column(s) and no header; need {"time, " if timed else ""}voltage, '
+                                    'T1[, T2] (or a header naming them, or --columns)')
+        idx = {r: k - first for k, r in enumerate(('time', 'u', 'T1', 'T2')) if first <= k < ncol + first}
+        warnings.append(f'{path.name}: no header; columns taken as ' + ('time [s], ' if timed else '')
+                        + 'u [V], T1 [degC]' + (', T2 [degC]' if 'T2' in idx else '') + ' (name them or use --columns)')
+    if not timed:
+        if 'time' in idx:
+            raise ThermalInputError(f'{path}: --sample-period-s is for a table without a time column, and this one has '
+                                    f'one ({header[idx["time"]] if header else idx["time"]}); drop the option or the '
+                                    'column')
+        return idx, units, warnings
     missing = [r for r in ('time', 'u', 'T1') if r not in idx]
     if missing:
         raise ThermalInputError(
             f'{path}: no column for {", ".join(missing)}'
             + (f' in header {", ".join(header)}' if header else '')
             + '; need time [s], drive voltage u [V] and the T1 (muscle face) temperature [degC] (T2 optional); '
-              'name them in the header (time, u, T1, T2) or give --columns time=0,u=1,T1=2,T2=3')
+              'name them in the header (time, u, T1, T2) or give --columns time=0,u=1,T1=2,T2=3'
+            + ('; a logger that writes no time, one row per fixed period: --sample-period-s S'
+               if missing == ['time'] else ''))
     return idx, units, warnings
 
 
@@ -184,13 +194,18 @@ class Series:
     source: str
 
 
-def load_table(path: Path, columns: dict[str, str] | None = None, units: dict[str, str] | None = None
-               ) -> tuple[list[Series], Cleaning]:
-    """Read, convert and clean one table; split by its frequency column if it has one."""
+def load_table(path: Path, columns: dict[str, str] | None = None, units: dict[str, str] | None = None,
+               sample_period_s: float | None = None) -> tuple[list[Series], Cleaning]:
+    """Read, convert and clean one table; split by its frequency column if it has one. ``sample_period_s``: the
+    table has no time column, its rows are that many seconds apart (a logger that writes one row per period)."""
     import numpy as np
     header, data = read_table(path)
     ncol = data.shape[1]
-    idx, hdr_units, warnings = _roles(path, header, columns, ncol)
+    idx, hdr_units, warnings = _roles(path, header, columns, ncol, timed=sample_period_s is None)
+    if sample_period_s is not None:  # row k at k periods: a row dropped below leaves its gap
+        data = np.column_stack([data, np.arange(data.shape[0]) * float(sample_period_s)])
+        idx['time'], hdr_units['time'] = ncol, 's'
+        units = {k: v for k, v in (units or {}).items() if k != 'time'}
     cl = Cleaning(rows=data.shape[0], warnings=warnings)
     units = dict(units or {})
     if 'T2' in idx and not np.isfinite(data[:, idx['T2']]).any():  # a logger's unused channel: every row dropped
@@ -353,8 +368,10 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh', recording: Any = None) ->
 
 
 def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None, units: dict[str, str],
-                hold: str = 'auto', recording: Any = None) -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
-    """Records from every input, the cleaning counts per file, and all warnings."""
+                hold: str = 'auto', recording: Any = None, sample_period_s: float | None = None
+                ) -> tuple[list[Any], dict[str, dict[str, Any]], list[str]]:
+    """Records from every input, the cleaning counts per file, and all warnings (``sample_period_s``: tables
+    without a time column, :func:`load_table`)."""
     records: list[Any] = []
     cleaning: dict[str, dict[str, Any]] = {}
     warnings: list[str] = []
@@ -365,7 +382,7 @@ def load_inputs(paths: Sequence[str], dt: float, columns: dict[str, str] | None,
         if _is_bag(p):
             recs, cl = load_bag(p, dt, 'zoh' if hold == 'auto' else hold, recording)
         else:
-            series, cl = load_table(p, columns, units)
+            series, cl = load_table(p, columns, units, sample_period_s)
             recs = to_records(series, dt, cl, 'linear' if hold == 'auto' else hold)
         records += recs
         if _is_bag(p):  # cleaned per topic by diagnose.data.load_run; it reports what it did as warnings
@@ -553,6 +570,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     ap.add_argument('--base', default=None, metavar='FILE', help='thermal file to start from (default Table 4.9)')
     ap.add_argument('--columns', type=_columns, default=None, help='ROLE=COLUMN,... roles time, u, T1, T2, frequency')
     ap.add_argument('--time-unit', choices=sorted(TIME_UNITS), default=None)
+    ap.add_argument('--sample-period-s', type=float, default=None, metavar='S',
+                    help='the tables have no time column: their rows are S seconds apart (a logger writing one row '
+                         'per period)')
     ap.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'), default=None)
     ap.add_argument('--voltage-unit', choices=('V', 'mV'), default=None)
     ap.add_argument('--dt', type=float, default=0.1, help='fit grid [s] (default 0.1; at most 1, the RK4 limit)')
@@ -609,9 +629,14 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     base = load_thermal_file(a.base) if a.base else th.ThermalParams()
     from sma_wrist.contract import Recording
     recording = Recording.from_options(a.topic, a.joint)  # bags of another rig (tables: --columns)
-    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold, recording)
-    hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold, recording)
-                                        if a.holdout else ([], {}, []))
+    period = a.sample_period_s
+    if period is not None and not (math.isfinite(period) and period > 0):
+        raise ThermalInputError(f'--sample-period-s {period} must be a number of seconds > 0')
+    if period is not None and a.time_unit:
+        raise ThermalInputError('--time-unit is the unit of a time column; --sample-period-s says there is none')
+    records, cleaning, warnings = load_inputs(a.inputs, a.dt, a.columns, units, a.input_hold, recording, period)
+    hold_recs, hold_clean, hold_warn = (load_inputs(a.holdout, a.dt, a.columns, units, a.input_hold, recording,
+                                                    period) if a.holdout else ([], {}, []))
     records, hold_recs = _distinct_names(records, hold_recs)
     names = [r.name for r in records + hold_recs]
     if len(set(names)) != len(names):
@@ -620,6 +645,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     say(f'{len(records)} run(s) to fit, {len(hold_recs)} hold-out run(s), grid {a.dt:g} s')
     result = ti.identify_thermal(records, hold_recs, base, faces=a.faces, validation=a.validation,
                                  train_fraction=a.train_fraction, progress=say)
+    fit_warnings = _fit_warnings(result, records, hold_recs)
     say('characterising the hold limits of the identified model')
     lo, hi = ti.hold_limits(result.fit.params)
     params = result.fit.params.with_limits(lo, hi)
@@ -649,7 +675,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
         'params_file': str(params_path) if params_path else None,
         'report': None,
         'inputs': [str(x) for x in a.inputs], 'holdout_inputs': [str(x) for x in a.holdout],
-        'cleaning': {**cleaning, **hold_clean}, 'warnings': warnings + hold_warn, 'dt_s': a.dt,
+        'cleaning': {**cleaning, **hold_clean}, 'warnings': warnings + hold_warn + fit_warnings, 'dt_s': a.dt,
     }
     summary['wall_s'] = time.perf_counter() - t0
     if a.out:
@@ -658,6 +684,46 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
         summary['report'] = str(rep)
     summary['wall_s'] = time.perf_counter() - t0
     return summary
+
+
+def _fit_warnings(result: Any, records: Sequence[Any], hold_recs: Sequence[Any]) -> list[str]:
+    """What the fit's RMS does not say: it stopped before converging, the data left parameters on their bounds,
+    or a run it predicts reaches temperatures or drives the fitted runs never did (its error is extrapolation).
+
+    Measured on a real Peltier (test/data/tec_chamber): heating only and one face, the fit crept on past its
+    iteration limit with K_R on its bound, and parameters from 2-10 min runs near 25 degC predicted a 25-35 degC
+    staircase 3.5 degC off."""
+    import numpy as np
+
+    from sma_wrist.core.thermal.identification import FACE_NAMES
+    fit, out = result.fit, []
+    if not fit.converged:
+        out.append(f'the fit {fit.message} with its error still falling: the data determine some parameters poorly '
+                   '(one face only, or a drive of one sign); judge the result by the held-out errors')
+    if fit.at_bounds:
+        out.append(f'the data left {", ".join(fit.at_bounds)}: they do not determine it; a run that drives both '
+                   'ways and measures both faces would')
+
+    def span(recs: Sequence[Any], f: int) -> tuple[float, float]:
+        T = np.concatenate([r.T[:, f][np.isfinite(r.T[:, f])] for r in recs] or [np.empty(0)])
+        return (float(T.min()), float(T.max())) if T.size else (math.nan, math.nan)
+
+    u_lo = min(float(r.u.min()) for r in records)
+    u_hi = max(float(r.u.max()) for r in records)
+    fitted = {f: span(records, f) for f in range(2)}
+    for r in hold_recs:
+        beyond = []
+        for f in range(2):
+            lo, hi = span([r], f)
+            flo, fhi = fitted[f]
+            margin = max(1.0, 0.1 * (fhi - flo))  # degC: a little past the fitted range is interpolation still
+            if math.isfinite(lo) and math.isfinite(flo) and (lo < flo - margin or hi > fhi + margin):
+                beyond.append(f'{FACE_NAMES[f]} {lo:.1f}..{hi:.1f} degC (fitted {flo:.1f}..{fhi:.1f})')
+        if float(r.u.min()) < u_lo - 0.5 or float(r.u.max()) > u_hi + 0.5:
+            beyond.append(f'u {r.u.min():+.1f}..{r.u.max():+.1f} V (fitted {u_lo:+.1f}..{u_hi:+.1f})')
+        if beyond:
+            out.append(f'hold-out run {r.name} reaches {", ".join(beyond)}: its error measures extrapolation')
+    return out
 
 
 def format_text(s: dict[str, Any]) -> str:

@@ -327,6 +327,8 @@ class ThermalFit:
     nfev: int
     wall_s: float
     message: str = ''
+    converged: bool = True  # False: stopped at max_iter with the cost still falling
+    at_bounds: tuple[str, ...] = ()  # free parameters the fit left on a bound, e.g. 'T1 K_R = 0 (lower bound)'
 
 
 def _weights(mask: FloatArray) -> FloatArray:
@@ -522,7 +524,14 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
     x, cost, nfev, message = _levenberg_marquardt(prob, np.clip(starts[start], lo, hi), lo, hi, max_iter)
     table = _table_from_free(x[None], prob.base_table, fitted)[0].real
     params = params_from_table(table, base)
-    return ThermalFit(params, fitted, start, cost, math.sqrt(cost), nfev, time.perf_counter() - t_wall, message)
+    # a bound the data pushed a parameter onto (measured: K_R = 0 on a heating-only real Peltier) says the data do
+    # not determine it, which the fit's RMS alone does not show
+    names = [f'{FACE_NAMES[f]} {k}' for f in fitted for k in FREE_KEYS]
+    tol = 1e-9 * (hi - lo)
+    at_bounds = tuple(f'{n} = {v:.4g} ({"lower" if v <= a + e else "upper"} bound)'
+                      for n, v, a, b, e in zip(names, x, lo, hi, tol) if v <= a + e or v >= b - e)
+    return ThermalFit(params, fitted, start, cost, math.sqrt(cost), nfev, time.perf_counter() - t_wall, message,
+                      not message.startswith('stopped'), at_bounds)
 
 
 # ------------------------------------------------------------------------------ validation
