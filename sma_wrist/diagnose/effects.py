@@ -24,6 +24,7 @@ from scipy.signal import savgol_filter
 
 from sma_wrist.core.plant.extensions import PARAMS, STATIC_PER_COULOMB, TEMP_CHANNEL_KEYS, TEMP_GAIN_REF_C, drive
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.signals import first_order  # noqa: F401 - the catalogue's lags, re-exported
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.diagnose.kernels import Constants, _jit
 
@@ -144,17 +145,6 @@ def noise_sigma(x: np.ndarray, lsb: float = 0.0) -> float:
         return float(np.std(x)) or 1.0
     mad = np.median(np.abs(d2 - np.median(d2))) * 1.4826
     return float(max(mad / np.sqrt(6.0), lsb / np.sqrt(12.0), 1e-9))
-
-
-def first_order(x: np.ndarray, tau: float, dt: float) -> np.ndarray:
-    """First-order lag along axis 0 (exact discretisation for a ramp-free hold), x[0] at rest."""
-    if tau <= 0:
-        return x
-    a = float(np.exp(-dt / tau))
-    from scipy.signal import lfilter
-    zi = (a * x[0])[None] if x.ndim > 1 else np.array([a * x[0]])
-    y, _ = lfilter([1 - a], [1, -a], x, axis=0, zi=zi)
-    return y
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:

@@ -581,6 +581,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     ap.add_argument('--faces', choices=('auto', 'both', 'muscle'), default='auto',
                     help='Table 4.9 columns to fit (auto: both when T2 is measured in every run)')
     ap.add_argument('--validation', choices=('auto', 'leave-one-out', 'time-split', 'none'), default='auto')
+    ap.add_argument('--sensor-lag', action='store_true',
+                    help="also fit one first-order lag of the temperature sensors (a thermistor on a block, a "
+                         "sheathed thermocouple); reported, not part of thermal.yaml's model")
     ap.add_argument('--train-fraction', type=float, default=0.6, help='time-split: fitted share of every run')
     ap.add_argument('--no-plots', action='store_true')
     ap.add_argument('--json', action='store_true', help='print one JSON object')
@@ -644,7 +647,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
                                 + ', '.join(sorted({n for n in names if names.count(n) > 1})))
     say(f'{len(records)} run(s) to fit, {len(hold_recs)} hold-out run(s), grid {a.dt:g} s')
     result = ti.identify_thermal(records, hold_recs, base, faces=a.faces, validation=a.validation,
-                                 train_fraction=a.train_fraction, progress=say)
+                                 train_fraction=a.train_fraction, sensor_lag=a.sensor_lag, progress=say)
     fit_warnings = _fit_warnings(result, records, hold_recs)
     say('characterising the hold limits of the identified model')
     lo, hi = ti.hold_limits(result.fit.params)
@@ -659,6 +662,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
             'tool': 'sma-wrist identify thermal', 'date': time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime()),
             'inputs': [str(x) for x in a.inputs], 'holdout_inputs': [str(x) for x in a.holdout],
             'grid_s': a.dt, 'faces_fitted': [ti.FACE_NAMES[f] for f in result.fit.faces],
+            **({'sensor_lag_s': round(result.fit.sensor_lag_s, 3)} if a.sensor_lag else {}),
             'validation': result.validation, 'in_sample_rms_C': round(result.fit.rms_C, 4), 'holdout': held},
             header='sma_wrist thermal params file (TEM heat balance, seed Eqs. 4.13-4.15, Table 4.9 layout).\n'
                    'Written by `sma-wrist identify thermal`. Load it in the wrist by setting the parameter\n'
@@ -666,6 +670,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     summary: dict[str, Any] = {
         'fit': {'faces_fitted': [ti.FACE_NAMES[f] for f in result.fit.faces], 'start': result.fit.start,
                 'rms_C': result.fit.rms_C, 'simulations': result.fit.nfev, 'message': result.fit.message,
+                'sensor_lag_s': result.fit.sensor_lag_s if a.sensor_lag else None,
                 'params': _params_json(params), 'default_params': _params_json(base),
                 'runs': [e.as_dict() for e in result.in_sample]},
         'holdout': [e.as_dict() for e in result.holdout],
@@ -729,7 +734,8 @@ def _fit_warnings(result: Any, records: Sequence[Any], hold_recs: Sequence[Any])
 def format_text(s: dict[str, Any]) -> str:
     out = [f'identified {", ".join(s["fit"]["faces_fitted"])} column(s) of Table 4.9 from '
            f'{len(s["fit"]["runs"])} run(s): in-sample RMS {s["fit"]["rms_C"]:.3f} degC '
-           f'({s["fit"]["simulations"]} simulations, start {s["fit"]["start"]}), {s["wall_s"]:.1f} s']
+           f'({s["fit"]["simulations"]} simulations, start {s["fit"]["start"]}), {s["wall_s"]:.1f} s'
+           + (f'; sensor lag {s["fit"]["sensor_lag_s"]:.3g} s' if s['fit'].get('sensor_lag_s') is not None else '')]
     for w in s['warnings']:
         out.append(f'warning: {w}')
     before = {e['record']: e for e in s['before']}

@@ -49,6 +49,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.core.errors import ParameterError, SmaWristError
+from sma_wrist.core.signals import first_order
 from sma_wrist.core.thermal import heat_balance as th
 
 FloatArray = NDArray[np.float64]
@@ -61,6 +62,11 @@ FACE_NAMES = ('T1', 'T2')  # Table 4.9 columns: muscle face (Eq. 4.13), exchange
 _LOWER = np.array([-1.0, -1.0, 1e-5, 0.0, 0.0, -50.0])
 _UPPER = np.array([1.0, 1.0, 5.0, 5.0, 1.0, 50.0])
 _COMPLEX_STEP = 1e-30
+#: the temperature sensors' first-order lag [s] when fitted (--sensor-lag): its bounds, and the lags the start is
+#: chosen from on the fit without a lag (from 1 s a 7.8 h real staircase's fit ran to 0 s, a local minimum, where
+#: the same table read through 120-240 s was 35 % better)
+SENSOR_LAG_BOUNDS_S = (0.0, 1800.0)
+SENSOR_LAG_STARTS_S = (0.0, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0)
 _BLOCK = 512  # steps per block of precomputed affine maps (bounds memory)
 
 
@@ -272,11 +278,13 @@ def simulate_tables(tables: NDArray, input_per_volt: float, u: FloatArray, T0: N
 
 
 def simulate_records(params: th.ThermalParams, records: Sequence[ThermalRecord],
-                     base: th.ThermalParams | None = None) -> list[FloatArray]:
-    """Free-run simulation of each record (K_r, 2) [degC] from its measured start (see :func:`start_states`)."""
+                     base: th.ThermalParams | None = None, sensor_lag_s: float = 0.0) -> list[FloatArray]:
+    """Free-run simulation of each record (K_r, 2) [degC] from its measured start (see :func:`start_states`), as
+    sensors of first-order lag ``sensor_lag_s`` [s] read it (0: the faces themselves)."""
     u, u2, _, _ = _pad(records)
     T0 = start_states(records, base or params)
     sim = simulate_tables(table_of(params)[None], params.input_per_volt, u, T0[None], records[0].dt, u2)
+    sim = first_order(sim, sensor_lag_s, records[0].dt)
     return [sim[:r.n, 0, j] for j, r in enumerate(records)]
 
 
@@ -329,6 +337,7 @@ class ThermalFit:
     message: str = ''
     converged: bool = True  # False: stopped at max_iter with the cost still falling
     at_bounds: tuple[str, ...] = ()  # free parameters the fit left on a bound, e.g. 'T1 K_R = 0 (lower bound)'
+    sensor_lag_s: float = 0.0  # the temperature sensors' first-order lag [s] fitted with the heat balance (0: none)
 
 
 def _weights(mask: FloatArray) -> FloatArray:
@@ -387,8 +396,9 @@ class _Problem:
     """Residuals and complex-step Jacobian of the simulation error over a set of runs."""
 
     def __init__(self, records: Sequence[ThermalRecord], base: th.ThermalParams, faces: tuple[int, ...],
-                 masks: Sequence[FloatArray] | None, settle_s: float) -> None:
+                 masks: Sequence[FloatArray] | None, settle_s: float, sensor_lag: bool = False) -> None:
         self.records = records
+        self.lag = sensor_lag  # x's last entry is then the sensors' lag [s]
         self.base = base
         self.faces = faces
         self.base_table = table_of(base)
@@ -417,9 +427,13 @@ class _Problem:
         n = x.size
         xc = np.tile(x.astype(complex), (n, 1))
         xc[np.arange(n), np.arange(n)] += 1j * _COMPLEX_STEP
-        tables = _table_from_free(xc, self.base_table, self.faces)
+        tables = _table_from_free(xc[:, :n - 1] if self.lag else xc, self.base_table, self.faces)
         with np.errstate(all='ignore'):
             sim = simulate_tables(tables, self.ipv, self.u, self.T0[None], self.dt, self.u2)  # (K, n, R, 2)
+            if self.lag:  # the heat balance's columns through the lag at x's value; the lag's own column stepped
+                tau = float(x[-1])
+                sim[:, -1] = first_order(sim[:, -1].real.astype(complex), xc[-1, -1], self.dt)
+                sim[:, :-1] = first_order(sim[:, :-1], tau, self.dt)
             res = (sim[:, 0].real - self.Tm) * self.w  # (K, R, 2)
             jac = sim.imag / _COMPLEX_STEP * self.w[None]  # (K, n, R, 2)
         r = res[self.mask]
@@ -434,9 +448,11 @@ class _Problem:
         return self._run(x)[1]
 
     def cost(self, x: FloatArray) -> float:
-        tables = _table_from_free(x[None], self.base_table, self.faces)
+        tables = _table_from_free((x[:-1] if self.lag else x)[None], self.base_table, self.faces)
         with np.errstate(all='ignore'):
             sim = simulate_tables(tables, self.ipv, self.u, self.T0[None], self.dt, self.u2)
+            if self.lag:
+                sim = first_order(sim, float(x[-1]), self.dt)
             r = ((sim[:, 0] - self.Tm) * self.w)[self.mask]
         c = float(np.sum(r * r))
         return c if math.isfinite(c) else math.inf
@@ -481,11 +497,13 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, lo: FloatArray, hi: Floa
 
 def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None = None, *,
                 faces: str = 'auto', masks: Sequence[FloatArray] | None = None, settle_s: float = 30.0,
-                max_iter: int = 60) -> ThermalFit:
+                max_iter: int = 60, sensor_lag: bool = False) -> ThermalFit:
     """Fit Table 4.9 columns to runs by simulation-error least squares (module docstring).
 
     ``faces``: 'auto' (both columns when every run measured T2, else the T1 column), 'both',
     'muscle'. ``masks``: per-run (K_r,) bool training samples (default all valid samples).
+    ``sensor_lag``: fit, with the table, one first-order lag [s] through which every temperature was measured
+    (a thermistor on a block, a sheathed thermocouple: the simulation is compared as that sensor reads it).
     Raises ThermalIdentificationError when the data cannot support the fit.
     """
     t_wall = time.perf_counter()
@@ -509,29 +527,36 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
         if float(np.ptp(r.u)) < 0.5:
             raise ThermalIdentificationError(f'{r.name}: the drive voltage hardly changes (range {np.ptp(r.u):.3g} V); '
                                              'identification needs an exciting input, e.g. the seed\'s 12 V sines')
-    prob = _Problem(records, base, fitted, masks, settle_s)
+    prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag)
     starts = {'base': _free_from_table(prob.base_table, fitted)}
     if both:
         ee = equation_error_table(records, base.input_per_volt, masks)
         if ee is not None and np.isfinite(ee).all():
             starts['equation_error'] = _free_from_table(ee, fitted)
     lo, hi = np.tile(_LOWER, len(fitted)), np.tile(_UPPER, len(fitted))
+    if sensor_lag:  # the table fitted without a lag, read through the lag that suits it best
+        plain = fit_thermal(records, base, faces=faces, masks=masks, settle_s=settle_s, max_iter=max_iter)
+        x0 = _free_from_table(table_of(plain.params), fitted)
+        lags = [t for t in SENSOR_LAG_STARTS_S if SENSOR_LAG_BOUNDS_S[0] <= t <= SENSOR_LAG_BOUNDS_S[1]]
+        starts = {f'no-lag fit, lag {t:g} s': np.r_[x0, t] for t in lags}
+        lo, hi = np.r_[lo, SENSOR_LAG_BOUNDS_S[0]], np.r_[hi, SENSOR_LAG_BOUNDS_S[1]]
     costs = {k: prob.cost(np.clip(v, lo, hi)) for k, v in starts.items()}
     start = min(costs, key=lambda k: costs[k])
     if not math.isfinite(costs[start]):
         raise ThermalIdentificationError('the simulation diverges from every start (base parameters and equation '
                                          'error); check the voltage unit and the sign convention (u > 0 heats T1)')
     x, cost, nfev, message = _levenberg_marquardt(prob, np.clip(starts[start], lo, hi), lo, hi, max_iter)
-    table = _table_from_free(x[None], prob.base_table, fitted)[0].real
+    nfev += len(costs) + (plain.nfev if sensor_lag else 0)
+    table = _table_from_free((x[:-1] if sensor_lag else x)[None], prob.base_table, fitted)[0].real
     params = params_from_table(table, base)
     # a bound the data pushed a parameter onto (measured: K_R = 0 on a heating-only real Peltier) says the data do
     # not determine it, which the fit's RMS alone does not show
-    names = [f'{FACE_NAMES[f]} {k}' for f in fitted for k in FREE_KEYS]
+    names = [f'{FACE_NAMES[f]} {k}' for f in fitted for k in FREE_KEYS] + (['sensor lag [s]'] if sensor_lag else [])
     tol = 1e-9 * (hi - lo)
     at_bounds = tuple(f'{n} = {v:.4g} ({"lower" if v <= a + e else "upper"} bound)'
                       for n, v, a, b, e in zip(names, x, lo, hi, tol) if v <= a + e or v >= b - e)
     return ThermalFit(params, fitted, start, cost, math.sqrt(cost), nfev, time.perf_counter() - t_wall, message,
-                      not message.startswith('stopped'), at_bounds)
+                      not message.startswith('stopped'), at_bounds, float(x[-1]) if sensor_lag else 0.0)
 
 
 # ------------------------------------------------------------------------------ validation
@@ -553,14 +578,14 @@ class RecordEvaluation:
 
 def evaluate(params: th.ThermalParams, records: Sequence[ThermalRecord], mode: str,
              masks: Sequence[FloatArray] | None = None, settle_s: float = 30.0,
-             base: th.ThermalParams | None = None) -> list[RecordEvaluation]:
+             base: th.ThermalParams | None = None, sensor_lag_s: float = 0.0) -> list[RecordEvaluation]:
     """Free-run each record under ``params`` and return Table 4.10 statistics per measured face.
 
     ``masks``: per-record samples to evaluate (default all valid samples after the start,
     and after ``settle_s`` when T2 is not measured). The % is of the face's measured range
-    over the whole run.
+    over the whole run. ``sensor_lag_s``: the simulation as sensors of that lag read it.
     """
-    sims = simulate_records(params, records, base)
+    sims = simulate_records(params, records, base, sensor_lag_s)
     out = []
     for j, r in enumerate(records):
         ev = r.valid.copy()
@@ -594,9 +619,10 @@ class ThermalIdentification:
 
 def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[ThermalRecord] = (),
                      base: th.ThermalParams | None = None, *, faces: str = 'auto', validation: str = 'auto',
-                     train_fraction: float = 0.6, settle_s: float = 30.0,
+                     train_fraction: float = 0.6, settle_s: float = 30.0, sensor_lag: bool = False,
                      progress: Callable[[str], None] | None = None) -> ThermalIdentification:
-    """Fit on ``records`` and validate on data the fit never saw.
+    """Fit on ``records`` and validate on data the fit never saw (``sensor_lag``: :func:`fit_thermal`'s, in every
+    fit; each prediction is read through the lag its fit found).
 
     ``validation``: 'leave-one-out' (each run predicted by the fit on the others; needs >= 2
     runs), 'time-split' (fit on the first ``train_fraction`` of every run, score the rest,
@@ -619,24 +645,26 @@ def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[Thermal
     if len({round(r.dt, 12) for r in all_records}) != 1:
         raise ThermalIdentificationError('all runs (and hold-out runs) must share one sample period')
     say(f'fit on {len(records)} run(s)')
-    final = fit_thermal(records, base, faces=faces, settle_s=settle_s)
+    final = fit_thermal(records, base, faces=faces, settle_s=settle_s, sensor_lag=sensor_lag)
     fitted_faces = 'both' if len(final.faces) == 2 else 'muscle'
     held: list[RecordEvaluation] = []
     if validation == 'leave-one-out':
         for j, r in enumerate(records):
             say(f'leave-one-out {j + 1}/{len(records)}: predicting {r.name}')
             others = [q for i, q in enumerate(records) if i != j]
-            f = fit_thermal(others, base, faces=fitted_faces, settle_s=settle_s)
-            held += evaluate(f.params, [r], 'leave-one-out', settle_s=settle_s, base=base)
+            f = fit_thermal(others, base, faces=fitted_faces, settle_s=settle_s, sensor_lag=sensor_lag)
+            held += evaluate(f.params, [r], 'leave-one-out', settle_s=settle_s, base=base, sensor_lag_s=f.sensor_lag_s)
     elif validation == 'time-split':
         say(f'time split: fit on the first {train_fraction:.0%} of every run')
         train = [np.arange(r.n) < int(train_fraction * r.n) for r in records]
-        f = fit_thermal(records, base, faces=fitted_faces, masks=train, settle_s=settle_s)
-        held += evaluate(f.params, records, 'time-split', masks=[~m for m in train], settle_s=settle_s, base=base)
+        f = fit_thermal(records, base, faces=fitted_faces, masks=train, settle_s=settle_s, sensor_lag=sensor_lag)
+        held += evaluate(f.params, records, 'time-split', masks=[~m for m in train], settle_s=settle_s, base=base,
+                         sensor_lag_s=f.sensor_lag_s)
+    lag = final.sensor_lag_s
     if holdout:
         say(f'predicting {len(holdout)} hold-out run(s)')
-        held += evaluate(final.params, holdout, 'holdout-file', settle_s=settle_s, base=base)
-    in_sample = evaluate(final.params, records, 'in-sample', settle_s=settle_s, base=base)
+        held += evaluate(final.params, holdout, 'holdout-file', settle_s=settle_s, base=base, sensor_lag_s=lag)
+    in_sample = evaluate(final.params, records, 'in-sample', settle_s=settle_s, base=base, sensor_lag_s=lag)
     before = evaluate(base, all_records, 'default', settle_s=settle_s, base=base)
     return ThermalIdentification(final, base, in_sample, held, before, validation, time.perf_counter() - t0)
 
