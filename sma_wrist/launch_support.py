@@ -63,12 +63,17 @@ REQUIRED_EXIT_REASONS = {
 
 
 def on_exit_actions(executable: str) -> list | None:
-    """``on_exit`` of a launch_ros Node: for a required node, log the reason and shut the launch down."""
+    """``on_exit`` of a launch_ros Node: for a required node, log the reason and shut the launch down -- unless the
+    launch is already shutting down (a user's Ctrl-C ends plant_sim too, and its exit is then no fault: under
+    Humble and Jazzy every Ctrl-C logged "plant_sim exited: the graph has no plant...")."""
     reason = REQUIRED_EXIT_REASONS.get(executable)
     if reason is None:
         return None
-    from launch.actions import LogInfo, Shutdown  # only launch files call this
-    return [LogInfo(msg=reason), Shutdown(reason=reason)]
+    from launch.actions import LogInfo, OpaqueFunction, Shutdown  # only launch files call this
+
+    def unless_shutting_down(context: Any) -> list:
+        return [] if context.is_shutdown else [LogInfo(msg=reason), Shutdown(reason=reason)]
+    return [OpaqueFunction(function=unless_shutting_down)]
 
 
 def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str

@@ -51,3 +51,23 @@ def test_a_params_files_payload_stands_unless_payload_kg_is_given(tmp_path, capf
         run_launch_file(_launch('wrist_sim.launch.py'), {'controller': 'pid', **arguments}, 0.1)
         out = capfd.readouterr()
         assert f'plant_sim: payload {kg} kg' in out.out + out.err, arguments  # plant_sim's start-up line
+
+
+def test_a_required_nodes_exit_during_a_shutdown_is_no_fault(monkeypatch):
+    """A user's Ctrl-C ends plant_sim with the rest: the launch is already shutting down, and its exit must not be
+    logged as "the graph has no plant" (it was, under Humble and Jazzy). Outside a shutdown it still is."""
+    import sys
+
+    from sma_wrist.launch_support import REQUIRED_EXIT_REASONS, on_exit_actions
+    from sma_wrist.runtime import launch_file as lf
+    monkeypatch.setitem(sys.modules, 'launch', lf)  # the launch API subset the embedded launcher provides
+    monkeypatch.setitem(sys.modules, 'launch.actions', lf)
+    (action,) = on_exit_actions('plant_sim')
+    for shutting_down, want in ((True, []), (False, [REQUIRED_EXIT_REASONS['plant_sim']])):
+        ctx = lf.LaunchContext({})
+        ctx.is_shutdown = shutting_down
+        result = lf.LaunchResult('time')
+        lf._on_exit([action], ctx, result, print_fn=lambda s: None)
+        assert result.log == want and (result.reason == 'shutdown') is not shutting_down
+    assert on_exit_actions('tem_controller') is None
+

@@ -38,6 +38,7 @@ class LaunchFileError(GraphError):
 class LaunchContext:
     def __init__(self, configurations: Mapping[str, str]) -> None:
         self.launch_configurations = dict(configurations)
+        self.is_shutdown = False  # launch.LaunchContext's: a Shutdown is under way
 
 
 def _perform(value: Any, context: LaunchContext) -> str:
@@ -203,6 +204,25 @@ def _configure(desc: LaunchDescription, arguments: Mapping[str, str]) -> tuple[L
     return context, nodes
 
 
+def _on_exit(actions: Sequence[Any], context: LaunchContext, result: LaunchResult,
+             print_fn: Callable[[str], None]) -> None:
+    """A node's ``on_exit`` actions: LogInfo, Shutdown (the first one's reason ends the launch), OpaqueFunction (its
+    actions in turn, given the context)."""
+    for a in actions:
+        if isinstance(a, LogInfo):
+            text = _perform(a.msg, context)
+            result.log.append(text)
+            print_fn(f'[INFO] [launch.user]: {text}')
+        elif isinstance(a, Shutdown):
+            if result.shutdown_reason is None:
+                result.reason, result.shutdown_reason = 'shutdown', _perform(a.reason, context)
+                context.is_shutdown = True
+        elif isinstance(a, OpaqueFunction):
+            _on_exit(a.function(context, *a.args, **a.kwargs) or [], context, result, print_fn)
+        else:
+            raise LaunchFileError(f'{type(a).__name__} in on_exit is not supported')
+
+
 def run_launch_file(path: str | Path, arguments: Optional[Mapping[str, Any]] = None, duration: float = 1.0, *,
                     bag: Optional[str | Path] = None, print_fn: Callable[[str], None] = print) -> LaunchResult:
     """``ros2 launch <path> name:=value...`` for ``duration`` s of sim time, on the embedded runtime."""
@@ -227,15 +247,7 @@ def run_launch_file(path: str | Path, arguments: Optional[Mapping[str, Any]] = N
                         raise
                     print_fn(f'[{action.name}] {message}')
                     result.exits[action.name] = 2
-                    for a in action.on_exit:
-                        if isinstance(a, LogInfo):
-                            text = _perform(a.msg, context)
-                            result.log.append(text)
-                            print_fn(f'[INFO] [launch.user]: {text}')
-                        elif isinstance(a, Shutdown) and result.shutdown_reason is None:
-                            result.reason, result.shutdown_reason = 'shutdown', _perform(a.reason, context)
-                        elif not isinstance(a, Shutdown):
-                            raise LaunchFileError(f'{type(a).__name__} in on_exit is not supported')
+                    _on_exit(action.on_exit, context, result, print_fn)
                     continue
                 result.started.append(action.name)
             if result.reason != 'shutdown':
