@@ -820,6 +820,29 @@ def test_a_device_on_another_protocol_version_is_named(tmp_path, graph):
     assert 'protocol version 2' in bridge.why_no_data()
 
 
+def test_a_port_that_does_not_open_is_named_in_the_safety_reason(tmp_path, graph):
+    """port:= naming no device: under Humble the bridge said only 'sensor timeout (no valid sample ...)' every
+    10 s, never that its port did not open. The reason now names the port and the open error, and sma-wrist run's
+    stall error carries it (next test)."""
+    missing = tmp_path / 'no_such_port'
+    rt, bridge, probe = graph(DeviceEmulator(EmulatorConfig(), link=str(missing)))
+    run_wall(rt, 0.5)
+    faults = bridge.faults()
+    assert faults and 'sensor timeout' in faults[0] and f'open {missing}' in faults[0], faults
+    assert 'the port does not open' in bridge.why_no_data() and 'port:=' in bridge.why_no_data()
+    assert bridge.counters['samples'] == 0
+
+
+def test_hardware_run_on_a_port_that_does_not_open_says_so(tmp_path, monkeypatch, ros_shutdown):
+    from sma_wrist import closed_loop
+    from sma_wrist.core.errors import SmaWristError
+    missing = tmp_path / 'no_such_port'
+    monkeypatch.setattr(closed_loop, 'DEVICE_STALL_S', 1.0)
+    with pytest.raises(SmaWristError, match=f'no data from the device.*the port does not open \\(open {missing}'):
+        closed_loop.run_closed_loop('pid', 0.3, 5.0, tmp_path / 'bag', hardware=True,
+                                    extra_params={'/hardware_bridge': {'port': str(missing)}})
+
+
 def test_hardware_run_on_a_device_of_another_protocol_version_says_so(tmp_path, monkeypatch, ros_shutdown):
     from sma_wrist import closed_loop
     from sma_wrist.core.errors import SmaWristError

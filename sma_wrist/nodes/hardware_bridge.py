@@ -293,8 +293,13 @@ class HardwareBridge(WristNode):
         return out
 
     def why_no_data(self) -> str:
-        """What the line carried since the last valid sample instead of samples ('' if nothing): a device on
-        another protocol version or baud rate sends lines, none of them usable."""
+        """Why no valid sample arrives, where the bridge can tell ('' if it cannot): a port that does not open (a
+        wrong port:= said only 'sensor timeout' under Humble), or a line that carries no usable sample (a device on
+        another protocol version or baud rate)."""
+        ls = self.link.stats
+        if not self.link.connected and ls.open_failures and ls.last_error.startswith('open '):
+            # no count of the tries in the text: a text that changes is logged again (their count is on /diagnostics)
+            return f'the port does not open ({ls.last_error}): check port:= and that the device is plugged in'
         st = self.link.parser.stats
         seen = self._line_at_sample
         if st.version_mismatch > seen[0]:
