@@ -61,14 +61,16 @@ def test_a_fit_on_one_real_run_predicts_the_modules_other_runs(tables, capsys, t
     assert s['fit']['message'].startswith('converged') or any('error still falling' in w for w in s['warnings'])
 
 
-def test_the_chambers_sensor_lag_is_what_the_two_node_model_missed(tables, capsys) -> None:
+def test_the_chambers_sensor_lag_is_what_the_two_node_model_missed(tables, capsys, tmp_path) -> None:
     """The thermistor sits on an aluminium box the heat balance does not have: fitted with one first-order sensor
     lag (--sensor-lag), the same fit predicts the other runs markedly better (measured 0.58 / 0.62 -> 0.35 / 0.37
     degC, lag 196 s)."""
     runs = [str(tables['run40']), '--holdout', str(tables['run39']), str(tables['run16']), *TABLE]
     _, plain = _cli(runs, capsys)
-    code, lagged = _cli([*runs, '--sensor-lag'], capsys)
+    code, lagged = _cli([*runs, '--sensor-lag', '--out', str(tmp_path / 'out')], capsys)
     assert code == 0, lagged
+    report = (tmp_path / 'out' / 'thermal_identification.md').read_text()
+    assert f'`--sensor-lag`): {lagged["fit"]["sensor_lag_s"]:.4g} s' in report
     assert 60.0 < lagged['fit']['sensor_lag_s'] < 600.0, lagged['fit']['sensor_lag_s']
     assert plain['fit']['sensor_lag_s'] is None
 

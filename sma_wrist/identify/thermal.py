@@ -509,6 +509,10 @@ def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: S
     if 1 not in result.fit.faces:
         lines += ['', 'The T2 (exchanger face) column is not fitted: no run measured T2, so the base values are kept '
                       'and the T1 column is identified given them (docs/identification_thermal.md, "Limits").']
+    if summary['fit'].get('sensor_lag_s') is not None:
+        lines += ['', f'Fitted with one first-order lag of the temperature sensors (`--sensor-lag`): '
+                      f'{summary["fit"]["sensor_lag_s"]:.4g} s. Every simulated temperature below is read through it; '
+                      'thermal.yaml keeps the heat balance only (the lag is in its provenance).']
     lines += ['', f'## Held-out errors (form of Table 4.10; validation: {result.validation})', '',
               'e = measured - simulated, free-run from the measured start; % of the face\'s measured range in that '
               'run (Eq. 4.3). "default RMS" is Table 4.9 on the same samples.', '',
