@@ -89,6 +89,8 @@ def test_a_held_out_run_beyond_the_fitted_range_is_named_extrapolation(tables, c
     assert len(said) == 1 and 'T1 24.9..35.0 degC' in said[0], s['warnings']
     # the fitted runs themselves are not named
     assert not any('hold-out run run' in w for w in s['warnings']), s['warnings']
+    # a PID's staircase is no sine: no frequency (it was labelled 1/9400 Hz)
+    assert [e['frequency_Hz'] for e in s['holdout'] if e['record'] == 'rtempco_run1.csv'] == [None]
 
 
 def test_the_same_runs_with_a_time_column_give_the_same_fit(tables, capsys, tmp_path) -> None:
