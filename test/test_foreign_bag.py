@@ -6,7 +6,6 @@ when they cannot."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
