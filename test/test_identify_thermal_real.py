@@ -58,6 +58,7 @@ def test_a_fit_on_one_real_run_predicts_the_modules_other_runs(tables, capsys, t
         assert rms < 0.75 and rms < 0.4 * before[e['record']], (e['record'], rms, before[e['record']])
     # heating only and one face: the loss term K_R is not determined, and the user is told so
     assert any('T1 K_R = 0 (lower bound)' in w for w in s['warnings']), s['warnings']
+    assert any("the model's cooling (u < 0) is extrapolated" in w and 'to +4.0 V' in w for w in s['warnings'])
     assert s['fit']['message'].startswith('converged') or any('error still falling' in w for w in s['warnings'])
 
 

@@ -723,6 +723,10 @@ def _fit_warnings(result: Any, records: Sequence[Any], hold_recs: Sequence[Any])
 
     u_lo = min(float(r.u.min()) for r in records)
     u_hi = max(float(r.u.max()) for r in records)
+    if u_lo > -0.5 or u_hi < 0.5:  # the fitted runs never drove one way: that side of the model is a guess
+        side = 'cooling (u < 0)' if u_lo > -0.5 else 'heating (u > 0)'
+        out.append(f'the fitted runs drive u only from {u_lo:+.1f} to {u_hi:+.1f} V: the model\'s {side} is '
+                   'extrapolated, and so is its hold limit on that side')
     fitted = {f: span(records, f) for f in range(2)}
     for r in hold_recs:
         beyond = []
