@@ -427,13 +427,13 @@ class _Problem:
         n = x.size
         xc = np.tile(x.astype(complex), (n, 1))
         xc[np.arange(n), np.arange(n)] += 1j * _COMPLEX_STEP
-        tables = _table_from_free(xc[:, :n - 1] if self.lag else xc, self.base_table, self.faces)
+        m = n - 1 if self.lag else n  # the table's columns; the lag's needs no heat-balance run of its own
+        tables = _table_from_free(xc[:m, :m], self.base_table, self.faces)
         with np.errstate(all='ignore'):
-            sim = simulate_tables(tables, self.ipv, self.u, self.T0[None], self.dt, self.u2)  # (K, n, R, 2)
-            if self.lag:  # the heat balance's columns through the lag at x's value; the lag's own column stepped
-                tau = float(x[-1])
-                sim[:, -1] = first_order(sim[:, -1].real.astype(complex), xc[-1, -1], self.dt)
-                sim[:, :-1] = first_order(sim[:, :-1], tau, self.dt)
+            sim = simulate_tables(tables, self.ipv, self.u, self.T0[None], self.dt, self.u2)  # (K, m, R, 2)
+            if self.lag:  # the table's columns through the lag at x's value; the lag's column: x's run, lag stepped
+                stepped = first_order(sim[:, :1].real.astype(complex), xc[-1, -1], self.dt)
+                sim = np.concatenate([first_order(sim, float(x[-1]), self.dt), stepped], axis=1)  # (K, n, R, 2)
             res = (sim[:, 0].real - self.Tm) * self.w  # (K, R, 2)
             jac = sim.imag / _COMPLEX_STEP * self.w[None]  # (K, n, R, 2)
         r = res[self.mask]
@@ -528,18 +528,19 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
             raise ThermalIdentificationError(f'{r.name}: the drive voltage hardly changes (range {np.ptp(r.u):.3g} V); '
                                              'identification needs an exciting input, e.g. the seed\'s 12 V sines')
     prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag)
-    starts = {'base': _free_from_table(prob.base_table, fitted)}
-    if both:
-        ee = equation_error_table(records, base.input_per_volt, masks)
-        if ee is not None and np.isfinite(ee).all():
-            starts['equation_error'] = _free_from_table(ee, fitted)
     lo, hi = np.tile(_LOWER, len(fitted)), np.tile(_UPPER, len(fitted))
-    if sensor_lag:  # the table fitted without a lag, read through the lag that suits it best
+    if sensor_lag:  # the table fitted without a lag (from the starts below), read through the lag that suits it best
         plain = fit_thermal(records, base, faces=faces, masks=masks, settle_s=settle_s, max_iter=max_iter)
         x0 = _free_from_table(table_of(plain.params), fitted)
         lags = [t for t in SENSOR_LAG_STARTS_S if SENSOR_LAG_BOUNDS_S[0] <= t <= SENSOR_LAG_BOUNDS_S[1]]
         starts = {f'no-lag fit, lag {t:g} s': np.r_[x0, t] for t in lags}
         lo, hi = np.r_[lo, SENSOR_LAG_BOUNDS_S[0]], np.r_[hi, SENSOR_LAG_BOUNDS_S[1]]
+    else:
+        starts = {'base': _free_from_table(prob.base_table, fitted)}
+        if both:
+            ee = equation_error_table(records, base.input_per_volt, masks)
+            if ee is not None and np.isfinite(ee).all():
+                starts['equation_error'] = _free_from_table(ee, fitted)
     costs = {k: prob.cost(np.clip(v, lo, hi)) for k, v in starts.items()}
     start = min(costs, key=lambda k: costs[k])
     if not math.isfinite(costs[start]):
