@@ -223,7 +223,7 @@ def test_unplug_reconnects_with_backoff_and_recovers(emulator, graph):
 @pytest.mark.parametrize('reminder_s', [None, 0.02])
 def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(emulator, graph, monkeypatch,
                                                                                 reminder_s):
-    """While the link is down the ERROR is not repeated every ~54 ms (its text carried a changing age)."""
+    """A lost link is one ERROR line and throttled reminders, not a line every ~54 ms with a changing age in it."""
     import rclpy.logging
 
     from sma_wrist.nodes import hardware_bridge
@@ -263,8 +263,8 @@ def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(e
 @pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
 def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
                                                                       source):
-    """Without this the bridge stamped /diagnostics with its steady/system clock (52.7 s) while its
-    measurements and /clock carried device time (118 s). The system clock here starts in 2023."""
+    """/diagnostics carries device time, as the measurements and /clock do, not the steady or system clock the
+    bridge polls on (those would read 52.7 s where the device reads 118 s). The system clock here starts in 2023."""
     from sma_wrist.runtime.launch import Runtime
     params = {}
     if source == 'hardware_bridge':

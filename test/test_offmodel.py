@@ -284,7 +284,7 @@ def test_observer_follows_the_muscle_through_noise_and_lag() -> None:
 def test_observer_in_front_of_the_compensator_recovers_the_inverse_on_noisy_sensors() -> None:
     """One cycle, sensors case (thermocouples 0.2 s + 0.2 degC, pot 3 mrad): measured 13.9 % on the
     thermocouples, 2.87 % (2.2 sign changes a second) with MuscleTemperatureObserver(0.33 s, 0.2 s) in
-    front of the compensator (the true temperature there: 3.5 %); 3.38 % with today's defaults
+    front of the compensator (the true temperature there: 3.5 %); 3.38 % with the defaults
     (temperature_source observer, window following the shift, shift gain 2 /s)."""
     # the observer's own effect: without the online TEM estimate (core.thermal.online), which learns in this cycle
     assert _one_cycle('sensors', 'inverse_adaptive', compensator_observer=None, window_follows_shift=False,
