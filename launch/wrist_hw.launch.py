@@ -3,7 +3,7 @@
     ros2 launch sma_wrist wrist_hw.launch.py port:=/dev/ttyACM0 controller:=direct_adaptive payload_kg:=0.3
 
 The same graph as wrist_sim.launch.py with hardware_bridge in place of plant_sim: the
-bridge talks to the wrist controller on port:= (docs/protocol.md; an emulator:
+bridge talks to the wrist controller on port:= (doc/explanation/protocol.md; an emulator:
 `sma-wrist emulate-device --port /tmp/wrist`) and publishes /clock from device time; every
 other node runs on it (use_sim_time). payload_kg:= is the payload actually mounted (it is
 published latched and used by the bridge's stress estimate).

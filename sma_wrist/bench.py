@@ -230,7 +230,7 @@ def bench_diagnose(quick: bool = False) -> dict:
 
 @section('diagnose_full')
 def bench_diagnose_full(quick: bool = False) -> dict:
-    """The diagnose section at full size: independent effects at three noise levels (issue 13)."""
+    """The diagnose section at full size: independent effects at three noise levels."""
     from sma_wrist.diagnose.bench import bench_diagnose as run_diagnose
     return run_diagnose(quick, full=True)
 
@@ -251,21 +251,21 @@ def bench_identify(quick: bool = False) -> dict:
 
 @section('sweep')
 def bench_sweep(quick: bool = False) -> dict:
-    """Closed loops per second: the vectorised sweep vs the node graph, side by side (docs/sweep.md)."""
+    """Closed loops per second: the vectorised sweep vs the node graph, side by side (doc/howto/sweep.md)."""
     from sma_wrist.sweep.bench import bench_sweep as run_sweep_bench
     return run_sweep_bench(quick)
 
 
 @section('identify_thermal')
 def bench_identify_thermal(quick: bool = False) -> dict:
-    """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (docs/identification_thermal.md)."""
+    """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (doc/howto/identify_tems.md)."""
     from sma_wrist.identify.thermal_testplant import holdout_table, speed
     return {'speed': speed(quick), **holdout_table(quick)}
 
 
 @section('identify_wrist')
 def bench_identify_wrist(quick: bool = False) -> dict:
-    """A wire transforming at 55-98 degC, windows from identify/wrist.py: seed TEMs vs TEMs rated 120 degC (docs/identification.md)."""
+    """A wire transforming at 55-98 degC, windows from identify/wrist.py: seed TEMs vs TEMs rated 120 degC (doc/howto/identify_wire.md)."""
     from sma_wrist.identify.wrist import hot_wire_runs
     return hot_wire_runs(('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
                          progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
@@ -275,7 +275,7 @@ def bench_identify_wrist(quick: bool = False) -> dict:
 @section('measured_wire')
 def bench_measured_wire(quick: bool = False) -> dict:
     """The measured Flexinol wire (test/data/flexinol, a source checkout) identified and run in the graph
-    on TEMs rated 120 degC; direct and pid also without their reference leads (docs/identification.md)."""
+    on TEMs rated 120 degC; direct and pid also without their reference leads (doc/howto/identify_wire.md)."""
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.identify.wrist import measured_wire_runs
     data = Path(__file__).resolve().parent.parent / 'test' / 'data' / 'flexinol'

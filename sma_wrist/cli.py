@@ -271,10 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
     i.set_defaults(func=cmd_info)
 
     d = diagnose_arguments(sub.add_parser(
-        'diagnose', help='what the model gets wrong in a recorded run: locate, name, extend, measure (docs/diagnose.md)'))
+        'diagnose', help='what the model gets wrong in a recorded run: locate, name, extend, measure (doc/explanation/diagnosis.md)'))
     d.set_defaults(func=cmd_diagnose)
 
-    d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (docs/protocol.md)')
+    d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (doc/explanation/protocol.md)')
     emulator_arguments(d)
     d.set_defaults(func=cmd_emulate_device)
 
@@ -282,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_identify_parser(sub)  # identify hysteresis / thermal: each sub-command registers its own options
 
     w = sweep_arguments(sub.add_parser('sweep', help='closed loops over sampled plants x controllers x payloads '
-                                                     '(vectorised; --scheduler: Dask), docs/sweep.md'))
+                                                     '(vectorised; --scheduler: Dask), doc/howto/sweep.md'))
     w.set_defaults(func=cmd_sweep)
 
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')

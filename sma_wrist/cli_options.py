@@ -81,7 +81,7 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
 
 
 def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
-    """Options of ``sma-wrist sweep`` (docs/sweep.md)."""
+    """Options of ``sma-wrist sweep`` (doc/howto/sweep.md)."""
     p.add_argument('--plants', type=int, default=20, help='number of sampled plants N (default 20)')
     p.add_argument('--seed', type=nonnegative_int, default=0, help='seed of the plant sample and the sensor noise (default 0)')
     p.add_argument('--controllers', default='inverse_adaptive,direct_adaptive,pid', help='comma separated')
@@ -106,7 +106,7 @@ def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:
     p.add_argument('--params-file', action='append', default=[], metavar='FILE',
                    help='ROS params file of the node graph applied after config/wrist.yaml (as sma-wrist run '
                         '--params-file; e.g. your identified hysteresis_file / thermal_file); repeatable. '
-                        'A parameter the sweep cannot honour is refused (docs/sweep.md)')
+                        'A parameter the sweep cannot honour is refused (doc/howto/sweep.md)')
     p.add_argument('--json', action='store_true', help='print the summary as JSON')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
     return p

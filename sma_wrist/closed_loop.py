@@ -191,7 +191,7 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     if stalled:
         raise SmaWristError(
             f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {sim_s:.2f} s of device time: check '
-            f"hardware_bridge's port, that the device is powered and streaming (docs/protocol.md); TEMs were "
+            f"hardware_bridge's port, that the device is powered and streaming (doc/explanation/protocol.md); TEMs were "
             f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if bag is not None else '') +
             (f'. What the bridge saw: {why}' if why else ''))
     summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,

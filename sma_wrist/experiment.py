@@ -13,8 +13,8 @@ embedded runtime, and writes ``runs/ch6/``:
 - ``tem_tracking.png``: the TEM controller's own story (seed Figs. 5.24-5.28): one module
   cannot hold two temperatures, two layers can;
 - ``family/`` (``family`` > 0): the same controllers and payloads on ``family`` plants that are not
-  the controllers' model (:mod:`sma_wrist.plants.spread`, issue 14's spread), run by the vectorised
-  sweep (bit-equal to the graph, docs/sweep.md); the report gives their median / 95th percentile /
+  the controllers' model (:mod:`sma_wrist.plants.spread`, its default family), run by the vectorised
+  sweep (bit-equal to the graph, doc/howto/sweep.md); the report gives their median / 95th percentile /
   share under 15 % beside each nominal figure.
 """
 from __future__ import annotations
@@ -216,11 +216,11 @@ def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plo
                          f'| {r["peak_command_V"]:.1f} |{fam}')
     if family:
         lines += ['', f'Nominal columns: the node graph on the controllers\' own model, noise-free. Off-model column: '
-                  f'the same controllers and payloads on {family["n_plants"]} plants sampled from issue 14\'s spread '
+                  f'the same controllers and payloads on {family["n_plants"]} plants sampled from the off-model family '
                   f'(seed {family["seed"]}: transition temperatures +-10 degC, stroke +-30 %, TEM gain and losses '
                   '+-30 %, coolant/ambient +-5 degC, thermocouple noise and lag, potentiometer noise; '
                   '`sma_wrist/plants/spread.py`), run by the sweep engine, which reproduces the graph bit for bit '
-                  f'(docs/sweep.md); max error over the last cycle, the seed\'s requirement is < 15 %. Files: '
+                  f'(doc/howto/sweep.md); max error over the last cycle, the seed\'s requirement is < 15 %. Files: '
                   '`family/`.' + (' The family runs the graph\'s parameters as the params files set them: '
                                   + ', '.join(f'{n}.{k} = {v}' for n, kv in family['parameters_changed'].items()
                                               for k, v in kv.items()) + '.' if family.get('parameters_changed') else '')
@@ -244,9 +244,9 @@ def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plo
     lines += [f'- {c}' for c in seed_claims(rows)]
     lines += ['', 'Why results can differ from the seed: the plant is the project\'s default SD-GPI set and TEM '
               'model, not the seed\'s hardware (its printed tables do not reproduce its loops, '
-              'docs/hysteresis_tables.md); the runs are noise-free and the inverse mode here keeps its hysteresis '
+              'doc/explanation/model.md); the runs are noise-free and the inverse mode here keeps its hysteresis '
               'memory from the measured temperatures and crosses the hysteresis gap ahead of each turn, which the '
-              'seed\'s composition does not (docs/control.md, where every controller decision is measured).', '']
+              'seed\'s composition does not (doc/explanation/controllers.md, where every controller decision is measured).', '']
     if plots:
         lines += ['## Plots', ''] + [f'![tracking {m:g} kg](tracking_{m:g}kg.png)' for m in loads] + [
             '', 'TEM controller alone (seed Figs. 5.24-5.28): one module cannot hold two temperatures, two layers can; '

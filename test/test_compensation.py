@@ -174,7 +174,7 @@ def test_many_wires_in_one_compensator_are_the_two_wire_ones_to_the_bit() -> Non
 
 
 def test_strain_informative_holds_on_a_stop_and_while_still_with_a_slack_wire() -> None:
-    """core.hysteresis.compensation.strain_informative (docs/control.md, ctrl14e): per wrist, both wires."""
+    """core.hysteresis.compensation.strain_informative (doc/explanation/controllers.md): per wrist, both wires."""
     from sma_wrist.core.hysteresis.compensation import strain_informative
     taut, slack = [1e8, 1e8], [1e8, 0.0]
     q = np.array([0.5, -0.35, 1.4, 0.5, 0.5, 0.5])
@@ -202,7 +202,7 @@ def test_track_holds_the_shift_where_told_and_is_unchanged_elsewhere() -> None:
 
 
 def test_shifts_hold_while_either_wire_of_a_pair_is_outside_the_load_range() -> None:
-    """MuscleCompensator(hold_outside_load_range=True) (docs/control.md "The pair's load range gates the shift";
+    """MuscleCompensator(hold_outside_load_range=True) (doc/explanation/controllers.md;
     off by default since "The load-range gate, after the slope fix"): the measured Flexinol wrist starts with
     muscle 1 at 14 MPa and muscle 2 slack, below the SD-GPI's 0.2-1.5 kgf. With the gate both wires hold while
     either is out of range, on the node's (2,) and the sweep's flat (2N,) wires alike; inside the range the
@@ -236,7 +236,7 @@ def test_shifts_hold_while_either_wire_of_a_pair_is_outside_the_load_range() -> 
 
 @pytest.mark.parametrize('compiled', [True, False])
 def test_a_wire_that_transformed_where_the_model_is_flat_moves_the_shift_only_the_right_way(compiled: bool) -> None:
-    """docs/control.md "The shift's slope": inside the model's loop the central difference of track's step spans
+    """doc/explanation/controllers.md: inside the model's loop the central difference of track's step spans
     both branches' memoryless parts (Eq. 3.22) and reads ~+0.0009 mm/degC; times the error of a wire that
     transformed where the model is flat (a family plant: 1.6 mm) it drove the shift up at ~1 degC/s, the way
     that makes the model colder still, to its limit. A wire shorter than the model predicts needs the model's

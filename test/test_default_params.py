@@ -1,4 +1,4 @@
-"""The default SD-GPI set reproduces the behaviour Sec. 3.2 describes (docs/model.md, "Material").
+"""The default SD-GPI set reproduces the behaviour Sec. 3.2 describes (doc/explanation/model.md).
 
 Loops are run on Sec. 3.2's input (one 20 -> 78 -> 20 degC sawtooth period, 80 mm wire) at the
 described loads. Definitions, fixed before looking at the numbers:

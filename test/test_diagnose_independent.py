@@ -1,10 +1,10 @@
-"""sma-wrist diagnose on effects it was not designed on (issue 13).
+"""sma-wrist diagnose on effects it was not designed on.
 
-A clean closed-loop run of the node graph (pid, 0.3 kg) is recorded once per session;
+A clean closed-loop run of the node graph (pid, 0.3 kg) is recorded once per test run;
 :mod:`sma_wrist.diagnose.distort` then rewrites it the way a real sensor, driver or wire
 would (without the diagnosis' own extension code) and the diagnosis must name the right
-subsystem. Each of the first five tests reproduces a failure of the diagnosis before
-issue 13 (the verdict it gave then is in the test's docstring).
+subsystem. Each of the first five tests reproduces a failure of a diagnosis without the per-channel
+sensor and driver effects (the verdict it gave then is in the test's docstring).
 """
 from __future__ import annotations
 

@@ -18,7 +18,7 @@ from sma_wrist.runs import load_run
 
 PID_LOADS = (0.1, 0.2, 0.3, 0.4, 0.5, 0.6)
 DIRECT_LOADS = (0.1, 0.35, 0.6)
-#: issue 4's target: inverse_adaptive under 5 % at every payload up to 0.6 kg
+#: the inverse mode's target: under 5 % at every payload up to 0.6 kg
 INVERSE_LOADS = PID_LOADS
 
 
@@ -50,7 +50,7 @@ def _face_errors(bag):
 
 @pytest.mark.parametrize('controller', ['inverse_adaptive', 'pid'])
 def test_tem_faces_stay_inside_their_window_at_the_heaviest_load(experiment_dir, controller):
-    """The predictive face protection (docs/thermal.md): with the fixed 75 degC switch a face
+    """The predictive face protection (doc/explanation/model.md): with the fixed 75 degC switch a face
     reached 84.5 degC at 0.6 kg; plant_sim reports any face outside 0-80 degC."""
     assert _face_errors(experiment_dir / 'main' / f'{controller}_0.6kg') == []
 
@@ -68,12 +68,12 @@ def test_experiment_report_has_every_run_and_checks_the_seed_claims(experiment_d
 
 
 def test_experiment_report_puts_the_off_model_family_beside_each_nominal_figure(experiment_dir, tracking_runs):
-    """Issue 14: nominal and off-model figures side by side in the experiment report. The family cell of each
+    """Nominal and off-model figures side by side in the experiment report. The family cell of each
     payload is the sweep's own result for that sampled plant (family/results.jsonl), not the nominal run."""
     table = json.loads((experiment_dir / 'direct' / 'table.json').read_text())
     rows = [json.loads(line) for line in (experiment_dir / 'direct' / 'family' / 'results.jsonl').read_text().splitlines()]
     text = (experiment_dir / 'direct' / 'report.md').read_text()
-    assert 'off-model family: median / p95 / share < 15 %' in text and 'issue 14' in text
+    assert 'off-model family: median / p95 / share < 15 %' in text and 'plants sampled from the off-model family' in text
     assert sorted(r['payload_kg'] for r in rows) == sorted(DIRECT_LOADS) and {r['group'] for r in rows} == {'spread'}
     for cell in table['family']['cells']:
         row, = [r for r in rows if abs(r['payload_kg'] - cell['payload_kg']) < 1e-9]
@@ -98,9 +98,9 @@ def test_closed_loop_tracks_the_seed_sine_within_15_percent(tracking_runs, contr
 
 @pytest.mark.parametrize('payload', INVERSE_LOADS)
 def test_inverse_adaptive_stays_under_5_percent_at_every_payload(tracking_runs, payload):
-    """Issue 4's target. Observed-memory inverse, reversal lead and predictive face protection
-    (docs/control.md): measured 2.11-2.82 %; 6.41 % at 0.6 kg with the fixed 75 degC switch; 2.56-3.40 %
-    (126 s) with issue 14's target prefilter and adapted temperature axis."""
+    """The inverse mode's target. Observed-memory inverse, reversal lead and predictive face protection
+    (doc/explanation/controllers.md): measured 2.11-2.82 %; 6.41 % at 0.6 kg with the fixed 75 degC switch; 2.56-3.40 %
+    (126 s) with the target prefilter and adapted temperature axis."""
     r = tracking_runs[('inverse_adaptive', payload)]
     assert r['window'] == 'last_cycle'
     assert r['max_error_pct'] < 5.0, r

@@ -137,7 +137,7 @@ def test_faults_drive_zero_volts(emulator, graph, fault):
 
 @pytest.mark.parametrize('fault', ['angle_adc_full_scale', 'angle_out_of_range', 'temperature_adc_full_scale'])
 def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulator, graph, tmp_path, fault):
-    """Issue 15 item 7: the faulty reading cut the TEMs but reached joint_states, the bag and the metrics."""
+    """A faulty reading cuts the TEMs and must not reach joint_states, the bag and the metrics."""
     from sma_wrist.bag import read_bag
     emu = emulator(noise_counts=0.0)
     rt, bridge, probe = graph(emu, (6.0, 0.0))
@@ -223,7 +223,7 @@ def test_unplug_reconnects_with_backoff_and_recovers(emulator, graph):
 @pytest.mark.parametrize('reminder_s', [None, 0.02])
 def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(emulator, graph, monkeypatch,
                                                                                 reminder_s):
-    """Issue 15 item 4: an ERROR every ~54 ms while the link was down (the text carried a changing age)."""
+    """A lost link is one ERROR line and throttled reminders, not a line every ~54 ms with a changing age in it."""
     import rclpy.logging
 
     from sma_wrist.nodes import hardware_bridge
@@ -263,8 +263,8 @@ def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(e
 @pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
 def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
                                                                       source):
-    """Issue 15 item 8: the bridge stamped /diagnostics with its steady/system clock (52.7 s) while its
-    measurements and /clock carried device time (118 s). The system clock here starts in 2023."""
+    """/diagnostics carries device time, as the measurements and /clock do, not the steady or system clock the
+    bridge polls on (those would read 52.7 s where the device reads 118 s). The system clock here starts in 2023."""
     from sma_wrist.runtime.launch import Runtime
     params = {}
     if source == 'hardware_bridge':
@@ -335,7 +335,7 @@ def test_the_stress_estimate_filters_noisy_inputs_and_passes_clean_ones():
     estimate was biased too (here +17 MPa on the hot wire at 0.3 degC / 3 mrad). The inverse mode takes
     this stress. The bridge now takes the inputs through a Kalman filter whose measurement noise is the
     window's own spread: noisy inputs are smoothed, clean ones (variance 0) pass as they are, so a device
-    with clean sensors keeps its lag-free estimate (docs/control.md "A filtered stress estimate")."""
+    with clean sensors keeps its lag-free estimate (doc/explanation/controllers.md)."""
     from sma_wrist.hw.estimate import InputFilter, StressEstimator
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     defaults = {p.name: p.default for p in HardwareBridge.PARAMS}
@@ -468,7 +468,7 @@ def test_the_emulated_thermocouple_chip_holds_and_rounds_its_readings():
 
 
 def test_the_emulated_device_can_hold_a_plant_that_is_not_the_model(tmp_path, capsys):
-    """--plant puts a registered plant behind the device (the issue's "independent device": another wire model
+    """--plant puts a registered plant behind the device (an "independent device": another wire model
     through hardware_bridge), in a scenario's perturbations, its sensors' lag and noise on what is reported. The
     device then reports that plant, to the ADC's resolution: here the phase-fraction wrist's own rest angle and its
     thermocouple, not the model's."""
@@ -561,7 +561,7 @@ def test_cli_emulator_on_a_pty(tmp_path):
 #: tolerance of the hardware-in-the-loop run vs the simulator, percentage points of the reference range.
 #: Measured on an idle 2-core machine at time scale 3: 7.41 / 3.38 % vs plant_sim's 7.22 / 2.95 %
 #: (ADC quantisation and noise, window averaging, the filtered velocity). On a loaded machine the
-#: bridge skips windows it cannot keep up with (by design, docs/protocol.md) and tracks worse.
+#: bridge skips windows it cannot keep up with (by design, doc/explanation/protocol.md) and tracks worse.
 CLOSED_LOOP_TOL_PCT = {'max_error_pct': 5.0, 'rms_error_pct': 1.5}
 TIME_SCALE = 3.0
 

@@ -1,7 +1,7 @@
 """sma-wrist identify hysteresis: reading, segmentation, bad input, real data, synthetic round trip.
 
 Real data: test/data/sma_react (SMA-REACT, BSD-3-Clause; README there). The bounds below are
-the numbers measured on it (docs/identification.md), rounded up a little, not tuned tolerances.
+the numbers measured on it (doc/howto/identify_wire.md), rounded up a little, not tuned tolerances.
 """
 from __future__ import annotations
 
@@ -140,7 +140,7 @@ def nitihf(tmp_path_factory: pytest.TempPathFactory) -> dict:
 
 def test_real_nitihf_fit_and_held_out_load(nitihf: dict) -> None:
     fit = {round(d['stress_MPa']): d for d in nitihf['fit']['per_load']}
-    # measured (docs/identification.md), % of stroke: GPI per load 2.6 / 1.3 / 0.6 / 0.6 and
+    # measured (doc/howto/identify_wire.md), % of stroke: GPI per load 2.6 / 1.3 / 0.6 / 0.6 and
     # SD-GPI 14.3 / 13.0 / 4.6 / 2.6 at 50 / 100 / 300 / 400 MPa
     for s, gpi, sd in ((50, 3.0, 16.0), (100, 1.5, 15.0), (300, 1.0, 5.5), (400, 1.0, 3.5)):
         assert fit[s]['gpi_rms_pct'] < gpi, fit[s]
@@ -180,7 +180,7 @@ def test_real_nitihf_interior_held_out_load_is_interpolated_best_by_the_saturati
     stress) and the saturating stroke law. The fit is the same on every CPU (core/hysteresis/trf.py);
     the quadratics' swing between 200 and 400 MPa that this test asserted before (> 30 %) was where
     scipy's solver happened to end: with the data perturbed by 1e-12 it gave 6.5-8792 %, the
-    fixed-order solver 7.0-7.9 % (docs/identification.md "The same data on two CPUs")."""
+    fixed-order solver 7.0-7.9 % (doc/howto/identify_wire.md)."""
     from sma_wrist.core.hysteresis.identification import fit_sdgpi, fit_sdgpi_cc, sdgpi_gpi_vectors, simulate_batch
     from sma_wrist.identify.hysteresis import choose_edges
     from sma_wrist.identify.io import REF_LENGTH_MM
@@ -208,7 +208,7 @@ def test_real_nitihf_interior_held_out_load_is_interpolated_best_by_the_saturati
     # quadratic 7.13 %, Clausius-Clapeyron 6.65 %, saturating 1.69 %
     assert err['quadratic'] < 10.0, err
     assert err['clausius-clapeyron'] < 8.0, err
-    assert err['saturating'] < 3.0, err  # the saturating stroke (docs/identification.md)
+    assert err['saturating'] < 3.0, err  # the saturating stroke (doc/howto/identify_wire.md)
     assert err['saturating'] < 0.5 * min(err['quadratic'], err['clausius-clapeyron']), err  # measured 3.9x
 
 
@@ -230,7 +230,7 @@ print(r.theta.tobytes().hex())
 
 def test_the_fit_is_the_same_bits_with_other_simd_paths_and_blas_kernels() -> None:
     """The same loops give the same wire whichever of numpy's SIMD paths and OpenBLAS's kernels run
-    (docs/identification.md "The same data on two CPUs": before core/hysteresis/trf.py this fit's 300 MPa
+    (doc/howto/identify_wire.md: before core/hysteresis/trf.py this fit's 300 MPa
     prediction was 32.5 % here, 43.3 % with numpy's AVX2 paths and OpenBLAS's Haswell kernel)."""
     import os
     import subprocess
@@ -330,7 +330,7 @@ def test_a_window_outside_the_wire_model_or_a_bad_file_is_refused(synthetic: tup
 
 
 def test_closed_loop_runs_on_the_identified_wire(synthetic: tuple[dict, SDGPIParams], tmp_path: Path) -> None:
-    """All nodes on the embedded runtime with the identified 60-120 degC wire (docs/identification.md)."""
+    """All nodes on the embedded runtime with the identified 60-120 degC wire (doc/howto/identify_wire.md)."""
     from sma_wrist import runtime
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
@@ -449,7 +449,7 @@ def test_identify_on_measured_flexinol_wire(tmp_path: Path) -> None:
     """A measured Flexinol loop set (50-200 MPa, 30 -> 140 -> 30 degC), 150 MPa held out.
 
     The Clausius-Clapeyron law, 4 training stresses, no leave-one-load-out: ~10 s. Bounds are
-    the measured values (docs/identification.md "A real wire in the wrist") with margin.
+    the measured values (doc/howto/identify_wire.md) with margin.
     """
     files = [str(FLEX / f'{s}MPa.txt') for s in (50, 100, 172, 200)]
     r = run(Options(files, [str(FLEX / '150MPa.txt')], out=str(tmp_path), loo=False, plots=False,

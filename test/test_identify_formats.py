@@ -3,7 +3,7 @@
 Every variant is written from a real measured loop (test/data/flexinol/100MPa.txt) the way
 another tool would export it and must read back to the same temperatures, strains and
 stresses; every malformed file must give an error naming the file and what is wrong.
-docs/identification.md "Input" and "More measured data, as users' files look".
+doc/howto/identify_wire.md and "More measured data, as users' files look".
 """
 from __future__ import annotations
 
@@ -312,7 +312,7 @@ def test_identify_on_measured_nitipd_multiload_export(tmp_path: Path) -> None:
     """The raw NiTiPd export (5 loads in one file), 100 MPa held out: its rows moved to a second file unchanged.
 
     Clausius-Clapeyron law on 22 / 50 / 150 / 200 MPa, no leave-one-load-out (~10 s). Bounds are
-    the measured values (docs/identification.md) with margin; gauge length assumed 200 mm
+    the measured values (doc/howto/identify_wire.md) with margin; gauge length assumed 200 mm
     (errors in % of stroke do not depend on it).
     """
     lines = NITIPD.read_text().splitlines()
@@ -330,7 +330,7 @@ def test_identify_on_measured_nitipd_multiload_export(tmp_path: Path) -> None:
         assert f['gpi_rms_pct'] < 2.0 and f['sdgpi_rms_pct'] < 6.5, f
     (h,) = r['holdout']
     # measured 5.46 / 9.86 % (SD-GPI 5.27 % of stroke overall on the training loads), identical with numpy's AVX-512
-    # or AVX2 loops and OpenBLAS's default or Haswell kernel (docs/identification.md "The same data on two CPUs")
+    # or AVX2 loops and OpenBLAS's default or Haswell kernel (doc/howto/identify_wire.md)
     assert h['rms_pct'] < 7.0 and h['max_pct'] < 14.0, h
     # the built-in wire (30-80 degC) is far off this one (-45..+40 degC)
     assert min(b['rms_pct'] for b in r['before']['per_load']) > 25.0

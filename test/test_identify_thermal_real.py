@@ -5,7 +5,7 @@ row per second, without a time column; only the chamber's temperature and the PW
 fit must do on it: predict the module's other runs far better than Table 4.9 does, and say what such data cannot
 determine (a parameter on its bound, a fit that did not converge, a held-out run beyond the fitted range).
 
-Bounds are the measurements of 2026-11-28 with margin (docs/identification_thermal.md "A real Peltier"): held-out
+Bounds are the measurements of 2026-11-28 with margin (doc/howto/identify_tems.md): held-out
 RMS 0.58 / 0.62 degC on runs 39 / 16 against Table 4.9's 2.05 / 2.13 degC.
 """
 from __future__ import annotations

@@ -96,7 +96,7 @@ def _lagging_wire(observe: bool, n: int = 1600, dt: float = 0.05) -> float:
 
 
 def test_observed_memory_mirrors_a_lagging_wire_and_the_committed_one_does_not() -> None:
-    """Eq. 5.5 commits the command; a wire that lags it then has another memory (docs/control.md)."""
+    """Eq. 5.5 commits the command; a wire that lags it then has another memory (doc/explanation/controllers.md)."""
     assert _lagging_wire(observe=True) < 1e-9
     assert _lagging_wire(observe=False) > 0.5  # mm, of a 2.8 mm stroke (measured 3.3)
 

@@ -1,6 +1,6 @@
 """numba's on-disk cache follows edits to a kernel's helpers in other files (core/jit.py).
 
-numba keys a cached kernel on its own file only (numba issue #1833): a caller in an unchanged file
+numba keys a cached kernel on its own file only (numba documents it): a caller in an unchanged file
 keeps the old machine code of a helper it inlined from an edited one. The package drops its caches
 when the sources of its kernel folders change; these tests run real numba on a two-file package.
 """
@@ -96,7 +96,7 @@ def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_
     assert in_tree()
     (pkg / 'helper.py').write_text('import numba\n\n@numba.njit(cache=True, inline="always")\n'
                                    'def gain(x):\n    return 3.0 * x\n')
-    assert run('numba alone') == 2.0  # numba issue #1833: the cached caller is stale
+    assert run('numba alone') == 2.0  # numba alone: the cached caller is stale
     assert run('locator') == 3.0
     assert run('in-tree guard') == 3.0
 

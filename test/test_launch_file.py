@@ -1,4 +1,4 @@
-"""The launch files run on the embedded launcher, and a required node's exit ends the launch (issue 15 item 3)."""
+"""The launch files run on the embedded launcher, and a required node's exit ends the launch."""
 from __future__ import annotations
 
 import pytest

@@ -181,7 +181,7 @@ def test_compensator_node_matches_the_core_inverse(probe_factory):
 
 @pytest.mark.parametrize('order', ['in_order', 'interleaved'])
 def test_compensator_pairs_one_cycles_targets_whatever_their_arrival_order(probe_factory, order):
-    """Issue 15 item 6: under ROS the four target topics of one cycle arrive in any order and the next
+    """Under ROS the four target topics of one cycle arrive in any order and the next
     cycle's first ones can overtake this cycle's last; the inverse must see each cycle's own set."""
     from rclpy.parameter import Parameter
 
@@ -289,7 +289,7 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
     assert len(flap) == 21  # /diagnostics sees every change
     assert len([s for s in probe.diagnostics() if s[0].endswith('fault')]) == 4
     assert logged[0] == 'flap: state 0' and logged[1].startswith('flap: state 0 (19 more changes')
-    # an error's onset and its end are always logged, the changing text in between is not (issue 15 item 4)
+    # an error's onset and its end are always logged, the changing text in between is not
     assert logged[2:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']
 
 
@@ -314,7 +314,7 @@ def _compensator_answers(probe_factory, stress: np.ndarray, msgs: list[tuple[str
 
 @pytest.mark.parametrize('order', ['in_order', 'shuffled'])
 def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arrival_order(probe_factory, order):
-    """Issue 15 item 6: the memory and the adapted axis follow the measured ticks (temperatures + angle
+    """The memory and the adapted axis follow the measured ticks (temperatures + angle
     paired by header stamp) one by one: the same answers as the core tracking every tick, when a
     tick's parts arrive in any order, the next tick's first part overtakes this cycle's targets, and
     an old sample arrives late (taking 'the latest' at each cycle's targets mixed ticks)."""
@@ -495,8 +495,8 @@ def test_compensator_observer_parameters_are_validated_with_a_reason():
 
 
 def test_compensator_hands_its_stroke_gain_to_the_core() -> None:
-    """hysteresis_compensator's stroke_gain_per_s (docs/control.md "Issue 14 item 2, continued") reaches
-    MuscleCompensator; the default (0.5 /s, docs/control.md "The shift's slope") is the sweep's STROKE_GAIN_PER_S."""
+    """hysteresis_compensator's stroke_gain_per_s (doc/explanation/controllers.md) reaches
+    MuscleCompensator; the default (0.5 /s, doc/explanation/controllers.md) is the sweep's STROKE_GAIN_PER_S."""
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
@@ -509,7 +509,7 @@ def test_compensator_hands_its_stroke_gain_to_the_core() -> None:
 
 def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory):
     """A joint held on its stop (-0.1 rad) with both wires at 55 degC, the measurement the measured
-    Flexinol run starts from (docs/control.md "The inverse mode on a measured wire"): the strain there
+    Flexinol run starts from (doc/explanation/controllers.md): the strain there
     is the chain's, not the wire's, muscle 1's shift runs to its limit in under 4 s, and /diagnostics
     says so once (WARN naming the wire); with the adaptation off nothing is reported."""
     from builtin_interfaces.msg import Time
@@ -550,17 +550,17 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     assert len(warned) == 1 and warned[0].level == b'\x01'  # WARN, once
     assert 'of muscle 1 at the +-15 degC limit' in warned[0].message and 'muscle 2' not in warned[0].message
     assert run(0.0)[0] == []
-    # hold_shift_on_stop (docs/control.md, ctrl14e): both taut and the joint off its stops, the shift still learns;
+    # hold_shift_on_stop (doc/explanation/controllers.md): both taut and the joint off its stops, the shift still learns;
     # on the stop (-0.35 rad), or standing still with muscle 2 slack, it holds
     assert run(2.0, hold=True, n=100)[1][0] > 3.0
     assert np.all(run(2.0, hold=True, q=-0.35, n=100)[1] == 0.0)
     assert np.all(run(2.0, hold=True, stress=stress * [1.0, 0.0], n=100)[1] == 0.0)
-    # hold_shift_outside_load_range (docs/control.md "The pair's load range gates the shift"; off by default): the
+    # hold_shift_outside_load_range (doc/explanation/controllers.md; off by default): the
     # measured Flexinol wrist's start, muscle 1 at 14 MPa and muscle 2 slack, below the model's 0.2-1.5 kgf
     low = MuscleGeometry().stress_Pa(np.array([0.07, 0.0]))
     assert np.all(run(2.0, stress=low, n=100)[1] == 0.0)
     # ungated the shift moves (at 50 degC: at the clipped 0.2 kgf the model's loop is flat from ~55 degC on, and
-    # a flat loop moves no shift, docs/control.md "The shift's slope")
+    # a flat loop moves no shift, doc/explanation/controllers.md)
     assert np.all(run(2.0, stress=low, n=100, temp=50.0)[1] == 0.0)
     assert np.abs(run(2.0, stress=low, n=100, in_range=False, temp=50.0)[1]).max() > 1.0
 

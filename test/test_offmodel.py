@@ -1,8 +1,8 @@
-"""The controllers on plants that are not their model (issue 14): temperature-axis adaptation of the
+"""The controllers on plants that are not their model: temperature-axis adaptation of the
 inverse, the TEM target prefilter, and short closed loops on perturbed and phase-fraction wrists.
 
 Bounds are the figures measured with ``sma_wrist.plants.loop`` (1 cycle, 0.3 kg) with a margin of
-about a third; docs/control.md has the full 126 s table.
+about a third; doc/explanation/controllers.md has the full 126 s table.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from sma_wrist.plants.loop import (CASES, REVERSAL_BAND_V, LoopResult, reversals
                                    shifted_sdgpi)
 from sma_wrist.sweep.simulate import Case, simulate
 
-#: TEM command sign changes per second allowed (docs/control.md "Chattering"): one heating/cooling
+#: TEM command sign changes per second allowed (doc/explanation/controllers.md): one heating/cooling
 #: cycle per time constant 1 / gain_per_s = 1 s of the TEM loop's error dynamics
 REVERSALS_LIMIT_PER_S = 2.0
 
@@ -102,7 +102,7 @@ def test_both_tem_paths_get_the_filtered_target() -> None:
 def test_reversal_band_is_the_documented_one() -> None:
     assert REVERSAL_BAND_V == 1.0
     u = np.zeros((1000, 2))
-    u[::2, 0], u[1::2, 0] = 24.0, -24.0  # the issue's +-24 V flips at 100 Hz
+    u[::2, 0], u[1::2, 0] = 24.0, -24.0  # +-24 V flips at 100 Hz
     assert reversals_per_s(u, 0.01) == pytest.approx(99.9, abs=0.2)
 
 
@@ -121,7 +121,7 @@ def test_inverse_mode_follows_a_wrist_with_other_transition_temperatures() -> No
 def test_target_prefilter_removes_chattering_on_noisy_sensors() -> None:
     """pid with thermocouple lag + noise and potentiometer noise: measured 2.1 sign changes a second
     (8.0 % max error) with the prefilter, 30.5 (18.2 %) without it. Without it the PID's own output filter
-    (docs/control.md "PID chattering") would hide the noise: 2.26 a second; so the loop without the prefilter
+    (doc/explanation/controllers.md) would hide the noise: 2.26 a second; so the loop without the prefilter
     runs the PID as it was then (Kp / Ki 300 / 60, unfiltered)."""
     r = _one_cycle('sensors', 'pid')
     assert r.reversals_per_s < 1.5 * REVERSALS_LIMIT_PER_S and r.max_error_pct < 11.0
@@ -135,7 +135,7 @@ def test_reference_lead_brings_direct_and_pid_onto_a_weaker_wire() -> None:
     """Stroke x0.7 (a wire with 30 % less stroke than the model's), one cycle at 0.3 kg: measured
     13.4 % (direct_adaptive) and 12.2 % (pid) with the reference leads (1 / 1.25 s, the defaults),
     17.7 and 17.5 % with the seed's laws on q_d(t); chattering 0.9 / 1.2 sign changes a second.
-    direct_adaptive's proportional map (docs/control.md "Direct adaptive: a proportional temperature map")
+    direct_adaptive's proportional map (doc/explanation/controllers.md)
     then took it to 8.49 %, and on this wire that map alone does most of it (8.71 % without the lead), so
     direct's law on q_d(t) here is the one before both (3 N/degC, unfiltered: 17.73 %)."""
     cases = [(CASES['stroke x0.7'](0.3), m) for m in ('direct_adaptive', 'pid')]
@@ -150,7 +150,7 @@ def test_reference_lead_brings_direct_and_pid_onto_a_weaker_wire() -> None:
 
 
 def test_direct_proportional_map_tracks_a_weaker_wire_without_chattering() -> None:
-    """direct_adaptive's temperature map (docs/control.md "Direct adaptive: a proportional temperature map"),
+    """direct_adaptive's temperature map (doc/explanation/controllers.md),
     one cycle at 0.3 kg: measured stroke x0.7 8.49 % and noisy sensors 0.80 sign changes a second with
     k = 10 N/degC and the 0.1 s output filter (the defaults); 13.44 % and 3.06 /s with the map before
     (3 N/degC, a relay between 20 and 80 degC for errors over ~0.03 rad); 2.32 /s with k = 10 unfiltered
@@ -187,24 +187,24 @@ def _without_inverse(case: str) -> dict[str, LoopResult]:
 @pytest.mark.parametrize('mode, bound', [('direct_adaptive', 10.0), ('pid', 10.0)])
 def test_modes_without_inverse_hold_on_other_heat_losses(mode: str, bound: float) -> None:
     """Muscle-face losses +30 %: measured 7.2 % (direct) and 7.7 % (pid), 1.1 and 1.5 sign changes a second;
-    with the reference leads and the direct map's 3 N/degC (issue 14 item 2) 7.8 and 6.8 %, 1.1 and 1.5;
+    with the reference leads and the direct map's 3 N/degC 7.8 and 6.8 %, 1.1 and 1.5;
     direct with its proportional map (10 N/degC, 0.1 s filter) 7.38 %, 0.80."""
     r = _without_inverse('losses +30%')[mode]
     assert r.max_error_pct < bound and r.reversals_per_s < REVERSALS_LIMIT_PER_S
 
 
 #: the phase-fraction wrist, one cycle: measured max error 39.6 / 59.6 / 47.3 % and 1.7 / 0.7 / 1.4 sign
-#: changes a second; issue 14's < 15 % is NOT met on this plant (docs/control.md): these bounds only
+#: changes a second; the < 15 % requirement is NOT met on this plant (doc/explanation/controllers.md): these bounds only
 #: guard the figures against getting worse
 PHASE_FRACTION = {'inverse_adaptive': 50.0, 'direct_adaptive': 75.0, 'pid': 60.0}
 
 
-#: Known shortfalls (issue 14, open): the bounds above were set on an approximate one-wrist loop;
+#: Known shortfall: the bounds above were set on an approximate one-wrist loop;
 #: on the sweep engine, which equals the node graph to the last bit, the inverse reaches 58.2 %
-#: (51-70 % over noise seeds; 58.9 % with the observer and shifted window, issue 14 item 2). Strict:
+#: (51-70 % over noise seeds; 58.9 % with the observer and shifted window). Strict:
 #: the day a change meets the bound, this marker must go. (pid's marker went with its output filter:
-#: 3.28 sign changes a second and 44.1 % before, 0.32 and 47.3 % after; docs/control.md "PID chattering".)
-_SHORT = {'inverse_adaptive': 'inverse on the phase-fraction wrist: 58 % > 50 % (issue 14 open)'}
+#: 3.28 sign changes a second and 44.1 % before, 0.32 and 47.3 % after; doc/explanation/controllers.md.)
+_SHORT = {'inverse_adaptive': 'inverse on the phase-fraction wrist: 58 % > 50 %, not yet solved'}
 
 
 @pytest.mark.parametrize('mode', [pytest.param(m, marks=pytest.mark.xfail(strict=True, reason=_SHORT[m]))
@@ -219,7 +219,7 @@ def test_pid_output_filter_removes_the_stick_slip_chattering() -> None:
     """Nominal plant at 0.1 kg, noise-free, 24-30 s: the joint sticks and slips (~1.2 Hz, ~40 mrad a slip) and
     Kp times that sawtooth swung the TEMs between heating and cooling: measured 2.67 sign changes a second
     with the PID before (Kp / Ki 300 / 60, unfiltered), 2.33 with today's gains (400 / 30) unfiltered, 0.83
-    with the 0.3 s output filter (the default; docs/control.md "PID chattering")."""
+    with the 0.3 s output filter (the default; doc/explanation/controllers.md)."""
     case = CASES['nominal'](0.1)
     now = run_loop(case, 'pid', 30.0, window_s=6.0)
     assert now.reversals_per_s < REVERSALS_LIMIT_PER_S
@@ -229,7 +229,7 @@ def test_pid_output_filter_removes_the_stick_slip_chattering() -> None:
 
 
 def test_true_temperature_reaches_only_the_named_consumer() -> None:
-    """The diagnosis behind docs/control.md's "Where the thermocouple error acts" (126 s, sensors case:
+    """The diagnosis behind doc/explanation/controllers.md's "Where the thermocouple error acts" (126 s, sensors case:
     inverse 17.67 % as built, 3.34 % with the compensator on the truth, 18.86 % with the TEM loop on it):
     on noisy sensors each choice changes the loop; pid has no compensator, so 'compensator' leaves it
     bit-equal."""
@@ -284,8 +284,8 @@ def test_observer_follows_the_muscle_through_noise_and_lag() -> None:
 def test_observer_in_front_of_the_compensator_recovers_the_inverse_on_noisy_sensors() -> None:
     """One cycle, sensors case (thermocouples 0.2 s + 0.2 degC, pot 3 mrad): measured 13.9 % on the
     thermocouples, 2.87 % (2.2 sign changes a second) with MuscleTemperatureObserver(0.33 s, 0.2 s) in
-    front of the compensator (the true temperature there: 3.5 %); 3.38 % with the defaults of issue 14
-    item 2 (temperature_source observer, window following the shift, shift gain 2 /s)."""
+    front of the compensator (the true temperature there: 3.5 %); 3.38 % with the defaults
+    (temperature_source observer, window following the shift, shift gain 2 /s)."""
     # the observer's own effect: without the online TEM estimate (core.thermal.online), which learns in this cycle
     assert _one_cycle('sensors', 'inverse_adaptive', compensator_observer=None, window_follows_shift=False,
                       online_thermal=None).max_error_pct > 10.0
@@ -299,9 +299,9 @@ def test_inverse_window_follows_the_learnt_shift() -> None:
     """Transitions 10 degC below the model's, the defaults (observer, shift gain 2 /s, stroke 0.5 /s), one
     cycle at 0.3 kg: measured 2.93 % with the inverse's window moved by each wire's shift (its answers span
     20-80 degC on the wire's axis), 11.31 % without (a wire colder than the model never gets above
-    80 - |shift| degC; docs/control.md "Issue 14 item 2"). Mixed B (transitions -5 degC, stroke x1.15, TEM
+    80 - |shift| degC; doc/explanation/controllers.md). Mixed B (transitions -5 degC, stroke x1.15, TEM
     gain +15 %, losses -15 %, ambient -3 degC, noisy sensors) shows it less: 5.01 vs 8.09 %. Before the
-    shift's slope was kept <= 0 (docs/control.md "The shift's slope") mixed B read 5.61 vs 23.74 %: part of
+    shift's slope was kept <= 0 (doc/explanation/controllers.md) mixed B read 5.61 vs 23.74 %: part of
     that was the wrong-way drift the slope's sign had caused, not the window."""
     # the window's own effect: without the online TEM estimate, which rescues a fixed window too
     assert _one_cycle('T-10', 'inverse_adaptive', online_thermal=None).max_error_pct < 5.0
@@ -356,11 +356,11 @@ def _stroke_run(stroke: float, gain: float) -> MuscleCompensator:
 
 
 def test_the_inverse_learns_a_wire_with_another_stroke() -> None:
-    """Stroke x0.75 (issue 14's family spans 0.7-1.3): the stroke ratio learns part of it on the loop's ends
+    """Stroke x0.75 (the family spans 0.7-1.3): the stroke ratio learns part of it on the loop's ends
     (measured 0.905), the shift absorbs less of it (+3.9 degC, +5.1 without); on the model itself the ratio
-    stays 1 and nothing is learnt (docs/control.md "Issue 14 item 2, continued").
+    stays 1 and nothing is learnt (doc/explanation/controllers.md).
 
-    Measured 0.69 before the shift's slope was kept <= 0 (docs/control.md "The shift's slope"): the wrong-way
+    Measured 0.69 before the shift's slope was kept <= 0 (doc/explanation/controllers.md): the wrong-way
     drift then ran the shift to +13 degC on the flat cold end and left the stroke the whole error. Now the
     cooling branch's tail near 20 degC, where the shift has a slope, takes about half of it; x1.3 reads 1.17
     (shift -4.9 degC, -9.1 without)."""
@@ -381,7 +381,7 @@ def test_the_inverse_learns_a_wire_with_another_stroke() -> None:
 def test_stroke_adaptation_fixes_a_wire_with_a_larger_stroke_in_one_cycle() -> None:
     """Stroke x1.3 at 0.3 kg, the first 47.1 s (3/4 of a cycle; max error over the last 15.7 s, the
     reference's descent): measured 2.90 % with the stroke adapting (stroke_gain_per_s 0.5 /s, the default since
-    docs/control.md "The shift's slope"), 21.94 % with the model's stroke (stroke_gain_per_s 0; the shift
+    doc/explanation/controllers.md), 21.94 % with the model's stroke (stroke_gain_per_s 0; the shift
     alone learns it over the second cycle)."""
     case = CASES['stroke x1.3'](0.3)
     assert run_loop(case, 'inverse_adaptive', 47.1, window_s=15.7).max_error_pct < 4.0
@@ -389,15 +389,15 @@ def test_stroke_adaptation_fixes_a_wire_with_a_larger_stroke_in_one_cycle() -> N
 
 
 def test_the_inverse_adapts_on_a_wire_identified_from_measured_loops(tmp_path) -> None:
-    """docs/control.md "The load-range gate, after the slope fix": the Flexinol wire identified from its measured
+    """doc/explanation/controllers.md: the Flexinol wire identified from its measured
     loops (test/data/flexinol, maestrolab, MIT; TEMs rated 120 degC, identify's wrist_params.yaml) runs slack or
     below its 50-200 MPa calibration most of the time, so with the gate on its shift and stroke never adapted:
     a wire 5 degC hotter than that model, 0.3 kg, 126 s, gave 51.5 % (pid 9.7 %). With the gate off (the
     default) the shift adapts on it: 5.6 %, and 5.2 % on the identified wire itself (8.0 % gated).
 
     On this wire the inverse's TEM commands chatter (3.3 / 3.5 sign changes a second without tem_controller's
-    chatter guard, session 10); with it (the default) 1.7 / 1.7, at 8.1 / 7.5 % (docs/control.md "A chatter
-    guard"). Gated, with the guard: 54.1 %. (Figures with session 10's CPU-independent fit; with the earlier
+    chatter guard); with it (the default) 1.7 / 1.7, at 8.1 / 7.5 % (doc/explanation/controllers.md). Gated, with
+    the guard: 54.1 %. (Figures with the CPU-independent fit; with the earlier
     fit of the same loops 5.2 / 5.6 % unguarded, 7.5 / 6.5 % guarded.)"""
     from pathlib import Path
 
@@ -420,7 +420,7 @@ def test_the_inverse_adapts_on_a_wire_identified_from_measured_loops(tmp_path) -
     own, hotter, own_free, hotter_free = (r['max_error_pct'] for r in rows)
     flips = [r['sign_changes_per_s'] for r in rows]
     assert own_free < 7.0 and hotter_free < 8.0, (own_free, hotter_free)  # measured 5.96 / 6.11 %
-    assert min(flips[2:]) > 2.5, flips  # measured 3.29 / 3.47 a second: the relay of docs/control.md
+    assert min(flips[2:]) > 2.5, flips  # measured 3.29 / 3.47 a second: the relay of doc/explanation/controllers.md
     assert max(flips[:2]) < REVERSALS_LIMIT_PER_S, flips  # measured 1.67 / 1.67 with the guard
     assert own < 10.0 and hotter < 9.0, (own, hotter)  # measured 8.09 / 7.50 %: the guard's price
     gated = simulate(cases[1:], 126.0, **{**kw, 'hold_shift_outside_load_range': True})[0][0]['max_error_pct']

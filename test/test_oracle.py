@@ -1,6 +1,6 @@
 """The oracle diagnosis (sma_wrist.plants.oracle): the closed loops given the plant's own models.
 
-docs/control.md "What a perfect model would give (oracle14, 2026-11-24)" has the family's figures
+doc/explanation/controllers.md has the family's figures
 (126 s); these are short runs that check each switch reaches what it names and nothing else.
 """
 from __future__ import annotations

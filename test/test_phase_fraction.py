@@ -1,4 +1,4 @@
-"""The phase-fraction benchmark wrist (issue 14, plant b): its own physics, and the controllers on it."""
+"""The phase-fraction benchmark wrist: its own physics, and the controllers on it."""
 from __future__ import annotations
 
 import dataclasses

@@ -1,5 +1,5 @@
 """The coupled plant: joint range and capacity, step-size convergence, typed errors, flags,
-and the equivalence of the batched, per-sample and plain-reference paths (docs/model.md)."""
+and the equivalence of the batched, per-sample and plain-reference paths (doc/explanation/model.md)."""
 from __future__ import annotations
 
 import math
@@ -23,7 +23,7 @@ def tem_window() -> tuple[float, float]:
 def swing(payloads: np.ndarray, T_lo: float, T_hi: float) -> tuple[np.ndarray, np.ndarray]:
     """Angle range (min, max) after the first half cycle of slow antagonistic temperature swings.
 
-    A 10 s period: within 3.5e-4 rad of docs/model.md's 60 s at 0-0.75 kg (the margins tested are >= 6e-3 rad),
+    A 10 s period: within 3.5e-4 rad of doc/explanation/model.md's 60 s at 0-0.75 kg (the margins tested are >= 6e-3 rad),
     at a sixth of the time."""
     return swing_range(PlantParams(), payloads, T_lo, T_hi, period_s=10.0)
 
@@ -166,7 +166,7 @@ def test_bad_dt_raises_with_range(bad: float) -> None:
 
 def test_saturation_is_flagged_not_silent() -> None:
     plant = WristPlant(payload_kg=[0.3, 0.3])
-    limit = plant.params.thermal.u_max_V  # the driver rating (docs/thermal.md "Drive limits")
+    limit = plant.params.thermal.u_max_V  # the driver rating (doc/explanation/model.md)
     s = plant.step([[limit + 1.0, 0.0], [5.0, -5.0]])
     assert s.flags['command_saturated'].tolist() == [True, False]
     s = plant.step([[5.0, -5.0], [5.0, -5.0]])

@@ -1,6 +1,6 @@
 """Plants that are not the controllers' model (sma_wrist.plants): the parameter-spread family, its
 validation, the varied plant against the plain one, sensors on what is published, and the node graph
-running a perturbed plant (where the sweep's loops must be the graph's, docs/sweep.md)."""
+running a perturbed plant (where the sweep's loops must be the graph's, doc/howto/sweep.md)."""
 from __future__ import annotations
 
 import dataclasses
@@ -17,7 +17,7 @@ from sma_wrist.core.plant.wrist import WristPlant
 from sma_wrist.plants import PLANTS, load_hysteresis, make_plant
 from sma_wrist.plants.spread import FAMILY, VALIDITY, Scenario, SensorBank, perturbed_hysteresis, sample
 
-#: a plant inside issue 14's spread, away from nominal on every axis
+#: a plant inside the default family, away from nominal on every axis
 PERTURBED = Scenario(payload_kg=0.4, transition_shift_C=4.0, stroke_scale=0.9, tem_gain_scale=1.1,
                      heat_loss_scale=0.9, ambient_offset_C=2.0, temp_noise_C=0.1, temp_lag_s=0.1,
                      angle_noise_rad=0.002, noise_seed=7)
@@ -131,7 +131,7 @@ def test_sensors_act_on_the_measurement_not_the_plant() -> None:
 
 
 def test_identified_wire_is_the_plant_s_wire_and_a_bad_file_is_refused(tmp_path: Path) -> None:
-    """``hysteresis_file`` (issue 14, 1(c)): the family perturbs the identified wire, not the default."""
+    """``hysteresis_file``: the family perturbs the identified wire, not the default."""
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.plants.spread import perturbed_hysteresis
     hot = perturbed_hysteresis(default_sdgpi(), 25.0, 1.0)  # a wire transforming 25 degC higher

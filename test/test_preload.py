@@ -1,4 +1,4 @@
-"""The chain's pre-load elongation for a wire (core/plant/preload.py, docs/model.md "Joint range and payload capacity")
+"""The chain's pre-load elongation for a wire (core/plant/preload.py, doc/explanation/model.md)
 and the nodes' preload_elongation_mm parameter."""
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from sma_wrist.runtime.launch import Runtime
 
 
 def test_the_calibration_gives_the_built_in_pre_load_for_the_built_in_wire() -> None:
-    """docs/model.md: 1.98 mm holds +-30 deg to ~0.7 kg in the TEM window 20.65-77.59 degC (narrow bracket: 3 runs)."""
+    """doc/explanation/model.md: 1.98 mm holds +-30 deg to ~0.7 kg in the TEM window 20.65-77.59 degC (narrow bracket: 3 runs)."""
     window = reachable_window(ThermalParams())
     assert window == pytest.approx((20.65, 77.59), abs=0.01)
     e0 = calibrate_preload(PlantParams(), window, bracket_mm=(1.8, 2.2), step_mm=0.2)

@@ -1,4 +1,4 @@
-"""The serial line protocol (sma_wrist/hw/protocol.py, docs/protocol.md): round trip,
+"""The serial line protocol (sma_wrist/hw/protocol.py, doc/explanation/protocol.md): round trip,
 robustness against garbage, corruption, cut lines and chunking, sequence tracking."""
 from __future__ import annotations
 
@@ -37,7 +37,7 @@ def parse_all(data: bytes, chunks: list[int] | None = None) -> tuple[list[P.Fram
 
 def test_crc_check_value_and_example_lines():
     assert P.crc16(b'123456789') == 0x29B1  # CRC-16/CCITT-FALSE check value
-    # the examples of docs/protocol.md
+    # the examples of doc/explanation/protocol.md
     assert P.encode(P.Sample(41, 41000, (25000, 24987, 17500, 17512, 35388), 0)) == \
         b'$S,1,41,41000,25000,24987,17500,17512,35388,0*' + b'%04X' % P.crc16(
             b'S,1,41,41000,25000,24987,17500,17512,35388,0') + b'\n'

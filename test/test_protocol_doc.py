@@ -1,4 +1,4 @@
-"""What docs/protocol.md states about the device side, checked on the emulator (issue 15 item 9).
+"""What doc/explanation/protocol.md states about the device side, checked on the emulator.
 
 The emulator is driven sample by sample (``_read_commands`` / ``_sample``), so everything is in
 device time and deterministic; commands go in through the pty as a host writes them.
@@ -16,7 +16,7 @@ from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig
 
-DOC = (Path(__file__).resolve().parent.parent / 'docs' / 'protocol.md').read_text()
+DOC = (Path(__file__).resolve().parent.parent / 'doc' / 'explanation' / 'protocol.md').read_text()
 
 
 class Device:

@@ -1,5 +1,5 @@
 """The embedded runtime's optional delivery model (sma_wrist/runtime/delivery.py): latency and
-jitter per delivery from a seeded generator, off by default (issue 15 item 6)."""
+jitter per delivery from a seeded generator, off by default."""
 from __future__ import annotations
 
 import numpy as np

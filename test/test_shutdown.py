@@ -1,4 +1,4 @@
-"""Node processes end cleanly however they are asked to stop (issue 15 items 1, 2, 5).
+"""Node processes end cleanly however they are asked to stop.
 
 Each case runs ``main_for`` in a child process with real signals (a SIGINT to itself, as
 the kernel sends a user's Ctrl-C), on the embedded runtime: a KeyboardInterrupt raised in

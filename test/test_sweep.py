@@ -1,5 +1,5 @@
 """sma-wrist sweep: the N-wrist compositions equal the one-wrist ones, the vectorised loops agree with
-the node graph, chunking and Dask change nothing, bad input and Ctrl-C (docs/sweep.md)."""
+the node graph, chunking and Dask change nothing, bad input and Ctrl-C (doc/howto/sweep.md)."""
 from __future__ import annotations
 
 import dataclasses
@@ -286,7 +286,7 @@ def test_worker_processes_give_the_single_process_numbers(tmp_path) -> None:
 
 def test_reach_floors_split_the_family_into_plants_a_controller_can_track_and_the_rest() -> None:
     """--reach: a wire 10 degC hotter than the model holds the joint short of the sine's top inside
-    20-80 degC (docs/control.md: floor 33.9 % at 0.3 kg), one 5 degC hotter nearly reaches it (3.6 %):
+    20-80 degC (doc/explanation/controllers.md: floor 33.9 % at 0.3 kg), one 5 degC hotter nearly reaches it (3.6 %):
     each plant's floor once, on every controller's row, and the summary over the plants under 15 %
     (rows as the sweep writes them; the loops' errors are made up, the floors are computed)."""
     from sma_wrist.plants.spread import Scenario

@@ -182,7 +182,7 @@ def test_layers_are_independent_without_coupling_and_exchange_heat_with_it() -> 
 
 def test_characterised_limits_bracket_the_defaults_and_runaway_is_detected() -> None:
     c = th.characterise_constant_commands(P, span_V=36.0, resolution_V=0.05)
-    # measured (docs/thermal.md): +13.28 / -12.39 V at 0.01 V resolution
+    # measured (doc/explanation/model.md): +13.28 / -12.39 V at 0.01 V resolution
     assert 13.0 <= c.heating_max_V <= 13.5 and -12.6 <= c.cooling_max_V <= -12.0
     assert c.cooling_max_V <= P.u_min_V < 0 < P.u_max_V <= c.heating_max_V
     assert c.steady_at_heating_max_C[0] == pytest.approx(80.0, abs=0.5)

@@ -128,9 +128,9 @@ def test_a_gap_or_tems_switched_off_between_samples_break_the_window():
 
 
 def test_a_stronger_tem_keeps_its_hot_faces_in_the_window_with_the_estimate_in_use() -> None:
-    """docs/control.md "The TEMs' hot faces": a family plant whose TEMs are 28 % stronger than the model (seed 1's
+    """doc/explanation/controllers.md: a family plant whose TEMs are 28 % stronger than the model (seed 1's
     plant 12), inverse mode, the first 40 s. The protection predicts the unmeasured exchanger faces with the
-    loop's heat balance; on the model's gain (the estimate not yet used, apply_after_s 30 s, session 7) a face
+    loop's heat balance; on the model's gain (the estimate not yet used, apply_after_s 30 s) a face
     reached 93.8 degC and spent 15.5 s above the 80 degC window; with the estimate in use from 10 s (the default)
     the hottest face is 78.9 degC. simulate's rows report both (tem_face_max_C, tem_face_outside_s)."""
     from sma_wrist.plants.spread import sample

@@ -12,7 +12,7 @@ elongation's arithmetic is ~75 ns. Same operations, same numbers (test_plant_ker
 Where the compiled kernels are cached, and when they are stale:
 
 - numba's on-disk cache (``cache=True``) checks only the source file of the function it compiled
-  (numba issue #1833, documented: "old function code might be used in the calculations"): a kernel
+  (numba documents it: "old function code might be used in the calculations"): a kernel
   that calls or inlines a helper from another file, or reads a constant from one, keeps its old
   machine code after that file changes in a source checkout or editable install.
 - numba writes its cache next to the source (``__pycache__/*.nbi``, ``*.nbc``). pip does not know

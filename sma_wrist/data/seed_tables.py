@@ -2,7 +2,7 @@
 
 Nothing here is corrected or reinterpreted: units, signs and labels are as printed.
 What the numbers give when plugged into the model is measured by
-:mod:`sma_wrist.core.hysteresis.seed_params` and written up in docs/hysteresis_tables.md.
+:mod:`sma_wrist.core.hysteresis.seed_params` and written up in doc/explanation/model.md.
 
 * Table 4.1: GPI envelope sets a_i (gamma_r) and b_i (gamma_l), Eq. 3.21, per load.
 * Table 4.2: GPI memoryless sets c_i (heating) and d_i (cooling), Eq. 3.22, per load.

@@ -1,4 +1,4 @@
-"""Model-discrepancy diagnosis of a recorded wrist run (issue #5): ``sma-wrist diagnose BAG``.
+"""Model-discrepancy diagnosis of a recorded wrist run: ``sma-wrist diagnose BAG``.
 
 1. Replay the nominal plant on the run's recorded inputs, subsystem by subsystem
    (commands -> temperatures; measured temperatures + payload -> angle; whole chain).
@@ -8,7 +8,7 @@
    the rest (:mod:`.fit`), pick the best, bootstrap its gain over held-out segments.
 4. Output: JSON / markdown + PNG report / params file of the extended model.
 
-See docs/diagnose.md.
+See doc/explanation/diagnosis.md.
 """
 from __future__ import annotations
 
@@ -356,7 +356,7 @@ def at_bound(f: ft.Fit) -> list[dict[str, Any]]:
 
 def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_file: str | Path | None = None,
                  thermal_file: str | Path | None = None) -> Path:
-    """The extended model as a ROS 2 params file for plant_sim (schema: docs/diagnose.md).
+    """The extended model as a ROS 2 params file for plant_sim (schema: doc/explanation/diagnosis.md).
 
     ``hysteresis_file``, ``thermal_file``: the wire and TEMs the diagnosis replayed; carried (absolute) so that
     the file runs the same plant instead of silently falling back to the built-in one.
@@ -378,7 +378,7 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
     out.parent.mkdir(parents=True, exist_ok=True)
     head = (f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
             f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
-            f'# schema: docs/diagnose.md "Params file": plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
+            f'# schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
             + (f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
                f'which refuses this file\n' if replay_only else ''))
     out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
@@ -438,5 +438,5 @@ def run_cli(args: argparse.Namespace) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m sma_wrist.diagnose BAG [--json] [--report DIR] [--params FILE]``."""
     ap = add_arguments(argparse.ArgumentParser(
-        prog='sma-wrist diagnose', description='Locate and name the model discrepancy of a recorded run (docs/diagnose.md).'))
+        prog='sma-wrist diagnose', description='Locate and name the model discrepancy of a recorded run (doc/explanation/diagnosis.md).'))
     return run_cli(ap.parse_args(list(argv) if argv is not None else None))

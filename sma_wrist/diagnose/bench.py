@@ -99,7 +99,7 @@ def bench_diagnose(quick: bool = False, full: bool = False) -> dict[str, Any]:
     return {'accuracy': accuracy(), 'bag': ten_minute_bag(), 'independent': independent(png=png)}
 
 
-# ----------------------------------------------------------------------------- independent effects (issue 13)
+# ----------------------------------------------------------------------------- independent effects
 CONTROLLERS = ('pid', 'inverse_adaptive', 'direct_adaptive')
 #: (thermocouple noise [degC], potentiometer noise [rad]) of the clean runs (false alarms vs noise)
 CLEAN_NOISE = ((0.0, 0.0), (0.05, 5e-4), (0.1, 1e-3), (0.2, 2e-3), (0.3, 3e-3))

@@ -1,5 +1,5 @@
 """Independent effect generator: a recorded run rewritten the way a real sensor, driver or wire
-would distort it (issue 13).
+would distort it.
 
 The diagnosis' own test data (:mod:`.testdata`) inject effects through the extended model
 the diagnosis fits, with the noise it assumes: a model checked against itself. This module

@@ -6,7 +6,7 @@ parameter vector (:data:`PARAMS`) is nominal at its default values; a candidate 
 few of those parameters. Evaluation is batched: N parameter rows give N replays in one
 kernel call (candidate grids, finite-difference Jacobians, bootstrap).
 
-Signal chain of the extended model (docs/diagnose.md has the equations)::
+Signal chain of the extended model (doc/explanation/diagnosis.md has the equations)::
 
     commands u --delay, TEM driver (dead zone, saturation)--> applied drive
     drive --TEM heat balance (gain, loss, Joule, coupling, ambient offset + drift)--> T_true
@@ -99,7 +99,7 @@ CATALOGUE: tuple[Effect, ...] = (
            'the wires lag the measured temperature, loops widen with the heating rate'),
     Effect('hysteresis_drift', 'hysteresis drift over cycles', 'hysteresis', ('hyst_drift_C_per_cycle',),
            'transition temperatures move with the number of cycles (functional fatigue)'),
-    # per-channel sensor chain and TEM driver (issue 13): what a real sensor, driver or wire does
+    # per-channel sensor chain and TEM driver: what a real sensor, driver or wire does
     Effect('temp_sensor_offsets', 'thermocouple offsets (per channel)', 'sensor', ('temp_offset_1_C', 'temp_offset_2_C'),
            'each thermocouple reads high/low by its own amount (one bad junction, a cold-junction error on one input)'),
     Effect('temp_sensor_gain', 'thermocouple gain errors (per channel)', 'sensor', ('temp_gain_err_1', 'temp_gain_err_2'),

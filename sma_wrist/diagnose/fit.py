@@ -29,7 +29,7 @@ SCALAR_GRID = 25  # grid points of a one-parameter fit over nominal +- 8 typical
 MAX_FIT_SAMPLES = 12000  # residual samples per channel in a fit (evenly subsampled)
 #: fraction of a channel's range below which a residual is replay error, not discrepancy: the
 #: nominal replay of a noise-free 126 s closed-loop plant_sim run (1 kHz plant, 100 Hz bag)
-#: misses the angle by 4.3e-4 rad RMS on a 1.05 rad range (docs/diagnose.md)
+#: misses the angle by 4.3e-4 rad RMS on a 1.05 rad range (doc/explanation/diagnosis.md)
 REPLAY_RESOLUTION = 1e-3
 
 THERMAL_EFFECT_PARAMS = {'command_delay_s', 'tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C',
@@ -290,7 +290,7 @@ def verdict_confidence(ev: Evaluator, candidates: list[Fit], named: Fit | None, 
     score is below ``-min_score``, else "no discrepancy". `named` is the run's verdict (None:
     no named cause); for an `unexplained` verdict it is the fraction of resamples in which
     some candidate still beats the nominal model (there is a discrepancy). What this cannot see: a cause outside the catalogue that all
-    candidates mimic; the benchmark checks how well it is calibrated (docs/diagnose.md).
+    candidates mimic; the benchmark checks how well it is calibrated (doc/explanation/diagnosis.md).
     """
     if not candidates:
         return 1.0 if named is None else 0.0

@@ -193,7 +193,7 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
         lines.append(f'| {i} | {a["cause"]} | {a["subsystem"]} | {a["score"]:.3f} | {a["gain_pct"]:.1f} | {ps} |')
     lines += [''] + [f'![{p}]({p})' for p in pngs] + ['']
     if result.params_file:
-        lines.append(f'Extended model parameters: `{Path(result.params_file).name}` (schema in docs/diagnose.md).')
+        lines.append(f'Extended model parameters: `{Path(result.params_file).name}` (schema in doc/explanation/diagnosis.md).')
     md = d / 'diagnosis.md'
     md.write_text('\n'.join(lines) + '\n')
     return md

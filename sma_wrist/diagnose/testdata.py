@@ -49,7 +49,7 @@ RANGES: dict[str, dict[str, tuple[float, float, bool]]] = {
     'hysteresis_drift': {'hyst_drift_C_per_cycle': (1.5, 4.0, True)},
     'recalibrate_thermal': {'loss_scale_err': (0.12, 0.25, True)},
     'recalibrate_mechanics': {'preload_err_mm': (0.08, 0.2, True)},
-    # per-channel sensors and the TEM driver (issue 13)
+    # per-channel sensors and the TEM driver
     'temp_sensor_offsets': {'temp_offset_1_C': (1.5, 3.0, True), 'temp_offset_2_C': (0.5, 1.2, True)},
     'temp_sensor_gain': {'temp_gain_err_1': (0.04, 0.1, True), 'temp_gain_err_2': (0.04, 0.1, True)},
     'temp_sensor_delay': {'temp_delay_1_s': (0.4, 1.5, False), 'temp_delay_2_s': (0.4, 1.5, False)},

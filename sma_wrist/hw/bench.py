@@ -5,7 +5,7 @@ bridge's serial link (reader thread, pyserial, protocol parser) on the other end
 reports what arrived: samples sent/received, lost (sequence gaps), reordered/repeated,
 latency from the emulator queueing a line to the link parsing it (monotonic ms, after 1 s warm-up, p50/p95/p99/max) and
 the achieved rate. Both ends share one Python process (GIL), as the in-process
-test set-up does; the ROS side is not included (see docs/protocol.md for numbers).
+test set-up does; the ROS side is not included (see doc/explanation/protocol.md for numbers).
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """A device emulator on a pseudo-terminal: the wrist's microcontroller, with the simulated plant.
 
 ``sma-wrist emulate-device --port /tmp/wrist`` opens a pty, links its slave end at
-``--port`` and behaves like the firmware of docs/protocol.md: boot notice and hello,
+``--port`` and behaves like the firmware of doc/explanation/protocol.md: boot notice and hello,
 then ``$S`` samples at ``--rate-hz`` (1 kHz) of device time with 16-bit ADC quantisation
 and Gaussian noise of the plant :class:`sma_wrist.core.plant.wrist.WristPlant` (the controllers' own
 model), or with ``--plant`` of a registered plant that is not the model (:mod:`sma_wrist.plants`:

@@ -5,7 +5,7 @@ plant_sim publishes from its state) is **estimated** here with the plant's own
 SD-GPI wire-load solve (sma_wrist.core.hysteresis.muscle.MuscleModel) at the measured muscle
 temperatures and the bundle elongations the measured angle implies (Eq. 4.17), with the
 play memory tracked across calls exactly as WristPlant does. The estimate is as good as
-the model (docs/model.md); on the emulator it reproduces the plant's stress up to sensor
+the model (doc/explanation/model.md); on the emulator it reproduces the plant's stress up to sensor
 noise. The wire is stiff, so a stress solved from measured temperatures and angle multiplies
 their noise (and noise that flips a temperature's direction moves the SD-GPI between its
 branches): the solve takes them through :class:`InputFilter`, a random-walk Kalman filter whose

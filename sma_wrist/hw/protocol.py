@@ -6,7 +6,7 @@ One frame per line, ASCII::
 
 ``<CRC>`` is CRC-16/CCITT-FALSE (poly 0x1021, init 0xFFFF, no reflection, no final XOR)
 of the bytes between ``$`` and ``*``, as four upper-case hex digits. A ``\\r`` before the
-``\\n`` is tolerated. Lines are at most :data:`MAX_LINE` bytes. docs/protocol.md is the
+``\\n`` is tolerated. Lines are at most :data:`MAX_LINE` bytes. doc/explanation/protocol.md is the
 full specification (fields, units, examples, error handling); this module is its
 reference implementation:
 

@@ -18,7 +18,7 @@ SUBCOMMANDS = ('hysteresis', 'thermal')
 def add_parser(sub: Any) -> Any:
     """Add ``identify`` and its sub-commands to the top-level sub-parsers ``sub``."""
     p = sub.add_parser('identify', help='identify the hysteresis or thermal model from measured data '
-                                        '(docs/identification.md)')
+                                        '(doc/howto/identify_wire.md)')
     isub = p.add_subparsers(dest='identify_command', required=True, metavar='WHAT')
     for name in SUBCOMMANDS:
         try:

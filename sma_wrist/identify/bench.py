@@ -1,6 +1,6 @@
 """Benchmark section ``identify``: fit speed and quality, exact Jacobian vs the earlier fits.
 
-Runs in a subprocess pinned to one core with single-threaded BLAS (the issue's "one core"),
+Runs in a subprocess pinned to one core with single-threaded BLAS (a fit's cost on one core),
 each case timed for ``method='exact'`` (today) and ``method='fd'`` (the finite-difference
 fits this replaced) side by side in that process, on the same data:
 

@@ -25,7 +25,7 @@ MODELS = ('quadratic', 'clausius-clapeyron', 'saturating')
 #: a loop whose stroke is under this share of the largest one's does not enter the transition slopes over stress
 TRANSFORMING_STROKE_FRACTION = 0.1
 
-HELP = 'identify the SD-GPI hysteresis of a wire from measured isobaric loops (docs/identification.md)'
+HELP = 'identify the SD-GPI hysteresis of a wire from measured isobaric loops (doc/howto/identify_wire.md)'
 
 
 def register(sub: Any) -> None:
@@ -117,7 +117,7 @@ def check_numbers(o: Options) -> None:
 
 
 def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
-    """The whole identification; returns the JSON document (see docs/identification.md)."""
+    """The whole identification; returns the JSON document (see doc/howto/identify_wire.md)."""
     import dataclasses
 
     import numpy as np
@@ -266,7 +266,7 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     s_all = np.array([lp.stress_MPa for lp in train + hold])
     # a loop that hardly transforms (below the detwinning stress) has 10/50/90 % points of its noise, at
     # the ends of its temperature sweep: they would bend the slopes (a phase-fraction wire's rig loops:
-    # A_50 0.25 degC/MPa with its 50 MPa loop, 0.10 = 1 / C_A without; docs/identification.md)
+    # A_50 0.25 degC/MPa with its 50 MPa loop, 0.10 = 1 / C_A without; doc/howto/identify_wire.md)
     strokes = np.array([t['stroke_mm'] for t in meas_tr])
     transforming = strokes >= TRANSFORMING_STROKE_FRACTION * strokes.max()
     for lp, st, ok in zip(train + hold, strokes, transforming):

@@ -3,7 +3,7 @@
 Transition temperatures of a branch are the temperatures where the branch has covered 10 %,
 50 % and 90 % of its elongation change (A_s, A_50, A_f while heating; M_s, M_50, M_f while
 cooling), found at the first crossing along the branch. Errors are in % of the measured
-loop's stroke (its elongation range) at that stress, as the issue and Eq. 4.3 normalise.
+loop's stroke (its elongation range) at that stress, as Eq. 4.3 normalises.
 """
 from __future__ import annotations
 

@@ -512,7 +512,7 @@ def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: S
         lines.append(f'| {k} | {ident[0, j]:.6g} | {default[0, j]:.6g} | {ident[1, j]:.6g} | {default[1, j]:.6g} |')
     if 1 not in result.fit.faces:
         lines += ['', 'The T2 (exchanger face) column is not fitted: no run measured T2, so the base values are kept '
-                      'and the T1 column is identified given them (docs/identification_thermal.md, "Limits").']
+                      'and the T1 column is identified given them (doc/howto/identify_tems.md).']
     if summary['fit'].get('sensor_lag_s') is not None:
         lines += ['', f'Fitted with one first-order lag of the temperature sensors (`--sensor-lag`): '
                       f'{summary["fit"]["sensor_lag_s"]:.4g} s. Every simulated temperature below is read through it; '
@@ -546,7 +546,7 @@ def write_report(out: Path, result: Any, records: Sequence[Any], holdout_recs: S
             lines += [f'![{rec.name}]({name})', '']
     lines += ['## Use it in the wrist', '',
               f'Set `thermal_file: {summary["params_file"]}` for **both** `plant_sim` and `tem_controller` '
-              '(a ROS params file passed with `--params-file`); docs/identification_thermal.md.', '']
+              '(a ROS params file passed with `--params-file`); doc/howto/identify_tems.md.', '']
     path = out / 'thermal_identification.md'
     path.write_text('\n'.join(lines))
     return path
@@ -674,7 +674,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
             'validation': result.validation, 'in_sample_rms_C': round(result.fit.rms_C, 4), 'holdout': held},
             header='sma_wrist thermal params file (TEM heat balance, seed Eqs. 4.13-4.15, Table 4.9 layout).\n'
                    'Written by `sma-wrist identify thermal`. Load it in the wrist by setting the parameter\n'
-                   'thermal_file to this path for BOTH plant_sim and tem_controller (docs/identification_thermal.md).')
+                   'thermal_file to this path for BOTH plant_sim and tem_controller (doc/howto/identify_tems.md).')
     summary: dict[str, Any] = {
         'fit': {'faces_fitted': [ti.FACE_NAMES[f] for f in result.fit.faces], 'start': result.fit.start,
                 'rms_C': result.fit.rms_C, 'simulations': result.fit.nfev, 'message': result.fit.message,

@@ -1,4 +1,4 @@
-"""The wrist's temperature windows for an identified wire (issue 12 item 4; docs/identification.md).
+"""The wrist's temperature windows for an identified wire (doc/howto/identify_wire.md).
 
 The controllers' temperature parameters were tuned for the built-in wire (transitions
 ~30-80 degC at the wrist's working load): the compensator asks for 20-80 degC, the adaptive
@@ -10,7 +10,7 @@ as :func:`sma_wrist.identify.loops.transitions` measures them), so the built-in 
 exactly today's defaults; :func:`wrist_params` turns it into a ROS params file for every
 node. The TEMs limit how hot a muscle can get: the muscle is a TEM face, and no face may
 leave the TEMs' operating window (``window_C`` of the thermal model; 0-80 degC for the
-seed's TEMs, docs/thermal.md): a window beyond it is reported, with what the TEMs would
+seed's TEMs, doc/explanation/model.md): a window beyond it is reported, with what the TEMs would
 need, never silently clipped.
 """
 from __future__ import annotations
@@ -165,7 +165,7 @@ def wire_preload(params: SDGPIParams, thermal_file: str | Path | None, window_C:
 def write_wrist_params(path: str | Path, nodes: dict[str, dict[str, Any]], problems: list[str]) -> Path:
     """The ROS params file (``sma-wrist run --params-file``, ``ros2 launch ... params_file:=``)."""
     import yaml
-    head = ['sma_wrist parameters for an identified wire (sma-wrist identify; docs/identification.md).',
+    head = ['sma_wrist parameters for an identified wire (sma-wrist identify; doc/howto/identify_wire.md).',
             'Temperature windows placed around the wire\'s transitions with the built-in wire\'s margins;',
             'the chain pre-load (preload_elongation_mm) calibrated for the wire like the built-in 1.98 mm.']
     head += [f'PROBLEM: {p}' for p in problems]
@@ -228,7 +228,7 @@ def hot_wire_runs(controllers: tuple[str, ...] = ('inverse_adaptive', 'direct_ad
     return out
 
 
-#: the laws of direct_adaptive and pid without their reference leads (docs/control.md, ctrl14d)
+#: the laws of direct_adaptive and pid without their reference leads (doc/explanation/controllers.md): what the leads buy on a measured wire
 WITHOUT_LEADS = {'adaptive_controller': {'direct_reference_lead_s': 0.0, 'pid_reference_lead_s': 0.0}}
 
 
@@ -239,7 +239,7 @@ def measured_wire_runs(files: list[str | Path], controllers: tuple[str, ...] = (
     """A wire identified from measured isobaric loops (``files``: ``sma-wrist identify hysteresis`` with the
     load law ``model``, the one ``auto`` chose for the Flexinol data, without its leave-one-out) run in the node graph (embedded runtime, 0.3 kg) on TEMs rated ``tem_top_C`` with
     :func:`wrist_params`' windows: each controller, and direct_adaptive / pid also without their reference
-    leads. Rows as :func:`hot_wire_runs`' (docs/identification.md, "A real wire in the wrist")."""
+    leads. Rows as :func:`hot_wire_runs`' (doc/howto/identify_wire.md)."""
     import tempfile
 
     from sma_wrist.core.thermal.params_file import write_thermal_file

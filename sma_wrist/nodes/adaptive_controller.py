@@ -42,7 +42,7 @@ DEFAULTS = JointControllerParams()
 #: still check what ranges cannot say (c1 > 0, force_min_N <= preload_N <= force_max_N, ...).
 FIELD_DOCS: dict[str, tuple[Any, ...]] = {
     'mode': ('joint controller: inverse_adaptive (law + inverse SD-GPI compensator), direct_adaptive '
-             '(law, force mapped to temperature) or pid (Sec. 6.1); docs/control.md', ''),
+             '(law, force mapped to temperature) or pid (Sec. 6.1); doc/explanation/controllers.md', ''),
     'robust': ('robust term of Eq. 5.32: tanh boundary layer or sgn', ''),
     'p_mode': ('PID proportional term on the error, or error times its rate', ''),
     'derivative_on': ('PID derivative of the measurement (no kick on reference steps) or of the error', ''),
@@ -73,17 +73,17 @@ FIELD_DOCS: dict[str, tuple[Any, ...]] = {
     'temperature_max_C': ('highest desired muscle temperature', 'degC', (0.0, 120.0)),
     'force_per_degC_N': ('direct mode: force request per degC of temperature request', 'N/degC', (0.0, 100.0)),
     'reversal_lead_s': ('inverse mode: start crossing the hysteresis gap this long before the joint must '
-                        'reverse (docs/control.md; 0 = Eq. 5.5 as composed in the seed)', 's', (0.0, 30.0)),
+                        'reverse (doc/explanation/controllers.md; 0 = Eq. 5.5 as composed in the seed)', 's', (0.0, 30.0)),
     'pid_reference_lead_s': ('pid mode: the PID acts on the reference this far ahead, the TEMs\' lag fed '
-                             'forward (docs/control.md; 0 = the seed\'s PID on q_d(t))', 's', (0.0, 10.0)),
+                             'forward (doc/explanation/controllers.md; 0 = the seed\'s PID on q_d(t))', 's', (0.0, 10.0)),
     'direct_reference_lead_s': ('direct_adaptive mode: the law acts on the reference this far ahead, the TEMs\' '
-                                'lag fed forward (docs/control.md; 0 = the seed\'s law on q_d(t))', 's', (0.0, 10.0)),
+                                'lag fed forward (doc/explanation/controllers.md; 0 = the seed\'s law on q_d(t))', 's', (0.0, 10.0)),
     'pid_output_filter_s': ('pid mode: time constant of a first-order low-pass on the PID output, against the '
-                            'joint\'s stick-slip reaching the TEMs (docs/control.md "PID chattering"; 0 = off)',
+                            'joint\'s stick-slip reaching the TEMs (doc/explanation/controllers.md; 0 = off)',
                             's', (0.0, 10.0)),
     'direct_output_filter_s': ('direct_adaptive mode: time constant of a first-order low-pass on the temperature '
-                               'request (F - F_pre) / k, against sensor noise reaching the TEMs (docs/control.md '
-                               '"Direct adaptive: a proportional temperature map"; 0 = off)', 's', (0.0, 10.0)),
+                               'request (F - F_pre) / k, against sensor noise reaching the TEMs (doc/explanation/controllers.md; '
+                               '0 = off)', 's', (0.0, 10.0)),
 }
 
 

@@ -86,14 +86,14 @@ HYSTERESIS_FILE_PARAM = Param('hysteresis_file', '', 'SD-GPI of the wire: hyster
 PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm,
                       "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; the same value in plant_sim, "
                       'hysteresis_compensator, adaptive_controller and hardware_bridge; the identified wire\'s in its '
-                      'wrist_params.yaml, docs/identification.md)', 'mm', (0.1, 10.0), runtime=False)
+                      'wrist_params.yaml, doc/howto/identify_wire.md)', 'mm', (0.1, 10.0), runtime=False)
 
 #: the online heat-balance estimate (core.thermal.online): the same values in tem_controller and
-#: hysteresis_compensator, which each run one on the same samples (docs/control.md "Learning the TEMs online")
+#: hysteresis_compensator, which each run one on the same samples (doc/explanation/controllers.md)
 THERMAL_ADAPTATION_PARAMS = (
     Param('thermal_adaptation.enabled', True, "estimate the TEMs' drive gain, muscle-face losses and ambient online from the "
-          'commands and the thermocouples, and run the observer and law on the estimate (docs/control.md "Learning '
-          'the TEMs online")', runtime=False),
+          'commands and the thermocouples, and run the observer and law on the estimate (doc/explanation/'
+          'controllers.md)', runtime=False),
     Param('thermal_adaptation.apply_after_s', OnlineThermalParams.apply_after_s,
           'thermal_adaptation: the estimate is used from this long after the first sample on', 's', (0.0, 600.0),
           runtime=False),

@@ -3,7 +3,7 @@
 Same topics, types and units as plant_sim (msg_defs/topics.yaml): /clock,
 /wrist/muscle_{1,2}/temperature, /wrist/muscle_{1,2}/stress, /wrist/joint_states,
 /wrist/payload (latched); subscribes /wrist/tem_{1,2}/command; reports on /diagnostics.
-The line protocol is docs/protocol.md (sma_wrist/hw/protocol.py); a reader thread
+The line protocol is doc/explanation/protocol.md (sma_wrist/hw/protocol.py); a reader thread
 (sma_wrist/hw/link.py) parses and reconnects with exponential backoff.
 
 Measurements: every ``1 / publish_rate_hz`` of device time the samples of that window
@@ -20,7 +20,7 @@ sample of each window, rebased to 0 at the first sample and kept continuous (spl
 window after the last published time) across device resets and reconnects. Samples are ordered
 by their sequence number and timed by their stamp: a late line is dropped, a stamp that repeats or
 trails a little (a millisecond clock) is taken at the newest time, and a boot flag or a stamp more
-than 50 ms back is a device restart (docs/protocol.md, "Error handling"). The other
+than 50 ms back is a device restart (doc/explanation/protocol.md). The other
 nodes run with use_sim_time as with plant_sim, so an emulator running N x faster than
 wall time (--time-scale) makes the whole graph run N x faster. The bridge itself runs on
 its steady clock (use_sim_time false): its timer polls every half window; each tick waits
@@ -309,7 +309,7 @@ class HardwareBridge(WristNode):
         bad = st.rejected_lines + st.garbage_bytes - seen[1]
         if bad > 0:
             return ('bytes arrive but no valid sample (bad checksums, cut or malformed lines, garbage): check the '
-                    'baud rate, the port and docs/protocol.md')
+                    'baud rate, the port and doc/explanation/protocol.md')
         return ''
 
     def _device_restarted(self, why: str) -> None:
@@ -355,7 +355,7 @@ class HardwareBridge(WristNode):
             self._next_pub_s = start
         t = self._anchor[1] + (t_us - self._anchor[0]) * 1e-6
         # the safety check sees every sample (_latest); a railed channel or an angle outside the safe
-        # range is a faulty reading, never published as a measurement (issue 15 item 7)
+        # range is a faulty reading, never published as a measurement
         stuck = any(self._stuck.update(t, temps[:2], self._sent_V))
         usable = not rail and not stuck and self.p['angle_min_rad'] <= q <= self.p['angle_max_rad']
         self.counters['rejected_samples'] += not usable
@@ -473,8 +473,8 @@ class HardwareBridge(WristNode):
         self.pub_joint.publish(js)
 
     def diagnostics_stamp(self) -> Any:
-        """Device time of the last published window, as the measurements and /clock (issue 15 item 8:
-        the steady clock the bridge polls on is another time base)."""
+        """Device time of the last published window, as the measurements and /clock (the steady
+        clock the bridge polls on is another time base)."""
         t = getattr(self, '_last_pub_s', None)
         return Time(nanoseconds=int(round((t or 0.0) * 1e9))).to_msg()
 

@@ -6,22 +6,22 @@ from adaptive_controller; its memory starts from the measured temperatures and s
 Targets the window cannot reach give the nearest reachable temperature, reported on
 /diagnostics; malformed targets are rejected and counted. With the measured memory, the
 measured joint angle adapts each wire's temperature axis (``shift_gain_per_s``,
-:meth:`~sma_wrist.core.hysteresis.compensation.MuscleCompensator.track`, docs/control.md "Feedback off-model").
+:meth:`~sma_wrist.core.hysteresis.compensation.MuscleCompensator.track`, doc/explanation/controllers.md).
 
 The memory and the axis follow the measurements sample by sample, in the order of their header
 stamps: the temperatures and the angle of one plant tick are paired by stamp and advance the
-memory once, whatever order they arrive in and whenever the targets arrive (issue 15 item 6,
-docs/runtime.md "Message timing").
+memory once, whatever order they arrive in and whenever the targets arrive
+(doc/explanation/runtime.md).
 
 ``temperature_source: observer`` feeds the memory and the axis with a
 :class:`~sma_wrist.core.control.tem.MuscleTemperatureObserver` of the thermocouples (heat balance
 Eqs. 4.13-4.14 driven by the TEM commands) instead of the raw thermocouple, as the sweep's
-``compensator_observer`` does (docs/control.md "The observer in the node graph"). The commands carry
+``compensator_observer`` does (doc/explanation/controllers.md). The commands carry
 no stamp: each is filed at its arrival (the node clock, or the newest measurement stamp seen if
 later) and a tick stamped t_k takes the newest command filed before t_k, the one tem_controller
 computed from the previous tick. The node subscribes to the commands only while the observer is on
 (two deliveries per tick less otherwise). ``thermal_file`` gives the observer the identified heat
-balance tem_controller loads (the same file for both nodes, docs/identification_thermal.md).
+balance tem_controller loads (the same file for both nodes, doc/howto/identify_tems.md).
 """
 from __future__ import annotations
 
@@ -81,31 +81,31 @@ class HysteresisCompensator(WristNode):
         Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
               choices=('numerical', 'analytic', 'auto')),
         Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
-              '(default, docs/control.md) or the desired stress from adaptive_controller (Eq. 5.5 as written)',
+              '(default, doc/explanation/controllers.md) or the desired stress from adaptive_controller (Eq. 5.5 as written)',
               choices=('measured', 'desired')),
         Param('memory_source', 'measured', "the inverse's hysteresis memory follows the measured temperatures "
-              '(default: the plant lags its command, docs/control.md) or the commanded ones (Eq. 5.5 as written)',
+              '(default: the plant lags its command, doc/explanation/controllers.md) or the commanded ones (Eq. 5.5 as written)',
               choices=('measured', 'commanded')),
         Param('shift_gain_per_s', 2.0, "memory_source measured: rate at which each wire's temperature axis follows "
-              "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; docs/control.md "
-              '"Feedback off-model")', '1/s', (0.0, 20.0)),
+              "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; doc/explanation/"
+              'controllers.md)', '1/s', (0.0, 20.0)),
         Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
         Param('hold_shift_on_stop', False, 'shift_gain_per_s > 0: each wire\'s shift (and stroke) holds while the '
               'measured angle is on a mechanical stop, or the joint stands still with a wire slack: the angle then '
-              'says nothing about the wires (docs/control.md "The inverse mode on a measured wire")'),
+              'says nothing about the wires (doc/explanation/controllers.md)'),
         Param('hold_shift_outside_load_range', False, "shift_gain_per_s > 0: a wrist's shifts (and strokes) hold "
               "while either wire's measured load lies outside the SD-GPI's calibrated range (a slack or "
-              'overloaded pair; docs/control.md "The pair\'s load range gates the shift"; off by default: '
+              'overloaded pair; doc/explanation/controllers.md; off by default: '
               '"The load-range gate, after the slope fix")'),
         Param('stroke_gain_per_s', 0.5, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
               "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
-              'ends (0 = the model\'s stroke; docs/control.md "Issue 14 item 2, continued", "The shift\'s slope")', '1/s', (0.0, 20.0)),
+              'ends (0 = the model\'s stroke; doc/explanation/controllers.md)', '1/s', (0.0, 20.0)),
         Param('temperature_source', 'observer', 'temperature the memory and the axis follow: the muscle-temperature '
-              'observer driven by the TEM commands (default) or the thermocouple as measured (docs/control.md '
-              '"The observer in the node graph", "Issue 14 item 2")', choices=('thermocouple', 'observer')),
+              'observer driven by the TEM commands (default) or the thermocouple as measured (doc/explanation/'
+              'controllers.md)', choices=('thermocouple', 'observer')),
         Param('window_follows_shift', True, "shift_gain_per_s > 0: the inverse searches the temperature window moved "
-              "by each wire's shift, so its answers span the whole window on the wire's axis (docs/control.md "
-              '"Issue 14 item 2")'),
+              "by each wire's shift, so its answers span the whole window on the wire's axis (doc/explanation/"
+              'controllers.md)'),
         Param('observer.correction_s', TemperatureObserverParams.correction_s, 'temperature_source observer: time '
               'constant pulling the estimate toward the thermocouple', 's', (0.0, 10.0)),
         Param('observer.tc_lag_s', TemperatureObserverParams.tc_lag_s, 'temperature_source observer: first-order lag '
@@ -332,8 +332,8 @@ class HysteresisCompensator(WristNode):
     def _report_shift(self) -> None:
         """WARN on /diagnostics while a wire's learnt temperature shift sits on its limit: the model does
         not explain that wire (another wire, or a slack wire / a joint on its stop read as a temperature
-        error), which on a measured wire went with the inverse mode failing (docs/control.md, "The
-        inverse mode on a measured wire")."""
+        error), which on a measured wire went with the inverse mode failing (doc/explanation/
+        controllers.md)."""
         lim = self.comp.shift_limit_C
         at = tuple(lim > 0 and abs(x) >= lim for x in self.comp.shift_C.tolist())
         if at == self._shift_at_limit:  # diagnose publishes on change only: skip building its values
@@ -352,7 +352,7 @@ class HysteresisCompensator(WristNode):
         Under ROS the four topics of one cycle arrive in any order, and the next cycle's first
         targets can arrive before this cycle's last: taking 'the latest of each' mixed two cycles
         (strain of one muscle from cycle k+1 with the other's from cycle k), which at a reversal
-        of the sine moved the joint (issue 15 item 6). A rejected target still fills its slot,
+        of the sine moved the joint. A rejected target still fills its slot,
         so the cycles stay aligned, and that cycle is skipped.
         """
         v = msg.data

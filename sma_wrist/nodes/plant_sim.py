@@ -200,7 +200,7 @@ class PlantSim(WristNode):
             self.diagnose('model', DiagnosticStatus.ERROR, f'simulation stopped: {e}')
             self.timer.cancel()
             return
-        # the TEMs' own operating window (docs/thermal.md), sampled at the tick: faces move over seconds
+        # the TEMs' own operating window (doc/explanation/model.md), sampled at the tick: faces move over seconds
         lo, hi = self.sim_params.thermal.window_C
         faces = s.thermal[0].ravel().tolist()
         outside = not all(lo <= f <= hi for f in faces)  # NaN counts as outside
@@ -227,7 +227,7 @@ class PlantSim(WristNode):
                       f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
                       {'hottest_C': f'{max(faces):.2f}', 'coldest_C': f'{min(faces):.2f}'} if outside else None)
         # the SD-GPI load solve searches up to max_load_kgf; a wire that would carry more is held there, and the
-        # wrist's motion from then on is the bound's, not the wire's (docs/control.md "How hard the modes pull")
+        # wrist's motion from then on is the bound's, not the wire's (doc/explanation/controllers.md)
         m = self.sim_params.muscle
         bound = f'{m.max_load_kgf:g} kgf ({float(m.stress_Pa(m.max_load_kgf)) * 1e-6:.0f} MPa)'
         self.diagnose('wire_load', DiagnosticStatus.ERROR if overload else DiagnosticStatus.OK,

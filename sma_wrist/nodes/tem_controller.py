@@ -34,7 +34,7 @@ from sma_wrist.core.thermal.params_file import load_thermal_file
 from sma_wrist.nodes.common import (THERMAL_ADAPTATION_PARAMS, Freshness, Param, WristNode, finite, main_for,
                                    online_thermal)
 
-LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (docs/thermal.md)
+LIMITS = th.ThermalParams()  # its u limits are the *hold* limits (doc/explanation/model.md)
 DRIVE = DriveLimits()
 
 
@@ -44,11 +44,11 @@ class TemController(WristNode):
               (0.01, 50.0)),
         Param('rate_filter_s', 0.05, 'time constant of the filter on the estimated dT_d/dt', 's', (0.0, 10.0)),
         Param('target_filter_s', 0.5, 'time constant of the prefilter on the desired temperatures (no TEM '
-              'chattering on noise and target jumps; docs/control.md "Chattering")', 's', (0.0, 10.0)),
+              'chattering on noise and target jumps; doc/explanation/controllers.md)', 's', (0.0, 10.0)),
         Param('chatter_guard.limit_per_s', CHATTER_LIMIT_PER_S,
               'a TEM command changing sign more often than this (averaged over chatter_guard.window_s) switches '
               'the rate filter to chatter_guard.rate_filter_s until it is below half of it; 0: off '
-              '(docs/control.md "A chatter guard")', '1/s', (0.0, 50.0)),
+              '(doc/explanation/controllers.md)', '1/s', (0.0, 50.0)),
         Param('chatter_guard.window_s', CHATTER_WINDOW_S, 'chatter_guard: averaging time of the sign-change rate', 's',
               (1.0, 600.0)),
         Param('chatter_guard.rate_filter_s', CHATTER_RATE_FILTER_S,

@@ -17,7 +17,7 @@ sign reversed for muscle 2), f_i the idle floor (each muscle held just below its
 when idle) and L the lead. The nine numbers (a, b, h, f per muscle, L) are searched (random search
 around a hand-timed start, then around the best), all candidates as one vectorised plant
 (:func:`search`). The best schedule's max error over the last cycle is the "dynamic reach"
-figure of docs/control.md "PID on the phase-fraction wrist": an open-loop schedule, so not a
+figure of doc/explanation/controllers.md: an open-loop schedule, so not a
 strict bound, but one that a model-free controller reading thermocouples does not beat easily.
 """
 from __future__ import annotations
@@ -166,7 +166,7 @@ def plot(results: dict[float, ReachResult], path: str, plant: str = 'phase_fract
     plt.close(fig)
 
 
-def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the figure quoted in docs/control.md
+def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the figure quoted in doc/explanation/controllers.md
     import argparse
     import sys
     import time

@@ -1,4 +1,4 @@
-"""The controllers on named off-model plants: docs/control.md's "Feedback off-model" cases.
+"""The controllers on named off-model plants: doc/explanation/controllers.md's "Feedback off-model" cases.
 
 A thin layer over the sweep engine (:func:`sma_wrist.sweep.simulate.simulate`, which equals the
 node graph to the last bit, test_plants): :data:`CASES` names plants of the family
@@ -7,7 +7,7 @@ of them under one mode, :func:`run_cases` runs many in one vectorised call per p
 :func:`reach_floor_pct` gives the least max error any controller can have on a case (the angle
 range the wrist reaches inside the controllers' temperature window).
 
-Used by test_offmodel.py and for the off-model figures of docs/control.md
+Used by test_offmodel.py and for the off-model figures of doc/explanation/controllers.md
 (``python -m sma_wrist.plants.loop``; ``sma-wrist sweep`` samples the whole family).
 """
 from __future__ import annotations
@@ -139,7 +139,7 @@ def run_loop(case: OffModelCase, mode: str, duration_s: float = 126.0, window_s:
     return _result(rows[0], trace)
 
 
-#: the off-model cases of docs/control.md: name -> (payload [kg] -> case). Sensors: thermocouple lag
+#: the off-model cases of doc/explanation/controllers.md: name -> (payload [kg] -> case). Sensors: thermocouple lag
 #: 0.2 s and noise 0.2 degC, potentiometer noise 3 mrad; the phase-fraction wrist has its own 0.2 s
 #: thermocouple lag and gets the same noise
 _SENSORS = dict(temp_lag_s=0.2, temp_noise_C=0.2, angle_noise_rad=0.003)
@@ -173,34 +173,34 @@ CASES: dict[str, Callable[[float], OffModelCase]] = {
 MODES = ('inverse_adaptive', 'direct_adaptive', 'pid')
 
 
-def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the report quoted in docs/control.md
+def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the report quoted in doc/explanation/controllers.md
     import argparse
     import json
     import sys
     import time
-    ap = argparse.ArgumentParser(description='the three controllers on off-model plants (docs/control.md)')
+    ap = argparse.ArgumentParser(description='the three controllers on off-model plants (doc/explanation/controllers.md)')
     ap.add_argument('--cases', default=','.join(CASES))
     ap.add_argument('--modes', default=','.join(MODES))
     ap.add_argument('--payloads', default='0.3')
     ap.add_argument('--duration', type=float, default=126.0)
     ap.add_argument('--legacy', action='store_true',
-                    help='the controllers before issue 14: no target prefilter, no temperature-axis adaptation, '
+                    help='the controllers without their off-model features: no target prefilter, no temperature-axis adaptation, '
                          'the compensator on the thermocouples')
     ap.add_argument('--before-item-2', action='store_true',
-                    help='the compensator before issue 14 item 2 (docs/control.md): on the thermocouples, its '
+                    help='the compensator before its observer (doc/explanation/controllers.md): on the thermocouples, its '
                          'window not following the shift, the axis adapting at 1 /s')
     ap.add_argument('--thermocouple', action='store_true',
                     help='the compensator reads the thermocouples (hysteresis_compensator temperature_source '
                          'thermocouple) instead of the observer')
     ap.add_argument('--before-lead', action='store_true',
-                    help='direct_adaptive and pid as before their reference leads (docs/control.md "Direct adaptive '
-                         'and PID off-model"): laws on q_d(t), direct map 1 N/degC')
+                    help='direct_adaptive and pid as before their reference leads (doc/explanation/'
+                         'controllers.md): laws on q_d(t), direct map 1 N/degC')
     ap.add_argument('--before-direct-map', action='store_true',
-                    help='direct_adaptive with its temperature map before the proportional band (docs/control.md '
-                         '"Direct adaptive: a proportional temperature map"): 3 N/degC, no output filter')
+                    help='direct_adaptive with its temperature map before the proportional band (doc/explanation/'
+                         'controllers.md): 3 N/degC, no output filter')
     ap.add_argument('--true-temperature', default='', metavar='CONSUMERS',
                     help='diagnosis: comma list of compensator,tem that read the true muscle temperature instead '
-                         'of the thermocouple (docs/control.md, "Where the thermocouple error acts")')
+                         'of the thermocouple (doc/explanation/controllers.md)')
     ap.add_argument('--observer', default='', metavar='CORRECTION_S,LAG_S',
                     help='the observer\'s parameters (hysteresis_compensator observer.*; default 0.33,0.2)')
     ap.add_argument('--stroke-gain', type=float, default=None, metavar='PER_S',
@@ -211,7 +211,7 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
                     help="hysteresis_compensator's hold_shift_outside_load_range (default the node's)")
     ap.add_argument('--oracle', default='', metavar='SWITCHES',
                     help='diagnosis: comma list of hysteresis,thermal,payload,sensors: the loop given the plant\'s '
-                         'own model(s) (docs/control.md, "What a perfect model would give")')
+                         'own model(s) (doc/explanation/controllers.md)')
     ap.add_argument('--thermal-adaptation', choices=('on', 'off'),
                     help="tem_controller's and hysteresis_compensator's thermal_adaptation (default the nodes')")
     ap.add_argument('--json', action='store_true')

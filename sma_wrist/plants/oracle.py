@@ -1,6 +1,6 @@
 """What a perfect model would give: the closed loops with the plant's own models (a diagnosis).
 
-Issue 14 asks for the inverse mode's median max error <= 8 % over its family of plants
+The inverse mode's median max error over the off-model family of plants is asked to be <= 8 %
 (``sma-wrist sweep --plants 40 --seed 1``). This module says where the error that remains
 comes from, plant by plant, by giving the loop -- one knowledge gap at a time, then all at
 once -- exactly what the plant runs (:func:`sma_wrist.sweep.simulate.simulate`'s ``oracle``):
@@ -28,7 +28,7 @@ PID gains), the back-stepping law's remaining estimates (beta, D), the reversal 
 Each oracle needs one model per plant, so every plant runs on its own (the sweep's engine with
 one scenario; its modes together): ~1 wrist's Python overhead per tick instead of a share of a
 vectorised bank's. ``python -m sma_wrist.plants.oracle`` measures the family and the nominal
-plant (docs/control.md "What a perfect model would give (oracle14, 2026-11-24)").
+plant (doc/explanation/controllers.md).
 """
 from __future__ import annotations
 
@@ -77,7 +77,7 @@ VARIANT_MODES: dict[str, tuple[str, ...]] = {
     'all_but_sensors': ('inverse_adaptive',),
 }
 NOMINAL_PAYLOADS = (0.1, 0.3, 0.6)
-LIMIT_PCT, TARGET_PCT = 15.0, 8.0  # the seed's requirement and issue 14's median target [%]
+LIMIT_PCT, TARGET_PCT = 15.0, 8.0  # the seed's requirement, and the inverse mode's median asked for over the family [%]
 
 
 def check(switches: Sequence[str], plant: str = 'sdgpi', scenarios: Sequence[Scenario] = ()) -> None:
@@ -309,7 +309,7 @@ def plot(rows: Sequence[dict[str, Any]], png: Path) -> None:
             ax.step(np.maximum(floors, 1.0), np.arange(1, floors.size + 1) / floors.size, where='post', color='k',
                     lw=2.5, alpha=0.5, label='static reach floor (no controller below)')
         ax.axvline(LIMIT_PCT, color='k', ls='--', lw=1)
-        ax.axvline(TARGET_PCT, color='r', ls=':', lw=1, label='8 % (issue 14 median target)')
+        ax.axvline(TARGET_PCT, color='r', ls=':', lw=1, label='8 % (median target)')
         ax.axhline(0.5, color='grey', ls=':', lw=0.8)
         ax.set_xscale('log')
         ax.set_xlim(1.0, 100.0)  # floors of 0 (and errors under 1 %) sit on the left edge
@@ -323,10 +323,10 @@ def plot(rows: Sequence[dict[str, Any]], png: Path) -> None:
     plt.close(fig)
 
 
-def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the report quoted in docs/control.md
+def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the report quoted in doc/explanation/controllers.md
     import argparse
-    ap = argparse.ArgumentParser(description='the closed loops with the plant\'s own models (docs/control.md, '
-                                             '"What a perfect model would give")')
+    ap = argparse.ArgumentParser(description='the closed loops with the plant\'s own models (doc/explanation/'
+                                             'controllers.md)')
     ap.add_argument('--plants', type=int, default=40)
     ap.add_argument('--seed', type=int, default=1)
     ap.add_argument('--variants', default=','.join(VARIANTS), help=f'comma list of {", ".join(VARIANTS)}')

@@ -1,6 +1,6 @@
 """A wrist whose wires are NOT the controllers' model: a phase-fraction (martensite fraction) wire.
 
-Issue 14, plant family (b): a structurally different benchmark plant, written from the
+A structurally different benchmark plant, written from the
 literature rather than from this project's SD-GPI, its Table 4.9 heat balance or its sensors.
 It drives the same joint (Eq. 4.18, :func:`sma_wrist.core.plant.kernel.joint_step_one`) and
 the same chain geometry (Eq. 4.17, 140 wires of 0.25 mm x 83 mm, pre-load elongation

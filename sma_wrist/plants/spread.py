@@ -4,8 +4,8 @@ A :class:`Scenario` is one plant the controllers do not know: the SD-GPI wire's 
 temperatures shifted, its stroke scaled, the TEM drive gain and the muscle face's heat
 losses scaled, the coolant/ambient offset, a payload the controllers are not told, and
 the sensors' imperfections (thermocouple noise and first-order lag, potentiometer noise).
-:func:`sample` draws N of them, seeded, from named ranges (:data:`FAMILY` = issue 14's
-spread); every name and range is checked against the model's validity (:data:`VALIDITY`).
+:func:`sample` draws N of them, seeded, from named ranges (:data:`FAMILY`, the default
+family); every name and range is checked against the model's validity (:data:`VALIDITY`).
 
 Where each perturbation acts:
 
@@ -60,10 +60,10 @@ class Perturbation:
     description: str
 
 
-#: Validity of each perturbation. Wider than the issue's spread, narrower than where the model
+#: Validity of each perturbation. Wider than the default family, narrower than where the model
 #: breaks: transition shifts beyond +-15 degC put a wire's transformation outside what the TEMs
 #: reach (20-80 degC working band); stroke and thermal scales of 0.5-1.5; the joint's +-30 deg
-#: range holds to ~0.7 kg (docs/model.md); sensor figures of realistic hardware.
+#: range holds to ~0.7 kg (doc/explanation/model.md); sensor figures of realistic hardware.
 VALIDITY: tuple[Perturbation, ...] = (
     Perturbation('payload_kg', 'kg', 0.3, 0.0, 0.7, 'payload at the 0.09 m lever, unknown to the controllers'),
     Perturbation('transition_shift_C', 'degC', 0.0, -15.0, 15.0, 'shift of the wire transformation temperatures'),
@@ -77,7 +77,7 @@ VALIDITY: tuple[Perturbation, ...] = (
 )
 BY_NAME = {p.name: p for p in VALIDITY}
 
-#: issue 14's spread: the family the sweep samples by default
+#: the family the sweep samples by default
 FAMILY: dict[str, tuple[float, float]] = {
     'payload_kg': (0.1, 0.6),
     'transition_shift_C': (-10.0, 10.0),

@@ -10,7 +10,7 @@ Usage::
 :func:`activate` installs a ``sys.meta_path`` finder so that ``import rclpy``,
 ``from std_msgs.msg import Float64`` etc. resolve to this package -- but only where the
 real rclpy is not importable (or when forced before the real one is imported).  Node
-modules never branch on the runtime; they import rclpy as usual.  See docs/runtime.md.
+modules never branch on the runtime; they import rclpy as usual.  See doc/explanation/runtime.md.
 """
 from __future__ import annotations
 

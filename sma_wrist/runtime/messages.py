@@ -7,7 +7,7 @@ attribute assignment, constants as class attributes (``byte`` constants are ``by
 in rosidl), equality, ``__repr__`` (``std_msgs.msg.Float64(data=1.0)``) and
 ``get_fields_and_field_types()``.
 
-Differences from rosidl (documented in docs/runtime.md): sequences and fixed arrays are
+Differences from rosidl (documented in doc/explanation/runtime.md): sequences and fixed arrays are
 plain Python lists (rosidl uses ``array.array`` / numpy), and assignment is not type
 checked.
 

@@ -32,7 +32,7 @@ from sma_wrist.sweep.simulate import Case, simulate
 if TYPE_CHECKING:  # graph_params builds nodes: imported where it is used
     from sma_wrist.sweep.graph_params import LoopSettings
 
-#: the seed's requirement and issue 14's targets over the family
+#: the seed's requirement (max error under 15 %) and the share of the family asked to meet it
 LIMIT_PCT = 15.0
 SHARE = 0.95
 NOMINAL_PAYLOADS = (0.1, 0.3, 0.6)
@@ -176,7 +176,7 @@ def split_chunks(cases: Sequence[Case], chunk: int, workers: int = 1) -> list[li
     ``workers`` (every worker runs as many), sizes equal within one loop (no short last chunk running alone).
 
     Why this size: a simulation's Python costs ~0.45 ms per tick whatever its size, so larger chunks
-    spread it over more loops (CPU per loop-tick, docs/sweep.md: ~15.2 us at 96 loops, ~13.6 at 192, ~13.5
+    spread it over more loops (CPU per loop-tick, doc/howto/sweep.md: ~15.2 us at 96 loops, ~13.6 at 192, ~13.5
     at 288); the cost is ~1 MB of memory per 126 s loop and, on Ctrl-C, the unfinished chunk's loops."""
     if not (isinstance(chunk, int) and chunk >= 1 and isinstance(workers, int) and workers >= 1):
         raise ParameterError(f'chunk = {chunk!r} and workers = {workers!r} must be integers >= 1')
@@ -418,7 +418,7 @@ def format_table(summary: Sequence[dict[str, Any]]) -> str:
                      + ('    -' if mpa is None else f'{mpa:5.0f}'))
     lines.append('max error over the last reference cycle, % of the reference range (true angle); '
                  'flips/s: median TEM command sign changes per second; MPa: the highest wire stress of any loop '
-                 '(docs/control.md "How hard the modes pull on the wires")')
+                 '(doc/explanation/controllers.md)')
     over = [s for s in summary if s.get('overloaded_loops')]
     if over:
         which = ', '.join(f'{s["overloaded_loops"]} {s["group"]} {s["controller"]}' for s in over)

@@ -163,19 +163,19 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     hottest [degC], ``tem_face_outside_s`` the time any face of the wrist was outside the TEM's window
     (``base.thermal.window_C``, 0-80 degC, as plant_sim's ``tem_faces`` diagnostic) [s], sampled at every tick;
     ``wire_stress_max_MPa`` the highest stress either wire of the wrist carried at a tick [MPa] (plant_sim's
-    ``/wrist/muscle_{1,2}/stress``; docs/control.md "How hard the modes pull on the wires"); ``overload_s`` the time
+    ``/wrist/muscle_{1,2}/stress``; doc/explanation/controllers.md); ``overload_s`` the time
     a wire's load was held at the wire model's bound (``MuscleGeometry.max_load_kgf``, plant_sim's ``wire_load``
     diagnostic) [s]: there the loop has left the model and its figures are not physics; ``angle_step_max_rad`` the
     largest change of the true angle over one tick [rad] (the built-in family's are 0.0055 at most: larger ones are
     snap-throughs or a load solve at its bound). The laws are the nodes' defaults; ``tem_params``
     (tem_controller's gain, rate and target filters) and ``shift_gain_per_s``
     (hysteresis_compensator's axis adaptation, 0 = off) change them, e.g. to measure the
-    controllers before issue 14 (``python -m sma_wrist.plants.loop --legacy``).
+    controllers without their target prefilter and axis adaptation (``python -m sma_wrist.plants.loop --legacy``).
 
     ``true_temperature``: a diagnosis, not a controller -- the named consumers (``'compensator'``,
     ``'tem'``) read the plant's true muscle temperatures instead of the thermocouples' (lag,
     noise; on the phase-fraction wrist also its own thermocouple's lag), which bounds what a
-    perfect temperature observer in that place could give (docs/control.md, "Where the thermocouple error acts").
+    perfect temperature observer in that place could give (doc/explanation/controllers.md).
     ``compensator_observer``: the compensator reads a :class:`MuscleTemperatureObserver` of the
     thermocouples driven by the TEM commands: the node graph with hysteresis_compensator's
     ``temperature_source: observer`` (the default) and the same ``observer.*`` parameters; None: the
@@ -198,7 +198,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
 
     ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
     (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
-    ``'sensors'``; docs/control.md "What a perfect model would give"); every case must then be on
+    ``'sensors'``; doc/explanation/controllers.md); every case must then be on
     the one ``sdgpi`` scenario."""
     check_true_temperature(true_temperature)
     if not cases:
@@ -257,7 +257,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     qd_rec = np.empty(k_total)
     T_d: FloatArray | None = None
     # the TEMs' faces as the plant has them (no node sees the exchanger faces): hottest, and time outside their
-    # window, as plant_sim's tem_faces diagnostic judges it (docs/control.md "The TEMs' hot faces")
+    # window, as plant_sim's tem_faces diagnostic judges it (doc/explanation/controllers.md)
     face_max, face_outside = np.full(n, -np.inf), np.zeros(n)
     stress_max = np.zeros(n)  # the wires' highest stress over the run [Pa]: what a co-contraction costs the wire
     overload = np.zeros(n)  # time a wire's load was held at the wire model's bound [s]: no physics there

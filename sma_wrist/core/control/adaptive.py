@@ -17,7 +17,7 @@ Control (Eq. 5.32), with s(z2) = sgn(z2) or the boundary layer tanh(z2 / eps)::
 
 Desired muscle forces F_i = F_pre + v_i, clipped to [F_min, F_max]; delta F = F_1 - F_2.
 
-Adaptive laws (Eq. 5.37 corrected so that Eqs. 5.33-5.36 hold; docs/control.md)::
+Adaptive laws (Eq. 5.37 corrected so that Eqs. 5.33-5.36 hold; doc/explanation/controllers.md)::
 
     theta_hat_dot  = -Gamma_a phi z2                   (5.37 prints +; with Eq. 5.33's -phi theta~ it must be -)
     beta_hat_0i_dot = Gamma_bi z2 v_ic / (2 beta_hat_0i)   (5.37 divides by the unknown beta~_0i)
@@ -56,7 +56,7 @@ class ControlGeometry:
     """Geometry the law needs (Table 5.4 and Chapter 2).
 
     r_eff_m: chain force -> output torque arm: sprocket pitch radius 7.96e-3 m / step-up 3
-        (Table 5.4's 0.75e-3 m would hold only 0.17 kg with 140 wires; docs/control.md).
+        (Table 5.4's 0.75e-3 m would hold only 0.17 kg with 140 wires; doc/explanation/controllers.md).
     joint_inertia_kgm2: I_w of Table 5.4.
     known_payload_kg: payload whose inertia M l^2 is added to I_w when it is known (0 = unknown).
     """

@@ -19,7 +19,7 @@ All modes also return the desired strain (what the compensator needs) and never 
 temperatures outside [temperature_min_C, temperature_max_C] (reported as saturation). The
 ``direct_adaptive`` and ``pid`` laws act on the reference ``direct_reference_lead_s`` /
 ``pid_reference_lead_s`` ahead (:func:`reference_ahead`): the TEMs' lag fed forward, which holds
-their tracking on plants that are not the model (docs/control.md, "Direct adaptive and PID off-model").
+their tracking on plants that are not the model (doc/explanation/controllers.md).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ MODES = ('inverse_adaptive', 'direct_adaptive', 'pid')
 
 
 def tuned_adaptive() -> AdaptiveParams:
-    """Adaptive gains tuned on this project's plant (docs/control.md, "Tuning").
+    """Adaptive gains tuned on this project's plant (doc/explanation/controllers.md).
 
     The seed's Table 6.1 gains (C1 = 3, C2 = 6.5) ask for forces of ~I/R C1 C2 e ~ 9 N at
     0.5 rad of error on a joint whose muscles need tens of degC -- hundreds of N of force
@@ -134,36 +134,36 @@ def bundle_strain(plant: PlantParams, q: float) -> FloatArray:
 class JointControllerParams:
     """Mode, the laws' parameters and the temperature map of the modes without an inverse."""
 
-    mode: Mode = 'inverse_adaptive'  # the seed's controller; under 5 % on this plant (docs/control.md)
+    mode: Mode = 'inverse_adaptive'  # the seed's controller; under 5 % on this plant (doc/explanation/controllers.md)
     adaptive: AdaptiveParams = field(default_factory=tuned_adaptive)
-    #: PID on the angle error, output in degC of differential temperature (docs/control.md; Kp / Ki
-    #: 300 / 60 until the output filter below, docs/control.md "PID chattering")
+    #: PID on the angle error, output in degC of differential temperature (doc/explanation/controllers.md; Kp / Ki
+    #: 300 / 60 until the output filter below, doc/explanation/controllers.md)
     pid: PIDParams = field(default_factory=lambda: PIDParams(kp=400.0, ki=30.0, kd=0.0, output_min=-30.0,
                                                               output_max=30.0))
     temperature_mid_C: float = 50.0  # centre of the muscles' working band [degC]
     temperature_min_C: float = 20.0
     temperature_max_C: float = 80.0
-    #: direct mode: force request per degC of temperature request [N/degC] (1 until issue 14 item 2, then 3;
-    #: 10 with the output filter below: the law's C1 C2 e then spans the 20-80 degC window over ~0.1 rad of
-    #: error instead of ~0.03, a proportional band like the PID's; docs/control.md "Direct adaptive: a
-    #: proportional temperature map")
+    #: direct mode: force request per degC of temperature request [N/degC] (10 with
+    #: the output filter below: the law's C1 C2 e then spans the 20-80 degC window over ~0.1 rad of
+    #: error instead of ~0.03, a proportional band like the PID's; doc/explanation/
+    #: controllers.md)
     force_per_degC_N: float = 10.0
     #: inverse mode: start crossing the hysteresis gap this long before the reference turns [s]
-    #: (0 = the strain at q_d throughout, Eq. 5.5 as written; docs/control.md "Reversal lead")
+    #: (0 = the strain at q_d throughout, Eq. 5.5 as written; doc/explanation/controllers.md)
     reversal_lead_s: float = 2.75
     #: pid / direct modes: the law acts on the reference this far ahead [s] (its local parabola,
     #: :func:`reference_ahead`): the TEMs' lag, fed forward; 0 = the seed's laws on q_d(t)
-    #: (docs/control.md, "Direct adaptive and PID off-model")
+    #: (doc/explanation/controllers.md)
     pid_reference_lead_s: float = 1.25
     direct_reference_lead_s: float = 1.0
     #: pid mode: first-order low-pass on the PID's output [s] (:func:`output_filter_step`): the joint's
     #: stick-slip (a ~1 Hz sawtooth of the angle error) and the potentiometer noise times Kp swung the
-    #: TEMs between heating and cooling; 0 = the seed's PID output as it is (docs/control.md "PID chattering")
+    #: TEMs between heating and cooling; 0 = the seed's PID output as it is (doc/explanation/controllers.md)
     pid_output_filter_s: float = 0.3
     #: direct mode: the same low-pass on the temperature request (F - F_pre) / k [s]: with k = 10 N/degC the
     #: map is a proportional band rather than a relay between 20 and 80 degC, and it passes the sensor noise
     #: and stick-slip to the TEMs (2.9 sign changes /s on the family's worst plant without the filter);
-    #: 0 = the map as it is (docs/control.md "Direct adaptive: a proportional temperature map")
+    #: 0 = the map as it is (doc/explanation/controllers.md)
     direct_output_filter_s: float = 0.1
 
     @property

@@ -30,7 +30,7 @@ to the thermal command limits and flagged ``saturated``: nothing is clipped sile
 Modes (Eq. 5.47): one module with I = h1 I_1 + h2 I_2 (the seed's Figs. 5.23-5.25, h = (1, 1)),
 or two layers, one controller per layer with h = (1, 0) acting on the muscle face
 (Figs. 5.26-5.28). Commands come out in volts, u = -I / input_per_volt, positive heats the
-muscle (T1) face (docs/thermal.md).
+muscle (T1) face (doc/explanation/model.md).
 """
 from __future__ import annotations
 
@@ -69,7 +69,7 @@ class TemControlParams:
         0.5 s). The muscle follows its target with the error dynamics' time constant
         1 / gain_per_s; target content faster than that (sensor noise amplified by the joint
         law, the inverse's jumps between branches) cannot move the muscle, only reverse the
-        TEM (docs/control.md, "Chattering").
+        TEM (doc/explanation/controllers.md).
     chatter_limit_per_s: the chatter guard (only :class:`TemLoop` and the sweep's bank; 0 = off,
         :class:`ChatterGuard`): a wrist whose TEM commands change sign more often than this
         [1/s], averaged over ``chatter_window_s`` [s], runs its rate filter at
@@ -105,13 +105,13 @@ class TemControlParams:
         return np.where(engaged, self.chatter_rate_filter_s, self.rate_filter_s)
 
 
-#: commands inside +-this band keep the last sign: the chattering metric's band [V] (docs/control.md
+#: commands inside +-this band keep the last sign: the chattering metric's band [V] (doc/explanation/controllers.md
 #: "Chattering metric and limit"; sweep.simulate.sign_changes_per_s counts with it)
 CHATTER_DEADBAND_V = 1.0
 #: tem_controller's chatter guard (``chatter_guard.*``): engaged above 2.5 sign changes a second over ~20 s,
 #: a quarter above the 2 /s limit the guard serves (the built-in wire's nominal loops run at 1.7 /s and
 #: pass 2 /s for a while on their first cycles; 2 /s over 10 s switched them in, at 5.1-5.7 % error instead
-#: of 2.7-3.8 %); its rate filter 0.2 s (docs/control.md "A chatter guard")
+#: of 2.7-3.8 %); its rate filter 0.2 s (doc/explanation/controllers.md)
 CHATTER_LIMIT_PER_S, CHATTER_WINDOW_S, CHATTER_RATE_FILTER_S = 2.5, 20.0, 0.2
 
 
@@ -123,7 +123,7 @@ class ChatterGuard:
     of the last ~window. A wrist is ``engaged`` from the sample one of its TEMs' r exceeds ``limit_per_s``
     until both are below half of it. Why a rate filter then: on a steep measured wire the inverse's answer
     relays across the loop's gap, and the law's feed-forward of dT_d/dt turns each relay step into a
-    full-scale swing (docs/control.md "A chatter guard"); a 0.2 s filter on that estimate halves the
+    full-scale swing (doc/explanation/controllers.md); a 0.2 s filter on that estimate halves the
     swings there, but costs the built-in wire's nominal tracking, so it is only switched in where the
     commands chatter.
     """
@@ -321,7 +321,7 @@ class MuscleTemperatureObserver:
 
     Unlike a filter of the measurement alone it neither lags the muscle nor overshoots it: the
     motion between samples is the heat balance's, driven by the commands, so the path the SD-GPI
-    memory observes is one a wire can take (docs/control.md, "Where the thermocouple error acts").
+    memory observes is one a wire can take (doc/explanation/controllers.md).
     The first sample initialises it at the measurement (exchanger faces at rest).
     """
 
@@ -489,7 +489,7 @@ def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: flo
     return out
 
 
-def _main() -> None:  # pragma: no cover - the report quoted in docs/thermal.md
+def _main() -> None:  # pragma: no cover - the report quoted in doc/explanation/model.md
     default = th.ThermalParams()
     wide = default.with_limits(-30.0, 30.0)
     print('Closed loop from rest, k = 1 /s, dt = 0.05 s, statistics over 200-400 s')
@@ -510,7 +510,7 @@ if __name__ == '__main__':  # pragma: no cover
 
 @dataclass(frozen=True)
 class DriveLimits:
-    """Transient drive limits with face protection (docs/thermal.md, "Drive limits").
+    """Transient drive limits with face protection (doc/explanation/model.md).
 
     The thermal model's ``u_min_V``/``u_max_V`` are *hold* limits: a command held forever
     keeps every face inside the window. A temperature controller never holds its extreme
@@ -522,7 +522,7 @@ class DriveLimits:
     inside [``face_min_C``, ``face_max_C``]; otherwise the allowed command nearest to the request
     is sent. The fixed switch it replaces (hold limits once a face passes ``protect_above_C``)
     let faces reach 84.5 degC for 24 s of a 252 s run (thermal inertia after the switch) and
-    cut the authority the sine's peak needs (docs/control.md). A layer with a face already
+    cut the authority the sine's peak needs (doc/explanation/controllers.md). A layer with a face already
     outside the window gets the hold limits regardless (the backstop when the model is wrong).
     predictive=False: the fixed switch at ``protect_above_C``.
     """

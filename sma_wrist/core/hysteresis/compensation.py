@@ -10,7 +10,7 @@ SD-GPI's coordinates (elongation of the 80 mm model wire, per-wire load). The mu
 so the SD-GPI target is y_SDGPI = (eps L_wire - c_el m) / (L_wire / L_model). Loads outside
 the SD-GPI's calibrated range are clipped to it and reported (the inverse is undefined there).
 
-Temperature-axis adaptation (issue 14, docs/control.md "Feedback off-model"). The inverse is
+Temperature-axis adaptation (doc/explanation/controllers.md). The inverse is
 a feed-forward at the desired strain: any difference between the SD-GPI and the wire
 (transition temperatures, stroke, the heat balance behind the measured temperature) goes
 straight to the joint. :meth:`MuscleCompensator.track` brings the measured angle in: each
@@ -22,7 +22,7 @@ T_d = T_inv + shift. Where the model's loop is flat (inside the hysteresis gap) 
 and the shift holds. Each wire has its own shift: the common mode, which the angle alone
 cannot see (both wires move it the same way), is seen by each wire's strain prediction.
 
-Stroke adaptation (issue 14 item 2, docs/control.md "Issue 14 item 2, continued"): a wire whose
+Stroke adaptation (doc/explanation/controllers.md): a wire whose
 transformation strain differs from the model's (stroke x s about the mid-stroke elongation y_mid,
 the way the family's plants differ, ``plants.spread.perturbed_hysteresis``) is predicted as
 y = y_mid + k (y_SDGPI(T - shift) - y_mid); k follows the same prediction error where the shift
@@ -82,7 +82,7 @@ class MuscleCompensator:
         #: :meth:`track` holds a wrist's shifts (and strokes) while either of its wires' measured load lies
         #: outside the SD-GPI's calibrated range (:meth:`pair_in_load_range`); off by default since the shift's
         #: slope is kept <= 0: it had stood in for that fix, and it kept a measured wire from adapting at all
-        #: (docs/control.md, "The load-range gate, after the slope fix")
+        #: (doc/explanation/controllers.md)
         self.hold_outside_load_range = bool(hold_outside_load_range)
         #: per wire: the wire's stroke over the model's, about y_mid_mm
         self.stroke = np.ones(2)
@@ -200,8 +200,8 @@ class MuscleCompensator:
         loop the central difference spans both branches' memoryless parts (Eq. 3.22, c set at T + h, d set
         at T - h) and reads up to ~+0.001 mm/degC. Times a large prediction error (a wire that transformed
         where the model's loop is flat: 1.6 mm on a family plant) that sign drove the shift the wrong way
-        at ~1 degC/s, to its limit, and the pair locked against each other (docs/control.md, "The shift's
-        slope").
+        at ~1 degC/s, to its limit, and the pair locked against each other (doc/explanation/
+        controllers.md).
 
         With ``stroke_gain_per_s`` k > 0 (module docstring): the prediction is y_mid + k (y_model - y_mid),
         the shift's slope k s, and, once the wire has been within STROKE_EDGE_C of both window edges,
@@ -234,8 +234,8 @@ class MuscleCompensator:
         Outside it the strain at the measured angle is not the model's to explain: a slack wire's (0 Pa)
         is the chain's, not the wire's, and the model is extrapolated there (the plant clamps its
         envelopes, Eq. 4.4-4.5). On the measured Flexinol wire the pair runs below 50 MPa most of the
-        time, and each wire's shift fitted there ran to its limit within seconds (docs/control.md, "The
-        pair's load range gates the shift"). The partner counts too: a slack antagonist leaves the
+        time, and each wire's shift fitted there ran to its limit within seconds (doc/explanation/
+        controllers.md). The partner counts too: a slack antagonist leaves the
         other wire carrying the payload alone, off the operating point the pre-load sets."""
         return _pair_taut(self._load(np.asarray(stress_Pa, float))[1])
 
@@ -292,7 +292,7 @@ def strain_informative(q_rad: ArrayLike, q_prev_rad: ArrayLike, dt: float, stres
                        q_stops_rad: tuple[float, float], slack_Pa: float = 1e6,
                        still_rad_s: float = 0.05) -> NDArray[np.bool_]:
     """(N, 2) whether the bundles' strains at the measured angle (Eq. 4.17) say something about the wires
-    (docs/control.md "The inverse mode on a measured wire"): not while the joint rests on a mechanical stop
+    (doc/explanation/controllers.md): not while the joint rests on a mechanical stop
     (measured angle q_rad (N,) at or over ``q_stops_rad``), nor while it stands still (|q - q_prev| / dt
     below ``still_rad_s``) with a wire slack (measured stress (N, 2) [Pa] below ``slack_Pa``): there the
     angle is the stop's or the other wire's, and a shift fitted to it winds up (both wires then pull

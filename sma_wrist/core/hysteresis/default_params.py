@@ -1,7 +1,7 @@
 """The default, self-consistent SD-GPI parameter set for Nitinol #6 (0.25 mm wire).
 
 Why a set of our own: the seed's printed GPI/SD-GPI tables do not reproduce its own
-described loops (see docs/hysteresis_tables.md). This set is built from the behaviour
+described loops (see doc/explanation/model.md). This set is built from the behaviour
 Sec. 3.2 describes, written as physical load-dependent loop descriptors and then
 converted *exactly* into the seed's model structure (tanh envelopes whose coefficients
 are quadratics of the load on load sections, Eqs. 3.21, 4.4-4.5), so every equation of
@@ -20,7 +20,7 @@ per 0.15 kgf; at 0.75-0.9 kgf A_f - M_f ~ 45 degC with full recovery between 20 
 is small. A_f and M_f are taken as the 95 % points of the branches (tanh argument 1.47).
 The transition temperatures rise with load everywhere above the critical load
 (Clausius-Clapeyron), which makes elongation increase with load at fixed temperature:
-the property the muscle/joint coupling relies on (docs/model.md).
+the property the muscle/joint coupling relies on (doc/explanation/model.md).
 """
 from __future__ import annotations
 

@@ -273,7 +273,7 @@ def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray
     bounded Levenberg-Marquardt on the normal equations was tried: it settles in the first of
     the loop's many local minima, 6x the cost TRF reaches). With numba it runs as
     :func:`~sma_wrist.core.hysteresis.trf.trf_solve`: the same fit on every CPU (scipy's
-    ``least_squares`` walks a CPU-dependent path through the local minima: docs/identification.md
+    ``least_squares`` walks a CPU-dependent path through the local minima: doc/howto/identify_wire.md
     "The same data on two CPUs"); without, scipy's ``least_squares``, which asks for the Jacobian
     at the point whose residual it just computed, so one simulation serves both.
     """
@@ -476,7 +476,7 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     per-load range. ``method`` as in :func:`fit_gpi`; ``branches``: initial memory per load
     (default 'cooling' for all, see :func:`simulate_batch`); ``degrees``: polynomial degree
     in the load of (k0, k1, k2, k3) of both envelopes (Eqs. 4.4-4.5 use 2 throughout; lower
-    degrees regularise, docs/identification.md). With 'exact' the per-load envelope fits also
+    degrees regularise, doc/howto/identify_wire.md). With 'exact' the per-load envelope fits also
     run as a continuation in load (each from its neighbour's fit) and the joint fit starts
     from both starting points, keeping the lower cost.
     """

@@ -1,6 +1,6 @@
 """A muscle: a bundle of parallel Nitinol wires whose load follows from its elongation.
 
-Coupling (docs/model.md): the joint angle fixes each bundle's elongation through the
+Coupling (doc/explanation/model.md): the joint angle fixes each bundle's elongation through the
 chain; each wire's load m is the one at which the material elongation equals it::
 
     scale * y_SDGPI(T, m; memory) + c_el * m = y_geo        (1)

@@ -4,7 +4,7 @@ The printed Tables 4.1-4.3 (GPI per load) and 4.5-4.6 (SD-GPI) lost something: u
 which envelope is "l" and which "r", the unprinted weight p0 of Eq. 4.1, or whether the
 mirror of Eq. 4.2 is already in the numbers. This module builds :class:`SDGPIParams` from
 the tables under each reading and measures what loop each gives for the input of Sec. 3.2,
-so the choice can be argued from numbers (docs/hysteresis_tables.md).
+so the choice can be argued from numbers (doc/explanation/model.md).
 
 Conventions
 -----------
@@ -252,7 +252,7 @@ class ConventionResult:
 
 
 def _reference_loop(load_g: int, T: FloatArray) -> FloatArray:
-    from sma_wrist.core.hysteresis.default_params import default_sdgpi  # the lead's set: Sec. 3.2 behaviour
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi  # the built-in set: Sec. 3.2 behaviour
     p = default_sdgpi()
     return elongation(p, T, load_g * 1e-3)
 

@@ -4,7 +4,7 @@ Why: the identification objective (a play-operator model, Eq. 3.25) is piecewise
 minima, and the path of scipy's ``least_squares(method='trf')`` through it amplifies last-bit
 differences: its SVD, J^T f and column norms go through BLAS/LAPACK, whose kernel (OpenBLAS's per-CPU
 choice) and numpy's SIMD loops (AVX-512 or AVX2) round differently, so the same data gave different
-fits on different machines (docs/identification.md "The same data on two CPUs"). This is the same
+fits on different machines (doc/howto/identify_wire.md). This is the same
 algorithm (``scipy.optimize._lsq.trf.trf_bounds``, ``tr_solver='exact'``, ``x_scale='jac'``, no
 loss) with two changes:
 
@@ -17,7 +17,7 @@ loss) with two changes:
   carries some CPU's last bits (from the callers' own arithmetic) still starts the same path.
 
 Measured: bit-identical fits with numpy's AVX-512 or AVX2 loops, OpenBLAS's default or Haswell
-kernel, and numba compiled for the host or for generic x86-64 (docs/identification.md).
+kernel, and numba compiled for the host or for generic x86-64 (doc/howto/identify_wire.md).
 Without numba the caller falls back to scipy's ``least_squares`` (same algorithm, CPU-dependent bits).
 
 The loop follows SciPy's ``scipy/optimize/_lsq/trf.py`` (BSD-3-Clause; Copyright (c) 2001-2002 Enthought, Inc.

@@ -9,7 +9,7 @@ centred position is q_neutral.
 
 Table 5.4's "sprocket radius" 0.75e-3 m is not used: with it 140 wires x 0.15 kgf would
 hold only 0.17 kg at 0.09 m and +-30 deg would need 0.39 mm of chain; with R_eff the
-0.6 kg capacity and the ~3 mm stroke both come out (docs/model.md).
+0.6 kg capacity and the ~3 mm stroke both come out (doc/explanation/model.md).
 
 Dynamics, Eq. 4.18 with payload inertia added (the seed's I_w is the bare joint)::
 

@@ -6,7 +6,7 @@ fitted ones as ``model.<name>`` into a params file, and ``plant_sim`` declares t
 ``model.<name>`` parameters and simulates them, so an extended model found in measured
 data can be run in the closed loop. At the nominal values the plant is the plain one.
 
-Where each effect acts (docs/diagnose.md has the equations)::
+Where each effect acts (doc/explanation/diagnosis.md has the equations)::
 
     commands --delay--> TEM heat balance (gain, loss, Joule, coupling, ambient)--> T_true
     commands --TEM driver (dead zone, saturation below the rating)--> applied drive
@@ -67,7 +67,7 @@ PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('angle_delay_s', 's', 0.0, 0.0, 3.0, 0.2, 'potentiometer / acquisition delay'),
     ExtensionParam('angle_offset_rad', 'rad', 0.0, -0.5, 0.5, 0.02, 'potentiometer offset'),
     ExtensionParam('angle_gain_err', '1', 0.0, -0.5, 0.5, 0.03, 'potentiometer gain error about q_neutral'),
-    # per-channel sensor chain (issue 13): each thermocouple on its own, the potentiometer's lag and drift
+    # per-channel sensor chain: each thermocouple on its own, the potentiometer's lag and drift
     ExtensionParam('temp_offset_1_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple 1 offset (muscle 1 only)'),
     ExtensionParam('temp_offset_2_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple 2 offset (muscle 2 only)'),
     ExtensionParam('temp_gain_err_1', '1', 0.0, -0.3, 0.3, 0.02, 'thermocouple 1 gain error about TEMP_GAIN_REF_C'),
@@ -140,7 +140,7 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
     off = [k for k in REPLAY_ONLY if v[k] != NOMINAL[k]]
     if off:
         raise ParameterError(f'model extension(s) {", ".join(f"{k} = {v[k]:g}" for k in off)} are replayed by '
-                             f'sma-wrist diagnose but not simulated by the plant (docs/diagnose.md)')
+                             f'sma-wrist diagnose but not simulated by the plant (doc/explanation/diagnosis.md)')
     tp = dataclasses.replace(p.thermal.scaled(1.0 + v['tem_gain_err'], 1.0 + v['loss_scale_err'],
                                               1.0 + v['joule_scale_err'], v['ambient_offset_C']),
                              coupling_per_s=v['coupling_per_s'])

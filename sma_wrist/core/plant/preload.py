@@ -1,4 +1,4 @@
-"""The chain's pre-load elongation e0 for a given wire (Sec. 2.2.3; docs/model.md "Joint range and payload capacity").
+"""The chain's pre-load elongation e0 for a given wire (Sec. 2.2.3; doc/explanation/model.md).
 
 The chain (Eq. 4.17) stretches both bundles to e0 at q_neutral: y_1 = e0 - x, y_2 = e0 + x. e0 decides
 where the pair can hold the joint: a larger e0 pulls both wires harder, so the hot muscle lifts a
@@ -22,7 +22,7 @@ from sma_wrist.core.thermal import heat_balance as th
 
 #: target range of Sec. 6.1: q_d = q_neutral +- 30 deg [rad]
 TARGET_HALF_RANGE_RAD = math.radians(30.0)
-#: payload range [kg] the built-in pre-load was calibrated for (its capacity ~0.7 kg, docs/model.md)
+#: payload range [kg] the built-in pre-load was calibrated for (its capacity ~0.7 kg, doc/explanation/model.md)
 PAYLOAD_RANGE_KG = (0.0, 0.7)
 
 

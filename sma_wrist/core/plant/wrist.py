@@ -1,6 +1,6 @@
 """The coupled wrist plant: TEM drive -> temperatures -> wire loads -> joint angle.
 
-One step of length dt (docs/model.md, "Coupling and integration"):
+One step of length dt (doc/explanation/model.md):
 
 1. TEM heat balance (Eqs. 4.13-4.14, :mod:`sma_wrist.core.thermal.heat_balance`), RK4, from the drive
    commands of both layers -> muscle temperatures T_i.
@@ -45,10 +45,10 @@ class PlantParams:
     joint: JointParams = field(default_factory=JointParams)
     #: TEM heat balance; the plant clips commands at the *driver rating* (+-24 V), not at the
     #: heat balance's hold limits (-12/+13 V), which the TEM controller enforces only while a
-    #: face is hot (tem_control.DriveLimits, docs/thermal.md "Drive limits").
+    #: face is hot (tem_control.DriveLimits, doc/explanation/model.md).
     thermal: th.ThermalParams = field(default_factory=lambda: th.ThermalParams().with_limits(-24.0, 24.0))
     #: Bundle elongation at q_neutral [mm], set by the pre-load calibration of Sec. 2.2.3:
-    #: with it the +-30 deg range is reachable up to ~0.7 kg at 0.09 m in the TEM-reachable window (docs/model.md).
+    #: with it the +-30 deg range is reachable up to ~0.7 kg at 0.09 m in the TEM-reachable window (doc/explanation/model.md).
     preload_elongation_mm: float = 1.98
     dt: float = 1e-3  # plant step [s]
     load_tolerance_mm: float = 1e-7  # residual of the wire-load solve (muscle.py Eq. 1)

@@ -15,7 +15,7 @@ fitted, the loss conductances differ). :class:`ThermalParams` can replace the im
 ambients (``ambient_C``) to model ambient or coolant drift; the default keeps Table 4.9's
 K_inf exactly.
 
-Arrangement (decision, docs/thermal.md): the final design is two layers (Fig. 5.26), one
+Arrangement (decision, doc/explanation/model.md): the final design is two layers (Fig. 5.26), one
 module per muscle. Layer i carries muscle i on its **T1 face (Eq. 4.13)** -- the face the
 seed's controller keeps when it sets h2 = 0 -- and the heat exchanger on its T2 face
 (Eq. 4.14; T'_i of Fig. 5.26, "not in use" for control but still simulated). With Table
@@ -93,7 +93,7 @@ class ThermalParams:
         Model input I per volt of command [1/V]; I = -input_per_volt * u (u > 0 heats T1).
     u_min_V, u_max_V:
         Command limits [V] (cooling, heating); from the runaway characterisation
-        (:func:`characterise_constant_commands`, docs/thermal.md).
+        (:func:`characterise_constant_commands`, doc/explanation/model.md).
     ambient_C:
         (muscle-face, exchanger-face) ambient/coolant temperatures [degC]; ``None`` keeps
         Table 4.9's K_inf (implied 25.596 / 31.568 degC).
@@ -101,7 +101,7 @@ class ThermalParams:
         Conductance between the two muscle faces over their heat capacity [1/s], adds
         coupling * (T_other_muscle - T_muscle) to Eq. 4.13 of each layer. Default 0.
     dt_max_s:
-        Largest accepted RK4 step [s] (stability bound ~25 s, accuracy bound, docs/thermal.md).
+        Largest accepted RK4 step [s] (stability bound ~25 s, accuracy bound, doc/explanation/model.md).
     window_C:
         Physical window of every face [degC]; 80 degC is the TEM operating limit.
     """
@@ -541,7 +541,7 @@ def sine_response(params: ThermalParams, amplitude_V: float = 12.0,
             'left_window': left}
 
 
-def _main() -> None:  # pragma: no cover - a report, exercised by docs/thermal.md
+def _main() -> None:  # pragma: no cover - a report, exercised by doc/explanation/model.md
     import dataclasses as dc
     p = ThermalParams()
     print('Table 4.9 implied ambients (Eq. 4.15): T1 %.3f degC, T2 %.3f degC' % (

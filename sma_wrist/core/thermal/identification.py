@@ -32,7 +32,7 @@ of 12 V sine runs (1/128-1 Hz), starting every parameter at 1. Here:
   offset between the faces, and the first ``settle_s`` seconds are left out of the residual.
 
 The command scale input_per_volt is not identifiable apart from the K's (every K multiplies
-a power of I); it stays fixed (docs/thermal.md, "Input unit and scale").
+a power of I); it stays fixed (doc/explanation/model.md).
 
 Error statistics (Table 4.10): e = measured - simulated on the evaluated samples, in degC and
 in % of the measured range of that face in that run (the form of Eq. 4.3).
@@ -671,7 +671,7 @@ def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[Thermal
 
 
 def hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[float, float]:
-    """Command hold limits of an identified model, found as docs/thermal.md found the defaults.
+    """Command hold limits of an identified model, found as doc/explanation/model.md found the defaults.
 
     :func:`sma_wrist.core.thermal.heat_balance.characterise_constant_commands` (every face in the window,
     converged after 3000 s), rounded inward to whole volts. Raises when a direction holds

@@ -2,7 +2,7 @@
 
 The TEM law (Eqs. 5.44-5.47) and its observer integrate Table 4.9's heat balance. A real module's
 drive gain, its losses to the air and the coolant temperature differ from it by tens of percent
-and degrees (issue 14's family: +-30 %, +-30 %, +-5 degC), and with the plant's own heat balance the
+and degrees (the off-model family's ranges: +-30 %, +-30 %, +-5 degC), and with the plant's own heat balance the
 inverse mode's median max error over the family falls from 12.8 to 8.0 % (``plants.oracle``,
 variant ``thermal``, seed 2). The loop has what it takes to learn them: the commands it sends and
 the thermocouples it reads. Per wrist, the scales
@@ -59,7 +59,7 @@ class OnlineThermalParams:
         apply_after_s: the estimate is used (:attr:`ThermalScaleEstimator.ready`) from this long after
         the first sample on [s]: the very first windows, before the loop has swept the temperatures, fit
         little; until it is used, the TEM loop's face protection predicts a stronger TEM's unmeasured hot
-        faces on the model's gain (docs/control.md "The TEMs' hot faces": 10 s, not 30 s).
+        faces on the model's gain (doc/explanation/controllers.md: 10 s, not 30 s).
     """
 
     window_s: float = 2.0

@@ -16,7 +16,7 @@ its face protection all use the same identified model. Format (YAML, version 1):
       K_R: 0.012524
       K_inf: 0.615142
     exchanger_face: {...}        # T2 column, Eq. 4.14
-    hold_limits_V: [-12.0, 13.0] # commands held forever keep every face in window_C (docs/thermal.md)
+    hold_limits_V: [-12.0, 13.0] # commands held forever keep every face in window_C (doc/explanation/model.md)
     window_C: [0.0, 80.0]
     identification: {...}        # provenance and held-out errors; informative only
 

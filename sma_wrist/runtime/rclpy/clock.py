@@ -169,7 +169,7 @@ class Clock:
                     entry.post(change, delta)
 
     def sleep_until(self, until: Time, context: Any = None) -> bool:
-        """Advance virtual time to ``until`` (SYSTEM/STEADY); see docs/runtime.md.
+        """Advance virtual time to ``until`` (SYSTEM/STEADY); see doc/explanation/runtime.md.
 
         There is nothing to wait for in a single-threaded virtual-time process, so sleeping
         on a clock that follows the virtual clock moves the virtual clock; sleeping on an

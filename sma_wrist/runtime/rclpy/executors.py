@@ -179,7 +179,7 @@ class Executor:
             before = (VCLOCK.steady_ns, self.callbacks_run)
             self.spin_once()
             if (VCLOCK.steady_ns, self.callbacks_run) == before and not self._pending_rest():
-                return  # idle forever: rclpy would block; we return (docs/runtime.md)
+                return  # idle forever: rclpy would block; we return (doc/explanation/runtime.md)
 
     def _pending_rest(self) -> bool:
         return self._pending_idx < len(self._pending)
