@@ -562,10 +562,11 @@ def _thermal_rows(results: dict[str, Any]) -> list[str]:
     rows = [[md(h['record']), f'{h["rms_C"]:.2f}',
              'n/a' if h['table_4_9_rms_C'] is None else f'{h["table_4_9_rms_C"]:.2f}'] for h in t['result']['holdout']]
     out = ['## A real Peltier module', '',
-           f'{md(t["what"])}: the heat balance fitted by `sma-wrist identify thermal`, RMS of the chamber '
-           'temperature on runs it never saw, beside the dissertation\'s Table 4.9 parameters on the same samples. '
-           'The logs\' PWM duty is converted to the mean drive voltage first (duty / 255 x 5 V, '
-           '`measure.py` does it).', '', f'`{t["command"]}`', '']
+           'The heat balance fitted by `sma-wrist identify thermal` on one logged run of a Peltier-heated chamber '
+           '(`test/data/tec_chamber`) predicts the module\'s other runs: RMS of the chamber temperature on runs '
+           'it never saw, beside the dissertation\'s Table 4.9 parameters on the same samples. The logs\' PWM duty '
+           'is converted to the mean drive voltage first (duty / 255 x 5 V; `measure.py --only identify_thermal` '
+           'writes the converted tables, then runs:)', '', f'`{t["command"]}`', '']
     out += _table(['held-out run', 'fitted model RMS [degC]', 'Table 4.9 RMS [degC]'], rows) + ['']
     if t['result']['warnings']:
         out += ['What the fit says it cannot determine:', ''] + [f'- {md(w)}' for w in t['result']['warnings']] + ['']
