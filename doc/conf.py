@@ -13,10 +13,13 @@ import re
 import sys
 from pathlib import Path
 
-DOC = Path(__file__).resolve().parent
-ROOT = DOC.parent
+# This file's folder holds refgen.py. rosdoc2 execs a copy of this file from its wrapping conf.py (then __file__
+# names the wrapper, and this folder is its doc/) with the package's sources first on sys.path.
+_here = Path(__file__).resolve().parent
+DOC = next((d for d in (_here, _here / 'doc', Path.cwd() / 'doc') if (d / 'refgen.py').is_file()), _here)
+if (DOC.parent / 'package.xml').is_file():
+    sys.path.insert(0, str(DOC.parent))  # the checkout's sma_wrist, also when an installed copy exists
 sys.path.insert(0, str(DOC))  # refgen: the page generator (a module, not a Sphinx extension)
-sys.path.insert(0, str(ROOT))  # the checkout's sma_wrist, also when an installed copy exists
 
 import refgen  # noqa: E402
 
@@ -65,7 +68,7 @@ html_theme_options = {'navigation_depth': 3}
 
 
 def _generate(app) -> None:  # noqa: ANN001 - sphinx.application.Sphinx
-    refgen.write_pages(Path(app.srcdir))
+    refgen.write_pages()  # into doc/: under rosdoc2 that is a folder below app.srcdir
 
 
 # napoleon reads the text before the first colon of every attribute / data / property docstring as its type

@@ -27,10 +27,21 @@ from pathlib import Path
 from typing import Any, Iterator
 
 DOC = Path(__file__).resolve().parent
-ROOT = DOC.parent
+
+
+def _source_root() -> Path:
+    """The package's source tree (package.xml, msg_defs/, sma_wrist/): doc/'s parent, or -- when rosdoc2 builds a
+    copy of doc/ in its own folder -- the one of the sma_wrist it puts first on sys.path."""
+    if (DOC.parent / 'package.xml').is_file():
+        return DOC.parent
+    import sma_wrist
+    return Path(sma_wrist.__file__).resolve().parent.parent
+
+
+ROOT = _source_root()
 RESULTS = DOC / 'validation' / 'results.json'
 #: the pages this module writes (relative to doc/); .gitignore lists them
-GENERATED = ('reference/', 'validation.md')
+GENERATED = ('reference/', 'validation.md', 'changelog.md', 'contributing.md')
 
 
 def version() -> str:
@@ -325,9 +336,20 @@ def validation_page(results: dict[str, Any] | None = None) -> str:
 
 # ----------------------------------------------------------------------------------------------------- write
 
+def _include(name: str, *options: str, title: str = '') -> str:
+    """A page that includes the top-level file ``name`` (CHANGELOG.rst, CONTRIBUTING.md), by its path from doc/:
+    rosdoc2 builds a copy of doc/ away from the sources, where a typed ``../`` would miss."""
+    path = os.path.relpath(ROOT / name, DOC)
+    return '\n'.join(([f'# {title}', ''] if title else []) + [f'```{{include}} {path}', *options, '```', ''])
+
+
 def pages() -> dict[str, str]:
     """Every generated page: path relative to doc/ -> Markdown text."""
-    out: dict[str, str] = {}
+    out: dict[str, str] = {
+        # CHANGELOG.rst's own title (3 lines and a blank) gives way to the page's
+        'changelog.md': _include('CHANGELOG.rst', ':parser: rst', ':start-line: 4', title='Changelog'),
+        'contributing.md': _include('CONTRIBUTING.md'),  # its own heading is the page's title
+    }
     node_list = nodes()
     out['reference/nodes/index.md'] = '\n'.join(
         ['# Nodes', '', 'Every node of the package with its parameters and topics, generated from the parameter specs '
@@ -346,8 +368,8 @@ def pages() -> dict[str, str]:
 
 
 def write_pages(srcdir: Path | None = None) -> list[Path]:
-    """Write every generated page under ``srcdir`` (default doc/); a page whose text is unchanged is not touched,
-    so Sphinx rebuilds only what changed."""
+    """Write every generated page under ``srcdir`` (default: doc/, the folder of this file, also in rosdoc2's copy);
+    a page whose text is unchanged is not touched, so Sphinx rebuilds only what changed."""
     base = Path(srcdir) if srcdir else DOC
     written = []
     for rel, text in pages().items():
