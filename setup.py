@@ -54,6 +54,12 @@ setup(
         'fast': ['numba>=0.57'],
         # sma-wrist sweep --scheduler ADDRESS: the chunks run on a Dask distributed cluster
         'dask': ['dask[distributed]>=2023.1'],
+        # The documentation (doc/, `sphinx-build -W --keep-going -b html doc doc/_build/html`). pip picks Sphinx
+        # 8.1 + MyST 4.0 on Humble's Python 3.10 (Sphinx 8.2+ and MyST 5 need 3.11+), Sphinx 9.0 / 9.1 + MyST 5.2
+        # on 3.11 / Jazzy's 3.12; the -W build was run clean with each (8.1.3 + 4.0.1, 9.0.4 + 5.2.0, 9.1.1 +
+        # 5.2.0), the bounds keep to them (warnings and MyST's Markdown change between majors).
+        # sphinx_rtd_theme is the theme rosdoc2 uses.
+        'docs': ['sphinx>=8.1,<10', 'myst-parser>=4.0,<6', 'sphinx_rtd_theme>=3.0,<4'],
     },
     zip_safe=True,
     maintainer='sma_wrist developers',

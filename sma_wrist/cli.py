@@ -243,15 +243,16 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=cmd_run)
 
     e = sub.add_parser('experiment', help='the Chapter 6 comparison: controllers x payloads, bags, report')
-    e.add_argument('--controllers', type=_csv(_controller), default=['inverse_adaptive', 'direct_adaptive', 'pid'])
+    e.add_argument('--controllers', type=_csv(_controller), default=['inverse_adaptive', 'direct_adaptive', 'pid'],
+                   help='comma separated (default: all three)')
     e.add_argument('--payloads', type=_csv(_payload), default=[0.1, 0.2, 0.3, 0.4, 0.5, 0.6], help='kg, comma separated')
-    e.add_argument('--out', default='runs/ch6')
+    e.add_argument('--out', default='runs/ch6', help='output directory: one bag per run, report.md, table, PNGs')
     e.add_argument('--duration', type=_positive_float, default=4 * math.pi / 0.1, help='s (default two periods)')
     e.add_argument('--workers', type=nonnegative_int, default=None,
                    help='parallel processes (default and 0: CPU count)')
     e.add_argument('--params-file', action='append', help='params file for every run (e.g. config/paper_table_6_1.yaml)')
-    e.add_argument('--no-plots', action='store_true')
-    e.add_argument('--json', action='store_true')
+    e.add_argument('--no-plots', action='store_true', help='write no PNG plots')
+    e.add_argument('--json', action='store_true', help='print the result table as JSON')
     e.add_argument('--family', type=nonnegative_int, default=8,
                    help='also run every controller x payload on this many sampled off-model plants (the sweep '
                         'engine) and report them beside the nominal figures (0: none; default 8)')
@@ -259,15 +260,15 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_experiment)
 
     c = sub.add_parser('compare', help='tracking metrics of recorded runs (sim or hardware), aligned on time')
-    c.add_argument('bags', nargs='+')
-    c.add_argument('--json', action='store_true')
+    c.add_argument('bags', nargs='+', help='rosbag2 directories or files (MCAP or SQLite)')
+    c.add_argument('--json', action='store_true', help='print the rows as JSON')
     c.add_argument('--plot', default=None, help='write an overlay PNG here')
     recording_arguments(c)
     c.set_defaults(func=cmd_compare)
 
     i = sub.add_parser('info', help='summarise a bag: topics, counts, duration')
-    i.add_argument('bag')
-    i.add_argument('--json', action='store_true')
+    i.add_argument('bag', help='rosbag2 directory or one .mcap / .db3 file')
+    i.add_argument('--json', action='store_true', help='print one JSON object')
     i.set_defaults(func=cmd_info)
 
     d = diagnose_arguments(sub.add_parser(
@@ -286,7 +287,7 @@ def build_parser() -> argparse.ArgumentParser:
     w.set_defaults(func=cmd_sweep)
 
     b = sub.add_parser('bench', help='benchmarks (plant, graph, ...) as numbers')
-    b.add_argument('--json', action='store_true')
+    b.add_argument('--json', action='store_true', help='print JSON instead of section.key = value lines')
     b.add_argument('--quick', action='store_true', help='short runs (smoke test of the benchmark itself)')
     b.add_argument('--section', action='append', help='only these sections')
     b.set_defaults(func=cmd_bench)

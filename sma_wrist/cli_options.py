@@ -54,7 +54,8 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--noise-counts', type=float, default=2.0, help='ADC noise, std dev [counts] (default 2)')
     ap.add_argument('--latency-ms', type=float, default=1.0, help='command -> drive delay, device time [ms]')
     ap.add_argument('--watchdog-s', type=float, default=0.5, help='zero drive without commands [device s]')
-    ap.add_argument('--seed', type=nonnegative_int, default=0)
+    ap.add_argument('--seed', type=nonnegative_int, default=0, help='seed of the ADC noise and injected garbage '
+                    '(default 0)')
     ap.add_argument('--thermocouple-offsets-C', default='0,0,0,0',
                     help='sensor errors of muscle 1, muscle 2, TEM face 1, TEM face 2 [degC]')
     ap.add_argument('--thermocouple-rate-hz', type=float, default=0.0, metavar='HZ',

@@ -1,4 +1,4 @@
-"""The project's one optional-numba switch: :data:`AVAILABLE` and the ``_jit`` decorator.
+"""The project's one optional-numba switch: ``AVAILABLE`` and the ``_jit`` decorator.
 
 Every compiled kernel under ``core/`` (``*/kernel.py``, ``*_kernel.py``) is plain Python compiled by
 numba when it is installed (``pip install sma_wrist[fast]``); without numba the decorator returns the
@@ -20,7 +20,7 @@ Where the compiled kernels are cached, and when they are stale:
   then imports that folder as a namespace package ahead of a later editable install's finder
   (``import sma_wrist`` gives ``__file__ None`` and the CLI runs the old copy).
 
-:class:`PackageCacheLocator` answers both: the package's kernels are cached in the user's cache
+``PackageCacheLocator`` answers both: the package's kernels are cached in the user's cache
 folder (``$XDG_CACHE_HOME/sma_wrist/numba``, ``NUMBA_CACHE_DIR`` when the user set it), one
 sub-folder per installed copy, and stamped with the digest of every source in the folders that
 hold kernels (:data:`KERNEL_FOLDERS`), so numba itself recompiles after an edit anywhere there.

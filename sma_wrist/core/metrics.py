@@ -6,10 +6,12 @@ percentage of the reference's full range,
     e_pct(t) = 100 |q(t) - q_d(t)| / (max q_d - min q_d),
 
 i.e. of 60 deg = 1.048 rad for the Sec. 6.1 sine. Alternatives and why not:
+
 - % of the instantaneous q_d: undefined at q_d = 0 and huge near the bottom of the sine
   (the seed's q_d touches 0 every cycle), so a 9 % maximum would be impossible.
 - % of the amplitude (half range): doubles every number; the seed's "max 8.4-10.4 %" with
   the "< 15 %" requirement reads more naturally against the 60 deg range.
+
 ``reference_range_rad`` overrides the denominator (e.g. for a step or constant reference).
 
 "Total absolute error (%)" (Table 6.2): the seed sums the per-sample absolute % error over

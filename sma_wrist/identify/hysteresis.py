@@ -41,8 +41,11 @@ def register(sub: Any) -> None:
     p.add_argument('--params', metavar='FILE', help='the "before" model: an earlier hysteresis.yaml (default: built-in set)')
     p.add_argument('--columns', metavar='T,STRAIN[,STRESS[,TIME]]',
                    help='column names or 0-based numbers (default: by header name, else 0,1,2)')
-    p.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'))  # = io.TEMPERATURE_UNITS (io imports numpy)
-    p.add_argument('--strain-unit', choices=('fraction', '%', 'mm'))
+    p.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'),
+                   help='unit of the temperature column (default: its header unit, else degC with a warning)')  # = io.TEMPERATURE_UNITS (io imports numpy)
+    p.add_argument('--strain-unit', choices=('fraction', '%', 'mm'),
+                   help='unit of the strain column, mm with --length-mm (default: its header unit, else from the '
+                        'values, with a warning)')
     p.add_argument('--stress-unit', choices=('MPa', 'psi', 'ksi', 'N', 'lbf', 'kg', 'kgf', 'g'), help='a stress (MPa, psi, ksi) or a load (N, lbf, kg, kgf, g)')
     p.add_argument('--length-mm', type=float, help='gauge length, for elongation in mm')
     p.add_argument('--wire-diameter-mm', type=float, help='wire diameter, for a load column in N, lbf, kg, kgf or g')
@@ -53,7 +56,7 @@ def register(sub: Any) -> None:
                    help="load law of the envelopes: the seed's quadratics per section, the Clausius-Clapeyron "
                         'shift, that shift with a saturating stroke, or auto (default: the lowest leave-one-load-out '
                         'error; without it quadratic)')
-    p.add_argument('--no-plots', action='store_true')
+    p.add_argument('--no-plots', action='store_true', help='write no PNG plots')
     p.add_argument('--thermal-file', metavar='FILE',
                    help="the TEMs the wire will run with (sma-wrist identify thermal); default the seed's (0-80 degC): "
                         'wrist_params.yaml says what they cannot reach')

@@ -577,25 +577,30 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     ap.add_argument('--params-out', default=None, metavar='FILE', help='params file (default DIR/thermal.yaml)')
     ap.add_argument('--base', default=None, metavar='FILE', help='thermal file to start from (default Table 4.9)')
     ap.add_argument('--columns', type=_columns, default=None, help='ROLE=COLUMN,... roles time, u, T1, T2, frequency')
-    ap.add_argument('--time-unit', choices=sorted(TIME_UNITS), default=None)
+    ap.add_argument('--time-unit', choices=sorted(TIME_UNITS), default=None,
+                    help='unit of the time column (default: its header unit)')
     ap.add_argument('--sample-period-s', type=float, default=None, metavar='S',
                     help='the tables have no time column: their rows are S seconds apart (a logger writing one row '
                          'per period)')
-    ap.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'), default=None)
-    ap.add_argument('--voltage-unit', choices=('V', 'mV'), default=None)
+    ap.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'), default=None,
+                    help='unit of the temperature columns (default: their header unit, else degC)')
+    ap.add_argument('--voltage-unit', choices=('V', 'mV'), default=None,
+                    help='unit of the drive voltage column (default: its header unit, else V)')
     ap.add_argument('--dt', type=float, default=0.1, help='fit grid [s] (default 0.1; at most 1, the RK4 limit)')
     ap.add_argument('--input-hold', choices=('auto', 'zoh', 'linear'), default='auto',
                     help='how the logged voltage drove the TEM between samples (auto: linear for tables, zoh for bags)')
     ap.add_argument('--faces', choices=('auto', 'both', 'muscle'), default='auto',
                     help='Table 4.9 columns to fit (auto: both when T2 is measured in every run)')
-    ap.add_argument('--validation', choices=('auto', 'leave-one-out', 'time-split', 'none'), default='auto')
+    ap.add_argument('--validation', choices=('auto', 'leave-one-out', 'time-split', 'none'), default='auto',
+                    help='held-out errors: each run predicted by the fit on the others, or every run\'s last '
+                         'share (--train-fraction) by the fit on the rest (auto: leave-one-out from 2 runs)')
     ap.add_argument('--sensor-lag', action='store_true',
                     help="also fit one first-order lag of the temperature sensors (a thermistor on a block, a "
                          "sheathed thermocouple); reported, not part of thermal.yaml's model")
     ap.add_argument('--train-fraction', type=float, default=0.6, help='time-split: fitted share of every run')
-    ap.add_argument('--no-plots', action='store_true')
+    ap.add_argument('--no-plots', action='store_true', help='write no PNG plots')
     ap.add_argument('--json', action='store_true', help='print one JSON object')
-    ap.add_argument('--quiet', action='store_true')
+    ap.add_argument('--quiet', action='store_true', help='no progress lines on stderr')
     from sma_wrist.cli_options import recording_arguments
     recording_arguments(ap)
     ap.set_defaults(func=run_cli)

@@ -81,7 +81,7 @@ class PlantSim(WristNode):
         Param('dt_s', 1e-3, 'plant integration step', 's', (1e-4, 1e-2), runtime=False),
         Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in simulated time', 'Hz',
               (1.0, 1000.0), runtime=False),
-        Param('real_time_factor', 1.0, 'simulated seconds per second of the node clock (steady time)', '',
+        Param('real_time_factor', 1.0, 'simulated seconds per second of the node clock (steady time)', '1',
               (0.01, 1000.0), runtime=False),
         Param('initial_angle_rad', -1.0, 'start angle; negative = static equilibrium at zero drive', 'rad',
               (-1.0, 1.4), runtime=False),

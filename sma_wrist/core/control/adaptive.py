@@ -55,10 +55,10 @@ N_WIRES = 140
 class ControlGeometry:
     """Geometry the law needs (Table 5.4 and Chapter 2).
 
-    r_eff_m: chain force -> output torque arm: sprocket pitch radius 7.96e-3 m / step-up 3
-        (Table 5.4's 0.75e-3 m would hold only 0.17 kg with 140 wires; doc/explanation/controllers.md).
-    joint_inertia_kgm2: I_w of Table 5.4.
-    known_payload_kg: payload whose inertia M l^2 is added to I_w when it is known (0 = unknown).
+    - r_eff_m: chain force -> output torque arm: sprocket pitch radius 7.96e-3 m / step-up 3
+      (Table 5.4's 0.75e-3 m would hold only 0.17 kg with 140 wires; doc/explanation/controllers.md).
+    - joint_inertia_kgm2: I_w of Table 5.4.
+    - known_payload_kg: payload whose inertia M l^2 is added to I_w when it is known (0 = unknown).
     """
 
     r_eff_m: float = 7.96e-3 / 3.0

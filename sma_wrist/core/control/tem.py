@@ -58,22 +58,22 @@ SEED_ONE_MODULE_WEIGHTS = (1.0, 1.0)
 class TemControlParams:
     """Controller parameters.
 
-    gain_per_s: k of the error dynamics de/dt + k e = 0 (Eq. 5.42; the seed uses 1) [1/s].
-    weights: (h1, h2) of Eq. 5.47 on the (muscle/T1, exchanger/T2) faces; (1, 0) = two layers.
-    rate_filter_s: time constant of the first-order filter on the estimated dT_d/dt [s]
-        (only :class:`TemController` estimates; 0 = raw backward difference).
-    target_filter_s: 1 / omega of a prefilter on the desired temperatures [s] (only
-        :class:`TemLoop`; 0 = none): the critically damped tracking filter
-        (2 omega s + omega^2) / (s + omega)^2, which follows a ramp without lag (a first-order
-        filter of the same time constant lags it by that time, 2.5 % of the sine's range at
-        0.5 s). The muscle follows its target with the error dynamics' time constant
-        1 / gain_per_s; target content faster than that (sensor noise amplified by the joint
-        law, the inverse's jumps between branches) cannot move the muscle, only reverse the
-        TEM (doc/explanation/controllers.md).
-    chatter_limit_per_s: the chatter guard (only :class:`TemLoop` and the sweep's bank; 0 = off,
-        :class:`ChatterGuard`): a wrist whose TEM commands change sign more often than this
-        [1/s], averaged over ``chatter_window_s`` [s], runs its rate filter at
-        ``chatter_rate_filter_s`` [s] until the rate falls below half the limit.
+    - gain_per_s: k of the error dynamics de/dt + k e = 0 (Eq. 5.42; the seed uses 1) [1/s].
+    - weights: (h1, h2) of Eq. 5.47 on the (muscle/T1, exchanger/T2) faces; (1, 0) = two layers.
+    - rate_filter_s: time constant of the first-order filter on the estimated dT_d/dt [s]
+      (only :class:`TemController` estimates; 0 = raw backward difference).
+    - target_filter_s: 1 / omega of a prefilter on the desired temperatures [s] (only
+      :class:`TemLoop`; 0 = none): the critically damped tracking filter
+      (2 omega s + omega^2) / (s + omega)^2, which follows a ramp without lag (a first-order
+      filter of the same time constant lags it by that time, 2.5 % of the sine's range at
+      0.5 s). The muscle follows its target with the error dynamics' time constant
+      1 / gain_per_s; target content faster than that (sensor noise amplified by the joint
+      law, the inverse's jumps between branches) cannot move the muscle, only reverse the
+      TEM (doc/explanation/controllers.md).
+    - chatter_limit_per_s: the chatter guard (only :class:`TemLoop` and the sweep's bank; 0 = off,
+      :class:`ChatterGuard`): a wrist whose TEM commands change sign more often than this
+      [1/s], averaged over ``chatter_window_s`` [s], runs its rate filter at
+      ``chatter_rate_filter_s`` [s] until the rate falls below half the limit.
     """
 
     gain_per_s: float = 1.0
@@ -247,7 +247,7 @@ def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_
 
     state (N, L, 2) degC; T_d and T_d_rate broadcastable to it (degC, degC/s), one target per
     face (faces with weight 0 are ignored, but must be finite). Raises ModelInputError on
-    non-finite inputs. One wrist of two layers runs in :func:`tem_kernel.linearising_command`
+    non-finite inputs. One wrist of two layers runs in :func:`~sma_wrist.core.control.tem_kernel.linearising_command`
     when numba is installed (``compiled``: None = that choice, False = numpy here).
     """
     T = th.check_state(state)
@@ -276,7 +276,7 @@ def observer_step(thermal: th.ThermalParams, state: ArrayLike, command_V: ArrayL
                   *, compiled: bool | None = None) -> FloatArray:
     """The controller's observer between samples: faces (N, L, 2) [degC] after the commands
     (N, L) [V] in force were held for dt [s] (thermal.step, RK4 of Eqs. 4.13-4.14; inputs are
-    the controller's own, already checked). One wrist runs in :func:`tem_kernel.observer_step`
+    the controller's own, already checked). One wrist runs in :func:`~sma_wrist.core.control.tem_kernel.observer_step`
     when numba is installed (``compiled`` as in :func:`feedback_linearising_command`)."""
     T = np.asarray(state, dtype=float)
     if _one_wrist(T, compiled):
@@ -571,7 +571,7 @@ def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: Ar
     """(lo, hi) [V], shape (N, L): the commands that, held for the horizon from the faces in
     ``state`` (N, L, 2), keep every face of their layer inside the window (1 V grid over the boost
     range). Where none does, both are the command that leaves the window least. One wrist of two
-    layers runs in :func:`tem_kernel.held_command_range` when numba is installed (``compiled`` as
+    layers runs in :func:`~sma_wrist.core.control.tem_kernel.held_command_range` when numba is installed (``compiled`` as
     in :func:`feedback_linearising_command`)."""
     T = np.asarray(state, dtype=float)
     cand = limits.boost_min_V + _CANDIDATES * (limits.boost_max_V - limits.boost_min_V)
@@ -663,7 +663,7 @@ class TemLoop:
 
     Without targets (``T_d`` None: stale or missing) the TEMs are switched off (0 V); :meth:`off`
     does the same from outside (watchdog). ``compiled`` (None: numba if installed) runs steps 1-4
-    as one call of :func:`tem_kernel.control_sample`; False runs the numpy functions named above,
+    as one call of :func:`~sma_wrist.core.control.tem_kernel.control_sample`; False runs the numpy functions named above,
     which stay the reference (test_tem_control compares the two over closed-loop sequences).
     """
 

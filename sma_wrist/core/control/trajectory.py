@@ -11,7 +11,7 @@ Default: the Sec. 6.1 experiment ``q_d = 0.524 + 0.524 sin(0.1 t)`` rad. It peak
 limits are [0, 1.05] rad rather than [0, 1.047].
 
 Use :func:`make_trajectory` to build one from a name and keyword arguments (node
-parameters); it raises :class:`ParameterError` naming the bad value and the valid range.
+parameters); it raises :class:`~sma_wrist.core.errors.ParameterError` naming the bad value and the valid range.
 """
 from __future__ import annotations
 

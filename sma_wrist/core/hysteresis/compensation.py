@@ -194,7 +194,7 @@ class MuscleCompensator:
 
         Step: shift += gain dt (y_model - y_meas) s / (s^2 + s_0^2), s = dy_model/dT [mm/degC] of the
         loop the memory is on (central difference, heating up / cooling down), y in the SD-GPI's
-        coordinates (:meth:`_target`), s_0 = SLOPE_FLOOR_MM_PER_C; clipped to +-shift_limit_C.
+        coordinates (``_target``), s_0 = SLOPE_FLOOR_MM_PER_C; clipped to +-shift_limit_C.
         A model predicting a longer wire than measured is too cold: its axis moves up.
         s is taken as min(s, 0): heating never lengthens the model's wire along its loop, but inside the
         loop the central difference spans both branches' memoryless parts (Eq. 3.22, c set at T + h, d set

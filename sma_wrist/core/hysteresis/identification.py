@@ -440,7 +440,7 @@ def _columns(T: ArrayLike, y: ArrayLike, n_loads: int) -> tuple[list[FloatArray]
 
 
 def sdgpi_gpi_vectors(x: FloatArray, edges: FloatArray, loads: FloatArray) -> FloatArray:
-    """(L, 20) GPI vectors of one SD-GPI vector (layout of :func:`_sd_layout`) at each load."""
+    """(L, 20) GPI vectors of one SD-GPI vector (layout of ``_sd_layout``) at each load."""
     return _sd_to_gpi(np.asarray(x, dtype=float)[None], np.asarray(edges, dtype=float),
                       np.asarray(loads, dtype=float))[0]
 

@@ -809,6 +809,7 @@ class LinearCorrection:
         return np.polyval(self.p_a, s), np.polyval(self.p_c, s)
 
     def precompensate(self, v: ArrayLike, load_kgf: ArrayLike) -> FloatArray:
+        """The command u = (v - c_l) / a_l whose corrected output is ``v`` at ``load_kgf`` (Eqs. 5.12-5.14 inverted)."""
         a, c = self.gain_offset(load_kgf)
         return (np.asarray(v, float) - c) / a
 

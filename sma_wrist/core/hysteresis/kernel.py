@@ -2,7 +2,7 @@
 
 Scalar per-wire loops, compiled by numba when present (see :mod:`sma_wrist.core.jit`); the numpy
 reference is :meth:`sma_wrist.core.hysteresis.muscle.MuscleModel.solve_load`. The plant kernel
-(:mod:`sma_wrist.core.plant.kernel`) calls :func:`_solve_load_into` once per muscle and step.
+(:mod:`sma_wrist.core.plant.kernel`) calls ``_solve_load_into`` once per muscle and step.
 """
 from __future__ import annotations
 

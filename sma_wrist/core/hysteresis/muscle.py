@@ -65,7 +65,7 @@ class MuscleGeometry:
 
 @dataclass
 class LoadSolution:
-    """Result of :func:`solve_load` for each bundle."""
+    """Result of :meth:`MuscleModel.solve_load` for each bundle."""
 
     load_kgf: FloatArray  # per-wire load
     compliance_mm_per_kgf: FloatArray  # d(elongation)/d(load) at the root, > 0

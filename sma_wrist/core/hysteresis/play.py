@@ -36,13 +36,17 @@ def play_series(v: ArrayLike, thresholds: ArrayLike, w0: ArrayLike | None = None
 
     Parameters
     ----------
-    v : (N,) input samples.
-    thresholds : (n,) thresholds r_j >= 0.
-    w0 : (n,) initial operator states; default ``f_r(v(0), 0)`` (Eq. 5.1).
+    v : array_like, shape (N,)
+        Input samples.
+    thresholds : array_like, shape (n,)
+        Thresholds r_j >= 0.
+    w0 : array_like, shape (n,), optional
+        Initial operator states; default ``f_r(v(0), 0)`` (Eq. 5.1).
 
     Returns
     -------
-    (N, n) operator outputs.
+    numpy.ndarray, shape (N, n)
+        Operator outputs.
     """
     v = np.asarray(v, dtype=float)
     r = np.asarray(thresholds, dtype=float)

@@ -2,7 +2,7 @@
 
 The printed Tables 4.1-4.3 (GPI per load) and 4.5-4.6 (SD-GPI) lost something: units,
 which envelope is "l" and which "r", the unprinted weight p0 of Eq. 4.1, or whether the
-mirror of Eq. 4.2 is already in the numbers. This module builds :class:`SDGPIParams` from
+mirror of Eq. 4.2 is already in the numbers. This module builds :class:`~sma_wrist.core.hysteresis.sdgpi.SDGPIParams` from
 the tables under each reading and measures what loop each gives for the input of Sec. 3.2,
 so the choice can be argued from numbers (doc/explanation/model.md).
 
@@ -12,7 +12,7 @@ Conventions
     'literal': a set -> gamma_r, b set -> gamma_l, as Eq. 3.21 prints (and as
     :mod:`sma_wrist.core.hysteresis.sdgpi` implements). 'swapped': the a set is the ascending
     (heating, lower) envelope gamma_l and the b set gamma_r, implemented by passing the
-    sets to :class:`SDGPIParams` in swapped roles.
+    sets to :class:`~sma_wrist.core.hysteresis.sdgpi.SDGPIParams` in swapped roles.
 ``p0``
     1.0, 0.0, or 'fitted': the p0 whose loop shape (mean removed) is closest in the
     least-squares sense to the project's default loop at the same load

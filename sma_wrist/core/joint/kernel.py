@@ -15,7 +15,7 @@ def joint_step_one(qj, qdj, torque, stiffness, payload, dt, joint):  # pragma: n
     """One wrist's joint step, linearly implicit Euler of Eq. 4.18 (joint.joint_step): (q, q').
 
     torque: net muscle torque [N m]; stiffness: -d torque / dq [N m/rad]; joint (10,) as in
-    :func:`step_many`. Shared by every plant whose muscles drive this joint.
+    :func:`~sma_wrist.core.plant.kernel.step_many`. Shared by every plant whose muscles drive this joint.
     """
     I_w, lever, coulomb, viscous, static, stick_v = joint[0], joint[1], joint[2], joint[3], joint[4], joint[5]
     q_min, q_max, g = joint[7], joint[8], joint[9]

@@ -43,6 +43,7 @@ class ExtensionParam:
     description: str
 
 
+#: every extension parameter: name, unit, nominal value, bounds, typical effect size, meaning
 PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('tem_gain_err', '1', 0.0, -0.6, 1.0, 0.1, 'relative error of the TEM drive gain input_per_volt'),
     ExtensionParam('loss_scale_err', '1', 0.0, -0.6, 1.5, 0.1,

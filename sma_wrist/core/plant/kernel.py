@@ -5,7 +5,7 @@ per-call overhead (~50 array operations a step) dominates a 1-wrist step. This m
 the same step written as tight scalar loops over wrists (thermal RK4, Eqs. 4.13-4.14; the
 wire-load solve of muscle.py Eq. 1 with the SD-GPI of Eqs. 3.19-3.24, 4.1-4.6; the joint
 of Eq. 4.18), compiled by numba when it is installed (``pip install sma_wrist[fast]``).
-Without numba the plant uses its numpy path; :data:`AVAILABLE` says which.
+Without numba the plant uses its numpy path; ``AVAILABLE`` says which.
 
 The uncompiled Python of the same functions (``step_many_into.py_func``) is the "plain
 per-sample Python reference loop" of the benchmark. test_plant_kernel checks the kernel

@@ -84,7 +84,7 @@ def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
     The smallest e0 in ``bracket_mm`` with which q_neutral +- 30 deg is reachable quasi-statically
     (:func:`reach_margins`) at both ends of ``payload_kg``: the heaviest payload must reach the top, the
     lightest the bottom. The top is not monotonic in e0 (a pair pulled too tight hardly moves), so a scan
-    in ``step_mm`` finds the first e0 that reaches it and scans 5x finer below it refine to ``tolerance_mm``; raises :class:`ParameterError`, naming what is missing, when no e0 reaches the range.
+    in ``step_mm`` finds the first e0 that reaches it and scans 5x finer below it refine to ``tolerance_mm``; raises :class:`~sma_wrist.core.errors.ParameterError`, naming what is missing, when no e0 reaches the range.
     """
     lo_C, hi_C = (float(v) for v in window_C)
     m_lo, m_hi = (float(v) for v in payload_kg)

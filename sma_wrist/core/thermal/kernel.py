@@ -51,7 +51,7 @@ def thermal_rk4(x, u, dt, th_coef, y0, xs, kk, acc):  # pragma: no cover - compi
 
 
 def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """th_coef (14,) of :func:`step_many` from a thermal.ThermalParams."""
+    """th_coef (14,) of :func:`~sma_wrist.core.plant.kernel.step_many` from a thermal.ThermalParams."""
     faces = [[tp._k_at[f], tp._k_t[f], tp._k_tinf[f], tp._k_tc[f], tp._k_r[f], tp._k_inf[f]] for f in (0, 1)]
     return np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1], dtype=float)
 

@@ -56,7 +56,7 @@ class OnlineThermalParams:
         deviation of (g, s, a); walk_sd_per_sqrt_s: random walk of (g, s, a) per sqrt(s);
         noise_sd_C: standard deviation of one residual (noise after averaging plus model error) [degC];
         max_step: the most one window may move (g, s, a) (a trust region: the Jacobian is a local one);
-        apply_after_s: the estimate is used (:attr:`ThermalScaleEstimator.ready`) from this long after
+        apply_after_s: the estimate is used (``ThermalScaleEstimator.ready``) from this long after
         the first sample on [s]: the very first windows, before the loop has swept the temperatures, fit
         little; until it is used, the TEM loop's face protection predicts a stronger TEM's unmeasured hot
         faces on the model's gain (doc/explanation/controllers.md: 10 s, not 30 s).
