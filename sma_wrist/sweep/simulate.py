@@ -203,7 +203,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     and joins the Sec. 6.1 sine over this time [s] (0: the sine from its first value).
 
     ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
-    (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
+    (:data:`sma_wrist.sweep.oracle_models.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
     ``'sensors'``; docs/control.md "What a perfect model would give"); every case must then be on
     the one ``sdgpi`` scenario."""
     check_true_temperature(true_temperature)
@@ -211,7 +211,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         raise ParameterError('no closed loops to simulate (N = 0)')
     orc: Any = None
     if oracle:  # lazily: plants.oracle runs this engine
-        from sma_wrist.plants import oracle as oracle_models
+        from sma_wrist.sweep import oracle_models
         orc = oracle_models
         orc.check(oracle, plant, [c.scenario for c in cases])
         if 'sensors' in oracle:
