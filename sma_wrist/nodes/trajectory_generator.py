@@ -58,6 +58,7 @@ class TrajectoryGenerator(WristNode):
         self.pub = self.publisher('/wrist/reference')
         self.t0_ns: int | None = None
         self.angle: float | None = None  # the latest measured angle [rad]
+        self.start_rad: float | None = None  # the angle the reference started from [rad] (None: not started)
         self.subscription('/wrist/joint_states', self._on_joint_state)
         self.timer = self.create_timer(1.0 / self.p['rate_hz'], self._tick)
 
@@ -80,9 +81,7 @@ class TrajectoryGenerator(WristNode):
 
     def apply(self, changed: Mapping[str, Any]) -> None:
         self.shape = self._build(self.p)
-        if self.t0_ns is not None:
-            self.trajectory = self._soft(self.trajectory.start_rad if isinstance(self.trajectory, SoftStart)
-                                         else None)
+        self.trajectory = self._soft(self.start_rad)
 
     def _soft(self, start_rad: float | None) -> Trajectory:
         """The shape, joined from start_rad over soft_start_s (the shape itself without an angle or with 0 s)."""
@@ -100,9 +99,9 @@ class TrajectoryGenerator(WristNode):
             if self.p['soft_start_s'] > 0.0 and self.angle is None:
                 return  # no measured angle to start from yet: no reference, the controllers wait
             self.t0_ns = now.nanoseconds
-            start = None if self.angle is None else min(max(self.angle, self.p['angle_min_rad']),
-                                                         self.p['angle_max_rad'])
-            self.trajectory = self._soft(start)
+            if self.angle is not None:  # a reference never leaves the angle limits, its start neither
+                self.start_rad = min(max(self.angle, self.p['angle_min_rad']), self.p['angle_max_rad'])
+            self.trajectory = self._soft(self.start_rad)
         t = (now.nanoseconds - self.t0_ns) * 1e-9
         q, qd, qdd = (float(x) for x in self.trajectory(t))
         self.pub.publish(JointState(header=Header(stamp=now.to_msg(), frame_id=self.contract.frame_id),

@@ -305,8 +305,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
             q_start = np.minimum(np.maximum(q_m, ANGLE_LIMITS_RAD[0]), ANGLE_LIMITS_RAD[1])
         t_ref, t_law = (now_ns - tick_ns) * 1e-9, (now_ns - 2 * tick_ns) * 1e-9
         qd_rec[k] = traj(t_ref)[0] if q_start is None else soft_start(traj(t_ref), t_ref, q_start, soft_start_s)[0]
-        if k >= 2:
-            q_d, qdot_d, qddot_d = soft_start(traj(t_law), t_law, q_start, soft_start_s)
+        if k >= 2:  # (n,) each: one reference per loop
+            q_d, qdot_d, qddot_d = (np.broadcast_to(x, (n,))
+                                    for x in soft_start(traj(t_law), t_law, q_start, soft_start_s))
         if comp is not None and k >= 1:
             # hysteresis_compensator's memory and axis take every measured tick (its first, t_1, starts
             # them), dt from the stamps, before the cycle's targets arrive
@@ -324,7 +325,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():
-                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law)
+                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d[idx], qdot_d[idx], qddot_d[idx], dt_law)
                 if T_g is not None:
                     T_new[idx] = T_g
                     continue
