@@ -122,9 +122,10 @@ def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]
     """Tracking metrics (sma_wrist.core.metrics) over the last full reference cycle, plus peak TEM command.
 
     Table 6.2 reports "a full cycle of wrist movement"; the first cycle of a run from rest
-    holds the start-up transient (the wrist rests at its gravity equilibrium, q_d starts at
-    0.524 rad), so max and RMS are taken over the last full cycle when the run has one
-    (``window`` says which), and over the whole run as ``*_all``. The % are of the reference's range, or of the
+    holds the start-up (the muscles warm from ambient before the wrist can move; trajectory_generator's
+    reference starts at the measured angle and joins the shape over its soft_start_s), so max and RMS are taken
+    over the last full cycle when the run has one (``window`` says which), and over the whole run, against the
+    reference as published, as ``*_all``. The % are of the reference's range, or of the
     Sec. 6.1 sine's 1.048 rad for a reference that does not move (``range_of`` says which).
     """
     # a constant reference (trajectory_generator shape: constant) has no range to take a % of: that of the
