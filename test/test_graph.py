@@ -283,3 +283,20 @@ def test_a_nominal_run_logs_no_warning_and_starts_from_the_wrists_angle(tmp_path
     assert abs(run.q_d[0] - run.q[0]) < 1e-3  # the soft start: the first reference is the measured angle
     k = int(np.argmax(run.t >= 30.5))  # then the sine itself (stamped one tick after its own clock)
     assert abs(run.q_d[k] - (0.524 + 0.524 * math.sin(0.1 * (run.t[k] - 0.01)))) < 1e-9
+
+
+def test_cli_run_plot_writes_the_tracking_plot_and_says_what_next(tmp_path):
+    """`run --plot` draws the recorded run with compare's plot (angle, error, temperatures, TEM commands) and the
+    summary names the bag, the plot and the next commands; a plot it cannot write is refused before the run."""
+    bag, png = tmp_path / 'demo', tmp_path / 'demo.png'
+    r = _cli('run', '--duration', '2', '--bag', str(bag), '--plot', str(png), '--quiet')
+    assert r.returncode == 0, r.stderr
+    assert png.stat().st_size > 10000 and png.read_bytes()[:4] == b'\x89PNG'
+    assert f'bag: {bag}' in r.stdout and f'plot: {png}' in r.stdout
+    assert f'sma-wrist compare {bag}' in r.stdout and '--params-file' in r.stdout
+    assert 'whole run' in r.stdout and 'soft start from the measured angle' in r.stdout
+    for args, message in ((('--plot', str(tmp_path / 'x.png')), 'give --bag DIR too'),
+                          (('--bag', str(tmp_path / 'b'), '--plot', str(tmp_path / 'x.bogus')), 'not an image format')):
+        bad = _cli('run', '--duration', '1', '--quiet', *args)
+        assert bad.returncode == 2 and message in bad.stderr and 'Traceback' not in bad.stderr
+    assert not (tmp_path / 'b').exists()  # refused before anything was recorded
