@@ -35,13 +35,18 @@ def test_trajectory_generator_starts_from_the_measured_angle_and_joins_the_sine(
     from soft_start_s on."""
     from sma_wrist.core.control.trajectory import SOFT_START_S
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
-    with Runtime() as rt:
+    from sma_wrist.runtime.rclpy import logging as rlog
+    said = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: said.append(msg) if name == 'trajectory_generator' else None)
+    with Runtime() as rt, rlog.silenced():
         probe = probe_factory(rt, ('/wrist/reference',))
         node = rt.add(TrajectoryGenerator)
-        rt.run_until(1.0, until='steady')
-        assert probe.got['/wrist/reference'] == []  # no angle yet: no reference
+        rt.run_until(1.5, until='steady')
+        assert probe.got['/wrist/reference'] == []  # no angle yet: no reference, and the reason said once
+        assert sum('no /wrist/joint_states yet' in m for m in said) == 1
         probe.every(0.01, '/wrist/joint_states', position=[0.2], velocity=[0.0], effort=[0.0])
-        rt.run_until(1.0 + SOFT_START_S + 10.0, until='steady')
+        rt.run_until(1.5 + SOFT_START_S + 10.0, until='steady')
+    remove()
     ref = probe.got['/wrist/reference']
     t = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in ref])
     q, qd, qdd = (np.array([getattr(m, f)[0] for m in ref]) for f in ('position', 'velocity', 'effort'))

@@ -59,6 +59,8 @@ class TrajectoryGenerator(WristNode):
         self.t0_ns: int | None = None
         self.angle: float | None = None  # the latest measured angle [rad]
         self.start_rad: float | None = None  # the angle the reference started from [rad] (None: not started)
+        self.waiting_since_ns: int | None = None
+        self.told_waiting = False
         self.subscription('/wrist/joint_states', self._on_joint_state)
         self.timer = self.create_timer(1.0 / self.p['rate_hz'], self._tick)
 
@@ -97,7 +99,14 @@ class TrajectoryGenerator(WristNode):
         now = self.get_clock().now()
         if self.t0_ns is None:
             if self.p['soft_start_s'] > 0.0 and self.angle is None:
-                return  # no measured angle to start from yet: no reference, the controllers wait
+                # no measured angle to start from yet: no reference, the controllers wait; said once after 1 s
+                if self.waiting_since_ns is None:
+                    self.waiting_since_ns = now.nanoseconds
+                elif not self.told_waiting and now.nanoseconds - self.waiting_since_ns > 1e9:
+                    self.told_waiting = True
+                    self.get_logger().info('no /wrist/joint_states yet: the reference starts at the measured angle '
+                                           '(soft_start_s; 0 publishes the shape without it)')
+                return
             self.t0_ns = now.nanoseconds
             if self.angle is not None:  # a reference never leaves the angle limits, its start neither
                 self.start_rad = min(max(self.angle, self.p['angle_min_rad']), self.p['angle_max_rad'])
