@@ -31,6 +31,8 @@ from typing import Callable
 
 import numpy as np
 
+from sma_wrist.outputs import bench_png
+
 SectionFn = Callable[[bool], dict]
 #: name -> callable(quick) returning a JSON-serialisable dict
 SECTIONS: dict[str, SectionFn] = {}
@@ -266,7 +268,7 @@ def bench_identify_thermal(quick: bool = False) -> dict:
 @section('identify_wrist')
 def bench_identify_wrist(quick: bool = False) -> dict:
     """A wire transforming at 55-98 degC, windows from identify/wrist.py: seed TEMs vs TEMs rated 120 degC (doc/howto/identify_wire.md)."""
-    from sma_wrist.identify.wrist import hot_wire_runs
+    from sma_wrist.identify.wrist_runs import hot_wire_runs
     return hot_wire_runs(('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
                          progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
                          png=bench_png('identify_wrist.png'))
@@ -277,7 +279,7 @@ def bench_measured_wire(quick: bool = False) -> dict:
     """The measured Flexinol wire (test/data/flexinol, a source checkout) identified and run in the graph
     on TEMs rated 120 degC; direct and pid also without their reference leads (doc/howto/identify_wire.md)."""
     from sma_wrist.core.errors import SmaWristError
-    from sma_wrist.identify.wrist import measured_wire_runs
+    from sma_wrist.identify.wrist_runs import measured_wire_runs
     data = Path(__file__).resolve().parent.parent / 'test' / 'data' / 'flexinol'
     files = sorted(data.glob('*MPa.txt'))
     if not files:
@@ -288,18 +290,6 @@ def bench_measured_wire(quick: bool = False) -> dict:
 
 
 # -------------------------------------------------------------------------------- driver
-
-def bench_png(name: str) -> str:
-    """Path of a benchmark's figure: in ``$SMA_WRIST_BENCH_DIR`` (default: the current directory),
-    created if missing, so a run does not end in a traceback after minutes of work."""
-    from sma_wrist.core.errors import SmaWristError
-    folder = Path(os.environ.get('SMA_WRIST_BENCH_DIR', '.'))
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise SmaWristError(f'SMA_WRIST_BENCH_DIR={folder}: cannot hold the figures ({e.strerror or e})') from None
-    return str(folder / name)
-
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     """Run the named sections (all registered ones by default) and return their results."""

@@ -189,7 +189,8 @@ def report_markdown(rows: list[dict[str, Any]], wall_s: float, workers: int, plo
     loads = sorted({r['payload_kg'] for r in rows})
     lines = ['# Chapter 6 experiment in simulation', '',
              f'{len(rows)} closed-loop runs of the node graph on the embedded runtime, {workers} worker processes, '
-             f'{wall_s:.0f} s wall in all. Reference q_d = 0.524 + 0.524 sin(0.1 t) rad for two periods; '
+             f'{wall_s:.0f} s wall in all. Reference q_d = 0.524 + 0.524 sin(0.1 t) rad for two periods, joined from '
+             'the wrist\'s measured angle over trajectory_generator\'s soft_start_s; '
              'metrics from each run\'s bag (`sma_wrist.runs`, definitions in `sma_wrist/core/metrics.py`): max and '
              'RMS error in % of the 1.048 rad reference range; total absolute error = sum of |e| % over the last full '
              'cycle resampled at 1 kHz (the only rate at which Table 6.2\'s numbers are plausible).', '',

@@ -62,4 +62,16 @@ def check_output_folder(path: str | Path | None, flag: str = '--out', inputs: It
     _check(path, flag, inputs, error, folder=True)
 
 
-__all__ = ['check_output_file', 'check_output_folder']
+def bench_png(name: str) -> str:
+    """Path of a benchmark's figure: in ``$SMA_WRIST_BENCH_DIR`` (default: the current directory),
+    created if missing, so a run does not end in a traceback after minutes of work."""
+    import os
+    folder = Path(os.environ.get('SMA_WRIST_BENCH_DIR', '.'))
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise SmaWristError(f'SMA_WRIST_BENCH_DIR={folder}: cannot hold the figures ({e.strerror or e})') from None
+    return str(folder / name)
+
+
+__all__ = ['check_output_file', 'check_output_folder', 'bench_png']

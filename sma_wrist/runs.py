@@ -122,9 +122,10 @@ def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]
     """Tracking metrics (sma_wrist.core.metrics) over the last full reference cycle, plus peak TEM command.
 
     Table 6.2 reports "a full cycle of wrist movement"; the first cycle of a run from rest
-    holds the start-up transient (the wrist rests at its gravity equilibrium, q_d starts at
-    0.524 rad), so max and RMS are taken over the last full cycle when the run has one
-    (``window`` says which), and over the whole run as ``*_all``. The % are of the reference's range, or of the
+    holds the start-up (the muscles warm from ambient before the wrist can move; trajectory_generator's
+    reference starts at the measured angle and joins the shape over its soft_start_s), so max and RMS are taken
+    over the last full cycle when the run has one (``window`` says which), and over the whole run, against the
+    reference as published, as ``*_all``. The % are of the reference's range, or of the
     Sec. 6.1 sine's 1.048 rad for a reference that does not move (``range_of`` says which).
     """
     # a constant reference (trajectory_generator shape: constant) has no range to take a % of: that of the
@@ -158,7 +159,8 @@ __all__ = ['RunData', 'load_run', 'run_metrics']
 
 
 def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: str = '') -> None:
-    """Angle vs reference (top) and error in % of the reference range (bottom), runs overlaid.
+    """Angle vs reference, error in % of the reference range, muscle temperatures and TEM commands, runs overlaid
+    (``compare --plot`` and ``run --plot``).
 
     Runs are aligned on their own time axis starting at the first reference sample, so a
     hardware run recorded at wall-clock stamps lines up with a simulated one.
@@ -166,18 +168,25 @@ def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: s
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
-    fig, (ax_q, ax_e) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    fig, (ax_q, ax_e, ax_T, ax_u) = plt.subplots(4, 1, figsize=(9, 10), sharex=True)
     for k, (run, label) in enumerate(zip(runs, labels)):
         t = run.t - run.t[0]
         span = float(np.ptp(run.q_d)) or 1.0
         if k == 0:
             ax_q.plot(t, run.q_d, 'k--', lw=1, label='q_d')
-        ax_q.plot(t, run.q, lw=1, label=label)
-        ax_e.plot(t, 100.0 * (run.q - run.q_d) / span, lw=1, label=label)
+        line, = ax_q.plot(t, run.q, lw=1, label=label)
+        ax_e.plot(t, 100.0 * (run.q - run.q_d) / span, lw=1, color=line.get_color(), label=label)
+        for i, style in ((0, '-'), (1, ':')):  # muscle 1 solid, muscle 2 dotted, in the run's colour
+            ax_T.plot(t, run.temperature_C[:, i], style, lw=1, color=line.get_color(), label=f'{label} muscle {i + 1}')
+            if run.command_t.size:
+                ax_u.plot(run.command_t - run.t[0], run.command_V[:, i], style, lw=0.8, color=line.get_color(),
+                          label=f'{label} TEM {i + 1}')
     ax_q.set_ylabel('angle [rad]')
     ax_e.set_ylabel('error [% of reference range]')
-    ax_e.set_xlabel('time since first reference [s]')
-    for ax in (ax_q, ax_e):
+    ax_T.set_ylabel('muscle temperature [degC]')
+    ax_u.set_ylabel('TEM command [V]')
+    ax_u.set_xlabel('time since first reference [s]')
+    for ax in (ax_q, ax_e, ax_T, ax_u):
         ax.grid(True, alpha=0.3)
         ax.legend(loc='best', fontsize=8)
     if title:
@@ -196,6 +205,18 @@ def _plot_formats() -> list[str]:
     return sorted(FigureCanvasBase.get_supported_filetypes())
 
 
+def check_plot_file(plot: str | Path, inputs: list[str | Path], example: str) -> None:
+    """SmaWristError before any work if ``--plot`` cannot be written: a folder (savefig wrote <folder>.png), one of
+    ``inputs``, or a suffix matplotlib does not write (its ValueError came as a traceback after the work)."""
+    from sma_wrist.outputs import check_output_file
+    check_output_file(plot, '--plot', inputs, example=example)
+    suffix = Path(plot).suffix.lower().lstrip('.')
+    formats = _plot_formats()
+    if suffix and formats and suffix not in formats:
+        raise SmaWristError(f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
+                            f'{", ".join("." + f for f in formats)} (no suffix: PNG)')
+
+
 def compare_runs(paths: list[str | Path], plot: str | Path | None = None,
                  recording: Recording | None = None) -> list[dict[str, Any]]:
     """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot.
@@ -203,13 +224,7 @@ def compare_runs(paths: list[str | Path], plot: str | Path | None = None,
     A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one).
     """
     if plot is not None:
-        from sma_wrist.outputs import check_output_file
-        check_output_file(plot, '--plot', paths, example='compare.png')  # a folder: savefig wrote <folder>.png
-        suffix = Path(plot).suffix.lower().lstrip('.')
-        formats = _plot_formats()
-        if suffix and formats and suffix not in formats:  # savefig's ValueError traceback, after every bag was read
-            raise SmaWristError(f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
-                                f'{", ".join("." + f for f in formats)} (no suffix: PNG)')
+        check_plot_file(plot, paths, 'compare.png')
     runs = [load_run(p, recording) for p in paths]
     rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None, 'dropped': r.dropped or None}
             for p, r in zip(paths, runs)]

@@ -204,7 +204,8 @@ def test_floor_benchmark_runs_the_contracts_topology_every_tick():
     periodic = [t for t in load_contract().topics.values() if t.rate_hz > 0]
     r = bench_contract_floor(0.5)
     assert r['published_per_tick'] == len(periodic) == 16
-    assert r['deliveries_per_tick'] == sum(len(t.subscribers) for t in periodic) == 23  # TEM commands: plant, compensator
+    # TEM commands: plant, compensator; joint states: trajectory_generator (its soft start), both controllers
+    assert r['deliveries_per_tick'] == sum(len(t.subscribers) for t in periodic) == 24
     assert r['callbacks_per_tick'] == 2 + r['deliveries_per_tick']
 
 
@@ -255,3 +256,47 @@ def test_a_params_file_naming_no_node_of_the_package_is_refused(tmp_path):
     f.write_text('/wrist/plant_sim:\n  ros__parameters:\n    payload_kg: 0.5\n/**:\n  ros__parameters:\n'
                  '    use_sim_time: true\n')  # a namespace and a wildcard are the user's business
     assert _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f)).returncode == 0
+
+
+def test_a_nominal_run_logs_no_warning_and_starts_from_the_wrists_angle(tmp_path):
+    """The README's demo (inverse_adaptive, 0.3 kg) for its first 35 s, start-up and the soft start's end included:
+    no WARN or ERROR line, since a console warning asks the user to act and the saturations the loop rides through
+    (a command at its limit while the wrist catches up) are /diagnostics matters. The reference starts at the
+    measured angle, not 0.44 rad above it at the sine's first value."""
+    from sma_wrist import runtime
+    from sma_wrist.runtime.rclpy import logging as rlog
+    runtime.activate()
+    lines = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: lines.append((int(sev), name, msg)))
+    try:
+        with rlog.silenced():
+            s = run_closed_loop('inverse_adaptive', 0.3, 35.0, tmp_path / 'bag')
+    finally:
+        remove()
+    loud = [(name, msg) for sev, name, msg in lines if sev >= int(rlog.LoggingSeverity.WARN)]
+    assert loud == []
+    data = read_bag(tmp_path / 'bag', ['/diagnostics'])
+    saturated = [st.name for m in data['/diagnostics'][1] for st in m.status
+                 if st.name.endswith('saturation') and int.from_bytes(st.level, 'little') == 1]
+    assert saturated  # the loop did saturate: /diagnostics has it, at WARN
+    run = s.run
+    assert abs(run.q_d[0] - run.q[0]) < 1e-3  # the soft start: the first reference is the measured angle
+    k = int(np.argmax(run.t >= 30.5))  # then the sine itself (stamped one tick after its own clock)
+    assert abs(run.q_d[k] - (0.524 + 0.524 * math.sin(0.1 * (run.t[k] - 0.01)))) < 1e-9
+
+
+def test_cli_run_plot_writes_the_tracking_plot_and_says_what_next(tmp_path):
+    """`run --plot` draws the recorded run with compare's plot (angle, error, temperatures, TEM commands) and the
+    summary names the bag, the plot and the next commands; a plot it cannot write is refused before the run."""
+    bag, png = tmp_path / 'demo', tmp_path / 'demo.png'
+    r = _cli('run', '--duration', '2', '--bag', str(bag), '--plot', str(png), '--quiet')
+    assert r.returncode == 0, r.stderr
+    assert png.stat().st_size > 10000 and png.read_bytes()[:4] == b'\x89PNG'
+    assert f'bag: {bag}' in r.stdout and f'plot: {png}' in r.stdout
+    assert f'sma-wrist compare {bag}' in r.stdout and '--params-file' in r.stdout
+    assert 'whole run' in r.stdout and 'soft start from the measured angle' in r.stdout
+    for args, message in ((('--plot', str(tmp_path / 'x.png')), 'give --bag DIR too'),
+                          (('--bag', str(tmp_path / 'b'), '--plot', str(tmp_path / 'x.bogus')), 'not an image format')):
+        bad = _cli('run', '--duration', '1', '--quiet', *args)
+        assert bad.returncode == 2 and message in bad.stderr and 'Traceback' not in bad.stderr
+    assert not (tmp_path / 'b').exists()  # refused before anything was recorded

@@ -23,27 +23,32 @@ TOPICS = ('/wrist/joint_states', '/wrist/muscle_1/temperature', '/wrist/muscle_2
 def emulator(tmp_path):
     made = []
 
-    def make(**kw) -> DeviceEmulator:
-        emu = DeviceEmulator(EmulatorConfig(**kw), link=str(tmp_path / f'wrist{len(made)}'))
-        emu.start()
+    def make(clock=None, **kw) -> DeviceEmulator:
+        """An emulator serving in its own thread on the wall clock, or (``clock``) opened for a driven bridge."""
+        emu = DeviceEmulator(EmulatorConfig(**kw), link=str(tmp_path / f'wrist{len(made)}'),
+                             **({} if clock is None else {'clock': clock}))
+        emu.start() if clock is None else emu.open()
         made.append(emu)
         return emu
     yield make
     for e in made:
         e.stop()
+        e.close()
 
 
 @pytest.fixture
 def graph(ros_shutdown, probe_factory):
-    """(runtime, bridge, probe) for an emulator; the probe commands both TEMs at 100 Hz of sim time."""
+    """(runtime, bridge, probe) for an emulator; the probe commands both TEMs at 100 Hz of sim time. ``clock``: the
+    emulator is not started; bridge and emulator run on this clock (:func:`driven_bridge`)."""
     from sma_wrist.runtime.launch import Runtime
     made = []
 
-    def make(emu: DeviceEmulator, command_V: tuple[float, float] = (0.0, 0.0), **params):
+    def make(emu: DeviceEmulator, command_V: tuple[float, float] = (0.0, 0.0), clock: ManualClock | None = None,
+             **params):
         from sma_wrist.nodes.hardware_bridge import HardwareBridge
         rt = Runtime(params={'/hardware_bridge': {'port': emu.link, **params}})
         made.append(rt)
-        bridge = rt.add(HardwareBridge)
+        bridge = rt.add(HardwareBridge if clock is None else driven_bridge(emu, clock))
         probe = probe_factory(rt, TOPICS, sim_time=True)
         probe.every(0.01, '/wrist/tem_1/command', data=float(command_V[0]))
         probe.every(0.01, '/wrist/tem_2/command', data=float(command_V[1]))
@@ -51,6 +56,99 @@ def graph(ros_shutdown, probe_factory):
     yield make
     for rt in made:
         rt.close()
+
+
+class ManualClock:
+    """Wall time [s] that moves only when the bridge waits for the device (:func:`driven_bridge`)."""
+
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def _settle(ready, what: str, limit_s: float = 10.0) -> None:
+    """Wait (real time) until the kernel has moved bytes across the pty: ``ready()`` true. Only the hand-over waits
+    here; what the bridge and the device see is timed by the manual clock."""
+    import time as _time
+    end = _time.monotonic() + limit_s
+    while not ready():
+        if _time.monotonic() > end:
+            raise AssertionError(f'the pty did not pass {what} within {limit_s} s')
+        _time.sleep(0.0002)
+
+
+def driven_bridge(emu: DeviceEmulator, clock: ManualClock) -> type:
+    """hardware_bridge whose wall time is ``clock`` and whose link reads the pty in the bridge's own thread: when the
+    bridge waits for the device, the clock moves to the next sample due and the emulator (no thread) serves up to it.
+    Load on the machine then changes nothing the bridge sees: every byte the device wrote by a time is read at that
+    time, every command the bridge wrote is read by the device at its next turn."""
+    import fcntl
+    import queue
+    import struct
+    import termios
+
+    from sma_wrist.hw.link import SerialLink
+    from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
+    def pending(fd: int) -> int:
+        return struct.unpack('i', fcntl.ioctl(fd, termios.FIONREAD, b'\0\0\0\0'))[0]
+
+    class DrivenLink(SerialLink):
+        def __init__(self, *args, **kw) -> None:
+            super().__init__(*args, clock=clock, **kw)
+            self.bytes_sent = 0
+
+        def start(self) -> None:  # no reader thread: connect now, as the thread's first turn does
+            # the device was on before the host: its boot lines are on the line, and opening the port discards them
+            emu.serve(clock())
+            _settle(lambda: pending(emu._slave) >= emu.stats.bytes_written, 'the boot lines')
+            self._ser = self.opener(self.port, self.baud)
+            self._skipped = emu.stats.bytes_written
+            self.parser.reset()
+            self.stats.connects += 1
+            self._put(('connected', clock(), self.port))
+            self.send(P.Query())
+
+        def stop(self) -> None:
+            self._close('stopped', notify=False)
+
+        def send(self, frame) -> bool:
+            ok = super().send(frame)
+            if ok:
+                self.bytes_sent += len(P.encode(frame))
+            return ok
+
+        def _pump(self) -> None:
+            """The device's turn at the clock's time, then every byte it wrote, parsed and stamped now."""
+            if emu._master is not None:  # what the bridge wrote reaches the device before its turn
+                _settle(lambda: pending(emu._master) >= self.bytes_sent - emu.stats.bytes_received, 'the commands')
+            emu.serve(clock())
+            want = emu.stats.bytes_written - self._skipped - self.stats.bytes_in
+            while want > 0:
+                data = self._ser.read(want)  # blocks up to the port's timeout per call
+                self.stats.bytes_in += len(data)
+                want -= len(data)
+                for f in self.parser.feed(data):
+                    self._put(('frame', clock(), f))
+
+        def next_event(self, timeout_s: float):
+            end = clock() + timeout_s
+            while True:
+                self._pump()
+                try:
+                    return self.events.get_nowait()
+                except queue.Empty:
+                    pass
+                if clock() >= end:
+                    raise queue.Empty
+                clock.now = min(end, max(emu.next_due(), clock() + 1e-6))
+
+    class DrivenBridge(HardwareBridge):
+        LINK = DrivenLink
+
+    return DrivenBridge
 
 
 def run_wall(rt, seconds: float, stop_when=None) -> None:
@@ -616,8 +714,9 @@ def test_a_stuck_thermocouple_under_drive_turns_the_tems_off(emulator, graph):
     stuck_sensor_s under a mean drive over stuck_sensor_drive_V is now a fault: 0 V, ERROR, its samples not
     published, until the reading changes. An idle TEM with a repeating reading is no fault."""
     from sma_wrist.hw.safety import StuckSensor
-    emu = emulator(noise_counts=0.0)
-    rt, bridge, probe = graph(emu, (20.0, 20.0), stuck_sensor_s=0.3)
+    clock = ManualClock()
+    emu = emulator(clock, noise_counts=0.0)
+    rt, bridge, probe = graph(emu, (20.0, 20.0), clock, stuck_sensor_s=0.3)
     rt.run_until(0.2, until='sim')
     assert bridge.command_to_send() == (20.0, 20.0)
     counts = int(Calibration().to_counts(np.array([40.0, 0, 0, 0]), 0.0)[0])
@@ -654,13 +753,14 @@ def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):
             s, = P.Parser().feed(super()._sample())
             return P.encode(P.Sample(s.seq, s.t_us + random.randint(0, 3), s.adc, s.flags))
     random.seed(0)
-    emu = Jittery(EmulatorConfig(), link=str(tmp_path / 'jittery'))
-    emu.start()
+    clock = ManualClock()
+    emu = Jittery(EmulatorConfig(), link=str(tmp_path / 'jittery'), clock=clock)
+    emu.open()
     try:
-        rt, bridge, probe = graph(emu)
+        rt, bridge, probe = graph(emu, clock=clock)
         rt.run_until(1.0, until='sim')
     finally:
-        emu.stop()
+        emu.close()
     clock = np.array([c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']])
     steps = np.diff(clock) / 0.01  # whole windows; a skip (host late) is a whole multiple
     assert len(clock) > 50 and np.all(np.abs(steps - np.round(steps)) < 0.01), np.unique(np.round(steps, 3))
@@ -704,13 +804,16 @@ class _Restamped(DeviceEmulator):
         return b''.join(P.encode(x) for x in self.restamp(s))
 
 
-def _run(tmp_path, graph, emu: DeviceEmulator, sim_s: float, command_V=(0.0, 0.0), **params):
-    emu.start()
+def _run(tmp_path, graph, make_emulator, sim_s: float, command_V=(0.0, 0.0), **params):
+    """The bridge on ``make_emulator(clock=...)``'s device for ``sim_s`` of device time, both on a manual clock."""
+    clock = ManualClock()
+    emu = make_emulator(clock=clock)
+    emu.open()
     try:
-        rt, bridge, probe = graph(emu, command_V, **params)
+        rt, bridge, probe = graph(emu, command_V, clock, **params)
         rt.run_until(sim_s, until='sim')
     finally:
-        emu.stop()
+        emu.close()
     clock = np.array([c.clock.sec + c.clock.nanosec * 1e-9 for c in probe.got['/clock']])
     return bridge, probe, clock
 
@@ -733,7 +836,8 @@ def test_a_late_line_is_dropped_not_taken_for_a_device_reboot(tmp_path, graph):
                 return []
             return [s]
     random.seed(1)
-    bridge, probe, clock = _run(tmp_path, graph, Reordering(EmulatorConfig(), link=str(tmp_path / 'r')), 2.0)
+    bridge, probe, clock = _run(tmp_path, graph, lambda clock: Reordering(EmulatorConfig(), link=str(tmp_path / 'r'),
+                                                                          clock=clock), 2.0)
     assert bridge.counters['resets'] == 0 and bridge.counters.get('out_of_order', 0) >= 10, bridge.counters
     # no splice: every window ends within a sample (the late one's successor) of its grid point
     off_grid = np.abs(clock - np.round(clock / 0.01) * 0.01)
@@ -751,8 +855,8 @@ def test_a_millisecond_device_clock_loses_no_samples(tmp_path, graph):
         def restamp(self, s):
             return [P.Sample(s.seq, (s.t_us + random.randint(0, 1500)) // 1000 * 1000, s.adc, s.flags)]
     random.seed(2)
-    emu = Millis(EmulatorConfig(), link=str(tmp_path / 'm'))
-    bridge, probe, clock = _run(tmp_path, graph, emu, 2.0)
+    bridge, probe, clock = _run(tmp_path, graph, lambda clock: Millis(EmulatorConfig(), link=str(tmp_path / 'm'),
+                                                                      clock=clock), 2.0)
     c = bridge.counters
     assert c['resets'] == 0 and c.get('out_of_order', 0) == 0 and c['invalid_samples'] == 0, c
     assert c['samples'] >= 0.99 * 1000 * clock[-1], (c['samples'], clock[-1])  # 1 kHz: 22 % short before
@@ -787,8 +891,9 @@ def test_a_device_sampling_slower_than_the_windows_is_named_and_gets_a_velocity(
     """A 50 Hz device under 100 Hz windows: each window held one sample, whose slope is 0, so every published
     velocity was 0 while the joint moved; nothing said why. Now the hello's rate is checked against the bridge's
     settings (WARN), and a one-sample window takes its velocity from the previous window's end."""
-    emu = DeviceEmulator(EmulatorConfig(rate_hz=50.0, noise_counts=0.0, time_scale=5.0), link=str(tmp_path / 'slow'))
-    bridge, probe, clock = _run(tmp_path, graph, emu, 12.0, (24.0, -24.0), sensor_timeout_s=1.0)
+    bridge, probe, clock = _run(tmp_path, graph, lambda clock: DeviceEmulator(
+        EmulatorConfig(rate_hz=50.0, noise_counts=0.0, time_scale=5.0), link=str(tmp_path / 'slow'), clock=clock),
+        12.0, (24.0, -24.0), sensor_timeout_s=1.0)
     said = [m for name, lvl, m in probe.diagnostics() if name == 'hardware_bridge: device' and lvl == 1]
     assert said and 'publish_rate_hz' in said[-1] and 'sensor_timeout_s' not in said[-1], said
     js = probe.got['/wrist/joint_states']

@@ -11,8 +11,9 @@ from sma_wrist.sweep.simulate import STROKE_GAIN_PER_S
 
 
 def test_trajectory_generator_publishes_the_seed_sine_with_derivatives(probe_factory):
+    """Without a soft start the reference is the Sec. 6.1 sine from its first tick, measured angle or not."""
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
-    with Runtime() as rt:
+    with Runtime(params={'/trajectory_generator': {'soft_start_s': 0.0}}) as rt:
         probe = probe_factory(rt, ('/wrist/reference',))
         rt.add(TrajectoryGenerator)
         rt.run_until(20.0, until='steady')
@@ -26,6 +27,36 @@ def test_trajectory_generator_publishes_the_seed_sine_with_derivatives(probe_fac
     np.testing.assert_allclose(qd, 0.0524 * np.cos(0.1 * (t - t0)), atol=1e-12)
     np.testing.assert_allclose(qdd, -0.00524 * np.sin(0.1 * (t - t0)), atol=1e-12)
     assert len(ref) == pytest.approx(2001, abs=1)
+
+
+def test_trajectory_generator_starts_from_the_measured_angle_and_joins_the_sine(probe_factory):
+    """The default soft start: nothing is published before a measured angle; the first reference is that angle, at
+    rest; it joins the sine smoothly (rate and acceleration the derivatives of the angle) and is the sine itself
+    from soft_start_s on."""
+    from sma_wrist.core.control.trajectory import SOFT_START_S
+    from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+    from sma_wrist.runtime.rclpy import logging as rlog
+    said = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: said.append(msg) if name == 'trajectory_generator' else None)
+    with Runtime() as rt, rlog.silenced():
+        probe = probe_factory(rt, ('/wrist/reference',))
+        node = rt.add(TrajectoryGenerator)
+        rt.run_until(1.5, until='steady')
+        assert probe.got['/wrist/reference'] == []  # no angle yet: no reference, and the reason said once
+        assert sum('no /wrist/joint_states yet' in m for m in said) == 1
+        probe.every(0.01, '/wrist/joint_states', position=[0.2], velocity=[0.0], effort=[0.0])
+        rt.run_until(1.5 + SOFT_START_S + 10.0, until='steady')
+    remove()
+    ref = probe.got['/wrist/reference']
+    t = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in ref])
+    q, qd, qdd = (np.array([getattr(m, f)[0] for m in ref]) for f in ('position', 'velocity', 'effort'))
+    s = t - t[0]
+    assert q[0] == 0.2 and qd[0] == 0.0 and qdd[0] == 0.0 and node.start_rad == 0.2
+    after = s >= SOFT_START_S
+    np.testing.assert_allclose(q[after], 0.524 + 0.524 * np.sin(0.1 * s[after]), atol=1e-12)
+    np.testing.assert_allclose(np.gradient(q, s), qd, atol=2e-5)  # 10 ms central differences of a smooth blend
+    np.testing.assert_allclose(np.gradient(qd, s), qdd, atol=2e-5)
+    assert np.all(np.abs(qd[~after]) < 0.2)  # no jump: the 0.32 rad to the sine's start taken over 30 s
 
 
 def test_trajectory_parameter_changes_are_validated_against_the_angle_limits():

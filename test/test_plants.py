@@ -201,7 +201,9 @@ def test_graph_with_the_temperature_observer_is_the_sweep_with_it() -> None:
 def test_graph_learning_the_tems_online_is_the_sweep_learning_them(mode: str) -> None:
     """tem_controller and hysteresis_compensator each run their own estimate of the TEMs (thermal_adaptation, used
     after 4 s here instead of 30) on the samples they take; the sweep runs one per wrist and hands the compensator's
-    observer the TEM loop's: same TEM commands and measured angles to the last bit, and not the loop without it."""
+    observer the TEM loop's: same TEM commands and measured angles to the last bit, and not the loop without it.
+    The reference starts at its first value (no soft start): in the first 10 s of a soft start pid's commands sit
+    at the drive limits, where no estimate can change them."""
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.core.thermal.online import OnlineThermalParams
     from sma_wrist.sweep.simulate import Case, simulate
@@ -209,14 +211,15 @@ def test_graph_learning_the_tems_online_is_the_sweep_learning_them(mode: str) ->
     early = {'thermal_adaptation.apply_after_s': 4.0}
     extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
                             **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}},
-             '/tem_controller': early, '/hysteresis_compensator': early}
+             '/tem_controller': early, '/hysteresis_compensator': early, '/trajectory_generator': {'soft_start_s': 0.0}}
     with tempfile.TemporaryDirectory() as d:
         run = run_closed_loop(mode, sc.payload_kg, 10.0, Path(d) / 'bag', extra_params=extra).run
-    _, tr = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=OnlineThermalParams(apply_after_s=4.0))
+    _, tr = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=OnlineThermalParams(apply_after_s=4.0),
+                     soft_start_s=0.0)
     k, kc = np.rint(run.t / 0.01).astype(int), np.rint(run.command_t / 0.01).astype(int)
     assert np.max(np.abs(run.q - tr.q_measured[k, 0])) <= 1e-12
     np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
-    _, off = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=None)
+    _, off = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=None, soft_start_s=0.0)
     assert np.max(np.abs(off.command_V[kc, 0] - run.command_V)) > 1e-3  # the estimate reached the commands
 
 

@@ -469,3 +469,18 @@ def test_the_sweep_reads_a_tick_as_a_node_reads_its_header_stamp() -> None:
         st = Time(nanoseconds=n).to_msg()
         assert stamp_seconds(n) == st.sec + 1e-9 * st.nanosec
     assert sum(stamp_seconds(n) != n * 1e-9 for n in ns) > 100
+
+
+def test_a_params_files_soft_start_reaches_the_sweeps_loops(tmp_path: Path) -> None:
+    """trajectory_generator's soft_start_s in a params file is the sweep loops' (not refused, not dropped), and it
+    changes where their references start."""
+    from sma_wrist.sweep.graph_params import loop_settings
+    from sma_wrist.sweep.simulate import Case, simulate
+    f = tmp_path / 'p.yaml'
+    f.write_text('trajectory_generator:\n  ros__parameters:\n    soft_start_s: 5.0\n')
+    settings = loop_settings([f])
+    assert settings.kwargs['soft_start_s'] == 5.0 and settings.changed == {'trajectory_generator': {'soft_start_s': 5.0}}
+    _, soft = simulate([Case(0, 'pid', Scenario(payload_kg=0.3))], 6.0, record=True, **settings.kwargs)
+    _, plain = simulate([Case(0, 'pid', Scenario(payload_kg=0.3))], 6.0, record=True, soft_start_s=0.0)
+    assert abs(soft.q_d[1, 0] - soft.q_measured[1, 0]) < 1e-12 and abs(plain.q_d[1, 0] - 0.524) < 1e-12
+    assert soft.q_d[-1, 0] == plain.q_d[-1, 0]  # joined: the sine itself after 5 s

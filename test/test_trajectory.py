@@ -115,3 +115,40 @@ def test_angle_limits_parameter() -> None:
 def test_non_finite_time_is_an_input_error() -> None:
     with pytest.raises(ModelInputError, match='t = nan'):
         tj.make_trajectory('sine')(np.array([0.0, np.nan]))
+
+
+@pytest.mark.parametrize('shape', ['sine', 'step', 'sine_sweep'])
+def test_a_soft_start_leaves_the_angle_at_rest_and_joins_the_shape_smoothly_and_exactly(shape: str) -> None:
+    """SoftStart: q_d(0) is the start angle with zero rate and acceleration; rate and acceleration are the
+    derivatives of the angle throughout (a blend, not a jump); from duration_s on it is the shape to the last bit;
+    its bounds hold the start angle."""
+    from sma_wrist.core.control.trajectory import SoftStart, make_trajectory
+    base = make_trajectory(shape)
+    soft = SoftStart(base, 0.08, 20.0)
+    q, qd, qdd = soft(np.array([0.0, -1.0]))
+    assert list(q) == [0.08, 0.08] and list(qd) == [0.0, 0.0] and list(qdd) == [0.0, 0.0]
+    t = np.linspace(0.0, 40.0, 40001)
+    q, qd, qdd = soft(t)
+    np.testing.assert_allclose(np.gradient(q, t), qd, atol=1e-5)
+    np.testing.assert_allclose(np.gradient(qd, t), qdd, atol=1e-4)
+    after = t >= 20.0
+    for a, b in zip(soft(t[after]), base(t[after])):
+        np.testing.assert_array_equal(a, b)
+    assert soft.bounds()[0] == min(0.08, base.bounds()[0]) and np.all(q >= soft.bounds()[0] - 1e-12)
+    assert np.all(q <= soft.bounds()[1] + 1e-12)
+
+
+def test_a_soft_start_takes_one_start_angle_per_wrist_and_zero_length_is_the_shape() -> None:
+    """soft_start on an array of start angles (the sweep's loops) gives each loop what SoftStart gives one wrist."""
+    from sma_wrist.core.control.trajectory import SoftStart, make_trajectory, soft_start
+    base = make_trajectory('sine')
+    starts = np.array([0.0, 0.08, 0.3])
+    for t in (0.0, 3.7, 19.99, 20.0, 55.0):
+        many = soft_start(base(t), t, starts, 20.0)
+        for j, q0 in enumerate(starts):
+            for a, b in zip(many, SoftStart(base, float(q0), 20.0)(t)):
+                assert a[j] == b
+    for a, b in zip(soft_start(base(3.0), 3.0, starts, 0.0), base(3.0)):
+        assert np.array_equal(a, b)
+    with pytest.raises(ParameterError, match='duration_s'):
+        SoftStart(base, 0.1, -1.0)

@@ -86,7 +86,7 @@ def bench_diagnose(quick: bool = False, full: bool = False) -> dict[str, Any]:
     per noise level. A PNG of the independent part goes to $SMA_WRIST_BENCH_DIR (default:
     the current directory) as ``diagnose_independent.png``.
     """
-    from sma_wrist.bench import bench_png
+    from sma_wrist.outputs import bench_png
     png = bench_png('diagnose_independent.png')
     if quick:
         return {'accuracy': accuracy(seeds_per_effect=1, clean_runs=2, duration_s=120.0),

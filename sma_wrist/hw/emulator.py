@@ -30,7 +30,7 @@ import time
 import tty
 from collections import deque
 from dataclasses import dataclass, field
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -83,6 +83,8 @@ class EmulatorStats:
     samples_sent: int = 0
     commands_received: int = 0
     bytes_dropped: int = 0
+    bytes_written: int = 0  # to the line (the host can count what it must have read)
+    bytes_received: int = 0  # from the line
     resets: int = 0
     unplugs: int = 0
     faults_injected: int = 0
@@ -92,11 +94,13 @@ class DeviceEmulator:
     """The emulated device. ``open()`` the pty, then ``start()`` (thread) or ``run()`` (blocking).
 
     Thread-safe control: :meth:`inject`, :meth:`stop`. ``sent_log`` (if enabled) keeps
-    ``(time.monotonic() when queued for writing, Sample)`` of every sample sent, for latency benchmarks.
+    ``(wall time of ``clock`` when queued for writing, Sample)`` of every sample sent, for latency benchmarks.
     """
 
-    def __init__(self, config: EmulatorConfig | None = None, link: str | None = None, log_sent: bool = False) -> None:
+    def __init__(self, config: EmulatorConfig | None = None, link: str | None = None, log_sent: bool = False,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+        self.clock = clock  # wall seconds: when samples are due (a test drives it and calls serve(), no thread)
         self.cfg = c = config or EmulatorConfig()
         if not (c.rate_hz > 0 and c.time_scale > 0):
             raise ValueError('rate_hz and time_scale must be > 0')
@@ -176,7 +180,7 @@ class DeviceEmulator:
     # ------------------------------------------------------------------ device
     def _boot(self, reason: str = 'power') -> None:
         """(Re)boot: time and sequence restart at 0, drive off, boot notice + hello queued."""
-        self._t_boot_wall = time.monotonic()
+        self._t_boot_wall = self.clock()
         self._n = 0  # samples since boot
         self._tc_next_s: float | None = None  # device time of the thermocouple chip's next conversion
         self._tc_held = np.zeros(2)
@@ -217,7 +221,7 @@ class DeviceEmulator:
                 self.stats.resets += 1
                 self._boot('software')
             elif kind == 'freeze':
-                self._freeze_until = time.monotonic() + float(v)
+                self._freeze_until = self.clock() + float(v)
             elif kind == 'force':
                 ch, counts = v
                 if counts is None:
@@ -250,6 +254,7 @@ class DeviceEmulator:
             return
         except OSError:
             return
+        self.stats.bytes_received += len(data)
         now = self.device_time_s
         for f in self.parser.feed(data):
             if isinstance(f, P.Command):
@@ -310,7 +315,7 @@ class DeviceEmulator:
         s = P.Sample((self._n - 1) % P.SEQ_MODULUS, int(round((self._n - 1) * 1e6 / c.rate_hz)), tuple(adc), flags)
         line = P.encode(s)
         if self.sent_log is not None:
-            self.sent_log.append((time.monotonic(), s))
+            self.sent_log.append((self.clock(), s))
         self.stats.samples_sent += 1
         r = self.rng.random(3) if (c.garbage_rate or c.checksum_error_rate or c.partial_rate) else None
         if self._corrupt or (r is not None and r[0] < c.checksum_error_rate):
@@ -329,6 +334,7 @@ class DeviceEmulator:
         try:
             n = os.write(self._master, self._out)
             del self._out[:n]
+            self.stats.bytes_written += n
         except (BlockingIOError, InterruptedError):
             pass
         except OSError:
@@ -356,25 +362,31 @@ class DeviceEmulator:
                 break
         return k
 
+    def serve(self, now: float) -> None:
+        """One turn of the device's loop at wall time ``now``: faults, commands, every sample due, the line."""
+        self._do_actions()
+        self._read_commands()
+        self.step_until(now)
+        self._flush()
+
+    def next_due(self) -> float:
+        """Wall time [s] the next sample is due."""
+        return self._t_boot_wall + (self._n + 1) / (self.cfg.rate_hz * self.cfg.time_scale)
+
     def run(self, duration_wall_s: float | None = None) -> None:
         """Serve until :meth:`stop` (or ``duration_wall_s``); opens the pty if not open."""
         if self._master is None:
             self.open()
-        self._t_boot_wall = time.monotonic()
+        self._t_boot_wall = self.clock()
         t_end = None if duration_wall_s is None else self._t_boot_wall + duration_wall_s
-        period = 1.0 / (self.cfg.rate_hz * self.cfg.time_scale)
         try:
             while not self._stop.is_set():
-                now = time.monotonic()
+                now = self.clock()
                 if t_end is not None and now >= t_end:
                     break
-                self._do_actions()
-                self._read_commands()
-                self.step_until(time.monotonic())
-                self._flush()
+                self.serve(now)
                 # next sample due; sleep at most 1 ms so commands are read promptly
-                nxt = self._t_boot_wall + (self._n + 1) * period
-                time.sleep(min(max(nxt - time.monotonic(), 0.0), 0.001))
+                time.sleep(min(max(self.next_due() - self.clock(), 0.0), 0.001))
         finally:
             self.close()
 

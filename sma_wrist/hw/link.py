@@ -9,7 +9,8 @@ queue the bridge drains: ``('frame', t, Frame)``, ``('connected', t, port)``,
 Faults: a failed open, a read/write error (unplugged cable, pty closed) or no valid frame
 for ``silence_s`` (a device that only sends garbage or hangs) closes the port and retries
 after a delay that doubles from ``backoff_initial_s`` up to ``backoff_max_s``; it is reset
-once a connection delivers a valid frame. Times here are wall (monotonic) seconds.
+once a connection delivers a valid frame. Times here are wall seconds of ``clock`` (``time.monotonic``; a test
+gives a clock it drives, and a link that reads the port when the bridge waits, through :meth:`SerialLink.next_event`).
 """
 from __future__ import annotations
 
@@ -49,8 +50,10 @@ class SerialLink:
 
     def __init__(self, port: str, baud: int = 921600, *, backoff_initial_s: float = 0.05,
                  backoff_max_s: float = 2.0, silence_s: float = 1.0, queue_size: int = 100000,
-                 opener: Callable[[str, int], Any] = open_serial) -> None:
+                 opener: Callable[[str, int], Any] = open_serial,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.port = port
+        self.clock = clock  # wall seconds: the events' stamps, the silence limit, and the bridge's timeouts
         self.baud = baud
         self.backoff_initial_s = backoff_initial_s
         self.backoff_max_s = backoff_max_s
@@ -102,6 +105,10 @@ class SerialLink:
             self.stats.commands_sent += 1
         return ok
 
+    def next_event(self, timeout_s: float) -> Event:
+        """The next event, waiting up to ``timeout_s`` of the link's clock; queue.Empty if none came."""
+        return self.events.get(timeout=timeout_s)
+
     # ------------------------------------------------------------------ reader thread
     def _put(self, ev: Event) -> None:
         try:
@@ -118,7 +125,7 @@ class SerialLink:
                 pass
             if notify:
                 self.stats.disconnects += 1
-                self._put(('disconnected', time.monotonic(), reason))
+                self._put(('disconnected', self.clock(), reason))
 
     def _run(self) -> None:
         delay = self.backoff_initial_s
@@ -135,7 +142,7 @@ class SerialLink:
             self.parser.reset()
             self._ser = ser
             self.stats.connects += 1
-            self._put(('connected', time.monotonic(), self.port))
+            self._put(('connected', self.clock(), self.port))
             self.send(P.Query())  # ask who is there (the hello sent at boot may have been flushed)
             good = self._serve(ser)
             if good:
@@ -147,7 +154,7 @@ class SerialLink:
     def _serve(self, ser: Any) -> bool:
         """Read until error, silence or stop; True if at least one valid frame arrived."""
         got_any = False
-        last_valid = time.monotonic()
+        last_valid = self.clock()
         while not self._stop.is_set():
             try:
                 data = ser.read(ser.in_waiting or 1)
@@ -155,7 +162,7 @@ class SerialLink:
                 self.stats.last_error = f'read: {e}'
                 self._close(f'read failed: {e}')
                 return got_any
-            now = time.monotonic()
+            now = self.clock()
             if data:
                 self.stats.bytes_in += len(data)
                 for f in self.parser.feed(data):

@@ -216,7 +216,7 @@ class AdaptiveController(WristNode):
             self._saturated = cmd.saturated
             self.diagnose('saturation', DiagnosticStatus.WARN if cmd.saturated else DiagnosticStatus.OK,
                           'command saturated: reference beyond what the muscles can reach' if cmd.saturated
-                          else 'command within limits', {k: f'{v:.4g}' for k, v in cmd.info.items()})
+                          else 'command within limits', {k: f'{v:.4g}' for k, v in cmd.info.items()}, routine=True)
         self._publish(cmd)
 
     def _publish(self, cmd: Any) -> None:

@@ -219,11 +219,14 @@ class WristNode(Node):
         """Stamp of /diagnostics: the node clock; a node that owns /clock overrides it with that time base."""
         return self.get_clock().now().to_msg()
 
-    def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None) -> None:
+    def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None, *,
+                 routine: bool = False) -> None:
         """Publish one DiagnosticStatus when ``key``'s level or message changes, and log it.
 
         Called every cycle with the current state; publishes on change only, so a
-        persistent fault is one message, and its recovery (level OK) another.
+        persistent fault is one message, and its recovery (level OK) another. ``routine``: a state the
+        loop is designed to ride through (a command at its limit while the wrist catches up); /diagnostics
+        carries it at ``level``, the console only at DEBUG, since a console WARN asks the user to act.
         """
         last = self._diag_last.get(key)
         if last == (level, message):
@@ -252,7 +255,9 @@ class WristNode(Node):
         text = f'{key}: {message}' + (f' ({quiet} more changes in the last {LOG_THROTTLE_S:g} s, see /diagnostics)'
                                       if quiet else '')
         log = self.get_logger()
-        if level == DiagnosticStatus.OK:
+        if routine:
+            log.debug(text)
+        elif level == DiagnosticStatus.OK:
             log.info(text)
         elif level == DiagnosticStatus.WARN:
             log.warning(text)

@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import math
 import queue
-import time
 from typing import Any, Mapping
 
 import numpy as np
@@ -85,6 +84,8 @@ OK, WARN, ERROR = DiagnosticStatus.OK, DiagnosticStatus.WARN, DiagnosticStatus.E
 
 class HardwareBridge(WristNode):
     OWNS_CLOCK = True
+    #: the serial link; its ``clock`` is the bridge's wall time (a test gives one that reads a pty on a clock it drives)
+    LINK: type[SerialLink] = SerialLink
     PARAMS = (
         Param('port', '/dev/ttyACM0', 'serial port (or pyserial URL) of the wrist controller', runtime=False),
         Param('baud_rate', 921600, 'serial baud rate (1 kHz samples need >= 921600; ignored by USB CDC/pty)',
@@ -187,8 +188,9 @@ class HardwareBridge(WristNode):
         for i in (1, 2):
             self.subscription(f'/wrist/tem_{i}/command', lambda msg, i=i: self._on_command(i, msg))
         self._publish_payload()
-        self.link = SerialLink(p['port'], p['baud_rate'], backoff_initial_s=p['reconnect_backoff_initial_s'],
-                               backoff_max_s=p['reconnect_backoff_max_s'], silence_s=p['silence_reconnect_s'])
+        self.link = self.LINK(p['port'], p['baud_rate'], backoff_initial_s=p['reconnect_backoff_initial_s'],
+                              backoff_max_s=p['reconnect_backoff_max_s'], silence_s=p['silence_reconnect_s'])
+        self.wall = self.link.clock  # the time base of the link's events: every wall-time limit is read on it
         self.timer = self.create_timer(0.5 * self.period_s, self._tick)
         self.link.start()
         self.get_logger().info(f'hardware_bridge: port {p["port"]} at {p["baud_rate"]} bit/s, publishing at '
@@ -383,7 +385,7 @@ class HardwareBridge(WristNode):
 
     def _tick(self) -> None:
         events = self.link.events
-        deadline = time.monotonic() + self.p['sample_wait_s']
+        deadline = self.wall() + self.p['sample_wait_s']
         # more queued events than max_backlog_windows windows of 1 kHz samples: the host is behind, skip ahead
         backlog = self.p['max_backlog_windows'] * self.period_s * 1000.0
         while True:
@@ -394,11 +396,11 @@ class HardwareBridge(WristNode):
             except queue.Empty:
                 if self._window_ready():
                     break
-                remaining = deadline - time.monotonic()
+                remaining = deadline - self.wall()
                 if remaining <= 0:
                     break
                 try:
-                    ev = events.get(timeout=remaining)
+                    ev = self.link.next_event(remaining)
                 except queue.Empty:
                     break
             self._handle(ev)
@@ -483,7 +485,7 @@ class HardwareBridge(WristNode):
         """Reasons the TEMs must be off now (empty: normal operation)."""
         p = self.p
         out = []
-        now = time.monotonic()
+        now = self.wall()
         if self._last_valid_wall is None or now - self._last_valid_wall > p['sensor_timeout_s']:
             # a fixed text: the age is in the status values (a text changing every tick was one log line per tick)
             why = self.why_no_data()
@@ -544,7 +546,7 @@ class HardwareBridge(WristNode):
 
     def status_values(self) -> dict[str, Any]:
         st = self.link.parser.stats
-        age = None if self._last_valid_wall is None else round(time.monotonic() - self._last_valid_wall, 3)
+        age = None if self._last_valid_wall is None else round(self.wall() - self._last_valid_wall, 3)
         return {**self.counters, 'last_valid_sample_age_s': age, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
                 'partial_lines': st.partial_lines, 'malformed': st.malformed, 'garbage_bytes': st.garbage_bytes,
                 'version_mismatch': st.version_mismatch, 'connects': self.link.stats.connects,
@@ -553,7 +555,7 @@ class HardwareBridge(WristNode):
 
     def _report(self) -> None:
         """Line statistics on /diagnostics about once per wall second (WARN while errors accrue)."""
-        now = time.monotonic()
+        now = self.wall()
         if now - self._diag_wall < 1.0:
             return
         self._diag_wall = now

@@ -392,7 +392,7 @@ class HysteresisCompensator(WristNode):
             self._saturated = sat
             self.diagnose('saturation', DiagnosticStatus.WARN if sat else DiagnosticStatus.OK,
                           'target outside the reachable temperature/load window' if sat else 'targets reachable',
-                          {'load_kgf': np.round(res.load_kgf, 3).tolist()})
+                          {'load_kgf': np.round(res.load_kgf, 3).tolist()}, routine=True)
         stamp = self.get_clock().now().to_msg()
         for i, T in enumerate(res.temperature_C.tolist()):
             msg = Temperature(temperature=T, variance=0.0)

@@ -188,7 +188,7 @@ class TemController(WristNode):
                       'muscle above limit: heating blocked' if hot else 'muscle temperatures below limit',
                       {'T_1_C': f'{self.T_meas[0]:.2f}', 'T_2_C': f'{self.T_meas[1]:.2f}'})
         self.diagnose('saturation', DiagnosticStatus.WARN if sat else DiagnosticStatus.OK,
-                      'command clipped to the drive limits' if sat else 'commands within limits')
+                      'command clipped to the drive limits' if sat else 'commands within limits', routine=True)
         self.diagnose('watchdog', DiagnosticStatus.OK, 'measurements and targets fresh')
 
     def _check_stale(self) -> None:

@@ -250,7 +250,7 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the repo
     if a.true_temperature:
         kw['true_temperature'] = names('--true-temperature', a.true_temperature, check_true_temperature)
     if a.oracle:
-        from sma_wrist.plants.oracle import check as check_oracle
+        from sma_wrist.sweep.oracle_models import check as check_oracle
         kw['oracle'] = names('--oracle', a.oracle, check_oracle)
     if a.observer:
         try:

@@ -32,7 +32,6 @@ plant (doc/explanation/controllers.md).
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import sys
 import time
@@ -41,14 +40,11 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from sma_wrist.core.control.joint_controller import JointControllerParams
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis.compensation import MuscleCompensator
-from sma_wrist.core.plant.wrist import PlantParams
-from sma_wrist.plants.spread import Scenario, sample, scenario_params
+from sma_wrist.plants.spread import Scenario, sample
+# the loop given the plant's own models: below both this study and the sweep engine that runs it
+from sma_wrist.sweep.oracle_models import SWITCHES, check, knows_payload, own_compensator, own_tem_bank  # noqa: F401
 
-#: the models the loop can be given the plant's own of (:func:`check`)
-SWITCHES = ('hysteresis', 'thermal', 'payload', 'sensors')
 #: the variants measured: name -> switches ('as_built': none, the nodes' defaults)
 VARIANTS: dict[str, tuple[str, ...]] = {
     'as_built': (),
@@ -78,47 +74,6 @@ VARIANT_MODES: dict[str, tuple[str, ...]] = {
 }
 NOMINAL_PAYLOADS = (0.1, 0.3, 0.6)
 LIMIT_PCT, TARGET_PCT = 15.0, 8.0  # the seed's requirement, and the inverse mode's median asked for over the family [%]
-
-
-def check(switches: Sequence[str], plant: str = 'sdgpi', scenarios: Sequence[Scenario] = ()) -> None:
-    """ParameterError unless ``switches`` are known names of :data:`SWITCHES`, the plant is the project's
-    (``sdgpi``: the only one whose models are the controllers' kind) and ``scenarios`` are one plant."""
-    if isinstance(switches, str):
-        raise ParameterError(f'oracle: a sequence of switch names, not the string {switches!r}')
-    bad = sorted(set(switches) - set(SWITCHES))
-    if bad:
-        raise ParameterError(f'oracle: unknown switch(es) {", ".join(map(repr, bad))}; known: {", ".join(SWITCHES)}')
-    if plant != 'sdgpi':
-        raise ParameterError(f'oracle: the plant\'s own models exist for the project\'s plant (sdgpi), not {plant!r}')
-    if len({dataclasses.replace(s, noise_seed=0) for s in scenarios}) > 1:
-        raise ParameterError('oracle: the loops need one model per plant; run one plant (scenario) at a time '
-                             '(sma_wrist.plants.loop.run_cases does)')
-
-
-def own_compensator(built: MuscleCompensator, scenario: Scenario, base: PlantParams | None = None
-                    ) -> MuscleCompensator:
-    """The compensator ``built`` (window, geometry) on the plant's own SD-GPI, adaptation off."""
-    own = scenario_params(scenario, base).hysteresis
-    return MuscleCompensator(own, built.geometry, T_range_C=built.T_range_C)
-
-
-def own_tem_bank(built: Any, scenario: Scenario, base: PlantParams | None = None) -> Any:
-    """A :class:`~sma_wrist.sweep.laws.TemLoopBank` like ``built`` on the plant's own heat balance
-    (command limits: ``built``'s law and hold limits)."""
-    from sma_wrist.sweep.laws import TemLoopBank
-    own = scenario_params(scenario, base).thermal
-    law = dataclasses.replace(own, u_min_V=built.thermal.u_min_V, u_max_V=built.thermal.u_max_V)
-    hold = dataclasses.replace(own, u_min_V=built.hold.u_min_V, u_max_V=built.hold.u_max_V)
-    return TemLoopBank(built.n, law, built.params, built.drive, hold, built.max_muscle_C)
-
-
-def knows_payload(params: JointControllerParams, payload_kg: float) -> JointControllerParams:
-    """``params`` whose adaptive law knows the payload [kg]: theta_hat starts at it and holds (Gamma_a = 0),
-    its inertia in I (ControlGeometry.known_payload_kg)."""
-    a = params.adaptive
-    return dataclasses.replace(params, adaptive=dataclasses.replace(
-        a, theta0_kg=float(payload_kg), gamma_a=0.0,
-        geometry=dataclasses.replace(a.geometry, known_payload_kg=float(payload_kg))))
 
 
 # ---------------------------------------------------------------------------------- measurement

@@ -27,7 +27,8 @@ HONOURED: dict[str, frozenset[str]] = {
     # over-temperature flag
     'plant_sim': frozenset({'hysteresis_file', 'thermal_file', 'preload_elongation_mm', 'dt_s',
                             'max_muscle_temperature_C'}),
-    'trajectory_generator': frozenset(),  # the metrics are over the last cycle of the Sec. 6.1 sine
+    # the reference is the Sec. 6.1 sine (the metrics are over its last cycle); its soft start from each wrist's angle
+    'trajectory_generator': frozenset({'soft_start_s'}),
     # every law parameter; the mode is --controllers
     'adaptive_controller': frozenset({'temperature_mid_C', 'temperature_min_C', 'temperature_max_C',
                                       'force_per_degC_N', 'reversal_lead_s', 'pid_reference_lead_s',
@@ -180,6 +181,7 @@ def loop_settings(params_files: Sequence[str | Path], plant: str = 'sdgpi') -> L
         'observer_thermal': None if obs is None else obs.thermal,
         'tem_loop': user['tem_controller'].objects['tem_loop'],
         'online_thermal': online,
+        'soft_start_s': user['trajectory_generator'].values['soft_start_s'],
     }
     return LoopSettings(out, changed)
 

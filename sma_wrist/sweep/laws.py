@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
@@ -33,20 +33,22 @@ FloatArray = NDArray[np.float64]
 @_jit
 def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, hold_after,
                         target):  # pragma: no cover - compiled
-    """JointController._reversal_lead for each wrist j, compiled (q (n,) [rad]): target[j] = the angle
-    whose strain is asked for; hold_on, hold_q, hold_after (n,) the latch per wrist, in place."""
+    """JointController._reversal_lead for each wrist j, compiled (q and its reference q_d, qdot_d, qddot_d (n,)
+    [rad, rad/s, rad/s^2]): target[j] = the angle whose strain is asked for; hold_on, hold_q, hold_after (n,) the
+    latch per wrist, in place."""
     for j in range(q.shape[0]):
-        e = q_d - q[j]
-        s_meet, after = time_to_meet(e, qdot_d, qddot_d)
-        turns = after != math.copysign(1.0, qdot_d) or (abs(e) > step and after != math.copysign(1.0, e))
+        r, rd = q_d[j], qdot_d[j]
+        e = r - q[j]
+        s_meet, after = time_to_meet(e, rd, qddot_d[j])
+        turns = after != math.copysign(1.0, rd) or (abs(e) > step and after != math.copysign(1.0, e))
         if not hold_on[j] and s_meet < 2.0 * lead_s and turns:
             hold_on[j] = True
             hold_q[j] = q[j] + after * step
             hold_after[j] = after
-        target[j] = q_d
+        target[j] = r
         if hold_on[j]:
-            turned = qdot_d * hold_after[j] > 0
-            if (turned and (q_d - hold_q[j]) * hold_after[j] >= 0) or (not turned and after != hold_after[j]):
+            turned = rd * hold_after[j] > 0
+            if (turned and (r - hold_q[j]) * hold_after[j] >= 0) or (not turned and after != hold_after[j]):
                 hold_on[j] = False
             else:
                 target[j] = hold_q[j]
@@ -104,16 +106,20 @@ class JointControllerBank:
         out /= self._wire_mm
         return out
 
-    def _strain_rows(self, q: float) -> FloatArray:
-        """(n, 2): every wrist's row the bundle strains at the one angle q (the reference's)."""
-        x = self._mm_per_rad * (q - self._q_neutral)  # strain_at's operations on floats: the same numbers
+    def _strain_rows(self, q: FloatArray) -> FloatArray:
+        """(n, 2): each wrist's bundle strains at its reference angle q (n,)."""
+        x = self._mm_per_rad * (q - self._q_neutral)  # strain_at's operations element by element: the same numbers
         out = np.empty((self.n, 2))
-        out[:] = ((self._e0 - x) / self._wire_mm, (self._e0 + x) / self._wire_mm)
+        out[:, 0] = (self._e0 - x) / self._wire_mm
+        out[:, 1] = (self._e0 + x) / self._wire_mm
         return out
 
-    def update(self, q: FloatArray, qdot: FloatArray, q_d: float, qdot_d: float, qddot_d: float, dt: float
-               ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
+    def update(self, q: FloatArray, qdot: FloatArray, q_d: ArrayLike, qdot_d: ArrayLike, qddot_d: ArrayLike,
+               dt: float) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
+        """One control step of every wrist; the reference (q_d, qdot_d, qddot_d) is one for all or (n,), one per
+        wrist (each starts from its own angle: trajectory_generator's soft start)."""
         p = self.params
+        q_d, qdot_d, qddot_d = (np.broadcast_to(np.asarray(v, float), (self.n,)) for v in (q_d, qdot_d, qddot_d))
         lo, hi = p.temperature_min_C, p.temperature_max_C
         q_now = q_d  # the desired strain stays the one at q_d(t), as JointController's
         if p.reference_lead_s > 0:
@@ -130,7 +136,8 @@ class JointControllerBank:
         out = self.adaptive.update_stacked(x, dt)
         force, saturated = out[:, :2], out[:, 7] != 0.0  # ControlOutput's force_1_N, force_2_N and saturated
         if p.mode == 'inverse_adaptive':
-            _reversal_lead_many(np.ascontiguousarray(q, float), float(q_d), float(qdot_d), float(qddot_d),
+            _reversal_lead_many(np.ascontiguousarray(q, float), np.ascontiguousarray(q_d), np.ascontiguousarray(qdot_d),
+                                np.ascontiguousarray(qddot_d),
                                 float(p.reversal_lead_s), REVERSAL_STEP_RAD, self.hold_on, self.hold_q,
                                 self.hold_after, self._target)
             return force, self.strain_at(self._target), None, saturated

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.control.tem import (CHATTER_DEADBAND_V, MuscleTemperatureObserver, TemControlParams,
                                        TemperatureObserverParams)
-from sma_wrist.core.control.trajectory import make_trajectory
+from sma_wrist.core.control.trajectory import SOFT_START_S, make_trajectory, soft_start
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
@@ -83,7 +83,8 @@ class Case:
 
 @dataclass
 class Trace:
-    """Recorded series of a chunk (for the agreement test and plots): (K,) times, (K, n) angles."""
+    """Recorded series of a chunk (for the agreement test and plots): (K,) times, (K, n) angles and references
+    (each loop's reference starts at its own wrist's angle)."""
 
     t: FloatArray
     q_d: FloatArray
@@ -111,13 +112,15 @@ def sign_changes_per_s(u: FloatArray, dt: float, deadband: float = CHATTER_DEADB
 
 def loop_metrics(t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArray, u: FloatArray,
                  period_s: float = SEED_PERIOD_S) -> list[dict[str, float]]:
-    """Per loop: run_metrics' figures over the last full cycle (whole run if shorter)."""
-    rng = float(q_d.max() - q_d.min())
-    if rng <= 0:
+    """Per loop: run_metrics' figures over the last full cycle (whole run if shorter), in % of each loop's reference
+    range over the run, as a bag's. ``q_d``: (K,) one reference for every loop, or (K, n) one per loop."""
+    ref = q_d.reshape(q_d.shape[0], -1)  # (K, 1) or (K, n): broadcasts against (K, n)
+    rng = ref.max(axis=0) - ref.min(axis=0)
+    if np.any(rng <= 0):
         raise ParameterError('the reference does not move: no error in % of its range')
     last = t >= t[-1] - period_s if t[-1] - t[0] >= period_s else np.ones(t.size, bool)
-    e = np.abs(q[last] - q_d[last, None]) * (100.0 / rng)
-    em = np.abs(q_meas[last] - q_d[last, None]) * (100.0 / rng)
+    e = np.abs(q[last] - ref[last]) * (100.0 / rng)
+    em = np.abs(q_meas[last] - ref[last]) * (100.0 / rng)
     chat = sign_changes_per_s(u[last], t[1] - t[0])  # (n, 2)
     out = []
     for j in range(q.shape[1]):
@@ -155,7 +158,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              online_thermal: OnlineThermalParams | None = OnlineThermalParams(),
              compensator_wire: SDGPIParams | None = None, compensator_window_C: tuple[float, float] = (20.0, 80.0),
              shift_limit_C: float = SHIFT_LIMIT_C, tem_loop: TemLoopSpec | None = None,
-             observer_thermal: ThermalParams | None = None
+             observer_thermal: ThermalParams | None = None, soft_start_s: float = SOFT_START_S
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -196,8 +199,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     observer's heat balance (None: the TEM loops' model); ``tem_loop`` tem_controller's loop
     (:class:`~sma_wrist.sweep.laws.TemLoopSpec`; None: its defaults).
 
+    ``soft_start_s``: trajectory_generator's: each loop's reference starts at its wrist's angle measured at t_1
+    and joins the Sec. 6.1 sine over this time [s] (0: the sine from its first value).
+
     ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
-    (:data:`sma_wrist.plants.oracle.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
+    (:data:`sma_wrist.sweep.oracle_models.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
     ``'sensors'``; doc/explanation/controllers.md); every case must then be on
     the one ``sdgpi`` scenario."""
     check_true_temperature(true_temperature)
@@ -205,7 +211,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         raise ParameterError('no closed loops to simulate (N = 0)')
     orc: Any = None
     if oracle:  # lazily: plants.oracle runs this engine
-        from sma_wrist.plants import oracle as oracle_models
+        from sma_wrist.sweep import oracle_models
         orc = oracle_models
         orc.check(oracle, plant, [c.scenario for c in cases])
         if 'sensors' in oracle:
@@ -254,7 +260,8 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
-    qd_rec = np.empty(k_total)
+    qd_rec = np.empty((k_total, n))
+    q_start = None  # each wrist's angle trajectory_generator starts its reference from [rad]
     T_d: FloatArray | None = None
     # the TEMs' faces as the plant has them (no node sees the exchanger faces): hottest, and time outside their
     # window, as plant_sim's tem_faces diagnostic judges it (doc/explanation/controllers.md)
@@ -292,8 +299,15 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         # trajectory_generator's clock starts at its first tick (t_1): the reference stamped t_k is
         # q_d(t_k - t_1); the controller at t_k still holds the one stamped t_k-1
         now_ns = int(round(s.t * 1e9))
-        qd_rec[k] = float(traj((now_ns - tick_ns) * 1e-9)[0])
-        q_d, qdot_d, qddot_d = (float(x) for x in traj((now_ns - 2 * tick_ns) * 1e-9))
+        # q_d(t_k - t_1); the controller at t_k still holds the one stamped t_k-1. It starts from the angle
+        # measured at t_1 (trajectory_generator's soft start)
+        if k == 1:
+            q_start = np.minimum(np.maximum(q_m, ANGLE_LIMITS_RAD[0]), ANGLE_LIMITS_RAD[1])
+        t_ref, t_law = (now_ns - tick_ns) * 1e-9, (now_ns - 2 * tick_ns) * 1e-9
+        qd_rec[k] = traj(t_ref)[0] if q_start is None else soft_start(traj(t_ref), t_ref, q_start, soft_start_s)[0]
+        if k >= 2:  # (n,) each: one reference per loop
+            q_d, qdot_d, qddot_d = (np.broadcast_to(x, (n,))
+                                    for x in soft_start(traj(t_law), t_law, q_start, soft_start_s))
         if comp is not None and k >= 1:
             # hysteresis_compensator's memory and axis take every measured tick (its first, t_1, starts
             # them), dt from the stamps, before the cycle's targets arrive
@@ -311,7 +325,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
             for mode, (idx, bank) in groups.items():
-                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d, qdot_d, qddot_d, dt_law)
+                force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d[idx], qdot_d[idx], qddot_d[idx], dt_law)
                 if T_g is not None:
                     T_new[idx] = T_g
                     continue

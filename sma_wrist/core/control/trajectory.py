@@ -10,6 +10,9 @@ Default: the Sec. 6.1 experiment ``q_d = 0.524 + 0.524 sin(0.1 t)`` rad. It peak
 1.048 rad, 0.6 mrad above pi/3 (the seed rounds 30 deg to 0.524 rad), so the default angle
 limits are [0, 1.05] rad rather than [0, 1.047].
 
+A run does not start on q_d(0): :class:`SoftStart` joins any of them from the wrist's measured
+angle over a few seconds (trajectory_generator's ``soft_start_s``).
+
 Use :func:`make_trajectory` to build one from a name and keyword arguments (node
 parameters); it raises :class:`~sma_wrist.core.errors.ParameterError` naming the bad value and the valid range.
 """
@@ -31,6 +34,46 @@ DEFAULT_ANGLE_LIMITS_RAD: tuple[float, float] = (0.0, 1.05)
 SEED_OFFSET_RAD = 0.524
 SEED_AMPLITUDE_RAD = 0.524
 SEED_OMEGA_RAD_S = 0.1
+#: trajectory_generator's default soft start [s]. The muscles start at ambient and the wrist cannot move until the
+#: TEMs have warmed one to its transformation (~11 s at 0.3 kg); the inverse_adaptive demo's whole-run max error
+#: was 60 / 40 / 32 / 31 % with 20 / 25 / 30 / 35 s (0.3 kg, first 70 s), the sine's own start 0.44 rad away
+#: 87 %: 30 s is the shortest on that floor
+SOFT_START_S = 30.0
+
+
+def smoothstep(t: FloatArray, duration_s: float) -> Sample:
+    """The quintic s = 10x^3 - 15x^4 + 6x^5, x = t / duration_s clipped to [0, 1], and its time derivatives.
+
+    s rises from 0 to 1 with zero rate and acceleration at both ends: ds/dt = 30 x^2 (1 - x)^2 / T,
+    d2s/dt2 = 60 x (1 - x)(1 - 2x) / T^2 (T = duration_s > 0), both 0 outside (0, T).
+    """
+    T = duration_s
+    x = np.clip(t / T, 0.0, 1.0)
+    inside = (t > 0.0) & (t < T)
+    s = x ** 3 * (10 - 15 * x + 6 * x * x)
+    ds = np.where(inside, 30 * x * x * (1 - x) ** 2, 0.0)
+    dds = np.where(inside, 60 * x * (1 - x) * (1 - 2 * x), 0.0)
+    return s, ds / T, dds / (T * T)
+
+
+def soft_start(reference: Sample, t: ArrayLike, start_rad: ArrayLike, duration_s: float) -> Sample:
+    """A reference sample r(t) joined smoothly from the angle start_rad over duration_s [s].
+
+    q_d = q_0 + s (r - q_0),  q_d' = s' (r - q_0) + s r',  q_d'' = s'' (r - q_0) + 2 s' r' + s r''
+    with s the quintic :func:`smoothstep` of t over duration_s: q_d starts at q_0 at rest (t <= 0) and is r
+    itself, to the last bit, from t = duration_s on. ``start_rad`` may be an array (one start per wrist, the
+    sweep's loops); ``t`` and ``reference`` are then shared or of the same shape. duration_s = 0: r as it is.
+    """
+    r, rd, rdd = reference
+    if duration_s == 0.0:
+        return r, rd, rdd
+    tt = np.asarray(t, dtype=float)
+    q0 = np.asarray(start_rad, dtype=float)
+    s, ds, dds = smoothstep(tt, duration_s)
+    gap = r - q0
+    done = tt >= duration_s
+    return (np.where(done, r, q0 + s * gap), np.where(done, rd, ds * gap + s * rd),
+            np.where(done, rdd, dds * gap + 2.0 * ds * rd + s * rdd))
 
 
 class Trajectory(Protocol):
@@ -119,12 +162,8 @@ class Step:
             q = np.where(tt >= self.t_step_s, self.final_rad, self.initial_rad).astype(float)
             return q, np.zeros_like(q), np.zeros_like(q)
         T = self.rise_time_s
-        x = np.clip((tt - self.t_step_s) / T, 0.0, 1.0)
-        inside = (tt > self.t_step_s) & (tt < self.t_step_s + T)
-        s = x ** 3 * (10 - 15 * x + 6 * x * x)
-        ds = np.where(inside, 30 * x * x * (1 - x) ** 2, 0.0)
-        dds = np.where(inside, 60 * x * (1 - x) * (1 - 2 * x), 0.0)
-        return self.initial_rad + dq * s, dq * ds / T, dq * dds / (T * T)
+        s, ds, dds = smoothstep(tt - self.t_step_s, T)
+        return self.initial_rad + dq * s, dq * ds, dq * dds
 
 
 @dataclass(frozen=True)
@@ -216,6 +255,32 @@ class Constant:
         return q, np.zeros_like(q), np.zeros_like(q)
 
 
+@dataclass(frozen=True)
+class SoftStart:
+    """``reference`` joined from the wrist's measured angle start_rad over duration_s (:func:`soft_start`).
+
+    A run then starts where the wrist is instead of a step of the reference's first value away from it
+    (the Sec. 6.1 sine starts at 0.524 rad, the wrist rests near 0.08 rad at 0.3 kg), so its error over the
+    whole run measures tracking, not the start-up transient.
+    """
+
+    reference: Any
+    start_rad: float
+    duration_s: float
+
+    def __post_init__(self) -> None:
+        _finite('start_rad', self.start_rad, unit='rad')
+        _finite('duration_s', self.duration_s, 0.0, unit='s')
+
+    def bounds(self) -> tuple[float, float]:
+        lo, hi = self.reference.bounds()
+        return min(lo, self.start_rad), max(hi, self.start_rad)  # q_d lies between q_0 and r(t)
+
+    def __call__(self, t: ArrayLike) -> Sample:
+        tt = _time(t)
+        return soft_start(self.reference(tt), tt, self.start_rad, self.duration_s)
+
+
 GENERATORS: dict[str, type] = {
     'sine': Sine, 'step': Step, 'ramp': Ramp, 'sine_sweep': SineSweep, 'constant': Constant,
 }
@@ -246,5 +311,5 @@ def make_trajectory(name: str = 'sine', angle_limits_rad: tuple[float, float] = 
     return traj
 
 
-__all__ = ['Sine', 'Step', 'Ramp', 'SineSweep', 'Constant', 'Trajectory', 'make_trajectory', 'GENERATORS',
-           'DEFAULT_ANGLE_LIMITS_RAD']
+__all__ = ['Sine', 'Step', 'Ramp', 'SineSweep', 'Constant', 'SoftStart', 'Trajectory', 'make_trajectory', 'soft_start',
+           'smoothstep', 'GENERATORS', 'DEFAULT_ANGLE_LIMITS_RAD', 'SOFT_START_S']
