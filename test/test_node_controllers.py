@@ -672,3 +672,28 @@ def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_facto
             assert any(level == 2 and '0.8 kgf' in m for level, m in load), load
         else:
             assert 0.8 < peak_kgf < 1.5 and load == [], (peak_kgf, load)
+
+
+@pytest.mark.parametrize('executable, waits_for', [
+    ('trajectory_generator', '/clock'),
+    ('adaptive_controller', '/wrist/reference and /wrist/joint_states'),
+    ('hysteresis_compensator', '/wrist/muscle_{1,2}/strain_desired'),
+    ('tem_controller', '/wrist/muscle_{1,2}/temperature and temperature_desired'),
+])
+def test_a_controller_node_says_at_start_what_it_waits_for(executable, waits_for):
+    """Started with `ros2 run`, the four controller nodes printed nothing until their inputs came: one INFO line at
+    start now names the node's key settings and what it waits for."""
+    from sma_wrist.closed_loop import ros_args
+    from sma_wrist.runtime.launch_file import node_class
+    from sma_wrist.runtime.rclpy import logging as rlog
+    records: list[tuple[object, str]] = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: records.append((sev, msg)) if name == executable else None)
+    try:
+        with rlog.silenced(), Runtime(ros_args(), params={'/**': {'use_sim_time': True}}) as rt:
+            rt.add(node_class(executable))
+    finally:
+        remove()
+    assert len(records) == 1, records
+    severity, line = records[0]
+    assert severity == rlog.LoggingSeverity.INFO and line.startswith(f'{executable}: ')
+    assert 'waiting for /clock (use_sim_time)' in line and waits_for in line, line

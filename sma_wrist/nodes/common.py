@@ -152,6 +152,12 @@ class WristNode(Node):
     def apply(self, changed: Mapping[str, Any]) -> None:
         """Take validated parameter changes into effect. Override."""
 
+    def waiting_for(self, topics: str) -> str:
+        """The start-up line's "what it waits for": ``topics``, and /clock first under use_sim_time (a node started
+        alone with ``ros2 run`` prints this and then nothing until its inputs come)."""
+        clock = '/clock (use_sim_time), then ' if self.get_parameter('use_sim_time').value else ''
+        return f'waiting for {clock}{topics}'
+
     def _sim_time_problem(self, use_sim_time: Any) -> str | None:
         if self.OWNS_CLOCK and use_sim_time is True:
             return (f'use_sim_time = true: {self.get_name()} publishes /clock itself and would wait '

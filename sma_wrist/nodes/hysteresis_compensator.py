@@ -147,6 +147,12 @@ class HysteresisCompensator(WristNode):
         self.subscription('/wrist/joint_states', self._on_joint_state)
         self.command_subs: list[Any] = []
         self._subscribe_commands()
+        p = self.p
+        self.get_logger().info(
+            f'hysteresis_compensator: method {p["method"]}, temperatures {p["temperature_min_C"]:g}-'
+            f'{p["temperature_max_C"]:g} degC, memory from the {p["temperature_source"]} temperatures; '
+            + self.waiting_for('/wrist/muscle_{1,2}/strain_desired and stress_desired from adaptive_controller, and the '
+                               'measured temperatures, stresses and joint state'))
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
