@@ -258,22 +258,27 @@ def test_compensator_memory_follows_the_measured_or_the_commanded_temperature(pr
     np.testing.assert_allclose(got[-2:], answers, atol=1e-9)
 
 
-def test_flapping_condition_is_published_every_change_but_logged_at_most_every_10_s(probe_factory):
-    from diagnostic_msgs.msg import DiagnosticStatus
-
-    from sma_wrist.nodes.common import LOG_THROTTLE_S
-    from sma_wrist.nodes.tem_controller import TemController
+def _logged(node) -> list[str]:
+    """The lines ``node`` logs from now on, whatever their severity."""
     logged: list[str] = []
 
     class Log:
         def info(self, m: str) -> None:
             logged.append(m)
         warning = error = info
+    node.get_logger = lambda: Log()
+    return logged
 
+
+def test_flapping_condition_is_published_every_change_but_logged_at_most_every_10_s(probe_factory):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from sma_wrist.nodes.common import LOG_THROTTLE_S
+    from sma_wrist.nodes.tem_controller import TemController
     with Runtime() as rt:
         probe = probe_factory(rt)
         node = rt.add(TemController)
-        node.get_logger = lambda: Log()
+        logged = _logged(node)
         for k in range(20):  # a command touching its limit every other tick
             node.diagnose('flap', DiagnosticStatus.WARN if k % 2 == 0 else DiagnosticStatus.OK, f'state {k % 2}')
             rt.run_until(0.1 * (k + 1), until='steady')
@@ -301,17 +306,10 @@ def test_the_end_of_a_logged_problem_is_always_logged(probe_factory):
     from diagnostic_msgs.msg import DiagnosticStatus
 
     from sma_wrist.nodes.tem_controller import TemController
-    logged: list[str] = []
-
-    class Log:
-        def info(self, m: str) -> None:
-            logged.append(m)
-        warning = error = info
-
     with Runtime() as rt:
         probe_factory(rt)
         node = rt.add(TemController)
-        node.get_logger = lambda: Log()
+        logged = _logged(node)
         node.diagnose('command', DiagnosticStatus.OK, 'commands fresh')  # the first state: OK, not published
         for t, level, text in ((4.5, DiagnosticStatus.WARN, 'TEM off'), (4.73, DiagnosticStatus.OK, 'commands fresh'),
                                (5.0, DiagnosticStatus.WARN, 'TEM off'), (5.1, DiagnosticStatus.OK, 'commands fresh')):
