@@ -14,7 +14,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from sma_wrist.launch_support import graph_specs, node_params_file, on_exit_actions, payload_override
+from sma_wrist.launch_support import graph_specs, node_parameters, on_exit_actions, payload_override
 
 
 def _graph(context) -> list:
@@ -25,13 +25,11 @@ def _graph(context) -> list:
     port = LaunchConfiguration('port').perform(context)
 
     return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
-                 parameters=[defaults, extra, node_params_file(exe, values)], on_exit=on_exit_actions(exe))
+                 parameters=node_parameters(defaults, extra, exe, values), on_exit=on_exit_actions(exe))
             for exe, values in graph_specs('hardware_bridge', {**payload_override(payload), 'port': port}, controller)]
 
 
 def generate_launch_description() -> LaunchDescription:
-    defaults = PathJoinSubstitution([FindPackageShare('sma_wrist'), 'config', 'wrist.yaml'])
-
     return LaunchDescription([
         DeclareLaunchArgument('port', default_value='/dev/ttyACM0', description='serial port of the wrist'),
         # direct_adaptive by default on hardware: the inverse mode relies on the SD-GPI matching the
@@ -40,7 +38,7 @@ def generate_launch_description() -> LaunchDescription:
                               choices=['inverse_adaptive', 'direct_adaptive', 'pid']),
         DeclareLaunchArgument('payload_kg', default_value='',
                               description='payload at 0.09 m [kg] (default: payload_kg of the params files, 0.3)'),
-        DeclareLaunchArgument('params_file', default_value=defaults,
-                              description='params file applied after config/wrist.yaml'),
+        DeclareLaunchArgument('params_file', default_value='',
+                              description='params file applied after config/wrist.yaml (default: none)'),
         OpaqueFunction(function=_graph),
     ])

@@ -4,8 +4,8 @@
 
 plant_sim publishes /clock; every other node runs on it (use_sim_time). The compensator is
 started only for controller:=inverse_adaptive (the other modes publish desired
-temperatures themselves). params_file:= replaces config/wrist.yaml (e.g. the paper's gains,
-config/paper_table_6_1.yaml, applied on top of the defaults).
+temperatures themselves). params_file:= is applied after config/wrist.yaml (e.g. the paper's gains,
+config/paper_table_6_1.yaml, on top of the defaults).
 """
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
@@ -13,7 +13,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from sma_wrist.launch_support import graph_specs, node_params_file, on_exit_actions, payload_override
+from sma_wrist.launch_support import graph_specs, node_parameters, on_exit_actions, payload_override
 
 
 def _graph(context) -> list:
@@ -23,19 +23,17 @@ def _graph(context) -> list:
     extra = LaunchConfiguration('params_file').perform(context)
 
     return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
-                 parameters=[defaults, extra, node_params_file(exe, values)], on_exit=on_exit_actions(exe))
+                 parameters=node_parameters(defaults, extra, exe, values), on_exit=on_exit_actions(exe))
             for exe, values in graph_specs('plant_sim', payload_override(payload), controller)]
 
 
 def generate_launch_description() -> LaunchDescription:
-    defaults = PathJoinSubstitution([FindPackageShare('sma_wrist'), 'config', 'wrist.yaml'])
-
     return LaunchDescription([
         DeclareLaunchArgument('controller', default_value='inverse_adaptive',
                               choices=['inverse_adaptive', 'direct_adaptive', 'pid']),
         DeclareLaunchArgument('payload_kg', default_value='',
                               description='payload at 0.09 m [kg] (default: payload_kg of the params files, 0.3)'),
-        DeclareLaunchArgument('params_file', default_value=defaults,
-                              description='params file applied after config/wrist.yaml'),
+        DeclareLaunchArgument('params_file', default_value='',
+                              description='params file applied after config/wrist.yaml (default: none)'),
         OpaqueFunction(function=_graph),
     ])

@@ -54,8 +54,8 @@ def _print_metrics(summary: Any) -> None:
           + (' -- INTERRUPTED' if summary.interrupted else ''))
     if summary.bag:
         print(f'bag: {summary.bag} ({summary.messages_recorded} messages, rosbag2/MCAP)')
-    else:  # the metrics are read back from the recording: without one a run printed nothing to compare
-        print('no tracking metrics: they are computed from the recording; run again with --bag DIR')
+    if summary.metrics_missing:
+        print(f'no tracking metrics: {summary.metrics_missing}')
     if m:
         total = m['total_abs_error_pct']
         where = 'over the last full cycle' if m.get('window') == 'last_cycle' else 'over the run'
@@ -100,11 +100,9 @@ def _print_next(bag: str | None, plot: str | None) -> None:
 
 
 def cmd_run(a: argparse.Namespace) -> int:
-    if a.plot is not None:
-        if a.bag is None:  # the plot is drawn from the recording, as the metrics are
-            raise SmaWristError('--plot draws the recorded run: give --bag DIR too')
+    if a.plot is not None:  # drawn from the recording, as the metrics are (a temporary one without --bag)
         from sma_wrist.runs import check_plot_file
-        check_plot_file(a.plot, [a.bag], 'run.png')
+        check_plot_file(a.plot, [a.bag] if a.bag else [], 'run.png')
     _prepare_bag(a.bag, a.overwrite)
     _activate()
     from sma_wrist.closed_loop import print_progress, run_closed_loop
@@ -113,17 +111,20 @@ def cmd_run(a: argparse.Namespace) -> int:
         mode, payload = file_choices(a.params_file or (), a.hardware is not None)
         a.controller = a.controller or mode
         a.payload_kg = payload if a.payload_kg is None else a.payload_kg
+    # without --bag the run is recorded to a temporary bag all the same: its metrics are the bag's, whether kept
     summary = run_closed_loop(a.controller, a.payload_kg, a.duration, a.bag, a.params_file or (),
                               progress=None if a.quiet else print_progress, hardware=a.hardware is not None,
-                              extra_params={'/hardware_bridge': {'port': a.hardware}} if a.hardware else None)
+                              extra_params={'/hardware_bridge': {'port': a.hardware}} if a.hardware else None,
+                              measure=True)
     if a.json:
         print(json.dumps({'bag': summary.bag, 'controller': summary.controller, 'payload_kg': summary.payload_kg,
                           'sim_time_s': summary.sim_time_s, 'wall_s': summary.wall_s,
                           'real_time_factor': summary.real_time_factor, 'messages': summary.messages_recorded,
-                          'interrupted': summary.interrupted, 'metrics': summary.metrics}, indent=2))
+                          'interrupted': summary.interrupted, 'metrics': summary.metrics,
+                          'metrics_missing': summary.metrics_missing or None}, indent=2))
     if a.plot is not None and summary.run is not None:
         from sma_wrist.runs import plot_runs
-        plot_runs([summary.run], [f'{summary.controller} {summary.payload_kg:g} kg'], a.plot, str(a.bag))
+        plot_runs([summary.run], [f'{summary.controller} {summary.payload_kg:g} kg'], a.plot, str(a.bag or ''))
     if not a.json:
         _print_metrics(summary)
         _print_next(summary.bag, a.plot)
@@ -257,7 +258,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument('--payload-kg', type=_payload, default=None,
                    help="payload at 0.09 m [kg] (default: plant_sim's payload_kg in the params files, 0.3)")
     r.add_argument('--duration', type=_positive_float, default=126.0, help='simulated seconds (default 126)')
-    r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist)')
+    r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist; without it the run is '
+                                               'recorded to a temporary bag for its metrics, removed afterwards)')
     r.add_argument('--overwrite', action='store_true', help='replace an existing bag at --bag')
     r.add_argument('--params-file', action='append', help='ROS params file applied after config/wrist.yaml')
     r.add_argument('--hardware', metavar='PORT', default=None,

@@ -34,6 +34,7 @@ class RunSummary:
     interrupted: bool
     metrics: dict[str, Any] = field(default_factory=dict)
     run: Any = None  # sma_wrist.runs.RunData read back from the bag (what the metrics came from)
+    metrics_missing: str = ''  # why ``metrics`` is empty although the run was measured ('' when it is not)
 
     @property
     def real_time_factor(self) -> float:
@@ -148,12 +149,33 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
                     bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
                     extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
                     progress: Callable[[float, float, float], None] | None = None,
-                    hardware: bool = False, delivery: Any = None) -> RunSummary:
+                    hardware: bool = False, delivery: Any = None, measure: bool = False) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
 
-    ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops
-    the run; the bag is closed with everything up to the interrupt and the summary says so.
+    ``measure`` without a ``bag``: record to a temporary bag, removed afterwards, for the metrics (``sma-wrist run``
+    without --bag printed none). ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C
+    stops the run; the bag is closed with everything up to the interrupt and the summary says so (and
+    ``metrics_missing`` why there are none, when it holds no reference yet).
     """
+    import contextlib
+    import tempfile
+    kept = bag is not None
+    with (tempfile.TemporaryDirectory(prefix='sma_wrist_run_') if measure and not kept
+          else contextlib.nullcontext(None)) as tmp:
+        if tmp is not None:
+            bag = Path(tmp) / 'bag'
+        summary = _run(controller, payload_kg, duration_s, bag, params_files, extra_params, topics, progress,
+                       hardware, delivery, kept)
+    if not kept:
+        summary.bag = None
+    return summary
+
+
+def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path | None,
+         params_files: Sequence[str | Path], extra_params: dict[str, dict[str, Any]] | None,
+         topics: Sequence[str] | None, progress: Callable[[float, float, float], None] | None, hardware: bool,
+         delivery: Any, kept: bool) -> RunSummary:
+    """:func:`run_closed_loop` with its bag (or none); ``kept``: the bag is the user's, not a temporary one."""
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
     if params_files:  # all but hardware_bridge (graph_nodes puts the source first), which would open its port
@@ -192,14 +214,21 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         raise SmaWristError(
             f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {sim_s:.2f} s of device time: check '
             f"hardware_bridge's port, that the device is powered and streaming (doc/explanation/protocol.md); TEMs were "
-            f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if bag is not None else '') +
+            f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if kept else '') +
             (f'. What the bridge saw: {why}' if why else ''))
     summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
                          time.perf_counter() - wall0, recorded, interrupted)
     if bag is not None:
+        from sma_wrist.bag import BagError
         from sma_wrist.runs import load_run, run_metrics
-        summary.run = load_run(bag)
-        summary.metrics = run_metrics(summary.run)
+        try:
+            summary.run = load_run(bag)
+        except BagError as exc:
+            if not interrupted:  # a run that ended normally and left no readable run is a fault
+                raise
+            summary.metrics_missing = f'interrupted at {sim_s:.2f} s before there was an error to measure: {exc.problem}'
+        else:
+            summary.metrics = run_metrics(summary.run)
     return summary
 
 

@@ -54,7 +54,7 @@ def payload_override(text: str) -> dict[str, float]:
 
 
 #: nodes whose exit leaves the rest of the graph meaningless (no plant or device, no /clock: every
-#: other node would wait forever); each launch file gives them ``on_exit`` = log + Shutdown with
+#: other node would wait forever); each launch file gives them ``on_exit`` = log + shut down with
 #: this reason, and the embedded launcher (sma_wrist.runtime.launch_file) honours the same actions
 REQUIRED_EXIT_REASONS = {
     'plant_sim': 'plant_sim exited: the graph has no plant and no /clock, shutting the launch down',
@@ -62,18 +62,41 @@ REQUIRED_EXIT_REASONS = {
 }
 
 
+class RequiredNodeFailed(RuntimeError):
+    """A required node exited with a non-zero code: raised from its ``on_exit`` so that ``ros2 launch`` exits 1.
+
+    launch's ``LaunchService.run`` (Humble 1.0.x, Jazzy 3.4.x) returns 1 only when an exception escapes an action or
+    an event handler ("Caught exception in launch (see debug for traceback): ..."), which also shuts the launch down;
+    a ``Shutdown`` action, whatever its reason, ends it with 0, so a script could not tell a refused start from a
+    normal end."""
+
+
 def on_exit_actions(executable: str) -> list | None:
     """``on_exit`` of a launch_ros Node: for a required node, log the reason and shut the launch down -- unless the
     launch is already shutting down (a user's Ctrl-C ends plant_sim too, and its exit is then no fault: under
-    Humble and Jazzy every Ctrl-C logged "plant_sim exited: the graph has no plant...")."""
+    Humble and Jazzy every Ctrl-C logged "plant_sim exited: the graph has no plant..."). A non-zero exit code (a
+    refused start exits 2) shuts it down by :class:`RequiredNodeFailed`, so that ``ros2 launch`` exits 1; an exit
+    with 0 (the node stopped on a signal of its own) by ``Shutdown``, and ``ros2 launch`` exits 0."""
     reason = REQUIRED_EXIT_REASONS.get(executable)
     if reason is None:
         return None
     from launch.actions import LogInfo, OpaqueFunction, Shutdown  # only launch files call this
 
     def unless_shutting_down(context: Any) -> list:
-        return [] if context.is_shutdown else [LogInfo(msg=reason), Shutdown(reason=reason)]
+        if context.is_shutdown:
+            return []
+        code = getattr(getattr(context.locals, 'event', None), 'returncode', None)  # launch's ProcessExited
+        if not code:
+            return [LogInfo(msg=reason), Shutdown(reason=reason)]
+        raise RequiredNodeFailed(f'{executable} exited with code {code}: ' + reason.split(': ', 1)[1])
     return [OpaqueFunction(function=unless_shutting_down)]
+
+
+def node_parameters(defaults: str, extra: str, executable: str, values: Mapping[str, Any]) -> list[str]:
+    """``parameters`` of a launch_ros Node: config/wrist.yaml, the user's params_file:= if one was given (its
+    default is none: defaulting to config/wrist.yaml put that file twice on every node's command line), then the
+    node's own overrides (:func:`node_params_file`)."""
+    return [defaults, *([extra] if extra.strip() else []), node_params_file(executable, values)]
 
 
 def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str
@@ -92,4 +115,5 @@ def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: st
     return specs
 
 
-__all__ = ['REQUIRED_EXIT_REASONS', 'node_params_file', 'graph_specs', 'on_exit_actions', 'payload_override']
+__all__ = ['REQUIRED_EXIT_REASONS', 'RequiredNodeFailed', 'node_params_file', 'node_parameters', 'graph_specs',
+           'on_exit_actions', 'payload_override']

@@ -174,12 +174,37 @@ def test_cli_run_json_and_info(tmp_path):
     assert json.loads(info.stdout)['topics']['/wrist/payload']['count'] == 1
 
 
-def test_cli_run_without_a_bag_says_where_the_metrics_are():
-    """The metrics are read back from the recording. `sma-wrist run` without --bag printed only its
-    timing line, and nothing said why there was no tracking error."""
-    r = _cli('run', '--duration', '0.5', '--quiet')
-    assert r.returncode == 0, r.stderr
-    assert 'max error' not in r.stdout and 'no tracking metrics' in r.stdout and '--bag DIR' in r.stdout
+def test_cli_run_without_a_bag_measures_the_run_as_with_one(tmp_path):
+    """`sma-wrist run --json` without --bag returned "metrics": {} and exit 0, with no reason: a script got nothing.
+    The run is now recorded to a temporary bag, removed afterwards: the same metrics as a run kept in a bag."""
+    import os
+    kept = _cli('run', '--controller', 'pid', '--duration', '2', '--bag', str(tmp_path / 'kept'), '--json', '--quiet')
+    scratch = tmp_path / 'tmp'
+    scratch.mkdir()
+    r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'run', '--controller', 'pid', '--duration', '2', '--json',
+                        '--quiet'], capture_output=True, text=True, timeout=600, env={**os.environ, 'TMPDIR': str(scratch)})
+    assert r.returncode == 0 and kept.returncode == 0, r.stderr + kept.stderr
+    out, ref = json.loads(r.stdout), json.loads(kept.stdout)
+    assert out['bag'] is None and out['metrics_missing'] is None and out['messages'] == ref['messages'] > 0
+    assert out['metrics'] == ref['metrics'] and out['metrics']['max_error_pct'] > 0
+    assert list(scratch.iterdir()) == []  # the temporary bag is gone
+    text = _cli('run', '--controller', 'pid', '--duration', '2', '--quiet')
+    assert text.returncode == 0 and 'max error' in text.stdout and 'no tracking metrics' not in text.stdout
+
+
+def test_cli_run_interrupted_before_any_reference_says_why_it_has_no_metrics(monkeypatch, capsys):
+    """A run stopped (Ctrl-C) before the trajectory published anything has no error to measure: the JSON says why,
+    the exit code is 130, and no traceback."""
+    from sma_wrist.cli import main
+    from sma_wrist.runtime.launch import Runtime
+
+    def interrupted(self, *args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(Runtime, 'run_until', interrupted)
+    assert main(['run', '--duration', '1', '--json', '--quiet']) == 130
+    out = json.loads(capsys.readouterr().out)
+    assert out['interrupted'] and out['metrics'] == {}
+    assert 'interrupted at 0.00 s' in out['metrics_missing'] and '/wrist/reference' in out['metrics_missing']
 
 
 @pytest.mark.parametrize('args, message', [
@@ -295,8 +320,11 @@ def test_cli_run_plot_writes_the_tracking_plot_and_says_what_next(tmp_path):
     assert f'bag: {bag}' in r.stdout and f'plot: {png}' in r.stdout
     assert f'sma-wrist compare {bag}' in r.stdout and '--params-file' in r.stdout
     assert 'whole run' in r.stdout and 'soft start from the measured angle' in r.stdout
-    for args, message in ((('--plot', str(tmp_path / 'x.png')), 'give --bag DIR too'),
-                          (('--bag', str(tmp_path / 'b'), '--plot', str(tmp_path / 'x.bogus')), 'not an image format')):
-        bad = _cli('run', '--duration', '1', '--quiet', *args)
-        assert bad.returncode == 2 and message in bad.stderr and 'Traceback' not in bad.stderr
+    # without --bag the run is measured through a temporary bag, and plotted from it all the same
+    unkept = tmp_path / 'unkept.png'
+    r = _cli('run', '--duration', '2', '--plot', str(unkept), '--quiet')
+    assert r.returncode == 0, r.stderr
+    assert unkept.read_bytes()[:4] == b'\x89PNG' and f'plot: {unkept}' in r.stdout and 'bag:' not in r.stdout
+    bad = _cli('run', '--duration', '1', '--quiet', '--bag', str(tmp_path / 'b'), '--plot', str(tmp_path / 'x.bogus'))
+    assert bad.returncode == 2 and 'not an image format' in bad.stderr and 'Traceback' not in bad.stderr
     assert not (tmp_path / 'b').exists()  # refused before anything was recorded

@@ -385,6 +385,49 @@ def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, 
     assert all(0.25 <= t <= clock[-1] for t in diag), (diag, clock[-1])
 
 
+@pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
+def test_the_log_is_stamped_and_throttled_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
+                                                                               source):
+    """`sma-wrist run --hardware`: the console log's stamps ended at 67.8 s in a 140 s run while /diagnostics went on
+    to 138 s. The records carried the embedded runtime's virtual steady clock, which on the hardware path lags the
+    device (hardware_bridge ticks every half window and each tick waits for it); the bridge's log throttle ran on
+    it too. Both now run on /clock, as the bag, the measurements and /diagnostics do. plant_sim at
+    real_time_factor 4 has the same two time bases."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from sma_wrist.nodes.common import LOG_THROTTLE_S
+    from sma_wrist.runtime.launch import Runtime
+    from sma_wrist.runtime.rclpy import logging as rlog
+    if source == 'hardware_bridge':
+        from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
+        params = {'/hardware_bridge': {'port': emulator().link}}
+    else:
+        from sma_wrist.nodes.plant_sim import PlantSim as Source
+        params = {'/plant_sim': {'real_time_factor': 4.0}}
+    records: list[tuple[str, float]] = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: records.append((msg, t * 1e-9)) if name == source else None)
+    try:
+        with Runtime(params=params) as rt:
+            node = rt.add(Source)
+            probe = probe_factory(rt, ('/wrist/joint_states',), sim_time=True)
+            rt.run_until(0.5, until='sim')
+            probe.publish('/wrist/tem_1/command', data=float('nan'))  # rejected: a WARN, logged
+            rt.spin_for(0.05, until='sim')
+            t_warn, steady = rt.sim_ns * 1e-9, rt.steady_ns * 1e-9
+            node.diagnose('check', DiagnosticStatus.WARN, 'first')
+            if source == 'hardware_bridge':  # device time 10 s on (a real 10 s of wall time otherwise)
+                node._last_pub_s += LOG_THROTTLE_S + 0.5
+            else:
+                rt.spin_for(LOG_THROTTLE_S + 0.5, until='sim')
+            node.diagnose('check', DiagnosticStatus.WARN, 'second')  # outside the throttle in the graph's time
+    finally:
+        remove()
+    assert steady < 0.8 * t_warn  # the two time bases differ here
+    (t_rejected,) = [t for m, t in records if m.startswith('input tem_1/command')]
+    assert t_warn - 0.1 <= t_rejected <= t_warn, (t_rejected, t_warn)
+    assert [m for m, _ in records if m.startswith('check')] == ['check: first', 'check: second']
+
+
 def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, probe_factory):
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.launch import Runtime

@@ -289,22 +289,27 @@ def test_compensator_memory_follows_the_measured_or_the_commanded_temperature(pr
     np.testing.assert_allclose(got[-2:], answers, atol=1e-9)
 
 
-def test_flapping_condition_is_published_every_change_but_logged_at_most_every_10_s(probe_factory):
-    from diagnostic_msgs.msg import DiagnosticStatus
-
-    from sma_wrist.nodes.common import LOG_THROTTLE_S
-    from sma_wrist.nodes.tem_controller import TemController
+def _logged(node) -> list[str]:
+    """The lines ``node`` logs from now on, whatever their severity."""
     logged: list[str] = []
 
     class Log:
         def info(self, m: str) -> None:
             logged.append(m)
         warning = error = info
+    node.get_logger = lambda: Log()
+    return logged
 
+
+def test_flapping_condition_is_published_every_change_but_logged_at_most_every_10_s(probe_factory):
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from sma_wrist.nodes.common import LOG_THROTTLE_S
+    from sma_wrist.nodes.tem_controller import TemController
     with Runtime() as rt:
         probe = probe_factory(rt)
         node = rt.add(TemController)
-        node.get_logger = lambda: Log()
+        logged = _logged(node)
         for k in range(20):  # a command touching its limit every other tick
             node.diagnose('flap', DiagnosticStatus.WARN if k % 2 == 0 else DiagnosticStatus.OK, f'state {k % 2}')
             rt.run_until(0.1 * (k + 1), until='steady')
@@ -319,9 +324,30 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
     flap = [s for s in probe.diagnostics() if s[0].endswith('flap')]
     assert len(flap) == 21  # /diagnostics sees every change
     assert len([s for s in probe.diagnostics() if s[0].endswith('fault')]) == 4
-    assert logged[0] == 'flap: state 0' and logged[1].startswith('flap: state 0 (19 more changes')
+    # the first problem and its end, then the state 10 s on with the count of changes not logged
+    assert logged[:2] == ['flap: state 0', 'flap: state 1'] and logged[2].startswith('flap: state 0 (18 more changes')
     # an error's onset and its end are always logged, the changing text in between is not
-    assert logged[2:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']
+    assert logged[3:] == ['fault: e1', 'fault: clear (2 more changes in the last 10 s, see /diagnostics)']
+
+
+def test_the_end_of_a_logged_problem_is_always_logged(probe_factory):
+    """The TEMs off for 0.23 s at start-up: plant_sim's WARN "no fresh command on tem_1, tem_2: TEM off" was logged,
+    and its "commands fresh" 0.23 s later fell in the 10 s throttle, so the console read as if they stayed off.
+    The throttle may drop repeats of a problem, never the return to normal after a problem it logged."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+
+    from sma_wrist.nodes.tem_controller import TemController
+    with Runtime() as rt:
+        probe_factory(rt)
+        node = rt.add(TemController)
+        logged = _logged(node)
+        node.diagnose('command', DiagnosticStatus.OK, 'commands fresh')  # the first state: OK, not published
+        for t, level, text in ((4.5, DiagnosticStatus.WARN, 'TEM off'), (4.73, DiagnosticStatus.OK, 'commands fresh'),
+                               (5.0, DiagnosticStatus.WARN, 'TEM off'), (5.1, DiagnosticStatus.OK, 'commands fresh')):
+            rt.run_until(t, until='steady')
+            node.diagnose('command', level, text)
+    # the second problem was a repeat inside the throttle: neither it nor its end was logged
+    assert logged == ['command: TEM off', 'command: commands fresh']
 
 
 def _compensator_answers(probe_factory, stress: np.ndarray, msgs: list[tuple[str, dict]], overrides=()
@@ -675,3 +701,28 @@ def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_facto
             assert any(level == 2 and '0.8 kgf' in m for level, m in load), load
         else:
             assert 0.8 < peak_kgf < 1.5 and load == [], (peak_kgf, load)
+
+
+@pytest.mark.parametrize('executable, waits_for', [
+    ('trajectory_generator', '/clock'),
+    ('adaptive_controller', '/wrist/reference and /wrist/joint_states'),
+    ('hysteresis_compensator', '/wrist/muscle_{1,2}/strain_desired'),
+    ('tem_controller', '/wrist/muscle_{1,2}/temperature and temperature_desired'),
+])
+def test_a_controller_node_says_at_start_what_it_waits_for(executable, waits_for):
+    """Started with `ros2 run`, the four controller nodes printed nothing until their inputs came: one INFO line at
+    start now names the node's key settings and what it waits for."""
+    from sma_wrist.closed_loop import ros_args
+    from sma_wrist.runtime.launch_file import node_class
+    from sma_wrist.runtime.rclpy import logging as rlog
+    records: list[tuple[object, str]] = []
+    remove = rlog.add_sink(lambda sev, name, msg, t: records.append((sev, msg)) if name == executable else None)
+    try:
+        with rlog.silenced(), Runtime(ros_args(), params={'/**': {'use_sim_time': True}}) as rt:
+            rt.add(node_class(executable))
+    finally:
+        remove()
+    assert len(records) == 1, records
+    severity, line = records[0]
+    assert severity == rlog.LoggingSeverity.INFO and line.startswith(f'{executable}: ')
+    assert 'waiting for /clock (use_sim_time)' in line and waits_for in line, line

@@ -132,7 +132,8 @@ class WristNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._diag_last: dict[str, tuple[int, str]] = {}
-        self._diag_logged: dict[str, tuple[int | None, int]] = {}  # key -> (last log time [ns], changes not logged)
+        # key -> (last log time [ns], changes not logged since, level last logged)
+        self._diag_logged: dict[str, tuple[int | None, int, bytes]] = {}
         self.rejected_inputs = 0
 
     # -- parameters ------------------------------------------------------------
@@ -150,6 +151,12 @@ class WristNode(Node):
 
     def apply(self, changed: Mapping[str, Any]) -> None:
         """Take validated parameter changes into effect. Override."""
+
+    def waiting_for(self, topics: str) -> str:
+        """The start-up line's "what it waits for": ``topics``, and /clock first under use_sim_time (a node started
+        alone with ``ros2 run`` prints this and then nothing until its inputs come)."""
+        clock = '/clock (use_sim_time), then ' if self.get_parameter('use_sim_time').value else ''
+        return f'waiting for {clock}{topics}'
 
     def _sim_time_problem(self, use_sim_time: Any) -> str | None:
         if self.OWNS_CLOCK and use_sim_time is True:
@@ -239,19 +246,23 @@ class WristNode(Node):
                                   hardware_id='sma_wrist',
                                   values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()])
         arr = DiagnosticArray(status=[status])
-        arr.header.stamp = self.diagnostics_stamp()
+        arr.header.stamp = stamp = self.diagnostics_stamp()
         self._diag_pub.publish(arr)
-        # the log follows /diagnostics: an error's onset and its end are always logged; any other
-        # change (a command touching its limit every few ticks, an error text carrying a measured
-        # value) at most once per LOG_THROTTLE_S per key, with the count of changes not logged
-        now = self.get_clock().now().nanoseconds
-        t_last, quiet = self._diag_logged.get(key, (None, 0))
+        # the log follows /diagnostics: an error's onset and its end are always logged, and so is the end of any
+        # problem whose onset was logged (a TEM off for 0.23 s logged its WARN, and its "commands fresh" fell in the
+        # throttle: the console read as if it stayed off); any other change (a command touching its limit every few
+        # ticks, an error text carrying a measured value) at most once per LOG_THROTTLE_S per key, with the count of
+        # changes not logged. Time is that of the /diagnostics stamp: hardware_bridge's own (steady) clock is none
+        # of the graph's, and on the embedded runtime it lags the device
+        now = stamp.sec * 1_000_000_000 + stamp.nanosec
+        t_last, quiet, logged_level = self._diag_logged.get(key, (None, 0, DiagnosticStatus.OK))
         was_error = last is not None and last[0] == DiagnosticStatus.ERROR
         edge = was_error != (level == DiagnosticStatus.ERROR)
-        if not edge and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
-            self._diag_logged[key] = (t_last, quiet + 1)
+        recovered = level == DiagnosticStatus.OK and logged_level != DiagnosticStatus.OK
+        if not (edge or recovered) and t_last is not None and now - t_last < LOG_THROTTLE_S * 1e9:
+            self._diag_logged[key] = (t_last, quiet + 1, logged_level)
             return
-        self._diag_logged[key] = (now, 0)
+        self._diag_logged[key] = (now, 0, level)
         text = f'{key}: {message}' + (f' ({quiet} more changes in the last {LOG_THROTTLE_S:g} s, see /diagnostics)'
                                       if quiet else '')
         log = self.get_logger()

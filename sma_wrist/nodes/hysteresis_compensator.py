@@ -41,6 +41,8 @@ from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.stamps import stamp_seconds
 from sma_wrist.core.thermal.heat_balance import ThermalParams
+from sma_wrist.core.thermal import online as thermal_online
+from sma_wrist.core.thermal.kernel import thermal_constants
 from sma_wrist.core.thermal.online import ThermalScaleEstimator
 from sma_wrist.core.thermal.params_file import load_thermal_file
 from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, PRELOAD_PARAM, THERMAL_ADAPTATION_PARAMS, Param, WristNode,
@@ -145,6 +147,12 @@ class HysteresisCompensator(WristNode):
         self.subscription('/wrist/joint_states', self._on_joint_state)
         self.command_subs: list[Any] = []
         self._subscribe_commands()
+        p = self.p
+        self.get_logger().info(
+            f'hysteresis_compensator: method {p["method"]}, temperatures {p["temperature_min_C"]:g}-'
+            f'{p["temperature_max_C"]:g} degC, memory from the {p["temperature_source"]} temperatures; '
+            + self.waiting_for('/wrist/muscle_{1,2}/strain_desired and stress_desired from adaptive_controller, and the '
+                               'measured temperatures, stresses and joint state'))
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
@@ -193,6 +201,12 @@ class HysteresisCompensator(WristNode):
                 warm_obs.update(np.full((1, 2), T_mid), np.zeros((1, 2)), 0.01)
         # the observer's own estimate of the TEMs, fed the samples tem_controller's takes (core.thermal.online)
         online = online_thermal(self.p)
+        if self.observer is not None and online is not None:
+            # the estimate's window and the observer on its constants (from apply_after_s on) compile here too: on a
+            # cold cache each cost seconds inside a callback, 2 s and 10 s into a run
+            thermal_online.warm_up()
+            warm_obs.coef_rows = thermal_constants(self.observer.thermal)[None]
+            warm_obs.update(np.full((1, 2), T_mid), np.zeros((1, 2)), 0.01)
         old = getattr(self, 'estimator', None)
         if self.observer is None or online is None:
             self.estimator = None

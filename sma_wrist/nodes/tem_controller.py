@@ -30,6 +30,7 @@ from sma_wrist.core.control.tem import (CHATTER_LIMIT_PER_S, CHATTER_RATE_FILTER
                                        TemControlParams, TemLoop)
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal import online as thermal_online
 from sma_wrist.core.thermal.params_file import load_thermal_file
 from sma_wrist.nodes.common import (THERMAL_ADAPTATION_PARAMS, Freshness, Param, WristNode, finite, main_for,
                                    online_thermal)
@@ -77,6 +78,8 @@ class TemController(WristNode):
         # the model of the TEMs (law, observer, protection) with its own hold limits
         self.hold = load_thermal_file(self.p['thermal_file']) if self.p['thermal_file'] else LIMITS
         tem_kernel.warm_up()  # compile before the first sample, not inside the loop
+        if online_thermal(self.p) is not None:
+            thermal_online.warm_up()  # ... and the online estimate's, first called 2 s into a run
         self.loop = self._build_loop(None)
         self.T_meas = np.full(2, np.nan)
         self.T_d = np.full(2, np.nan)
@@ -91,6 +94,13 @@ class TemController(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
             self.subscription(f'/wrist/muscle_{i}/temperature_desired', lambda m, i=i: self._on_target(i, m))
         self.watchdog = self.create_timer(0.05, self._check_stale)
+        p = self.p
+        self.get_logger().info(
+            f'tem_controller: gain {p["gain_per_s"]:g} 1/s, drive {p["u_min_V"]:g}..{p["u_max_V"]:g} V, TEM faces kept in '
+            f'{p["face_min_C"]:g}-{p["face_max_C"]:g} degC, online heat-balance estimate '
+            f'{"on" if p["thermal_adaptation.enabled"] else "off"}; '
+            f'{self.waiting_for("/wrist/muscle_{1,2}/temperature and temperature_desired")} (0 V until both are fresh, '
+            f'and after {p["stale_timeout_s"]:g} s without one)')
 
     @property
     def observer(self) -> np.ndarray:

@@ -63,6 +63,12 @@ class TrajectoryGenerator(WristNode):
         self.told_waiting = False
         self.subscription('/wrist/joint_states', self._on_joint_state)
         self.timer = self.create_timer(1.0 / self.p['rate_hz'], self._tick)
+        p = self.p
+        shape = ', '.join(f'{k.split(".", 1)[1]} {v:g}' for k, v in p.items() if k.startswith(p['shape'] + '.'))
+        self.get_logger().info(f'trajectory_generator: {p["shape"]} ({shape}) within [{p["angle_min_rad"]:g}, '
+                               f'{p["angle_max_rad"]:g}] rad on /wrist/reference at {p["rate_hz"]:g} Hz, t = 0 at its '
+                               'first tick' + ('; waiting for /clock (use_sim_time)'
+                                               if self.get_parameter('use_sim_time').value else ''))
 
     def _build(self, p: Mapping[str, Any]) -> Trajectory:
         """The core generator for a parameter set; ParameterError names what is wrong."""

@@ -89,6 +89,8 @@ class Runtime:
         self.recorders: list[Any] = []
         self._sim_ns: Optional[int] = None
         self.context.graph.add_tap(self._on_clock, ['/clock'])
+        from .rclpy import logging as rlog
+        rlog.set_stamp_source(self._log_time_ns)  # the log on the bag's time base, not the virtual steady clock
 
     def _on_clock(self, topic: Any, msg: Any, t_ns: int) -> None:
         self._sim_ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
@@ -106,6 +108,9 @@ class Runtime:
 
     def _record_time_ns(self) -> int:
         return self._sim_ns if self._sim_ns is not None else VCLOCK.steady_ns
+
+    def _log_time_ns(self) -> int:
+        return self._sim_ns if self._sim_ns is not None else VCLOCK.system_ns
 
     def add_nodes(self, factories: Iterable[Any]) -> list[Any]:
         return [self.add(f) for f in factories]
@@ -184,6 +189,8 @@ class Runtime:
             node.destroy_node()
         self.nodes = []
         rclpy.try_shutdown()
+        from .rclpy import logging as rlog
+        rlog.set_stamp_source(None)
         if errors:
             raise errors[0]
 

@@ -10,9 +10,10 @@ Under ros2 launch each ``Node`` is a process started with
 ``--ros-args -r __node:=<name> --params-file <f>...``; here each is constructed in one
 context with exactly those arguments as its own (``use_global_arguments=False``). A node
 that refuses to start is a process that exits 2 (``main_for``'s message is printed): its
-``on_exit`` actions run, and a ``Shutdown`` ends the launch with its reason, as ros2 launch
-does (launch ``ExecuteProcess(on_exit=...)``, ``actions/shutdown_action.py``). A node that
-fails while running raises out of the run (one process here).
+``on_exit`` actions run with that exit in ``context.locals.event``, and a ``Shutdown`` ends the
+launch with its reason, as ros2 launch does (launch ``ExecuteProcess(on_exit=...)``,
+``actions/shutdown_action.py``); an action that raises ends it with ``return_code`` 1, as
+``LaunchService.run`` does. A node that fails while running raises out of the run (one process here).
 """
 from __future__ import annotations
 
@@ -39,6 +40,15 @@ class LaunchContext:
     def __init__(self, configurations: Mapping[str, str]) -> None:
         self.launch_configurations = dict(configurations)
         self.is_shutdown = False  # launch.LaunchContext's: a Shutdown is under way
+        self.locals = types.SimpleNamespace()  # launch's: ``event`` while an event handler's actions run
+
+
+@dataclass(frozen=True)
+class ProcessExited:
+    """What launch's ``ProcessExited`` event carries that on_exit actions read (``context.locals.event``)."""
+
+    process_name: str
+    returncode: int
 
 
 def _perform(value: Any, context: LaunchContext) -> str:
@@ -148,8 +158,9 @@ class _LaunchModules:
 # -- running ---------------------------------------------------------------------------------
 @dataclass
 class LaunchResult:
-    reason: str  # 'time' (ran for the duration) or 'shutdown' (a Shutdown action)
+    reason: str  # 'time' (ran for the duration) or 'shutdown' (a Shutdown action, or an action that raised)
     shutdown_reason: Optional[str] = None
+    return_code: int = 0  # what ros2 launch returns: 1 when an action raised (LaunchService.run), else 0
     exits: dict[str, int] = field(default_factory=dict)  # node name -> exit code of nodes that ended
     started: list[str] = field(default_factory=list)  # node names running when the launch ended
     log: list[str] = field(default_factory=list)  # LogInfo messages
@@ -205,9 +216,28 @@ def _configure(desc: LaunchDescription, arguments: Mapping[str, str]) -> tuple[L
 
 
 def _on_exit(actions: Sequence[Any], context: LaunchContext, result: LaunchResult,
-             print_fn: Callable[[str], None]) -> None:
-    """A node's ``on_exit`` actions: LogInfo, Shutdown (the first one's reason ends the launch), OpaqueFunction (its
-    actions in turn, given the context)."""
+             print_fn: Callable[[str], None], event: Optional[ProcessExited] = None) -> None:
+    """A node's ``on_exit`` actions, ``event`` in ``context.locals``: LogInfo, Shutdown (the first one's reason ends the
+    launch), OpaqueFunction (its actions in turn, given the context). An action that raises ends the launch with
+    return code 1 and launch's message, as ``LaunchService.run`` does (launch_service.py, Humble and Jazzy)."""
+    saved, context.locals = context.locals, types.SimpleNamespace(**vars(context.locals), event=event)
+    try:
+        _run_actions(actions, context, result, print_fn)
+    except LaunchFileError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - launch catches every exception of an action the same way
+        message = f'Caught exception in launch (see debug for traceback): {exc}'
+        print_fn(f'[ERROR] [launch]: {message}')
+        result.return_code = 1
+        if result.shutdown_reason is None:
+            result.reason, result.shutdown_reason = 'shutdown', message
+        context.is_shutdown = True
+    finally:
+        context.locals = saved
+
+
+def _run_actions(actions: Sequence[Any], context: LaunchContext, result: LaunchResult,
+                 print_fn: Callable[[str], None]) -> None:
     for a in actions:
         if isinstance(a, LogInfo):
             text = _perform(a.msg, context)
@@ -218,7 +248,7 @@ def _on_exit(actions: Sequence[Any], context: LaunchContext, result: LaunchResul
                 result.reason, result.shutdown_reason = 'shutdown', _perform(a.reason, context)
                 context.is_shutdown = True
         elif isinstance(a, OpaqueFunction):
-            _on_exit(a.function(context, *a.args, **a.kwargs) or [], context, result, print_fn)
+            _run_actions(a.function(context, *a.args, **a.kwargs) or [], context, result, print_fn)
         else:
             raise LaunchFileError(f'{type(a).__name__} in on_exit is not supported')
 
@@ -247,7 +277,7 @@ def run_launch_file(path: str | Path, arguments: Optional[Mapping[str, Any]] = N
                         raise
                     print_fn(f'[{action.name}] {message}')
                     result.exits[action.name] = 2
-                    _on_exit(action.on_exit, context, result, print_fn)
+                    _on_exit(action.on_exit, context, result, print_fn, ProcessExited(action.name, 2))
                     continue
                 result.started.append(action.name)
             if result.reason != 'shutdown':

@@ -22,8 +22,11 @@ from sma_wrist.core.thermal import heat_balance as th
 
 #: target range of Sec. 6.1: q_d = q_neutral +- 30 deg [rad]
 TARGET_HALF_RANGE_RAD = math.radians(30.0)
-#: payload range [kg] the built-in pre-load was calibrated for (its capacity ~0.7 kg, doc/explanation/model.md)
-PAYLOAD_RANGE_KG = (0.0, 0.7)
+#: payloads [kg] at whose ends :func:`calibrate_preload` asks for the whole target range (the built-in pre-load's
+#: design point, doc/explanation/model.md). Not the payloads the nodes accept (sma_wrist.contract.PAYLOAD_RANGE_KG, 0-1.5 kg):
+#: no pre-load reaches the range at 1.5 kg, and the smallest that reaches it at 0.7 kg still does to ~1.3 kg in the
+#: controllers' 20-80 degC window (doc/explanation/model.md)
+CALIBRATION_PAYLOAD_KG = (0.0, 0.7)
 
 
 def reachable_window(thermal: th.ThermalParams, controllers_C: tuple[float, float] | None = None) -> tuple[float, float]:
@@ -77,7 +80,7 @@ def reach_margins(params: PlantParams, preload_mm: np.ndarray, window_C: tuple[f
 
 
 def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
-                      payload_kg: tuple[float, float] = PAYLOAD_RANGE_KG, bracket_mm: tuple[float, float] = (0.5, 4.0),
+                      payload_kg: tuple[float, float] = CALIBRATION_PAYLOAD_KG, bracket_mm: tuple[float, float] = (0.5, 4.0),
                       step_mm: float = 0.25, tolerance_mm: float = 0.01) -> float:
     """Pre-load elongation e0 [mm] (Eq. 4.17) for ``params.hysteresis`` in the temperature window ``window_C`` [degC].
 

@@ -284,4 +284,18 @@ def with_scales(base: th.ThermalParams, theta: FloatArray) -> th.ThermalParams:
     return base.scaled(gain=g, losses=s, ambient_shift_C=a)
 
 
-__all__ = ['OnlineThermalParams', 'ThermalScaleEstimator', 'scaled_constants', 'theta_of', 'with_scales', 'BOUNDS']
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the estimate's window prediction before a node spins: a throwaway
+    estimator fed one short window runs the code path of the real one. On a cold cache its first window compiled
+    inside tem_controller's and hysteresis_compensator's callbacks, 2 s into a run, for seconds
+    (:func:`sma_wrist.core.control.tem_kernel.warm_up`)."""
+    if not AVAILABLE:
+        return
+    est = ThermalScaleEstimator(th.ThermalParams(), 1, OnlineThermalParams(window_s=0.2, points=1, avg_s=0.1))
+    T, u = np.full((1, 2), 30.0), np.zeros((1, 2))
+    for k in range(25):  # three samples start the window, 0.2 s of them close it
+        est.sample(0.01 * k, T + 0.01 * k, u)
+
+
+__all__ = ['OnlineThermalParams', 'ThermalScaleEstimator', 'scaled_constants', 'theta_of', 'with_scales', 'warm_up',
+           'BOUNDS']

@@ -4,7 +4,8 @@ Filters (``throttle_duration_sec`` [+ ``throttle_time_source_type``], ``skip_fir
 ``once``) keep per-call-site state, keyed like rclpy by the caller's code location; their
 combination rules and errors are rclpy's.  Output goes to stderr in rcutils' default
 format ``[SEVERITY] [sec.nsec] [name]: message`` with the *virtual* system time, and to any
-sinks registered with :func:`add_sink` (tests, diagnostics).  One deliberate difference:
+sinks registered with :func:`add_sink` (tests, diagnostics); inside a ``Runtime`` the stamp is the graph's time
+(:func:`set_stamp_source`: /clock once a node publishes it).  One deliberate difference:
 a throttled call site always logs its first call (rclpy compares against a last-logged
 time of 0, which on a virtual clock starting at 0 would swallow the first message).
 """
@@ -18,7 +19,7 @@ from typing import Any, Callable, Iterator, Optional
 from .clock import Clock
 
 __all__ = ['LoggingSeverity', 'RcutilsLogger', 'add_sink', 'get_logger',
-           'get_logger_effective_level', 'set_logger_level']
+           'get_logger_effective_level', 'set_logger_level', 'set_stamp_source']
 
 
 class LoggingSeverity(IntEnum):
@@ -35,6 +36,17 @@ _default_level = LoggingSeverity.INFO
 Sink = Callable[[LoggingSeverity, str, str, int], None]
 _sinks: list[Sink] = []
 stream_output = True  # print to stderr; tests/CLI may turn it off
+_stamp_source: Optional[Callable[[], int]] = None  # ns of a record; None: the virtual system time
+
+
+def set_stamp_source(source: Optional[Callable[[], int]]) -> None:
+    """What the records are stamped with [ns] (None: the virtual system time). Under ROS a record carries the wall
+    clock; the virtual steady clock is none, and on the hardware path it lags the device: hardware_bridge's timer
+    ticks every half window and each tick waits for the device, so a 140 s run's log ended at 68 s while its bag
+    went on to 140 s. A ``sma_wrist.runtime.launch.Runtime`` stamps the records with /clock once a node publishes it,
+    the time base of the bag, the measurements and /diagnostics."""
+    global _stamp_source
+    _stamp_source = source
 
 
 @contextlib.contextmanager
@@ -201,7 +213,7 @@ _DEFAULT_THROTTLE_CLOCK = Clock()
 
 
 def _emit(severity: LoggingSeverity, name: str, message: str) -> None:
-    t = _DEFAULT_THROTTLE_CLOCK._now_ns()
+    t = _DEFAULT_THROTTLE_CLOCK._now_ns() if _stamp_source is None else _stamp_source()
     for sink in list(_sinks):
         sink(severity, name, message, t)
     if stream_output:
