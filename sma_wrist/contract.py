@@ -95,7 +95,7 @@ def load_contract(path: str | None = None) -> Contract:
 #: Wider than the pre-load calibration's 0-0.7 kg (core.plant.preload.CALIBRATION_PAYLOAD_KG), on purpose: up to
 #: 1.5 kg the simulated wrist stays inside its wire model (no wire-load bound, no over-temperature in 126 s closed
 #: loops), and a heavier payload can follow a smaller reference; the Sec. 6.1 sine's top is out of reach at 1.5 kg
-#: (docs/model.md "Joint range and payload capacity")
+#: (doc/explanation/model.md, "Two payload ranges")
 PAYLOAD_RANGE_KG = (0.0, 1.5)
 
 #: the largest magnitude a measured sample of each kind can have and still be one (readers drop and count the rest):
