@@ -226,7 +226,8 @@ def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path 
         except BagError as exc:
             if not interrupted:  # a run that ended normally and left no readable run is a fault
                 raise
-            summary.metrics_missing = f'interrupted at {sim_s:.2f} s before there was an error to measure: {exc.problem}'
+            summary.metrics_missing = (f'interrupted at {sim_s:.2f} s before there was an error to measure: '
+                                       f'{exc.problem}')
         else:
             summary.metrics = run_metrics(summary.run)
     return summary

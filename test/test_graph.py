@@ -182,7 +182,8 @@ def test_cli_run_without_a_bag_measures_the_run_as_with_one(tmp_path):
     scratch = tmp_path / 'tmp'
     scratch.mkdir()
     r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'run', '--controller', 'pid', '--duration', '2', '--json',
-                        '--quiet'], capture_output=True, text=True, timeout=600, env={**os.environ, 'TMPDIR': str(scratch)})
+                        '--quiet'], capture_output=True, text=True, timeout=600,
+                       env={**os.environ, 'TMPDIR': str(scratch)})
     assert r.returncode == 0 and kept.returncode == 0, r.stderr + kept.stderr
     out, ref = json.loads(r.stdout), json.loads(kept.stdout)
     assert out['bag'] is None and out['metrics_missing'] is None and out['messages'] == ref['messages'] > 0

@@ -705,9 +705,9 @@ def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_facto
 
 @pytest.mark.parametrize('executable, waits_for', [
     ('trajectory_generator', '/clock'),
-    ('adaptive_controller', '/wrist/reference and /wrist/joint_states'),
-    ('hysteresis_compensator', '/wrist/muscle_{1,2}/strain_desired'),
-    ('tem_controller', '/wrist/muscle_{1,2}/temperature and temperature_desired'),
+    ('adaptive_controller', 'the reference (/wrist/reference) and the joint state'),
+    ('hysteresis_compensator', 'the desired strains and stresses (/wrist/muscle_{1,2}/strain_desired'),
+    ('tem_controller', 'desired muscle temperatures (/wrist/muscle_{1,2}/temperature, temperature_desired)'),
 ])
 def test_a_controller_node_says_at_start_what_it_waits_for(executable, waits_for):
     """Started with `ros2 run`, the four controller nodes printed nothing until their inputs came: one INFO line at

@@ -147,10 +147,11 @@ class AdaptiveController(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
         self.watchdog = self.create_timer(0.05, self._check_stale)
         p = self.p
+        waits = self.waiting_for('the reference (/wrist/reference) and the joint state')
         self.get_logger().info(
-            f'adaptive_controller: mode {p["mode"]}, temperatures {p["temperature_min_C"]:g}-{p["temperature_max_C"]:g} '
-            f'degC, pre-load {p["preload_elongation_mm"]:g} mm; {self.waiting_for("/wrist/reference and /wrist/joint_states")}'
-            f' (no output until both are fresh, none after {p["stale_timeout_s"]:g} s without one)')
+            f'adaptive_controller: mode {p["mode"]}, temperatures {p["temperature_min_C"]:g}-'
+            f'{p["temperature_max_C"]:g} degC, pre-load {p["preload_elongation_mm"]:g} mm; {waits} (no output until '
+            f'both are fresh, none after {p["stale_timeout_s"]:g} s without one)')
 
     # -- parameters ----------------------------------------------------------------
     @staticmethod

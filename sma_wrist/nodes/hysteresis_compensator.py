@@ -151,8 +151,9 @@ class HysteresisCompensator(WristNode):
         self.get_logger().info(
             f'hysteresis_compensator: method {p["method"]}, temperatures {p["temperature_min_C"]:g}-'
             f'{p["temperature_max_C"]:g} degC, memory from the {p["temperature_source"]} temperatures; '
-            + self.waiting_for('/wrist/muscle_{1,2}/strain_desired and stress_desired from adaptive_controller, and the '
-                               'measured temperatures, stresses and joint state'))
+            + self.waiting_for('the desired strains and stresses (/wrist/muscle_{1,2}/strain_desired, '
+                               'stress_desired) of adaptive_controller, and the measured temperatures, stresses and '
+                               'joint state'))
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)

@@ -95,12 +95,13 @@ class TemController(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature_desired', lambda m, i=i: self._on_target(i, m))
         self.watchdog = self.create_timer(0.05, self._check_stale)
         p = self.p
+        waits = self.waiting_for('the measured and desired muscle temperatures (/wrist/muscle_{1,2}/temperature, '
+                                 'temperature_desired)')
         self.get_logger().info(
-            f'tem_controller: gain {p["gain_per_s"]:g} 1/s, drive {p["u_min_V"]:g}..{p["u_max_V"]:g} V, TEM faces kept in '
-            f'{p["face_min_C"]:g}-{p["face_max_C"]:g} degC, online heat-balance estimate '
-            f'{"on" if p["thermal_adaptation.enabled"] else "off"}; '
-            f'{self.waiting_for("/wrist/muscle_{1,2}/temperature and temperature_desired")} (0 V until both are fresh, '
-            f'and after {p["stale_timeout_s"]:g} s without one)')
+            f'tem_controller: gain {p["gain_per_s"]:g} 1/s, drive {p["u_min_V"]:g}..{p["u_max_V"]:g} V, TEM faces kept '
+            f'in {p["face_min_C"]:g}-{p["face_max_C"]:g} degC, online heat-balance estimate '
+            f'{"on" if p["thermal_adaptation.enabled"] else "off"}; {waits} (0 V until both are fresh, and after '
+            f'{p["stale_timeout_s"]:g} s without one)')
 
     @property
     def observer(self) -> np.ndarray:

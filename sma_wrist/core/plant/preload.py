@@ -80,7 +80,8 @@ def reach_margins(params: PlantParams, preload_mm: np.ndarray, window_C: tuple[f
 
 
 def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
-                      payload_kg: tuple[float, float] = CALIBRATION_PAYLOAD_KG, bracket_mm: tuple[float, float] = (0.5, 4.0),
+                      payload_kg: tuple[float, float] = CALIBRATION_PAYLOAD_KG,
+                      bracket_mm: tuple[float, float] = (0.5, 4.0),
                       step_mm: float = 0.25, tolerance_mm: float = 0.01) -> float:
     """Pre-load elongation e0 [mm] (Eq. 4.17) for ``params.hysteresis`` in the temperature window ``window_C`` [degC].
 
