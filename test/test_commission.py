@@ -233,3 +233,50 @@ def test_cli_bad_input_is_named(tmp_path, capsys, args, named_):
     assert main(['commission', '--out', str(tmp_path / 'c'), *args]) == 2
     err = capsys.readouterr().err
     assert named_ in err and 'Traceback' not in err
+
+
+def test_a_device_on_another_protocol_version_is_named(tmp_path):
+    dev = SimDevice(EmulatorConfig(rate_hz=RATE_HZ))
+    emit = dev.emulator.emit
+
+    def version_2(n):  # every line as a device of protocol version 2 sends it (valid CRCs)
+        from sma_wrist.hw.protocol import encode_unchecked
+        lines = emit(n).split(b'\n')[:-1]
+        return b''.join(encode_unchecked(ln[1:ln.rindex(b'*')].decode().replace(',1,', ',2,', 1)) for ln in lines)
+    dev.emulator.emit = version_2
+    import sma_wrist.commission.bringup as B
+    old, B.HELLO_TIMEOUT_S = B.HELLO_TIMEOUT_S, 0.3
+    try:
+        res = commission(tmp_path / 'c', dev)
+    finally:
+        B.HELLO_TIMEOUT_S = old
+    assert named(res) == [('no_hello', None)] and 'protocol version 2' in res['faults'][0]['message']
+    assert exit_code(res) == EXIT_FAULT
+
+
+def test_ctrl_c_on_the_command_line_over_a_serial_port(tmp_path, pty_device):
+    """A real SIGINT to `sma-wrist commission --hardware`: exit 130, TEMs off, the report of the steps so far."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    emu = pty_device(time_scale=2.0)
+    env = {**os.environ, 'PYTHONPATH': os.pathsep.join(sys.path)}
+    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist', 'commission', '--hardware', emu.link, '--out',
+                             str(tmp_path / 'c')], stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        for line in proc.stderr:
+            if 'step: tem_pulses' in line:
+                break
+        time.sleep(1.0)  # inside the pulses
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130 and 'Traceback' not in err
+    assert 'interrupted during the tem_pulses step' in out and 'TEMs off' in err
+    report = (tmp_path / 'c' / 'commission.md').read_text()
+    assert 'Sensors at rest' in report and 'muscle_1' in report
+    time.sleep(0.1)
+    assert np.all(emu._u == 0.0) and emu.stats.max_abs_command_V <= LIM.pulse_V

@@ -262,7 +262,12 @@ class BringUp:
         while self.hello is None:
             self.pump()
             if self.hello is None and time.monotonic() - wall0 > HELLO_TIMEOUT_S:
-                raise Stop(D.Fault('no_hello', None, 'the device sends no hello (H frame) in answer to a query',
+                st = self.dev.parser_stats
+                seen = (f'its lines are protocol version {self.dev.parser.foreign_version}, this host speaks '
+                        f'{P.PROTOCOL_VERSION}' if st.version_mismatch else
+                        f'{st.rejected_lines} lines and {st.garbage_bytes} bytes failed their checks' if
+                        st.rejected_lines or st.garbage_bytes else 'nothing valid arrived')
+                raise Stop(D.Fault('no_hello', None, f'the device sends no hello (H frame) in answer to a query: {seen}',
                                    'check the baud rate, the port and that the firmware speaks docs/protocol.md'))
         self._wall0 = time.monotonic()
         self.hold(1.0)

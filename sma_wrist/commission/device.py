@@ -29,7 +29,8 @@ class SerialDevice:
         self.open_timeout_s = open_timeout_s
         # no silent reconnects: a link that drops mid-procedure stops it (silence_s > stall_s, so it is seen here)
         self.link = SerialLink(port, baud, backoff_initial_s=0.2, backoff_max_s=1.0, silence_s=stall_s + 1.0)
-        self.parser_stats = self.link.parser.stats
+        self.parser = self.link.parser
+        self.parser_stats = self.parser.stats
         self._last_frame_wall = 0.0
 
     def open(self) -> None:

@@ -81,11 +81,10 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
         if step is None:
             lines += ['Not run.', '']
             continue
-        lines += _table(step) + ['']
         if key == 'tem_pulses':
-            lines += ['Rows: TEM command 1, 2 (positive pulse); columns: muscle reading 1, 2 / TEM face 1, 2. '
-                      'A wrist wired as documented has positive muscle changes and negative face changes on the '
-                      'diagonal only.', '']
+            lines += _pulses(step)
+        else:
+            lines += _table(step) + ['']
         png = {'tem_pulses': 'pulses.png', 'angle': 'angle.png'}.get(key)
         if png in pngs:
             lines += [f'![{key}]({png})', '']
@@ -96,6 +95,28 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
     path = out / 'commission.md'
     path.write_text('\n'.join(lines))
     return path
+
+
+def _pulses(step: dict[str, Any]) -> list[str]:
+    """The pulses' temperature changes as a table per run (first, and through the corrected wiring)."""
+    out = [f'Wiring in use: `{step["wiring_in_use"]}`.', '',
+           'Change of each reading by the end of a positive pulse on each TEM command [degC]. A wrist wired as '
+           'documented warms its own muscle and cools its own TEM face: positive muscle and negative face changes '
+           'on the diagonal only.', '']
+    for name, title in (('first', 'pulses'), ('verified', 'pulses through the corrected wiring')):
+        p = step.get(name)
+        if p is None:
+            continue
+        out += [f'{title} (responses count from {p["response_floor_C"]:g} degC on a muscle, '
+                f'{p["face_response_floor_C"]:g} degC on a face; frozen readings: {p["frozen_readings"]}):', '',
+                '| pulse on | muscle reading 1 | muscle reading 2 | TEM face 1 | TEM face 2 |', '|---|---|---|---|---|']
+        for k in range(2):
+            m, f = p['muscle_change_C'][k], p['face_change_C'][k]
+            out.append(f'| TEM command {k + 1} | {m[0]:+.3f} | {m[1]:+.3f} | {f[0]:+.3f} | {f[1]:+.3f} |')
+        out.append('')
+    if 'wiring_corrected' in step:
+        out += [f'Corrected wiring: `{step["wiring_corrected"]}`.', '']
+    return out
 
 
 def _table(d: dict[str, Any]) -> list[str]:
