@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
@@ -255,7 +256,6 @@ class BringUp:
             pass
 
     def step_link(self) -> None:
-        import time
         self.dev.query()
         wall0 = time.monotonic()
         self.set_drive(0.0, 0.0)

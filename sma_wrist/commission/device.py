@@ -78,7 +78,8 @@ class SerialDevice:
         return out
 
     def close(self) -> None:
-        """TEMs off (a few times: a lost line must not leave them on until the device's watchdog), then close."""
+        """TEMs off (a few times: a lost line must not leave them on until the device's watchdog), then close; safe
+        to call on a link that never connected or is closed."""
         for _ in range(3):
             self.link.send_command(0.0, 0.0)
         self.link.stop()

@@ -93,21 +93,18 @@ def commission(out: str | Path, device: Any, *, params_files: Sequence[str | Pat
     out.mkdir(parents=True, exist_ok=True)
     bring = BringUp(device, calibration_of(values), Wiring.from_params(values), lim, accept_fixes, progress)
     status, message = 'fault', ''
-    opened = False
     try:
         try:
             device.open()
-            opened = True
             status = 'commissioned' if bring.run() == 'passed' else 'fault'
         except PortError as e:
             status, message = 'bad_port', str(e)
             raise
         except KeyboardInterrupt:
             status = 'interrupted'
-            message = f'interrupted during the {bring.step or "first"} step: TEMs off; what was measured is kept'
+            message = f'interrupted during the {bring.step or "link"} step: TEMs off; what was measured is kept'
         finally:
-            if opened:
-                device.close()
+            device.close()  # TEMs off again, the port closed (also after a failed open or Ctrl-C while opening)
     finally:
         result = _result(bring, status, message, port or getattr(device, 'port', ''), lim)
         if status == 'commissioned':
