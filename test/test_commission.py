@@ -179,11 +179,11 @@ def pty_device(tmp_path):
 
 
 def test_over_a_serial_port_a_polarity_fault_is_named_and_the_tems_left_off(tmp_path, pty_device):
-    emu = pty_device(time_scale=4.0, tem_polarity_swapped=(True, False))
+    emu = pty_device(time_scale=2.0, tem_polarity_swapped=(True, False))
     res = commission(tmp_path / 'c', SerialDevice(emu.link), port=emu.link)
-    assert named(res) == [('tem_polarity', 1)] and exit_code(res) == EXIT_FAULT
+    assert named(res) == [('tem_polarity', 1)] and exit_code(res) == EXIT_FAULT, res['faults']
     assert res['steps']['link']['rate_hz_measured'] == pytest.approx(1000.0, rel=0.01)
-    assert res['steps']['link']['device_s_per_wall_s'] > 1.5  # the device's own pace (x4), measured
+    assert res['steps']['link']['device_s_per_wall_s'] > 1.2  # the device's own pace (x2), measured
     time.sleep(0.1)
     assert emu.stats.max_abs_command_V <= LIM.pulse_V and np.all(emu._u == 0.0)
 

@@ -16,7 +16,11 @@ faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
 Fault injection (for tests and demos), from the command line as rates/periods, or from
 Python with :meth:`DeviceEmulator.inject`: garbage bytes, checksum errors, cut lines,
 resets, unplug (the pty's master is closed, the link removed; on replug the device
-boots again on a new pty at the same link), freezes (no samples), forced ADC counts.
+boots again on a new pty at the same link), freezes (no samples), forced ADC counts. Wiring faults of a wrist as
+built (``--swap-tem-polarity N``, ``--swap-tem-channels``, ``--swap-thermocouples``, ``--reverse-angle``,
+``--broken-wire N``; docs/protocol.md "Wiring"), for ``sma-wrist commission``; the largest drive a command asked
+for is kept (``stats.max_abs_command_V``) and printed on exit. :meth:`DeviceEmulator.receive` /
+:meth:`DeviceEmulator.emit` step the device in lockstep with a host that is no serial port.
 """
 from __future__ import annotations
 
