@@ -114,6 +114,8 @@ def commission_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser
     ap.add_argument('--max-muscle-C', type=float, default=75.0, metavar='DEGC',
                     help='bring-up temperature limit of the muscles (default 75)')
     ap.add_argument('--baud-rate', type=int, default=921600, help='serial baud rate (default 921600)')
+    ap.add_argument('--stall-s', type=float, default=1.0, metavar='S',
+                    help='no valid frame from the device for this long (wall) stops the procedure (default 1)')
     ap.add_argument('--seed', type=nonnegative_int, default=0, help='--sim: the emulated sensors\' noise seed')
     ap.add_argument('--json', action='store_true', help='print one JSON object')
     return ap

@@ -41,8 +41,8 @@ CHANNEL_NAMES = ('muscle 1 thermocouple', 'muscle 2 thermocouple', 'TEM 1 face',
 class BringUpLimits:
     """What the bring-up may do to the wrist. Voltages [V], times device [s], temperatures [degC]."""
 
-    pulse_V: float = 6.0  # the wiring pulses: ~1 degC on the model wrist's muscle in 2 s
-    pulse_s: float = 2.0
+    pulse_V: float = 6.0  # the wiring pulses: ~1.7 degC on the model wrist's muscle in 3 s
+    pulse_s: float = 3.0
     rest_s: float = 2.0  # at 0 V: the sensors' noise, and between pulses
     heat_V: float = 20.0  # the angle check, once the pulses showed that a positive drive heats that muscle
     cool_V: float = 12.0  # cooling back after it (a negative drive of this size)
@@ -59,6 +59,7 @@ class BringUpLimits:
     min_response_C: float = 0.15  # the least muscle temperature change a pulse must cause to count
     min_face_response_C: float = 0.05  # the same for a TEM face
     response_sigmas: float = 8.0  # ... and this many standard errors of its estimate
+    face_response_sigmas: float = 4.0  # a face's: the decision between the two faces is relative (face_ratio)
 
     @property
     def max_drive_V(self) -> float:
@@ -323,15 +324,15 @@ class BringUp:
         for k, (t_on, t_off) in enumerate(windows):
             # the first sample at the drive's new value is one latency later; the window ends where the drive did
             for j in range(2):
-                c = D.step_change(t, temps[:, j], t_on, t_off, baseline_s=lim.rest_s / 2)
+                c = D.step_change(t, temps[:, j], t_on, t_off, baseline_s=0.75 * lim.rest_s)
                 muscle[k, j] = c.change
                 se_m.append(c.stderr)
-                c = D.step_change(t, temps[:, 2 + j], t_on, t_off, baseline_s=lim.rest_s / 2)
+                c = D.step_change(t, temps[:, 2 + j], t_on, t_off, baseline_s=0.75 * lim.rest_s)
                 face[k, j] = c.change
                 se_f.append(c.stderr)
         floor = max(lim.min_response_C, lim.response_sigmas * max(se_m))
         # an exchanger face on a large heat sink moves less (0.13 degC on the phase-fraction wrist): its own floor
-        floor_f = max(lim.min_face_response_C, lim.response_sigmas * max(se_f))
+        floor_f = max(lim.min_face_response_C, lim.face_response_sigmas * max(se_f))
         sel = t >= t_begin
         frozen = np.ptp(adc[sel][:, :2], axis=0) == 0 if sel.any() else np.zeros(2, bool)
         frozen = frozen[self.wiring.channel_order()[:2]]

@@ -61,8 +61,8 @@ def noise_level(t: np.ndarray, y: np.ndarray) -> float:
     return float(np.std(y - A @ coef, ddof=2))
 
 
-def step_change(t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baseline_s: float = 1.0,
-                tail_s: float = 0.3) -> StepChange:
+def step_change(t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baseline_s: float = 2.0,
+                tail_s: float = 0.5) -> StepChange:
     """How much ``y`` changed by the end of a pulse from ``t_on`` to ``t_off`` [s]: the mean over the pulse's last
     ``tail_s`` minus the baseline (the line fitted over the ``baseline_s`` before ``t_on``, extrapolated to the
     tail's mean time, so that a drift left by an earlier pulse is not taken for a response).
@@ -79,7 +79,10 @@ def step_change(t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baselin
     t_tail = t[tail].mean()
     expected = icpt + slope * (t_tail - tb.mean())
     sd = noise_level(tb, yb)
-    stderr = sd * float(np.sqrt(1.0 / tail.sum() + 1.0 / base.sum()))
+    # the tail's mean, the baseline's level and its slope extrapolated over (t_tail - its mean): the last dominates
+    # (a 1 s baseline of 0.1 degC noise extrapolated 2 s ahead: 0.02 degC, five times the other two)
+    stderr = sd * float(np.sqrt(1.0 / tail.sum() + 1.0 / base.sum()
+                                + (t_tail - tb.mean()) ** 2 / np.sum((tb - tb.mean()) ** 2)))
     return StepChange(float(y[tail].mean() - expected), stderr)
 
 
@@ -116,15 +119,16 @@ def _dominant(changes: Sequence[float], floor: float, ratio: float) -> int | Non
 
 
 def classify_pulses(muscle: np.ndarray, face: np.ndarray, muscle_floor_C: float, face_floor_C: float,
-                    frozen: np.ndarray | None = None, ratio: float = 3.0,
+                    frozen: np.ndarray | None = None, ratio: float = 3.0, face_ratio: float = 2.0,
                     current: Wiring = Wiring()) -> PulseFindings:
     """Wiring findings from a positive pulse on each command of the wiring in use.
 
     ``muscle[k, j]`` [degC]: change of temperature reading j (muscle-ordered by the wiring in use) during the pulse
     on command k; ``face[k, f]``: change of TEM face f (each face sensor sits on its own TEM, which sits on muscle f).
     ``muscle_floor_C`` / ``face_floor_C``: the least change that counts as a response (a few
-    standard errors above the noise, and a physical minimum); ``ratio``: how much larger than the other
-    channel's a response must be. ``frozen[j]``: reading j did not change at all over the pulses. ``current``: the
+    standard errors above the noise, and a physical minimum); ``ratio`` / ``face_ratio``: how much larger than the
+    other channel's a response must be (a face on a large heat sink moves 0.13 degC in a pulse, the other one
+    within the noise: 2 rather than 3). ``frozen[j]``: reading j did not change at all over the pulses. ``current``: the
     wiring the pulses went through; a fault's ``params`` are that wiring corrected.
     """
     muscle, face = np.asarray(muscle, float), np.asarray(face, float)
@@ -134,7 +138,7 @@ def classify_pulses(muscle: np.ndarray, face: np.ndarray, muscle_floor_C: float,
     polarity: list[int | None] = [None, None]
     reading_of_muscle: list[int | None] = [None, None]
     for k in range(2):
-        f = _dominant(face[k], face_floor_C, ratio)
+        f = _dominant(face[k], face_floor_C, face_ratio)
         j = _dominant(muscle[k], muscle_floor_C, ratio)
         if f is None and j is None:
             faults.append(Fault('tem_no_response', k + 1, f'TEM command {k + 1} changed neither TEM face nor '

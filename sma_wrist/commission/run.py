@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import copy
 import json
+import math
 import sys
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -177,10 +178,13 @@ def run_cli(a: argparse.Namespace) -> int:
         print(f'error: --payload-kg {payload:g} is outside [{PAYLOAD_RANGE_KG[0]:g}, {PAYLOAD_RANGE_KG[1]:g}] kg',
               file=sys.stderr)
         return EXIT_BAD_INPUT
+    if not (math.isfinite(a.stall_s) and a.stall_s > 0):
+        print(f'error: --stall-s {a.stall_s!r} must be a finite number > 0', file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         lim = BringUpLimits(heat_V=a.heat_V, max_muscle_C=a.max_muscle_C)
         device = (sim_device(a.params_file, 0.3 if payload is None else payload, a.seed) if a.sim else
-                  SerialDevice(a.hardware, a.baud_rate))
+                  SerialDevice(a.hardware, a.baud_rate, stall_s=a.stall_s))
         progress = None if a.json else (lambda step: print(f'step: {step}', file=sys.stderr, flush=True))
         result = commission(a.out, device, params_files=a.params_file, payload_kg=payload,
                             accept_fixes=a.accept_fixes, limits=lim, progress=progress, port=a.hardware)
