@@ -12,7 +12,7 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import (diagnose_arguments, emulator_arguments, nonnegative_int, recording_arguments,
+from sma_wrist.cli_options import (commission_arguments, diagnose_arguments, emulator_arguments, nonnegative_int, recording_arguments,
                                    sweep_arguments)
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
@@ -214,6 +214,11 @@ def cmd_compare(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_commission(a: argparse.Namespace) -> int:
+    from sma_wrist.commission.run import run_cli
+    return run_cli(a)
+
+
 def cmd_diagnose(a: argparse.Namespace) -> int:
     from sma_wrist.diagnose import run_cli
     return run_cli(a)
@@ -303,6 +308,11 @@ def build_parser() -> argparse.ArgumentParser:
     d = diagnose_arguments(sub.add_parser(
         'diagnose', help='what the model gets wrong in a recorded run: locate, name, extend, measure (doc/explanation/diagnosis.md)'))
     d.set_defaults(func=cmd_diagnose)
+
+    m = commission_arguments(sub.add_parser(
+        'commission', help='bring a new wrist up: link, sensors, TEM wiring, angle direction; report and params '
+                           'file (doc/howto/commission.md)'))
+    m.set_defaults(func=cmd_commission)
 
     d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (doc/explanation/protocol.md)')
     emulator_arguments(d)

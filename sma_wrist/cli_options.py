@@ -79,6 +79,47 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--params-file', action='append', default=[], metavar='FILE',
                     help="the wire, TEMs and pre-load plant_sim would simulate with this ROS params file "
                          "(applied after config/wrist.yaml; repeatable), e.g. an identified wire's wrist_params.yaml")
+    ap.add_argument('--transition-shift-C', type=float, default=None, metavar='DEGC',
+                    help="a wire transforming this much hotter (> 0) or colder than the model's (the model so "
+                         "perturbed, --plant sdgpi, unless --plant names another; within +-15 degC)")
+    ap.add_argument('--tem-gain-scale', type=float, default=None, metavar='K',
+                    help="TEMs K times as strong as the model's (0.5-1.5; < 1: weaker), as --transition-shift-C")
+    # wiring faults of a wrist as built: what `sma-wrist commission` finds (doc/howto/commission.md)
+    ap.add_argument('--swap-tem-polarity', type=int, action='append', metavar='N',
+                    help="TEM N's (1 or 2) leads swapped: its drive cools where it should heat; repeatable")
+    ap.add_argument('--swap-tem-channels', action='store_true',
+                    help='driver output 1 wired to TEM 2 (on muscle 2) and output 2 to TEM 1')
+    ap.add_argument('--swap-thermocouples', action='store_true',
+                    help="the muscle thermocouples swapped: ADC channel 1 reads muscle 2's, channel 2 muscle 1's")
+    ap.add_argument('--reverse-angle', action='store_true',
+                    help="the potentiometer's outer leads swapped: it reads 65535 - counts")
+    ap.add_argument('--broken-wire', type=int, default=None, metavar='N',
+                    help="muscle N's (1 or 2) wire does not pull (broken, unhooked): heating it moves nothing")
+
+
+def commission_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Options of ``sma-wrist commission`` (doc/howto/commission.md)."""
+    ap.add_argument('--hardware', metavar='PORT', default=None, help='the wrist controller on this serial port')
+    ap.add_argument('--sim', action='store_true', help='the simulated plant (of --params-file) behind an emulated '
+                    'device instead of a port')
+    ap.add_argument('--out', required=True, metavar='DIR', help='report (commission.md, PNGs) and wrist_params.yaml')
+    ap.add_argument('--payload-kg', type=float, default=None, metavar='M', help='payload as mounted [kg] (written '
+                    'into the params file)')
+    ap.add_argument('--params-file', action='append', default=[], metavar='FILE',
+                    help="ROS params file(s) after config/wrist.yaml: the bridge's calibration to start from (and "
+                         'the plant of --sim); carried into the params file written')
+    ap.add_argument('--accept-fixes', action='store_true', help='write the wiring faults a bridge parameter corrects '
+                    'into the params file and go on (after verifying them)')
+    ap.add_argument('--heat-V', type=float, default=20.0, metavar='V', help='drive of the angle check (default 20; '
+                    'the wiring pulses are 6 V)')
+    ap.add_argument('--max-muscle-C', type=float, default=75.0, metavar='DEGC',
+                    help='bring-up temperature limit of the muscles (default 75)')
+    ap.add_argument('--baud-rate', type=int, default=921600, help='serial baud rate (default 921600)')
+    ap.add_argument('--stall-s', type=float, default=1.0, metavar='S',
+                    help='no valid frame from the device for this long (wall) stops the procedure (default 1)')
+    ap.add_argument('--seed', type=nonnegative_int, default=0, help='--sim: the emulated sensors\' noise seed')
+    ap.add_argument('--json', action='store_true', help='print one JSON object')
+    return ap
 
 
 def sweep_arguments(p: argparse.ArgumentParser) -> argparse.ArgumentParser:

@@ -16,11 +16,16 @@ faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
 Fault injection (for tests and demos), from the command line as rates/periods, or from
 Python with :meth:`DeviceEmulator.inject`: garbage bytes, checksum errors, cut lines,
 resets, unplug (the pty's master is closed, the link removed; on replug the device
-boots again on a new pty at the same link), freezes (no samples), forced ADC counts.
+boots again on a new pty at the same link), freezes (no samples), forced ADC counts. Wiring faults of a wrist as
+built (``--swap-tem-polarity N``, ``--swap-tem-channels``, ``--swap-thermocouples``, ``--reverse-angle``,
+``--broken-wire N``; doc/explanation/protocol.md "Wiring"), for ``sma-wrist commission``; the largest drive a command asked
+for is kept (``stats.max_abs_command_V``) and printed on exit. :meth:`DeviceEmulator.receive` /
+:meth:`DeviceEmulator.emit` step the device in lockstep with a host that is no serial port.
 """
 from __future__ import annotations
 
 import argparse
+import copy
 import dataclasses
 import math
 import os
@@ -76,6 +81,13 @@ class EmulatorConfig:
     # 0 = the thermocouples sampled through the ADC like the other channels
     thermocouple_rate_hz: float = 0.0
     thermocouple_resolution_C: float = 0.0
+    # wiring faults of a wrist as built, what `sma-wrist commission` finds (doc/howto/commission.md): the host's
+    # commands and the device's channels stay as doc/explanation/protocol.md says, the wires behind them do not
+    tem_polarity_swapped: tuple[bool, bool] = (False, False)  # TEM i's leads swapped: its drive cools where it heated
+    tem_channels_swapped: bool = False  # driver output 1 wired to TEM 2, output 2 to TEM 1
+    thermocouples_swapped: bool = False  # ADC channel 1 reads muscle 2's thermocouple, channel 2 muscle 1's
+    angle_reversed: bool = False  # the potentiometer's outer leads swapped: it reads 65535 - counts
+    broken_wire: int = 0  # muscle 1 or 2 whose wire does not pull (broken, unhooked): heating it moves nothing (0: none)
 
 
 @dataclass
@@ -88,6 +100,7 @@ class EmulatorStats:
     resets: int = 0
     unplugs: int = 0
     faults_injected: int = 0
+    max_abs_command_V: float = 0.0  # the largest |drive| any command asked for (before the device's clipping)
 
 
 class DeviceEmulator:
@@ -117,6 +130,11 @@ class DeviceEmulator:
             sc = Scenario.from_mapping({'payload_kg': c.payload_kg, **c.scenario})
             self.plant = make_plant(c.plant, [sc], base)
             self.sensors = SensorBank([sc], 1.0 / c.rate_hz)
+        if c.broken_wire not in (0, 1, 2):
+            raise ValueError(f'broken_wire {c.broken_wire!r}: 0 (none), 1 or 2')
+        # a broken wire: the joint is a second wrist's in which that muscle is never heated; the temperatures
+        # are the first's (the TEM still heats the muscle, the wire no longer pulls)
+        self._joint_plant: Any = copy.deepcopy(self.plant) if c.broken_wire else None
         self.rng = np.random.default_rng(c.seed)
         self.stats = EmulatorStats()
         self.parser = P.Parser()
@@ -241,7 +259,9 @@ class DeviceEmulator:
             time.sleep(0.005)
         # the wrist cooled/moved meanwhile at zero drive
         lost = int(wall_s * self.cfg.time_scale * self.cfg.rate_hz)
-        self.plant.advance(np.zeros((1, 2)), max(1, lost * self.steps_per_sample))
+        for plant in (self.plant, self._joint_plant):
+            if plant is not None:
+                plant.advance(np.zeros((1, 2)), max(1, lost * self.steps_per_sample))
         self._boot('power')
         self.open()
 
@@ -254,15 +274,39 @@ class DeviceEmulator:
             return
         except OSError:
             return
+        self.receive(data)
+
+    def receive(self, data: bytes) -> None:
+        """Bytes from the host: commands take effect after the latency, a query is answered with a hello."""
         self.stats.bytes_received += len(data)
         now = self.device_time_s
         for f in self.parser.feed(data):
             if isinstance(f, P.Command):
                 self.stats.commands_received += 1
                 u = np.array([[f.u1_mV, f.u2_mV]], float) / 1000.0
+                self.stats.max_abs_command_V = max(self.stats.max_abs_command_V, float(np.abs(u).max()))
                 self._pending.append((now + self.cfg.latency_s, u))
             elif isinstance(f, P.Query):
                 self._out += P.encode(P.Hello(self.cfg.device_id, self.cfg.firmware, int(round(self.cfg.rate_hz))))
+
+    def _wired(self, u: np.ndarray) -> np.ndarray:
+        """The drive (1, 2) [V] each TEM gets from the driver's outputs ``u``, through the wiring faults."""
+        c = self.cfg
+        if c.tem_channels_swapped:
+            u = u[:, ::-1]
+        if any(c.tem_polarity_swapped):
+            u = u * np.where(np.asarray(c.tem_polarity_swapped), -1.0, 1.0)
+        return u
+
+    def emit(self, n: int) -> bytes:
+        """The next ``n`` samples' lines (and whatever was queued before them), at once: the device stepped in
+        lockstep with a host that is no serial port (``sma-wrist commission --sim``, tests)."""
+        self._do_actions()
+        for _ in range(n):
+            self._out += self._sample()
+        out = bytes(self._out)
+        self._out.clear()
+        return out
 
     def _convert(self, t: float, T: np.ndarray) -> np.ndarray:
         """The thermocouple chip's latest conversion (2,) [degC] at device time t [s]: it samples the
@@ -293,17 +337,27 @@ class DeviceEmulator:
         if self._boot_flag:
             flags |= P.FLAG_BOOT
             self._boot_flag = False
+        u = self._wired(u)
         self.plant.advance(u, self.steps_per_sample)
         st = self.plant.state
-        T, q = self.plant.muscle_temperature_C, st.q
+        T, q, qd = self.plant.muscle_temperature_C, st.q, st.qd
+        if self._joint_plant is not None:
+            u_joint = u.copy()
+            u_joint[:, c.broken_wire - 1] = 0.0
+            self._joint_plant.advance(u_joint, self.steps_per_sample)
+            q, qd = self._joint_plant.state.q, self._joint_plant.state.qd
         if self.sensors is not None:
-            T, q, _ = self.sensors.measure(T, q.copy(), st.qd.copy())
+            T, q, _ = self.sensors.measure(T, q.copy(), qd.copy())
         chip = c.thermocouple_rate_hz > 0
         if chip:
             T = self._convert(t, T[0])[None]
         th = st.thermal[0]  # (layer, face): the TEMs' exchanger faces
         temps = np.array([T[0, 0], T[0, 1], th[0, 1], th[1, 1]])
+        if c.thermocouples_swapped:
+            temps[:2] = temps[1::-1]
         counts = c.calibration.to_counts(temps, float(q[0]))
+        if c.angle_reversed:
+            counts[4] = P.ADC_MAX - counts[4]
         if c.noise_counts > 0:
             noise = self.rng.normal(0.0, c.noise_counts, 5)
             if chip:  # the chip's reading reaches the firmware as a number, not through the ADC
@@ -440,12 +494,24 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
     if plant != 'model' and plant not in PLANTS:
         raise ValueError(f'--plant {plant!r}: one of model, {", ".join(sorted(PLANTS))}')
     scenario: dict[str, Any] = {}
+    # a wire transforming hotter or colder, TEMs weaker or stronger than the model's: the model so perturbed
+    off_model = {k: v for k, v in (('transition_shift_C', getattr(a, 'transition_shift_C', None)),
+                                   ('tem_gain_scale', getattr(a, 'tem_gain_scale', None))) if v is not None}
+    if off_model and plant == 'model':
+        plant = 'sdgpi'
     if getattr(a, 'scenario_file', None):
         if plant == 'model':
             raise ValueError('--scenario-file perturbs a registered plant: give --plant sdgpi or phase_fraction too')
         from sma_wrist.plants.spread import Scenario
         # as plant_sim's scenario_file: axes it names (a sweep row's payload too) win; ParameterError is a ValueError
         scenario = Scenario.from_file(a.scenario_file, {'payload_kg': a.payload_kg}).to_dict()
+    if off_model:
+        from sma_wrist.plants.spread import Scenario
+        scenario = Scenario.from_mapping({'payload_kg': a.payload_kg, **scenario, **off_model}).to_dict()
+    polarity = set(getattr(a, 'swap_tem_polarity', None) or ())
+    broken = getattr(a, 'broken_wire', None) or 0
+    if not polarity <= {1, 2} or broken not in (0, 1, 2):
+        raise ValueError('--swap-tem-polarity and --broken-wire take a muscle number, 1 or 2')
     base = None
     if getattr(a, 'params_file', None):  # the wrist plant_sim would simulate with these files
         from sma_wrist import runtime
@@ -459,7 +525,10 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
                           checksum_error_rate=a.checksum_error_rate, partial_rate=a.partial_rate,
                           reset_every_s=a.reset_every_s, unplug_every_s=a.unplug_every_s,
                           unplug_wall_s=a.unplug_wall_s, thermocouple_rate_hz=tc_rate,
-                          thermocouple_resolution_C=tc_res)
+                          thermocouple_resolution_C=tc_res, tem_polarity_swapped=(1 in polarity, 2 in polarity),
+                          tem_channels_swapped=bool(getattr(a, 'swap_tem_channels', False)),
+                          thermocouples_swapped=bool(getattr(a, 'swap_thermocouples', False)),
+                          angle_reversed=bool(getattr(a, 'reverse_angle', False)), broken_wire=broken)
 
 
 def run_from_args(a: argparse.Namespace) -> int:
@@ -485,6 +554,9 @@ def run_from_args(a: argparse.Namespace) -> int:
         pass
     finally:
         emu.close()
+    # the device's side of what the host did (commission's bring-up limits are checked against it)
+    print(f'received {emu.stats.commands_received} commands, largest |drive| {emu.stats.max_abs_command_V:g} V',
+          flush=True)
     return 0
 
 

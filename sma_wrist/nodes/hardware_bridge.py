@@ -64,7 +64,7 @@ from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
-from sma_wrist.hw.calibration import Calibration
+from sma_wrist.hw.calibration import Calibration, Wiring
 from sma_wrist.hw.estimate import StressEstimator, slope
 from sma_wrist.hw.safety import StuckSensor
 from sma_wrist.hw.link import SerialLink
@@ -144,12 +144,21 @@ class HardwareBridge(WristNode):
               (-20.0, 20.0)),
         Param('calibration.angle_gain_rad_per_count', 1e-4, 'potentiometer gain', 'rad', (-1e-2, 1e-2)),
         Param('calibration.angle_offset_rad', -3.2768, 'angle at count 0', 'rad', (-10.0, 10.0)),
+        # the wiring (hw/calibration.py Wiring): a wrist wired otherwise than doc/explanation/protocol.md, corrected in software;
+        # sma-wrist commission measures them and writes them into its wrist_params.yaml (doc/howto/commission.md)
+        Param('calibration.tem_sign', [1, 1], "per muscle, the sign of its TEM's drive: -1 where the TEM's two leads "
+              'are swapped (a positive drive of its driver output cools the muscle); each 1 or -1'),
+        Param('calibration.tem_channel_map', [1, 2], "per muscle, the driver output (the C frame's u1 = 1, u2 = 2) "
+              "wired to its TEM: [1, 2] as documented, [2, 1] with the TEMs' drive wires swapped"),
+        Param('calibration.thermocouple_map', [1, 2], "per muscle, the ADC channel (the S frame's adc_T1 = 1, "
+              'adc_T2 = 2) of its thermocouple: [1, 2] as documented, [2, 1] with the thermocouples swapped'),
     )
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('hardware_bridge', **kwargs)
         p = self.p
         self.cal = self._calibration(p)
+        self.wiring = Wiring.from_params(p)
         self.period_s = 1.0 / p['publish_rate_hz']
         self.command_V = np.zeros(2)
         self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
@@ -221,6 +230,12 @@ class HardwareBridge(WristNode):
             return f'angle_min_rad {values["angle_min_rad"]} must be below angle_max_rad {values["angle_max_rad"]}'
         if values['calibration.angle_gain_rad_per_count'] == 0.0:
             return 'calibration.angle_gain_rad_per_count must not be 0'
+        try:
+            wiring_problem = Wiring.from_params(values).problem()
+        except (TypeError, ValueError):
+            wiring_problem = 'calibration.tem_sign, tem_channel_map and thermocouple_map must be lists of integers'
+        if wiring_problem:
+            return wiring_problem
         if not values['reconnect_backoff_initial_s'] <= values['reconnect_backoff_max_s']:
             return 'reconnect_backoff_initial_s must not exceed reconnect_backoff_max_s'
         if not isinstance(values['port'], str) or not values['port'].strip():
@@ -230,6 +245,7 @@ class HardwareBridge(WristNode):
     def apply(self, changed: Mapping[str, Any]) -> None:
         if any(k.startswith(('adc.', 'calibration.')) for k in changed):
             self.cal = self._calibration(self.p)
+            self.wiring = Wiring.from_params(self.p)
         if 'payload_kg' in changed:
             self._publish_payload()
         if any(k.startswith('stress_filter.') for k in changed):
@@ -342,7 +358,7 @@ class HardwareBridge(WristNode):
             self._resync()
             self.seq.update(s.seq)
             last_t = None
-        temps, q = self.cal.to_physical_fast(s.adc)
+        temps, q = self.cal.to_physical_fast(self.wiring.muscle_counts(s.adc))  # muscle i's thermocouple first
         rail = min(s.adc) == 0 or max(s.adc) == P.ADC_MAX
         if not (math.isfinite(sum(temps)) and math.isfinite(q)):
             self.counters['invalid_samples'] += 1
@@ -541,7 +557,7 @@ class HardwareBridge(WristNode):
     def _send(self) -> None:
         if self.link.connected:
             u1, u2 = self.command_to_send()
-            self.link.send_command(u1, u2)
+            self.link.send_command(*self.wiring.device_command(u1, u2))  # muscle i's TEM on its driver output
             self._sent_V[:] = (u1, u2)
 
     def status_values(self) -> dict[str, Any]:
