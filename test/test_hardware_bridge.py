@@ -1007,3 +1007,57 @@ def test_hardware_run_on_a_device_of_another_protocol_version_says_so(tmp_path, 
                                         extra_params={'/hardware_bridge': {'port': emu.link}})
     finally:
         emu.stop()
+
+
+
+def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_path, ros_shutdown, probe_factory):
+    """The controllers answer each published window with the TEM commands. When that answer arrives after the
+    bridge's next tick has begun to wait for the device, an executor that runs one callback at a time (rclpy's)
+    takes it only once the next window is out: a window of extra loop delay. Under ROS that happens whenever the
+    answer takes longer than the time to the bridge's next tick (0-5 ms: the timer's phase against the windows);
+    here the delivery model holds the answer 7 ms, past the next tick. A probe answers each joint state with its
+    stamp as both commands; every command the bridge writes to the device is logged with the window then out."""
+    from sensor_msgs.msg import JointState
+
+    from sma_wrist.nodes.hardware_bridge import HardwareBridge
+    from sma_wrist.runtime.delivery import DeliveryModel
+    from sma_wrist.runtime.launch import Runtime
+
+    link = str(tmp_path / 'wrist')
+    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
+                             '--noise-counts', '0'], stdout=subprocess.PIPE, text=True)
+    answer = (0.007, 0.0)
+    delivery = DeliveryModel(0.0, 0.0, per_topic={'/wrist/tem_1/command': answer, '/wrist/tem_2/command': answer})
+    sent: list[tuple[float, float]] = []  # (stamp of the window last published [s], command 1 written [V])
+    try:
+        proc.stdout.readline()
+        with Runtime(params={'/hardware_bridge': {'port': link}}, delivery=delivery) as rt:
+            bridge = rt.add(HardwareBridge)
+            send = bridge.link.send_command
+
+            def logged(u1: float, u2: float) -> bool:
+                sent.append((bridge._last_pub_s or 0.0, u1))
+                return send(u1, u2)
+            bridge.link.send_command = logged
+            probe = probe_factory(rt, (), sim_time=True)
+
+            def answer_with_stamp(js) -> None:
+                v = js.header.stamp.sec + js.header.stamp.nanosec * 1e-9  # V: the window's stamp (a 3 s run)
+                probe.publish('/wrist/tem_1/command', data=v)
+                probe.publish('/wrist/tem_2/command', data=v)
+            probe.node.create_subscription(JointState, '/wrist/joint_states', answer_with_stamp, 10)
+            rt.run_until(3.0, until='sim')
+    finally:
+        proc.terminate()
+        proc.wait(10)
+        proc.stdout.close()
+    first: dict[float, float] = {}  # each answer when first written (every tick writes the command in force again)
+    for window, u in sent:
+        if u > 0.0:
+            first.setdefault(u, window)
+    late = np.array([window - u for u, window in first.items()])[20:]  # windows out before the answer [s]
+    assert len(late) > 200 and np.all(late > -1e-9)  # an answer never precedes its window
+    # written while its own window is the last one out: the device drives with it before the next measurements.
+    # Every answer was a window late before (share 0.00); 0.79-1.00 now, the rest where the host fell behind the
+    # device on a loaded machine and the next window was complete before the answer came
+    assert np.mean(late < 1e-9) > 0.5, np.round(late[:20], 3)
