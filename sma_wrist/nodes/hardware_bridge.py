@@ -27,7 +27,7 @@ its steady clock (use_sim_time false): its timer polls every half window; a tick
 up to ``sample_wait_s`` (wall) for the window to complete, then publishes, except the first
 tick after a publication, which takes only what has arrived: while a tick waits, the
 executor takes no TEM command, and the commands answering a window arrive in the next
-milliseconds (docs/runtime.md, "The hardware path under real ROS 2"). On the embedded
+milliseconds (doc/explanation/runtime.md, "The hardware bridge and the executor"). On the embedded
 runtime, whose steady clock is virtual, that wait is what paces the graph by the device:
 nothing is published before the device sent it. If the host falls behind, old windows
 are skipped (counted), the newest is published; data is never queued up into latency.
