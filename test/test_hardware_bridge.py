@@ -1024,8 +1024,10 @@ def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_pa
     from sma_wrist.runtime.launch import Runtime
 
     link = str(tmp_path / 'wrist')
+    # a device at a quarter of wall speed leaves the host time to keep up on a loaded machine: which window an answer
+    # lands in depends on virtual time only, unless the host falls behind the device
     proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
-                             '--noise-counts', '0'], stdout=subprocess.PIPE, text=True)
+                             '--noise-counts', '0', '--time-scale', '0.25'], stdout=subprocess.PIPE, text=True)
     answer = (0.007, 0.0)
     delivery = DeliveryModel(0.0, 0.0, per_topic={'/wrist/tem_1/command': answer, '/wrist/tem_2/command': answer})
     sent: list[tuple[float, float]] = []  # (stamp of the window last published [s], command 1 written [V])
@@ -1042,11 +1044,11 @@ def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_pa
             probe = probe_factory(rt, (), sim_time=True)
 
             def answer_with_stamp(js) -> None:
-                v = js.header.stamp.sec + js.header.stamp.nanosec * 1e-9  # V: the window's stamp (a 3 s run)
+                v = js.header.stamp.sec + js.header.stamp.nanosec * 1e-9  # V: the window's stamp (a 2 s run)
                 probe.publish('/wrist/tem_1/command', data=v)
                 probe.publish('/wrist/tem_2/command', data=v)
             probe.node.create_subscription(JointState, '/wrist/joint_states', answer_with_stamp, 10)
-            rt.run_until(3.0, until='sim')
+            rt.run_until(2.0, until='sim')
     finally:
         proc.terminate()
         proc.wait(10)
@@ -1056,8 +1058,7 @@ def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_pa
         if u > 0.0:
             first.setdefault(u, window)
     late = np.array([window - u for u, window in first.items()])[20:]  # windows out before the answer [s]
-    assert len(late) > 200 and np.all(late > -1e-9)  # an answer never precedes its window
-    # written while its own window is the last one out: the device drives with it before the next measurements.
-    # Every answer was a window late before (share 0.00); 0.79-1.00 now, the rest where the host fell behind the
-    # device on a loaded machine and the next window was complete before the answer came
-    assert np.mean(late < 1e-9) > 0.5, np.round(late[:20], 3)
+    assert len(late) > 150 and np.all(late > -1e-9)  # an answer never precedes its window
+    # written while its own window is the last one out: the device drives with it before the next measurements
+    # (every answer was a window late when the tick after a publication waited for the device)
+    assert np.mean(late < 1e-9) > 0.9, np.round(late[:20], 3)
