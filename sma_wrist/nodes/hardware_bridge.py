@@ -156,7 +156,7 @@ class HardwareBridge(WristNode):
         self.period_s = 1.0 / p['publish_rate_hz']
         self.command_V = np.zeros(2)
         self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
-        self._ticks_since_pub = 0  # timer ticks since the last window went out
+        self._ticks_since_pub = 1  # timer ticks since the last window went out (none went out yet)
         # the stresses are the wire model's (the device measures none): the identified wire's when given
         self.estimator = StressEstimator(PlantParams.from_files(p['hysteresis_file'],
                                                                 preload_elongation_mm=p['preload_elongation_mm']),
