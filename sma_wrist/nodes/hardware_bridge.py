@@ -23,8 +23,11 @@ trails a little (a millisecond clock) is taken at the newest time, and a boot fl
 than 50 ms back is a device restart (doc/explanation/protocol.md). The other
 nodes run with use_sim_time as with plant_sim, so an emulator running N x faster than
 wall time (--time-scale) makes the whole graph run N x faster. The bridge itself runs on
-its steady clock (use_sim_time false): its timer polls every half window; each tick waits
-up to ``sample_wait_s`` (wall) for the window to complete, then publishes. On the embedded
+its steady clock (use_sim_time false): its timer polls every half window; a tick waits
+up to ``sample_wait_s`` (wall) for the window to complete, then publishes, except the first
+tick after a publication, which takes only what has arrived: while a tick waits, the
+executor takes no TEM command, and the commands answering a window arrive in the next
+milliseconds (doc/explanation/runtime.md, "The hardware bridge and the executor"). On the embedded
 runtime, whose steady clock is virtual, that wait is what paces the graph by the device:
 nothing is published before the device sent it. If the host falls behind, old windows
 are skipped (counted), the newest is published; data is never queued up into latency.
@@ -162,6 +165,7 @@ class HardwareBridge(WristNode):
         self.period_s = 1.0 / p['publish_rate_hz']
         self.command_V = np.zeros(2)
         self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
+        self._ticks_since_pub = 1  # timer ticks since the last window went out (none went out yet)
         # the stresses are the wire model's (the device measures none): the identified wire's when given
         self.estimator = StressEstimator(PlantParams.from_files(p['hysteresis_file'],
                                                                 preload_elongation_mm=p['preload_elongation_mm']),
@@ -401,7 +405,14 @@ class HardwareBridge(WristNode):
 
     def _tick(self) -> None:
         events = self.link.events
-        deadline = self.wall() + self.p['sample_wait_s']
+        # right after a window went out, the controllers' answer to it (the TEM commands) is on its way: a tick that
+        # blocked on the device now would hold that answer in the executor's queue (rclpy runs one callback at a
+        # time) until the next window is out, a window of extra loop delay. So the first tick after a publication
+        # only takes what has arrived; the next one (half a window later) waits, and windows still go out as
+        # they complete. (The commands carry no stamp: which window one answers cannot be told.)
+        wait_s = self.p['sample_wait_s'] if self._ticks_since_pub > 0 else 0.0
+        self._ticks_since_pub += 1
+        deadline = self.wall() + wait_s
         # more queued events than max_backlog_windows windows of 1 kHz samples: the host is behind, skip ahead
         backlog = self.p['max_backlog_windows'] * self.period_s * 1000.0
         while True:
@@ -434,6 +445,7 @@ class HardwareBridge(WristNode):
         t_end = self._window[-1][0]
         w = [x for x in self._window if x[0] > t_end - self.period_s + 1e-9]
         skipped = int((t_end - self._next_pub_s) / self.period_s + 1e-9)
+        self._ticks_since_pub = 0
         self.counters['windows_skipped'] += max(0, skipped)
         self._window.clear()
         first = self._last_pub_s is None
