@@ -270,7 +270,8 @@ def test_a_nominal_run_logs_no_warning_and_starts_from_the_wrists_angle(tmp_path
     remove = rlog.add_sink(lambda sev, name, msg, t: lines.append((int(sev), name, msg)))
     try:
         with rlog.silenced():
-            s = run_closed_loop('inverse_adaptive', 0.3, 35.0, tmp_path / 'bag')
+            s = run_closed_loop('inverse_adaptive', 0.3, 35.0, tmp_path / 'bag',
+                                extra_params={'/trajectory_generator': {'soft_start_s': 30.0}})  # as run sets it
     finally:
         remove()
     loud = [(name, msg) for sev, name, msg in lines if sev >= int(rlog.LoggingSeverity.WARN)]
@@ -294,7 +295,7 @@ def test_cli_run_plot_writes_the_tracking_plot_and_says_what_next(tmp_path):
     assert png.stat().st_size > 10000 and png.read_bytes()[:4] == b'\x89PNG'
     assert f'bag: {bag}' in r.stdout and f'plot: {png}' in r.stdout
     assert f'sma-wrist compare {bag}' in r.stdout and '--params-file' in r.stdout
-    assert 'whole run' in r.stdout and 'soft start from the measured angle' in r.stdout
+    assert 'whole run' in r.stdout and 'from the measured angle with --soft-start' in r.stdout
     for args, message in ((('--plot', str(tmp_path / 'x.png')), 'give --bag DIR too'),
                           (('--bag', str(tmp_path / 'b'), '--plot', str(tmp_path / 'x.bogus')), 'not an image format')):
         bad = _cli('run', '--duration', '1', '--quiet', *args)
