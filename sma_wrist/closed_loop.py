@@ -107,6 +107,17 @@ def file_choices(params_files: Sequence[str | Path], hardware: bool = False) -> 
     return mode, float(payload)
 
 
+def file_soft_start(params_files: Sequence[str | Path]) -> float | None:
+    """trajectory_generator's ``soft_start_s`` as the user's params files set it, None where none does (the
+    package's config/wrist.yaml is not asked: its value is the node's default, which ``run`` replaces)."""
+    if not params_files:
+        return None
+    from sma_wrist.runtime.arguments import overrides_for, parse_ros_args
+    args = [parse_ros_args(['--ros-args', *(a for f in params_files for a in ('--params-file', str(f)))])]
+    value = overrides_for('/trajectory_generator', args).get('soft_start_s')
+    return None if value is None else float(value)
+
+
 def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
               extra: dict[str, dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:
     """What the launch file sets on top of the params files."""

@@ -296,7 +296,8 @@ def test_a_nominal_run_logs_no_warning_and_starts_from_the_wrists_angle(tmp_path
     remove = rlog.add_sink(lambda sev, name, msg, t: lines.append((int(sev), name, msg)))
     try:
         with rlog.silenced():
-            s = run_closed_loop('inverse_adaptive', 0.3, 35.0, tmp_path / 'bag')
+            s = run_closed_loop('inverse_adaptive', 0.3, 35.0, tmp_path / 'bag',
+                                extra_params={'/trajectory_generator': {'soft_start_s': 30.0}})  # as run sets it
     finally:
         remove()
     loud = [(name, msg) for sev, name, msg in lines if sev >= int(rlog.LoggingSeverity.WARN)]
@@ -320,7 +321,7 @@ def test_cli_run_plot_writes_the_tracking_plot_and_says_what_next(tmp_path):
     assert png.stat().st_size > 10000 and png.read_bytes()[:4] == b'\x89PNG'
     assert f'bag: {bag}' in r.stdout and f'plot: {png}' in r.stdout
     assert f'sma-wrist compare {bag}' in r.stdout and '--params-file' in r.stdout
-    assert 'whole run' in r.stdout and 'soft start from the measured angle' in r.stdout
+    assert 'whole run' in r.stdout and 'from the measured angle with --soft-start' in r.stdout
     # without --bag the run is measured through a temporary bag, and plotted from it all the same
     unkept = tmp_path / 'unkept.png'
     r = _cli('run', '--duration', '2', '--plot', str(unkept), '--quiet')
@@ -329,3 +330,22 @@ def test_cli_run_plot_writes_the_tracking_plot_and_says_what_next(tmp_path):
     bad = _cli('run', '--duration', '1', '--quiet', '--bag', str(tmp_path / 'b'), '--plot', str(tmp_path / 'x.bogus'))
     assert bad.returncode == 2 and 'not an image format' in bad.stderr and 'Traceback' not in bad.stderr
     assert not (tmp_path / 'b').exists()  # refused before anything was recorded
+
+
+def test_cli_run_takes_a_params_files_soft_start_where_the_command_line_names_none(tmp_path):
+    """`run` soft-starts the reference by its own default; a params file's trajectory_generator soft_start_s
+    stands where --soft-start is not given (the file is the user's choice), and --soft-start beats both."""
+    from sma_wrist.runs import load_run
+    params = tmp_path / 'p.yaml'
+    params.write_text('trajectory_generator:\n  ros__parameters:\n    soft_start_s: 0.0\n')
+    first = {}
+    for name, args in (('default', ()), ('file', ('--params-file', str(params))),
+                       ('option', ('--params-file', str(params), '--soft-start', '30'))):
+        r = _cli('run', '--duration', '2', '--quiet', '--bag', str(tmp_path / name), *args)
+        assert r.returncode == 0, r.stderr
+        run = load_run(tmp_path / name)
+        first[name] = (float(run.q_d[0]), float(run.q[0]))
+    # soft-started: the reference starts at the wrist's measured angle; without: at the sine's first value
+    assert abs(first['default'][0] - first['default'][1]) < 0.02
+    assert abs(first['option'][0] - first['option'][1]) < 0.02
+    assert abs(first['file'][0] - first['file'][1]) > 0.1

@@ -30,15 +30,15 @@ def test_trajectory_generator_publishes_the_seed_sine_with_derivatives(probe_fac
 
 
 def test_trajectory_generator_starts_from_the_measured_angle_and_joins_the_sine(probe_factory):
-    """The default soft start: nothing is published before a measured angle; the first reference is that angle, at
+    """A soft start (sma-wrist run's 30 s): nothing is published before a measured angle; the first reference is that angle, at
     rest; it joins the sine smoothly (rate and acceleration the derivatives of the angle) and is the sine itself
     from soft_start_s on."""
-    from sma_wrist.core.control.trajectory import SOFT_START_S
+    from sma_wrist.core.control.trajectory import RUN_SOFT_START_S as SOFT_START_S
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
     from sma_wrist.runtime.rclpy import logging as rlog
     said = []
     remove = rlog.add_sink(lambda sev, name, msg, t: said.append(msg) if name == 'trajectory_generator' else None)
-    with Runtime() as rt, rlog.silenced():
+    with Runtime(params={'/trajectory_generator': {'soft_start_s': SOFT_START_S}}) as rt, rlog.silenced():
         probe = probe_factory(rt, ('/wrist/reference',))
         node = rt.add(TrajectoryGenerator)
         rt.run_until(1.5, until='steady')

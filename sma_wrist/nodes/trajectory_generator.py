@@ -6,7 +6,8 @@ ramp, sine_sweep, constant (:mod:`sma_wrist.core.control.trajectory`). Time is t
 at t = 0 of its trajectory whenever the node comes up. It starts from the wrist's measured angle
 (the first ``/wrist/joint_states`` it has, clipped to the angle limits) and joins the shape over
 ``soft_start_s`` (:class:`~sma_wrist.core.control.trajectory.SoftStart`); until it has that angle it publishes
-nothing, and the controllers wait. ``soft_start_s: 0`` publishes the shape from its first value at once.
+nothing, and the controllers wait. ``soft_start_s: 0`` (the default; ``sma-wrist run`` sets 30 s) publishes the
+shape from its first value at once.
 Output: ``/wrist/reference``
 (sensor_msgs/JointState: position q_d, velocity, effort = acceleration, documented in
 msg_defs/topics.yaml).
@@ -19,7 +20,7 @@ from typing import Any, Mapping
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 
-from sma_wrist.core.control.trajectory import GENERATORS, SOFT_START_S, SoftStart, Trajectory, make_trajectory
+from sma_wrist.core.control.trajectory import GENERATORS, SoftStart, Trajectory, make_trajectory
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.nodes.common import Param, WristNode, finite, main_for
 
@@ -46,7 +47,7 @@ class TrajectoryGenerator(WristNode):
         Param('rate_hz', 100.0, 'publishing rate', 'Hz', (1.0, 1000.0), runtime=False),
         Param('angle_min_rad', 0.0, 'lowest angle a reference may command', 'rad', (-0.35, 1.4)),
         Param('angle_max_rad', 1.05, 'highest angle a reference may command', 'rad', (-0.35, 1.4)),
-        Param('soft_start_s', SOFT_START_S, 'the reference starts at the wrist\'s measured angle and joins the shape '
+        Param('soft_start_s', 0.0, 'the reference starts at the wrist\'s measured angle and joins the shape '
               'over this time (quintic blend, at rest at both ends); 0: the shape from its first value at once, '
               'however far the wrist is from it', 's', (0.0, 120.0)),
     ) + _shape_params()

@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
 from sma_wrist.core.control.tem import (CHATTER_DEADBAND_V, MuscleTemperatureObserver, TemControlParams,
                                        TemperatureObserverParams)
-from sma_wrist.core.control.trajectory import SOFT_START_S, make_trajectory, soft_start
+from sma_wrist.core.control.trajectory import make_trajectory, soft_start
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
@@ -158,7 +158,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
              online_thermal: OnlineThermalParams | None = OnlineThermalParams(),
              compensator_wire: SDGPIParams | None = None, compensator_window_C: tuple[float, float] = (20.0, 80.0),
              shift_limit_C: float = SHIFT_LIMIT_C, tem_loop: TemLoopSpec | None = None,
-             observer_thermal: ThermalParams | None = None, soft_start_s: float = SOFT_START_S
+             observer_thermal: ThermalParams | None = None, soft_start_s: float = 0.0
              ) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
@@ -200,7 +200,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     (:class:`~sma_wrist.sweep.laws.TemLoopSpec`; None: its defaults).
 
     ``soft_start_s``: trajectory_generator's: each loop's reference starts at its wrist's angle measured at t_1
-    and joins the Sec. 6.1 sine over this time [s] (0: the sine from its first value).
+    and joins the Sec. 6.1 sine over this time [s] (0, the node's default: the sine from its first value).
 
     ``oracle``: a diagnosis, not a controller -- the named models of the loop are the plant's own
     (:data:`sma_wrist.sweep.oracle_models.SWITCHES`: ``'hysteresis'``, ``'thermal'``, ``'payload'``,
