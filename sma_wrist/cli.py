@@ -12,8 +12,8 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import (diagnose_arguments, emulator_arguments, nonnegative_int, recording_arguments,
-                                   sweep_arguments)
+from sma_wrist.cli_options import (diagnose_arguments, emulator_arguments, monitor_arguments, nonnegative_int,
+                                   recording_arguments, sweep_arguments)
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 
@@ -194,6 +194,11 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     return run_cli(a)
 
 
+def cmd_monitor(a: argparse.Namespace) -> int:
+    from sma_wrist.monitor.playback import run_cli
+    return run_cli(a)
+
+
 def cmd_sweep(a: argparse.Namespace) -> int:
     from sma_wrist.core.errors import ParameterError
     from sma_wrist.plants.spread import FAMILY
@@ -273,6 +278,10 @@ def build_parser() -> argparse.ArgumentParser:
     d = diagnose_arguments(sub.add_parser(
         'diagnose', help='what the model gets wrong in a recorded run: locate, name, extend, measure (docs/diagnose.md)'))
     d.set_defaults(func=cmd_diagnose)
+
+    d = monitor_arguments(sub.add_parser(
+        'monitor', help='the live model monitor on a recorded bag: which cause from when (docs/monitor.md)'))
+    d.set_defaults(func=cmd_monitor)
 
     d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (docs/protocol.md)')
     emulator_arguments(d)

@@ -178,7 +178,9 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     """Write a Truth as a rosbag2 (MCAP) bag through the embedded runtime and BagRecorder.
 
     corrupt: {'drop_topics': [...], 'nan_T': (start, n), 'kelvin': True, 'degrees': True,
-    'gap': (start_s, length_s), 'shuffle_stamps': n, 'duplicate_stamps': n}.
+    'gap': (start_s, length_s), 'shuffle_stamps': n, 'duplicate_stamps': n, 'stamp_jitter_s': sigma (white
+    jitter of the header stamps, clipped to +-0.4 of a sample), 'drop_rate': p (each measurement message lost
+    with probability p)}.
     """
     from sma_wrist import runtime
     runtime.activate()
@@ -217,6 +219,10 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     if c.get('duplicate_stamps'):
         i = rng.choice(np.arange(1, K - 1), c['duplicate_stamps'], replace=False)
         head[i] = head[i - 1]
+    if c.get('stamp_jitter_s'):
+        lim = 0.4 * truth.dt * 1e9
+        head = head + np.clip(rng.normal(0.0, c['stamp_jitter_s'] * 1e9, K), -lim, lim).astype(np.int64)
+    lost = rng.random((K, 3)) < c.get('drop_rate', 0.0)  # T1, T2, joint
     u = truth.u
     payload = truth.payload_kg
 
@@ -248,12 +254,12 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
                 p['/clock'].publish(Clock(clock=Time(nanoseconds=int(stamp_ns[k])).to_msg()))
             for i in (1, 2):
                 name = f'/wrist/muscle_{i}/temperature'
-                if name in p:
+                if name in p and not lost[k, i - 1]:
                     m = Temperature(temperature=float(T[k, i - 1]), variance=NOISE_T_C ** 2)
                     m.header.stamp = stamp
                     m.header.frame_id = f'muscle_{i}'
                     p[name].publish(m)
-            if '/wrist/joint_states' in p:
+            if '/wrist/joint_states' in p and not lost[k, 2]:
                 js = JointState(name=['wrist'], position=[float(q[k])], velocity=[0.0], effort=[0.0])
                 js.header.stamp = stamp
                 js.header.frame_id = 'wrist_base'
@@ -269,6 +275,12 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     finally:
         rclpy.try_shutdown()
     return path
+
+
+def write_run_bag(run: 'Run', path: str | Path, corrupt: dict[str, Any] | None = None, seed: int = 0) -> Path:
+    """Write an aligned Run (e.g. a recording rewritten by :mod:`.distort`) as a bag, like :func:`write_bag`."""
+    truth = Truth('recorded', {}, seed, run.payload_kg, run.dt, run.t, run.u, run.T, run.q)
+    return write_bag(truth, path, corrupt)
 
 
 def make_bag(path: str | Path, effect: str = 'none', seed: int = 0, duration_s: float = 240.0,
