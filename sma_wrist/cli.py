@@ -95,14 +95,22 @@ def cmd_run(a: argparse.Namespace) -> int:
         a.payload_kg = payload if a.payload_kg is None else a.payload_kg
     summary = run_closed_loop(a.controller, a.payload_kg, a.duration, a.bag, a.params_file or (),
                               progress=None if a.quiet else print_progress, hardware=a.hardware is not None,
-                              extra_params={'/hardware_bridge': {'port': a.hardware}} if a.hardware else None)
+                              extra_params={'/hardware_bridge': {'port': a.hardware}} if a.hardware else None,
+                              monitor=None if a.monitor is None else {'history_file': a.monitor})
     if a.json:
         print(json.dumps({'bag': summary.bag, 'controller': summary.controller, 'payload_kg': summary.payload_kg,
                           'sim_time_s': summary.sim_time_s, 'wall_s': summary.wall_s,
                           'real_time_factor': summary.real_time_factor, 'messages': summary.messages_recorded,
-                          'interrupted': summary.interrupted, 'metrics': summary.metrics}, indent=2))
+                          'interrupted': summary.interrupted, 'metrics': summary.metrics,
+                          **({'monitor': summary.monitor} if summary.monitor is not None else {})}, indent=2))
     else:
         _print_metrics(summary)
+        if summary.monitor is not None:
+            m = summary.monitor
+            v = m['verdict']
+            print(f'twin_monitor: {m["checks"]} checks ({m["skipped_checks"]} skipped while one ran); last verdict: '
+                  + (f'{v["level"]} {v["cause"] or ""} {v["subsystem"] or ""}'.strip() if v else 'none yet')
+                  + (f'; history: {a.monitor}' if a.monitor else ''))
     return 130 if summary.interrupted else 0
 
 
@@ -241,6 +249,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument('--bag', default=None, help='rosbag2 directory to create (must not exist)')
     r.add_argument('--overwrite', action='store_true', help='replace an existing bag at --bag')
     r.add_argument('--params-file', action='append', help='ROS params file applied after config/wrist.yaml')
+    r.add_argument('--monitor', nargs='?', const='', default=None, metavar='HISTORY',
+                   help='also run twin_monitor (docs/monitor.md); HISTORY: write its verdict history there (.csv, '
+                        '.json or .md)')
     r.add_argument('--hardware', metavar='PORT', default=None,
                    help='use hardware_bridge on this serial port instead of plant_sim')
     r.add_argument('--json', action='store_true', help='print one JSON object')

@@ -34,6 +34,7 @@ class RunSummary:
     interrupted: bool
     metrics: dict[str, Any] = field(default_factory=dict)
     run: Any = None  # sma_wrist.runs.RunData read back from the bag (what the metrics came from)
+    monitor: dict[str, Any] | None = None  # twin_monitor's checks and last verdict (run_closed_loop(monitor=...))
 
     @property
     def real_time_factor(self) -> float:
@@ -148,14 +149,22 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
                     bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
                     extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
                     progress: Callable[[float, float, float], None] | None = None,
-                    hardware: bool = False, delivery: Any = None) -> RunSummary:
+                    hardware: bool = False, delivery: Any = None,
+                    monitor: dict[str, Any] | None = None) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
+
+    ``monitor``: also run twin_monitor with these parameter overrides ({} for its defaults); its last verdict and
+    how many checks it made and skipped are in ``RunSummary.monitor``.
 
     ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops
     the run; the bag is closed with everything up to the interrupt and the summary says so.
     """
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
+    if monitor is not None:
+        from sma_wrist.nodes.twin_monitor import TwinMonitor
+        nodes.append(TwinMonitor)
+        extra_params = {**(extra_params or {}), '/twin_monitor': dict(monitor)}
     if params_files:  # all but hardware_bridge (graph_nodes puts the source first), which would open its port
         check_params(nodes[1:] if hardware else nodes, ros_args(params_files), params_files,
                      overrides(controller, payload_kg, source, extra_params))
@@ -169,7 +178,9 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
             rec = rt.record(bag, topics)
         from sma_wrist.nodes.common import add_or_refuse
         # a value a node refuses (a params file's): its reason, not rclpy's traceback
-        source_node = [add_or_refuse(rt, cls) for cls in nodes][0]
+        built = [add_or_refuse(rt, cls) for cls in nodes]
+        source_node = built[0]
+        monitor_node = built[-1] if monitor is not None else None
         chunk = max(duration_s / 100.0, 0.01)
         t = 0.0
         stall = _Stall(rt, DEVICE_STALL_S) if hardware else None
@@ -185,6 +196,12 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         except KeyboardInterrupt:
             interrupted = True
         sim_s = (rt.sim_ns or 0) / 1e9
+        monitor_out = None
+        if monitor_node is not None:
+            v = monitor_node.verdict
+            monitor_out = {'checks': len(monitor_node.monitor.history), 'skipped_checks': monitor_node.skipped_checks,
+                           'verdict': v.to_json() if v is not None else None,
+                           'episodes': monitor_node.monitor.episodes()}
         why = source_node.why_no_data() if stalled else ''
         if bag is not None:
             recorded = rec.count
@@ -196,6 +213,7 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
             (f'. What the bridge saw: {why}' if why else ''))
     summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
                          time.perf_counter() - wall0, recorded, interrupted)
+    summary.monitor = monitor_out
     if bag is not None:
         from sma_wrist.runs import load_run, run_metrics
         summary.run = load_run(bag)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from scipy.signal import lfilter
@@ -174,8 +174,12 @@ def run_from_truth(truth: Truth) -> 'Run':
 
 
 # ----------------------------------------------------------------------------- bags
-def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = None) -> Path:
+def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = None, nodes: Sequence[type] = (),
+              params: dict[str, dict[str, Any]] | None = None) -> Path:
     """Write a Truth as a rosbag2 (MCAP) bag through the embedded runtime and BagRecorder.
+
+    ``nodes``: node classes that run beside the publisher (they see the data live and their topics are recorded
+    too, e.g. twin_monitor), with ``params`` ({node: {name: value}}).
 
     corrupt: {'drop_topics': [...], 'nan_T': (start, n), 'kelvin': True, 'degrees': True,
     'gap': (start_s, length_s), 'shuffle_stamps': n, 'duplicate_stamps': n, 'stamp_jitter_s': sigma (white
@@ -271,16 +275,18 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
 
     path = Path(path)
     try:
-        run_nodes([Measured], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady')
+        run_nodes([Measured, *nodes], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady',
+                  params=params)
     finally:
         rclpy.try_shutdown()
     return path
 
 
-def write_run_bag(run: 'Run', path: str | Path, corrupt: dict[str, Any] | None = None, seed: int = 0) -> Path:
+def write_run_bag(run: 'Run', path: str | Path, corrupt: dict[str, Any] | None = None, seed: int = 0,
+                  nodes: Sequence[type] = (), params: dict[str, dict[str, Any]] | None = None) -> Path:
     """Write an aligned Run (e.g. a recording rewritten by :mod:`.distort`) as a bag, like :func:`write_bag`."""
     truth = Truth('recorded', {}, seed, run.payload_kg, run.dt, run.t, run.u, run.T, run.q)
-    return write_bag(truth, path, corrupt)
+    return write_bag(truth, path, corrupt, nodes, params)
 
 
 def make_bag(path: str | Path, effect: str = 'none', seed: int = 0, duration_s: float = 240.0,

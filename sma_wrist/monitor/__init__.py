@@ -244,46 +244,18 @@ class Monitor:
 
     def diagnose(self, window: Run | str, t_s: float) -> Verdict:
         """Diagnose one window (the costly part: seconds of CPU); returns this check's verdict, before persistence."""
-        import time
-        if isinstance(window, str):
-            return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {window}')
-        from sma_wrist.diagnose import diagnose_run
-        c0 = time.process_time()
-        c = self.config
-        try:
-            res = diagnose_run(window, candidates=list(c.candidates) if c.candidates else None,
-                               hysteresis_file=self.model.hysteresis_file, thermal_file=self.model.thermal_file)
-        except DiagnoseInputError as exc:
-            return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {exc}',
-                           check_cpu_s=time.process_time() - c0)
-        cpu = time.process_time() - c0
-        params = {k: v['value'] for k, v in res.parameters.items()}
-        if not res.discrepancy:
-            return Verdict(t_s, 'OK', None, None, res.confidence, summary=res.summary, check_confidence=res.confidence,
-                           check_cpu_s=cpu)
-        cause = res.cause or 'unexplained'
-        v = Verdict(t_s, 'WARN', cause, res.subsystem, res.confidence, params, res.gain_pct, res.summary,
-                    res.correlates if cause == 'unexplained' else [], cause, res.subsystem, res.confidence, cpu)
-        if res.confidence < c.min_confidence:
-            return Verdict(t_s, 'OK', None, None, 1.0 - res.confidence,
-                           summary=f'not raised (confidence {res.confidence:.2f} < {c.min_confidence:g}): {res.summary}',
-                           check_cause=cause, check_subsystem=res.subsystem, check_confidence=res.confidence,
-                           check_cpu_s=cpu)
-        if self._known(res.cause, params):
-            return Verdict(t_s, 'OK', None, None, res.confidence,
-                           summary=f'the known extension of the model ({self.model.description}): {res.summary}',
-                           check_cause=cause, check_subsystem=res.subsystem, check_confidence=res.confidence,
-                           check_cpu_s=cpu)
-        return v
+        m = self.model
+        return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension)
 
-    def _known(self, cause: str | None, params: dict[str, float]) -> bool:
-        """The named cause is the extension the model was given (a diagnosis' params file), at about its values."""
-        ext = self.model.extension
-        if not cause or not ext or not params or any(k not in ext for k in params):
-            return False
-        from sma_wrist.diagnose import effects as fx
-        return all(abs(v - ext[k]) <= KNOWN_TOLERANCE * max(abs(ext[k]), float(fx.TYPICAL[fx.INDEX[k]]))
-                   for k, v in params.items())
+    def needed(self, v: Verdict) -> int:
+        """Consecutive checks that must agree before ``v`` is published: ``persist_checks``; for an unexplained
+        discrepancy, as many as it takes the window to hold only data after a change (a wrist that changed inside
+        the window fits no constant model: the windows straddling a change are unexplained before the change
+        is named)."""
+        k = self.config.persist_checks
+        if v.cause == 'unexplained':
+            return k + int(math.ceil(self.span_s / self.config.check_period_s - 1e-9))
+        return k
 
     def decide(self, v: Verdict) -> Verdict:
         """Apply the persistence rule to this check's verdict; returns the published one and keeps it in history."""
@@ -298,7 +270,7 @@ class Monitor:
             if self._streak and _key(self._streak[-1]) != _key(v):
                 self._streak = []
             self._streak.append(v)
-            if len(self._streak) >= self.config.persist_checks:
+            if len(self._streak) >= self.needed(v):
                 since = self._streak[0].t_s
                 self._streak = []
                 if v.level == 'OK':
@@ -309,7 +281,7 @@ class Monitor:
                 out = v
             else:  # not (yet) persistent: the raised verdict (or OK) stands; this check's view is attached
                 pending = (f'{v.level} {v.cause or ""} in this check ({len(self._streak)} of '
-                           f'{self.config.persist_checks} needed): ')
+                           f'{self.needed(v)} needed): ')
                 if cur is None:
                     out = Verdict(v.t_s, 'OK', None, None, v.confidence if v.level == 'OK' else 1.0 - v.confidence,
                                   summary=pending + v.summary)
@@ -347,6 +319,49 @@ class Monitor:
                 open_['causes'].append(v.cause)
             open_['parameters'], open_['confidence'] = dict(v.parameters), v.confidence
         return out
+
+
+def diagnose_window(window: Run | str, t_s: float, config: MonitorConfig, hysteresis_file: str | None = None,
+                    thermal_file: str | None = None, extension: dict[str, float] | None = None) -> Verdict:
+    """One check's verdict on a window (:meth:`Monitor.window`), before persistence; a plain function of picklable
+    arguments, so that a node can run it in a worker process. ``extension``: the known model extension."""
+    import time
+    if isinstance(window, str):
+        return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {window}')
+    from sma_wrist.diagnose import diagnose_run
+    c0 = time.process_time()
+    c = config
+    try:
+        res = diagnose_run(window, candidates=list(c.candidates) if c.candidates else None,
+                           hysteresis_file=hysteresis_file, thermal_file=thermal_file)
+    except DiagnoseInputError as exc:
+        return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {exc}', check_cpu_s=time.process_time() - c0)
+    cpu = time.process_time() - c0
+    params = {k: v['value'] for k, v in res.parameters.items()}
+    if not res.discrepancy:
+        return Verdict(t_s, 'OK', None, None, res.confidence, summary=res.summary, check_confidence=res.confidence,
+                       check_cpu_s=cpu)
+    cause = res.cause or 'unexplained'
+    seen = {'check_cause': cause, 'check_subsystem': res.subsystem, 'check_confidence': res.confidence,
+            'check_cpu_s': cpu}
+    if res.confidence < c.min_confidence:
+        return Verdict(t_s, 'OK', None, None, 1.0 - res.confidence,
+                       summary=f'not raised (confidence {res.confidence:.2f} < {c.min_confidence:g}): {res.summary}',
+                       **seen)
+    if known(res.cause, params, extension or {}):
+        return Verdict(t_s, 'OK', None, None, res.confidence,
+                       summary=f'the known extension of the model: {res.summary}', **seen)
+    return Verdict(t_s, 'WARN', cause, res.subsystem, res.confidence, params, res.gain_pct, res.summary,
+                   res.correlates if cause == 'unexplained' else [], **seen)
+
+
+def known(cause: str | None, params: dict[str, float], extension: dict[str, float]) -> bool:
+    """The named cause is the extension the model was given (a diagnosis' params file), at about its values."""
+    if not cause or not extension or not params or any(k not in extension for k in params):
+        return False
+    from sma_wrist.diagnose import effects as fx
+    return all(abs(v - extension[k]) <= KNOWN_TOLERANCE * max(abs(extension[k]), float(fx.TYPICAL[fx.INDEX[k]]))
+               for k, v in params.items())
 
 
 HISTORY_FIELDS = ('t_s', 'level', 'cause', 'subsystem', 'confidence', 'gain_pct', 'check_cause', 'check_subsystem',

@@ -25,10 +25,8 @@ from sma_wrist.monitor import Monitor, MonitorConfig, MonitorInputError, Verdict
 KINDS = {'u1': 'float', 'u2': 'float', 'T1': 'temperature', 'T2': 'temperature', 'joint': 'joint', 'payload': 'float'}
 
 
-def _events(path: str | Path, recording: Recording, warnings: list[str]) -> tuple[list[tuple[float, int, str, float]],
-                                                                                    float | None]:
-    """(time-ordered events (t, order, key, value), first payload) of the bag; MonitorInputError naming what is
-    missing and how to record it."""
+def _bag_series(path: str | Path, recording: Recording, warnings: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """{key of TOPICS: (t [s], values)} of the bag, cleaned as the diagnosis cleans them."""
     from sma_wrist.bag import BagError, read_bag
     p = Path(path)
     if not p.exists():
@@ -52,6 +50,13 @@ def _events(path: str | Path, recording: Recording, warnings: list[str]) -> tupl
             except (ContractError, AttributeError, TypeError, ValueError) as exc:
                 raise MonitorInputError(f'{topic}: unexpected message content ({exc}); the contract type is required '
                                         f'(msg_defs/topics.yaml)') from None
+    return series
+
+
+def _events(series: dict[str, tuple[np.ndarray, np.ndarray]], p: str, warnings: list[str]
+            ) -> tuple[list[tuple[float, int, str, float]], float | None]:
+    """(time-ordered events (t, order, key, value), first payload); MonitorInputError naming what is missing
+    and how to record it."""
     record = ('record them with the graph running: ros2 bag record ' + ' '.join(
         TOPICS[k] for k in ('u1', 'u2', 'T1', 'T2', 'joint', 'payload')) + ' (or sma-wrist run --bag DIR); a bag '
         'that names them otherwise: --topic CONTRACT=RECORDED')
@@ -86,7 +91,23 @@ def monitor_bag(path: str | Path, config: MonitorConfig | None = None, recording
     wall0 = time.perf_counter()
     warnings: list[str] = []
     mon = Monitor(config)
-    events, payload = _events(path, recording or Recording(), warnings)
+    series = _bag_series(path, recording or Recording(), warnings)
+    return _play(mon, series, str(path), warnings, wall0, on_verdict)
+
+
+def monitor_run(run: Any, config: MonitorConfig | None = None) -> dict[str, Any]:
+    """The same on an aligned Run (sma_wrist.diagnose.data.Run, e.g. one the effect generator rewrote): its
+    samples are the messages, stamped on its grid (the benchmark's path; the bag's adds reading it)."""
+    wall0 = time.perf_counter()
+    mon = Monitor(config)
+    series = {'u1': (run.t, run.u[:, 0]), 'u2': (run.t, run.u[:, 1]), 'T1': (run.t, run.T[:, 0]),
+              'T2': (run.t, run.T[:, 1]), 'joint': (run.t, run.q), 'payload': (run.t[:1], np.array([run.payload_kg]))}
+    return _play(mon, series, run.source, list(run.warnings), wall0, None)
+
+
+def _play(mon: Monitor, series: dict[str, tuple[np.ndarray, np.ndarray]], p: str, warnings: list[str], wall0: float,
+          on_verdict: Callable[[Verdict], None] | None) -> dict[str, Any]:
+    events, payload = _events(series, p, warnings)
     t0 = events[0][0]
     mon.payload(payload if payload is not None else 0.3)
     if payload is None:
