@@ -54,6 +54,8 @@ def monitor_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
                     help='consecutive checks that must agree before a verdict is raised or cleared (default 2)')
     ap.add_argument('--min-confidence', type=float, default=0.5, metavar='P',
                     help='a discrepancy found with a lower confidence (0-1) counts as OK (default 0.5)')
+    ap.add_argument('--sure-confidence', type=float, default=0.95, metavar='P',
+                    help='a cause named with at least this confidence is raised by one check (default 0.95)')
     ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
     ap.add_argument('--hysteresis-file', metavar='FILE',
                     help='the wire model: hysteresis.yaml from sma-wrist identify (default: built-in set)')

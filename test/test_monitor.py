@@ -78,7 +78,7 @@ def test_an_effect_beginning_mid_run_is_named_after_its_onset_and_ok_before(clea
     assert raised, [(v['t_s'], v['check_cause']) for v in vs]
     first = raised[0]
     assert first['subsystem'] == subsystem, first
-    assert first['t_s'] - ONSET_S <= 75.0
+    assert first['t_s'] - ONSET_S <= 60.0
     assert all(v['subsystem'] == subsystem for v in raised)
     assert res['onset_s'][first['cause']] >= ONSET_S
     text = out.read_text()
@@ -127,8 +127,8 @@ def test_persistence_raises_after_k_agreeing_checks_and_clears_after_k_clean_one
     """The rule on its own (no diagnosis): one odd check is no alarm; a changed subsystem must persist too."""
     mon = Monitor(MonitorConfig(persist_checks=2))
     ok = lambda t: Verdict(t, 'OK', None, None, 1.0)  # noqa: E731
-    warn = lambda t, s='sensor', c='temp_sensor_offsets': Verdict(t, 'WARN', c, s, 1.0, check_cause=c,  # noqa: E731
-                                                                  check_subsystem=s, check_confidence=1.0)
+    warn = lambda t, s='sensor', c='temp_sensor_offsets', p=0.9: Verdict(t, 'WARN', c, s, p, check_cause=c,  # noqa: E731
+                                                                         check_subsystem=s, check_confidence=p)
     seq = [ok(0), warn(15), ok(30), warn(45), warn(60), warn(75, c='temp_sensor_offset'), warn(90, 'joint',
            'payload_mismatch'), warn(105), ok(120), ok(135)]
     levels = [(v.level, v.subsystem) for v in (mon.decide(v) for v in seq)]
@@ -139,6 +139,10 @@ def test_persistence_raises_after_k_agreeing_checks_and_clears_after_k_clean_one
     assert ep[0]['causes'] == ['temp_sensor_offsets', 'temp_sensor_offset']
     md = history_text(mon.history, 'md')
     assert md.count('\n| ') == len(seq) + 1 and '| WARN | temp_sensor_offset |' in md
+    # a cause named with (nearly) every bootstrap resample agreeing is raised by one check; clearing still takes two
+    mon = Monitor(MonitorConfig(persist_checks=2, sure_confidence=0.95))
+    levels = [mon.decide(v).level for v in (ok(0), warn(15, p=0.97), ok(30), ok(45))]
+    assert levels == ['OK', 'WARN', 'WARN', 'OK']
 
 
 def test_bad_monitor_settings_are_refused():
@@ -162,12 +166,12 @@ def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clea
     t_res, res = data['/wrist/twin/residual/muscle_1/temperature']
     t_res = (np.asarray(t_res) - t_res[0]) * 1e-9
     r = np.array([m.data for m in res])
-    assert 100 < r.size < 200  # 10 Hz of 150 s
+    assert 1400 < r.size < 1600  # 10 Hz of 150 s
     assert np.abs(r[t_res < ONSET_S - 1]).max() < 0.6  # the twin is the wrist (0.1 degC noise) ...
     assert np.median(r[t_res > ONSET_S + 1]) == pytest.approx(3.0, abs=0.5)  # ... until the thermocouple moves
     assert len(data['/wrist/twin/joint_states'][1]) == r.size
-    ours = [(s.level, dict((kv.key, kv.value) for kv in s.values), s.message) for m in data['/diagnostics'][1]
-            for s in m.status if s.name == 'twin_monitor: model']
+    ours = [(s.level[0] if isinstance(s.level, bytes) else int(s.level), dict((kv.key, kv.value) for kv in s.values),
+             s.message) for m in data['/diagnostics'][1] for s in m.status if s.name == 'twin_monitor: model']
     levels = [lv for lv, _, _ in ours]
     warn = [(vals, msg) for lv, vals, msg in ours if lv == 1]
     assert warn and warn[0][0]['subsystem'] == 'sensor', ours
@@ -194,7 +198,7 @@ def test_an_unexplained_discrepancy_is_raised_only_once_the_window_holds_no_data
     mon = Monitor(cfg)
     un = lambda t: Verdict(t, 'WARN', 'unexplained', 'thermal', 1.0, check_cause='unexplained',  # noqa: E731
                            check_subsystem='thermal', check_confidence=1.0)
-    named = lambda t: Verdict(t, 'WARN', 'temp_sensor_offsets', 'sensor', 1.0)  # noqa: E731
+    named = lambda t: Verdict(t, 'WARN', 'temp_sensor_offsets', 'sensor', 0.9)  # noqa: E731
     out = [mon.decide(v) for v in (un(15), un(30), un(45), named(60), named(75))]
     assert [v.level for v in out] == ['OK', 'OK', 'OK', 'OK', 'WARN'] and out[-1].subsystem == 'sensor'
     assert mon.needed(un(0)) == 2 + 5  # 65 s of window at 15 s per check

@@ -52,6 +52,7 @@ class MonitorConfig:
     check_period_s: float = 15.0  # time between checks [s]
     persist_checks: int = 2  # consecutive agreeing checks before a verdict is raised or cleared
     min_confidence: float = 0.5  # a discrepancy verdict below this confidence counts as OK
+    sure_confidence: float = 0.95  # a named cause at or above this confidence is raised by one check
     candidates: tuple[str, ...] | None = None  # catalogue ids to try (None: all)
     hysteresis_file: str = ''
     thermal_file: str = ''
@@ -72,6 +73,8 @@ class MonitorConfig:
             raise MonitorInputError(f'persist_checks = {self.persist_checks} must be >= 1')
         if not 0.0 <= self.min_confidence <= 1.0:
             raise MonitorInputError(f'min_confidence = {self.min_confidence:g} must be in [0, 1]')
+        if not self.min_confidence <= self.sure_confidence <= 1.0:
+            raise MonitorInputError(f'sure_confidence = {self.sure_confidence:g} must be in [min_confidence, 1]')
         if self.candidates:
             from sma_wrist.diagnose import effects as fx
             unknown = [c for c in self.candidates if c not in fx.EFFECTS]
@@ -248,13 +251,18 @@ class Monitor:
         return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension)
 
     def needed(self, v: Verdict) -> int:
-        """Consecutive checks that must agree before ``v`` is published: ``persist_checks``; for an unexplained
+        """Consecutive checks that must agree before ``v`` is published: ``persist_checks``, one for a cause named
+        with at least ``sure_confidence``; for an unexplained
         discrepancy, as many as it takes the window to hold only data after a change (a wrist that changed inside
         the window fits no constant model: the windows straddling a change are unexplained before the change
         is named)."""
         k = self.config.persist_checks
         if v.cause == 'unexplained':
             return k + int(math.ceil(self.span_s / self.config.check_period_s - 1e-9))
+        if v.level == 'WARN' and v.confidence >= self.config.sure_confidence:
+            # a cause named with (nearly) every bootstrap resample agreeing: raised at once, so that an effect is
+            # named within window_s + check_period_s of its onset (one check later, 75 s with the defaults)
+            return 1
         return k
 
     def decide(self, v: Verdict) -> Verdict:

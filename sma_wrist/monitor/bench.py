@@ -59,7 +59,9 @@ def _detect_case(args: tuple) -> dict[str, Any]:
             'first_subsystem': first['subsystem'] if first else None, 'delay_s': delay,
             'detected': bool(first and not early and first['subsystem'] == subsystem and delay <= DETECT_WITHIN_S),
             'false_before_onset': bool(early), 'checks': res['checks'], 'check_cpu_s': res['check_cpu_s'],
-            'cpu_s': cpu, 'duration_s': res['duration_s']}
+            'cpu_s': cpu, 'duration_s': res['duration_s'],
+            'verdicts': [(v['t_s'], v['level'], v['subsystem'], v['check_cause'], v['check_subsystem'],
+                          v['check_confidence']) for v in res['verdicts']]}
 
 
 def detection(runs: dict[str, Any], duration_s: float = 210.0, seeds: tuple[int, ...] = (1,), workers: int = 2
@@ -96,7 +98,9 @@ def _nominal_case(args: tuple) -> dict[str, Any]:
            'warn_checks': sum(v['level'] != 'OK' for v in res['verdicts']), 'episodes': res['episodes'],
            'check_level_not_ok': sum(v['check_cause'] is not None for v in res['verdicts']),
            'check_cpu_s': res['check_cpu_s'], 'cpu_s': cpu, 'wall_s': res['wall_s'],
-           'twin_cpu_s': cpu - sum(v.check_cpu_s for v in mon.history)}
+           'twin_cpu_s': cpu - sum(v.check_cpu_s for v in mon.history),
+           'verdicts': [(v['t_s'], v['level'], v['subsystem'], v['check_cause'], v['check_subsystem'],
+                         v['check_confidence']) for v in res['verdicts']]}
     out['core_fraction'] = cpu / out['duration_s']
     if with_diagnose:
         from sma_wrist.diagnose import diagnose

@@ -137,7 +137,8 @@ def _play(mon: Monitor, series: dict[str, tuple[np.ndarray, np.ndarray]], p: str
 def config_from_args(a: argparse.Namespace) -> MonitorConfig:
     cands = tuple(a.candidates.split(',')) if a.candidates else None
     return MonitorConfig(window_s=a.window_s, settle_s=a.settle_s, check_period_s=a.check_period_s,
-                         persist_checks=a.persist_checks, min_confidence=a.min_confidence, candidates=cands,
+                         persist_checks=a.persist_checks, min_confidence=a.min_confidence,
+                         sure_confidence=a.sure_confidence, candidates=cands,
                          hysteresis_file=a.hysteresis_file or '', thermal_file=a.thermal_file or '',
                          params_file=a.params_file or '')
 

@@ -44,6 +44,8 @@ class TwinMonitor(WristNode):
               'cleared', 'checks', (1, 100)),
         Param('min_confidence', _DEFAULTS.min_confidence, 'a discrepancy found with a lower confidence counts as OK',
               '1', (0.0, 1.0)),
+        Param('sure_confidence', _DEFAULTS.sure_confidence, 'a cause named with at least this confidence is raised '
+              'by one check', '1', (0.0, 1.0)),
         Param('candidates', '', 'comma-separated catalogue ids the checks try (docs/diagnose.md; empty: all)',
               runtime=False),
         HYSTERESIS_FILE_PARAM,
@@ -70,7 +72,8 @@ class TwinMonitor(WristNode):
         try:
             self.config = MonitorConfig(window_s=p['window_s'], settle_s=p['settle_s'],
                                         check_period_s=p['check_period_s'], persist_checks=p['persist_checks'],
-                                        min_confidence=p['min_confidence'], candidates=cands,
+                                        min_confidence=p['min_confidence'], sure_confidence=p['sure_confidence'],
+                                        candidates=cands,
                                         hysteresis_file=p['hysteresis_file'], thermal_file=p['thermal_file'],
                                         params_file=p['params_file'])
             if p['history_file']:
@@ -106,6 +109,7 @@ class TwinMonitor(WristNode):
         c.check_period_s = self.p['check_period_s']
         c.persist_checks = self.p['persist_checks']
         c.min_confidence = self.p['min_confidence']
+        c.sure_confidence = self.p['sure_confidence']
 
     # -- input ------------------------------------------------------------------------------------------------
     def _on_command(self, i: int, msg: Float64) -> None:
