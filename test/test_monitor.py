@@ -56,6 +56,10 @@ def test_the_generator_starts_an_effect_at_its_onset(clean_run):
     p = ds.apply(clean_run, ds.Distortion('payload', 'plant', 0.2, 'kg'), onset_s=ONSET_S)
     assert np.abs(p.q[before] - clean_run.q[before]).max() < 1e-6  # re-simulated: the same plant until the onset
     assert np.abs(p.q[~before] - clean_run.q[~before]).max() > 0.01  # then a heavier wrist sags
+    for kind, value in (('ambient_drift', 20.0), ('tem_weak', 0.2)):  # the heat balance changes from the onset on
+        h = ds.apply(clean_run, ds.Distortion(kind, 'plant', value, ''), onset_s=ONSET_S)
+        assert np.abs(h.T[before] - clean_run.T[before]).max() < 1e-6
+        assert np.abs(h.T[~before] - clean_run.T[~before]).max() > 0.1, kind
 
 
 @pytest.mark.parametrize('effect,subsystem', [

@@ -137,7 +137,7 @@ def weak_tem_params(fraction: float, base: PlantParams | None = None) -> PlantPa
 def ambient_params(shift_C: float, base: PlantParams | None = None) -> PlantParams:
     """The plant with both faces' ambient / coolant temperatures `shift_C` [degC] away from Table 4.9's."""
     p = base or PlantParams()
-    amb = p.thermal.effective_ambient_C()
+    amb = p.thermal.effective_ambient_C
     return dataclasses.replace(p, thermal=dataclasses.replace(p.thermal, ambient_C=(amb[0] + shift_C, amb[1] + shift_C)))
 
 
