@@ -17,6 +17,7 @@ NODES = {
     'tem_controller': 'sma_wrist.nodes.tem_controller:main',
     'trajectory_generator': 'sma_wrist.nodes.trajectory_generator:main',
     'hardware_bridge': 'sma_wrist.nodes.hardware_bridge:main',
+    'twin_monitor': 'sma_wrist.nodes.twin_monitor:main',
 }
 
 setup(

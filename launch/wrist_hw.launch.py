@@ -14,7 +14,7 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-from sma_wrist.launch_support import graph_specs, node_parameters, on_exit_actions, payload_override
+from sma_wrist.launch_support import flag, graph_specs, node_parameters, on_exit_actions, payload_override
 
 
 def _graph(context) -> list:
@@ -26,7 +26,8 @@ def _graph(context) -> list:
 
     return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
                  parameters=node_parameters(defaults, extra, exe, values), on_exit=on_exit_actions(exe))
-            for exe, values in graph_specs('hardware_bridge', {**payload_override(payload), 'port': port}, controller)]
+            for exe, values in graph_specs('hardware_bridge', {**payload_override(payload), 'port': port}, controller,
+                                           flag(LaunchConfiguration('monitor').perform(context)))]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -40,5 +41,8 @@ def generate_launch_description() -> LaunchDescription:
                               description='payload at 0.09 m [kg] (default: payload_kg of the params files, 0.3)'),
         DeclareLaunchArgument('params_file', default_value='',
                               description='params file applied after config/wrist.yaml (default: none)'),
+        DeclareLaunchArgument('monitor', default_value='false', choices=['true', 'false'],
+                              description='also run twin_monitor: the model beside the wrist, verdicts on /diagnostics '
+                                          '(doc/howto/monitor.md)'),
         OpaqueFunction(function=_graph),
     ])

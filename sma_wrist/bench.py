@@ -237,6 +237,14 @@ def bench_diagnose_full(quick: bool = False) -> dict:
     return run_diagnose(quick, full=True)
 
 
+@section('monitor')
+def bench_monitor(quick: bool = False) -> dict:
+    """The live model monitor: detection of effects beginning mid-run, false alarms over 30 min per controller,
+    CPU cost and the graph's speed with it (doc/howto/monitor.md)."""
+    from sma_wrist.monitor.bench import bench_monitor as run_monitor
+    return run_monitor(quick)
+
+
 @section('bridge')
 def bench_bridge(quick: bool = False) -> dict:
     """1 kHz sample streaming emulator -> pty -> bridge link: loss, reordering, latency percentiles."""

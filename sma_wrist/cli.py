@@ -12,8 +12,8 @@ import math
 import sys
 from typing import Any, Callable, Sequence
 
-from sma_wrist.cli_options import (commission_arguments, diagnose_arguments, emulator_arguments, nonnegative_int, recording_arguments,
-                                   sweep_arguments)
+from sma_wrist.cli_options import (commission_arguments, diagnose_arguments, emulator_arguments, monitor_arguments,
+                                   nonnegative_int, recording_arguments, sweep_arguments)
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 
@@ -130,18 +130,26 @@ def cmd_run(a: argparse.Namespace) -> int:
     # without --bag the run is recorded to a temporary bag all the same: its metrics are the bag's, whether kept
     summary = run_closed_loop(a.controller, a.payload_kg, a.duration, a.bag, a.params_file or (),
                               progress=None if a.quiet else print_progress, hardware=a.hardware is not None,
-                              extra_params=extra, measure=True)
+                              extra_params=extra, measure=True,
+                              monitor=None if a.monitor is None else {'history_file': a.monitor})
     if a.json:
         print(json.dumps({'bag': summary.bag, 'controller': summary.controller, 'payload_kg': summary.payload_kg,
                           'sim_time_s': summary.sim_time_s, 'wall_s': summary.wall_s,
                           'real_time_factor': summary.real_time_factor, 'messages': summary.messages_recorded,
                           'interrupted': summary.interrupted, 'metrics': summary.metrics,
-                          'metrics_missing': summary.metrics_missing or None}, indent=2))
+                          'metrics_missing': summary.metrics_missing or None,
+                          **({'monitor': summary.monitor} if summary.monitor is not None else {})}, indent=2))
     if a.plot is not None and summary.run is not None:
         from sma_wrist.runs import plot_runs
         plot_runs([summary.run], [f'{summary.controller} {summary.payload_kg:g} kg'], a.plot, str(a.bag or ''))
     if not a.json:
         _print_metrics(summary)
+        if summary.monitor is not None:
+            m = summary.monitor
+            v = m['verdict']
+            print(f'twin_monitor: {m["checks"]} checks ({m["skipped_checks"]} skipped while one ran); last verdict: '
+                  + (f'{v["level"]} {v["cause"] or ""} {v["subsystem"] or ""}'.strip() if v else 'none yet')
+                  + (f'; history: {a.monitor}' if a.monitor else ''))
         _print_next(summary.bag, a.plot)
     return 130 if summary.interrupted else 0
 
@@ -239,6 +247,11 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     return run_cli(a)
 
 
+def cmd_monitor(a: argparse.Namespace) -> int:
+    from sma_wrist.monitor.playback import run_cli
+    return run_cli(a)
+
+
 def cmd_sweep(a: argparse.Namespace) -> int:
     from sma_wrist.core.errors import ParameterError
     from sma_wrist.plants.spread import FAMILY
@@ -282,6 +295,9 @@ def build_parser() -> argparse.ArgumentParser:
                                                'recorded to a temporary bag for its metrics, removed afterwards)')
     r.add_argument('--overwrite', action='store_true', help='replace an existing bag at --bag')
     r.add_argument('--params-file', action='append', help='ROS params file applied after config/wrist.yaml')
+    r.add_argument('--monitor', nargs='?', const='', default=None, metavar='HISTORY',
+                   help='also run twin_monitor (doc/howto/monitor.md); HISTORY: write its verdict history there (.csv, '
+                        '.json or .md)')
     r.add_argument('--hardware', metavar='PORT', default=None,
                    help='use hardware_bridge on this serial port instead of plant_sim')
     r.add_argument('--soft-start', type=_soft_start, default=None, metavar='S',
@@ -331,6 +347,12 @@ def build_parser() -> argparse.ArgumentParser:
         'commission', help='bring a new wrist up: link, sensors, TEM wiring, angle direction; report and params '
                            'file (doc/howto/commission.md)'))
     m.set_defaults(func=cmd_commission)
+
+    d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (doc/explanation/protocol.md)')
+
+    d = monitor_arguments(sub.add_parser(
+        'monitor', help='the live model monitor on a recorded bag: which cause from when (doc/howto/monitor.md)'))
+    d.set_defaults(func=cmd_monitor)
 
     d = sub.add_parser('emulate-device', help='emulated wrist controller on a pseudo-terminal (doc/explanation/protocol.md)')
     emulator_arguments(d)

@@ -36,6 +36,38 @@ def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     return ap
 
 
+def monitor_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The ``monitor`` options (``sma-wrist monitor`` and ``python -m sma_wrist.monitor.playback``); the defaults
+    are twin_monitor's parameters (sma_wrist.monitor.MonitorConfig)."""
+    ap.add_argument('bag', help='rosbag2 directory (or .mcap) recorded per msg_defs/topics.yaml, played through as if '
+                                'live')
+    ap.add_argument('--json', action='store_true', help='print one JSON object (verdicts, episodes, onset_s, wall_s) '
+                                                        'instead of the timeline')
+    ap.add_argument('--out', metavar='FILE', help='write the verdict history here (.csv, .json or .md)')
+    ap.add_argument('--window-s', type=float, default=45.0, metavar='S',
+                    help='scored part of the rolling window the diagnosis checks [s] (default 45)')
+    ap.add_argument('--settle-s', type=float, default=20.0, metavar='S',
+                    help="lead-in before it that only settles the replays' memory [s] (default 20)")
+    ap.add_argument('--check-period-s', type=float, default=15.0, metavar='S',
+                    help='bag time between two checks [s] (default 15)')
+    ap.add_argument('--persist-checks', type=int, default=2, metavar='N',
+                    help='consecutive checks that must agree before a verdict is raised or cleared (default 2)')
+    ap.add_argument('--min-confidence', type=float, default=0.5, metavar='P',
+                    help='a discrepancy found with a lower confidence (0-1) counts as OK (default 0.5)')
+    ap.add_argument('--sure-confidence', type=float, default=0.95, metavar='P',
+                    help='a cause named with at least this confidence is raised by one check (default 0.95)')
+    ap.add_argument('--candidates', metavar='IDS', help='comma-separated catalogue ids to try (default: all)')
+    ap.add_argument('--hysteresis-file', metavar='FILE',
+                    help='the wire model: hysteresis.yaml from sma-wrist identify (default: built-in set)')
+    ap.add_argument('--thermal-file', metavar='FILE',
+                    help="the TEMs' heat balance: thermal.yaml from sma-wrist identify thermal (default: Table 4.9)")
+    ap.add_argument('--params-file', metavar='FILE',
+                    help="a diagnosis' extended_params.yaml (sma-wrist diagnose --params): the twin runs that "
+                         'extended model and the monitor stays OK while the wrist keeps to it')
+    recording_arguments(ap)
+    return ap
+
+
 def recording_arguments(ap: argparse.ArgumentParser) -> None:
     """``--topic`` / ``--joint``: read a bag recorded on another rig as if it followed msg_defs/topics.yaml."""
     ap.add_argument('--topic', action='append', metavar='CONTRACT=RECORDED',

@@ -35,6 +35,7 @@ class RunSummary:
     metrics: dict[str, Any] = field(default_factory=dict)
     run: Any = None  # sma_wrist.runs.RunData read back from the bag (what the metrics came from)
     metrics_missing: str = ''  # why ``metrics`` is empty although the run was measured ('' when it is not)
+    monitor: dict[str, Any] | None = None  # twin_monitor's checks and last verdict (run_closed_loop(monitor=...))
 
     @property
     def real_time_factor(self) -> float:
@@ -160,13 +161,16 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
                     bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
                     extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
                     progress: Callable[[float, float, float], None] | None = None,
-                    hardware: bool = False, delivery: Any = None, measure: bool = False) -> RunSummary:
+                    hardware: bool = False, delivery: Any = None, measure: bool = False,
+                    monitor: dict[str, Any] | None = None) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
 
     ``measure`` without a ``bag``: record to a temporary bag, removed afterwards, for the metrics (``sma-wrist run``
-    without --bag printed none). ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C
-    stops the run; the bag is closed with everything up to the interrupt and the summary says so (and
-    ``metrics_missing`` why there are none, when it holds no reference yet).
+    without --bag printed none). ``monitor``: also run twin_monitor with these parameter overrides ({} for its
+    defaults); its last verdict and how many checks it made and skipped are in ``RunSummary.monitor``.
+    ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops the run; the bag is
+    closed with everything up to the interrupt and the summary says so (and ``metrics_missing`` why there are
+    none, when it holds no reference yet).
     """
     import contextlib
     import tempfile
@@ -176,7 +180,7 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
         if tmp is not None:
             bag = Path(tmp) / 'bag'
         summary = _run(controller, payload_kg, duration_s, bag, params_files, extra_params, topics, progress,
-                       hardware, delivery, kept)
+                       hardware, delivery, kept, monitor)
     if not kept:
         summary.bag = None
     return summary
@@ -185,10 +189,14 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
 def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path | None,
          params_files: Sequence[str | Path], extra_params: dict[str, dict[str, Any]] | None,
          topics: Sequence[str] | None, progress: Callable[[float, float, float], None] | None, hardware: bool,
-         delivery: Any, kept: bool) -> RunSummary:
+         delivery: Any, kept: bool, monitor: dict[str, Any] | None) -> RunSummary:
     """:func:`run_closed_loop` with its bag (or none); ``kept``: the bag is the user's, not a temporary one."""
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
+    if monitor is not None:
+        from sma_wrist.nodes.twin_monitor import TwinMonitor
+        nodes.append(TwinMonitor)
+        extra_params = {**(extra_params or {}), '/twin_monitor': dict(monitor)}
     if params_files:  # all but hardware_bridge (graph_nodes puts the source first), which would open its port
         check_params(nodes[1:] if hardware else nodes, ros_args(params_files), params_files,
                      overrides(controller, payload_kg, source, extra_params))
@@ -202,7 +210,9 @@ def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path 
             rec = rt.record(bag, topics)
         from sma_wrist.nodes.common import add_or_refuse
         # a value a node refuses (a params file's): its reason, not rclpy's traceback
-        source_node = [add_or_refuse(rt, cls) for cls in nodes][0]
+        built = [add_or_refuse(rt, cls) for cls in nodes]
+        source_node = built[0]
+        monitor_node = built[-1] if monitor is not None else None
         chunk = max(duration_s / 100.0, 0.01)
         t = 0.0
         stall = _Stall(rt, DEVICE_STALL_S) if hardware else None
@@ -218,6 +228,12 @@ def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path 
         except KeyboardInterrupt:
             interrupted = True
         sim_s = (rt.sim_ns or 0) / 1e9
+        monitor_out = None
+        if monitor_node is not None:
+            v = monitor_node.verdict
+            monitor_out = {'checks': len(monitor_node.monitor.history), 'skipped_checks': monitor_node.skipped_checks,
+                           'verdict': v.to_json() if v is not None else None,
+                           'episodes': monitor_node.monitor.episodes()}
         why = source_node.why_no_data() if stalled else ''
         if bag is not None:
             recorded = rec.count
@@ -229,6 +245,7 @@ def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path 
             (f'. What the bridge saw: {why}' if why else ''))
     summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
                          time.perf_counter() - wall0, recorded, interrupted)
+    summary.monitor = monitor_out
     if bag is not None:
         from sma_wrist.bag import BagError
         from sma_wrist.runs import load_run, run_metrics

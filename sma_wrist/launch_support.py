@@ -99,12 +99,13 @@ def node_parameters(defaults: str, extra: str, executable: str, values: Mapping[
     return [defaults, *([extra] if extra.strip() else []), node_params_file(executable, values)]
 
 
-def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str
+def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str, monitor: bool = False
                 ) -> list[tuple[str, dict[str, Any]]]:
     """(executable, its own parameter overrides) of every node of the wrist graph, in start order.
 
     ``source`` owns /clock (plant_sim or hardware_bridge) and runs on its own clock; every other
-    node runs on /clock. The compensator only serves the inverse mode.
+    node runs on /clock. The compensator only serves the inverse mode; ``monitor`` adds twin_monitor (optional:
+    the graph does not depend on it).
     """
     specs = [(source, {'use_sim_time': False, **source_overrides}),
              ('trajectory_generator', {'use_sim_time': True}),
@@ -112,8 +113,18 @@ def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: st
     if controller == 'inverse_adaptive':
         specs.append(('hysteresis_compensator', {'use_sim_time': True}))
     specs.append(('tem_controller', {'use_sim_time': True}))
+    if monitor:
+        specs.append(('twin_monitor', {'use_sim_time': True}))
     return specs
 
 
-__all__ = ['REQUIRED_EXIT_REASONS', 'RequiredNodeFailed', 'node_params_file', 'node_parameters', 'graph_specs',
+def flag(text: str) -> bool:
+    """A launch argument's true / false (ros2 launch passes text)."""
+    v = text.strip().lower()
+    if v not in ('true', 'false', '1', '0', 'yes', 'no', ''):
+        raise ValueError(f'{text!r} is not true or false')
+    return v in ('true', '1', 'yes')
+
+
+__all__ = ['REQUIRED_EXIT_REASONS', 'RequiredNodeFailed', 'flag', 'graph_specs', 'node_parameters', 'node_params_file',
            'on_exit_actions', 'payload_override']

@@ -18,6 +18,7 @@ NODE_CLASSES = {
     'adaptive_controller': ('sma_wrist.nodes.adaptive_controller', 'AdaptiveController'),
     'hysteresis_compensator': ('sma_wrist.nodes.hysteresis_compensator', 'HysteresisCompensator'),
     'tem_controller': ('sma_wrist.nodes.tem_controller', 'TemController'),
+    'twin_monitor': ('sma_wrist.nodes.twin_monitor', 'TwinMonitor'),
 }
 
 

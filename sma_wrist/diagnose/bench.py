@@ -114,7 +114,7 @@ def record_clean_runs(directory: str, controllers: tuple[str, ...] = CONTROLLERS
     """Record one clean closed-loop bag per controller with the embedded runtime (plant_sim, 0.3 kg).
 
     The reference is the Sec. 6.1 sine from its first value (trajectory_generator ``soft_start_s: 0``), as in every
-    run the diagnosis figures (docs/diagnose.md) were measured on: the wrist moves from the first seconds. With the
+    run the diagnosis figures (doc/explanation/diagnosis.md) were measured on: the wrist moves from the first seconds. With the
     default 30 s soft start a 60 s run spends its first ~12 s still while the muscles warm, and the fit's first 60 %
     is then too little excited: thermocouple noise of 0.1-0.3 degC came out as a discrepancy."""
     from sma_wrist import runtime

@@ -63,6 +63,13 @@ class Run:
     valid: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
     source: str = ''
+    #: heat-balance state at t = 0 [degC] (2 layers, 2 faces: muscle, exchanger), when known from a replay that
+    #: ran before the stretch (a live monitor's twin); None: the exchanger faces start at rest, right for a run
+    #: that starts from rest, not for a window cut from the middle of one
+    thermal_x0: np.ndarray | None = None
+    #: the first settle_s [s] only settle the replays' memory (the wires' hysteresis, the joint): neither fitted nor
+    #: scored; the train / held-out split is over the rest. 0: the usual 5 s burn-in
+    settle_s: float = 0.0
 
     @property
     def n(self) -> int:
@@ -191,6 +198,14 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
                                          f'required (msg_defs/topics.yaml)') from None
             if s[0].size:
                 series[key] = s
+    return run_from_series(series, str(p), warnings, max_rate_hz)
+
+
+def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: str, warnings: list[str],
+                    max_rate_hz: float = 100.0) -> Run:
+    """Align cleaned series {key of TOPICS: (t [s], values)} into a Run, with the unit, stale-sensor and gap
+    checks of :func:`load_run`; the same path for a bag and for the samples a live monitor buffered."""
+    p = source
     have_u = 'u1' in series and 'u2' in series
     have_T = 'T1' in series and 'T2' in series
     have_q = 'joint' in series
@@ -309,4 +324,4 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
     for x, y in bridged:
         valid[(grid > x) & (grid < y)] = False
     return Run(t=grid - grid[0], dt=dt, u=u, T=T, q=q, payload_kg=payload, t0_s=float(grid[0]), warnings=warnings,
-               source=str(p), valid=valid)
+               source=source, valid=valid)

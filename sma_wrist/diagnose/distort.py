@@ -44,6 +44,13 @@ OFF_MODEL_THERMAL = (('muscle_face', 'K_alpha_tau', 0.7), ('muscle_face', 'K_R',
                      ('exchanger_face', 'K_T_inf', 1.35), ('exchanger_face', 'K_inf', 1.35))
 
 
+#: plant changes a running wrist undergoes (re-simulated from their onset on), and the subsystem each belongs to:
+#: ``tem_weak`` the TEMs' Peltier terms (both faces) lose this fraction, ``payload`` this mass [kg] is added at the
+#: lever (``/wrist/payload`` still says the old one), ``ambient_drift`` both faces' ambient / coolant temperature
+#: drifts at this rate [degC/h]; ``thermal_physics`` is the off-model heat balance above
+PLANT_SUBSYSTEM = {'thermal_physics': 'thermal', 'tem_weak': 'thermal', 'ambient_drift': 'thermal', 'payload': 'joint'}
+
+
 @dataclass(frozen=True)
 class Distortion:
     """One effect applied to a recording."""
@@ -55,7 +62,9 @@ class Distortion:
 
     @property
     def subsystem(self) -> str:
-        return {'u': 'actuator', 'plant': 'thermal'}.get(self.channel, 'sensor')
+        if self.channel == 'plant':
+            return PLANT_SUBSYSTEM.get(self.kind, 'thermal')
+        return {'u': 'actuator'}.get(self.channel, 'sensor')
 
     @property
     def id(self) -> str:
@@ -115,57 +124,153 @@ def off_model_params(scale: float = 1.0) -> PlantParams:
     return dataclasses.replace(p, thermal=dataclasses.replace(tp, **faces))
 
 
+def weak_tem_params(fraction: float, base: PlantParams | None = None) -> PlantParams:
+    """The plant whose TEMs lost `fraction` of their Peltier terms (K_alpha_tau, K_tau of both faces; Joule heating
+    and losses unchanged): a module weakening with age or a failing solder joint."""
+    p = base or PlantParams()
+    tp = p.thermal
+    faces = [dataclasses.replace(f, K_alpha_tau=f.K_alpha_tau * (1.0 - fraction), K_tau=f.K_tau * (1.0 - fraction))
+             for f in (tp.muscle_face, tp.exchanger_face)]
+    return dataclasses.replace(p, thermal=dataclasses.replace(tp, muscle_face=faces[0], exchanger_face=faces[1]))
+
+
+def ambient_params(shift_C: float, base: PlantParams | None = None) -> PlantParams:
+    """The plant with both faces' ambient / coolant temperatures `shift_C` [degC] away from Table 4.9's."""
+    p = base or PlantParams()
+    amb = p.thermal.effective_ambient_C
+    return dataclasses.replace(p, thermal=dataclasses.replace(p.thermal, ambient_C=(amb[0] + shift_C, amb[1] + shift_C)))
+
+
 def resimulate(run: Run, params: PlantParams | None = None, drive: Callable[[np.ndarray], np.ndarray] | None = None,
-               command_delay_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+               command_delay_s: float = 0.0, onset_s: float = 0.0,
+               change: Callable[[WristPlant, float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Open-loop plant run on the recorded commands: (T (K, 2) [degC], q (K,) [rad]) at the run's samples.
 
     The command recorded at sample k drives the plant until sample k+1 (plant_sim's
-    convention), after `command_delay_s` and the `drive` model.
+    convention), after `command_delay_s` and the `drive` model, which act from `onset_s` [s] on (before it the
+    commands are applied as recorded). `change(plant, t_since_onset)`, if given, is called before every sample
+    interval from the onset on and may change the plant's parameters or payload in place (a wrist that changes
+    while it runs).
     """
     params = params or PlantParams()
     u = run.u
+    i_on = int(np.searchsorted(run.t, onset_s - 1e-9))
     if command_delay_s > 0:
-        u = np.stack([late(run.t, u[:, i], command_delay_s) for i in (0, 1)], axis=1)
+        late_u = np.stack([late(run.t, u[:, i], command_delay_s) for i in (0, 1)], axis=1)
+        u = np.concatenate([u[:i_on], late_u[i_on:]])
     if drive is not None:
-        u = drive(u)
+        u = np.concatenate([u[:i_on], drive(u)[i_on:]])
     plant = WristPlant(params, payload_kg=run.payload_kg)
     steps = max(1, int(round(run.dt / params.dt)))
     T = np.empty((run.n, 2))
     q = np.empty(run.n)
     T[0], q[0] = plant.muscle_temperature_C[0], plant.state.q[0]
     for k in range(run.n - 1):
+        if change is not None and k >= i_on:
+            change(plant, float(run.t[k] - run.t[i_on]))
         s = plant.advance(u[k][None], steps)
         T[k + 1], q[k + 1] = plant.muscle_temperature_C[0], s.q[0]
     return T, q
 
 
+def plant_change(kind: str, value: float, base: PlantParams | None = None) -> Callable[[WristPlant, float], None]:
+    """A `change` for :func:`resimulate` (:data:`PLANT_SUBSYSTEM` kinds other than thermal_physics)."""
+    base = base or PlantParams()
+    if kind == 'tem_weak':
+        weak = weak_tem_params(value, base)
+
+        def tem(plant: WristPlant, t: float) -> None:
+            plant.params = weak
+        return tem
+    if kind == 'payload':
+        before: list[float] = []
+
+        def payload(plant: WristPlant, t: float) -> None:
+            if not before:  # the mass the wrist carried until the onset
+                before.append(float(plant.state.payload_kg[0]))
+            plant.state.payload_kg[:] = before[0] + value
+        return payload
+    if kind == 'ambient_drift':
+        state = {'step': -1}
+
+        def ambient(plant: WristPlant, t: float) -> None:
+            step = int(t)  # the ambient moves in 1 s steps: re-packing the plant's constants every 10 ms is slow
+            if step != state['step']:
+                state['step'] = step
+                plant.params = ambient_params(value / 3600.0 * step, base)
+        return ambient
+    raise ValueError(f'unknown plant change {kind!r}')
+
+
 # ----------------------------------------------------------------------------- one case
 def apply(run: Run, d: Distortion | None = None, noise_T_C: float = 0.0, noise_q_rad: float = 0.0,
-          seed: int = 0) -> Run:
-    """A copy of `run` with the distortion `d` (or none) and white sensor noise."""
+          seed: int = 0, onset_s: float = 0.0) -> Run:
+    """A copy of `run` with the distortion `d` (or none), beginning at `onset_s` [s of the run], and white sensor
+    noise. A sensor fault that begins mid-run starts from the true reading: a drift from zero, a lag from the
+    value at the onset, a delay from the onset on."""
     T = run.T.copy()
     q = run.q.copy()
+    i_on = int(np.searchsorted(run.t, onset_s - 1e-9))
+    t_on = run.t[i_on:]
     if d is not None:
         if d.channel == 'u':
             if d.kind == 'command_delay':
-                T, q = resimulate(run, command_delay_s=d.value)
+                T, q = resimulate(run, command_delay_s=d.value, onset_s=onset_s)
             else:
-                T, q = resimulate(run, drive=driver(d.kind, d.value))
+                T, q = resimulate(run, drive=driver(d.kind, d.value), onset_s=onset_s)
+        elif d.channel == 'plant' and d.kind == 'thermal_physics':
+            if onset_s > 0:
+                T, q = resimulate(run, onset_s=onset_s, change=_switch(off_model_params(d.value)))
+            else:
+                T, q = resimulate(run, params=off_model_params(d.value))
         elif d.channel == 'plant':
-            T, q = resimulate(run, params=off_model_params(d.value))
+            T, q = resimulate(run, onset_s=onset_s, change=plant_change(d.kind, d.value))
         elif d.channel == 'q':
-            q = rewrite(run.t, q, d.kind, d.value, Q_REF_RAD)
+            q[i_on:] = rewrite(t_on, q[i_on:], d.kind, d.value, Q_REF_RAD) if d.kind != 'delay' else \
+                late(run.t, q, d.value)[i_on:]
         else:
             for i in {'T1': (0,), 'T2': (1,), 'T': (0, 1)}[d.channel]:
-                T[:, i] = rewrite(run.t, T[:, i], d.kind, d.value, GAIN_REF_C)
+                T[i_on:, i] = rewrite(t_on, T[i_on:, i], d.kind, d.value, GAIN_REF_C) if d.kind != 'delay' else \
+                    late(run.t, T[:, i], d.value)[i_on:]
     rng = np.random.default_rng(seed)
     if noise_T_C > 0:
         T = T + rng.normal(0.0, noise_T_C, T.shape)
     if noise_q_rad > 0:
         q = q + rng.normal(0.0, noise_q_rad, q.shape)
-    label = d.id + f'={d.value:g}{d.unit}' if d is not None else 'clean'
+    label = (d.id + f'={d.value:g}{d.unit}' + (f' from {onset_s:g} s' if onset_s > 0 else '')) if d is not None else 'clean'
     return dataclasses.replace(run, T=T, q=q, warnings=list(run.warnings),
                                source=f'{run.source} [{label}, noise {noise_T_C:g} degC / {noise_q_rad:g} rad]')
+
+
+def _switch(params: PlantParams) -> Callable[[WristPlant, float], None]:
+    def switch(plant: WristPlant, t: float) -> None:
+        plant.params = params
+    return switch
+
+
+#: the realistic sensors of a real rig (the monitor's false-alarm runs): white noise, 16-bit ADC quantisation
+#: (temperatures over -50..150 degC, angle over -pi..pi) and periodic interference: mains hum at 50.1 Hz sampled at
+#: 100 Hz (aliased to 49.9 Hz) and a 0.7 Hz pump / fan line. Jittering stamps and dropped samples are the bag
+#: writer's (testdata.write_bag's ``stamp_jitter_s``, ``drop_rate``)
+REALISTIC = {'noise_T_C': 0.3, 'noise_q_rad': 3e-3, 'hum_T_C': 0.1, 'hum_q_rad': 1e-3, 'hum_hz': 50.1,
+             'line_T_C': 0.05, 'line_q_rad': 5e-4, 'line_hz': 0.7}
+
+
+def realistic(run: Run, seed: int = 0, scale: float = 1.0) -> Run:
+    """`run` read through realistic sensors (:data:`REALISTIC`, amplitudes times `scale`)."""
+    r = REALISTIC
+    rng = np.random.default_rng(seed)
+    phase = rng.uniform(0, 2 * np.pi, 4)
+    t = run.t[:, None]
+    T = (run.T + scale * (rng.normal(0.0, r['noise_T_C'], run.T.shape)
+                          + r['hum_T_C'] * np.sin(2 * np.pi * r['hum_hz'] * t + phase[:2])
+                          + r['line_T_C'] * np.sin(2 * np.pi * r['line_hz'] * t + phase[2:])))
+    q = (run.q + scale * (rng.normal(0.0, r['noise_q_rad'], run.q.shape)
+                          + r['hum_q_rad'] * np.sin(2 * np.pi * r['hum_hz'] * run.t + phase[0])
+                          + r['line_q_rad'] * np.sin(2 * np.pi * r['line_hz'] * run.t + phase[2])))
+    lsb_T, lsb_q = 200.0 / 2 ** 16, 2 * np.pi / 2 ** 16
+    return dataclasses.replace(run, T=np.round(T / lsb_T) * lsb_T, q=np.round(q / lsb_q) * lsb_q,
+                               warnings=list(run.warnings), source=f'{run.source} [realistic sensors x{scale:g}]')
 
 
 #: the sweep of the benchmark: effect -> magnitudes (weak, strong) and the catalogue causes

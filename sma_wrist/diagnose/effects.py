@@ -293,7 +293,12 @@ class ExtendedModel:
                 T0 = self.temp_inverse_static(self.T_start, kv, 0.0) if run.T is not None else self._rest[:, 0]
                 x0 = self._rest.copy()
                 x0[:, 1] += off  # exchanger face starts at its rest state, shifted by the ambient offset
-                x0[:, 1] += (T0 - self._rest[:, 0])
+                if getattr(run, 'thermal_x0', None) is not None:
+                    # a window cut from a longer run: the exchanger faces are where the earlier replay left them
+                    # (from rest, a 45 s window of a clean run was an 'unexplained thermal discrepancy')
+                    x0[:, 1] += np.asarray(run.thermal_x0)[:, 1] - self._rest[:, 1]
+                else:
+                    x0[:, 1] += (T0 - self._rest[:, 0])
                 x0[:, 0] = T0
                 x0s.append(x0)
             # one kernel call per distinct drive (delay, dead zone, saturation change the input itself)

@@ -85,6 +85,12 @@ class Evaluator:
         self.mask = np.ones(K) if run.valid is None else np.asarray(run.valid, float)
         self.i0 = min(int(BURN_IN_S / run.dt), K // 10)
         self.i_train = int(TRAIN_FRACTION * K)
+        settle = getattr(run, 'settle_s', 0.0)
+        if settle > 0:
+            # a window with a lead-in that only settles the replays' memory (a live monitor's): that part is
+            # neither fitted nor scored, and the split is over what follows it
+            self.i0 = max(self.i0, min(int(round(settle / run.dt)), K // 2))
+            self.i_train = self.i0 + int(TRAIN_FRACTION * (K - self.i0))
         self.seg_edges = np.linspace(self.i_train, K, N_SEGMENTS + 1).astype(int)
         # noise level per channel, floored at the replay's own resolution so that noise-free
         # (simulated) data is not held to a standard the replay cannot meet

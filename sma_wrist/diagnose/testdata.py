@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 from scipy.signal import lfilter
@@ -174,11 +174,17 @@ def run_from_truth(truth: Truth) -> 'Run':
 
 
 # ----------------------------------------------------------------------------- bags
-def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = None) -> Path:
+def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = None, nodes: Sequence[type] = (),
+              params: dict[str, dict[str, Any]] | None = None) -> Path:
     """Write a Truth as a rosbag2 (MCAP) bag through the embedded runtime and BagRecorder.
 
+    ``nodes``: node classes that run beside the publisher (they see the data live and their topics are recorded
+    too, e.g. twin_monitor), with ``params`` ({node: {name: value}}).
+
     corrupt: {'drop_topics': [...], 'nan_T': (start, n), 'kelvin': True, 'degrees': True,
-    'gap': (start_s, length_s), 'shuffle_stamps': n, 'duplicate_stamps': n}.
+    'gap': (start_s, length_s), 'shuffle_stamps': n, 'duplicate_stamps': n, 'stamp_jitter_s': sigma (white
+    jitter of the header stamps, clipped to +-0.4 of a sample), 'drop_rate': p (each measurement message lost
+    with probability p)}.
     """
     from sma_wrist import runtime
     runtime.activate()
@@ -217,6 +223,10 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     if c.get('duplicate_stamps'):
         i = rng.choice(np.arange(1, K - 1), c['duplicate_stamps'], replace=False)
         head[i] = head[i - 1]
+    if c.get('stamp_jitter_s'):
+        lim = 0.4 * truth.dt * 1e9
+        head = head + np.clip(rng.normal(0.0, c['stamp_jitter_s'] * 1e9, K), -lim, lim).astype(np.int64)
+    lost = rng.random((K, 3)) < c.get('drop_rate', 0.0)  # T1, T2, joint
     u = truth.u
     payload = truth.payload_kg
 
@@ -248,12 +258,12 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
                 p['/clock'].publish(Clock(clock=Time(nanoseconds=int(stamp_ns[k])).to_msg()))
             for i in (1, 2):
                 name = f'/wrist/muscle_{i}/temperature'
-                if name in p:
+                if name in p and not lost[k, i - 1]:
                     m = Temperature(temperature=float(T[k, i - 1]), variance=NOISE_T_C ** 2)
                     m.header.stamp = stamp
                     m.header.frame_id = f'muscle_{i}'
                     p[name].publish(m)
-            if '/wrist/joint_states' in p:
+            if '/wrist/joint_states' in p and not lost[k, 2]:
                 js = JointState(name=['wrist'], position=[float(q[k])], velocity=[0.0], effort=[0.0])
                 js.header.stamp = stamp
                 js.header.frame_id = 'wrist_base'
@@ -265,10 +275,18 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
 
     path = Path(path)
     try:
-        run_nodes([Measured], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady')
+        run_nodes([Measured, *nodes], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady',
+                  params=params)
     finally:
         rclpy.try_shutdown()
     return path
+
+
+def write_run_bag(run: 'Run', path: str | Path, corrupt: dict[str, Any] | None = None, seed: int = 0,
+                  nodes: Sequence[type] = (), params: dict[str, dict[str, Any]] | None = None) -> Path:
+    """Write an aligned Run (e.g. a recording rewritten by :mod:`.distort`) as a bag, like :func:`write_bag`."""
+    truth = Truth('recorded', {}, seed, run.payload_kg, run.dt, run.t, run.u, run.T, run.q)
+    return write_bag(truth, path, corrupt, nodes, params)
 
 
 def make_bag(path: str | Path, effect: str = 'none', seed: int = 0, duration_s: float = 240.0,

@@ -414,7 +414,7 @@ def add_or_refuse(rt: Any, node_class: type) -> Any:
 
 #: the package's nodes (setup.py's console scripts; test_config checks they agree)
 NODE_NAMES = ('plant_sim', 'hardware_bridge', 'trajectory_generator', 'adaptive_controller', 'hysteresis_compensator',
-              'tem_controller')
+              'tem_controller', 'twin_monitor')
 
 
 def undeclared_parameters(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:

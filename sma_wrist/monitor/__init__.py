@@ -1,0 +1,423 @@
+"""Live model monitoring of a running wrist: is it still its model, and if not, what changed since when.
+
+:class:`Monitor` is fed the contract topics as they arrive (TEM commands, muscle temperatures, the angle, the
+payload). It runs a :class:`~sma_wrist.monitor.twin.Twin` (the plant model on the measured commands) beside the
+wrist, keeps the recent samples, and every ``check_period_s`` runs the model-discrepancy diagnosis
+(:func:`sma_wrist.diagnose.diagnose_run`, doc/explanation/diagnosis.md) on a rolling window of them:
+
+* the window is ``settle_s + window_s`` long; the first ``settle_s`` only settle the replays' memory (the wires'
+  hysteresis and the joint start where the wrist was, not from rest), and the thermal replay starts from the twin's
+  heat-balance state (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`): cut from the middle of a clean run, a
+  window replayed from rest was an "unexplained discrepancy" in 2 of 3 checks;
+* a verdict is *raised* only when ``persist_checks`` consecutive checks agree on the subsystem with a confidence of
+  at least ``min_confidence``, and cleared after as many clean checks (a single noisy window is no alarm).
+
+The check is split so that a node can run the costly part in a worker thread: :meth:`Monitor.window` (cheap, under
+the node's lock) cuts the window, :meth:`Monitor.diagnose` (seconds of CPU) diagnoses it, :meth:`Monitor.decide`
+(cheap) updates the verdict. ``sma-wrist monitor BAG`` (:mod:`.playback`) plays a bag through the same object.
+See doc/howto/monitor.md.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from sma_wrist.diagnose.data import TOPICS, DiagnoseInputError, Run, run_from_series
+from sma_wrist.monitor.twin import Model, MonitorInputError, Twin, load_model
+
+__all__ = ['MonitorConfig', 'Monitor', 'Verdict', 'MonitorInputError', 'LEVELS']
+
+#: DiagnosticStatus levels (diagnostic_msgs): OK 0, WARN 1, ERROR 2
+LEVELS = {'OK': 0, 'WARN': 1, 'ERROR': 2}
+#: a known extension (a diagnosis' extended_params.yaml) is recognised when every parameter of a named cause is one
+#: of it and within this fraction of its value (or of its catalogue typical magnitude, for a value near 0)
+KNOWN_TOLERANCE = 0.3
+#: extra history kept beyond the window [s]: stamps jitter and the grid needs both ends
+MARGIN_S = 2.0
+
+
+@dataclass
+class MonitorConfig:
+    """What the monitor checks against and how often (every field is a node parameter and a CLI option)."""
+
+    window_s: float = 45.0  # scored part of the window [s]
+    settle_s: float = 20.0  # lead-in that settles the replays' memory [s]
+    check_period_s: float = 15.0  # time between checks [s]
+    persist_checks: int = 2  # consecutive agreeing checks before a verdict is raised or cleared
+    min_confidence: float = 0.5  # a discrepancy verdict below this confidence counts as OK
+    sure_confidence: float = 0.95  # a named cause at or above this confidence is raised by one check
+    candidates: tuple[str, ...] | None = None  # catalogue ids to try (None: all)
+    hysteresis_file: str = ''
+    thermal_file: str = ''
+    params_file: str = ''  # a diagnosis' extended_params.yaml
+
+    def check(self) -> 'MonitorConfig':
+        """Raise MonitorInputError for values that cannot work."""
+        from sma_wrist.diagnose.data import MIN_DURATION_S
+        if not (math.isfinite(self.window_s) and self.window_s >= MIN_DURATION_S - self.settle_s
+                and self.window_s >= 20.0):
+            raise MonitorInputError(f'window_s = {self.window_s:g} s: the diagnosis needs at least 20 s to score and '
+                                    f'{MIN_DURATION_S:g} s in all (window_s + settle_s)')
+        if not (math.isfinite(self.settle_s) and self.settle_s >= 0):
+            raise MonitorInputError(f'settle_s = {self.settle_s:g} s must be >= 0')
+        if not (math.isfinite(self.check_period_s) and self.check_period_s > 0):
+            raise MonitorInputError(f'check_period_s = {self.check_period_s:g} s must be > 0')
+        if self.persist_checks < 1:
+            raise MonitorInputError(f'persist_checks = {self.persist_checks} must be >= 1')
+        if not 0.0 <= self.min_confidence <= 1.0:
+            raise MonitorInputError(f'min_confidence = {self.min_confidence:g} must be in [0, 1]')
+        if not self.min_confidence <= self.sure_confidence <= 1.0:
+            raise MonitorInputError(f'sure_confidence = {self.sure_confidence:g} must be in [min_confidence, 1]')
+        if self.candidates:
+            from sma_wrist.diagnose import effects as fx
+            unknown = [c for c in self.candidates if c not in fx.EFFECTS]
+            if unknown:
+                raise MonitorInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
+        return self
+
+
+@dataclass
+class Verdict:
+    """What the monitor says after one check (times in the recording's / node's clock [s])."""
+
+    t_s: float  # end of the checked window
+    level: str  # OK | WARN | ERROR
+    cause: str | None  # catalogue id, 'unexplained', or None while OK / ERROR
+    subsystem: str | None
+    confidence: float
+    parameters: dict[str, float] = field(default_factory=dict)
+    gain_pct: float = 0.0
+    summary: str = ''
+    correlates: list[dict[str, Any]] = field(default_factory=list)
+    #: what this check's diagnosis said, before the persistence rule (the published level may differ)
+    check_cause: str | None = None
+    check_subsystem: str | None = None
+    check_confidence: float = 0.0
+    check_cpu_s: float = 0.0
+    since_s: float | None = None  # when the raised verdict was first seen (its onset as the monitor saw it)
+
+    def to_json(self) -> dict[str, Any]:
+        from sma_wrist.diagnose import _plain
+        return _plain(asdict(self))
+
+
+def _key(v: Verdict) -> tuple[str, str | None]:
+    """What must persist: the level and the subsystem (the cause may be refined from check to check)."""
+    return v.level, v.subsystem
+
+
+class Monitor:
+    """The monitor of one wrist; feed it with :meth:`command`, :meth:`temperature`, :meth:`angle`, :meth:`payload`."""
+
+    def __init__(self, config: MonitorConfig | None = None, model: Model | None = None) -> None:
+        self.config = (config or MonitorConfig()).check()
+        c = self.config
+        self.model = model or load_model(c.hysteresis_file or None, c.thermal_file or None, c.params_file or None)
+        self.twin: Twin | None = None
+        self.payload_kg: float | None = None
+        self._payload_pending = 0.3
+        self._buf: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in TOPICS if k != 'payload'}
+        self._states: tuple[list[float], list[np.ndarray]] = ([], [])
+        self.t_first: float | None = None
+        self.t_last: float | None = None
+        self.last_check: float | None = None
+        self.history: list[Verdict] = []
+        self.current: Verdict | None = None  # the raised verdict
+        self._streak: list[Verdict] = []
+
+    # -- input ----------------------------------------------------------------------------------------------
+    def payload(self, kg: float) -> None:
+        """``/wrist/payload`` [kg] (latched): the twin carries it."""
+        self.payload_kg = float(kg)
+        if self.twin is not None:
+            self.twin.set_payload(kg)
+
+    def command(self, i: int, t_s: float, volts: float) -> None:
+        """TEM ``i`` (1, 2) commanded ``volts`` [V] at ``t_s`` [s]."""
+        if not math.isfinite(volts):
+            return
+        self._append(f'u{i}', t_s, volts)
+        self._ensure_twin(t_s).set_command(i - 1, volts)
+
+    def temperature(self, i: int, t_s: float, celsius: float) -> None:
+        """Muscle ``i`` (1, 2) measured ``celsius`` [degC], stamped ``t_s`` [s]."""
+        self._append(f'T{i}', t_s, celsius)
+        if not self._buf['joint'][0] and i == 1:  # no angle topic: the thermocouple's stamps clock the twin
+            self.tick(t_s)
+
+    def angle(self, t_s: float, rad: float) -> None:
+        """Wrist angle [rad] stamped ``t_s`` [s]; clocks the twin."""
+        self._append('joint', t_s, rad)
+        self.tick(t_s)
+
+    def tick(self, t_s: float) -> None:
+        """Advance the twin to the measurement stamp ``t_s`` [s] and keep its heat-balance state."""
+        tw = self._ensure_twin(t_s)
+        tw.advance_to(t_s)
+        ts, xs = self._states
+        if not ts or t_s > ts[-1]:
+            ts.append(float(tw.t))
+            xs.append(tw.thermal_state)
+
+    def _ensure_twin(self, t_s: float) -> Twin:
+        if self.twin is None:
+            self.twin = Twin(self.model, self.payload_kg if self.payload_kg is not None else self._payload_pending)
+            self.twin.advance_to(t_s)
+        return self.twin
+
+    def _append(self, key: str, t_s: float, v: float) -> None:
+        t, x = self._buf[key]
+        t.append(float(t_s))
+        x.append(float(v))
+        if self.t_first is None or t_s < self.t_first:
+            self.t_first = float(t_s)
+        if self.t_last is None or t_s > self.t_last:
+            self.t_last = float(t_s)
+
+    def residuals(self) -> dict[str, float]:
+        """Latest measured minus twin: ``T1``, ``T2`` [degC] and ``q`` [rad] (NaN where nothing was measured)."""
+        out = {'T1': float('nan'), 'T2': float('nan'), 'q': float('nan')}
+        if self.twin is None:
+            return out
+        T = self.twin.temperatures_C
+        for i in (1, 2):
+            x = self._buf[f'T{i}'][1]
+            if x:
+                out[f'T{i}'] = x[-1] - float(T[i - 1])
+        if self._buf['joint'][1]:
+            out['q'] = self._buf['joint'][1][-1] - self.twin.angle_rad
+        return out
+
+    # -- checks ---------------------------------------------------------------------------------------------
+    @property
+    def span_s(self) -> float:
+        return self.config.window_s + self.config.settle_s
+
+    def due(self, t_s: float) -> bool:
+        """A check is due at ``t_s``: a full window of data and ``check_period_s`` since the last check."""
+        if self.t_first is None or t_s - self.t_first < self.span_s:
+            return False
+        return self.last_check is None or t_s - self.last_check >= self.config.check_period_s - 1e-9
+
+    def window(self, t_s: float) -> Run | str:
+        """The window ending at ``t_s`` as a Run (or a message saying why it cannot be checked); trims the buffers.
+
+        Cheap: call it where the samples arrive (under the node's lock), then :meth:`diagnose` elsewhere."""
+        self.last_check = t_s
+        lo = t_s - self.span_s
+        self._trim(lo - MARGIN_S)
+        series = {}
+        for k, (t, x) in self._buf.items():
+            ta, xa = np.asarray(t), np.asarray(x)
+            sel = (ta >= lo) & (ta <= t_s)
+            if sel.sum() > 1:
+                o = np.argsort(ta[sel], kind='stable')
+                series[k] = (ta[sel][o], xa[sel][o])
+        if self.payload_kg is not None:
+            series['payload'] = (np.array([lo]), np.array([self.payload_kg]))
+        warnings: list[str] = []
+        if 'u1' not in series or 'u2' not in series:
+            return (f'no TEM commands in the last {self.span_s:g} s: the twin runs on {TOPICS["u1"]} and '
+                    f'{TOPICS["u2"]} (std_msgs/Float64, V); is tem_controller (or the bridge) running?')
+        try:
+            run = run_from_series(series, f'window {lo:.1f}-{t_s:.1f} s', warnings)
+        except DiagnoseInputError as exc:
+            return str(exc)
+        # the heat-balance state the twin had at the window's first sample
+        ts, xs = self._states
+        if ts:
+            j = int(np.clip(np.searchsorted(np.asarray(ts), run.t0_s + 1e-9) - 1, 0, len(ts) - 1))
+            run.thermal_x0 = xs[j]
+        run.settle_s = min(self.config.settle_s, max(run.duration - 20.0, 0.0))
+        return run
+
+    def _trim(self, t_min: float) -> None:
+        for t, x in list(self._buf.values()) + [self._states]:
+            n = int(np.searchsorted(np.asarray(t), t_min)) if t else 0
+            if n > 0:
+                del t[:n]
+                del x[:n]
+
+    def diagnose(self, window: Run | str, t_s: float) -> Verdict:
+        """Diagnose one window (the costly part: seconds of CPU); returns this check's verdict, before persistence."""
+        m = self.model
+        return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension)
+
+    def needed(self, v: Verdict) -> int:
+        """Consecutive checks that must agree before ``v`` is published: ``persist_checks``, one for a cause named
+        with at least ``sure_confidence``; for an unexplained
+        discrepancy, as many as it takes the window to hold only data after a change (a wrist that changed inside
+        the window fits no constant model: the windows straddling a change are unexplained before the change
+        is named)."""
+        k = self.config.persist_checks
+        if v.cause == 'unexplained':
+            return k + int(math.ceil(self.span_s / self.config.check_period_s - 1e-9))
+        if v.level == 'WARN' and v.confidence >= self.config.sure_confidence:
+            # a cause named with (nearly) every bootstrap resample agreeing: raised at once, so that an effect is
+            # named within window_s + check_period_s of its onset (one check later, 75 s with the defaults)
+            return 1
+        return k
+
+    def decide(self, v: Verdict) -> Verdict:
+        """Apply the persistence rule to this check's verdict; returns the published one and keeps it in history."""
+        cur = self.current
+        if _key(v) == (_key(cur) if cur is not None else ('OK', None)):
+            self._streak = []
+            if v.level != 'OK':
+                v.since_s = cur.since_s if cur is not None else v.t_s
+                self.current = v  # the same subsystem: refreshed cause, parameters, confidence
+            out = v
+        else:
+            if self._streak and _key(self._streak[-1]) != _key(v):
+                self._streak = []
+            self._streak.append(v)
+            if len(self._streak) >= self.needed(v):
+                since = self._streak[0].t_s
+                self._streak = []
+                if v.level == 'OK':
+                    self.current = None
+                else:
+                    v.since_s = since
+                    self.current = v
+                out = v
+            else:  # not (yet) persistent: the raised verdict (or OK) stands; this check's view is attached
+                pending = (f'{v.level} {v.cause or ""} in this check ({len(self._streak)} of '
+                           f'{self.needed(v)} needed): ')
+                if cur is None:
+                    out = Verdict(v.t_s, 'OK', None, None, v.confidence if v.level == 'OK' else 1.0 - v.confidence,
+                                  summary=pending + v.summary)
+                else:
+                    out = Verdict(v.t_s, cur.level, cur.cause, cur.subsystem, cur.confidence, dict(cur.parameters),
+                                  cur.gain_pct, pending + v.summary, list(cur.correlates), since_s=cur.since_s)
+                out.check_cause, out.check_subsystem = v.check_cause, v.check_subsystem
+                out.check_confidence, out.check_cpu_s = v.check_confidence, v.check_cpu_s
+        self.history.append(out)
+        return out
+
+    def check(self, t_s: float) -> Verdict:
+        """Cut, diagnose and decide in one call (what playback does; a node splits it over its worker thread)."""
+        return self.decide(self.diagnose(self.window(t_s), t_s))
+
+    # -- history --------------------------------------------------------------------------------------------
+    def episodes(self) -> list[dict[str, Any]]:
+        """Each raised verdict once: level, subsystem, the causes named (first first), onset_s (the first check that
+        saw it), raised_s (when it was published), until_s (None: still raised)."""
+        out: list[dict[str, Any]] = []
+        for v in self.history:
+            open_ = out[-1] if out and out[-1]['until_s'] is None else None
+            if v.level == 'OK' or (open_ is not None and (open_['level'], open_['subsystem']) != _key(v)):
+                if open_ is not None:
+                    open_['until_s'] = v.t_s
+                    open_ = None
+            if v.level == 'OK':
+                continue
+            if open_ is None:
+                out.append({'level': v.level, 'subsystem': v.subsystem, 'cause': v.cause, 'causes': [],
+                            'onset_s': v.since_s if v.since_s is not None else v.t_s, 'raised_s': v.t_s,
+                            'until_s': None, 'parameters': dict(v.parameters), 'confidence': v.confidence})
+                open_ = out[-1]
+            if v.cause is not None and v.cause not in open_['causes']:
+                open_['causes'].append(v.cause)
+            open_['parameters'], open_['confidence'] = dict(v.parameters), v.confidence
+        return out
+
+
+def diagnose_window(window: Run | str, t_s: float, config: MonitorConfig, hysteresis_file: str | None = None,
+                    thermal_file: str | None = None, extension: dict[str, float] | None = None) -> Verdict:
+    """One check's verdict on a window (:meth:`Monitor.window`), before persistence; a plain function of picklable
+    arguments, so that a node can run it in a worker process. ``extension``: the known model extension."""
+    import time
+    if isinstance(window, str):
+        return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {window}')
+    from sma_wrist.diagnose import diagnose_run
+    c0 = time.process_time()
+    c = config
+    try:
+        res = diagnose_run(window, candidates=list(c.candidates) if c.candidates else None,
+                           hysteresis_file=hysteresis_file, thermal_file=thermal_file)
+    except DiagnoseInputError as exc:
+        return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {exc}', check_cpu_s=time.process_time() - c0)
+    cpu = time.process_time() - c0
+    params = {k: v['value'] for k, v in res.parameters.items()}
+    if not res.discrepancy:
+        return Verdict(t_s, 'OK', None, None, res.confidence, summary=res.summary, check_confidence=res.confidence,
+                       check_cpu_s=cpu)
+    cause = res.cause or 'unexplained'
+    seen = {'check_cause': cause, 'check_subsystem': res.subsystem, 'check_confidence': res.confidence,
+            'check_cpu_s': cpu}
+    if res.confidence < c.min_confidence:
+        return Verdict(t_s, 'OK', None, None, 1.0 - res.confidence,
+                       summary=f'not raised (confidence {res.confidence:.2f} < {c.min_confidence:g}): {res.summary}',
+                       **seen)
+    if known(res.cause, params, extension or {}):
+        return Verdict(t_s, 'OK', None, None, res.confidence,
+                       summary=f'the known extension of the model: {res.summary}', **seen)
+    return Verdict(t_s, 'WARN', cause, res.subsystem, res.confidence, params, res.gain_pct, res.summary,
+                   res.correlates if cause == 'unexplained' else [], **seen)
+
+
+def known(cause: str | None, params: dict[str, float], extension: dict[str, float]) -> bool:
+    """The named cause is the extension the model was given (a diagnosis' params file), at about its values."""
+    if not cause or not extension or not params or any(k not in extension for k in params):
+        return False
+    from sma_wrist.diagnose import effects as fx
+    return all(abs(v - extension[k]) <= KNOWN_TOLERANCE * max(abs(extension[k]), float(fx.TYPICAL[fx.INDEX[k]]))
+               for k, v in params.items())
+
+
+HISTORY_FIELDS = ('t_s', 'level', 'cause', 'subsystem', 'confidence', 'gain_pct', 'check_cause', 'check_subsystem',
+                  'check_confidence', 'since_s', 'parameters', 'summary')
+
+
+def history_text(history: Sequence[Verdict], fmt: str, episodes: list[dict[str, Any]] | None = None) -> str:
+    """The verdict history as ``csv``, ``json`` or ``md`` (markdown table)."""
+    rows = [v.to_json() for v in history]
+    if fmt == 'json':
+        return json.dumps({'verdicts': rows, 'episodes': episodes or []}, indent=1)
+    def cell(r: dict[str, Any], k: str) -> str:
+        x = r.get(k)
+        if isinstance(x, dict):
+            return '; '.join(f'{a} = {b:.4g}' for a, b in x.items())
+        if isinstance(x, float):
+            return f'{x:.4g}'
+        return '' if x is None else str(x)
+    if fmt == 'csv':
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(HISTORY_FIELDS)
+        for r in rows:
+            w.writerow([cell(r, k) for k in HISTORY_FIELDS])
+        return buf.getvalue()
+    if fmt == 'md':
+        cols = ('t_s', 'level', 'cause', 'subsystem', 'confidence', 'parameters', 'summary')
+        lines = ['# Model monitor: verdict history', '', '| ' + ' | '.join(cols) + ' |', '|' + '---|' * len(cols)]
+        lines += ['| ' + ' | '.join(cell(r, k).replace('|', '/') for k in cols) + ' |' for r in rows]
+        return '\n'.join(lines) + '\n'
+    raise MonitorInputError(f'history format {fmt!r}: use a file ending .csv, .json or .md')
+
+
+def history_format(path: str | Path) -> str:
+    """csv | json | md from a file name; MonitorInputError otherwise."""
+    ext = Path(path).suffix.lower().lstrip('.')
+    fmt = {'csv': 'csv', 'json': 'json', 'md': 'md', 'markdown': 'md'}.get(ext)
+    if fmt is None:
+        raise MonitorInputError(f'{path}: the verdict history is written as .csv, .json or .md (got {ext or "no"} '
+                                f'extension)')
+    return fmt
+
+
+def write_history(path: str | Path, history: Sequence[Verdict], episodes: list[dict[str, Any]] | None = None) -> Path:
+    p = Path(path)
+    text = history_text(history, history_format(p), episodes)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(p.name + '.tmp')
+    tmp.write_text(text)
+    tmp.replace(p)  # a reader never sees half a file
+    return p

@@ -1,0 +1,148 @@
+"""The digital twin of a running wrist: the plant model driven by the measured TEM commands.
+
+:class:`Twin` steps :class:`sma_wrist.core.plant.wrist.WristPlant` (the plant ``plant_sim`` runs, at its 1 kHz
+step) over each interval between two measurement stamps under the command held over it (the command stamped at
+t_k drives [t_k, t_k+1), plant_sim's convention and the diagnosis'). Its predictions are what the wrist would read
+if it were its model; its heat-balance state at the start of a check window is where the diagnosis' thermal replay
+of that window starts (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`), because a window cut from the middle of a
+run does not start with its heat exchangers at rest.
+
+:func:`load_model` builds the model from the files a user has: the identified wire (``hysteresis_file``), the
+identified TEMs (``thermal_file``), or a diagnosis' ``extended_params.yaml`` (which may name both, plus the fitted
+``model.*`` extension).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+
+
+class MonitorInputError(SmaWristError):
+    """The monitor cannot run: the message names what is missing or wrong and how to get it."""
+
+
+@dataclass
+class Model:
+    """What the twin simulates and what the monitor expects to see."""
+
+    params: PlantParams
+    #: a diagnosis' extended model {name: value} (sma_wrist.core.plant.extensions names), {} for the plain model:
+    #: a verdict naming these parameters near these values is the known wrist, not a new discrepancy
+    extension: dict[str, float] = field(default_factory=dict)
+    hysteresis_file: str | None = None
+    thermal_file: str | None = None
+    payload_err_kg: float = 0.0
+    description: str = 'the built-in model'
+
+
+def _readable(path: str, what: str, how: str) -> Path:
+    p = Path(path).expanduser()
+    if not p.is_file():
+        raise MonitorInputError(f'{what} {path}: no such file ({how})')
+    return p
+
+
+def load_model(hysteresis_file: str | None = None, thermal_file: str | None = None,
+               params_file: str | None = None) -> Model:
+    """The twin's model; raises MonitorInputError naming the file that does not load and how to make one."""
+    import yaml
+
+    from sma_wrist.core.plant import extensions as mx
+    ext: dict[str, float] = {}
+    src = []
+    if params_file:
+        p = _readable(params_file, 'params file', 'sma-wrist diagnose BAG --params FILE writes one')
+        try:
+            doc = yaml.safe_load(p.read_text())
+            node = next(iter(doc.values())) if isinstance(doc, dict) and doc else None
+            values = node['ros__parameters'] if isinstance(node, dict) else None
+            if not isinstance(values, dict):
+                raise ValueError('no "<node>: ros__parameters:" mapping')
+        except (yaml.YAMLError, ValueError, StopIteration, KeyError, TypeError) as exc:
+            raise MonitorInputError(f'params file {params_file}: not a ROS 2 params file ({exc}); expected what '
+                                    f'sma-wrist diagnose --params writes (doc/howto/diagnose.md)') from None
+        hysteresis_file = hysteresis_file or values.get('hysteresis_file') or None
+        thermal_file = thermal_file or values.get('thermal_file') or None
+        known = {e.name for e in mx.PARAMS}
+        unknown = [k for k in values if k.startswith('model.') and k[6:] not in known]
+        if unknown:
+            raise MonitorInputError(f'params file {params_file}: unknown model parameter(s) {", ".join(unknown)} '
+                                    f'(sma_wrist/core/plant/extensions.py lists them)')
+        ext = {k[6:]: float(v) for k, v in values.items() if k.startswith('model.')}
+        src.append(f'the extended model of {params_file}')
+    for f, what, how in ((hysteresis_file, 'hysteresis_file', 'sma-wrist identify hysteresis writes one'),
+                         (thermal_file, 'thermal_file', 'sma-wrist identify thermal writes one')):
+        if f:
+            _readable(f, what, how)
+            src.append(f'{what} {f}')
+    try:
+        base = PlantParams.from_files(hysteresis_file, thermal_file)
+    except SmaWristError as exc:
+        raise MonitorInputError(f'model files do not load: {exc}') from None
+    except Exception as exc:  # noqa: BLE001 - a broken file is the user's problem to fix, said in one line
+        raise MonitorInputError(f'model files do not load ({type(exc).__name__}: {exc}); write them with sma-wrist '
+                                f'identify (hysteresis / thermal)') from None
+    values_all = dict(mx.NOMINAL)
+    values_all.update(ext)
+    simulated = {k: (v if k not in mx.REPLAY_ONLY else mx.NOMINAL[k]) for k, v in values_all.items()}
+    try:
+        params = mx.plant_params(simulated, base)
+    except SmaWristError as exc:
+        raise MonitorInputError(f'params file {params_file}: {exc}') from None
+    return Model(params, {k: v for k, v in ext.items() if v != mx.NOMINAL.get(k)}, hysteresis_file, thermal_file,
+                 float(values_all.get('payload_err_kg', 0.0)), ', '.join(src) or 'the built-in model')
+
+
+class Twin:
+    """The model wrist stepped beside the real one (``plant_sim``'s plant, no sensor effects)."""
+
+    def __init__(self, model: Model, payload_kg: float) -> None:
+        self.model = model
+        self.payload_kg = float(payload_kg)
+        self.plant = WristPlant(model.params, payload_kg=max(self.payload_kg + model.payload_err_kg, 0.0))
+        self.t: float | None = None  # stamp of the state [s]
+        self.command_V = np.zeros((1, 2))
+
+    def set_payload(self, payload_kg: float) -> None:
+        """The recorded payload changed (``/wrist/payload``): the twin carries the new mass from now on."""
+        self.payload_kg = float(payload_kg)
+        self.plant.state.payload_kg[:] = max(self.payload_kg + self.model.payload_err_kg, 0.0)
+
+    def set_command(self, i: int, volts: float) -> None:
+        """TEM ``i`` (0, 1) was commanded ``volts`` [V]; it drives the twin from the next measurement stamp on."""
+        self.command_V[0, i] = volts
+
+    def advance_to(self, t_s: float) -> None:
+        """Integrate to the measurement stamp ``t_s`` [s] under the held commands (steps of the plant's dt)."""
+        if self.t is None or t_s <= self.t:
+            self.t = t_s if self.t is None else self.t
+            return
+        n = int(round((t_s - self.t) / self.model.params.dt))
+        if n > 0:
+            # a stamp far ahead (a pause of the recording) is integrated too: the plant went on meanwhile
+            self.plant.advance(self.command_V, n)
+            self.t += n * self.model.params.dt
+
+    @property
+    def temperatures_C(self) -> np.ndarray:
+        """Predicted muscle temperatures (2,) [degC]."""
+        return self.plant.muscle_temperature_C[0].copy()
+
+    @property
+    def angle_rad(self) -> float:
+        """Predicted wrist angle [rad]."""
+        return float(self.plant.state.q[0])
+
+    @property
+    def thermal_state(self) -> np.ndarray:
+        """Heat-balance state (2 layers, 2 faces) [degC]."""
+        return np.array(self.plant.state.thermal[0], dtype=float)
+
+    def describe(self) -> dict[str, Any]:
+        return {'model': self.model.description, 'payload_kg': self.payload_kg}

@@ -1,0 +1,211 @@
+"""The live model monitor (sma_wrist.monitor, sma-wrist monitor, twin_monitor) on effects that begin mid-run.
+
+A clean closed-loop run of the node graph (pid, 0.3 kg, 150 s) is recorded once per session; the independent
+effect generator (:mod:`sma_wrist.diagnose.distort`, which does not use the diagnosis' extension code) starts an
+effect at ``ONSET_S`` and the rewritten run is written as a bag. The monitor must stay OK before the onset and name
+the right subsystem after it; a nominal run read through realistic sensors must raise nothing.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sma_wrist.diagnose import distort as ds
+from sma_wrist.diagnose import testdata as td
+from sma_wrist.diagnose.data import load_run
+from sma_wrist.monitor import Monitor, MonitorConfig, MonitorInputError, Verdict, history_text
+from sma_wrist.monitor.playback import monitor_bag
+
+RUN_S = 150.0
+ONSET_S = 70.0
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope='module')
+def clean_run(tmp_path_factory):
+    """A clean 150 s closed-loop recording (pid), loaded."""
+    from sma_wrist.diagnose.bench import record_clean_runs
+    bags = record_clean_runs(str(tmp_path_factory.mktemp('monitor')), ('pid',), RUN_S)
+    return load_run(bags['pid'])
+
+
+def _bag(run, path, d=None, onset=ONSET_S, realistic=False):  # type: ignore[no-untyped-def]
+    if realistic:
+        r = ds.realistic(run, seed=5)
+        return td.write_run_bag(r, path, {'stamp_jitter_s': 1e-3, 'drop_rate': 1e-3})
+    return td.write_run_bag(ds.apply(run, d, 0.1, 1e-3, 2, onset_s=onset), path)
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess:
+    env = {'PYTHONPATH': str(ROOT), 'PATH': '/usr/bin:/bin'}
+    return subprocess.run([sys.executable, '-m', 'sma_wrist', 'monitor', *args], capture_output=True, text=True,
+                          cwd=ROOT, env={**__import__('os').environ, **env})
+
+
+def test_the_generator_starts_an_effect_at_its_onset(clean_run):
+    """Before the onset the rewritten run is the recording; after it, the effect."""
+    r = ds.apply(clean_run, ds.Distortion('offset', 'T1', 3.0, 'degC'), onset_s=ONSET_S)
+    before = clean_run.t < ONSET_S - 1e-9
+    assert np.array_equal(r.T[before], clean_run.T[before])
+    assert np.allclose(r.T[~before, 0] - clean_run.T[~before, 0], 3.0)
+    p = ds.apply(clean_run, ds.Distortion('payload', 'plant', 0.2, 'kg'), onset_s=ONSET_S)
+    assert np.abs(p.q[before] - clean_run.q[before]).max() < 1e-6  # re-simulated: the same plant until the onset
+    assert np.abs(p.q[~before] - clean_run.q[~before]).max() > 0.01  # then a heavier wrist sags
+    for kind, value in (('ambient_drift', 20.0), ('tem_weak', 0.2)):  # the heat balance changes from the onset on
+        h = ds.apply(clean_run, ds.Distortion(kind, 'plant', value, ''), onset_s=ONSET_S)
+        assert np.abs(h.T[before] - clean_run.T[before]).max() < 1e-6
+        assert np.abs(h.T[~before] - clean_run.T[~before]).max() > 0.1, kind
+
+
+@pytest.mark.parametrize('effect,subsystem', [
+    (('offset', 'T1', 3.0), 'sensor'),          # a thermocouple coming loose
+    (('payload', 'plant', 0.2), 'joint'),        # a heavier payload than /wrist/payload says
+], ids=['thermocouple offset', 'heavier payload'])
+def test_an_effect_beginning_mid_run_is_named_after_its_onset_and_ok_before(clean_run, tmp_path, effect, subsystem):
+    bag = _bag(clean_run, tmp_path / 'bag', ds.Distortion(*effect, ''))
+    out = tmp_path / 'history.csv'
+    r = _cli(str(bag), '--json', '--out', str(out))
+    assert r.returncode == 0, r.stderr + r.stdout
+    res = json.loads(r.stdout)
+    vs = res['verdicts']
+    assert {'t_s', 'level', 'cause', 'subsystem', 'confidence'} <= set(vs[0])
+    assert res['wall_s'] > 0
+    # every check whose window ended before the onset: OK, cause and subsystem null
+    early = [v for v in vs if v['t_s'] < ONSET_S]
+    assert early and all(v['level'] == 'OK' and v['cause'] is None and v['subsystem'] is None for v in early), early
+    raised = [v for v in vs if v['level'] == 'WARN']
+    assert raised, [(v['t_s'], v['check_cause']) for v in vs]
+    first = raised[0]
+    assert first['subsystem'] == subsystem, first
+    assert first['t_s'] - ONSET_S <= 60.0
+    assert all(v['subsystem'] == subsystem for v in raised)
+    assert res['onset_s'][first['cause']] >= ONSET_S
+    text = out.read_text()
+    assert text.splitlines()[0].startswith('t_s,level,cause,subsystem') and first['cause'] in text
+
+
+def test_a_nominal_run_through_realistic_sensors_raises_nothing(clean_run, tmp_path):
+    """0.3 degC / 3 mrad white noise, 16-bit quantisation, mains hum and a 0.7 Hz line, jittering stamps and
+    dropped samples: no WARN, no ERROR."""
+    bag = _bag(clean_run, tmp_path / 'bag', realistic=True)
+    res = monitor_bag(bag)
+    res.pop('_monitor')
+    assert res['checks'] >= 5
+    assert all(v['level'] == 'OK' for v in res['verdicts']), [(v['t_s'], v['level'], v['summary'][:120])
+                                                              for v in res['verdicts']]
+    assert res['episodes'] == [] and res['onset_s'] == {}
+
+
+def test_a_bag_without_the_commands_is_refused_with_what_to_record(tmp_path):
+    truth = td.simulate('none', seed=1, duration_s=40.0)
+    bag = td.write_bag(truth, tmp_path / 'no_commands', {'drop_topics': ['/wrist/tem_1/command', '/wrist/tem_2/command']})
+    for args in ((), ('--json',)):
+        r = _cli(str(bag), *args)
+        text = r.stdout + r.stderr
+        assert r.returncode == 2 and 'Traceback' not in text, text
+        assert '/wrist/tem_1/command' in text and 'ros2 bag record' in text
+        if args:
+            assert 'error' in json.loads(r.stdout)
+
+
+def test_model_files_that_do_not_load_are_named(tmp_path):
+    truth = td.simulate('none', seed=1, duration_s=40.0)
+    bag = td.write_bag(truth, tmp_path / 'bag')
+    broken = tmp_path / 'hysteresis.yaml'
+    broken.write_text('not: [a wire')
+    cases = [(('--hysteresis-file', str(tmp_path / 'missing.yaml')), 'missing.yaml: no such file'),
+             (('--hysteresis-file', str(broken)), 'model files do not load'),
+             (('--params-file', str(broken)), 'not a ROS 2 params file'),
+             (('--out', str(tmp_path / 'history.txt')), '.csv, .json or .md')]
+    for args, named in cases:
+        r = _cli(str(bag), *args)
+        assert r.returncode == 2 and named in r.stderr and 'Traceback' not in r.stderr, (args, r.stderr)
+
+
+def test_persistence_raises_after_k_agreeing_checks_and_clears_after_k_clean_ones():
+    """The rule on its own (no diagnosis): one odd check is no alarm; a changed subsystem must persist too."""
+    mon = Monitor(MonitorConfig(persist_checks=2))
+    ok = lambda t: Verdict(t, 'OK', None, None, 1.0)  # noqa: E731
+    warn = lambda t, s='sensor', c='temp_sensor_offsets', p=0.9: Verdict(t, 'WARN', c, s, p, check_cause=c,  # noqa: E731
+                                                                         check_subsystem=s, check_confidence=p)
+    seq = [ok(0), warn(15), ok(30), warn(45), warn(60), warn(75, c='temp_sensor_offset'), warn(90, 'joint',
+           'payload_mismatch'), warn(105), ok(120), ok(135)]
+    levels = [(v.level, v.subsystem) for v in (mon.decide(v) for v in seq)]
+    assert levels == [('OK', None), ('OK', None), ('OK', None), ('OK', None), ('WARN', 'sensor'), ('WARN', 'sensor'),
+                      ('WARN', 'sensor'), ('WARN', 'sensor'), ('WARN', 'sensor'), ('OK', None)]
+    ep = mon.episodes()
+    assert len(ep) == 1 and ep[0]['onset_s'] == 45 and ep[0]['raised_s'] == 60 and ep[0]['until_s'] == 135
+    assert ep[0]['causes'] == ['temp_sensor_offsets', 'temp_sensor_offset']
+    md = history_text(mon.history, 'md')
+    assert md.count('\n| ') == len(seq) + 1 and '| WARN | temp_sensor_offset |' in md
+    # a cause named with (nearly) every bootstrap resample agreeing is raised by one check; clearing still takes two
+    mon = Monitor(MonitorConfig(persist_checks=2, sure_confidence=0.95))
+    levels = [mon.decide(v).level for v in (ok(0), warn(15, p=0.97), ok(30), ok(45))]
+    assert levels == ['OK', 'WARN', 'WARN', 'OK']
+
+
+def test_bad_monitor_settings_are_refused():
+    for kw, named in (({'window_s': 5.0}, 'window_s'), ({'check_period_s': 0.0}, 'check_period_s'),
+                      ({'candidates': ('friction', 'nope')}, 'nope')):
+        with pytest.raises(MonitorInputError, match=named):
+            MonitorConfig(**kw).check()
+
+
+def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clean_run, tmp_path):
+    """The node on the embedded runtime beside a wrist whose thermocouple 1 reads 3 degC high from ONSET_S on
+    (checks inline, so that every one is made on the virtual clock)."""
+    from sma_wrist.bag import read_bag
+    from sma_wrist.nodes.twin_monitor import TwinMonitor
+    hist = tmp_path / 'verdicts.json'
+    run = ds.apply(clean_run, ds.Distortion('offset', 'T1', 3.0, 'degC'), 0.1, 1e-3, 2, onset_s=ONSET_S)
+    bag = td.write_run_bag(run, tmp_path / 'bag', nodes=[TwinMonitor], params={
+        '/twin_monitor': {'use_sim_time': True, 'worker': 'inline', 'history_file': str(hist)}})
+    data = read_bag(bag, ['/diagnostics', '/wrist/twin/muscle_1/temperature', '/wrist/twin/residual/muscle_1/temperature',
+                          '/wrist/twin/joint_states', '/wrist/twin/residual/angle'])
+    t_res, res = data['/wrist/twin/residual/muscle_1/temperature']
+    t_res = (np.asarray(t_res) - t_res[0]) * 1e-9
+    r = np.array([m.data for m in res])
+    assert 1400 < r.size < 1600  # 10 Hz of 150 s
+    assert np.abs(r[t_res < ONSET_S - 1]).max() < 0.6  # the twin is the wrist (0.1 degC noise) ...
+    assert np.median(r[t_res > ONSET_S + 1]) == pytest.approx(3.0, abs=0.5)  # ... until the thermocouple moves
+    assert len(data['/wrist/twin/joint_states'][1]) == r.size
+    ours = [(s.level[0] if isinstance(s.level, bytes) else int(s.level), dict((kv.key, kv.value) for kv in s.values),
+             s.message) for m in data['/diagnostics'][1] for s in m.status if s.name == 'twin_monitor: model']
+    levels = [lv for lv, _, _ in ours]
+    warn = [(vals, msg) for lv, vals, msg in ours if lv == 1]
+    assert warn and warn[0][0]['subsystem'] == 'sensor', ours
+    assert float(warn[0][0]['since_s']) >= ONSET_S and 'temp_offset_1_C' in warn[0][0]
+    assert 2 not in levels  # never ERROR
+    doc = json.loads(hist.read_text())
+    assert [v['level'] for v in doc['verdicts']][0] == 'OK' and doc['episodes'][0]['subsystem'] == 'sensor'
+
+
+@pytest.mark.parametrize('monitor, started', [('true', True), ('false', False)])
+def test_the_sim_launch_file_starts_twin_monitor_only_when_asked(monitor, started):
+    from sma_wrist.runtime.launch_file import run_launch_file
+    from sma_wrist.share import share_path
+    r = run_launch_file(str(share_path('launch/wrist_sim.launch.py')), {'controller': 'pid', 'monitor': monitor}, 0.3)
+    assert r.reason == 'time' and r.exits == {}
+    assert ('twin_monitor' in r.started) == started
+    assert r.started[:4] == ['plant_sim', 'trajectory_generator', 'adaptive_controller', 'tem_controller']
+
+
+def test_an_unexplained_discrepancy_is_raised_only_once_the_window_holds_no_data_from_before_it():
+    """A wrist that changed inside the window fits no constant model: the checks straddling the change say
+    'unexplained' before the cause can be named, and that transition is no verdict of its own."""
+    cfg = MonitorConfig(persist_checks=2, window_s=45.0, settle_s=20.0, check_period_s=15.0)
+    mon = Monitor(cfg)
+    un = lambda t: Verdict(t, 'WARN', 'unexplained', 'thermal', 1.0, check_cause='unexplained',  # noqa: E731
+                           check_subsystem='thermal', check_confidence=1.0)
+    named = lambda t: Verdict(t, 'WARN', 'temp_sensor_offsets', 'sensor', 0.9)  # noqa: E731
+    out = [mon.decide(v) for v in (un(15), un(30), un(45), named(60), named(75))]
+    assert [v.level for v in out] == ['OK', 'OK', 'OK', 'OK', 'WARN'] and out[-1].subsystem == 'sensor'
+    assert mon.needed(un(0)) == 2 + 5  # 65 s of window at 15 s per check
+    mon = Monitor(cfg)
+    out = [mon.decide(un(15 * i)) for i in range(1, 9)]
+    assert [v.level for v in out].index('WARN') == 6 and out[-1].cause == 'unexplained'
