@@ -4,6 +4,7 @@ The same file serves `colcon build` on a ROS 2 machine (data_files land in
 share/sma_wrist, executables in lib/sma_wrist for `ros2 run`) and `pip install .`
 on a plain Python machine (the embedded runtime replaces rclpy there).
 """
+
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -47,7 +48,9 @@ setup(
         # dask[distributed]: the sweep's --scheduler test (LocalCluster, ~5 s) runs in CI, not skipped
         # pytest-xdist: the suite is CPU-bound and was serial, one of CI's 2 cores idle
         # (`-n 2 --dist loadgroup` in .ci/run; test/conftest.py groups module fixtures)
-        'test': ['pytest>=7', 'hypothesis>=6', 'dask[distributed]>=2023.1', 'pytest-xdist>=3.0'],
+        # ruff: test_lint.py checks the code against ruff.toml; pinned to a minor release because the formatter's
+        # style may change between them
+        'test': ['pytest>=7', 'hypothesis>=6', 'dask[distributed]>=2023.1', 'pytest-xdist>=3.0', 'ruff>=0.17,<0.18'],
         # Reports write PNG plots; optional so a headless robot install stays small.
         'plot': ['matplotlib>=3.5'],
         # Compiles the per-sample plant step (sma_wrist/core/plant/kernel.py): ~1 us instead of

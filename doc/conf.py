@@ -7,6 +7,7 @@ validation page from ``doc/validation/results.json``, so none of them can drift 
 
 Build: ``sphinx-build -W --keep-going -b html doc doc/_build/html``.
 """
+
 from __future__ import annotations
 
 import re
@@ -98,8 +99,9 @@ _LITERAL = re.compile(r'(``.+?``|:\w+:`[^`]+`|`[^`]+`_?)')
 def _literal_bars(app, what, name, obj, options, lines) -> None:  # noqa: ANN001
     for i, line in enumerate(lines):
         if '|' in line:
-            lines[i] = ''.join(part if k % 2 else part.replace('|', '\\|')
-                               for k, part in enumerate(_LITERAL.split(line)))
+            lines[i] = ''.join(
+                part if k % 2 else part.replace('|', '\\|') for k, part in enumerate(_LITERAL.split(line))
+            )
 
 
 def setup(app):  # noqa: ANN001, ANN201

@@ -7,12 +7,13 @@ started only for controller:=inverse_adaptive (the other modes publish desired
 temperatures themselves). params_file:= is applied after config/wrist.yaml (e.g. the paper's gains,
 config/paper_table_6_1.yaml, on top of the defaults).
 """
-from launch import LaunchDescription
+
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
+from launch import LaunchDescription
 from sma_wrist.launch_support import flag, graph_specs, node_parameters, on_exit_actions, payload_override
 
 
@@ -22,22 +23,44 @@ def _graph(context) -> list:
     defaults = PathJoinSubstitution([FindPackageShare('sma_wrist'), 'config', 'wrist.yaml']).perform(context)
     extra = LaunchConfiguration('params_file').perform(context)
 
-    return [Node(package='sma_wrist', executable=exe, name=exe, output='screen',
-                 parameters=node_parameters(defaults, extra, exe, values), on_exit=on_exit_actions(exe))
-            for exe, values in graph_specs('plant_sim', payload_override(payload), controller,
-                                           flag(LaunchConfiguration('monitor').perform(context)))]
+    return [
+        Node(
+            package='sma_wrist',
+            executable=exe,
+            name=exe,
+            output='screen',
+            parameters=node_parameters(defaults, extra, exe, values),
+            on_exit=on_exit_actions(exe),
+        )
+        for exe, values in graph_specs(
+            'plant_sim', payload_override(payload), controller, flag(LaunchConfiguration('monitor').perform(context))
+        )
+    ]
 
 
 def generate_launch_description() -> LaunchDescription:
-    return LaunchDescription([
-        DeclareLaunchArgument('controller', default_value='inverse_adaptive',
-                              choices=['inverse_adaptive', 'direct_adaptive', 'pid']),
-        DeclareLaunchArgument('payload_kg', default_value='',
-                              description='payload at 0.09 m [kg] (default: payload_kg of the params files, 0.3)'),
-        DeclareLaunchArgument('params_file', default_value='',
-                              description='params file applied after config/wrist.yaml (default: none)'),
-        DeclareLaunchArgument('monitor', default_value='false', choices=['true', 'false'],
-                              description='also run twin_monitor: the model beside the wrist, verdicts on /diagnostics '
-                                          '(doc/howto/monitor.md)'),
-        OpaqueFunction(function=_graph),
-    ])
+    return LaunchDescription(
+        [
+            DeclareLaunchArgument(
+                'controller', default_value='inverse_adaptive', choices=['inverse_adaptive', 'direct_adaptive', 'pid']
+            ),
+            DeclareLaunchArgument(
+                'payload_kg',
+                default_value='',
+                description='payload at 0.09 m [kg] (default: payload_kg of the params files, 0.3)',
+            ),
+            DeclareLaunchArgument(
+                'params_file',
+                default_value='',
+                description='params file applied after config/wrist.yaml (default: none)',
+            ),
+            DeclareLaunchArgument(
+                'monitor',
+                default_value='false',
+                choices=['true', 'false'],
+                description='also run twin_monitor: the model beside the wrist, verdicts on /diagnostics '
+                '(doc/howto/monitor.md)',
+            ),
+            OpaqueFunction(function=_graph),
+        ]
+    )

@@ -38,11 +38,13 @@ metadata.yaml; anything else goes through rosbags' reader.  A SQLite file is rea
 metadata.yaml whose topics do not match the storage's (rosbags then reads no message) loses only
 what is really gone.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Optional
+from typing import Any
 
 import numpy as np
 import yaml
@@ -62,7 +64,7 @@ STORAGE_SUFFIX = {'mcap': '.mcap', 'sqlite3': '.db3'}
 class BagError(SmaWristError):
     """A bag could not be written or read completely."""
 
-    def __init__(self, path: str | Path, problem: str, salvaged: Optional[BagData] = None) -> None:
+    def __init__(self, path: str | Path, problem: str, salvaged: BagData | None = None) -> None:
         self.path = str(path)
         self.problem = problem
         self.salvaged: BagData = salvaged or {}
@@ -79,10 +81,17 @@ def _rosbags_qos(qos: Any) -> Any:
         sec, nsec = divmod(int(d.nanoseconds), 10**9)
         return QosTime(sec, nsec)
 
-    return Qos(QosHistory(int(qos.history)), int(qos.depth), QosReliability(int(qos.reliability)),
-               QosDurability(int(qos.durability)), t(qos.deadline), t(qos.lifespan),
-               QosLiveliness(int(qos.liveliness)), t(qos.liveliness_lease_duration),
-               bool(qos.avoid_ros_namespace_conventions))
+    return Qos(
+        QosHistory(int(qos.history)),
+        int(qos.depth),
+        QosReliability(int(qos.reliability)),
+        QosDurability(int(qos.durability)),
+        t(qos.deadline),
+        t(qos.lifespan),
+        QosLiveliness(int(qos.liveliness)),
+        t(qos.liveliness_lease_duration),
+        bool(qos.avoid_ros_namespace_conventions),
+    )
 
 
 def make_humble_compatible(bag_dir: str | Path) -> None:
@@ -91,7 +100,7 @@ def make_humble_compatible(bag_dir: str | Path) -> None:
     doc = yaml.safe_load(meta_path.read_text())
     info = doc['rosbag2_bagfile_information']
     if info.get('version', 0) not in (5, 8):
-        raise BagError(bag_dir, f"metadata version {info.get('version')} cannot be down-converted")
+        raise BagError(bag_dir, f'metadata version {info.get("version")} cannot be down-converted')
     for key in ('custom_data', 'ros_distro'):
         info.pop(key, None)
     for t in info.get('topics_with_message_count', []):
@@ -127,9 +136,16 @@ class BagRecorder:
         publishing node's clock.
     """
 
-    def __init__(self, path: str | Path, topics: Optional[Iterable[str]] = None, *,
-                 context: Any = None, flush_every: int = 2000, humble_compatible: bool = True,
-                 clock_ns: Optional[Callable[[], int]] = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        topics: Iterable[str] | None = None,
+        *,
+        context: Any = None,
+        flush_every: int = 2000,
+        humble_compatible: bool = True,
+        clock_ns: Callable[[], int] | None = None,
+    ) -> None:
         self._clock_ns = clock_ns
         self.path = Path(path)
         self.topics = None if topics is None else [t if t.startswith('/') else '/' + t for t in topics]
@@ -145,11 +161,12 @@ class BagRecorder:
         self.closed = False
 
     # -- lifecycle ---------------------------------------------------------
-    def start(self) -> 'BagRecorder':
+    def start(self) -> BagRecorder:
         from rosbags.rosbag2 import StoragePlugin, Writer
         from rosbags.rosbag2.errors import WriterError
 
         from sma_wrist.runtime.rclpy.utilities import get_default_context
+
         ctx = self._context if self._context is not None else get_default_context()
         if not ctx.ok():
             raise BagError(self.path, 'cannot record: the rclpy context is not initialised')
@@ -161,7 +178,7 @@ class BagRecorder:
         self._remove_tap = ctx.graph.add_tap(self._tap, self.topics)
         return self
 
-    def __enter__(self) -> 'BagRecorder':
+    def __enter__(self) -> BagRecorder:
         return self.start() if self._writer is None else self
 
     def __exit__(self, *exc: Any) -> None:
@@ -170,9 +187,11 @@ class BagRecorder:
     def _connection(self, topic: Any) -> tuple[Any, Any]:
         from sma_wrist.runtime.fastcdr import encoder_for
         from sma_wrist.runtime.messages import TYPESTORE
+
         qos = [_rosbags_qos(p.qos_profile) for p in topic.publishers[:1]]
-        conn = self._writer.add_connection(topic.name, topic.msg_type._TYPE, typestore=TYPESTORE,
-                                           offered_qos_profiles=qos)
+        conn = self._writer.add_connection(
+            topic.name, topic.msg_type._TYPE, typestore=TYPESTORE, offered_qos_profiles=qos
+        )
         entry = self._conns[topic.name] = (conn, encoder_for(topic.msg_type._TYPE))
         self.counts[topic.name] = 0
         return entry
@@ -260,12 +279,13 @@ def _storage_files(p: Path, suffixes: Iterable[str] = STORAGE_SUFFIX.values()) -
 @dataclass
 class _MetaCounts:
     """What metadata.yaml says a bag holds, to check a read against (absent: all empty)."""
-    total: Optional[int] = None
+
+    total: int | None = None
     per_file: dict[str, int] = field(default_factory=dict)
     topics: list[tuple[str, str]] = field(default_factory=list)  # (name, type) in metadata.yaml's order
 
 
-def _meta_counts(p: Path, meta: Optional[dict[str, Any]] = None) -> _MetaCounts:
+def _meta_counts(p: Path, meta: dict[str, Any] | None = None) -> _MetaCounts:
     """metadata.yaml's message counts of a bag directory (``meta``: its mapping, if already read), if it has a
     usable one."""
     try:
@@ -274,13 +294,15 @@ def _meta_counts(p: Path, meta: Optional[dict[str, Any]] = None) -> _MetaCounts:
         return _MetaCounts(
             sum(int(t['message_count']) for t in listed),
             {Path(str(f['path'])).name: int(f['message_count']) for f in meta.get('files') or []},
-            [(str(t['topic_metadata']['name']), str(t['topic_metadata']['type'])) for t in listed])
+            [(str(t['topic_metadata']['name']), str(t['topic_metadata']['type'])) for t in listed],
+        )
     except (OSError, yaml.YAMLError, _NotMetadata, KeyError, TypeError, ValueError):
         return _MetaCounts()
 
 
-def _salvage_file(file: Path, topics: Optional[frozenset[str]] = None, meta: Optional[_MetaCounts] = None
-                  ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+def _salvage_file(
+    file: Path, topics: frozenset[str] | None = None, meta: _MetaCounts | None = None
+) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """(messages, problem) of one storage file, MCAP or SQLite as its first bytes say."""
     with open(file, 'rb') as f:
         head = f.read(16)
@@ -294,6 +316,7 @@ def iter_mcap(file: str | Path) -> Iterator[tuple[str, str, int, bytes]]:
     """(topic, msgtype, log_time_ns, cdr bytes) of an MCAP file via the `mcap` library's
     indexed reader (raises on a truncated file)."""
     from mcap.reader import make_reader
+
     with open(file, 'rb') as f:
         reader = make_reader(f)
         for schema, channel, message in reader.iter_messages(log_time_order=False):
@@ -306,6 +329,7 @@ def _mcap_summary(data: bytes) -> Any:
     import io
 
     from mcap.reader import SeekingReader
+
     try:
         return SeekingReader(io.BytesIO(data), validate_crcs=False).get_summary()
     except Exception:  # noqa: BLE001 - a damaged footer or summary: the file is read without it
@@ -317,19 +341,22 @@ def _message_index(data: bytes, index: Any) -> list[tuple[int, int, int]]:
     by offset; [] where they do not read."""
     entries: list[tuple[int, int, int]] = []
     for cid, off in index.message_index_offsets.items():
-        if data[off:off + 1] != b'\x07' or int.from_bytes(data[off + 9:off + 11], 'little') != cid:
+        if data[off : off + 1] != b'\x07' or int.from_bytes(data[off + 9 : off + 11], 'little') != cid:
             return []
-        n = int.from_bytes(data[off + 11:off + 15], 'little')
+        n = int.from_bytes(data[off + 11 : off + 15], 'little')
         if off + 15 + n > len(data) or n % 16:
             return []
-        raw = data[off + 15:off + 15 + n]
-        entries.extend((int.from_bytes(raw[i + 8:i + 16], 'little'), cid, int.from_bytes(raw[i:i + 8], 'little'))
-                       for i in range(0, n, 16))
+        raw = data[off + 15 : off + 15 + n]
+        entries.extend(
+            (int.from_bytes(raw[i + 8 : i + 16], 'little'), cid, int.from_bytes(raw[i : i + 8], 'little'))
+            for i in range(0, n, 16)
+        )
     return sorted(entries)
 
 
-def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
-                 ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+def salvage_mcap(
+    file: str | Path, topics: frozenset[str] | None = None
+) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """Read an MCAP file record by record without its index, keeping every complete
     message (of ``topics``, default all) -- also those at the start of a chunk cut off by
     truncation (uncompressed chunks, as BagRecorder writes them).  Returns (messages in file
@@ -348,6 +375,7 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
     stream reader instead (:func:`_stream_mcap`), which decompresses them."""
     import bisect
     import zlib
+
     data = Path(file).read_bytes()
     out: list[tuple[str, str, int, bytes]] = []
     schemas: dict[int, str] = {}
@@ -386,34 +414,40 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
         return starts[i] if i < len(starts) else 0
 
     def s16(b: bytes, o: int) -> tuple[int, int]:
-        return int.from_bytes(b[o:o + 2], 'little'), o + 2
+        return int.from_bytes(b[o : o + 2], 'little'), o + 2
 
     def string(b: bytes, o: int) -> tuple[str, int]:
-        n = int.from_bytes(b[o:o + 4], 'little')
+        n = int.from_bytes(b[o : o + 4], 'little')
         if o + 4 + n > len(b):
             raise ValueError('string runs past the end of its record')
-        return b[o + 4:o + 4 + n].decode(), o + 4 + n
+        return b[o + 4 : o + 4 + n].decode(), o + 4 + n
 
     def message(buf: bytes, pos: int, end: int) -> None:
         cid = buf[pos + 9] | buf[pos + 10] << 8
         if cid in keep:
             topic, msgtype = keep[cid]
-            out.append((topic, msgtype, int.from_bytes(buf[pos + 15:pos + 23], 'little'), buf[pos + 31:end]))
+            out.append((topic, msgtype, int.from_bytes(buf[pos + 15 : pos + 23], 'little'), buf[pos + 31 : end]))
         elif topics is None:  # a message before its channel (damaged file): keep what is known
             topic, sid = channels.get(cid, ('', 0))
-            out.append((topic, schemas.get(sid, ''), int.from_bytes(buf[pos + 15:pos + 23], 'little'),
-                        buf[pos + 31:end]))
+            out.append(
+                (topic, schemas.get(sid, ''), int.from_bytes(buf[pos + 15 : pos + 23], 'little'), buf[pos + 31 : end])
+            )
 
     def records(buf: bytes, pos: int, where: str) -> None:
         size = len(buf)
         top = where == 'file'
         while pos < size:
             op = buf[pos]
-            length = int.from_bytes(buf[pos + 1:pos + 9], 'little')
+            length = int.from_bytes(buf[pos + 1 : pos + 9], 'little')
             end = pos + 9 + length
             bad = pos + 9 > size or end > size or op == 0 or 0x10 <= op < 0x80
-            if top and not bad and op != 0x06 and (ci := chunk_index(next_chunk(pos - 1))) is not None \
-                    and ci.chunk_start_offset < end:  # a record overlapping the next chunk: its length is damaged
+            if (
+                top
+                and not bad
+                and op != 0x06
+                and (ci := chunk_index(next_chunk(pos - 1))) is not None
+                and ci.chunk_start_offset < end
+            ):  # a record overlapping the next chunk: its length is damaged
                 bad = True
             if top and bad and state['footer'] is False and (resume := next_chunk(pos)):
                 # a record that does not parse between chunks of a closed file: go on at the next indexed chunk
@@ -427,12 +461,11 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
                 message(buf, pos, end)  # the bulk of the file: only the wanted channels' bytes are copied
                 pos = end
                 continue
-            body = buf[pos + 9:end]
+            body = buf[pos + 9 : end]
             if len(body) < length:
                 if op == 0x06:  # chunk: read what is left of it
                     chunk(body, pos, complete=False)
-                state['problem'] = (state['problem'] or
-                                    f'{where}: truncated record (opcode 0x{op:02x}) at offset {pos}')
+                state['problem'] = state['problem'] or f'{where}: truncated record (opcode 0x{op:02x}) at offset {pos}'
                 return
             if op == 0x03:
                 sid, o = s16(body, 0)
@@ -469,7 +502,7 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
         comp, o = string(body, 28)
         if comp:
             raise Compressed
-        recs = body[o + 8:o + 8 + int.from_bytes(body[o:o + 8], 'little')]
+        recs = body[o + 8 : o + 8 + int.from_bytes(body[o : o + 8], 'little')]
         start = len(out)
         if not complete:  # cut off by truncation: every complete message before the cut
             records(recs, 0, f'chunk at offset {pos}')
@@ -479,8 +512,10 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
             entries = _message_index(data, ci) if ci is not None else []
             times = [t for _, cid, t in entries if topics is None or cid in keep]
             lost_times.extend(times)
-            damage.append(f'chunk at offset {pos} does not match its CRC: '
-                          f'{len(times) if entries else "all its"} messages lost ({span(times)})')
+            damage.append(
+                f'chunk at offset {pos} does not match its CRC: '
+                f'{len(times) if entries else "all its"} messages lost ({span(times)})'
+            )
             return
         saved = state['problem']
         try:
@@ -499,21 +534,27 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
         entries = _message_index(data, ci) if ci is not None else []
         if not entries:  # no index to go by: the messages before the break, but the last (damage may start in it)
             out.extend(prefix[:-1])
-            damage.append(f'chunk at offset {pos} is damaged ({broken}); no message index: the messages after '
-                          f'{len(prefix) - 1} of it are lost')
+            damage.append(
+                f'chunk at offset {pos} is damaged ({broken}); no message index: the messages after '
+                f'{len(prefix) - 1} of it are lost'
+            )
             return
         ok = []
         for off, cid, t in entries:
-            length = int.from_bytes(recs[off + 1:off + 9], 'little')
-            ok.append(recs[off:off + 1] == b'\x05' and off + 9 + length <= len(recs) and length >= 22
-                      and int.from_bytes(recs[off + 9:off + 11], 'little') == cid
-                      and int.from_bytes(recs[off + 15:off + 23], 'little') == t)
+            length = int.from_bytes(recs[off + 1 : off + 9], 'little')
+            ok.append(
+                recs[off : off + 1] == b'\x05'
+                and off + 9 + length <= len(recs)
+                and length >= 22
+                and int.from_bytes(recs[off + 9 : off + 11], 'little') == cid
+                and int.from_bytes(recs[off + 15 : off + 23], 'little') == t
+            )
         lost = []
         for k, (off, cid, t) in enumerate(entries):
             # the next message's header must be intact too: damage that starts in this one's bytes breaks it
             if ok[k] and (ok[k + 1] if k + 1 < len(entries) else True):
                 if cid in keep or topics is None:
-                    message(recs, off, off + 9 + int.from_bytes(recs[off + 1:off + 9], 'little'))
+                    message(recs, off, off + 9 + int.from_bytes(recs[off + 1 : off + 9], 'little'))
             elif cid in keep or topics is None:
                 lost.append(t)
         lost_times.extend(lost)
@@ -530,10 +571,14 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
     if damage:
         s = get_summary()
         stats = s.statistics if s else None
-        total = '' if stats is None else (
-            f' of {sum(n for cid, n in stats.channel_message_counts.items() if topics is None or cid in keep)}')
-        problem = '; '.join([f'MCAP data is damaged: {len(out)}{total} messages read', *damage]
-                            + ([problem] if problem else []))
+        total = (
+            ''
+            if stats is None
+            else (f' of {sum(n for cid, n in stats.channel_message_counts.items() if topics is None or cid in keep)}')
+        )
+        problem = '; '.join(
+            [f'MCAP data is damaged: {len(out)}{total} messages read', *damage] + ([problem] if problem else [])
+        )
     elif problem:
         problem = f'MCAP data is truncated or corrupt after {len(out)} messages ({problem})'
     elif not state['footer']:
@@ -541,13 +586,15 @@ def salvage_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
     return out, problem
 
 
-def _stream_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
-                 ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+def _stream_mcap(
+    file: str | Path, topics: frozenset[str] | None = None
+) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """:func:`salvage_mcap` of a file with compressed chunks (zstd, lz4): the `mcap` library's stream reader,
     record by record without the index, up to the first record it cannot read (a chunk cut short is lost
     whole: its compressed bytes cannot be read in part)."""
     from mcap.records import Channel, Footer, Message, Schema
     from mcap.stream_reader import StreamReader
+
     out: list[tuple[str, str, int, bytes]] = []
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, str]] = {}
@@ -572,9 +619,12 @@ def _stream_mcap(file: str | Path, topics: Optional[frozenset[str]] = None
     return out, ''
 
 
-def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None, expected: Optional[int] = None,
-                guess_topics: Optional[list[tuple[str, str]]] = None
-                ) -> tuple[list[tuple[str, str, int, bytes]], str]:
+def salvage_db3(
+    file: str | Path,
+    topics: frozenset[str] | None = None,
+    expected: int | None = None,
+    guess_topics: list[tuple[str, str]] | None = None,
+) -> tuple[list[tuple[str, str, int, bytes]], str]:
     """Read a rosbag2 SQLite file (``.db3``) through its own ``topics`` and ``messages`` tables, without
     metadata.yaml: (messages of ``topics``, default all, in recording order, problem); problem is '' for a
     file read to its end. Humble's and Jazzy's schemas (and earlier ones) share these two tables.
@@ -591,6 +641,7 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None, expec
     import contextlib
     import sqlite3
     import tempfile
+
     file = Path(file)
     with open(file, 'rb') as f:
         head = f.read(100)
@@ -622,7 +673,9 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None, expec
                 con = sqlite3.connect(f'{path.resolve().as_uri()}?mode=ro', uri=True)
                 try:
                     names = {int(i): (str(n), str(t)) for i, n, t in con.execute('SELECT id, name, type FROM topics')}
-                    for i, tid, t, data in con.execute('SELECT id, topic_id, timestamp, data FROM messages ORDER BY id'):
+                    for i, tid, t, data in con.execute(
+                        'SELECT id, topic_id, timestamp, data FROM messages ORDER BY id'
+                    ):
                         rows[int(i)] = (int(tid), int(t), bytes(data))
                     sqlite_ok = True
                 finally:
@@ -642,15 +695,19 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None, expec
             rows.setdefault(i, r)
         scanned = f'a page-by-page scan found {found} more'
         if scan.lost:
-            scanned += (f'; {len(scan.lost)} messages (t {scan.lost[0] / 1e9:.3f} .. {scan.lost[-1] / 1e9:.3f} s) are '
-                        f'lost with their overflow pages')
+            scanned += (
+                f'; {len(scan.lost)} messages (t {scan.lost[0] / 1e9:.3f} .. {scan.lost[-1] / 1e9:.3f} s) are '
+                f'lost with their overflow pages'
+            )
         if not names:
             names = scan.topics
         if not names and rows:
             names = _guess_topic_ids(rows, guess_topics or [])
-            scanned += ('; the topics table is lost: ' + (
-                'topic names guessed from metadata.yaml (its order, checked by decoding each id\'s first message)'
-                if names else 'the messages cannot be named (no metadata.yaml topics match them) and are not read'))
+            scanned += '; the topics table is lost: ' + (
+                "topic names guessed from metadata.yaml (its order, checked by decoding each id's first message)"
+                if names
+                else 'the messages cannot be named (no metadata.yaml topics match them) and are not read'
+            )
         notes.append(scanned)
     out: list[tuple[str, str, int, bytes]] = []
     for i in sorted(rows):
@@ -666,11 +723,13 @@ def salvage_db3(file: str | Path, topics: Optional[frozenset[str]] = None, expec
     return out, (f'SQLite data is truncated or corrupt ({problem})' if problem else '')
 
 
-def _guess_topic_ids(rows: dict[int, tuple[int, int, bytes]], topics: list[tuple[str, str]]
-                     ) -> dict[int, tuple[str, str]]:
+def _guess_topic_ids(
+    rows: dict[int, tuple[int, int, bytes]], topics: list[tuple[str, str]]
+) -> dict[int, tuple[str, str]]:
     """Topic id -> (name, type) when the ``topics`` table is lost: id k is metadata.yaml's k-th topic, kept only if
     every id's first message decodes as that type ({} when any does not: a wrong guess would misfile data)."""
     from sma_wrist.runtime.fastcdr import decoder_for
+
     first: dict[int, bytes] = {}
     for tid, _, data in rows.values():
         first.setdefault(tid, data)
@@ -715,15 +774,15 @@ def _record(payload: bytes) -> list[Any]:
         t, o = _varint(payload, o)
         if t >= 12:
             n = (t - 12) >> 1
-            v: Any = payload[p:p + n] if t % 2 == 0 else payload[p:p + n].decode()
+            v: Any = payload[p : p + n] if t % 2 == 0 else payload[p : p + n].decode()
         elif t in (10, 11):
             raise ValueError('reserved serial type')
         else:
             n = _SERIAL_SIZE[t]
             if t == 7:
-                v = float(np.frombuffer(payload[p:p + 8], '>f8')[0]) if p + 8 <= len(payload) else 0.0
+                v = float(np.frombuffer(payload[p : p + 8], '>f8')[0]) if p + 8 <= len(payload) else 0.0
             else:
-                v = None if t == 0 else t - 8 if t >= 8 else int.from_bytes(payload[p:p + n], 'big', signed=True)
+                v = None if t == 0 else t - 8 if t >= 8 else int.from_bytes(payload[p : p + n], 'big', signed=True)
         p += n
         values.append(v)
     if o != hsize or p != len(payload):
@@ -731,7 +790,7 @@ def _record(payload: bytes) -> list[Any]:
     return values
 
 
-def _message_head(local: bytes) -> Optional[int]:
+def _message_head(local: bytes) -> int | None:
     """The timestamp of a ``messages`` row from the first bytes of its record (its blob may be cut off), None if the
     record is not of that shape (id, topic_id, timestamp, data)."""
     try:
@@ -742,16 +801,22 @@ def _message_head(local: bytes) -> Optional[int]:
             types.append(t)
     except IndexError:
         return None
-    if len(types) != 4 or types[0] > 6 or not (1 <= types[1] <= 6 and 1 <= types[2] <= 6) or types[3] < 12 \
-            or types[3] % 2:
+    if (
+        len(types) != 4
+        or types[0] > 6
+        or not (1 <= types[1] <= 6 and 1 <= types[2] <= 6)
+        or types[3] < 12
+        or types[3] % 2
+    ):
         return None
     p = hsize + _SERIAL_SIZE[types[0]] + _SERIAL_SIZE[types[1]]
-    return int.from_bytes(local[p:p + _SERIAL_SIZE[types[2]]], 'big', signed=True)
+    return int.from_bytes(local[p : p + _SERIAL_SIZE[types[2]]], 'big', signed=True)
 
 
 @dataclass
 class _Db3Scan:
     """What a page scan of a rosbag2 SQLite file found."""
+
     messages: dict[int, tuple[int, int, bytes]]  # message id -> (topic id, timestamp, data)
     topics: dict[int, tuple[str, str]]  # topic id -> (name, type)
     lost: list[int] = field(default_factory=list)  # timestamps of rows whose overflow pages are missing
@@ -765,14 +830,19 @@ def _db3_page_size(data: bytes) -> int:
         slots = range(size, len(data) - size + 1, size)
         if not slots:
             break
-        ok = sum(1 for o in slots if data[o] in (2, 5, 10, 13) and data[o + 7] < 128
-                 and int.from_bytes(data[o + 3:o + 5], 'big') * 2 + 8 <= size)
+        ok = sum(
+            1
+            for o in slots
+            if data[o] in (2, 5, 10, 13)
+            and data[o + 7] < 128
+            and int.from_bytes(data[o + 3 : o + 5], 'big') * 2 + 8 <= size
+        )
         if ok >= 0.6 * len(slots):
             return size
     return 0
 
 
-def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
+def _scan_db3(data: bytes, wal: bytes | None = None) -> _Db3Scan:
     """Every row of rosbag2's ``messages`` and ``topics`` tables on the table-leaf pages physically in ``data`` (and in
     the frames of a ``-wal`` file), told from other tables' rows by their shape. Rows on pages the ``messages``
     b-tree still reaches come first, then other pages, then free-list pages (stale copies); de-duplicated by id."""
@@ -790,23 +860,23 @@ def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
     pages: dict[int, bytes] = {}  # page number (from 1) -> newest image in the write-ahead log
     if wal and len(wal) >= 32 and header_ok and int.from_bytes(wal[8:12], 'big') == size:
         for o in range(32, len(wal) - 24 - size + 1, 24 + size):
-            if wal[o + 8:o + 16] == wal[16:24]:  # the frame's salt is this log's: not a leftover of an older one
-                pages[int.from_bytes(wal[o:o + 4], 'big')] = wal[o + 24:o + 24 + size]
+            if wal[o + 8 : o + 16] == wal[16:24]:  # the frame's salt is this log's: not a leftover of an older one
+                pages[int.from_bytes(wal[o : o + 4], 'big')] = wal[o + 24 : o + 24 + size]
         npages = max([npages, *pages])
 
-    def page(n: int) -> Optional[bytes]:
+    def page(n: int) -> bytes | None:
         if n in pages:
             return pages[n]
-        return data[(n - 1) * size:n * size] if 1 <= n and n * size <= len(data) else None
+        return data[(n - 1) * size : n * size] if 1 <= n and n * size <= len(data) else None
 
     max_local = usable - 35  # payloads up to this size are whole on their leaf page
     min_local = (usable - 12) * 32 // 255 - 23
 
-    def cells(pg: bytes, hdr: int) -> Iterator[tuple[int, Optional[bytes], bytes]]:
+    def cells(pg: bytes, hdr: int) -> Iterator[tuple[int, bytes | None, bytes]]:
         """(rowid, payload or None if its overflow pages are missing, local part) of a table leaf page's cells."""
-        n = int.from_bytes(pg[hdr + 3:hdr + 5], 'big')
+        n = int.from_bytes(pg[hdr + 3 : hdr + 5], 'big')
         for i in range(n):
-            off = int.from_bytes(pg[hdr + 8 + 2 * i:hdr + 10 + 2 * i], 'big')
+            off = int.from_bytes(pg[hdr + 8 + 2 * i : hdr + 10 + 2 * i], 'big')
             if not hdr + 8 + 2 * n <= off < usable:
                 continue
             try:
@@ -816,19 +886,19 @@ def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
                 continue
             if plen <= max_local:
                 if o + plen <= usable:
-                    yield rowid, pg[o:o + plen], pg[o:o + plen]
+                    yield rowid, pg[o : o + plen], pg[o : o + plen]
                 continue
             local = min_local + (plen - min_local) % (usable - 4)
             local = local if local <= max_local else min_local
             if o + local + 4 > usable:
                 continue
-            parts, got = [pg[o:o + local]], local
-            nxt = int.from_bytes(pg[o + local:o + local + 4], 'big')
+            parts, got = [pg[o : o + local]], local
+            nxt = int.from_bytes(pg[o + local : o + local + 4], 'big')
             for _ in range(plen // (usable - 4) + 1):  # an overflow chain is never longer: no loop on garbage
                 ov = page(nxt) if nxt else None
                 if ov is None or got >= plen:
                     break
-                parts.append(ov[4:4 + min(usable - 4, plen - got)])
+                parts.append(ov[4 : 4 + min(usable - 4, plen - got)])
                 got += len(parts[-1])
                 nxt = int.from_bytes(ov[:4], 'big')
             yield rowid, (b''.join(parts) if got == plen else None), parts[0]
@@ -838,8 +908,16 @@ def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
     free: set[int] = set()
     if header_ok:
         try:
-            root = next((int(r[3]) for _, p, _ in cells(data[:size], 100) if p is not None
-                         for r in [_record(p)] if len(r) == 5 and r[0] == 'table' and r[1] == 'messages'), 0)
+            root = next(
+                (
+                    int(r[3])
+                    for _, p, _ in cells(data[:size], 100)
+                    if p is not None
+                    for r in [_record(p)]
+                    if len(r) == 5 and r[0] == 'table' and r[1] == 'messages'
+                ),
+                0,
+            )
         except (ValueError, UnicodeDecodeError, IndexError):
             root = 0
         stack, seen = [root] if root else [], set()
@@ -853,14 +931,17 @@ def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
                 reachable.append(n)
             elif pg[0] == _DB3_INTERIOR:
                 k = int.from_bytes(pg[3:5], 'big')
-                kids = [int.from_bytes(pg[o:o + 4], 'big')
-                        for o in (int.from_bytes(pg[12 + 2 * i:14 + 2 * i], 'big') for i in range(k)) if o + 4 <= size]
+                kids = [
+                    int.from_bytes(pg[o : o + 4], 'big')
+                    for o in (int.from_bytes(pg[12 + 2 * i : 14 + 2 * i], 'big') for i in range(k))
+                    if o + 4 <= size
+                ]
                 stack.extend(reversed([*kids, int.from_bytes(pg[8:12], 'big')]))
         trunk = int.from_bytes(data[32:36], 'big')
         while trunk and trunk not in free and (pg := page(trunk)) is not None:  # free-list trunk pages
             free.add(trunk)
             count = min(int.from_bytes(pg[4:8], 'big'), (usable - 8) // 4)
-            free.update(int.from_bytes(pg[8 + 4 * i:12 + 4 * i], 'big') for i in range(count))
+            free.update(int.from_bytes(pg[8 + 4 * i : 12 + 4 * i], 'big') for i in range(count))
             trunk = int.from_bytes(pg[:4], 'big')
     first = set(reachable)
     order = reachable + [n for n in range(1, npages + 1) if n not in first and n not in free] + sorted(free)
@@ -881,11 +962,20 @@ def _scan_db3(data: bytes, wal: Optional[bytes] = None) -> _Db3Scan:
                 r = _record(payload)
             except (ValueError, UnicodeDecodeError, IndexError):
                 continue
-            if (len(r) == 4 and isinstance(r[1], int) and isinstance(r[2], int) and isinstance(r[3], bytes)
-                    and (r[0] is None or r[0] == rowid)):
+            if (
+                len(r) == 4
+                and isinstance(r[1], int)
+                and isinstance(r[2], int)
+                and isinstance(r[3], bytes)
+                and (r[0] is None or r[0] == rowid)
+            ):
                 msgs.setdefault(rowid, (r[1], r[2], r[3]))
-            elif (len(r) in (5, 6) and all(isinstance(v, str) for v in r[1:]) and r[1].startswith('/')
-                  and (r[0] is None or r[0] == rowid)):  # topics(id, name, type, serialization_format, qos[, hash])
+            elif (
+                len(r) in (5, 6)
+                and all(isinstance(v, str) for v in r[1:])
+                and r[1].startswith('/')
+                and (r[0] is None or r[0] == rowid)
+            ):  # topics(id, name, type, serialization_format, qos[, hash])
                 scan.topics.setdefault(rowid, (r[1], r[2]))
     scan.lost = sorted(t for i, t in lost.items() if i not in msgs)
     return scan
@@ -895,6 +985,7 @@ def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> tuple[BagData, s
     """(decoded messages, problem): a message that does not decode (damaged bytes, an unknown type) is left out and
     counted in the problem ('' when every one decodes), never dropped without a word."""
     from sma_wrist.runtime.fastcdr import decoder_for
+
     times: dict[str, list[int]] = {}
     msgs: dict[str, list[Any]] = {}
     decoders: dict[str, Any] = {}
@@ -912,8 +1003,11 @@ def _to_bagdata(rows: Iterable[tuple[str, str, int, bytes]]) -> tuple[BagData, s
         msgs.setdefault(topic, []).append(m)
     problem = ''
     if bad:
-        problem = (f'{sum(bad.values())} messages could not be decoded and were left out ('
-                   + ', '.join(f'{k}: {v}' for k, v in sorted(bad.items())) + ')')
+        problem = (
+            f'{sum(bad.values())} messages could not be decoded and were left out ('
+            + ', '.join(f'{k}: {v}' for k, v in sorted(bad.items()))
+            + ')'
+        )
     return {k: (np.asarray(times[k], dtype=np.int64), msgs[k]) for k in times}, problem
 
 
@@ -941,7 +1035,7 @@ def _salvage(p: Path) -> tuple[BagData, str]:
     return data, '; '.join(problems)
 
 
-def _read_closed(p: Path, wanted: Optional[frozenset[str]]) -> tuple[Optional[BagData], str]:
+def _read_closed(p: Path, wanted: frozenset[str] | None) -> tuple[BagData | None, str]:
     """read_bag's fast path: a closed bag of MCAP files (BagRecorder's, in one pass each: :func:`salvage_mcap`) or
     of SQLite files (``ros2 bag record`` on Humble: :func:`salvage_db3`), its message counts checked against
     metadata.yaml. (data, '') when all is well; (None, problem) when a file is damaged (truncated, a chunk or page
@@ -954,8 +1048,11 @@ def _read_closed(p: Path, wanted: Optional[frozenset[str]]) -> tuple[Optional[Ba
         files = _storage_files(p, [suffix]) if suffix else []
         if not files:
             return None, ''
-        expected = sum(int(t['message_count']) for t in meta['topics_with_message_count']
-                       if wanted is None or t['topic_metadata']['name'] in wanted)
+        expected = sum(
+            int(t['message_count'])
+            for t in meta['topics_with_message_count']
+            if wanted is None or t['topic_metadata']['name'] in wanted
+        )
     except (OSError, yaml.YAMLError, _NotMetadata, KeyError, TypeError, ValueError):
         return None, ''
     rows: list[tuple[str, str, int, bytes]] = []
@@ -972,8 +1069,7 @@ def _read_closed(p: Path, wanted: Optional[frozenset[str]]) -> tuple[Optional[Ba
     return (None, undecoded) if undecoded else (data, '')
 
 
-def read_bag(path: str | Path, topics: Optional[Iterable[str]] = None, *,
-             salvage: bool = False) -> BagData:
+def read_bag(path: str | Path, topics: Iterable[str] | None = None, *, salvage: bool = False) -> BagData:
     """All messages of a bag: ``{topic: (t_ns int64 array, [messages])}`` in time order.
 
     Raises BagError if the bag is missing, truncated or corrupt (``.salvaged`` holds what
@@ -1078,11 +1174,14 @@ def bag_info(path: str | Path) -> BagInfo:
     try:
         meta = _metadata(p)
         with Reader(p) as reader:
-            info = BagInfo(path=str(p), version=int(meta['version']),
-                           storage=str(meta['storage_identifier']),
-                           message_count=reader.message_count,
-                           start_ns=reader.start_time if reader.message_count else 0,
-                           end_ns=reader.end_time - 1 if reader.message_count else 0)
+            info = BagInfo(
+                path=str(p),
+                version=int(meta['version']),
+                storage=str(meta['storage_identifier']),
+                message_count=reader.message_count,
+                start_ns=reader.start_time if reader.message_count else 0,
+                end_ns=reader.end_time - 1 if reader.message_count else 0,
+            )
             for c in reader.connections:
                 prev = info.topics.get(c.topic)
                 info.topics[c.topic] = TopicSummary(c.msgtype, c.msgcount + (prev.count if prev else 0))

@@ -17,6 +17,7 @@ Section 'plant' measures, in one run, the plant's steps per second:
 * ``compiled_*``: the same kernel compiled by numba (optional extra ``fast``), as
   ``WristPlant.advance`` uses it.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,8 +27,8 @@ import os
 import platform
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -40,13 +41,16 @@ SECTIONS: dict[str, SectionFn] = {}
 
 def section(name: str) -> Callable[[SectionFn], SectionFn]:
     """Register a benchmark section under ``name``."""
+
     def deco(fn: SectionFn) -> SectionFn:
         SECTIONS[name] = fn
         return fn
+
     return deco
 
 
 # ------------------------------------------------------------------ the plain reference
+
 
 class PlainWrist:
     """One wrist stepped by plain Python: the uncompiled source of the plant kernel.
@@ -64,8 +68,10 @@ class PlainWrist:
 
         p = params or PlantParams()
         s = WristPlant(p, payload_kg=payload_kg).state  # type: ignore[arg-type]
-        self._state = [np.array(x, copy=True, order='C') for x in
-                       (s.thermal, s.q, s.qd, s.w, s.heating, s.T_prev, s.load_kgf, s.compliance, s.payload_kg)]
+        self._state = [
+            np.array(x, copy=True, order='C')
+            for x in (s.thermal, s.q, s.qd, s.w, s.heating, s.T_prev, s.load_kgf, s.compliance, s.payload_kg)
+        ]
         self._flags = np.zeros((1, 4), bool)
         self._consts = plant_kernel.pack_constants(p)
         self._u = np.zeros((1, 2))
@@ -89,6 +95,7 @@ class PlainWrist:
 
 
 # ----------------------------------------------------------------------- plant section
+
 
 def _command(k: int, dt: float) -> float:
     """A drive that keeps the wrist moving: 13 V sine of 2 s period."""
@@ -206,6 +213,7 @@ def _bench_compiled(params: object, n_steps: int, repeats: int) -> dict:
 def bench_graph(quick: bool = False) -> dict:
     """The node graph on the embedded runtime (sma_wrist.closed_loop.bench_graph)."""
     from sma_wrist.closed_loop import bench_graph as run_graph
+
     return run_graph(quick)
 
 
@@ -215,6 +223,7 @@ def bench_experiment(quick: bool = False) -> dict:
     import tempfile
 
     from sma_wrist.experiment import run_experiment
+
     ctrls = ['inverse_adaptive', 'direct_adaptive', 'pid']
     loads = [0.1, 0.6] if quick else [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]
     duration = 10.0 if quick else 4 * math.pi / 0.1
@@ -227,6 +236,7 @@ def bench_experiment(quick: bool = False) -> dict:
 def bench_diagnose(quick: bool = False) -> dict:
     """Diagnosis accuracy over hidden-effect runs and the wall time on a 10-minute 100 Hz bag."""
     from sma_wrist.diagnose.bench import bench_diagnose as run_diagnose
+
     return run_diagnose(quick)
 
 
@@ -234,6 +244,7 @@ def bench_diagnose(quick: bool = False) -> dict:
 def bench_diagnose_full(quick: bool = False) -> dict:
     """The diagnose section at full size: independent effects at three noise levels."""
     from sma_wrist.diagnose.bench import bench_diagnose as run_diagnose
+
     return run_diagnose(quick, full=True)
 
 
@@ -242,6 +253,7 @@ def bench_monitor(quick: bool = False) -> dict:
     """The live model monitor: detection of effects beginning mid-run, false alarms over 30 min per controller,
     CPU cost and the graph's speed with it (doc/howto/monitor.md)."""
     from sma_wrist.monitor.bench import bench_monitor as run_monitor
+
     return run_monitor(quick)
 
 
@@ -249,6 +261,7 @@ def bench_monitor(quick: bool = False) -> dict:
 def bench_bridge(quick: bool = False) -> dict:
     """1 kHz sample streaming emulator -> pty -> bridge link: loss, reordering, latency percentiles."""
     from sma_wrist.hw.bench import bench_bridge as run_bridge
+
     return run_bridge(5.0 if quick else 600.0)
 
 
@@ -256,6 +269,7 @@ def bench_bridge(quick: bool = False) -> dict:
 def bench_identify(quick: bool = False) -> dict:
     """GPI / SD-GPI fit time and quality, exact Jacobian vs the earlier finite differences, one core."""
     from sma_wrist.identify.bench import bench_identify as run_identify
+
     return run_identify(quick)
 
 
@@ -263,6 +277,7 @@ def bench_identify(quick: bool = False) -> dict:
 def bench_sweep(quick: bool = False) -> dict:
     """Closed loops per second: the vectorised sweep vs the node graph, side by side (doc/howto/sweep.md)."""
     from sma_wrist.sweep.bench import bench_sweep as run_sweep_bench
+
     return run_sweep_bench(quick)
 
 
@@ -270,6 +285,7 @@ def bench_sweep(quick: bool = False) -> dict:
 def bench_identify_thermal(quick: bool = False) -> dict:
     """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (doc/howto/identify_tems.md)."""
     from sma_wrist.identify.thermal_testplant import holdout_table, speed
+
     return {'speed': speed(quick), **holdout_table(quick)}
 
 
@@ -277,9 +293,12 @@ def bench_identify_thermal(quick: bool = False) -> dict:
 def bench_identify_wrist(quick: bool = False) -> dict:
     """A wire transforming at 55-98 degC, windows from identify/wrist.py: seed TEMs vs TEMs rated 120 degC (doc/howto/identify_wire.md)."""
     from sma_wrist.identify.wrist_runs import hot_wire_runs
-    return hot_wire_runs(('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
-                         progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
-                         png=bench_png('identify_wrist.png'))
+
+    return hot_wire_runs(
+        ('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
+        progress=lambda m: print(f'[identify_wrist] {m}', file=sys.stderr, flush=True),
+        png=bench_png('identify_wrist.png'),
+    )
 
 
 @section('measured_wire')
@@ -288,16 +307,21 @@ def bench_measured_wire(quick: bool = False) -> dict:
     on TEMs rated 120 degC; direct and pid also without their reference leads (doc/howto/identify_wire.md)."""
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.identify.wrist_runs import measured_wire_runs
+
     data = Path(__file__).resolve().parent.parent / 'test' / 'data' / 'flexinol'
     files = sorted(data.glob('*MPa.txt'))
     if not files:
-        raise SmaWristError(f'the measured-wire benchmark reads the source checkout\'s {data}: not found')
-    return measured_wire_runs(files, ('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
-                              progress=lambda m: print(f'[measured_wire] {m}', file=sys.stderr, flush=True),
-                              png=bench_png('measured_wire.png'))
+        raise SmaWristError(f"the measured-wire benchmark reads the source checkout's {data}: not found")
+    return measured_wire_runs(
+        files,
+        ('inverse_adaptive',) if quick else ('inverse_adaptive', 'direct_adaptive', 'pid'),
+        progress=lambda m: print(f'[measured_wire] {m}', file=sys.stderr, flush=True),
+        png=bench_png('measured_wire.png'),
+    )
 
 
 # -------------------------------------------------------------------------------- driver
+
 
 def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     """Run the named sections (all registered ones by default) and return their results."""
@@ -305,9 +329,17 @@ def run(sections: list[str] | None = None, quick: bool = False) -> dict:
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:
         from sma_wrist.core.errors import ParameterError
+
         raise ParameterError(f'unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}')
-    out: dict = {'meta': {'python': platform.python_version(), 'numpy': np.__version__,
-                          'machine': platform.machine(), 'cpu_count': os.cpu_count(), 'quick': quick}}
+    out: dict = {
+        'meta': {
+            'python': platform.python_version(),
+            'numpy': np.__version__,
+            'machine': platform.machine(),
+            'cpu_count': os.cpu_count(),
+            'quick': quick,
+        }
+    }
     for name in names:
         t0 = time.perf_counter()
         result = dict(SECTIONS[name](quick))

@@ -5,13 +5,15 @@ record -a``: the same node classes, the same params files (config/wrist.yaml, th
 user's), the same per-node overrides the launch file sets (use_sim_time, payload_kg, mode).
 The runtime must be active before this module is imported (``sma_wrist.cli`` does it).
 """
+
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence, TypeVar
+from typing import Any, TypeVar
 
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
@@ -72,6 +74,7 @@ def graph_nodes(controller: str, hardware: bool = False) -> list[type]:
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     from sma_wrist.nodes.tem_controller import TemController
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+
     if hardware:
         from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
     else:
@@ -95,6 +98,7 @@ def file_choices(params_files: Sequence[str | Path], hardware: bool = False) -> 
     merges them): what ``run`` uses where the command line names neither. ``run --params-file`` with a file's
     ``payload_kg: 0.6`` ran 0.3 kg, the option's default, and never checked the file's value."""
     from sma_wrist.runtime.arguments import overrides_for, parse_ros_args
+
     args = [parse_ros_args(ros_args(params_files))]
     source = '/hardware_bridge' if hardware else '/plant_sim'
     mode = overrides_for('/adaptive_controller', args).get('mode', 'inverse_adaptive')
@@ -114,13 +118,15 @@ def file_soft_start(params_files: Sequence[str | Path]) -> float | None:
     if not params_files:
         return None
     from sma_wrist.runtime.arguments import overrides_for, parse_ros_args
+
     args = [parse_ros_args(['--ros-args', *(a for f in params_files for a in ('--params-file', str(f)))])]
     value = overrides_for('/trajectory_generator', args).get('soft_start_s')
     return None if value is None else float(value)
 
 
-def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
-              extra: dict[str, dict[str, Any]] | None = None) -> dict[str, dict[str, Any]]:
+def overrides(
+    controller: str, payload_kg: float, source: str = 'plant_sim', extra: dict[str, dict[str, Any]] | None = None
+) -> dict[str, dict[str, Any]]:
     """What the launch file sets on top of the params files."""
     out: dict[str, dict[str, Any]] = {
         '/**': {'use_sim_time': True},
@@ -132,13 +138,15 @@ def overrides(controller: str, payload_kg: float, source: str = 'plant_sim',
     return out
 
 
-def build_nodes(nodes: Sequence[type], args: Sequence[str], params: dict[str, dict[str, Any]],
-                take: Callable[[Any], T]) -> dict[str, T]:
+def build_nodes(
+    nodes: Sequence[type], args: Sequence[str], params: dict[str, dict[str, Any]], take: Callable[[Any], T]
+) -> dict[str, T]:
     """{node name: ``take(node)``} of ``nodes`` built, not run, on a throwaway embedded runtime with ``args`` and
     ``params``, their start-up lines silenced; a node that refuses its values raises ParameterError with its reason
     (ros2 run's). How ``run`` checks a params file and ``sweep`` reads one."""
     from sma_wrist.nodes.common import add_or_refuse
     from sma_wrist.runtime.rclpy import logging as rlog
+
     out: dict[str, T] = {}
     with rlog.silenced(), Runtime(list(args), params=params) as rt:
         for cls in nodes:
@@ -147,22 +155,32 @@ def build_nodes(nodes: Sequence[type], args: Sequence[str], params: dict[str, di
     return out
 
 
-def check_params(nodes: Sequence[type], args: Sequence[str], params_files: Sequence[str | Path],
-                 params: dict[str, dict[str, Any]]) -> None:
+def check_params(
+    nodes: Sequence[type], args: Sequence[str], params_files: Sequence[str | Path], params: dict[str, dict[str, Any]]
+) -> None:
     """Build ``nodes`` (:func:`build_nodes`) before anything is recorded: a value a node refuses, or a key of
     ``params_files`` that no node of the graph declares (ROS ignores it, so a misspelt name would run the defaults in
     silence), is a ParameterError. A refusal met only when the run started left its bag behind, which then blocked
     the rerun ("already exists")."""
     from sma_wrist.nodes.common import refuse_undeclared
+
     refuse_undeclared(params_files, build_nodes(nodes, args, params, lambda n: set(n.get_parameters_by_prefix(''))))
 
 
-def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.3, duration_s: float = 126.0,
-                    bag: str | Path | None = None, params_files: Sequence[str | Path] = (),
-                    extra_params: dict[str, dict[str, Any]] | None = None, topics: Sequence[str] | None = None,
-                    progress: Callable[[float, float, float], None] | None = None,
-                    hardware: bool = False, delivery: Any = None, measure: bool = False,
-                    monitor: dict[str, Any] | None = None) -> RunSummary:
+def run_closed_loop(
+    controller: str = 'inverse_adaptive',
+    payload_kg: float = 0.3,
+    duration_s: float = 126.0,
+    bag: str | Path | None = None,
+    params_files: Sequence[str | Path] = (),
+    extra_params: dict[str, dict[str, Any]] | None = None,
+    topics: Sequence[str] | None = None,
+    progress: Callable[[float, float, float], None] | None = None,
+    hardware: bool = False,
+    delivery: Any = None,
+    measure: bool = False,
+    monitor: dict[str, Any] | None = None,
+) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
 
     ``measure`` without a ``bag``: record to a temporary bag, removed afterwards, for the metrics (``sma-wrist run``
@@ -174,41 +192,72 @@ def run_closed_loop(controller: str = 'inverse_adaptive', payload_kg: float = 0.
     """
     import contextlib
     import tempfile
+
     kept = bag is not None
-    with (tempfile.TemporaryDirectory(prefix='sma_wrist_run_') if measure and not kept
-          else contextlib.nullcontext(None)) as tmp:
+    with (
+        tempfile.TemporaryDirectory(prefix='sma_wrist_run_') if measure and not kept else contextlib.nullcontext(None)
+    ) as tmp:
         if tmp is not None:
             bag = Path(tmp) / 'bag'
-        summary = _run(controller, payload_kg, duration_s, bag, params_files, extra_params, topics, progress,
-                       hardware, delivery, kept, monitor)
+        summary = _run(
+            controller,
+            payload_kg,
+            duration_s,
+            bag,
+            params_files,
+            extra_params,
+            topics,
+            progress,
+            hardware,
+            delivery,
+            kept,
+            monitor,
+        )
     if not kept:
         summary.bag = None
     return summary
 
 
-def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path | None,
-         params_files: Sequence[str | Path], extra_params: dict[str, dict[str, Any]] | None,
-         topics: Sequence[str] | None, progress: Callable[[float, float, float], None] | None, hardware: bool,
-         delivery: Any, kept: bool, monitor: dict[str, Any] | None) -> RunSummary:
+def _run(
+    controller: str,
+    payload_kg: float,
+    duration_s: float,
+    bag: str | Path | None,
+    params_files: Sequence[str | Path],
+    extra_params: dict[str, dict[str, Any]] | None,
+    topics: Sequence[str] | None,
+    progress: Callable[[float, float, float], None] | None,
+    hardware: bool,
+    delivery: Any,
+    kept: bool,
+    monitor: dict[str, Any] | None,
+) -> RunSummary:
     """:func:`run_closed_loop` with its bag (or none); ``kept``: the bag is the user's, not a temporary one."""
     source = 'hardware_bridge' if hardware else 'plant_sim'
     nodes = graph_nodes(controller, hardware)
     if monitor is not None:
         from sma_wrist.nodes.twin_monitor import TwinMonitor
+
         nodes.append(TwinMonitor)
         extra_params = {**(extra_params or {}), '/twin_monitor': dict(monitor)}
     if params_files:  # all but hardware_bridge (graph_nodes puts the source first), which would open its port
-        check_params(nodes[1:] if hardware else nodes, ros_args(params_files), params_files,
-                     overrides(controller, payload_kg, source, extra_params))
+        check_params(
+            nodes[1:] if hardware else nodes,
+            ros_args(params_files),
+            params_files,
+            overrides(controller, payload_kg, source, extra_params),
+        )
     wall0 = time.perf_counter()
     interrupted = stalled = False
     recorded = 0
     sim_s = 0.0
-    with Runtime(ros_args(params_files), params=overrides(controller, payload_kg, source, extra_params),
-                 delivery=delivery) as rt:
+    with Runtime(
+        ros_args(params_files), params=overrides(controller, payload_kg, source, extra_params), delivery=delivery
+    ) as rt:
         if bag is not None:
             rec = rt.record(bag, topics)
         from sma_wrist.nodes.common import add_or_refuse
+
         # a value a node refuses (a params file's): its reason, not rclpy's traceback
         built = [add_or_refuse(rt, cls) for cls in nodes]
         source_node = built[0]
@@ -231,9 +280,12 @@ def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path 
         monitor_out = None
         if monitor_node is not None:
             v = monitor_node.verdict
-            monitor_out = {'checks': len(monitor_node.monitor.history), 'skipped_checks': monitor_node.skipped_checks,
-                           'verdict': v.to_json() if v is not None else None,
-                           'episodes': monitor_node.monitor.episodes()}
+            monitor_out = {
+                'checks': len(monitor_node.monitor.history),
+                'skipped_checks': monitor_node.skipped_checks,
+                'verdict': v.to_json() if v is not None else None,
+                'episodes': monitor_node.monitor.episodes(),
+            }
         why = source_node.why_no_data() if stalled else ''
         if bag is not None:
             recorded = rec.count
@@ -241,21 +293,32 @@ def _run(controller: str, payload_kg: float, duration_s: float, bag: str | Path 
         raise SmaWristError(
             f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {sim_s:.2f} s of device time: check '
             f"hardware_bridge's port, that the device is powered and streaming (doc/explanation/protocol.md); TEMs were "
-            f'held at 0 V' + (f'; the bag {bag} holds everything up to here' if kept else '') +
-            (f'. What the bridge saw: {why}' if why else ''))
-    summary = RunSummary(str(bag) if bag is not None else None, controller, float(payload_kg), sim_s,
-                         time.perf_counter() - wall0, recorded, interrupted)
+            f'held at 0 V'
+            + (f'; the bag {bag} holds everything up to here' if kept else '')
+            + (f'. What the bridge saw: {why}' if why else '')
+        )
+    summary = RunSummary(
+        str(bag) if bag is not None else None,
+        controller,
+        float(payload_kg),
+        sim_s,
+        time.perf_counter() - wall0,
+        recorded,
+        interrupted,
+    )
     summary.monitor = monitor_out
     if bag is not None:
         from sma_wrist.bag import BagError
         from sma_wrist.runs import load_run, run_metrics
+
         try:
             summary.run = load_run(bag)
         except BagError as exc:
             if not interrupted:  # a run that ended normally and left no readable run is a fault
                 raise
-            summary.metrics_missing = (f'interrupted at {sim_s:.2f} s before there was an error to measure: '
-                                       f'{exc.problem}')
+            summary.metrics_missing = (
+                f'interrupted at {sim_s:.2f} s before there was an error to measure: {exc.problem}'
+            )
         else:
             summary.metrics = run_metrics(summary.run)
     return summary
@@ -274,8 +337,17 @@ def print_progress(t: float, total: float, wall: float) -> None:
     sys.stderr.flush()
 
 
-__all__ = ['CONTROLLERS', 'RunSummary', 'graph_nodes', 'build_nodes', 'check_params', 'run_closed_loop', 'print_progress', 'ros_args',
-           'overrides']
+__all__ = [
+    'CONTROLLERS',
+    'RunSummary',
+    'graph_nodes',
+    'build_nodes',
+    'check_params',
+    'run_closed_loop',
+    'print_progress',
+    'ros_args',
+    'overrides',
+]
 
 
 def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:
@@ -291,17 +363,20 @@ def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:
 
     from sma_wrist import runtime
     from sma_wrist.runtime.bench import bench_contract_floor
+
     runtime.activate()
     duration = 10.0 if quick else 60.0
     floors = [bench_contract_floor(duration) for _ in range(repeats)]
     floor = min(floors, key=lambda f: f['us_per_tick'])
-    out: dict[str, Any] = {'sim_time_s': duration, 'repeats': repeats,
-                           'floor_real_time_factor': floor['real_time_factor'],
-                           'floor_real_time_factor_range': [min(f['real_time_factor'] for f in floors),
-                                                            floor['real_time_factor']],
-                           'floor_us_per_tick': floor['us_per_tick'],
-                           'floor_messages_per_tick': floor['published_per_tick'],
-                           'floor_deliveries_per_tick': floor['deliveries_per_tick']}
+    out: dict[str, Any] = {
+        'sim_time_s': duration,
+        'repeats': repeats,
+        'floor_real_time_factor': floor['real_time_factor'],
+        'floor_real_time_factor_range': [min(f['real_time_factor'] for f in floors), floor['real_time_factor']],
+        'floor_us_per_tick': floor['us_per_tick'],
+        'floor_messages_per_tick': floor['published_per_tick'],
+        'floor_deliveries_per_tick': floor['deliveries_per_tick'],
+    }
     for controller in ('direct_adaptive', 'inverse_adaptive'):
         run_closed_loop(controller, 0.3, 0.5)  # imports, numba cache load
         plain, recorded = [], []
@@ -315,9 +390,10 @@ def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:
         out[f'{controller}_real_time_factor_range'] = [min(x.real_time_factor for x in plain), s.real_time_factor]
         out[f'{controller}_nodes_us_per_tick'] = 1e6 * s.wall_s / (duration * 100.0) - floor['us_per_tick']
         out[f'{controller}_recorded_real_time_factor'] = r.real_time_factor
-        out[f'{controller}_recorded_real_time_factor_range'] = [min(x.real_time_factor for x in recorded),
-                                                                r.real_time_factor]
+        out[f'{controller}_recorded_real_time_factor_range'] = [
+            min(x.real_time_factor for x in recorded),
+            r.real_time_factor,
+        ]
         out[f'{controller}_messages_per_sim_s'] = r.messages_recorded / duration
-        out[f'{controller}_recording_cost_us_per_message'] = (
-            1e6 * (r.wall_s - s.wall_s) / max(r.messages_recorded, 1))
+        out[f'{controller}_recording_cost_us_per_message'] = 1e6 * (r.wall_s - s.wall_s) / max(r.messages_recorded, 1)
     return out

@@ -6,12 +6,14 @@ the tests read the same file. No ROS imports: message classes are resolved by th
 
 The file is found by :func:`sma_wrist.share.share_path` under every install layout.
 """
+
 from __future__ import annotations
 
 import functools
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any
 
 import yaml
 
@@ -69,7 +71,7 @@ def contract_path() -> Path:
         raise ContractError(str(e)) from None
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def load_contract(path: str | None = None) -> Contract:
     """Parse and check the contract (cached)."""
     p = Path(path) if path else contract_path()
@@ -77,10 +79,17 @@ def load_contract(path: str | None = None) -> Contract:
         raw: Any = yaml.safe_load(p.read_text())
         topics = {}
         for t in raw['topics']:
-            topic = Topic(name=t['name'], type=t['type'], unit=str(t['unit']), rate_hz=float(t['rate_hz']),
-                          publisher=t['publisher'], subscribers=tuple(t.get('subscribers') or ()),
-                          description=t['description'], qos=t.get('qos', 'reliable'),
-                          alt_publisher=t.get('alt_publisher'))
+            topic = Topic(
+                name=t['name'],
+                type=t['type'],
+                unit=str(t['unit']),
+                rate_hz=float(t['rate_hz']),
+                publisher=t['publisher'],
+                subscribers=tuple(t.get('subscribers') or ()),
+                description=t['description'],
+                qos=t.get('qos', 'reliable'),
+                alt_publisher=t.get('alt_publisher'),
+            )
             if topic.name in topics:
                 raise ContractError(f'{p}: topic {topic.name} listed twice')
             if topic.qos not in ('reliable', 'transient_local'):
@@ -120,8 +129,10 @@ def joint_positions(msgs: Any, joint_name: str | None = None) -> list[float]:
         elif len(names) <= 1:
             i = 0
         else:
-            raise ContractError(f'sensor_msgs/JointState names the joints {names}, none of them {name!r}: give the '
-                                "wrist's with --joint NAME")
+            raise ContractError(
+                f'sensor_msgs/JointState names the joints {names}, none of them {name!r}: give the '
+                "wrist's with --joint NAME"
+            )
         out.append(float(m.position[i]) if len(m.position) > i else float('nan'))
     return out
 
@@ -135,18 +146,18 @@ class Recording:
     joint: str | None = None  # the wrist's joint in its JointState (None: the contract's)
 
     @classmethod
-    def from_options(cls, topic_specs: Iterable[str] | None = None, joint: str | None = None) -> 'Recording':
+    def from_options(cls, topic_specs: Iterable[str] | None = None, joint: str | None = None) -> Recording:
         """From ``CONTRACT=RECORDED`` strings; ContractError names a malformed, unknown or doubled one."""
         known = load_contract().topics
         out: dict[str, str] = {}
         for spec in topic_specs or ():
             name, sep, recorded = (x.strip() for x in spec.partition('='))
             if not sep or not name.startswith('/') or not recorded.startswith('/'):
-                raise ContractError(f'--topic {spec!r}: give CONTRACT=RECORDED, e.g. '
-                                    '/wrist/joint_states=/joint_states')
+                raise ContractError(f'--topic {spec!r}: give CONTRACT=RECORDED, e.g. /wrist/joint_states=/joint_states')
             if name not in known:
-                raise ContractError(f'--topic {spec!r}: {name} is not a contract topic (one of '
-                                    f'{", ".join(sorted(known))})')
+                raise ContractError(
+                    f'--topic {spec!r}: {name} is not a contract topic (one of {", ".join(sorted(known))})'
+                )
             if name in out or recorded in out.values():
                 raise ContractError(f'--topic {spec!r}: {name if name in out else recorded} is mapped twice')
             out[name] = recorded
@@ -164,5 +175,14 @@ class Recording:
         return {back.get(k, k): v for k, v in data.items() if k in back or k not in self.topics}
 
 
-__all__ = ['IMPOSSIBLE', 'PAYLOAD_RANGE_KG', 'Contract', 'ContractError', 'Recording', 'Topic', 'contract_path',
-           'joint_positions', 'load_contract']
+__all__ = [
+    'IMPOSSIBLE',
+    'PAYLOAD_RANGE_KG',
+    'Contract',
+    'ContractError',
+    'Recording',
+    'Topic',
+    'contract_path',
+    'joint_positions',
+    'load_contract',
+]

@@ -8,6 +8,7 @@ sections come after its ``/**`` and would silently win over controller:=, payloa
 port:= (found running the launch files under ROS 2 Humble). Written under the node's own
 name, a later file's value replaces the earlier one in that node's entry.
 """
+
 from __future__ import annotations
 
 import atexit
@@ -15,7 +16,8 @@ import os
 import re
 import shutil
 import tempfile
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import yaml
 
@@ -89,6 +91,7 @@ def on_exit_actions(executable: str) -> list | None:
         if not code:
             return [LogInfo(msg=reason), Shutdown(reason=reason)]
         raise RequiredNodeFailed(f'{executable} exited with code {code}: ' + reason.split(': ', 1)[1])
+
     return [OpaqueFunction(function=unless_shutting_down)]
 
 
@@ -99,17 +102,20 @@ def node_parameters(defaults: str, extra: str, executable: str, values: Mapping[
     return [defaults, *([extra] if extra.strip() else []), node_params_file(executable, values)]
 
 
-def graph_specs(source: str, source_overrides: Mapping[str, Any], controller: str, monitor: bool = False
-                ) -> list[tuple[str, dict[str, Any]]]:
+def graph_specs(
+    source: str, source_overrides: Mapping[str, Any], controller: str, monitor: bool = False
+) -> list[tuple[str, dict[str, Any]]]:
     """(executable, its own parameter overrides) of every node of the wrist graph, in start order.
 
     ``source`` owns /clock (plant_sim or hardware_bridge) and runs on its own clock; every other
     node runs on /clock. The compensator only serves the inverse mode; ``monitor`` adds twin_monitor (optional:
     the graph does not depend on it).
     """
-    specs = [(source, {'use_sim_time': False, **source_overrides}),
-             ('trajectory_generator', {'use_sim_time': True}),
-             ('adaptive_controller', {'use_sim_time': True, 'mode': controller})]
+    specs = [
+        (source, {'use_sim_time': False, **source_overrides}),
+        ('trajectory_generator', {'use_sim_time': True}),
+        ('adaptive_controller', {'use_sim_time': True, 'mode': controller}),
+    ]
     if controller == 'inverse_adaptive':
         specs.append(('hysteresis_compensator', {'use_sim_time': True}))
     specs.append(('tem_controller', {'use_sim_time': True}))
@@ -126,5 +132,13 @@ def flag(text: str) -> bool:
     return v in ('true', '1', 'yes')
 
 
-__all__ = ['REQUIRED_EXIT_REASONS', 'RequiredNodeFailed', 'flag', 'graph_specs', 'node_parameters', 'node_params_file',
-           'on_exit_actions', 'payload_override']
+__all__ = [
+    'REQUIRED_EXIT_REASONS',
+    'RequiredNodeFailed',
+    'flag',
+    'graph_specs',
+    'node_parameters',
+    'node_params_file',
+    'on_exit_actions',
+    'payload_override',
+]

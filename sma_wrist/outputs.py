@@ -4,10 +4,11 @@ An output path that is one of the command's inputs (a measured table, a bag's me
 overwritten; a folder given as a file, or a file as a folder, failed with a traceback once the work
 was done. These checks name the option and the path instead.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 from sma_wrist.core.errors import SmaWristError
 
@@ -30,8 +31,14 @@ def _input_hit(path: Path, inputs: Iterable[str | Path]) -> Path | None:
     return None
 
 
-def _check(path: str | Path | None, flag: str, inputs: Iterable[str | Path], error: type[SmaWristError],
-           folder: bool, example: str | None = None) -> None:
+def _check(
+    path: str | Path | None,
+    flag: str,
+    inputs: Iterable[str | Path],
+    error: type[SmaWristError],
+    folder: bool,
+    example: str | None = None,
+) -> None:
     if not path:
         return
     p = Path(path)
@@ -44,19 +51,30 @@ def _check(path: str | Path | None, flag: str, inputs: Iterable[str | Path], err
         raise error(f'{flag} {p}: {blocked} is a file, not a folder')
     hit = _input_hit(p, inputs)
     if hit is not None:
-        raise error(f'{flag} {p} is {"inside " if hit.resolve() != p.resolve() else ""}the input {hit}: '
-                    f'it would be overwritten; give another {"folder" if folder else "path"}')
+        raise error(
+            f'{flag} {p} is {"inside " if hit.resolve() != p.resolve() else ""}the input {hit}: '
+            f'it would be overwritten; give another {"folder" if folder else "path"}'
+        )
 
 
-def check_output_file(path: str | Path | None, flag: str, inputs: Iterable[str | Path] = (),
-                      error: type[SmaWristError] = SmaWristError, example: str | None = None) -> None:
+def check_output_file(
+    path: str | Path | None,
+    flag: str,
+    inputs: Iterable[str | Path] = (),
+    error: type[SmaWristError] = SmaWristError,
+    example: str | None = None,
+) -> None:
     """``error`` if the file ``path`` cannot be written without harm: it is a folder (the message suggests
     ``example`` inside it), it would be created under a file, or it is (or is inside) one of ``inputs``."""
     _check(path, flag, inputs, error, folder=False, example=example)
 
 
-def check_output_folder(path: str | Path | None, flag: str = '--out', inputs: Iterable[str | Path] = (),
-                        error: type[SmaWristError] = SmaWristError) -> None:
+def check_output_folder(
+    path: str | Path | None,
+    flag: str = '--out',
+    inputs: Iterable[str | Path] = (),
+    error: type[SmaWristError] = SmaWristError,
+) -> None:
     """``error`` if the folder ``path`` cannot be used: it is a file, would be created under a file, or is (or is
     inside) one of ``inputs``."""
     _check(path, flag, inputs, error, folder=True)
@@ -66,6 +84,7 @@ def bench_png(name: str) -> str:
     """Path of a benchmark's figure: in ``$SMA_WRIST_BENCH_DIR`` (default: the current directory),
     created if missing, so a run does not end in a traceback after minutes of work."""
     import os
+
     folder = Path(os.environ.get('SMA_WRIST_BENCH_DIR', '.'))
     try:
         folder.mkdir(parents=True, exist_ok=True)

@@ -6,6 +6,7 @@ Alignment: the reference is interpolated at the joint-state stamps (both stamped
 node clocks, i.e. simulated time under use_sim_time); samples before the first reference
 are dropped.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -22,8 +23,15 @@ from sma_wrist.core.metrics import SEED_PERIOD_S, SEED_REFERENCE_RANGE_RAD, Trac
 
 FloatArray = NDArray[np.float64]
 
-TOPICS = ('/wrist/joint_states', '/wrist/reference', '/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature',
-          '/wrist/tem_1/command', '/wrist/tem_2/command', '/wrist/payload')
+TOPICS = (
+    '/wrist/joint_states',
+    '/wrist/reference',
+    '/wrist/muscle_1/temperature',
+    '/wrist/muscle_2/temperature',
+    '/wrist/tem_1/command',
+    '/wrist/tem_2/command',
+    '/wrist/payload',
+)
 
 
 @dataclass
@@ -66,16 +74,26 @@ def load_run(path: str | Path, recording: Recording | None = None) -> RunData:
     js = _series(data, '/wrist/joint_states')
     ref = _series(data, '/wrist/reference')
     if not js or not ref:
-        missing = [t + (f' (as {rec.topics[t]})' if t in rec.topics else '')
-                   for t, s in (('/wrist/joint_states', js), ('/wrist/reference', ref)) if not s]
-        raise BagError(path, f'no messages on {", ".join(missing)}: a run bag needs the measured joint state '
-                             'and the reference (see msg_defs/topics.yaml; --topic CONTRACT=RECORDED reads a bag '
-                             'that names them otherwise)')
+        missing = [
+            t + (f' (as {rec.topics[t]})' if t in rec.topics else '')
+            for t, s in (('/wrist/joint_states', js), ('/wrist/reference', ref))
+            if not s
+        ]
+        raise BagError(
+            path,
+            f'no messages on {", ".join(missing)}: a run bag needs the measured joint state '
+            'and the reference (see msg_defs/topics.yaml; --topic CONTRACT=RECORDED reads a bag '
+            'that names them otherwise)',
+        )
     t = np.array([_stamp(m) for _, m in js])
     q = np.array(joint_positions((m for _, m in js), rec.joint))
     wild = np.abs(q) > IMPOSSIBLE['joint']  # a glitch read as an angle was a 1e8 % error
-    dropped = (f'{int(wild.sum())} of {q.size} joint states with angles beyond +-{IMPOSSIBLE["joint"]:g} (up to '
-               f'{np.abs(q[wild]).max():.3g}) are no measurement and were left out' if wild.any() else '')
+    dropped = (
+        f'{int(wild.sum())} of {q.size} joint states with angles beyond +-{IMPOSSIBLE["joint"]:g} (up to '
+        f'{np.abs(q[wild]).max():.3g}) are no measurement and were left out'
+        if wild.any()
+        else ''
+    )
     q[wild] = np.nan
     tr = np.array([_stamp(m) for _, m in ref])
     qr = np.array(joint_positions((m for _, m in ref), rec.joint))
@@ -85,16 +103,22 @@ def load_run(path: str | Path, recording: Recording | None = None) -> RunData:
     tr, qr = tr[good], qr[good]
     for topic, stamps in (('/wrist/joint_states', t), ('/wrist/reference', tr)):
         if stamps.size > 2 and np.unique(stamps).size < 0.5 * stamps.size:  # one pair would be all the metrics
-            raise BagError(path, f'the header stamps of {topic} do not advance ({np.unique(stamps).size} distinct '
-                                 f'in {stamps.size} messages): its publisher does not stamp them, and the error '
-                                 'is measured by stamp')
+            raise BagError(
+                path,
+                f'the header stamps of {topic} do not advance ({np.unique(stamps).size} distinct '
+                f'in {stamps.size} messages): its publisher does not stamp them, and the error '
+                'is measured by stamp',
+            )
     keep = (t >= tr[0]) & (t <= tr[-1]) & np.isfinite(q)
     if not keep.any():
         finite = np.isfinite(q)
-        why = ('no joint state has a finite position' if not finite.any() else
-               f'the joint states are stamped {t[finite].min():.6g}..{t[finite].max():.6g} s and the reference '
-               f'{tr[0]:.6g}..{tr[-1]:.6g} s: different clocks (sim time and wall time?)')
-        raise BagError(path, f'no measured angle inside the reference\'s time span: {why}')
+        why = (
+            'no joint state has a finite position'
+            if not finite.any()
+            else f'the joint states are stamped {t[finite].min():.6g}..{t[finite].max():.6g} s and the reference '
+            f'{tr[0]:.6g}..{tr[-1]:.6g} s: different clocks (sim time and wall time?)'
+        )
+        raise BagError(path, f"no measured angle inside the reference's time span: {why}")
     t, q = t[keep], q[keep]
     order = np.argsort(t, kind='stable')
     t, q = t[order], q[order]
@@ -114,8 +138,9 @@ def load_run(path: str | Path, recording: Recording | None = None) -> RunData:
     command_t = np.array([ns * 1e-9 for ns, _ in cmd[0][:n]])
     command_V = np.array([[cmd[0][k][1].data, cmd[1][k][1].data] for k in range(n)]).reshape(n, 2)
     pay = _series(data, '/wrist/payload')
-    return RunData(str(path), t, q, q_d, temps, command_t, command_V, float(pay[-1][1].data) if pay else None,
-                   damage, dropped)
+    return RunData(
+        str(path), t, q, q_d, temps, command_t, command_V, float(pay[-1][1].data) if pay else None, damage, dropped
+    )
 
 
 def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]:
@@ -131,13 +156,15 @@ def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]
     # a constant reference (trajectory_generator shape: constant) has no range to take a % of: that of the
     # Sec. 6.1 sine, so a set-point run reads on the same scale as the seed's figures
     still = run.q_d.size > 0 and float(np.ptp(run.q_d)) <= 0.0
-    whole: TrackingMetrics = tracking_metrics(run.t, run.q, run.q_d,
-                                              reference_range_rad=SEED_REFERENCE_RANGE_RAD if still else None)
+    whole: TrackingMetrics = tracking_metrics(
+        run.t, run.q, run.q_d, reference_range_rad=SEED_REFERENCE_RANGE_RAD if still else None
+    )
     span = run.t[-1] - run.t[0] if run.t.size else 0.0
     if span >= period_s:
         last = run.t >= run.t[-1] - period_s
-        m = tracking_metrics(run.t[last], run.q[last], run.q_d[last],
-                             reference_range_rad=whole.reference_range_rad, period_s=None)
+        m = tracking_metrics(
+            run.t[last], run.q[last], run.q_d[last], reference_range_rad=whole.reference_range_rad, period_s=None
+        )
         out = m.to_dict()
         out['total_abs_error_pct'] = whole.total_abs_error_pct
         out['cycle_start_s'], out['cycle_period_s'] = whole.cycle_start_s, whole.cycle_period_s
@@ -166,21 +193,29 @@ def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: s
     hardware run recorded at wall-clock stamps lines up with a simulated one.
     """
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+
     fig, (ax_q, ax_e, ax_T, ax_u) = plt.subplots(4, 1, figsize=(9, 10), sharex=True)
     for k, (run, label) in enumerate(zip(runs, labels)):
         t = run.t - run.t[0]
         span = float(np.ptp(run.q_d)) or 1.0
         if k == 0:
             ax_q.plot(t, run.q_d, 'k--', lw=1, label='q_d')
-        line, = ax_q.plot(t, run.q, lw=1, label=label)
+        (line,) = ax_q.plot(t, run.q, lw=1, label=label)
         ax_e.plot(t, 100.0 * (run.q - run.q_d) / span, lw=1, color=line.get_color(), label=label)
         for i, style in ((0, '-'), (1, ':')):  # muscle 1 solid, muscle 2 dotted, in the run's colour
             ax_T.plot(t, run.temperature_C[:, i], style, lw=1, color=line.get_color(), label=f'{label} muscle {i + 1}')
             if run.command_t.size:
-                ax_u.plot(run.command_t - run.t[0], run.command_V[:, i], style, lw=0.8, color=line.get_color(),
-                          label=f'{label} TEM {i + 1}')
+                ax_u.plot(
+                    run.command_t - run.t[0],
+                    run.command_V[:, i],
+                    style,
+                    lw=0.8,
+                    color=line.get_color(),
+                    label=f'{label} TEM {i + 1}',
+                )
     ax_q.set_ylabel('angle [rad]')
     ax_e.set_ylabel('error [% of reference range]')
     ax_T.set_ylabel('muscle temperature [degC]')
@@ -209,16 +244,20 @@ def check_plot_file(plot: str | Path, inputs: list[str | Path], example: str) ->
     """SmaWristError before any work if ``--plot`` cannot be written: a folder (savefig wrote <folder>.png), one of
     ``inputs``, or a suffix matplotlib does not write (its ValueError came as a traceback after the work)."""
     from sma_wrist.outputs import check_output_file
+
     check_output_file(plot, '--plot', inputs, example=example)
     suffix = Path(plot).suffix.lower().lstrip('.')
     formats = _plot_formats()
     if suffix and formats and suffix not in formats:
-        raise SmaWristError(f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
-                            f'{", ".join("." + f for f in formats)} (no suffix: PNG)')
+        raise SmaWristError(
+            f'--plot {plot}: .{suffix} is not an image format matplotlib writes; use one of '
+            f'{", ".join("." + f for f in formats)} (no suffix: PNG)'
+        )
 
 
-def compare_runs(paths: list[str | Path], plot: str | Path | None = None,
-                 recording: Recording | None = None) -> list[dict[str, Any]]:
+def compare_runs(
+    paths: list[str | Path], plot: str | Path | None = None, recording: Recording | None = None
+) -> list[dict[str, Any]]:
     """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot.
 
     A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one).
@@ -226,8 +265,10 @@ def compare_runs(paths: list[str | Path], plot: str | Path | None = None,
     if plot is not None:
         check_plot_file(plot, paths, 'compare.png')
     runs = [load_run(p, recording) for p in paths]
-    rows = [{'bag': str(p), **run_metrics(r), 'damaged': r.damage or None, 'dropped': r.dropped or None}
-            for p, r in zip(paths, runs)]
+    rows = [
+        {'bag': str(p), **run_metrics(r), 'damaged': r.damage or None, 'dropped': r.dropped or None}
+        for p, r in zip(paths, runs)
+    ]
     if plot is not None:
         plot_runs(runs, [Path(p).name for p in paths], plot, 'compare')
     return rows

@@ -4,6 +4,7 @@ Looked up, in order: the source tree (a checkout, or ``colcon build --symlink-in
 ``<sys.prefix>/share/sma_wrist`` (where ``pip install`` puts setup.py's data_files), and
 every ``$AMENT_PREFIX_PATH/share/sma_wrist`` (a sourced ROS 2 workspace).
 """
+
 from __future__ import annotations
 
 import os

@@ -1,5 +1,6 @@
 """Shared test set-up: the embedded rclpy runtime (before anything imports rclpy) and a
 probe node that publishes inputs and collects outputs of a node under test."""
+
 from __future__ import annotations
 
 import os
@@ -16,8 +17,11 @@ runtime.activate()
 def pytest_configure(config: pytest.Config) -> None:
     # registered here too, so the marks below are known when pytest-xdist is not installed
     config.addinivalue_line('markers', 'xdist_group(name): run these tests on one pytest-xdist worker')
-    config.addinivalue_line('markers', 'exclusive: a wall-clock real-time test; under pytest-xdist the other '
-                            'workers wait while it runs, so it has the CPUs a serial run would give it')
+    config.addinivalue_line(
+        'markers',
+        'exclusive: a wall-clock real-time test; under pytest-xdist the other '
+        'workers wait while it runs, so it has the CPUs a serial run would give it',
+    )
     _warm_kernels(config)
 
 
@@ -33,10 +37,16 @@ def _warm_kernels(config: pytest.Config) -> None:
     from pathlib import Path
 
     from sma_wrist.core import jit
-    if (hasattr(config, 'workerinput') or not getattr(config.option, 'numprocesses', None)
-            or os.environ.get('SMA_WRIST_NO_WARM') or not jit.AVAILABLE):
+
+    if (
+        hasattr(config, 'workerinput')
+        or not getattr(config.option, 'numprocesses', None)
+        or os.environ.get('SMA_WRIST_NO_WARM')
+        or not jit.AVAILABLE
+    ):
         return
     import sma_wrist
+
     script = Path(__file__).with_name('warm_kernels.py')
     # the copy of the package this run imports (the installed one under .ci/run, which runs from test/; the
     # checkout under ``python -m pytest test`` from the root): numba caches per source folder, so warming
@@ -44,11 +54,18 @@ def _warm_kernels(config: pytest.Config) -> None:
     here = str(Path(sma_wrist.__file__).resolve().parent.parent)
     env = {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in (here, os.environ.get('PYTHONPATH')) if p)}
     t0 = time.perf_counter()
-    procs = [subprocess.Popen([sys.executable, str(script), part], stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, text=True, env=env) for part in ('closed_loops', 'replays')]
+    procs = [
+        subprocess.Popen(
+            [sys.executable, str(script), part], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env
+        )
+        for part in ('closed_loops', 'replays')
+    ]
     failed = [err.strip().splitlines()[-1] for p in procs if (err := p.communicate()[1]) and p.returncode]
-    print(f'sma_wrist: numba kernels ready for the workers in {time.perf_counter() - t0:.0f} s'
-          + (f' (not all: {"; ".join(failed)})' if failed else ''), file=sys.__stderr__)
+    print(
+        f'sma_wrist: numba kernels ready for the workers in {time.perf_counter() - t0:.0f} s'
+        + (f' (not all: {"; ".join(failed)})' if failed else ''),
+        file=sys.__stderr__,
+    )
 
 
 @pytest.hookimpl(tryfirst=True)
@@ -75,6 +92,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
         yield
         return
     import fcntl
+
     # the workers' basetemps are <run's basetemp>/popen-gwN: the parent is this run's, shared by all
     base = str(item.config._tmp_path_factory.getbasetemp().parent / 'sma_wrist-xdist')  # type: ignore[attr-defined]
     exclusive = item.get_closest_marker('exclusive') is not None
@@ -95,6 +113,7 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
 @pytest.fixture
 def ros_shutdown():
     import rclpy
+
     yield
     rclpy.try_shutdown()
 
@@ -108,6 +127,7 @@ class Probe:
 
         from sma_wrist.contract import load_contract
         from sma_wrist.nodes.common import message_class, qos_for
+
         self.contract = load_contract()
         self.node = rt.add(Node(name, parameter_overrides=[Parameter('use_sim_time', value=sim_time)]))
         self.pubs: dict[str, Any] = {}
@@ -115,6 +135,7 @@ class Probe:
         for t in self.got:
             if t == '/diagnostics':
                 from diagnostic_msgs.msg import DiagnosticArray
+
                 self.node.create_subscription(DiagnosticArray, t, self.got[t].append, 10)
             else:
                 c = self.contract.topic(t)
@@ -134,8 +155,11 @@ class Probe:
         return self.node.create_timer(period_s, lambda: self.publish(topic, **fields))
 
     def diagnostics(self) -> list[tuple[str, int, str]]:
-        return [(s.name, s.level[0] if isinstance(s.level, bytes) else int(s.level), s.message)
-                for arr in self.got['/diagnostics'] for s in arr.status]
+        return [
+            (s.name, s.level[0] if isinstance(s.level, bytes) else int(s.level), s.message)
+            for arr in self.got['/diagnostics']
+            for s in arr.status
+        ]
 
 
 @pytest.fixture

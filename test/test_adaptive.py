@@ -1,4 +1,5 @@
 """Back-stepping adaptive law (Eqs. 5.24, 5.32, 5.37 as corrected in sma_wrist.core.control.adaptive)."""
+
 from __future__ import annotations
 
 import math
@@ -23,8 +24,10 @@ def _simulate_law_model(theta_true: float, steps: int = 20000, dt: float = 1e-3,
         t = k * dt
         qr, qdr, qddr = 0.5 + 0.3 * math.sin(t), 0.3 * math.cos(t), -0.3 * math.sin(t)
         o = c.update(q, qd, qr, qdr, qddr, dt)
-        acc = g.r_eff_m / g.inertia_kgm2 * float(o.delta_force_N[0]) - g.g_m_s2 * g.lever_m * math.cos(q) \
-            / g.inertia_kgm2 * theta_true
+        acc = (
+            g.r_eff_m / g.inertia_kgm2 * float(o.delta_force_N[0])
+            - g.g_m_s2 * g.lever_m * math.cos(q) / g.inertia_kgm2 * theta_true
+        )
         qd += dt * acc
         q += dt * qd
         errs.append(abs(q - qr))
@@ -79,6 +82,7 @@ def test_compiled_law_equals_its_plain_python_source(mode, robust):
     """adaptive_kernel.update runs compiled under numba and as plain Python without it: both give
     the same forces, flags and estimates over a random sample sequence (saturating ones included)."""
     from sma_wrist.core.control import adaptive_kernel
+
     rng = np.random.default_rng(3)
     p = AdaptiveParams(mode=mode, robust=robust, c1=50.0, c2=80.0, gamma_a=0.5, gamma_b1=0.3, gamma_d1=0.2)
     k = adaptive_kernel.pack(p)
@@ -87,8 +91,9 @@ def test_compiled_law_equals_its_plain_python_source(mode, robust):
     saturated = 0
     for _ in range(400):
         x = rng.uniform(-1.0, 1.0, (5, 3)) * np.array([[1.0], [2.0], [1.0], [0.2], [0.05]])
-        for fn, st, out in zip((adaptive_kernel.update, getattr(adaptive_kernel.update, 'py_func',
-                                                                 adaptive_kernel.update)), states, outs):
+        for fn, st, out in zip(
+            (adaptive_kernel.update, getattr(adaptive_kernel.update, 'py_func', adaptive_kernel.update)), states, outs
+        ):
             fn(x, 0.01, *st, k, out)
         # same equations; libm's tanh/cos and LLVM's may differ in the last bit
         np.testing.assert_allclose(outs[0][:, :8], outs[1][:, :8], rtol=1e-12, atol=1e-12)

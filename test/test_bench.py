@@ -1,4 +1,5 @@
 """The benchmark driver's small contracts (the benchmarks themselves are `sma-wrist bench`, not tests)."""
+
 from __future__ import annotations
 
 import pytest
@@ -23,5 +24,6 @@ def test_a_figure_folder_that_cannot_be_made_is_a_clear_error(tmp_path, monkeypa
 
 def test_an_unknown_section_is_a_clear_error():
     from sma_wrist.bench import run
+
     with pytest.raises(SmaWristError, match=r"unknown benchmark section\(s\) \['nope'\]"):
         run(['nope'])

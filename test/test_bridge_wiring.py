@@ -1,6 +1,7 @@
 """hardware_bridge's wiring parameters (calibration.tem_sign, tem_channel_map, thermocouple_map) and the reversed
 potentiometer's calibration, on an emulated device wired wrong: with the parameters the topics carry muscle i's
 temperature and the TEM command i heats muscle i, as on a device wired as doc/explanation/protocol.md says."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,10 +17,12 @@ TOPICS = ('/wrist/joint_states', '/wrist/muscle_1/temperature', '/wrist/muscle_2
 def wired(tmp_path, ros_shutdown, probe_factory):
     """(emulator, bridge, probe): a device wired per ``cfg``, the bridge with ``params``, TEM 1 commanded 8 V."""
     from sma_wrist.runtime.launch import Runtime
+
     made = []
 
     def make(cfg: dict, params: dict):
         from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
         emu = DeviceEmulator(EmulatorConfig(noise_counts=1.0, time_scale=2.0, **cfg), link=str(tmp_path / 'wrist'))
         emu.start()
         rt = Runtime(params={'/hardware_bridge': {'port': emu.link, **params}})
@@ -30,18 +33,28 @@ def wired(tmp_path, ros_shutdown, probe_factory):
         probe.every(0.01, '/wrist/tem_2/command', data=0.0)
         rt.run_until(3.0, until='sim')
         return emu, bridge, probe
+
     yield make
     for emu, rt in made:
         rt.close()
         emu.stop()
 
 
-ALL_SWAPPED = {'tem_polarity_swapped': (False, True), 'tem_channels_swapped': True, 'thermocouples_swapped': True,
-               'angle_reversed': True}
-CORRECTED = {'calibration.tem_sign': [1, -1],  # muscle 1's TEM on output 2; muscle 2's on output 1, reversed 'calibration.tem_channel_map': [2, 1],
-             'calibration.thermocouple_map': [2, 1],
-             'calibration.angle_gain_rad_per_count': Calibration().reversed_angle().angle_gain_rad_per_count,
-             'calibration.angle_offset_rad': Calibration().reversed_angle().angle_offset_rad}
+ALL_SWAPPED = {
+    'tem_polarity_swapped': (False, True),
+    'tem_channels_swapped': True,
+    'thermocouples_swapped': True,
+    'angle_reversed': True,
+}
+CORRECTED = {
+    'calibration.tem_sign': [
+        1,
+        -1,
+    ],  # muscle 1's TEM on output 2; muscle 2's on output 1, reversed 'calibration.tem_channel_map': [2, 1],
+    'calibration.thermocouple_map': [2, 1],
+    'calibration.angle_gain_rad_per_count': Calibration().reversed_angle().angle_gain_rad_per_count,
+    'calibration.angle_offset_rad': Calibration().reversed_angle().angle_offset_rad,
+}
 
 
 @pytest.mark.parametrize('case', ['documented wiring', 'every fault, corrected'])
@@ -67,9 +80,12 @@ def test_a_wiring_parameter_that_is_no_wiring_is_refused(ros_shutdown, tmp_path)
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.launch import Runtime
-    for bad, named in (({'calibration.tem_sign': [1, 0]}, 'tem_sign'),
-                       ({'calibration.tem_channel_map': [1, 1]}, 'tem_channel_map'),
-                       ({'calibration.thermocouple_map': [1, 2, 3]}, 'thermocouple_map')):
+
+    for bad, named in (
+        ({'calibration.tem_sign': [1, 0]}, 'tem_sign'),
+        ({'calibration.tem_channel_map': [1, 1]}, 'tem_channel_map'),
+        ({'calibration.thermocouple_map': [1, 2, 3]}, 'thermocouple_map'),
+    ):
         rt = Runtime(params={'/hardware_bridge': {'port': str(tmp_path / 'none'), **bad}})
         try:
             with pytest.raises(SmaWristError, match=named):
@@ -80,14 +96,16 @@ def test_a_wiring_parameter_that_is_no_wiring_is_refused(ros_shutdown, tmp_path)
 
 def test_a_wiring_parameter_changes_at_run_time(wired):
     from rclpy.parameter import Parameter
+
     emu, bridge, probe = wired({'thermocouples_swapped': True}, {})
     assert bridge.set_parameters([Parameter('calibration.thermocouple_map', value=[2, 1])])[0].successful
     assert not bridge.set_parameters([Parameter('calibration.thermocouple_map', value=[2, 2])])[0].successful
     assert bridge.wiring.thermocouple_map == (2, 1)
     adc = (100, 200, 300, 400, 500)
     assert bridge.wiring.muscle_counts(adc) == (200, 100, 300, 400, 500)
-    assert np.allclose(bridge.cal.to_physical(bridge.wiring.muscle_counts(adc))[0][:2],
-                       bridge.cal.to_physical(adc)[0][1::-1])
+    assert np.allclose(
+        bridge.cal.to_physical(bridge.wiring.muscle_counts(adc))[0][:2], bridge.cal.to_physical(adc)[0][1::-1]
+    )
 
 
 def test_a_closed_loop_on_a_polarity_swapped_device_tracks_with_tem_sign(tmp_path, ros_shutdown):
@@ -97,20 +115,42 @@ def test_a_closed_loop_on_a_polarity_swapped_device_tracks_with_tem_sign(tmp_pat
     """
     import subprocess
     import sys
+
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.runs import load_run
+
     link = str(tmp_path / 'wrist')
-    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
-                             '--time-scale', '1.5', '--swap-tem-polarity', '1'], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'sma_wrist.cli',
+            'emulate-device',
+            '--port',
+            link,
+            '--time-scale',
+            '1.5',
+            '--swap-tem-polarity',
+            '1',
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         proc.stdout.readline()
-        run_closed_loop('direct_adaptive', 0.3, 40.0, tmp_path / 'hw', hardware=True,
-                        extra_params={'/hardware_bridge': {'port': link, 'calibration.tem_sign': [-1, 1]}})
+        run_closed_loop(
+            'direct_adaptive',
+            0.3,
+            40.0,
+            tmp_path / 'hw',
+            hardware=True,
+            extra_params={'/hardware_bridge': {'port': link, 'calibration.tem_sign': [-1, 1]}},
+        )
     finally:
         proc.terminate()
         out = proc.communicate(timeout=10)[0]
     run = load_run(tmp_path / 'hw')
     sel = (run.t >= 25.0) & (run.t <= 40.0)
     e = np.abs(run.q[sel] - run.q_d[sel]) / 1.048 * 100.0  # % of the Sec. 6.1 reference range
-    assert sel.sum() > 1000 and e.max() < 30.0 and np.sqrt(np.mean(e ** 2)) < 10.0, (e.max(), np.sqrt(np.mean(e ** 2)))
+    assert sel.sum() > 1000 and e.max() < 30.0 and np.sqrt(np.mean(e**2)) < 10.0, (e.max(), np.sqrt(np.mean(e**2)))
     assert 'largest |drive| 24 V' in out  # the device did get the loop's commands

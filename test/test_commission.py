@@ -6,6 +6,7 @@ matrix of faults x channels x plants costs seconds, not minutes; the serial path
 tested on its own below, and so is the command line at the device's 1 kHz. The lockstep cases sample at 250 Hz: the
 decisions are taken on device time, not sample counts, and it quarters their cost. The drive limit is asserted from the device's side: the largest |command| the emulator
 received."""
+
 from __future__ import annotations
 
 import json
@@ -46,7 +47,7 @@ def assert_stopped_safely(res, emu, limit_V):
     """TEMs off at the end, never driven beyond ``limit_V`` (the device's record), the report written."""
     assert emu.stats.max_abs_command_V <= limit_V + 1e-9
     assert np.all(emu._u == 0.0)
-    assert (res['report'] and open(res['report']).read().startswith('# Wrist commissioning report'))
+    assert res['report'] and open(res['report']).read().startswith('# Wrist commissioning report')
 
 
 @pytest.mark.parametrize('plant', ['model', 'phase_fraction'])
@@ -68,8 +69,10 @@ def test_a_reversed_potentiometer_is_named_with_its_calibration(tmp_path, plant)
     res, emu = run(tmp_path, plant=plant, angle_reversed=True)
     assert named(res) == [('angle_reversed', None)] and exit_code(res) == EXIT_FAULT
     f = res['faults'][0]
-    assert f['params'] == {'calibration.angle_gain_rad_per_count': -1e-4,
-                           'calibration.angle_offset_rad': pytest.approx(-3.2768 + 6.5535)}
+    assert f['params'] == {
+        'calibration.angle_gain_rad_per_count': -1e-4,
+        'calibration.angle_offset_rad': pytest.approx(-3.2768 + 6.5535),
+    }
     assert_stopped_safely(res, emu, LIM.max_drive_V)
 
 
@@ -102,11 +105,25 @@ def test_a_device_without_a_fault_is_never_reported_as_having_one(tmp_path, case
 def test_accepted_fixes_are_verified_and_written_for_every_fault_at_once(tmp_path):
     """All four wiring faults on one device: corrected in software, verified by the pulses again, written."""
     import yaml
-    res, emu = run(tmp_path, accept_fixes=True, tem_polarity_swapped=(False, True), tem_channels_swapped=True,
-                   thermocouples_swapped=True, angle_reversed=True)
+
+    res, emu = run(
+        tmp_path,
+        accept_fixes=True,
+        tem_polarity_swapped=(False, True),
+        tem_channels_swapped=True,
+        thermocouples_swapped=True,
+        angle_reversed=True,
+    )
     assert res['status'] == 'commissioned' and exit_code(res) == EXIT_OK
-    assert sorted(named(res), key=str) == sorted([('tem_polarity', 2), ('tem_channels_swapped', None),
-                                                  ('thermocouples_swapped', None), ('angle_reversed', None)], key=str)
+    assert sorted(named(res), key=str) == sorted(
+        [
+            ('tem_polarity', 2),
+            ('tem_channels_swapped', None),
+            ('thermocouples_swapped', None),
+            ('angle_reversed', None),
+        ],
+        key=str,
+    )
     assert all(f['fixed'] for f in res['faults'])
     assert res['steps']['tem_pulses']['verified']['muscle_change_C'][0][0] > 0.5  # through the fix: it heats
     params = yaml.safe_load(open(res['params_file']))['hardware_bridge']['ros__parameters']
@@ -117,6 +134,7 @@ def test_accepted_fixes_are_verified_and_written_for_every_fault_at_once(tmp_pat
     assert_stopped_safely(res, emu, LIM.max_drive_V)
     # the bridge takes the file as it is (every key declared, every value valid)
     from sma_wrist.commission.run import bridge_values
+
     assert bridge_values([res['params_file']])['calibration.tem_sign'] == [1, -1]
 
 
@@ -129,13 +147,14 @@ def test_ctrl_c_at_any_step_turns_the_tems_off_and_keeps_the_report(tmp_path, st
         if dev.emulator.device_time_s > stop_at_s:
             raise KeyboardInterrupt
         return frames()
+
     dev.frames = interrupted
     res = commission(tmp_path / 'c', dev)
     assert res['status'] == 'interrupted' and exit_code(res) == 130
     assert f'during the {step} step' in res['message']
     report = open(res['report']).read()
     assert 'interrupted' in report and res['params_file'] is None
-    done = ['link', 'sensors', 'tem_pulses', 'angle'][:['link', 'sensors', 'tem_pulses', 'angle'].index(step)]
+    done = ['link', 'sensors', 'tem_pulses', 'angle'][: ['link', 'sensors', 'tem_pulses', 'angle'].index(step)]
     assert all(k in res['steps'] for k in done)  # what was learnt so far is kept
     assert_stopped_safely(res, dev.emulator, LIM.max_drive_V)
 
@@ -148,6 +167,7 @@ def test_a_sensor_that_saturates_mid_procedure_stops_it(tmp_path):
         if dev.emulator.device_time_s > 8.0:
             dev.emulator.inject('force', (2, 65535))  # TEM 1 face thermocouple open: the ADC at full scale
         return frames()
+
     dev.frames = saturating
     res = commission(tmp_path / 'c', dev)
     assert named(res) == [('sensor_saturated', 3)] and 'TEM 1 face' in res['faults'][0]['message']
@@ -189,6 +209,7 @@ def pty_device(tmp_path):
         emu.start()
         made.append(emu)
         return emu
+
     yield make
     for e in made:
         e.stop()
@@ -213,6 +234,7 @@ def test_a_device_that_stops_streaming_mid_procedure_stops_it_with_the_tems_off(
             emu._froze = True
             emu.inject('freeze', 2 * STALL_S)  # wall s without a line
         return frames()
+
     dev.frames = freezing
     res = commission(tmp_path / 'c', dev, port=emu.link)
     assert named(res) == [('link_lost', None)] and 'stopped streaming' in res['faults'][0]['message']
@@ -222,6 +244,7 @@ def test_a_device_that_stops_streaming_mid_procedure_stops_it_with_the_tems_off(
 
 def test_cli_a_port_that_does_not_open_is_bad_input_with_a_report(tmp_path, capsys):
     from sma_wrist.cli import main
+
     code = main(['commission', '--hardware', str(tmp_path / 'absent'), '--out', str(tmp_path / 'c')])
     err = capsys.readouterr().err
     assert code == 2 and 'does not open' in err and 'Traceback' not in err
@@ -230,6 +253,7 @@ def test_cli_a_port_that_does_not_open_is_bad_input_with_a_report(tmp_path, caps
 
 def test_cli_sim_commissions_and_prints_json(tmp_path, capsys):
     from sma_wrist.cli import main
+
     code = main(['commission', '--sim', '--out', str(tmp_path / 'c'), '--payload-kg', '0.4', '--json'])
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc['status'] == 'commissioned' and doc['faults'] == []
@@ -238,12 +262,18 @@ def test_cli_sim_commissions_and_prints_json(tmp_path, capsys):
     assert 'payload_kg: 0.4' in open(doc['params_file']).read()
 
 
-@pytest.mark.parametrize('args,named_', [(['--sim', '--hardware', 'x'], 'either --hardware'),
-                                          (['--sim', '--payload-kg', '3'], '--payload-kg'),
-                                          (['--sim', '--heat-V', '30'], 'above the TEM driver rating'),
-                                          (['--sim', '--params-file', 'nope.yaml'], 'no such file')])
+@pytest.mark.parametrize(
+    'args,named_',
+    [
+        (['--sim', '--hardware', 'x'], 'either --hardware'),
+        (['--sim', '--payload-kg', '3'], '--payload-kg'),
+        (['--sim', '--heat-V', '30'], 'above the TEM driver rating'),
+        (['--sim', '--params-file', 'nope.yaml'], 'no such file'),
+    ],
+)
 def test_cli_bad_input_is_named(tmp_path, capsys, args, named_):
     from sma_wrist.cli import main
+
     assert main(['commission', '--out', str(tmp_path / 'c'), *args]) == 2
     err = capsys.readouterr().err
     assert named_ in err and 'Traceback' not in err
@@ -255,10 +285,13 @@ def test_a_device_on_another_protocol_version_is_named(tmp_path):
 
     def version_2(n):  # every line as a device of protocol version 2 sends it (valid CRCs)
         from sma_wrist.hw.protocol import encode_unchecked
+
         lines = emit(n).split(b'\n')[:-1]
-        return b''.join(encode_unchecked(ln[1:ln.rindex(b'*')].decode().replace(',1,', ',2,', 1)) for ln in lines)
+        return b''.join(encode_unchecked(ln[1 : ln.rindex(b'*')].decode().replace(',1,', ',2,', 1)) for ln in lines)
+
     dev.emulator.emit = version_2
     import sma_wrist.commission.bringup as B
+
     old, B.HELLO_TIMEOUT_S = B.HELLO_TIMEOUT_S, 0.3
     try:
         res = commission(tmp_path / 'c', dev)
@@ -274,11 +307,27 @@ def test_ctrl_c_on_the_command_line_over_a_serial_port(tmp_path, pty_device):
     import signal
     import subprocess
     import sys
+
     emu = pty_device(time_scale=2.0)
     env = {**os.environ, 'PYTHONPATH': os.pathsep.join(sys.path)}
-    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist', 'commission', '--hardware', emu.link, '--out',
-                             str(tmp_path / 'c'), '--stall-s', str(STALL_S)], stderr=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, env=env)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'sma_wrist',
+            'commission',
+            '--hardware',
+            emu.link,
+            '--out',
+            str(tmp_path / 'c'),
+            '--stall-s',
+            str(STALL_S),
+        ],
+        stderr=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     try:
         for line in proc.stderr:
             if 'step: tem_pulses' in line:

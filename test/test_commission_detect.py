@@ -1,5 +1,6 @@
 """The bring-up's numerical decisions (sma_wrist/commission/detect.py) and the wiring map they produce
 (sma_wrist/hw/calibration.py Wiring), on synthetic step responses: no device, no plant."""
+
 from __future__ import annotations
 
 import itertools
@@ -59,8 +60,10 @@ def test_a_wrist_wired_as_documented_has_no_fault():
         assert not found.faults and found.wiring() == Wiring()
 
 
-@pytest.mark.parametrize('polarity,channels,thermocouples', list(itertools.product(
-    [(1, 1), (-1, 1), (1, -1), (-1, -1)], [False, True], [False, True])))
+@pytest.mark.parametrize(
+    'polarity,channels,thermocouples',
+    list(itertools.product([(1, 1), (-1, 1), (1, -1), (-1, -1)], [False, True], [False, True])),
+)
 def test_each_wiring_fault_is_named_and_its_fix_undoes_it(polarity, channels, thermocouples):
     found = D.classify_pulses(*responses(polarity, channels, thermocouples), 0.15, 0.15)
     expected = [('tem_polarity', m + 1) for m in range(2) if polarity[m] < 0]
@@ -68,7 +71,7 @@ def test_each_wiring_fault_is_named_and_its_fix_undoes_it(polarity, channels, th
     assert kinds(found) == sorted(expected)
     fixed = Wiring().then(found.wiring())
     for f in found.faults:  # every fix names its bridge parameter, with the corrected wiring's value
-        (key, value), = f.params.items()
+        ((key, value),) = f.params.items()
         assert fixed.params()[key] == value and key in f.fix
     # through the corrected wiring the same wrist answers as one wired as documented
     again = D.classify_pulses(*_through(fixed, polarity, channels, thermocouples), 0.15, 0.15, current=fixed)
@@ -109,12 +112,16 @@ def test_a_dead_tem_a_frozen_reading_and_a_response_below_the_floor():
     found = D.classify_pulses(muscle, face, 0.15, 0.15)  # not frozen, just not moving: the sensor sits off the wire
     assert kinds(found) == [('muscle_sensor_no_response', 1)]
     muscle, face = responses()
-    assert kinds(D.classify_pulses(muscle * 0.1, face, 0.15, 0.15)) == [('muscle_sensor_no_response', 1),
-                                                                        ('muscle_sensor_no_response', 2)]
+    assert kinds(D.classify_pulses(muscle * 0.1, face, 0.15, 0.15)) == [
+        ('muscle_sensor_no_response', 1),
+        ('muscle_sensor_no_response', 2),
+    ]
     muscle, face = responses()
     face[:] = 0.0  # the faces decide the TEM; without them a swap could not be told from the other
-    assert kinds(D.classify_pulses(muscle, face, 0.15, 0.15)) == [('face_sensor_no_response', 1),
-                                                                   ('face_sensor_no_response', 2)]
+    assert kinds(D.classify_pulses(muscle, face, 0.15, 0.15)) == [
+        ('face_sensor_no_response', 1),
+        ('face_sensor_no_response', 2),
+    ]
 
 
 def test_a_response_needs_to_dominate_the_other_channel():

@@ -1,4 +1,5 @@
 """The inverse in wrist coordinates undoes the plant's muscle model (muscle.py Eq. 1)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -85,8 +86,9 @@ def test_wrist_coordinates_are_the_muscle_geometry_to_the_bit() -> None:
     # one stress for both muscles (broadcast): the same numbers, the load in the stress's shape
     res = comp(strain[5], sigma_d[5, 0], commit=False)
     assert res.load_kgf.shape == res.load_clipped.shape == () and res.sdgpi_elongation_mm.shape == (2,)
-    np.testing.assert_array_equal(res.sdgpi_elongation_mm, comp(strain[5], sigma_d[5, [0, 0]], commit=False)
-                                  .sdgpi_elongation_mm)
+    np.testing.assert_array_equal(
+        res.sdgpi_elongation_mm, comp(strain[5], sigma_d[5, [0, 0]], commit=False).sdgpi_elongation_mm
+    )
 
 
 @pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
@@ -116,6 +118,7 @@ def test_compiled_track_step_is_the_numpy_step(seed: int) -> None:
     from unittest import mock
 
     from sma_wrist.core import jit
+
     if not jit.AVAILABLE:
         pytest.skip('numba is not installed: there is only the numpy path')
     g = MuscleGeometry()
@@ -126,7 +129,7 @@ def test_compiled_track_step_is_the_numpy_step(seed: int) -> None:
     for c in comps:
         c.reset(T, stress)
     shifts = []
-    for k in range(400):
+    for _k in range(400):
         T = np.clip(T + rng.normal(0.0, 1.5, 2), 20.0, 80.0)
         stress = stress * (1.0 + rng.normal(0.0, 0.01, 2))
         strain = rng.uniform(0.02, 0.05, 2)
@@ -158,16 +161,25 @@ def test_many_wires_in_one_compensator_are_the_two_wire_ones_to_the_bit() -> Non
         c.reset(s[0][0], s[1][0])
     clipped_seen = False
     for k in range(1, 200):
-        bank.track(np.concatenate([s[0][k] for s in seqs]), np.concatenate([s[1][k] for s in seqs]),
-                   np.concatenate([e[k - 1] for e in strain_measured]), 0.01)
+        bank.track(
+            np.concatenate([s[0][k] for s in seqs]),
+            np.concatenate([s[1][k] for s in seqs]),
+            np.concatenate([e[k - 1] for e in strain_measured]),
+            0.01,
+        )
         res = bank(np.concatenate([s[2][k] for s in seqs]), np.concatenate([s[3][k] for s in seqs]), commit=False)
         for j, (c, s) in enumerate(zip(ones, seqs)):
             c.track(s[0][k], s[1][k], strain_measured[j][k - 1], 0.01)
             one = c(s[2][k], s[3][k], commit=False)
             w = slice(2 * j, 2 * j + 2)
-            for a, b in ((res.temperature_C, one.temperature_C), (res.saturated, one.saturated),
-                         (res.load_kgf, one.load_kgf), (res.load_clipped, one.load_clipped),
-                         (res.sdgpi_elongation_mm, one.sdgpi_elongation_mm), (bank.shift_C, c.shift_C)):
+            for a, b in (
+                (res.temperature_C, one.temperature_C),
+                (res.saturated, one.saturated),
+                (res.load_kgf, one.load_kgf),
+                (res.load_clipped, one.load_clipped),
+                (res.sdgpi_elongation_mm, one.sdgpi_elongation_mm),
+                (bank.shift_C, c.shift_C),
+            ):
                 np.testing.assert_array_equal(a[w], b)
         clipped_seen |= bool(res.load_clipped.any())
     assert np.ptp(bank.shift_C) > 0.1 and clipped_seen
@@ -176,6 +188,7 @@ def test_many_wires_in_one_compensator_are_the_two_wire_ones_to_the_bit() -> Non
 def test_strain_informative_holds_on_a_stop_and_while_still_with_a_slack_wire() -> None:
     """core.hysteresis.compensation.strain_informative (doc/explanation/controllers.md): per wrist, both wires."""
     from sma_wrist.core.hysteresis.compensation import strain_informative
+
     taut, slack = [1e8, 1e8], [1e8, 0.0]
     q = np.array([0.5, -0.35, 1.4, 0.5, 0.5, 0.5])
     q_prev = np.array([0.5, -0.35, 1.4, 0.5, 0.49, 0.5])  # the fifth moves (1 rad/s), the others stand
@@ -217,8 +230,12 @@ def test_shifts_hold_while_either_wire_of_a_pair_is_outside_the_load_range() -> 
     assert comp.pair_in_load_range(slack).tolist() == [False, False]
     flat = np.concatenate([taut, over, slack, taut])  # four wrists' wires, flat as the sweep's bank has them
     assert comp.pair_in_load_range(flat).tolist() == [True, True, False, False, False, False, True, True]
-    assert comp.pair_in_load_range(flat.reshape(4, 2)).tolist() == [[True, True], [False, False], [False, False],
-                                                                    [True, True]]
+    assert comp.pair_in_load_range(flat.reshape(4, 2)).tolist() == [
+        [True, True],
+        [False, False],
+        [False, False],
+        [True, True],
+    ]
 
     def shifts(stress: np.ndarray, gate: bool) -> np.ndarray:
         c = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, hold_outside_load_range=gate)
@@ -245,6 +262,7 @@ def test_a_wire_that_transformed_where_the_model_is_flat_moves_the_shift_only_th
 
     from sma_wrist.core import jit
     from sma_wrist.core.hysteresis.inverse import _output_frozen
+
     if compiled and not jit.AVAILABLE:
         pytest.skip('numba is not installed: there is only the numpy path')
     g = MuscleGeometry()
@@ -258,7 +276,9 @@ def test_a_wire_that_transformed_where_the_model_is_flat_moves_the_shift_only_th
         m = np.full(2, 0.8)
         y_model = _output_frozen(comp.params, st.w, st.T_prev, m, st.heating)
         h = 0.5
-        y_pm = _output_frozen(comp.params, st.w, st.T_prev + np.array([[h], [-h]]), m, np.array([[True] * 2, [False] * 2]))
+        y_pm = _output_frozen(
+            comp.params, st.w, st.T_prev + np.array([[h], [-h]]), m, np.array([[True] * 2, [False] * 2])
+        )
         assert np.all((y_pm[0] - y_pm[1]) / (2 * h) > 0.0)  # the artefact this test is about is there
         # a wire 1.5 mm shorter than the model (it transformed), in bundle strain (CompensationResult's inverse)
         eps = ((y_model - 1.5) * g.length_scale + g.elastic_mm_per_kgf * m) / g.wire_length_mm

@@ -1,4 +1,5 @@
 """Params files and the topic contract agree with the code (one source of truth)."""
+
 from __future__ import annotations
 
 import ast
@@ -24,14 +25,18 @@ NODE_CLASSES = {
 
 def _declared(node: str) -> set[str]:
     import importlib
+
     mod, cls = NODE_CLASSES[node]
     return {p.name for p in getattr(importlib.import_module(mod), cls).PARAMS} | {'use_sim_time'}
 
 
 def _flat_keys(tree: dict, prefix: str = '') -> list[str]:
     """Parameter names of a params-file map: nested maps are dotted names, as rcl reads them."""
-    return [k for key, sub in tree.items()
-            for k in (_flat_keys(sub, f'{prefix}{key}.') if isinstance(sub, dict) else [f'{prefix}{key}'])]
+    return [
+        k
+        for key, sub in tree.items()
+        for k in (_flat_keys(sub, f'{prefix}{key}.') if isinstance(sub, dict) else [f'{prefix}{key}'])
+    ]
 
 
 @pytest.mark.parametrize('path', sorted((ROOT / 'config').glob('*.yaml')), ids=lambda p: p.name)
@@ -47,6 +52,7 @@ def test_every_params_file_key_is_a_declared_parameter(path):
 
 def test_every_parameter_has_a_description_and_numbers_a_range():
     import importlib
+
     for node, (mod, cls) in NODE_CLASSES.items():
         for p in getattr(importlib.import_module(mod), cls).PARAMS:
             assert p.description, f'{node}.{p.name} has no description'
@@ -98,12 +104,17 @@ def test_launch_overrides_written_under_the_node_name_beat_config_wrist_yaml():
     from sma_wrist.nodes.plant_sim import PlantSim
     from sma_wrist.runtime.launch import Runtime
     from sma_wrist.share import share_path
+
     path = node_params_file('plant_sim', {'payload_kg': 0.7, 'use_sim_time': False})
     try:
-        with Runtime(['--ros-args', '--params-file', str(share_path('config/wrist.yaml')), '--params-file', path]) as rt:
+        with Runtime(
+            ['--ros-args', '--params-file', str(share_path('config/wrist.yaml')), '--params-file', path]
+        ) as rt:
             assert rt.add(PlantSim).get_parameter('payload_kg').value == 0.7
         wild = node_params_file('/**', {'payload_kg': 0.7})
-        with Runtime(['--ros-args', '--params-file', str(share_path('config/wrist.yaml')), '--params-file', wild]) as rt:
+        with Runtime(
+            ['--ros-args', '--params-file', str(share_path('config/wrist.yaml')), '--params-file', wild]
+        ) as rt:
             assert rt.add(PlantSim).get_parameter('payload_kg').value == 0.3  # the trap
     finally:
         rclpy.try_shutdown()
@@ -115,16 +126,19 @@ def test_launch_params_files_are_removed_when_the_launch_process_exits(tmp_path)
     (a forked child that exits normally keeps the parent's)."""
     import subprocess
     import sys
-    code = ('import os, sys\n'
-            'from sma_wrist.launch_support import node_params_file\n'
-            'paths = [node_params_file(n, {"payload_kg": 0.5}) for n in ("plant_sim", "/**")]\n'
-            'assert all(os.path.isfile(p) for p in paths)\n'
-            'pid = os.fork()\n'
-            'if pid == 0:\n'
-            '    sys.exit(0)\n'
-            'os.waitpid(pid, 0)\n'
-            'assert all(os.path.isfile(p) for p in paths), "a child removed the parent\'s files"\n'
-            'print("\\n".join(paths))\n')
+
+    code = (
+        'import os, sys\n'
+        'from sma_wrist.launch_support import node_params_file\n'
+        'paths = [node_params_file(n, {"payload_kg": 0.5}) for n in ("plant_sim", "/**")]\n'
+        'assert all(os.path.isfile(p) for p in paths)\n'
+        'pid = os.fork()\n'
+        'if pid == 0:\n'
+        '    sys.exit(0)\n'
+        'os.waitpid(pid, 0)\n'
+        'assert all(os.path.isfile(p) for p in paths), "a child removed the parent\'s files"\n'
+        'print("\\n".join(paths))\n'
+    )
     env = {**os.environ, 'TMPDIR': str(tmp_path)}
     r = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, env=env, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -137,6 +151,7 @@ def test_launch_params_files_are_removed_when_the_launch_process_exits(tmp_path)
 def test_every_adaptive_controller_parameter_says_what_it_is():
     """`ros2 param describe` on the dataclass-derived parameters (found generic under Humble)."""
     from sma_wrist.nodes.adaptive_controller import FIELD_DOCS, AdaptiveController
+
     generic = [p.name for p in AdaptiveController.PARAMS if 'sma_wrist.core)' in p.description]
     assert generic == []
     assert all(doc[0] for doc in FIELD_DOCS.values())
@@ -150,6 +165,7 @@ def test_adaptive_controller_numeric_parameters_have_real_ranges():
 
     from sma_wrist.nodes.adaptive_controller import AdaptiveController
     from sma_wrist.runtime.launch import Runtime
+
     numeric = [p for p in AdaptiveController.PARAMS if isinstance(p.default, float)]
     assert len(numeric) >= 25
     table = yaml.safe_load((ROOT / 'config' / 'paper_table_6_1.yaml').read_text())
@@ -162,7 +178,7 @@ def test_adaptive_controller_numeric_parameters_have_real_ranges():
             assert lo <= table[p.name] <= hi, (p.name, table[p.name])
     with Runtime() as rt:
         node = rt.add(AdaptiveController)
-        res, = node.set_parameters([Parameter('adaptive.c1', value=6000.0)])
-        ok, = node.set_parameters([Parameter('adaptive.c1', value=600.0)])
+        (res,) = node.set_parameters([Parameter('adaptive.c1', value=6000.0)])
+        (ok,) = node.set_parameters([Parameter('adaptive.c1', value=600.0)])
     assert not res.successful and '5000' in res.reason
     assert ok.successful and node.law.params.adaptive.c1 == 600.0

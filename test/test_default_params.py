@@ -10,6 +10,7 @@ described loads. Definitions, fixed before looking at the numbers:
 
 Tolerances are the text's own "about": +-15 % on strokes, +-5 degC on the 45 degC split.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -25,8 +26,8 @@ def loop(load_g: float) -> tuple[float, float, float]:
     """(stroke [mm], A_f, M_f [degC]) of the major loop at one load."""
     _, T, i_peak, i_trough = sawtooth_input(dt=0.25, n_periods=1, T_min=20.0, T_max=78.0)
     y = elongation(default_sdgpi(), T, load_g * 1e-3)
-    yh, Th = y[:i_peak + 1], T[:i_peak + 1]
-    yc, Tc = y[i_peak:i_trough + 1], T[i_peak:i_trough + 1]
+    yh, Th = y[: i_peak + 1], T[: i_peak + 1]
+    yc, Tc = y[i_peak : i_trough + 1], T[i_peak : i_trough + 1]
     a_f = Th[np.argmax(yh[0] - yh >= 0.95 * (yh[0] - yh[-1]))]
     m_f = Tc[np.argmax(yc - yc[0] >= 0.95 * (yc[-1] - yc[0]))]
     return float(yc[-1] - yh[-1]), float(a_f), float(m_f)
@@ -96,6 +97,7 @@ def test_elongation_increases_with_load_for_frozen_memory() -> None:
         m0 = rng.uniform(0.3, 1.3)
         lo, up = play_bounds(p, np.array([T]), np.array([m0]))
         w = lo + rng.uniform(0, 1, lo.shape) * (up - lo)
-        y, _ = mm.elongation(np.full(loads.size, T), loads, np.repeat(w, loads.size, 0),
-                             np.full(loads.size, bool(rng.integers(2))))
+        y, _ = mm.elongation(
+            np.full(loads.size, T), loads, np.repeat(w, loads.size, 0), np.full(loads.size, bool(rng.integers(2)))
+        )
         assert np.diff(y).min() > 0.0

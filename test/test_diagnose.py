@@ -7,6 +7,7 @@ Each case draws its magnitude from the effect's range with a per-case seed; the
 diagnosis sees only the data. The benchmark (``sma-wrist bench --section diagnose``)
 runs many more cases and prints accuracy and false-alarm rate.
 """
+
 from __future__ import annotations
 
 import json
@@ -52,8 +53,11 @@ CLEAN_SEEDS = (11, 12, 13)
 #: the catalogue without the per-channel sensor and driver effects, which are in the
 #: benchmark and test_diagnose_independent (the suite stays fast)
 BASE_CATALOGUE = tuple(e for e in fx.CATALOGUE if not e.id.startswith(('temp_sensor_', 'angle_sensor_', 'tem_')))
-CASES = ([(e.id, _seed(e.id), None) for e in BASE_CATALOGUE] + [(e, _seed(e, 1), p) for e, p in MAGNITUDES]
-         + [('none', s, None) for s in CLEAN_SEEDS])
+CASES = (
+    [(e.id, _seed(e.id), None) for e in BASE_CATALOGUE]
+    + [(e, _seed(e, 1), p) for e, p in MAGNITUDES]
+    + [('none', s, None) for s in CLEAN_SEEDS]
+)
 
 
 def _run_case(case):  # type: ignore[no-untyped-def]
@@ -100,23 +104,42 @@ def test_a_wrist_of_another_wire_model_is_unexplained_and_its_figures_are_its_ch
     no catalogue effect is named; the verdict's channel is the thermal one, 17-22 degC RMS off. The result printed
     the best candidate's channel's figures (mechanics, 0.33 rad) under "thermal"."""
     from sma_wrist import runtime
+
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.diagnose import diagnose
-    run_closed_loop('direct_adaptive', 0.3, 40.0, tmp_path / 'pf',
-                    extra_params={'/plant_sim': {'plant': 'phase_fraction'}})
+
+    run_closed_loop(
+        'direct_adaptive', 0.3, 40.0, tmp_path / 'pf', extra_params={'/plant_sim': {'plant': 'phase_fraction'}}
+    )
     res = diagnose(tmp_path / 'pf')
     assert res.discrepancy and res.unexplained and res.cause is None, res.summary
     assert res.channel == 'thermal' and res.rmse_before > 5.0  # degC
-    assert (res.rmse_before, res.rmse_after) == (res.channels['thermal']['rmse_before'],
-                                                 res.channels['thermal']['rmse_after'])
+    assert (res.rmse_before, res.rmse_after) == (
+        res.channels['thermal']['rmse_before'],
+        res.channels['thermal']['rmse_after'],
+    )
     # the user's next step: the TEMs identified from another run of that wrist (identify thermal), replayed with
     # --thermal-file: the thermal channel comes down to the TEMs' own error, what is left is the wire's
     from sma_wrist.cli import main
-    run_closed_loop('direct_adaptive', 0.3, 70.0, tmp_path / 'pf_train',
-                    extra_params={'/plant_sim': {'plant': 'phase_fraction'}})
-    assert main(['identify', 'thermal', str(tmp_path / 'pf_train'), '--out', str(tmp_path / 'tems'), '--no-plots',
-                 '--quiet']) == 0
+
+    run_closed_loop(
+        'direct_adaptive', 0.3, 70.0, tmp_path / 'pf_train', extra_params={'/plant_sim': {'plant': 'phase_fraction'}}
+    )
+    assert (
+        main(
+            [
+                'identify',
+                'thermal',
+                str(tmp_path / 'pf_train'),
+                '--out',
+                str(tmp_path / 'tems'),
+                '--no-plots',
+                '--quiet',
+            ]
+        )
+        == 0
+    )
     tems = tmp_path / 'tems' / 'thermal.yaml'
     again = diagnose(tmp_path / 'pf', thermal_file=str(tems), params_out=tmp_path / 'ext.yaml')
     # 22.2 -> 6.5 degC here (from a 70 s run of the same wrist to this 40 s one)
@@ -127,14 +150,37 @@ def test_a_wrist_of_another_wire_model_is_unexplained_and_its_figures_are_its_ch
 
 # ------------------------------------------------------------------------- bags and CLI
 
+
 def test_cli_on_a_bag_json_report_and_params_file(tmp_path):
     truth = td.make_bag(tmp_path / 'measured', 'thermal_coupling', seed=_seed('cli'), duration_s=150.0)
-    r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'diagnose', str(tmp_path / 'measured'), '--json',
-                        '--report', str(tmp_path / 'report')], capture_output=True, text=True, timeout=600)
+    r = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'sma_wrist',
+            'diagnose',
+            str(tmp_path / 'measured'),
+            '--json',
+            '--report',
+            str(tmp_path / 'report'),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    for key in ('discrepancy', 'subsystem', 'cause', 'parameters', 'rmse_before', 'rmse_after', 'gain_pct',
-                'alternatives', 'unexplained'):
+    for key in (
+        'discrepancy',
+        'subsystem',
+        'cause',
+        'parameters',
+        'rmse_before',
+        'rmse_after',
+        'gain_pct',
+        'alternatives',
+        'unexplained',
+    ):
         assert key in out
     assert out['cause'] == 'thermal_coupling' and out['subsystem'] == 'thermal'
     assert out['parameters']['coupling_per_s']['unit'] == '1/s'
@@ -159,14 +205,17 @@ def test_bag_diagnosis_equals_array_diagnosis(tmp_path):
     assert run.payload_kg == pytest.approx(truth.payload_kg)
 
 
-@pytest.mark.parametrize('corrupt,warning', [
-    ({'nan_T': (3000, 40)}, 'NaN'),
-    ({'kelvin': True}, 'Kelvin'),
-    ({'degrees': True}, 'degrees'),
-    ({'shuffle_stamps': 20}, 'not sorted'),
-    ({'duplicate_stamps': 20}, 'duplicate'),
-    ({'gap': (20.0, 3.0)}, 'gap'),
-])
+@pytest.mark.parametrize(
+    'corrupt,warning',
+    [
+        ({'nan_T': (3000, 40)}, 'NaN'),
+        ({'kelvin': True}, 'Kelvin'),
+        ({'degrees': True}, 'degrees'),
+        ({'shuffle_stamps': 20}, 'not sorted'),
+        ({'duplicate_stamps': 20}, 'duplicate'),
+        ({'gap': (20.0, 3.0)}, 'gap'),
+    ],
+)
 def test_flawed_bags_are_repaired_reported_and_still_diagnosed(tmp_path, corrupt, warning):
     truth = td.make_bag(tmp_path / 'b', 'sensor_offset_gain', seed=_seed('flaw'), duration_s=150.0, corrupt=corrupt)
     res = diagnose(tmp_path / 'b')
@@ -177,23 +226,37 @@ def test_flawed_bags_are_repaired_reported_and_still_diagnosed(tmp_path, corrupt
 
 
 def test_missing_angle_still_checks_the_thermal_part(tmp_path):
-    td.make_bag(tmp_path / 'b', 'tem_mismatch', seed=_seed('noq'), duration_s=150.0,
-                corrupt={'drop_topics': ['/wrist/joint_states']})
+    td.make_bag(
+        tmp_path / 'b',
+        'tem_mismatch',
+        seed=_seed('noq'),
+        duration_s=150.0,
+        corrupt={'drop_topics': ['/wrist/joint_states']},
+    )
     res = diagnose(tmp_path / 'b')
     assert any('/wrist/joint_states' in w for w in res.warnings)
     assert res.cause == 'tem_mismatch' and list(res.channels) == ['thermal']
 
 
-@pytest.mark.parametrize('corrupt,needle', [
-    ({'drop_topics': ['/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature', '/wrist/joint_states']},
-     'nothing to compare'),
-])
+@pytest.mark.parametrize(
+    'corrupt,needle',
+    [
+        (
+            {'drop_topics': ['/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature', '/wrist/joint_states']},
+            'nothing to compare',
+        ),
+    ],
+)
 def test_unusable_bag_names_what_is_needed(tmp_path, corrupt, needle):
     td.make_bag(tmp_path / 'b', 'none', seed=1, duration_s=40.0, corrupt=corrupt)
     with pytest.raises(DiagnoseInputError, match=needle):
         diagnose(tmp_path / 'b')
-    r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'diagnose', str(tmp_path / 'b')],
-                       capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, '-m', 'sma_wrist', 'diagnose', str(tmp_path / 'b')],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 2 and r.stderr.startswith('error: ') and needle in r.stderr and 'Traceback' not in r.stderr
 
 
@@ -212,10 +275,13 @@ def test_too_short_and_truncated_bags(tmp_path):
 
 # ------------------------------------------------------------------------- closed loop
 
+
 def _closed_loop(bag, extra=None, params_files=(), duration=70.0):  # type: ignore[no-untyped-def]
     from sma_wrist.closed_loop import run_closed_loop
-    return run_closed_loop('pid', 0.3, duration, bag, params_files=params_files,
-                           extra_params={'/plant_sim': extra} if extra else None)
+
+    return run_closed_loop(
+        'pid', 0.3, duration, bag, params_files=params_files, extra_params={'/plant_sim': extra} if extra else None
+    )
 
 
 @pytest.fixture(scope='module')
@@ -234,20 +300,24 @@ def test_clean_closed_loop_plant_sim_run_is_no_discrepancy(nominal_closed_loop):
     assert res.channels['mechanics']['rmse_before'] < 1e-3 * np.ptp(run.q)
 
 
-@pytest.mark.parametrize('effect,extra', [
-    ('sensor_offset_gain', {'model.angle_offset_rad': 0.04}),
-    # default (0.5 s prefiltered) pid: named recalibrate_mechanics (viscous 0.142 vs 0.15) while the
-    # 100 Hz mechanics replay's own step error (1.07 mrad) exceeded its resolution floor (0.99 mrad)
-    ('payload_mismatch', {'model.payload_err_kg': 0.15}),
-    ('thermal_coupling', {'model.coupling_per_s': 0.02}),
-])
+@pytest.mark.parametrize(
+    'effect,extra',
+    [
+        ('sensor_offset_gain', {'model.angle_offset_rad': 0.04}),
+        # default (0.5 s prefiltered) pid: named recalibrate_mechanics (viscous 0.142 vs 0.15) while the
+        # 100 Hz mechanics replay's own step error (1.07 mrad) exceeded its resolution floor (0.99 mrad)
+        ('payload_mismatch', {'model.payload_err_kg': 0.15}),
+        ('thermal_coupling', {'model.coupling_per_s': 0.02}),
+    ],
+)
 def test_effect_hidden_in_closed_loop_data_is_found_and_its_params_file_reproduces_the_run(
-        tmp_path, nominal_closed_loop, effect, extra):
+    tmp_path, nominal_closed_loop, effect, extra
+):
     _closed_loop(tmp_path / 'measured', extra)
     res = diagnose(tmp_path / 'measured', params_out=tmp_path / 'extended.yaml')
     assert res.cause == effect, res.summary
-    (key, value), = extra.items()
-    assert res.parameters[key[len('model.'):]]['value'] == pytest.approx(value, rel=0.15)
+    ((key, value),) = extra.items()
+    assert res.parameters[key[len('model.') :]]['value'] == pytest.approx(value, rel=0.15)
     # the extended model, run in the same closed loop, reproduces the measured angle; the nominal does not
     _closed_loop(tmp_path / 'extended', params_files=[tmp_path / 'extended.yaml'])
     runs = {k: load_run(tmp_path / k) for k in ('measured', 'extended')}
@@ -261,8 +331,10 @@ def test_effect_hidden_in_closed_loop_data_is_found_and_its_params_file_reproduc
 
 # ------------------------------------------------------------------------- the extension parameters
 
+
 def test_nominal_extension_is_the_plain_plant():
     from sma_wrist.core.plant.wrist import PlantParams
+
     base = PlantParams()
     assert mx.plant_params({}, base) is base
     assert mx.plant_params(dict(mx.NOMINAL), base) is base
@@ -280,8 +352,12 @@ def test_extension_values_are_checked():
 def test_plant_sim_refuses_a_replay_only_extension(tmp_path):
     params = tmp_path / 'p.yaml'
     params.write_text('plant_sim:\n  ros__parameters:\n    model.hyst_lag_s: 5.0\n')
-    r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'run', '--duration', '1', '--quiet',
-                        '--params-file', str(params)], capture_output=True, text=True, timeout=300)
+    r = subprocess.run(
+        [sys.executable, '-m', 'sma_wrist', 'run', '--duration', '1', '--quiet', '--params-file', str(params)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert r.returncode == 2 and 'not simulated by the plant' in r.stderr and 'Traceback' not in r.stderr
 
 
@@ -290,8 +366,14 @@ def test_sensor_chain_matches_the_replay_sensor_model():
     t = np.arange(3000) * dt
     q = 0.5 + 0.4 * np.sin(0.3 * t)
     T = np.stack([40 + 20 * np.sin(0.1 * t), 40 - 20 * np.sin(0.1 * t)], axis=1)
-    v = {'angle_delay_s': 0.237, 'backlash_rad': 0.03, 'angle_offset_rad': 0.02, 'angle_gain_err': -0.05,
-         'temp_lag_s': 2.0, 'temp_offset_C': 1.5}
+    v = {
+        'angle_delay_s': 0.237,
+        'backlash_rad': 0.03,
+        'angle_offset_rad': 0.02,
+        'angle_gain_err': -0.05,
+        'temp_lag_s': 2.0,
+        'temp_offset_C': 1.5,
+    }
     chain = mx.SensorChain(v, dt, 0.524)
     got_q = np.array([chain.angle(x) for x in q])
     got_T = np.array([chain.temperatures(x) for x in T])

@@ -6,6 +6,7 @@ would (without the diagnosis' own extension code) and the diagnosis must name th
 subsystem. Each of the first five tests reproduces a failure of a diagnosis without the per-channel
 sensor and driver effects (the verdict it gave then is in the test's docstring).
 """
+
 from __future__ import annotations
 
 import ast
@@ -26,6 +27,7 @@ RUN_S = 60.0
 def clean_run(tmp_path_factory):
     """A clean 60 s closed-loop recording (pid), loaded."""
     from sma_wrist.diagnose.bench import record_clean_runs
+
     bags = record_clean_runs(str(tmp_path_factory.mktemp('independent')), ('pid',), RUN_S)
     return load_run(bags['pid'])
 
@@ -54,8 +56,13 @@ NAMED = [
     # the mirror case: commands applied late (plant re-simulated) are not blamed on the sensors
     ('late drive', ('command_delay', 'u', 0.4), 'actuator', 'actuator_delay', ('command_delay_s',)),
     # before: hysteresis_drift (wire fatigue) with 84-87 % held-out gain
-    ('thermocouple drift', ('drift', 'T', 30.0), 'sensor', 'temp_sensor_drift',
-     ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h')),
+    (
+        'thermocouple drift',
+        ('drift', 'T', 30.0),
+        'sensor',
+        'temp_sensor_drift',
+        ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h'),
+    ),
     # an actuator effect shows in the thermal channel but not between temperatures and angle
     ('driver dead zone', ('dead_zone', 'u', 2.0), 'actuator', 'tem_dead_zone', ('tem_dead_zone_V',)),
 ]
@@ -102,12 +109,23 @@ def test_generator_reproduces_the_recording_and_does_not_use_the_extension_code(
 
 def test_sensor_chain_per_channel_matches_the_replay():
     from sma_wrist.core.plant import extensions as mx
+
     dt = 0.01
     t = np.arange(3000) * dt
     T = np.stack([40 + 20 * np.sin(0.1 * t), 40 - 20 * np.sin(0.13 * t)], axis=1)
-    v = {'temp_offset_1_C': 1.2, 'temp_offset_2_C': -0.7, 'temp_gain_err_1': 0.05, 'temp_gain_err_2': -0.04,
-         'temp_delay_1_s': 0.337, 'temp_delay_2_s': 0.05, 'temp_lag_1_s': 2.0, 'temp_lag_2_s': 0.5,
-         'temp_drift_1_C_per_h': 20.0, 'temp_drift_2_C_per_h': -8.0, 'temp_offset_C': 0.3}
+    v = {
+        'temp_offset_1_C': 1.2,
+        'temp_offset_2_C': -0.7,
+        'temp_gain_err_1': 0.05,
+        'temp_gain_err_2': -0.04,
+        'temp_delay_1_s': 0.337,
+        'temp_delay_2_s': 0.05,
+        'temp_lag_1_s': 2.0,
+        'temp_lag_2_s': 0.5,
+        'temp_drift_1_C_per_h': 20.0,
+        'temp_drift_2_C_per_h': -8.0,
+        'temp_offset_C': 0.3,
+    }
     chain = mx.SensorChain(v, dt, 0.524)
     got = np.array([chain.temperatures(x) for x in T])
     np.testing.assert_allclose(got, fx.thermocouples(T, fx.theta(**v), dt), atol=1e-9)

@@ -1,5 +1,6 @@
 """The residual-lag statistic (report.lag_estimate, FFT cross-correlation) against the
 direct sum over lags, and on known delays of either sign."""
+
 import numpy as np
 import pytest
 
@@ -11,7 +12,7 @@ def _direct(meas: np.ndarray, model: np.ndarray, dt: float, max_lag_s: float = 3
     a, b = a - a.mean(), b - b.mean()
     m = int(max_lag_s / dt)
     lags = np.arange(-m, m + 1)
-    cc = np.array([float(np.sum(a[max(k, 0):a.size + min(k, 0)] * b[max(-k, 0):b.size - max(k, 0)])) for k in lags])
+    cc = np.array([float(np.sum(a[max(k, 0) : a.size + min(k, 0)] * b[max(-k, 0) : b.size - max(k, 0)])) for k in lags])
     k = int(np.argmax(cc))
     den = cc[k - 1] - 2 * cc[k] + cc[k + 1]
     return float((lags[k] + (0.5 * (cc[k - 1] - cc[k + 1]) / den if den else 0.0)) * 0.01)

@@ -4,6 +4,7 @@ The reference pages are generated from the sources (doc/refgen.py): every node p
 ``sma-wrist`` command and option must appear with a description, and a number with its unit. The validation page
 and the README's results block are rendered from doc/validation/results.json and must show what it holds.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,7 +40,9 @@ def test_nothing_in_the_reference_lacks_a_description_or_unit() -> None:
 def test_every_node_parameter_has_a_row_on_its_nodes_page(pages) -> None:
     nodes = refgen.nodes()
     assert {n.name for n in nodes} == {p.stem for p in (ROOT / 'sma_wrist' / 'nodes').glob('*.py')} - {
-        '__init__', 'common'}
+        '__init__',
+        'common',
+    }
     for n in nodes:
         page = pages[f'reference/nodes/{n.name}.md']
         rows = {line.split(' | ')[0].strip('| `') for line in page.splitlines() if line.startswith('| `')}
@@ -52,6 +55,7 @@ def test_every_node_parameter_has_a_row_on_its_nodes_page(pages) -> None:
 
 def test_every_contract_topic_is_on_the_topics_page_and_its_nodes_pages(pages) -> None:
     from sma_wrist.contract import load_contract
+
     for t in load_contract().topics.values():
         assert f'| `{t.name}` | `{t.type}` |' in pages['reference/topics.md'], t.name
         for node in (t.publisher, t.alt_publisher, *t.subscribers):
@@ -82,11 +86,18 @@ def test_an_undocumented_option_or_unitless_number_is_reported() -> None:
     from sma_wrist.nodes.common import Param
 
     class Fake:
-        PARAMS = (Param('gain', 1.0, 'a gain', range=(0.0, 2.0)), Param('rate_hz', 1.0, '', 'Hz'),
-                  Param('count', 3, 'a count'))
+        PARAMS = (
+            Param('gain', 1.0, 'a gain', range=(0.0, 2.0)),
+            Param('rate_hz', 1.0, '', 'Hz'),
+            Param('count', 3, 'a count'),
+        )
+
     found = refgen.param_problems(refgen.NodeDoc('fake', None, Fake))
-    assert found == ['fake.gain: a float parameter without unit (use "1" for a ratio)', 'fake.rate_hz: no description',
-                     'fake.rate_hz: a float parameter without range']
+    assert found == [
+        'fake.gain: a float parameter without unit (use "1" for a ratio)',
+        'fake.rate_hz: no description',
+        'fake.rate_hz: a float parameter without range',
+    ]
 
 
 def test_markdown_cells_keep_bars_and_markup_literal() -> None:
@@ -122,8 +133,8 @@ def test_the_readme_results_block_is_the_json(results) -> None:
     readme = (ROOT / 'README.md').read_text()
     assert refgen.README_BEGIN in readme, 'README.md has no results block'
     assert refgen.replace_readme_block(readme, results) == readme, (
-        "README.md's results block is not doc/validation/results.json's: run python3 doc/validation/measure.py "
-        '--readme')
+        "README.md's results block is not doc/validation/results.json's: run python3 doc/validation/measure.py --readme"
+    )
 
 
 def test_a_readme_without_the_markers_is_refused(results) -> None:
@@ -131,11 +142,29 @@ def test_a_readme_without_the_markers_is_refused(results) -> None:
         refgen.replace_readme_block('# README\n', results)
 
 
-@pytest.mark.skipif(not all(importlib.util.find_spec(m) for m in ('sphinx', 'myst_parser', 'sphinx_rtd_theme')),
-                    reason="the docs extra is not installed (pip install '.[docs]')")
+@pytest.mark.skipif(
+    not all(importlib.util.find_spec(m) for m in ('sphinx', 'myst_parser', 'sphinx_rtd_theme')),
+    reason="the docs extra is not installed (pip install '.[docs]')",
+)
 def test_the_site_builds_without_a_warning(tmp_path) -> None:
     # the dummy builder reads every page and resolves every cross-reference (nitpicky) without writing HTML
-    p = subprocess.run([sys.executable, '-m', 'sphinx', '-W', '--keep-going', '-q', '-b', 'dummy', '-d',
-                        str(tmp_path / 'doctrees'), str(DOC), str(tmp_path / 'out')],
-                       cwd=ROOT, capture_output=True, text=True)
+    p = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'sphinx',
+            '-W',
+            '--keep-going',
+            '-q',
+            '-b',
+            'dummy',
+            '-d',
+            str(tmp_path / 'doctrees'),
+            str(DOC),
+            str(tmp_path / 'out'),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
     assert p.returncode == 0, p.stderr[-5000:]

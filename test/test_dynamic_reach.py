@@ -1,5 +1,6 @@
 """The dynamic-reach schedules (sma_wrist.plants.dynamic_reach): the oracle thermostat reaches its
 targets and moves the joint the way the targets say, the search keeps the best candidate, bad input is refused."""
+
 from __future__ import annotations
 
 import numpy as np

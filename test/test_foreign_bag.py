@@ -3,6 +3,7 @@
 compare, diagnose and identify thermal read it with ``--topic CONTRACT=RECORDED`` and ``--joint NAME``
 (sma_wrist.contract.Recording) as they read a bag that follows msg_defs/topics.yaml, and say what to give
 when they cannot."""
+
 from __future__ import annotations
 
 import json
@@ -14,10 +15,14 @@ from rosbags.typesys import Stores, get_typestore
 from sma_wrist.cli import main
 
 TYPESTORE = get_typestore(Stores.ROS2_HUMBLE)
-RENAMED = {'/wrist/joint_states': '/joint_states', '/wrist/reference': '/wrist_controller/reference',
-           '/wrist/muscle_1/temperature': '/sma/flexor/temperature',
-           '/wrist/muscle_2/temperature': '/sma/extensor/temperature',
-           '/wrist/tem_1/command': '/tem/flexor/voltage', '/wrist/tem_2/command': '/tem/extensor/voltage'}
+RENAMED = {
+    '/wrist/joint_states': '/joint_states',
+    '/wrist/reference': '/wrist_controller/reference',
+    '/wrist/muscle_1/temperature': '/sma/flexor/temperature',
+    '/wrist/muscle_2/temperature': '/sma/extensor/temperature',
+    '/wrist/tem_1/command': '/tem/flexor/voltage',
+    '/wrist/tem_2/command': '/tem/extensor/voltage',
+}
 OPTIONS = [x for c, r in RENAMED.items() for x in ('--topic', f'{c}={r}')] + ['--joint', 'wrist_flex']
 
 
@@ -34,12 +39,14 @@ def _robot(m):
 def bags(tmp_path_factory):
     """(a recorded run, the same run as another rig would have recorded it)."""
     from rosbags.rosbag2 import Reader, Writer
+
     d = tmp_path_factory.mktemp('foreign')
     ours, theirs = d / 'ours', d / 'theirs'
     assert main(['run', '--duration', '32', '--bag', str(ours), '--quiet']) == 0
     with Reader(ours) as r, Writer(theirs, version=8) as w:
-        conns = {c.id: w.add_connection(RENAMED.get(c.topic, c.topic), c.msgtype, typestore=TYPESTORE)
-                 for c in r.connections}
+        conns = {
+            c.id: w.add_connection(RENAMED.get(c.topic, c.topic), c.msgtype, typestore=TYPESTORE) for c in r.connections
+        }
         for c, t, raw in r.messages():
             if c.msgtype == 'sensor_msgs/msg/JointState':
                 raw = TYPESTORE.serialize_cdr(_robot(TYPESTORE.deserialize_cdr(raw, c.msgtype)), c.msgtype)
@@ -77,6 +84,7 @@ def test_diagnose_and_identify_thermal_read_another_rigs_bag_as_their_own(bags):
     from sma_wrist.contract import Recording
     from sma_wrist.diagnose.data import load_run
     from sma_wrist.identify.thermal import load_bag
+
     ours, theirs = bags
     rec = Recording.from_options(OPTIONS[1::2][:-1], 'wrist_flex')
     a, b = load_run(ours), load_run(theirs, recording=rec)
@@ -86,9 +94,14 @@ def test_diagnose_and_identify_thermal_read_another_rigs_bag_as_their_own(bags):
     assert [np.array_equal(x.T, y.T, equal_nan=True) and np.array_equal(x.u, y.u) for x, y in zip(ra, rb)] == [True] * 2
 
 
-@pytest.mark.parametrize('spec,says', [('/wrist/joint_states', 'give CONTRACT=RECORDED'),
-                                       ('/joint_states=/wrist/joint_states', 'is not a contract topic'),
-                                       ('wrist/joint_states=/js', 'give CONTRACT=RECORDED')])
+@pytest.mark.parametrize(
+    'spec,says',
+    [
+        ('/wrist/joint_states', 'give CONTRACT=RECORDED'),
+        ('/joint_states=/wrist/joint_states', 'is not a contract topic'),
+        ('wrist/joint_states=/js', 'give CONTRACT=RECORDED'),
+    ],
+)
 def test_a_malformed_topic_option_is_a_clear_error(bags, capsys, spec, says):
     _, theirs = bags
     for cmd in (['compare', str(theirs)], ['diagnose', str(theirs)]):

@@ -1,4 +1,5 @@
 """The whole node graph on the embedded runtime: tracking, bags, determinism, interrupts, CLI."""
+
 from __future__ import annotations
 
 import json
@@ -26,6 +27,7 @@ INVERSE_LOADS = PID_LOADS
 def experiment_dir(tmp_path_factory):
     """Two periods of the Sec. 6.1 reference per controller and payload, in parallel processes."""
     from sma_wrist.experiment import run_experiment
+
     out = tmp_path_factory.mktemp('ch6')
     with open(os.devnull, 'w') as log:
         kw = dict(duration_s=4 * math.pi / 0.1, workers=2, plots=False, log=log)
@@ -61,8 +63,11 @@ def test_experiment_report_has_every_run_and_checks_the_seed_claims(experiment_d
         for c in ('inverse_adaptive', 'pid'):
             r = tracking_runs[(c, m)]
             assert f'| {m:g} kg | {c} | {r["max_error_pct"]:.2f} (' in text
-    lowest = all(min(('inverse_adaptive', 'pid'), key=lambda c: tracking_runs[(c, m)]['total_abs_error_pct'])
-                 == 'inverse_adaptive' for m in PID_LOADS)
+    lowest = all(
+        min(('inverse_adaptive', 'pid'), key=lambda c: tracking_runs[(c, m)]['total_abs_error_pct'])
+        == 'inverse_adaptive'
+        for m in PID_LOADS
+    )
     claim = 'inverse_adaptive has the lowest total absolute error. Here: at '
     assert claim + ('6 of 6 loads -- agrees.' if lowest else '') in text
 
@@ -71,23 +76,33 @@ def test_experiment_report_puts_the_off_model_family_beside_each_nominal_figure(
     """Nominal and off-model figures side by side in the experiment report. The family cell of each
     payload is the sweep's own result for that sampled plant (family/results.jsonl), not the nominal run."""
     table = json.loads((experiment_dir / 'direct' / 'table.json').read_text())
-    rows = [json.loads(line) for line in (experiment_dir / 'direct' / 'family' / 'results.jsonl').read_text().splitlines()]
+    rows = [
+        json.loads(line) for line in (experiment_dir / 'direct' / 'family' / 'results.jsonl').read_text().splitlines()
+    ]
     text = (experiment_dir / 'direct' / 'report.md').read_text()
-    assert 'off-model family: median / p95 / share < 15 %' in text and 'plants sampled from the off-model family' in text
+    assert (
+        'off-model family: median / p95 / share < 15 %' in text and 'plants sampled from the off-model family' in text
+    )
     assert sorted(r['payload_kg'] for r in rows) == sorted(DIRECT_LOADS) and {r['group'] for r in rows} == {'spread'}
     for cell in table['family']['cells']:
-        row, = [r for r in rows if abs(r['payload_kg'] - cell['payload_kg']) < 1e-9]
+        (row,) = [r for r in rows if abs(r['payload_kg'] - cell['payload_kg']) < 1e-9]
         assert cell['plants'] == 1 and cell['median_max_error_pct'] == row['max_error_pct']
         nominal = tracking_runs[('direct_adaptive', cell['payload_kg'])]['max_error_pct']
         assert row['max_error_pct'] != nominal  # a plant that is not the model
         line = f'| {cell["payload_kg"]:g} kg | direct_adaptive | {nominal:.2f}'  # (seed) where the seed has the load
-        assert any(ln.startswith(line) and ln.endswith(f' {row["max_error_pct"]:.2f} / {row["max_error_pct"]:.2f} / '
-                                                       f'{100 * (row["max_error_pct"] < 15):.0f} % |')
-                   for ln in text.splitlines())
+        assert any(
+            ln.startswith(line)
+            and ln.endswith(
+                f' {row["max_error_pct"]:.2f} / {row["max_error_pct"]:.2f} / '
+                f'{100 * (row["max_error_pct"] < 15):.0f} % |'
+            )
+            for ln in text.splitlines()
+        )
 
 
-@pytest.mark.parametrize('controller, payload', [('pid', m) for m in PID_LOADS] +
-                         [('direct_adaptive', m) for m in DIRECT_LOADS])
+@pytest.mark.parametrize(
+    'controller, payload', [('pid', m) for m in PID_LOADS] + [('direct_adaptive', m) for m in DIRECT_LOADS]
+)
 def test_closed_loop_tracks_the_seed_sine_within_15_percent(tracking_runs, controller, payload):
     """The Sec. 6.1 requirement, on the last full cycle (the first holds the start from rest)."""
     r = tracking_runs[(controller, payload)]
@@ -111,18 +126,33 @@ def test_bag_round_trip_rosbags_and_mcap_agree_with_what_was_published(tmp_path)
     bag = tmp_path / 'run'
     run_closed_loop('inverse_adaptive', 0.3, 3.0, bag)
     info = bag_info(bag)
-    for topic in ('/clock', '/wrist/joint_states', '/wrist/muscle_1/temperature', '/wrist/tem_1/command',
-                  '/wrist/reference', '/wrist/payload', '/wrist/muscle_1/stress_desired'):
+    for topic in (
+        '/clock',
+        '/wrist/joint_states',
+        '/wrist/muscle_1/temperature',
+        '/wrist/tem_1/command',
+        '/wrist/reference',
+        '/wrist/payload',
+        '/wrist/muscle_1/stress_desired',
+    ):
         assert info.topics[topic].count > 0, topic
     assert info.topics['/wrist/joint_states'].count == 301  # 100 Hz for 3 s, plus t = 0
     via_rosbags = read_bag(bag, ['/wrist/joint_states'])['/wrist/joint_states']
     from rosbags.typesys import Stores, get_typestore
+
     store = get_typestore(Stores.ROS2_HUMBLE)
-    via_mcap = [store.deserialize_cdr(raw, msgtype) for f in sorted(bag.glob('*.mcap'))
-                for topic, msgtype, _, raw in iter_mcap(f) if topic == '/wrist/joint_states']
+    via_mcap = [
+        store.deserialize_cdr(raw, msgtype)
+        for f in sorted(bag.glob('*.mcap'))
+        for topic, msgtype, _, raw in iter_mcap(f)
+        if topic == '/wrist/joint_states'
+    ]
     from mcap.reader import make_reader
+
     with open(next(bag.glob('*.mcap')), 'rb') as fh:
-        official = [(ch.topic, m.log_time) for _, ch, m in make_reader(fh).iter_messages(topics=['/wrist/joint_states'])]
+        official = [
+            (ch.topic, m.log_time) for _, ch, m in make_reader(fh).iter_messages(topics=['/wrist/joint_states'])
+        ]
     assert len(via_mcap) == len(via_rosbags[1]) == len(official) == 301
     q_rosbags = np.array([m.position[0] for m in via_rosbags[1]])
     q_mcap = np.array([m.position[0] for m in via_mcap])
@@ -148,6 +178,7 @@ def test_interrupted_run_leaves_a_readable_bag_up_to_the_interrupt(tmp_path):
     def interrupt(t, total, wall):
         if t >= 1.5:
             raise KeyboardInterrupt
+
     bag = tmp_path / 'cut'
     s = run_closed_loop('inverse_adaptive', 0.3, 10.0, bag, progress=interrupt)
     assert s.interrupted
@@ -162,8 +193,19 @@ def _cli(*args):
 
 def test_cli_run_json_and_info(tmp_path):
     bag = tmp_path / 'demo'
-    r = _cli('run', '--controller', 'direct_adaptive', '--payload-kg', '0.4', '--duration', '2', '--bag', str(bag),
-             '--json', '--quiet')
+    r = _cli(
+        'run',
+        '--controller',
+        'direct_adaptive',
+        '--payload-kg',
+        '0.4',
+        '--duration',
+        '2',
+        '--bag',
+        str(bag),
+        '--json',
+        '--quiet',
+    )
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out['payload_kg'] == 0.4 and out['metrics']['payload_kg'] == 0.4
@@ -178,12 +220,17 @@ def test_cli_run_without_a_bag_measures_the_run_as_with_one(tmp_path):
     """`sma-wrist run --json` without --bag returned "metrics": {} and exit 0, with no reason: a script got nothing.
     The run is now recorded to a temporary bag, removed afterwards: the same metrics as a run kept in a bag."""
     import os
+
     kept = _cli('run', '--controller', 'pid', '--duration', '2', '--bag', str(tmp_path / 'kept'), '--json', '--quiet')
     scratch = tmp_path / 'tmp'
     scratch.mkdir()
-    r = subprocess.run([sys.executable, '-m', 'sma_wrist', 'run', '--controller', 'pid', '--duration', '2', '--json',
-                        '--quiet'], capture_output=True, text=True, timeout=600,
-                       env={**os.environ, 'TMPDIR': str(scratch)})
+    r = subprocess.run(
+        [sys.executable, '-m', 'sma_wrist', 'run', '--controller', 'pid', '--duration', '2', '--json', '--quiet'],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, 'TMPDIR': str(scratch)},
+    )
     assert r.returncode == 0 and kept.returncode == 0, r.stderr + kept.stderr
     out, ref = json.loads(r.stdout), json.loads(kept.stdout)
     assert out['bag'] is None and out['metrics_missing'] is None and out['messages'] == ref['messages'] > 0
@@ -201,6 +248,7 @@ def test_cli_run_interrupted_before_any_reference_says_why_it_has_no_metrics(mon
 
     def interrupted(self, *args, **kwargs):
         raise KeyboardInterrupt
+
     monkeypatch.setattr(Runtime, 'run_until', interrupted)
     assert main(['run', '--duration', '1', '--json', '--quiet']) == 130
     out = json.loads(capsys.readouterr().out)
@@ -208,13 +256,16 @@ def test_cli_run_interrupted_before_any_reference_says_why_it_has_no_metrics(mon
     assert 'interrupted at 0.00 s' in out['metrics_missing'] and '/wrist/reference' in out['metrics_missing']
 
 
-@pytest.mark.parametrize('args, message', [
-    (('run', '--payload-kg', 'nan'), 'outside [0, 1.5] kg'),
-    (('run', '--payload-kg', '3'), 'outside [0, 1.5] kg'),
-    (('run', '--duration', '-1'), 'must be a finite number > 0'),
-    (('run', '--controller', 'mpc'), 'invalid choice'),
-    (('info', '/nonexistent/bag'), 'error:'),
-])
+@pytest.mark.parametrize(
+    'args, message',
+    [
+        (('run', '--payload-kg', 'nan'), 'outside [0, 1.5] kg'),
+        (('run', '--payload-kg', '3'), 'outside [0, 1.5] kg'),
+        (('run', '--duration', '-1'), 'must be a finite number > 0'),
+        (('run', '--controller', 'mpc'), 'invalid choice'),
+        (('info', '/nonexistent/bag'), 'error:'),
+    ],
+)
 def test_cli_bad_input_is_a_clear_error_not_a_traceback(args, message):
     r = _cli(*args)
     assert r.returncode == 2
@@ -227,6 +278,7 @@ def test_floor_benchmark_runs_the_contracts_topology_every_tick():
     plus the two timers (plant, trajectory) -- so its speed is the runtime's cost of this graph."""
     from sma_wrist.contract import load_contract
     from sma_wrist.runtime.bench import bench_contract_floor
+
     periodic = [t for t in load_contract().topics.values() if t.rate_hz > 0]
     r = bench_contract_floor(0.5)
     assert r['published_per_tick'] == len(periodic) == 16
@@ -238,8 +290,10 @@ def test_floor_benchmark_runs_the_contracts_topology_every_tick():
 def test_cli_parser_does_not_import_the_heavy_subcommands():
     """Every sma-wrist command builds the whole parser: it must not import scipy.signal (diagnose)
     or the plant (emulator), ~1.5 s of start-up for a command that needs neither."""
-    code = ('import sys; from sma_wrist import cli; cli.build_parser(); '
-            'print(sorted(m for m in ("scipy.signal", "sma_wrist.diagnose", "sma_wrist.core.plant.wrist") if m in sys.modules))')
+    code = (
+        'import sys; from sma_wrist import cli; cli.build_parser(); '
+        'print(sorted(m for m in ("scipy.signal", "sma_wrist.diagnose", "sma_wrist.core.plant.wrist") if m in sys.modules))'
+    )
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == '[]'
 
@@ -249,17 +303,20 @@ def test_cli_run_takes_the_payload_and_mode_of_its_params_file(tmp_path):
     --params-file` ran the options' defaults (0.3 kg, inverse_adaptive) over them and never checked their values.
     Now the file's values are used where the command line names none, checked, and the command line still wins."""
     f = tmp_path / 'mine.yaml'
-    f.write_text('plant_sim:\n  ros__parameters:\n    payload_kg: 0.6\n'
-                 'adaptive_controller:\n  ros__parameters:\n    mode: pid\n')
+    f.write_text(
+        'plant_sim:\n  ros__parameters:\n    payload_kg: 0.6\nadaptive_controller:\n  ros__parameters:\n    mode: pid\n'
+    )
     r = _cli('run', '--duration', '0.5', '--quiet', '--json', '--params-file', str(f))
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert (out['controller'], out['payload_kg']) == ('pid', 0.6)
     r = _cli('run', '--duration', '0.5', '--quiet', '--json', '--params-file', str(f), '--payload-kg', '0.1')
     assert json.loads(r.stdout)['payload_kg'] == 0.1 and json.loads(r.stdout)['controller'] == 'pid'
-    for text, named in (('plant_sim:\n  ros__parameters:\n    payload_kg: heavy\n', "payload_kg 'heavy'"),
-                        ('plant_sim:\n  ros__parameters:\n    payload_kg: .nan\n', 'payload_kg nan'),
-                        ('adaptive_controller:\n  ros__parameters:\n    mode: foo\n', "mode 'foo'")):
+    for text, named in (
+        ('plant_sim:\n  ros__parameters:\n    payload_kg: heavy\n', "payload_kg 'heavy'"),
+        ('plant_sim:\n  ros__parameters:\n    payload_kg: .nan\n', 'payload_kg nan'),
+        ('adaptive_controller:\n  ros__parameters:\n    mode: foo\n', "mode 'foo'"),
+    ):
         f.write_text(text)
         r = _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f))
         assert r.returncode == 2 and named in r.stderr and 'Traceback' not in r.stderr, r.stderr
@@ -272,15 +329,19 @@ def test_a_params_file_naming_no_node_of_the_package_is_refused(tmp_path):
     import ast
 
     from sma_wrist.nodes.common import NODE_NAMES
+
     tree = ast.parse((Path(__file__).parents[1] / 'setup.py').read_text())
-    nodes = next(n.value for n in ast.walk(tree) if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'NODES')
+    nodes = next(
+        n.value for n in ast.walk(tree) if isinstance(n, ast.Assign) and getattr(n.targets[0], 'id', '') == 'NODES'
+    )
     assert sorted(ast.literal_eval(nodes)) == sorted(NODE_NAMES)
     f = tmp_path / 'typo.yaml'
     f.write_text('plant_simm:\n  ros__parameters:\n    payload_kg: 0.5\n')
     r = _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f))
     assert r.returncode == 2 and 'node plant_simm in' in r.stderr and 'Traceback' not in r.stderr, r.stderr
-    f.write_text('/wrist/plant_sim:\n  ros__parameters:\n    payload_kg: 0.5\n/**:\n  ros__parameters:\n'
-                 '    use_sim_time: true\n')  # a namespace and a wildcard are the user's business
+    f.write_text(
+        '/wrist/plant_sim:\n  ros__parameters:\n    payload_kg: 0.5\n/**:\n  ros__parameters:\n    use_sim_time: true\n'
+    )  # a namespace and a wildcard are the user's business
     assert _cli('run', '--duration', '0.5', '--quiet', '--params-file', str(f)).returncode == 0
 
 
@@ -291,20 +352,30 @@ def test_a_nominal_run_logs_no_warning_and_starts_from_the_wrists_angle(tmp_path
     measured angle, not 0.44 rad above it at the sine's first value."""
     from sma_wrist import runtime
     from sma_wrist.runtime.rclpy import logging as rlog
+
     runtime.activate()
     lines = []
     remove = rlog.add_sink(lambda sev, name, msg, t: lines.append((int(sev), name, msg)))
     try:
         with rlog.silenced():
-            s = run_closed_loop('inverse_adaptive', 0.3, 35.0, tmp_path / 'bag',
-                                extra_params={'/trajectory_generator': {'soft_start_s': 30.0}})  # as run sets it
+            s = run_closed_loop(
+                'inverse_adaptive',
+                0.3,
+                35.0,
+                tmp_path / 'bag',
+                extra_params={'/trajectory_generator': {'soft_start_s': 30.0}},
+            )  # as run sets it
     finally:
         remove()
     loud = [(name, msg) for sev, name, msg in lines if sev >= int(rlog.LoggingSeverity.WARN)]
     assert loud == []
     data = read_bag(tmp_path / 'bag', ['/diagnostics'])
-    saturated = [st.name for m in data['/diagnostics'][1] for st in m.status
-                 if st.name.endswith('saturation') and int.from_bytes(st.level, 'little') == 1]
+    saturated = [
+        st.name
+        for m in data['/diagnostics'][1]
+        for st in m.status
+        if st.name.endswith('saturation') and int.from_bytes(st.level, 'little') == 1
+    ]
     assert saturated  # the loop did saturate: /diagnostics has it, at WARN
     run = s.run
     assert abs(run.q_d[0] - run.q[0]) < 1e-3  # the soft start: the first reference is the measured angle
@@ -336,11 +407,15 @@ def test_cli_run_takes_a_params_files_soft_start_where_the_command_line_names_no
     """`run` soft-starts the reference by its own default; a params file's trajectory_generator soft_start_s
     stands where --soft-start is not given (the file is the user's choice), and --soft-start beats both."""
     from sma_wrist.runs import load_run
+
     params = tmp_path / 'p.yaml'
     params.write_text('trajectory_generator:\n  ros__parameters:\n    soft_start_s: 0.0\n')
     first = {}
-    for name, args in (('default', ()), ('file', ('--params-file', str(params))),
-                       ('option', ('--params-file', str(params), '--soft-start', '30'))):
+    for name, args in (
+        ('default', ()),
+        ('file', ('--params-file', str(params))),
+        ('option', ('--params-file', str(params), '--soft-start', '30')),
+    ):
         r = _cli('run', '--duration', '2', '--quiet', '--bag', str(tmp_path / name), *args)
         assert r.returncode == 0, r.stderr
         run = load_run(tmp_path / name)

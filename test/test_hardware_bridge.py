@@ -1,6 +1,7 @@
 """hardware_bridge against the device emulator on a pty (sma_wrist/nodes/hardware_bridge.py,
 sma_wrist/hw/emulator.py): data flow and calibration, the safety cut-off, serial faults,
 parameter updates, and the closed loop through bridge + emulator vs the simulator."""
+
 from __future__ import annotations
 
 import os
@@ -15,8 +16,15 @@ from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig, config_from_args
 
-TOPICS = ('/wrist/joint_states', '/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature',
-          '/wrist/muscle_1/stress', '/wrist/muscle_2/stress', '/wrist/payload', '/clock')
+TOPICS = (
+    '/wrist/joint_states',
+    '/wrist/muscle_1/temperature',
+    '/wrist/muscle_2/temperature',
+    '/wrist/muscle_1/stress',
+    '/wrist/muscle_2/stress',
+    '/wrist/payload',
+    '/clock',
+)
 
 
 @pytest.fixture
@@ -25,11 +33,15 @@ def emulator(tmp_path):
 
     def make(clock=None, **kw) -> DeviceEmulator:
         """An emulator serving in its own thread on the wall clock, or (``clock``) opened for a driven bridge."""
-        emu = DeviceEmulator(EmulatorConfig(**kw), link=str(tmp_path / f'wrist{len(made)}'),
-                             **({} if clock is None else {'clock': clock}))
+        emu = DeviceEmulator(
+            EmulatorConfig(**kw),
+            link=str(tmp_path / f'wrist{len(made)}'),
+            **({} if clock is None else {'clock': clock}),
+        )
         emu.start() if clock is None else emu.open()
         made.append(emu)
         return emu
+
     yield make
     for e in made:
         e.stop()
@@ -41,11 +53,14 @@ def graph(ros_shutdown, probe_factory):
     """(runtime, bridge, probe) for an emulator; the probe commands both TEMs at 100 Hz of sim time. ``clock``: the
     emulator is not started; bridge and emulator run on this clock (:func:`driven_bridge`)."""
     from sma_wrist.runtime.launch import Runtime
+
     made = []
 
-    def make(emu: DeviceEmulator, command_V: tuple[float, float] = (0.0, 0.0), clock: ManualClock | None = None,
-             **params):
+    def make(
+        emu: DeviceEmulator, command_V: tuple[float, float] = (0.0, 0.0), clock: ManualClock | None = None, **params
+    ):
         from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
         rt = Runtime(params={'/hardware_bridge': {'port': emu.link, **params}})
         made.append(rt)
         bridge = rt.add(HardwareBridge if clock is None else driven_bridge(emu, clock))
@@ -53,6 +68,7 @@ def graph(ros_shutdown, probe_factory):
         probe.every(0.01, '/wrist/tem_1/command', data=float(command_V[0]))
         probe.every(0.01, '/wrist/tem_2/command', data=float(command_V[1]))
         return rt, bridge, probe
+
     yield make
     for rt in made:
         rt.close()
@@ -72,6 +88,7 @@ def _settle(ready, what: str, limit_s: float = 10.0) -> None:
     """Wait (real time) until the kernel has moved bytes across the pty: ``ready()`` true. Only the hand-over waits
     here; what the bridge and the device see is timed by the manual clock."""
     import time as _time
+
     end = _time.monotonic() + limit_s
     while not ready():
         if _time.monotonic() > end:
@@ -154,8 +171,9 @@ def driven_bridge(emu: DeviceEmulator, clock: ManualClock) -> type:
 def run_wall(rt, seconds: float, stop_when=None) -> None:
     """Spin the graph for about ``seconds`` of wall time (the bridge paces on the device)."""
     t_end = time.monotonic() + seconds
-    rt.run_until(1e6, until='steady',
-                 stop_when=lambda: time.monotonic() > t_end or (stop_when is not None and stop_when()))
+    rt.run_until(
+        1e6, until='steady', stop_when=lambda: time.monotonic() > t_end or (stop_when is not None and stop_when())
+    )
 
 
 def levels(probe, key: str) -> list[int]:
@@ -237,13 +255,16 @@ def test_faults_drive_zero_volts(emulator, graph, fault):
 def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulator, graph, tmp_path, fault):
     """A faulty reading cuts the TEMs and must not reach joint_states, the bag and the metrics."""
     from sma_wrist.bag import read_bag
+
     emu = emulator(noise_counts=0.0)
     rt, bridge, probe = graph(emu, (6.0, 0.0))
     rec = rt.record(tmp_path / 'bag', ['/wrist/joint_states', '/wrist/muscle_2/temperature'])
     rt.run_until(0.3, until='sim')
-    ch, counts = {'angle_adc_full_scale': (4, P.ADC_MAX),
-                  'angle_out_of_range': (4, int(Calibration().to_counts(np.zeros(4), 1.7)[4])),
-                  'temperature_adc_full_scale': (1, P.ADC_MAX)}[fault]
+    ch, counts = {
+        'angle_adc_full_scale': (4, P.ADC_MAX),
+        'angle_out_of_range': (4, int(Calibration().to_counts(np.zeros(4), 1.7)[4])),
+        'temperature_adc_full_scale': (1, P.ADC_MAX),
+    }[fault]
     n_js = len(probe.got['/wrist/joint_states'])
     emu.inject('force', (ch, counts))
     rt.spin_for(0.4, until='sim')
@@ -276,8 +297,9 @@ def test_non_finite_command_turns_that_tem_off(emulator, graph):
     assert bridge.command_to_send() == (4.0, 4.0)
 
 
-@pytest.mark.parametrize('fault,value', [('garbage', 500), ('corrupt', 20), ('cut', 20), ('raw', b'$S,1,99*0000\n'),
-                                         ('reset', None)])
+@pytest.mark.parametrize(
+    'fault,value', [('garbage', 500), ('corrupt', 20), ('cut', 20), ('raw', b'$S,1,99*0000\n'), ('reset', None)]
+)
 def test_line_faults_never_publish_invalid_samples(emulator, graph, fault, value):
     emu = emulator(noise_counts=0.0)
     rt, bridge, probe = graph(emu, (3.0, 0.0))
@@ -319,20 +341,23 @@ def test_unplug_reconnects_with_backoff_and_recovers(emulator, graph):
 
 
 @pytest.mark.parametrize('reminder_s', [None, 0.02])
-def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(emulator, graph, monkeypatch,
-                                                                                reminder_s):
+def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(
+    emulator, graph, monkeypatch, reminder_s
+):
     """A lost link is one ERROR line and throttled reminders, not a line every ~54 ms with a changing age in it."""
     import rclpy.logging
 
     from sma_wrist.nodes import hardware_bridge
+
     if reminder_s is not None:
         monkeypatch.setattr(hardware_bridge, 'FAULT_REMINDER_S', reminder_s)
     emu = emulator()
     rt, bridge, probe = graph(emu, (3.0, 3.0))
     rt.run_until(0.3, until='sim')
     lines: list[tuple[str, str, int]] = []
-    remove = rclpy.logging.add_sink(lambda sev, name, msg, t: lines.append((str(sev), msg, t))
-                                    if name == 'hardware_bridge' else None)
+    remove = rclpy.logging.add_sink(
+        lambda sev, name, msg, t: lines.append((str(sev), msg, t)) if name == 'hardware_bridge' else None
+    )
     try:
         t0 = rt.steady_ns
         emu.inject('unplug', 1.0)
@@ -353,20 +378,21 @@ def test_a_lost_link_logs_one_line_going_one_returning_and_throttled_reminders(e
     else:
         assert 1 <= len(reminders) <= t_down / (reminder_s * 1e9) + 1, (len(reminders), t_down)
         assert 'sensor timeout' in reminders[0]
-    back = [m for _, m, _ in lines[len(down):]]
+    back = [m for _, m, _ in lines[len(down) :]]
     assert any(m.startswith('safety: normal operation') for m in back), back
     assert len(back) <= 6, back
 
 
 @pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
-def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
-                                                                      source):
+def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory, source):
     """/diagnostics carries device time, as the measurements and /clock do, not the steady or system clock the
     bridge polls on (those would read 52.7 s where the device reads 118 s). The system clock here starts in 2023."""
     from sma_wrist.runtime.launch import Runtime
+
     params = {}
     if source == 'hardware_bridge':
         from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
+
         params = {'/hardware_bridge': {'port': emulator().link}}
     else:
         from sma_wrist.nodes.plant_sim import PlantSim as Source
@@ -379,6 +405,7 @@ def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, 
 
     def s(stamp) -> float:
         return stamp.sec + stamp.nanosec * 1e-9
+
     diag = [s(a.header.stamp) for a in probe.got['/diagnostics'] if a.status[0].name.startswith(source)]
     clock = [s(m.header.stamp) for m in probe.got['/wrist/joint_states']]
     assert diag and clock
@@ -386,8 +413,9 @@ def test_diagnostics_are_stamped_in_the_time_base_of_the_measurements(emulator, 
 
 
 @pytest.mark.parametrize('source', ['plant_sim', 'hardware_bridge'])
-def test_the_log_is_stamped_and_throttled_in_the_time_base_of_the_measurements(emulator, ros_shutdown, probe_factory,
-                                                                               source):
+def test_the_log_is_stamped_and_throttled_in_the_time_base_of_the_measurements(
+    emulator, ros_shutdown, probe_factory, source
+):
     """`sma-wrist run --hardware`: the console log's stamps ended at 67.8 s in a 140 s run while /diagnostics went on
     to 138 s. The records carried the embedded runtime's virtual steady clock, which on the hardware path is not the
     device's time (it moves by the bridge's ticks); the bridge's log throttle ran on it too. Both now run on /clock, as the bag, the measurements and /diagnostics do. plant_sim at
@@ -397,11 +425,14 @@ def test_the_log_is_stamped_and_throttled_in_the_time_base_of_the_measurements(e
     from sma_wrist.nodes.common import LOG_THROTTLE_S
     from sma_wrist.runtime.launch import Runtime
     from sma_wrist.runtime.rclpy import logging as rlog
+
     if source == 'hardware_bridge':
         from sma_wrist.nodes.hardware_bridge import HardwareBridge as Source
+
         params = {'/hardware_bridge': {'port': emulator().link}}
     else:
         from sma_wrist.nodes.plant_sim import PlantSim as Source
+
         params = {'/plant_sim': {'real_time_factor': 4.0}}
     records: list[tuple[str, float]] = []
     remove = rlog.add_sink(lambda sev, name, msg, t: records.append((msg, t * 1e-9)) if name == source else None)
@@ -414,6 +445,7 @@ def test_the_log_is_stamped_and_throttled_in_the_time_base_of_the_measurements(e
                 # the bridge's ticks (two per window, the second waiting for the device) keep its steady clock with
                 # device time: set it apart, so that a record stamped with it would show
                 from sma_wrist.runtime.vclock import VCLOCK
+
                 VCLOCK.advance_to(VCLOCK.steady_ns + 1_000_000_000)
             probe.publish('/wrist/tem_1/command', data=float('nan'))  # rejected: a WARN, logged
             rt.spin_for(0.05, until='sim')
@@ -435,6 +467,7 @@ def test_the_log_is_stamped_and_throttled_in_the_time_base_of_the_measurements(e
 def test_no_device_at_all_stays_safe_and_keeps_trying(tmp_path, ros_shutdown, probe_factory):
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.launch import Runtime
+
     with Runtime(params={'/hardware_bridge': {'port': str(tmp_path / 'nothing')}}) as rt:
         bridge = rt.add(HardwareBridge)
         probe = probe_factory(rt, ('/clock',))
@@ -450,6 +483,7 @@ def test_the_stress_estimate_is_the_identified_wires(tmp_path, ros_shutdown):
     (identify's wrist_params.yaml set the other nodes only). It now takes hysteresis_file and preload_elongation_mm,
     as plant_sim and the compensator do, and identify writes them for it; a file it cannot read stops it with the
     reason, as for plant_sim."""
+    from sma_wrist.core.errors import ParameterError
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.core.plant.wrist import PlantParams
@@ -458,12 +492,13 @@ def test_the_stress_estimate_is_the_identified_wires(tmp_path, ros_shutdown):
     from sma_wrist.nodes.common import add_or_refuse
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.launch import Runtime
-    from sma_wrist.core.errors import ParameterError
+
     hot = shifted_wire(default_sdgpi(), 20.0)
     wire = save_hysteresis(tmp_path / 'wire.yaml', hot)
     port = str(tmp_path / 'nothing')
-    with Runtime(params={'/hardware_bridge': {'port': port, 'hysteresis_file': str(wire),
-                                              'preload_elongation_mm': 1.6}}) as rt:
+    with Runtime(
+        params={'/hardware_bridge': {'port': port, 'hysteresis_file': str(wire), 'preload_elongation_mm': 1.6}}
+    ) as rt:
         est = rt.add(HardwareBridge).estimator.update(75.0, 40.0, 0.6)
     own = StressEstimator(PlantParams(hysteresis=hot, preload_elongation_mm=1.6)).update(75.0, 40.0, 0.6)
     builtin = StressEstimator().update(75.0, 40.0, 0.6)
@@ -483,6 +518,7 @@ def test_the_stress_estimate_filters_noisy_inputs_and_passes_clean_ones():
     with clean sensors keeps its lag-free estimate (doc/explanation/controllers.md)."""
     from sma_wrist.hw.estimate import InputFilter, StressEstimator
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
     defaults = {p.name: p.default for p in HardwareBridge.PARAMS}
     drift = (defaults['stress_filter.temperature_drift_C'],) * 2 + (defaults['stress_filter.angle_drift_rad'],)
     rng = np.random.default_rng(0)
@@ -491,7 +527,7 @@ def test_the_stress_estimate_filters_noisy_inputs_and_passes_clean_ones():
     q = 0.6 + 0.003 * rng.standard_normal(n)
 
     def run(est, T, q, var=(0.0, 0.0, 0.0)):
-        return np.array([est.update(T[k, 0], T[k, 1], q[k], dt_s=0.01, variance=var)[:2] for k in range(n)])[n // 2:]
+        return np.array([est.update(T[k, 0], T[k, 1], q[k], dt_s=0.01, variance=var)[:2] for k in range(n)])[n // 2 :]
 
     quiet_T, quiet_q = np.full((n, 2), [70.0, 40.0]), np.full(n, 0.6)
     quiet = run(StressEstimator(), quiet_T, quiet_q)[-1]
@@ -512,6 +548,7 @@ def test_the_window_line_reports_the_variance_of_its_end_value():
     """The bridge's angle is a least-squares line's value at the window's end; the filter is told its
     variance, from the residuals. Checked against the spread of that value over many noisy windows."""
     from sma_wrist.hw.estimate import slope
+
     rng = np.random.default_rng(1)
     t = np.arange(10) * 1e-3
     ends, reported = [], []
@@ -526,23 +563,35 @@ def test_the_window_line_reports_the_variance_of_its_end_value():
 
 def test_malformed_parameter_updates_rejected_node_keeps_running(emulator, graph):
     from rclpy.parameter import Parameter
+
     emu = emulator()
     rt, bridge, probe = graph(emu, (2.0, 2.0))
     rt.run_until(0.2, until='sim')
-    bad = [Parameter('sensor_timeout_s', value='fast'), Parameter('sensor_timeout_s', value=-1.0),
-           Parameter('max_muscle_temperature_C', value=float('nan')), Parameter('angle_min_rad', value=2.0),
-           Parameter('calibration.angle_gain_rad_per_count', value=0.0), Parameter('port', value='/dev/other'),
-           Parameter('publish_rate_hz', value=50.0), Parameter('adc.temperature_gain_C_per_count', value=5.0),
-           Parameter('stress_filter.angle_drift_rad', value=0.0)]
+    bad = [
+        Parameter('sensor_timeout_s', value='fast'),
+        Parameter('sensor_timeout_s', value=-1.0),
+        Parameter('max_muscle_temperature_C', value=float('nan')),
+        Parameter('angle_min_rad', value=2.0),
+        Parameter('calibration.angle_gain_rad_per_count', value=0.0),
+        Parameter('port', value='/dev/other'),
+        Parameter('publish_rate_hz', value=50.0),
+        Parameter('adc.temperature_gain_C_per_count', value=5.0),
+        Parameter('stress_filter.angle_drift_rad', value=0.0),
+    ]
     for p in bad:
         res = bridge.set_parameters([p])[0]
         assert not res.successful, p.name
     assert bridge.p['sensor_timeout_s'] == 0.1 and bridge.p['angle_min_rad'] == -0.45
-    assert bridge.estimator.filter.q_c[2] == pytest.approx(0.00275 ** 2)
-    ok = bridge.set_parameters([Parameter('calibration.muscle_1_offset_C', value=2.0),
-                                Parameter('payload_kg', value=0.5), Parameter('stress_filter.angle_drift_rad', value=0.01)])
+    assert bridge.estimator.filter.q_c[2] == pytest.approx(0.00275**2)
+    ok = bridge.set_parameters(
+        [
+            Parameter('calibration.muscle_1_offset_C', value=2.0),
+            Parameter('payload_kg', value=0.5),
+            Parameter('stress_filter.angle_drift_rad', value=0.01),
+        ]
+    )
     assert all(r.successful for r in ok)
-    assert bridge.estimator.filter.q_c[2] == pytest.approx(0.01 ** 2)  # the estimate's filter took the change
+    assert bridge.estimator.filter.q_c[2] == pytest.approx(0.01**2)  # the estimate's filter took the change
     n = len(probe.got['/wrist/joint_states'])
     T_before = probe.got['/wrist/muscle_1/temperature'][-1].temperature
     rt.spin_for(0.2, until='sim')
@@ -555,6 +604,7 @@ def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
     """--port at an existing regular file: os.replace deleted the file (it became the pty link and was
     removed on exit). Refused with exit 2 and the file kept; a folder that does not exist is named too."""
     from sma_wrist.cli import main
+
     f = tmp_path / 'notes.txt'
     f.write_text('keep me')
     assert main(['emulate-device', '--port', str(f), '--duration', '0.1']) == 2
@@ -564,20 +614,27 @@ def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
     assert f'the folder {tmp_path / "no"} does not exist' in capsys.readouterr().out
 
 
-@pytest.mark.parametrize('args, named', [
-    (['--noise-counts', '-1'], '--noise-counts'), (['--latency-ms', 'inf'], '--latency-ms'),
-    (['--watchdog-s', 'nan'], '--watchdog-s'), (['--watchdog-s', '0'], '--watchdog-s'),
-    (['--garbage-rate', '2'], '--garbage-rate'), (['--checksum-error-rate', 'nan'], '--checksum-error-rate'),
-    (['--thermocouple-offsets-C', 'a,b,c,d'], '--thermocouple-offsets-C'),
-    (['--plant', 'nope'], "--plant 'nope': one of model, phase_fraction, sdgpi"),
-    (['--thermocouple-rate-hz', '-10'], '--thermocouple-rate-hz'),
-    (['--thermocouple-rate-hz', '2000'], '--thermocouple-rate-hz 2000 is above the sample rate'),
-    (['--thermocouple-resolution-C', '0.25'], '--thermocouple-resolution-C models a converter chip'),
-])
+@pytest.mark.parametrize(
+    'args, named',
+    [
+        (['--noise-counts', '-1'], '--noise-counts'),
+        (['--latency-ms', 'inf'], '--latency-ms'),
+        (['--watchdog-s', 'nan'], '--watchdog-s'),
+        (['--watchdog-s', '0'], '--watchdog-s'),
+        (['--garbage-rate', '2'], '--garbage-rate'),
+        (['--checksum-error-rate', 'nan'], '--checksum-error-rate'),
+        (['--thermocouple-offsets-C', 'a,b,c,d'], '--thermocouple-offsets-C'),
+        (['--plant', 'nope'], "--plant 'nope': one of model, phase_fraction, sdgpi"),
+        (['--thermocouple-rate-hz', '-10'], '--thermocouple-rate-hz'),
+        (['--thermocouple-rate-hz', '2000'], '--thermocouple-rate-hz 2000 is above the sample rate'),
+        (['--thermocouple-resolution-C', '0.25'], '--thermocouple-resolution-C models a converter chip'),
+    ],
+)
 def test_emulator_refuses_a_fault_or_noise_option_it_cannot_be(tmp_path, capsys, args, named):
     """A NaN or negative noise, latency or watchdog, or a fault rate outside [0, 1], made a device without that
     behaviour in silence (a NaN watchdog never fires); now exit 2 naming the option, before any pty is made."""
     from sma_wrist.cli import main
+
     link = tmp_path / 'dev'
     assert main(['emulate-device', '--port', str(link), '--duration', '0.1', *args]) == 2
     assert capsys.readouterr().out.startswith(f'error: {named}') and not os.path.lexists(link)
@@ -587,7 +644,7 @@ def _device_readings(emu: DeviceEmulator, n: int) -> np.ndarray:
     """(n, 5) muscle 1/2 and TEM face 1/2 temperatures [degC] and angle [rad] the device reports at zero drive."""
     out = []
     for _ in range(n):
-        frame, = P.Parser().feed(emu._sample())
+        (frame,) = P.Parser().feed(emu._sample())
         temps, q = emu.cfg.calibration.to_physical(frame.adc)
         out.append([*temps, q])
     return np.array(out)
@@ -599,8 +656,12 @@ def test_the_emulated_thermocouple_chip_holds_and_rounds_its_readings():
     chip's resolution; the noise of the thermocouple (the scenario's) changes only at a conversion, and the ADC's
     per-sample noise is not on them. The angle is still sampled through the ADC at every sample."""
     scen = {'temp_noise_C': 0.3, 'angle_noise_rad': 0.003}
-    r = _device_readings(DeviceEmulator(EmulatorConfig(plant='sdgpi', scenario=scen, thermocouple_rate_hz=10.0,
-                                                       thermocouple_resolution_C=0.25)), 400)
+    r = _device_readings(
+        DeviceEmulator(
+            EmulatorConfig(plant='sdgpi', scenario=scen, thermocouple_rate_hz=10.0, thermocouple_resolution_C=0.25)
+        ),
+        400,
+    )
     T = r[:, :2]
     changes = np.flatnonzero(np.any(np.diff(T, axis=0) != 0, axis=1)) + 1
     assert changes.size >= 3 and set(np.diff(changes)) <= {100, 101}  # one conversion per 100 samples
@@ -621,6 +682,7 @@ def test_the_emulated_device_can_hold_a_plant_that_is_not_the_model(tmp_path, ca
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.plants import make_plant
     from sma_wrist.plants.spread import Scenario
+
     model = _device_readings(DeviceEmulator(EmulatorConfig(noise_counts=0.0)), 50)
     pf = _device_readings(DeviceEmulator(EmulatorConfig(noise_counts=0.0, plant='phase_fraction')), 50)
     ref = make_plant('phase_fraction', [Scenario(payload_kg=0.3)], PlantParams(dt=1e-3))
@@ -636,9 +698,11 @@ def test_the_emulated_device_can_hold_a_plant_that_is_not_the_model(tmp_path, ca
     a = argparse_for(['--plant', 'sdgpi', '--scenario-file', str(f), '--noise-counts', '0'])
     noisy = _device_readings(DeviceEmulator(config_from_args(a)), 50)
     assert np.std(np.diff(noisy[:, 0])) > 0.1 and np.std(np.diff(model[:, 0])) < 0.01
-    for bad, named in ((['--scenario-file', str(f)], 'give --plant'),
-                       (['--plant', 'sdgpi', '--scenario-file', str(tmp_path / 'none.json')], 'scenario file'),
-                       (['--plant', 'sdgpi', '--scenario-file', str(f.with_name('bad.json'))], 'unknown perturbation')):
+    for bad, named in (
+        (['--scenario-file', str(f)], 'give --plant'),
+        (['--plant', 'sdgpi', '--scenario-file', str(tmp_path / 'none.json')], 'scenario file'),
+        (['--plant', 'sdgpi', '--scenario-file', str(f.with_name('bad.json'))], 'unknown perturbation'),
+    ):
         f.with_name('bad.json').write_text('{"shift": 5}')
         assert main(['emulate-device', '--duration', '0.1', *bad]) == 2
         out = capsys.readouterr().out
@@ -652,6 +716,7 @@ def test_the_emulated_device_can_hold_the_wrist_a_params_file_describes(tmp_path
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.identify.wrist import shifted_wire
+
     wire = save_hysteresis(tmp_path / 'wire.yaml', shifted_wire(default_sdgpi(), 10.0))
     f = tmp_path / 'wrist.yaml'
     f.write_text(f'plant_sim:\n  ros__parameters:\n    hysteresis_file: {wire}\n    preload_elongation_mm: 1.7\n')
@@ -673,6 +738,7 @@ def argparse_for(argv):
     import argparse
 
     from sma_wrist.hw.emulator import add_arguments
+
     ap = argparse.ArgumentParser()
     add_arguments(ap)
     return ap.parse_args(argv)
@@ -680,9 +746,13 @@ def argparse_for(argv):
 
 def test_cli_emulator_on_a_pty(tmp_path):
     import serial
+
     link = str(tmp_path / 'dev')
-    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
-                             '--duration', '5'], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link, '--duration', '5'],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert 'emulated wrist on /dev/pts/' in proc.stdout.readline()
         assert os.path.islink(link)
@@ -691,8 +761,9 @@ def test_cli_emulator_on_a_pty(tmp_path):
         parser = P.Parser()
         frames: list = []
         t_end = time.monotonic() + 2.0
-        while time.monotonic() < t_end and not (any(isinstance(f, P.Hello) for f in frames)
-                                                and any(isinstance(f, P.Sample) for f in frames)):
+        while time.monotonic() < t_end and not (
+            any(isinstance(f, P.Hello) for f in frames) and any(isinstance(f, P.Sample) for f in frames)
+        ):
             frames += parser.feed(ser.read(ser.in_waiting or 1))
         assert any(isinstance(f, P.Hello) and f.rate_hz == 1000 for f in frames)
         assert sum(isinstance(f, P.Sample) for f in frames) > 0 and parser.stats.bad_checksum == 0
@@ -717,14 +788,24 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     bridge + the controller graph, bag recorded; metrics close to plant_sim's on the same run."""
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.runs import load_run, run_metrics
+
     link = str(tmp_path / 'wrist')
-    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
-                             '--time-scale', str(TIME_SCALE)], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link, '--time-scale', str(TIME_SCALE)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         proc.stdout.readline()
         t0 = time.monotonic()
-        hw = run_closed_loop('direct_adaptive', 0.3, 126.0, tmp_path / 'hw', hardware=True,
-                             extra_params={'/hardware_bridge': {'port': link}})
+        hw = run_closed_loop(
+            'direct_adaptive',
+            0.3,
+            126.0,
+            tmp_path / 'hw',
+            hardware=True,
+            extra_params={'/hardware_bridge': {'port': link}},
+        )
         wall = time.monotonic() - t0
     finally:
         proc.terminate()
@@ -740,6 +821,7 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
         assert abs(m[k] - sim.metrics[k]) <= tol, (k, m[k], sim.metrics[k])
     # the hardware bag feeds the diagnosis like any measured bag: both subsystems replayed
     from sma_wrist.diagnose import diagnose
+
     res = diagnose(tmp_path / 'hw')
     assert set(res.channels) == {'thermal', 'mechanics'} and res.duration_s > 120.0
     assert res.channels['thermal']['rmse_before'] < 1.0  # degC: the emulator is the nominal plant
@@ -748,10 +830,17 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
 def test_hardware_run_without_a_device_stops_with_a_clear_error(tmp_path, monkeypatch, ros_shutdown):
     from sma_wrist import closed_loop
     from sma_wrist.core.errors import SmaWristError
+
     monkeypatch.setattr(closed_loop, 'DEVICE_STALL_S', 1.0)
     with pytest.raises(SmaWristError, match='no data from the device for 1 s'):
-        closed_loop.run_closed_loop('pid', 0.3, 5.0, tmp_path / 'bag', hardware=True,
-                                    extra_params={'/hardware_bridge': {'port': str(tmp_path / 'absent')}})
+        closed_loop.run_closed_loop(
+            'pid',
+            0.3,
+            5.0,
+            tmp_path / 'bag',
+            hardware=True,
+            extra_params={'/hardware_bridge': {'port': str(tmp_path / 'absent')}},
+        )
     assert (tmp_path / 'bag' / 'metadata.yaml').exists()  # the bag was closed, not lost
 
 
@@ -761,6 +850,7 @@ def test_a_stuck_thermocouple_under_drive_turns_the_tems_off(emulator, graph):
     stuck_sensor_s under a mean drive over stuck_sensor_drive_V is now a fault: 0 V, ERROR, its samples not
     published, until the reading changes. An idle TEM with a repeating reading is no fault."""
     from sma_wrist.hw.safety import StuckSensor
+
     clock = ManualClock()
     emu = emulator(clock, noise_counts=0.0)
     rt, bridge, probe = graph(emu, (20.0, 20.0), clock, stuck_sensor_s=0.3)
@@ -770,8 +860,9 @@ def test_a_stuck_thermocouple_under_drive_turns_the_tems_off(emulator, graph):
     emu.inject('force', (0, counts))  # muscle 1's reading freezes at 40 degC
     rt.spin_for(0.6, until='sim')
     assert bridge.command_to_send() == (0.0, 0.0) and levels(probe, 'safety')[-1] == 2
-    assert any('muscle 1 thermocouple stuck' in m for name, lvl, m in probe.diagnostics()
-               if name == 'hardware_bridge: safety')
+    assert any(
+        'muscle 1 thermocouple stuck' in m for name, lvl, m in probe.diagnostics() if name == 'hardware_bridge: safety'
+    )
     n_js = len(probe.got['/wrist/joint_states'])
     rt.spin_for(0.3, until='sim')  # the TEMs are off now, and the reading is still stuck: still a fault
     assert bridge.command_to_send() == (0.0, 0.0) and len(probe.got['/wrist/joint_states']) < n_js + 5
@@ -783,8 +874,9 @@ def test_a_stuck_thermocouple_under_drive_turns_the_tems_off(emulator, graph):
     s = StuckSensor(1, hold_s=1.0, drive_V=18.0)
     assert not any(s.update(0.01 * k, np.array([40.0]), np.array([0.0]))[0] for k in range(500))
     assert not any(s.update(5.0 + 0.01 * k, np.array([40.0]), np.array([15.0]))[0] for k in range(500))
-    assert not any(s.update(10.0 + 0.01 * k, np.array([40.0]), np.array([24.0 * (-1) ** (k // 20)]))[0]
-                   for k in range(500))
+    assert not any(
+        s.update(10.0 + 0.01 * k, np.array([40.0]), np.array([24.0 * (-1) ** (k // 20)]))[0] for k in range(500)
+    )
     assert any(s.update(15.0 + 0.01 * k, np.array([40.0]), np.array([-22.0]))[0] for k in range(500))
     assert not s.update(25.0, np.array([40.25]), np.array([-22.0]))[0]  # a new reading clears it
 
@@ -797,8 +889,9 @@ def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):
 
     class Jittery(DeviceEmulator):
         def _sample(self) -> bytes:
-            s, = P.Parser().feed(super()._sample())
+            (s,) = P.Parser().feed(super()._sample())
             return P.encode(P.Sample(s.seq, s.t_us + random.randint(0, 3), s.adc, s.flags))
+
     random.seed(0)
     clock = ManualClock()
     emu = Jittery(EmulatorConfig(), link=str(tmp_path / 'jittery'), clock=clock)
@@ -816,12 +909,14 @@ def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):
 def test_the_devices_own_drive_cut_is_reported(tmp_path, graph):
     """The device's flags were never read: a device cutting the drive on its own over-temperature check (flag 4)
     while the controllers went on commanding 24 V left nothing on /diagnostics. Now a WARN while it lasts."""
+
     class Cutting(DeviceEmulator):
         cut = False
 
         def _sample(self) -> bytes:
-            s, = P.Parser().feed(super()._sample())
+            (s,) = P.Parser().feed(super()._sample())
             return P.encode(P.Sample(s.seq, s.t_us, s.adc, s.flags | (P.FLAG_OVERTEMP if self.cut else 0)))
+
     emu = Cutting(EmulatorConfig(), link=str(tmp_path / 'cutting'))
     emu.start()
     try:
@@ -835,8 +930,9 @@ def test_the_devices_own_drive_cut_is_reported(tmp_path, graph):
     finally:
         emu.stop()
     assert during == 1 and levels(probe, 'device_drive')[-1] == 0
-    assert any('over-temperature check' in m for name, lvl, m in probe.diagnostics()
-               if name == 'hardware_bridge: device_drive')
+    assert any(
+        'over-temperature check' in m for name, lvl, m in probe.diagnostics() if name == 'hardware_bridge: device_drive'
+    )
 
 
 class _Restamped(DeviceEmulator):
@@ -847,7 +943,7 @@ class _Restamped(DeviceEmulator):
         return [s]
 
     def _sample(self) -> bytes:
-        s, = P.Parser().feed(super()._sample())
+        (s,) = P.Parser().feed(super()._sample())
         return b''.join(P.encode(x) for x in self.restamp(s))
 
 
@@ -882,9 +978,11 @@ def test_a_late_line_is_dropped_not_taken_for_a_device_reboot(tmp_path, graph):
                 self.held = s
                 return []
             return [s]
+
     random.seed(1)
-    bridge, probe, clock = _run(tmp_path, graph, lambda clock: Reordering(EmulatorConfig(), link=str(tmp_path / 'r'),
-                                                                          clock=clock), 2.0)
+    bridge, probe, clock = _run(
+        tmp_path, graph, lambda clock: Reordering(EmulatorConfig(), link=str(tmp_path / 'r'), clock=clock), 2.0
+    )
     assert bridge.counters['resets'] == 0 and bridge.counters.get('out_of_order', 0) >= 10, bridge.counters
     # no splice: every window ends within a sample (the late one's successor) of its grid point
     off_grid = np.abs(clock - np.round(clock / 0.01) * 0.01)
@@ -901,9 +999,11 @@ def test_a_millisecond_device_clock_loses_no_samples(tmp_path, graph):
     class Millis(_Restamped):
         def restamp(self, s):
             return [P.Sample(s.seq, (s.t_us + random.randint(0, 1500)) // 1000 * 1000, s.adc, s.flags)]
+
     random.seed(2)
-    bridge, probe, clock = _run(tmp_path, graph, lambda clock: Millis(EmulatorConfig(), link=str(tmp_path / 'm'),
-                                                                      clock=clock), 2.0)
+    bridge, probe, clock = _run(
+        tmp_path, graph, lambda clock: Millis(EmulatorConfig(), link=str(tmp_path / 'm'), clock=clock), 2.0
+    )
     c = bridge.counters
     assert c['resets'] == 0 and c.get('out_of_order', 0) == 0 and c['invalid_samples'] == 0, c
     assert c['samples'] >= 0.99 * 1000 * clock[-1], (c['samples'], clock[-1])  # 1 kHz: 22 % short before
@@ -913,11 +1013,13 @@ def test_a_millisecond_device_clock_loses_no_samples(tmp_path, graph):
 def test_a_reboot_without_its_reset_line_is_spliced_and_reported(tmp_path, graph):
     """A device whose reset line is lost (a reboot while the host was reading, a brown-out): the time base was
     spliced, but /diagnostics said nothing. Now the boot flag (or time going back) reports it."""
+
     class Silent(_Restamped):
         def _boot(self, reason='power'):
             super()._boot(reason)
             if reason != 'power':  # the reset and hello lines are lost
                 self._out.clear()
+
     emu = Silent(EmulatorConfig(), link=str(tmp_path / 's'))
     emu.start()
     try:
@@ -938,9 +1040,16 @@ def test_a_device_sampling_slower_than_the_windows_is_named_and_gets_a_velocity(
     """A 50 Hz device under 100 Hz windows: each window held one sample, whose slope is 0, so every published
     velocity was 0 while the joint moved; nothing said why. Now the hello's rate is checked against the bridge's
     settings (WARN), and a one-sample window takes its velocity from the previous window's end."""
-    bridge, probe, clock = _run(tmp_path, graph, lambda clock: DeviceEmulator(
-        EmulatorConfig(rate_hz=50.0, noise_counts=0.0, time_scale=5.0), link=str(tmp_path / 'slow'), clock=clock),
-        12.0, (24.0, -24.0), sensor_timeout_s=1.0)
+    bridge, probe, clock = _run(
+        tmp_path,
+        graph,
+        lambda clock: DeviceEmulator(
+            EmulatorConfig(rate_hz=50.0, noise_counts=0.0, time_scale=5.0), link=str(tmp_path / 'slow'), clock=clock
+        ),
+        12.0,
+        (24.0, -24.0),
+        sensor_timeout_s=1.0,
+    )
     said = [m for name, lvl, m in probe.diagnostics() if name == 'hardware_bridge: device' and lvl == 1]
     assert said and 'publish_rate_hz' in said[-1] and 'sensor_timeout_s' not in said[-1], said
     js = probe.got['/wrist/joint_states']
@@ -956,9 +1065,11 @@ def test_a_device_sampling_slower_than_the_windows_is_named_and_gets_a_velocity(
 def test_a_device_on_another_protocol_version_is_named(tmp_path, graph):
     """A device speaking protocol v2: every line was dropped, and the only words were 'sensor timeout' and, from
     sma-wrist run, 'no data from the device'. The reason now names the version."""
+
     class V2(_Restamped):
         def restamp(self, s):
             return [P.Sample(s.seq, s.t_us, s.adc, s.flags, version=2)]
+
     emu = V2(EmulatorConfig(), link=str(tmp_path / 'v2'))
     emu.start()
     try:
@@ -988,11 +1099,13 @@ def test_a_port_that_does_not_open_is_named_in_the_safety_reason(tmp_path, graph
 def test_hardware_run_on_a_port_that_does_not_open_says_so(tmp_path, monkeypatch, ros_shutdown):
     from sma_wrist import closed_loop
     from sma_wrist.core.errors import SmaWristError
+
     missing = tmp_path / 'no_such_port'
     monkeypatch.setattr(closed_loop, 'DEVICE_STALL_S', 1.0)
     with pytest.raises(SmaWristError, match=f'no data from the device.*the port does not open \\(open {missing}'):
-        closed_loop.run_closed_loop('pid', 0.3, 5.0, tmp_path / 'bag', hardware=True,
-                                    extra_params={'/hardware_bridge': {'port': str(missing)}})
+        closed_loop.run_closed_loop(
+            'pid', 0.3, 5.0, tmp_path / 'bag', hardware=True, extra_params={'/hardware_bridge': {'port': str(missing)}}
+        )
 
 
 def test_hardware_run_on_a_device_of_another_protocol_version_says_so(tmp_path, monkeypatch, ros_shutdown):
@@ -1002,16 +1115,17 @@ def test_hardware_run_on_a_device_of_another_protocol_version_says_so(tmp_path, 
     class V2(_Restamped):
         def restamp(self, s):
             return [P.Sample(s.seq, s.t_us, s.adc, s.flags, version=2)]
+
     monkeypatch.setattr(closed_loop, 'DEVICE_STALL_S', 1.0)
     emu = V2(EmulatorConfig(), link=str(tmp_path / 'v2'))
     emu.start()
     try:
         with pytest.raises(SmaWristError, match='no data from the device.*protocol version 2, this bridge 1'):
-            closed_loop.run_closed_loop('pid', 0.3, 5.0, tmp_path / 'bag', hardware=True,
-                                        extra_params={'/hardware_bridge': {'port': emu.link}})
+            closed_loop.run_closed_loop(
+                'pid', 0.3, 5.0, tmp_path / 'bag', hardware=True, extra_params={'/hardware_bridge': {'port': emu.link}}
+            )
     finally:
         emu.stop()
-
 
 
 def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_path, ros_shutdown, probe_factory):
@@ -1030,8 +1144,22 @@ def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_pa
     link = str(tmp_path / 'wrist')
     # a device at a quarter of wall speed leaves the host time to keep up on a loaded machine: which window an answer
     # lands in depends on virtual time only, unless the host falls behind the device
-    proc = subprocess.Popen([sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link,
-                             '--noise-counts', '0', '--time-scale', '0.25'], stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            '-m',
+            'sma_wrist.cli',
+            'emulate-device',
+            '--port',
+            link,
+            '--noise-counts',
+            '0',
+            '--time-scale',
+            '0.25',
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     answer = (0.007, 0.0)
     delivery = DeliveryModel(0.0, 0.0, per_topic={'/wrist/tem_1/command': answer, '/wrist/tem_2/command': answer})
     sent: list[tuple[float, float]] = []  # (stamp of the window last published [s], command 1 written [V])
@@ -1044,6 +1172,7 @@ def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_pa
             def logged(u1: float, u2: float) -> bool:
                 sent.append((bridge._last_pub_s or 0.0, u1))
                 return send(u1, u2)
+
             bridge.link.send_command = logged
             probe = probe_factory(rt, (), sim_time=True)
 
@@ -1051,6 +1180,7 @@ def test_the_answer_to_a_window_reaches_the_device_before_the_next_window(tmp_pa
                 v = js.header.stamp.sec + js.header.stamp.nanosec * 1e-9  # V: the window's stamp (a 2 s run)
                 probe.publish('/wrist/tem_1/command', data=v)
                 probe.publish('/wrist/tem_2/command', data=v)
+
             probe.node.create_subscription(JointState, '/wrist/joint_states', answer_with_stamp, 10)
             rt.run_until(2.0, until='sim')
     finally:

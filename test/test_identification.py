@@ -1,4 +1,5 @@
 """Identification recovers known loops from noisy data (sigma = 0.5 % of range)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -46,8 +47,17 @@ def two_section_default(dT: float = 0.0) -> SDGPIParams:
         for i in range(4):
             sa[k, i] = np.polyfit(mm, a[:, i], 2)
             sb[k, i] = np.polyfit(mm, b[:, i], 2)
-    two = SDGPIParams(EnvelopeSections(edges, sa, sb), D.c, D.d, D.rho, D.tau, D.c_thr, p0=1.0,
-                      T_valid=(-10.0, 110.0), name='default, 2 sections')
+    two = SDGPIParams(
+        EnvelopeSections(edges, sa, sb),
+        D.c,
+        D.d,
+        D.rho,
+        D.tau,
+        D.c_thr,
+        p0=1.0,
+        T_valid=(-10.0, 110.0),
+        name='default, 2 sections',
+    )
     return shifted_wire(two, dT)
 
 
@@ -70,6 +80,7 @@ def test_fit_sdgpi_recovers_loops_across_loads() -> None:
 def test_exact_jacobian_matches_central_differences_and_numpy_path() -> None:
     from sma_wrist.core.hysteresis import identification_kernel as K
     from sma_wrist.core.hysteresis.identification import IDX_P0, simulate_jac
+
     _, T, _, _ = sawtooth_input(dt=2.0, n_periods=2)
     th = gpi_vector(default_sdgpi(), 0.8)
     th[IDX_P0] = 1.0
@@ -82,7 +93,9 @@ def test_exact_jacobian_matches_central_differences_and_numpy_path() -> None:
             tp, tm = th.copy(), th.copy()
             tp[i] += h
             tm[i] -= h
-            fd = (simulate_batch(T, tp[None], branch=branch)[:, 0] - simulate_batch(T, tm[None], branch=branch)[:, 0]) / (2 * h)
+            fd = (
+                simulate_batch(T, tp[None], branch=branch)[:, 0] - simulate_batch(T, tm[None], branch=branch)[:, 0]
+            ) / (2 * h)
             np.testing.assert_allclose(J[:, i], fd, atol=1e-6 * max(np.abs(fd).max(), 1e-9), err_msg=f'column {i}')
         if K.AVAILABLE:  # the compiled one-pass kernel and the numpy path give the same numbers
             yn, Jn = simulate_jac(T, th, branch=branch, compiled=False)
@@ -122,8 +135,13 @@ def test_clausius_clapeyron_law_is_one_exact_quadratic_section_with_exact_jacobi
     np.testing.assert_allclose(np.stack([np.polyval(q[i], m) for i in range(4)], 1), k, atol=1e-9)
     np.testing.assert_allclose(-k[:, 2] / k[:, 1], 60.0 + 25.0 * (m - 0.9))  # centres shift linearly (CC)
     h = 1e-6
-    fd = np.stack([(cc_coefficients(z + h * e, m - 0.9)[0] - cc_coefficients(z - h * e, m - 0.9)[0]) / (2 * h)
-                   for e in np.eye(z.size)], axis=-1)
+    fd = np.stack(
+        [
+            (cc_coefficients(z + h * e, m - 0.9)[0] - cc_coefficients(z - h * e, m - 0.9)[0]) / (2 * h)
+            for e in np.eye(z.size)
+        ],
+        axis=-1,
+    )
     np.testing.assert_allclose(J, fd, atol=1e-6)
 
 
@@ -136,8 +154,13 @@ def test_saturating_stroke_law_has_an_exact_jacobian_and_sections_that_follow_it
     np.testing.assert_allclose(k[:, 0], 0.2 + 1.1 * (1 - np.exp(-6.0 * m)) + 0.05 * (m - 0.9))  # saturates
     np.testing.assert_allclose(-k[:, 2] / k[:, 1], 60.0 + 25.0 * (m - 0.9))  # centres shift linearly (CC)
     h = 1e-6
-    fd = np.stack([(sat_coefficients(z + h * e, m, 0.9)[0] - sat_coefficients(z - h * e, m, 0.9)[0]) / (2 * h)
-                   for e in np.eye(z.size)], axis=-1)
+    fd = np.stack(
+        [
+            (sat_coefficients(z + h * e, m, 0.9)[0] - sat_coefficients(z - h * e, m, 0.9)[0]) / (2 * h)
+            for e in np.eye(z.size)
+        ],
+        axis=-1,
+    )
     np.testing.assert_allclose(J, fd, atol=1e-6)
     edges = np.linspace(m[0], m[-1], 17)  # the written form: quadratics per section, continuous
     env = EnvelopeSections(edges, sat_to_sections(z, 0.9, edges), sat_to_sections(z, 0.9, edges))
@@ -172,6 +195,7 @@ def test_fixed_order_trf_is_scipys_trust_region_reflective() -> None:
 
     from sma_wrist.core import jit
     from sma_wrist.core.hysteresis.trf import lstsq, polyfit, trf_solve
+
     if not jit.AVAILABLE:
         pytest.skip('trf_solve needs numba')
     t = np.linspace(0.0, 4.0, 60)
@@ -184,8 +208,17 @@ def test_fixed_order_trf_is_scipys_trust_region_reflective() -> None:
     lo, hi = np.array([0.0, 0.25, 0.0, 0.25]), np.array([10.0, 10.0, 10.0, 10.0])  # the slow rate ends on its bound
     x0 = np.array([1.5, 1.0, 0.8, 0.4])  # not symmetric in the two terms (from a symmetric start last bits pick one)
     x, cost, status, _ = trf_solve(fj, x0, lo, hi, 200)
-    ref = least_squares(lambda z: fj(z)[0], x0, jac=lambda z: fj(z)[1], bounds=(lo, hi), x_scale='jac',
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=200)
+    ref = least_squares(
+        lambda z: fj(z)[0],
+        x0,
+        jac=lambda z: fj(z)[1],
+        bounds=(lo, hi),
+        x_scale='jac',
+        xtol=1e-10,
+        ftol=1e-10,
+        gtol=1e-10,
+        max_nfev=200,
+    )
     assert status > 0 and ref.status > 0
     np.testing.assert_allclose(x, ref.x, rtol=1e-6, atol=1e-8)
     assert abs(cost - ref.cost) <= 1e-9 * ref.cost

@@ -3,6 +3,7 @@
 Real data: test/data/sma_react (SMA-REACT, BSD-3-Clause; README there). The bounds below are
 the numbers measured on it (doc/howto/identify_wire.md), rounded up a little, not tuned tolerances.
 """
+
 from __future__ import annotations
 
 import json
@@ -30,6 +31,7 @@ def _quiet(msg: str) -> None:
 
 
 # ----------------------------------------------------------------------------- reading
+
 
 def test_reads_an_instrument_export_with_header_units_and_seven_cycles() -> None:
     m = read_measurement(DATA / 'multicycle' / 'isobaric_7cycle.txt', Units(length_mm=500.0))
@@ -70,12 +72,18 @@ def test_cleaning_counts_nan_duplicate_and_unsorted_rows(tmp_path: Path) -> None
     f = tmp_path / 'run.csv'
     f.write_text('time_s,temperature_C,strain_pct,stress_MPa\n' + '\n'.join(rows) + '\n')
     m = read_measurement(f)
-    assert m.counts == {'unreadable_rows': 1, 'nan_rows': 1, 'duplicate_rows': 1, 'unsorted_stamps': 1,
-                        'temperature_spikes': 0}
+    assert m.counts == {
+        'unreadable_rows': 1,
+        'nan_rows': 1,
+        'duplicate_rows': 1,
+        'unsorted_stamps': 1,
+        'temperature_spikes': 0,
+    }
     assert m.T_C.size == T.size and np.all(np.diff(m.time) > 0)
 
 
 # ----------------------------------------------------------------------------- bad input
+
 
 def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict]:
     code = cli_main(['identify', 'hysteresis', *args, '--json', '--no-plots', '--no-loo'])
@@ -83,19 +91,38 @@ def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict
     return code, json.loads(out)
 
 
-@pytest.mark.parametrize('make, needed', [
-    (lambda d: d / 'missing.txt', 'cannot read'),
-    (lambda d: (d / 'empty.txt', (d / 'empty.txt').write_text(''))[0], 'empty'),
-    (lambda d: (d / 'words.txt', (d / 'words.txt').write_text('a b c\nd e f\n'))[0], 'no numeric rows'),
-    (lambda d: (d / 'huge.txt', (d / 'huge.txt').write_text(
-        '\n'.join(f'{20 + i} {50.0 + i} 100' for i in range(80))))[0], 'fit neither'),
-    (lambda d: (d / 'heat.txt', (d / 'heat.txt').write_text(
-        '\n'.join(f'{20 + i} {0.01 + 1e-4 * i} 100' for i in range(80))))[0], 'no complete heating-cooling cycle'),
-    (lambda d: (d / 'short.txt', (d / 'short.txt').write_text(
-        '\n'.join(f'{T} 0.01 100' for T in [20, 60, 100, 60, 20, 60, 100] * 3)))[0], 'samples'),
-])
-def test_bad_input_is_a_json_error_naming_file_and_need(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                       make, needed: str) -> None:  # type: ignore[no-untyped-def]
+@pytest.mark.parametrize(
+    'make, needed',
+    [
+        (lambda d: d / 'missing.txt', 'cannot read'),
+        (lambda d: (d / 'empty.txt', (d / 'empty.txt').write_text(''))[0], 'empty'),
+        (lambda d: (d / 'words.txt', (d / 'words.txt').write_text('a b c\nd e f\n'))[0], 'no numeric rows'),
+        (
+            lambda d: (
+                d / 'huge.txt',
+                (d / 'huge.txt').write_text('\n'.join(f'{20 + i} {50.0 + i} 100' for i in range(80))),
+            )[0],
+            'fit neither',
+        ),
+        (
+            lambda d: (
+                d / 'heat.txt',
+                (d / 'heat.txt').write_text('\n'.join(f'{20 + i} {0.01 + 1e-4 * i} 100' for i in range(80))),
+            )[0],
+            'no complete heating-cooling cycle',
+        ),
+        (
+            lambda d: (
+                d / 'short.txt',
+                (d / 'short.txt').write_text('\n'.join(f'{T} 0.01 100' for T in [20, 60, 100, 60, 20, 60, 100] * 3)),
+            )[0],
+            'samples',
+        ),
+    ],
+)
+def test_bad_input_is_a_json_error_naming_file_and_need(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], make, needed: str
+) -> None:  # type: ignore[no-untyped-def]
     f = make(tmp_path)
     code, doc = _cli([str(f), str(HF / '100MPa.txt'), str(HF / '200MPa.txt')], capsys)
     assert code == 2 and set(doc) == {'error'}
@@ -129,13 +156,16 @@ def test_hysteresis_file_errors_name_the_file_and_key(tmp_path: Path) -> None:
 
 # ----------------------------------------------------------------------------- real data
 
+
 @pytest.fixture(scope='module')
 def nitihf(tmp_path_factory: pytest.TempPathFactory) -> dict:
     """SD-GPI (the seed's quadratic load law) fitted on 5 of the 6 NiTiHf stresses; 200 MPa held out."""
     out = tmp_path_factory.mktemp('nitihf')
     files = [str(HF / f'{s}MPa.txt') for s in (7, 50, 100, 300, 400)]
-    return run(Options(files, [str(HF / '200MPa.txt')], out=str(out), loo=False, plots=False, model='quadratic'),
-               progress=_quiet)
+    return run(
+        Options(files, [str(HF / '200MPa.txt')], out=str(out), loo=False, plots=False, model='quadratic'),
+        progress=_quiet,
+    )
 
 
 def test_real_nitihf_fit_and_held_out_load(nitihf: dict) -> None:
@@ -199,8 +229,12 @@ def test_real_nitihf_interior_held_out_load_is_interpolated_best_by_the_saturati
             edges = choose_edges(m[tr])
             r = fit_sdgpi(*args, edges, branches=[br[i] for i in tr])
         else:
-            r = fit_sdgpi_cc(*args, branches=[br[i] for i in tr], amplitude_degree=2,
-                             amplitude_law='saturating' if law == 'saturating' else 'polynomial')
+            r = fit_sdgpi_cc(
+                *args,
+                branches=[br[i] for i in tr],
+                amplitude_degree=2,
+                amplitude_law='saturating' if law == 'saturating' else 'polynomial',
+            )
             edges = r.params.envelopes.edges_kg
         th = sdgpi_gpi_vectors(r.theta, edges, m[4:5])
         err[law] = errors_pct(simulate_batch(T[4], th, branch=br[4])[:, 0], y[4])[0]
@@ -237,18 +271,28 @@ def test_the_fit_is_the_same_bits_with_other_simd_paths_and_blas_kernels() -> No
     import sys
 
     from sma_wrist.core import jit
+
     if not jit.AVAILABLE:
         pytest.skip('without numba the fits are scipy least_squares, CPU-dependent in the last bits')
     from numpy._core._multiarray_umath import __cpu_features__ as cpu
 
     off = [f for f in ('X86_V4', 'AVX512_ICL', 'AVX512_SPR') if cpu.get(f)]  # only what this CPU has
     runs = [{}, {'OPENBLAS_CORETYPE': 'Haswell', **({'NPY_DISABLE_CPU_FEATURES': ' '.join(off)} if off else {})}]
-    out = [subprocess.run([sys.executable, '-c', _FIT_HEX, str(HF)], env={**os.environ, **e}, capture_output=True,
-                          text=True, check=True).stdout.strip() for e in runs]
+    out = [
+        subprocess.run(
+            [sys.executable, '-c', _FIT_HEX, str(HF)],
+            env={**os.environ, **e},
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+        for e in runs
+    ]
     assert out[0] and out[0] == out[1], runs
 
 
 # ----------------------------------------------------------------------------- synthetic round trip
+
 
 def write_synthetic(d: Path, truth: SDGPIParams, loads: list[float], noise: float = 0.005) -> list[str]:
     """One 40 -> 140 -> 40 degC loop per load as T [degC], strain [%], stress [MPa] files."""
@@ -260,8 +304,9 @@ def write_synthetic(d: Path, truth: SDGPIParams, loads: list[float], noise: floa
         y = y + rng.normal(0, noise * np.ptp(y), y.size)
         s = load_kgf_to_stress(m)
         f = d / f'{s:.1f}MPa.txt'
-        np.savetxt(f, np.c_[T, 100 * y / 80.0, np.full(T.size, s)], header='temperature_C strain_% stress_MPa',
-                   comments='')
+        np.savetxt(
+            f, np.c_[T, 100 * y / 80.0, np.full(T.size, s)], header='temperature_C strain_% stress_MPa', comments=''
+        )
         files.append(str(f))
     return files
 
@@ -273,8 +318,9 @@ def synthetic(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, SDGPIPara
     train = write_synthetic(d, truth, [0.65, 0.7, 0.75, 0.85, 0.95, 1.05])
     hold = write_synthetic(d, truth, [0.8], noise=0.0)
     # the truth is a seed-form wire (free quadratics on two sections): identified with that law
-    return run(Options(train, hold, out=str(d / 'out'), loo=False, plots=False, model='quadratic'),
-               progress=_quiet), truth
+    return run(
+        Options(train, hold, out=str(d / 'out'), loo=False, plots=False, model='quadratic'), progress=_quiet
+    ), truth
 
 
 def test_synthetic_round_trip_recovers_the_wire(synthetic: tuple[dict, SDGPIParams]) -> None:
@@ -293,15 +339,20 @@ def test_synthetic_round_trip_recovers_the_wire(synthetic: tuple[dict, SDGPIPara
 
 # ----------------------------------------------------------------------------- the identified wire in the wrist
 
+
 def test_nodes_load_the_identified_wire(synthetic: tuple[dict, SDGPIParams], probe_factory) -> None:  # type: ignore[no-untyped-def]
     from sma_wrist.runtime.launch import Runtime
 
     f = synthetic[0]['params_file']
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     from sma_wrist.nodes.plant_sim import PlantSim
-    with Runtime(params={'/plant_sim': {'hysteresis_file': f},
-                         '/hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': 50.0,
-                                                     'temperature_max_C': 125.0}}) as rt:
+
+    with Runtime(
+        params={
+            '/plant_sim': {'hysteresis_file': f},
+            '/hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': 50.0, 'temperature_max_C': 125.0},
+        }
+    ) as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature', '/wrist/joint_states'))
         plant = rt.add(PlantSim)
         comp = rt.add(HysteresisCompensator)
@@ -311,8 +362,9 @@ def test_nodes_load_the_identified_wire(synthetic: tuple[dict, SDGPIParams], pro
     assert np.isfinite(probe.got['/wrist/joint_states'][-1].position[0])
 
 
-def test_a_window_outside_the_wire_model_or_a_bad_file_is_refused(synthetic: tuple[dict, SDGPIParams],
-                                                                  tmp_path: Path) -> None:
+def test_a_window_outside_the_wire_model_or_a_bad_file_is_refused(
+    synthetic: tuple[dict, SDGPIParams], tmp_path: Path
+) -> None:
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     from sma_wrist.nodes.plant_sim import PlantSim
@@ -332,6 +384,7 @@ def test_a_window_outside_the_wire_model_or_a_bad_file_is_refused(synthetic: tup
 def test_closed_loop_runs_on_the_identified_wire(synthetic: tuple[dict, SDGPIParams], tmp_path: Path) -> None:
     """All nodes on the embedded runtime with the identified 60-120 degC wire (doc/howto/identify_wire.md)."""
     from sma_wrist import runtime
+
     runtime.activate()
     from sma_wrist.closed_loop import run_closed_loop
 
@@ -341,12 +394,12 @@ def test_closed_loop_runs_on_the_identified_wire(synthetic: tuple[dict, SDGPIPar
     assert s.metrics['n_samples'] > 200 and np.isfinite(s.metrics['rms_error_pct'])
 
 
-def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
-        synthetic: tuple[dict, SDGPIParams]) -> None:
+def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(synthetic: tuple[dict, SDGPIParams]) -> None:
     """identify/wrist.py: the built-in wire gives today's defaults; a hotter wire moves every window."""
     import yaml
 
     from sma_wrist.identify.wrist import operating_window, shifted_wire, wrist_params
+
     assert operating_window(default_sdgpi()) == pytest.approx((20.0, 80.0), abs=1e-6)
     hot = shifted_wire(default_sdgpi(), 20.0)  # transforms at 55-98 degC at 0.8 kgf
     lo, hi = operating_window(hot)
@@ -360,9 +413,11 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     assert 'max_muscle_temperature_C' not in nodes['hardware_bridge']
     assert wrist_params('wire.yaml', default_sdgpi(), preload_mm=1.98)[1] == []  # the built-in wire: nothing to say
     from sma_wrist import runtime
+
     runtime.activate()
     from sma_wrist.identify.wrist import BRIDGE_MUSCLE_CUTOFF_C
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
     assert {q.name: q.default for q in HardwareBridge.PARAMS}['max_muscle_temperature_C'] == BRIDGE_MUSCLE_CUTOFF_C
     # the bridge estimates the wires' stress with this wire and pre-load
     assert nodes['hardware_bridge'] == {'hysteresis_file': 'wire.yaml', 'preload_elongation_mm': 1.98}
@@ -378,8 +433,10 @@ def test_wrist_windows_follow_the_wire_and_name_what_the_tems_cannot_reach(
     assert any('TEMs work only up to 80' in p for p in wp['problems'])
     # and the chain's pre-load, one value for the three nodes that use the chain (core/plant/preload.py): the seed's
     # TEMs hold this wire's muscles only at its cold end, so no pre-load reaches the range and it says so
-    e0 = {n: doc[n]['ros__parameters']['preload_elongation_mm'] for n in ('plant_sim', 'hysteresis_compensator',
-                                                                          'adaptive_controller')}
+    e0 = {
+        n: doc[n]['ros__parameters']['preload_elongation_mm']
+        for n in ('plant_sim', 'hysteresis_compensator', 'adaptive_controller')
+    }
     assert set(e0.values()) == {wp['preload_elongation_mm']} == {1.98}
     assert any(p.startswith('pre-load: ') and 'kept the built-in 1.98 mm' in p for p in wp['problems'])
 
@@ -388,6 +445,7 @@ def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_do
     """Targets along the hot wire's own loop at 0.8 kgf: reachable in the derived window, not in 20-80 degC."""
     from sma_wrist.core.hysteresis.inverse import InverseCompensator
     from sma_wrist.identify.wrist import operating_window, shifted_wire
+
     hot = shifted_wire(default_sdgpi(), 20.0)
     T = np.r_[np.linspace(55.0, 98.0, 60), np.linspace(98.0, 55.0, 60)]
     y = simulate(hot, T, 0.8)
@@ -407,8 +465,11 @@ def test_the_derived_window_lets_the_inverse_reach_a_hot_wire_and_the_default_do
 
 
 def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(
-        synthetic: tuple[dict, SDGPIParams], tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        monkeypatch: pytest.MonkeyPatch) -> None:
+    synthetic: tuple[dict, SDGPIParams],
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     import sma_wrist.diagnose as dg
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.diagnose.data import load_run
@@ -433,6 +494,7 @@ def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(
     import yaml
 
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
+
     wire = save_hysteresis(tmp_path / 'wire.yaml', default_sdgpi())  # a wire this run was recorded with
     dg.diagnose_run(load_run(bag), params_out=tmp_path / 'ext.yaml', candidates=['friction'], hysteresis_file=str(wire))
     ros = yaml.safe_load((tmp_path / 'ext.yaml').read_text())['plant_sim']['ros__parameters']
@@ -452,8 +514,12 @@ def test_identify_on_measured_flexinol_wire(tmp_path: Path) -> None:
     the measured values (doc/howto/identify_wire.md) with margin.
     """
     files = [str(FLEX / f'{s}MPa.txt') for s in (50, 100, 172, 200)]
-    r = run(Options(files, [str(FLEX / '150MPa.txt')], out=str(tmp_path), loo=False, plots=False,
-                    model='clausius-clapeyron'), progress=_quiet)
+    r = run(
+        Options(
+            files, [str(FLEX / '150MPa.txt')], out=str(tmp_path), loo=False, plots=False, model='clausius-clapeyron'
+        ),
+        progress=_quiet,
+    )
     fit = {round(d['stress_MPa']): d for d in r['fit']['per_load']}
     # measured GPI 0.69 / 0.74 / 2.11 / 0.96 %, SD-GPI 2.63 / 2.43 / 2.37 / 2.33 % of stroke
     for s, gpi in ((50, 1.0), (100, 1.0), (172, 2.5), (200, 1.2)):

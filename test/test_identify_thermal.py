@@ -6,6 +6,7 @@ back exactly; the independent Peltier plant (sma_wrist/identify/thermal_testplan
 Kelvin Peltier term, convection law, thermocouple lag 0.15 s, noise 0.2 degC) is held out per
 frequency and must beat Table 4.9 by a wide margin.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -80,6 +81,7 @@ def test_sensor_lag_is_recovered_with_the_table_and_its_jacobian_is_exact() -> N
     table; without the option the table absorbs the lag and misses. The lag's complex-step column equals central
     differences."""
     from sma_wrist.core.signals import first_order
+
     truth = th.ThermalParams()
     recs = [dataclasses.replace(r, T=first_order(r.T, 2.0, r.dt)) for r in _zoh_runs(truth)]
     fit = ti.fit_thermal(recs, sensor_lag=True)
@@ -133,6 +135,7 @@ def test_fit_needs_an_exciting_input_and_t2_for_both_columns() -> None:
 
 # ------------------------------------------------------------------------------ params file
 
+
 def test_thermal_file_round_trip_and_hold_limits(tmp_path: Path) -> None:
     p = th.ThermalParams()
     lo, hi = ti.hold_limits(p, resolution_V=0.1)
@@ -143,14 +146,17 @@ def test_thermal_file_round_trip_and_hold_limits(tmp_path: Path) -> None:
     assert (q.u_min_V, q.u_max_V, q.input_per_volt) == (lo, hi, p.input_per_volt)
 
 
-@pytest.mark.parametrize('text, match', [
-    (None, 'cannot read'),
-    ('a: [1, 2', 'not a YAML'),
-    ('format: other\nversion: 1\n', 'not a thermal file'),
-    ('format: sma_wrist/thermal\nversion: 7\n', 'version 7'),
-    ('format: sma_wrist/thermal\nversion: 1\nmuscle_fase: {}\n', 'unknown key'),
-    (b'\x89HDF\r\n\x1a\n\xff\xfe' * 8, 'not a UTF-8 text'),
-])
+@pytest.mark.parametrize(
+    'text, match',
+    [
+        (None, 'cannot read'),
+        ('a: [1, 2', 'not a YAML'),
+        ('format: other\nversion: 1\n', 'not a thermal file'),
+        ('format: sma_wrist/thermal\nversion: 7\n', 'version 7'),
+        ('format: sma_wrist/thermal\nversion: 1\nmuscle_fase: {}\n', 'unknown key'),
+        (b'\x89HDF\r\n\x1a\n\xff\xfe' * 8, 'not a UTF-8 text'),
+    ],
+)
 def test_thermal_file_errors_name_the_file(tmp_path: Path, text: str | bytes | None, match: str) -> None:
     f = tmp_path / 'thermal.yaml'
     if isinstance(text, bytes):
@@ -175,8 +181,10 @@ def test_thermal_file_rejects_nan_and_a_face_without_loss(tmp_path: Path) -> Non
 
 # ------------------------------------------------------------------------------ CLI
 
+
 def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict]:
     from sma_wrist.cli import main
+
     code = main(['identify', 'thermal', *args, '--json'])
     out = capsys.readouterr().out
     return code, json.loads(out)
@@ -197,10 +205,24 @@ def identified(peltier_runs: list[ti.ThermalRecord], tmp_path_factory: pytest.Te
     import io
 
     from sma_wrist.cli import main
+
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        code = main(['identify', 'thermal', str(files[0]), str(files[1]), '--holdout', str(files[2]), '--dt', '0.2',
-                     '--out', str(d / 'out'), '--json'])
+        code = main(
+            [
+                'identify',
+                'thermal',
+                str(files[0]),
+                str(files[1]),
+                '--holdout',
+                str(files[2]),
+                '--dt',
+                '0.2',
+                '--out',
+                str(d / 'out'),
+                '--json',
+            ]
+        )
     return {'code': code, 'json': json.loads(buf.getvalue()), 'dir': d}
 
 
@@ -221,16 +243,20 @@ def test_cli_identifies_counts_the_cleaning_and_writes_report_and_params(identif
     assert (p.u_min_V, p.u_max_V) == tuple(s['hold_limits_V'])
 
 
-@pytest.mark.parametrize('content, match', [
-    ('', 'empty file'),
-    ('time,u\n0,1\n1,2\n', 'no column for T1'),
-    ('time,u,T1\n' + ''.join(f'{k},{5000 * math.sin(k / 5)},{30 + k * 0.01}\n' for k in range(400)), 'not volts'),
-    ('time,u,T1\n' + ''.join(f'{k * 0.1},{12 * math.sin(k / 5)},{30.0}\n' for k in range(100)), 'covers only'),
-    ('time,u,T1\n' + ''.join(f'{k * 0.1},{12 * math.sin(k / 5)},{900.0}\n' for k in range(400)), 'not a TEM face'),
-    ('time,u,T1\n' + ''.join(f'{k * 0.1},2.0,{30 + k * 0.001}\n' for k in range(400)), 'exciting input'),
-])
-def test_cli_bad_input_gives_json_error_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
-                                                   content: str, match: str) -> None:
+@pytest.mark.parametrize(
+    'content, match',
+    [
+        ('', 'empty file'),
+        ('time,u\n0,1\n1,2\n', 'no column for T1'),
+        ('time,u,T1\n' + ''.join(f'{k},{5000 * math.sin(k / 5)},{30 + k * 0.01}\n' for k in range(400)), 'not volts'),
+        ('time,u,T1\n' + ''.join(f'{k * 0.1},{12 * math.sin(k / 5)},{30.0}\n' for k in range(100)), 'covers only'),
+        ('time,u,T1\n' + ''.join(f'{k * 0.1},{12 * math.sin(k / 5)},{900.0}\n' for k in range(400)), 'not a TEM face'),
+        ('time,u,T1\n' + ''.join(f'{k * 0.1},2.0,{30 + k * 0.001}\n' for k in range(400)), 'exciting input'),
+    ],
+)
+def test_cli_bad_input_gives_json_error_and_exit_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], content: str, match: str
+) -> None:
     f = tmp_path / 'bad.csv'
     f.write_text(content)
     code, out = _cli([str(f)], capsys)
@@ -248,11 +274,13 @@ def test_cli_missing_file_and_bad_columns(tmp_path: Path, capsys: pytest.Capture
 
 def test_kelvin_and_millisecond_headers_are_converted(tmp_path: Path, peltier_runs: list[ti.ThermalRecord]) -> None:
     from sma_wrist.identify.thermal import load_table
+
     r = peltier_runs[1]
     f = tmp_path / 'k.tsv'
     t = np.arange(r.n) * r.dt * 1000.0
-    np.savetxt(f, np.c_[t, r.u * 1000.0, r.T[:, 0] + 273.15], delimiter='\t', header='Time [ms]\tu [mV]\tT1 [K]',
-               comments='')
+    np.savetxt(
+        f, np.c_[t, r.u * 1000.0, r.T[:, 0] + 273.15], delimiter='\t', header='Time [ms]\tu [mV]\tT1 [K]', comments=''
+    )
     series, cl = load_table(f)
     assert np.allclose(series[0].t, np.arange(r.n) * r.dt) and np.allclose(series[0].u, r.u, atol=1e-6)
     assert np.allclose(series[0].T[:, 0], r.T[:, 0], atol=1e-6) and np.isnan(series[0].T[:, 1]).all()
@@ -260,8 +288,14 @@ def test_kelvin_and_millisecond_headers_are_converted(tmp_path: Path, peltier_ru
 
 # ------------------------------------------------------------------------------ in the wrist
 
-def _tem_loop(plant_file: str | None, controller_file: str | None, bag: Path | None = None,
-              phases: tuple = (((45.0, 35.0), 40.0), ((35.0, 45.0), 40.0)), adapt: bool = False) -> list[np.ndarray]:
+
+def _tem_loop(
+    plant_file: str | None,
+    controller_file: str | None,
+    bag: Path | None = None,
+    phases: tuple = (((45.0, 35.0), 40.0), ((35.0, 45.0), 40.0)),
+    adapt: bool = False,
+) -> list[np.ndarray]:
     """plant_sim + tem_controller on the embedded runtime, muscle targets held per phase; returns
     the measured muscle temperatures (100 Hz) and records a bag when asked. ``adapt``: tem_controller's
     thermal_adaptation (off: the law runs the file as loaded)."""
@@ -270,8 +304,11 @@ def _tem_loop(plant_file: str | None, controller_file: str | None, bag: Path | N
     from sma_wrist.nodes.plant_sim import PlantSim
     from sma_wrist.nodes.tem_controller import TemController
     from sma_wrist.runtime.launch import Runtime
-    params: dict = {'/plant_sim': {'use_sim_time': False},
-                    '/tem_controller': {'use_sim_time': True, 'thermal_adaptation.enabled': adapt}}
+
+    params: dict = {
+        '/plant_sim': {'use_sim_time': False},
+        '/tem_controller': {'use_sim_time': True, 'thermal_adaptation.enabled': adapt},
+    }
     if plant_file:
         params['/plant_sim']['thermal_file'] = plant_file
     if controller_file:
@@ -284,8 +321,9 @@ def _tem_loop(plant_file: str | None, controller_file: str | None, bag: Path | N
         rt.add(TemController)
         t = 0.0
         for targets, seconds in phases:
-            timers = [probe.every(0.01, f'/wrist/muscle_{i}/temperature_desired', temperature=targets[i - 1])
-                      for i in (1, 2)]
+            timers = [
+                probe.every(0.01, f'/wrist/muscle_{i}/temperature_desired', temperature=targets[i - 1]) for i in (1, 2)
+            ]
             t += seconds
             rt.run_until(t, until='sim')
             for tm in timers:
@@ -312,8 +350,9 @@ def test_identified_file_runs_in_the_closed_tem_loop_on_the_embedded_runtime(ide
         assert np.abs(T[-500:] - target).max() < 0.5 * np.abs(off[-500:] - target).max()
 
 
-def test_cli_identifies_the_muscle_faces_from_a_recorded_bag(tmp_path: Path, capsys: pytest.CaptureFixture[str]
-                                                             ) -> None:
+def test_cli_identifies_the_muscle_faces_from_a_recorded_bag(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A bag of plant_sim + tem_controller (targets switched at 40 s): each muscle is a run, only
     T1 is published, so the T1 column is fitted and each muscle predicted from the other."""
     bag = tmp_path / 'bag'
@@ -333,6 +372,7 @@ def test_nodes_refuse_a_bad_thermal_file(tmp_path: Path) -> None:
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.nodes.tem_controller import TemController
     from sma_wrist.runtime.launch import Runtime
+
     with Runtime(params={'/tem_controller': {'thermal_file': str(tmp_path / 'missing.yaml')}}) as rt:
         with pytest.raises(SmaWristError, match='missing.yaml'):
             rt.add(TemController)
@@ -343,9 +383,12 @@ def test_a_frequency_column_with_blank_cells_takes_the_frequency_above(tmp_path:
     filled) made a run of no rows and an IndexError traceback. A blank now takes the frequency above it, rows
     before the first frequency are dropped, and the warning says how many."""
     from sma_wrist.identify.thermal import load_table
+
     t = np.arange(0.0, 80.0, 0.1)
-    rows = [(0.0625 if k < t.size // 2 else 0.125, tk, 3.0 * math.sin(tk), 30.0 + math.sin(tk), 25.0)
-            for k, tk in enumerate(t)]
+    rows = [
+        (0.0625 if k < t.size // 2 else 0.125, tk, 3.0 * math.sin(tk), 30.0 + math.sin(tk), 25.0)
+        for k, tk in enumerate(t)
+    ]
     lines = ['frequency,time,u,T1,T2'] + [','.join(f'{x:.4f}' for x in r) for r in rows]
     blank = [1, 3, 5, 200, t.size // 2 + 7]  # the first row keeps its frequency; one blank in the second block
     for i in blank:
@@ -373,6 +416,7 @@ def test_a_humble_sqlite_bag_is_read_as_a_bag(tmp_path: Path, capsys: pytest.Cap
 
     from sma_wrist.cli import main
     from sma_wrist.runtime.messages import TYPESTORE as store
+
     bag, db3 = tmp_path / 'run', tmp_path / 'run_db3'
     assert main(['run', '--duration', '40', '--bag', str(bag), '--quiet']) == 0
     with Reader(bag) as r, Writer(db3, version=8, storage_plugin=StoragePlugin.SQLITE3) as w:
@@ -397,12 +441,14 @@ def test_a_text_column_or_an_empty_t2_column_does_not_empty_the_table(tmp_path: 
     no value and the empty T2 as absent, with a warning; the numbers are the same as without those columns."""
     from sma_wrist.identify.io import read_table
     from sma_wrist.identify.thermal import load_table
+
     t = np.arange(0.0, 60.0, 0.1)
     plain = tmp_path / 'plain.csv'
     plain.write_text('time,u,T1\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f}\n' for x in t))
     status = tmp_path / 'status.csv'
-    status.write_text('time,u,T1,status\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f},OK\n'
-                                                      for x in t))
+    status.write_text(
+        'time,u,T1,status\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f},OK\n' for x in t)
+    )
     empty = tmp_path / 'empty_t2.csv'
     empty.write_text('time,u,T1,T2\n' + ''.join(f'{x:.1f},{math.sin(x):.4f},{30 + math.sin(x):.4f},\n' for x in t))
     table = read_table(status)
@@ -416,8 +462,9 @@ def test_a_text_column_or_an_empty_t2_column_does_not_empty_the_table(tmp_path: 
     assert any('T2 column (T2) has no value in any row' in w for w in load_table(empty)[1].warnings)
 
 
-def test_files_of_one_name_in_two_folders_are_two_runs(tmp_path: Path, peltier_runs: list[ti.ThermalRecord],
-                                                       capsys: pytest.CaptureFixture[str]) -> None:
+def test_files_of_one_name_in_two_folders_are_two_runs(
+    tmp_path: Path, peltier_runs: list[ti.ThermalRecord], capsys: pytest.CaptureFixture[str]
+) -> None:
     """A rig that writes a folder per wire (sn/a/data.csv, sn/b/data.csv) was refused: "two runs have the same
     name". identify hysteresis takes that layout; now thermal names those runs by their path. The same file given
     twice is still refused."""
@@ -432,8 +479,9 @@ def test_files_of_one_name_in_two_folders_are_two_runs(tmp_path: Path, peltier_r
     assert code == 2 and 'two runs have the same name' in doc['error']
 
 
-def test_a_time_column_in_milliseconds_is_named_as_the_likely_cause(tmp_path: Path,
-                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+def test_a_time_column_in_milliseconds_is_named_as_the_likely_cause(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """A time column in ms (or ns, as ROS stamps are) read as seconds made every row a gap: 'covers only 0.0 s;
     need at least 30 s'. The error now says how far apart the rows are and names --time-unit (now with ns)."""
     t = np.arange(0.0, 60.0, 0.1)

@@ -8,6 +8,7 @@ determine (a parameter on its bound, a fit that did not converge, a held-out run
 Bounds are the measurements of 2026-11-28 with margin (doc/howto/identify_tems.md): held-out
 RMS 0.58 / 0.62 degC on runs 39 / 16 against Table 4.9's 2.05 / 2.13 degC.
 """
+
 from __future__ import annotations
 
 import csv
@@ -28,7 +29,7 @@ def _volts(src: Path, dst: Path) -> Path:
         rows.insert(0, ['set_c', 'oven_c', 'output', 'ambient_c'])
     with dst.open('w') as f:
         f.write('u_V,oven_c,ambient_c\n')
-        for set_c, oven_c, output, ambient_c in rows[1:]:
+        for _set_c, oven_c, output, ambient_c in rows[1:]:
             f.write(f'{float(output) / FULL_DUTY * SUPPLY_V:.6f},{oven_c},{ambient_c}\n')
     return dst
 
@@ -41,14 +42,25 @@ def tables(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict]:
     from sma_wrist.cli import main
+
     capsys.readouterr()
     code = main(['identify', 'thermal', *args, '--json', '--no-plots'])
     return code, json.loads(capsys.readouterr().out)
 
 
 def test_a_fit_on_one_real_run_predicts_the_modules_other_runs(tables, capsys, tmp_path) -> None:
-    code, s = _cli([str(tables['run40']), '--holdout', str(tables['run39']), str(tables['run16']), *TABLE,
-                    '--out', str(tmp_path / 'out')], capsys)
+    code, s = _cli(
+        [
+            str(tables['run40']),
+            '--holdout',
+            str(tables['run39']),
+            str(tables['run16']),
+            *TABLE,
+            '--out',
+            str(tmp_path / 'out'),
+        ],
+        capsys,
+    )
     assert code == 0, s
     before = {e['record']: e['faces']['T1']['rms_C'] for e in s['before']}
     files = [e for e in s['holdout'] if e['mode'] == 'holdout-file']
@@ -77,14 +89,17 @@ def test_the_chambers_sensor_lag_is_what_the_two_node_model_missed(tables, capsy
 
     def held(s: dict) -> dict[str, float]:
         return {e['record']: e['faces']['T1']['rms_C'] for e in s['holdout'] if e['mode'] == 'holdout-file'}
+
     for run, rms in held(lagged).items():
         assert rms < 0.45 and rms < 0.75 * held(plain)[run], (run, rms, held(plain)[run])
 
 
 def test_a_held_out_run_beyond_the_fitted_range_is_named_extrapolation(tables, capsys) -> None:
     """Short runs near 25-26 degC predicting the 25-35 degC staircase: the error that follows is extrapolation."""
-    code, s = _cli([str(tables[n]) for n in ('run40', 'run39', 'run16')]
-                   + ['--holdout', str(tables['rtempco_run1']), *TABLE], capsys)
+    code, s = _cli(
+        [str(tables[n]) for n in ('run40', 'run39', 'run16')] + ['--holdout', str(tables['rtempco_run1']), *TABLE],
+        capsys,
+    )
     assert code == 0, s
     said = [w for w in s['warnings'] if 'rtempco_run1.csv' in w and 'extrapolation' in w]
     assert len(said) == 1 and 'T1 24.9..35.0 degC' in said[0], s['warnings']
@@ -105,12 +120,15 @@ def test_the_same_runs_with_a_time_column_give_the_same_fit(tables, capsys, tmp_
     assert a['fit']['params'] == b['fit']['params'] and a['fit']['rms_C'] == b['fit']['rms_C']
 
 
-@pytest.mark.parametrize('extra, says', [
-    ([], '--sample-period-s S'),  # no time column and no period: the error names the option
-    (['--sample-period-s', '0'], 'must be a number of seconds > 0'),
-    (['--sample-period-s', 'nan'], 'must be a number of seconds > 0'),
-    (['--sample-period-s', '1', '--time-unit', 'ms'], '--time-unit is the unit of a time column'),
-])
+@pytest.mark.parametrize(
+    'extra, says',
+    [
+        ([], '--sample-period-s S'),  # no time column and no period: the error names the option
+        (['--sample-period-s', '0'], 'must be a number of seconds > 0'),
+        (['--sample-period-s', 'nan'], 'must be a number of seconds > 0'),
+        (['--sample-period-s', '1', '--time-unit', 'ms'], '--time-unit is the unit of a time column'),
+    ],
+)
 def test_a_table_without_time_needs_a_valid_period(tables, capsys, extra, says) -> None:
     code, s = _cli([str(tables['run39']), '--columns', 'u=u_V,T1=oven_c', *extra], capsys)
     assert code == 2 and says in s['error'], s
@@ -125,6 +143,7 @@ def test_a_period_for_a_table_that_has_time_is_refused(tmp_path, capsys) -> None
 
 def test_a_headerless_table_with_a_period_reads_u_and_t1_from_the_left(tmp_path, capsys) -> None:
     from sma_wrist.identify.thermal import load_table
+
     f = tmp_path / 'bare.csv'
     f.write_text(''.join(f'{(k % 20) / 4},{25 + k / 100}\n' for k in range(200)))
     (s,), cl = load_table(f, sample_period_s=0.5)

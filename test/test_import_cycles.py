@@ -1,5 +1,6 @@
 """No import cycle between the package's modules, counting imports inside functions too (a function-level import
 is how a cycle is usually dodged, and it is still a cycle in the design: a module that both need goes below both)."""
+
 from __future__ import annotations
 
 import ast
@@ -31,7 +32,7 @@ def import_graph(root: Path = ROOT) -> dict[str, set[str]]:
                 base = node.module or ''
                 if node.level:  # relative: from the module's package
                     pkg = name.split('.') if is_pkg else name.split('.')[:-1]
-                    pkg = pkg[:len(pkg) - node.level + 1]
+                    pkg = pkg[: len(pkg) - node.level + 1]
                     base = '.'.join(pkg + ([base] if base else []))
                 targets = [f'{base}.{a.name}' if f'{base}.{a.name}' in files else base for a in node.names]
             else:
@@ -97,8 +98,12 @@ def test_the_finder_sees_a_cycle_made_of_function_level_imports(tmp_path: Path) 
 KNOWN = [
     # the embedded rclpy keeps rclpy's own module layout (clock, context, logging, utilities, node, time_source
     # import one another there too), so code written against rclpy finds every name where rclpy has it
-    ['sma_wrist.runtime.rclpy.clock', 'sma_wrist.runtime.rclpy.context', 'sma_wrist.runtime.rclpy.logging',
-     'sma_wrist.runtime.rclpy.utilities'],
+    [
+        'sma_wrist.runtime.rclpy.clock',
+        'sma_wrist.runtime.rclpy.context',
+        'sma_wrist.runtime.rclpy.logging',
+        'sma_wrist.runtime.rclpy.utilities',
+    ],
     ['sma_wrist.runtime.rclpy.node', 'sma_wrist.runtime.rclpy.time_source'],
     # the compiled kernel's warm-up builds the default parameters of the class that wraps it (inside warm_up only)
     ['sma_wrist.core.control.adaptive', 'sma_wrist.core.control.adaptive_kernel'],

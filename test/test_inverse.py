@@ -1,4 +1,5 @@
 """Inverse compensation (Eqs. 5.5-5.15): exact PI inverse, SD-GPI compensator, saturation, seed corrections."""
+
 from __future__ import annotations
 
 from unittest import mock
@@ -9,19 +10,27 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sma_wrist.core import jit
-from sma_wrist.core.errors import ModelInputError
+from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.core.hysteresis import kernel as hysteresis_kernel
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
-from sma_wrist.core.hysteresis.inverse import (InverseCompensator, LinearCorrection, composition_error,
-                                               inverse_table_parameters, pi_inverse_params, pi_inverse_state, pi_series,
-                                               table_5_1_correction)
+from sma_wrist.core.hysteresis.inverse import (
+    InverseCompensator,
+    LinearCorrection,
+    composition_error,
+    inverse_table_parameters,
+    pi_inverse_params,
+    pi_inverse_state,
+    pi_series,
+    table_5_1_correction,
+)
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, initial_state, simulate, step
 
 
 def _piecewise_monotone(rng: np.random.Generator, n_seg: int = 30) -> np.ndarray:
     ext = np.cumsum(rng.normal(0, 2, n_seg))
-    return np.concatenate([np.linspace(ext[i], ext[i + 1], rng.integers(2, 12), endpoint=False)
-                           for i in range(n_seg - 1)])
+    return np.concatenate(
+        [np.linspace(ext[i], ext[i + 1], rng.integers(2, 12), endpoint=False) for i in range(n_seg - 1)]
+    )
 
 
 @pytest.mark.parametrize('seed', range(5))
@@ -154,7 +163,7 @@ def test_compiled_observe_and_solve_agree_with_the_numpy_path(seed: int, S: int)
     T0, m0 = rng.uniform(*T_range, S), rng.uniform(m_lo, m_hi, S)
     branch = str(rng.choice(['cooling', 'heating']))
     comps = []
-    for numpy_path in (True, False):
+    for _numpy_path in (True, False):
         comps.append(InverseCompensator(P, T_range=T_range))
         comps[-1].reset(T0, m0, branch=branch)
     T, m = T0.copy(), m0.copy()
@@ -197,10 +206,25 @@ def test_compiled_observe_and_solve_compute_the_floats_of_their_python_source() 
         out = []
         with ExitStack() as stack:
             if interpreted:
-                for module, names in ((inverse, ('_residual', '_residual_parts', '_refine', '_argmin_abs',
-                                                 '_grid_f', '_interval_bounds', '_side_free', '_side_argmin',
-                                                 '_nearest_root', '_invert_frozen', '_observe_step')),
-                                      (hysteresis_kernel, ('_envelopes',))):
+                for module, names in (
+                    (
+                        inverse,
+                        (
+                            '_residual',
+                            '_residual_parts',
+                            '_refine',
+                            '_argmin_abs',
+                            '_grid_f',
+                            '_interval_bounds',
+                            '_side_free',
+                            '_side_argmin',
+                            '_nearest_root',
+                            '_invert_frozen',
+                            '_observe_step',
+                        ),
+                    ),
+                    (hysteresis_kernel, ('_envelopes',)),
+                ):
                     for name in names:
                         stack.enter_context(mock.patch.object(module, name, getattr(module, name).py_func))
             for seed in range(6):
@@ -216,19 +240,22 @@ def test_compiled_observe_and_solve_compute_the_floats_of_their_python_source() 
                     y_d = comp.output(m_in) + rng.normal(0.0, [0.05, 0.5, 3.0][k % 3], 2)  # some unreachable
                     res = comp.solve(y_d, m_in, commit=False)
                     st_ = comp.state
-                    out.append(np.concatenate([res.T, res.saturated, res.achieved_mm, st_.w.ravel(), st_.T_prev,
-                                               st_.heating]))
+                    out.append(
+                        np.concatenate([res.T, res.saturated, res.achieved_mm, st_.w.ravel(), st_.T_prev, st_.heating])
+                    )
         return np.concatenate(out)
 
     compiled, interpreted = run(False), run(True)
     assert np.array_equal(compiled, interpreted), f'{np.sum(compiled != interpreted)} of {compiled.size} differ'
 
 
-def _full_walk(T0: float, h_prev: bool, coef, w, y: float, lo: float, hi: float, G: int, tol: float,
-               P) -> tuple[float, bool]:
+def _full_walk(
+    T0: float, h_prev: bool, coef, w, y: float, lo: float, hi: float, G: int, tol: float, P
+) -> tuple[float, bool]:
     """The search as its docstring states it, every grid point of both sides evaluated (interpreted):
     first sign change of each side refined, the nearer root, else the grid point of smallest |f|."""
     from sma_wrist.core.hysteresis import inverse
+
     r, wts, c, d = P.thresholds, P.weights, P.c, P.d
     res = inverse._residual.py_func
     Tg = [[T0 + (g / (G - 1.0)) * (end - T0) for g in range(G)] for end in (hi, lo)]
@@ -237,8 +264,27 @@ def _full_walk(T0: float, h_prev: bool, coef, w, y: float, lo: float, hi: float,
     for s in (0, 1):
         k = next((g for g in range(1, G) if f[s][g - 1] * f[s][g] <= 0), None)
         if k is not None:
-            roots.append(inverse._refine.py_func(Tg[s][k - 1], Tg[s][k], f[s][k - 1], f[s][k], T0, h_prev, s == 0,
-                                                 coef, w, y, r, wts, c, d, P.p0, P.k_f, tol))
+            roots.append(
+                inverse._refine.py_func(
+                    Tg[s][k - 1],
+                    Tg[s][k],
+                    f[s][k - 1],
+                    f[s][k],
+                    T0,
+                    h_prev,
+                    s == 0,
+                    coef,
+                    w,
+                    y,
+                    r,
+                    wts,
+                    c,
+                    d,
+                    P.p0,
+                    P.k_f,
+                    tol,
+                )
+            )
         else:
             roots.append(np.nan)
     dist = [abs(x - T0) if np.isfinite(x) else np.inf for x in roots]
@@ -256,6 +302,7 @@ def test_compiled_search_skips_only_points_that_cannot_change_the_answer(seed: i
     are saturated: 18 instead of 67 residuals). Its answers are the full walk's to the bit, over random
     memories, windows and targets near and far (reachable, beyond one side, beyond both)."""
     from sma_wrist.core.hysteresis import kernel as hk
+
     P = default_sdgpi()
     rng = np.random.default_rng(seed)
     (m_lo, m_hi) = P.load_range
@@ -276,8 +323,9 @@ def test_compiled_search_skips_only_points_that_cannot_change_the_answer(seed: i
         for s in range(S):
             coef, _ = hk._envelopes(*comp._kernel_params[:2], m[s])
             T0 = min(max(st_.T_prev[s], lo[s]), hi[s])
-            T_ref, sat_ref = _full_walk(T0, bool(st_.heating[s]), coef, st_.w[s], y_d[s], lo[s], hi[s], comp.grid,
-                                        comp.tol_mm, P)
+            T_ref, sat_ref = _full_walk(
+                T0, bool(st_.heating[s]), coef, st_.w[s], y_d[s], lo[s], hi[s], comp.grid, comp.tol_mm, P
+            )
             assert (res.T[s], bool(res.saturated[s])) == (T_ref, sat_ref), (k, s)
             saturated += sat_ref
             found += not sat_ref
@@ -308,7 +356,7 @@ def test_bad_measurements_and_targets_raise_and_leave_the_memory(numpy_path: boo
 
 
 def test_compensator_needs_reset() -> None:
-    with pytest.raises(Exception):
+    with pytest.raises(ParameterError):
         InverseCompensator(default_sdgpi())(1.0, 0.8)
 
 
@@ -327,8 +375,9 @@ def test_analytic_inverse_exact_when_envelopes_coincide() -> None:
     comp.reset([20.0], [0.0], branch='cooling')
     y0 = float(comp.output([0.0])[0])
     lo_, hi_ = 6.0 - (0.5 + P.weights.sum()) * 4.9, 6.0 - (0.5 + P.weights.sum()) * 1.1
-    v = np.concatenate([np.linspace(y0, lo_ + 0.5, 40), np.linspace(lo_ + 0.5, hi_ - 0.8, 30),
-                        np.linspace(hi_ - 0.8, lo_ + 1.0, 20)])
+    v = np.concatenate(
+        [np.linspace(y0, lo_ + 0.5, 40), np.linspace(lo_ + 0.5, hi_ - 0.8, 30), np.linspace(hi_ - 0.8, lo_ + 1.0, 20)]
+    )
     T = np.array([comp(np.array([x]), np.array([0.0]))[0][0] for x in v])
     y = simulate(P, T, 0.0, state=initial_state(P, [20.0], [0.0]))
     assert np.abs(y - v).max() < 1e-9
@@ -349,7 +398,7 @@ def test_table_5_1_gain_is_far_from_one() -> None:
 
 def test_linear_correction_fit_roundtrip() -> None:
     loads = np.array([0.65, 0.8, 0.95, 1.05])
-    a_true, c_true = 0.9 + 0.1 * loads ** 2, 0.2 - 0.1 * loads
+    a_true, c_true = 0.9 + 0.1 * loads**2, 0.2 - 0.1 * loads
     u = np.stack([np.full(4, 0.5), np.full(4, 3.0)], axis=1)
     v = a_true[:, None] * u + c_true[:, None]
     corr = LinearCorrection.fit(loads, u, v)

@@ -4,6 +4,7 @@ numba keys a cached kernel on its own file only (numba documents it): a caller i
 keeps the old machine code of a helper it inlined from an edited one. The package drops its caches
 when the sources of its kernel folders change; these tests run real numba on a two-file package.
 """
+
 from __future__ import annotations
 
 import os
@@ -50,7 +51,7 @@ def test_a_source_edit_drops_the_caches_and_an_unchanged_tree_keeps_them(tmp_pat
     assert not any(f.exists() for f in cached)
 
 
-RUN = textwrap.dedent('''
+RUN = textwrap.dedent("""
     import sys
     from pathlib import Path
     sys.path.insert(0, sys.argv[1])
@@ -63,7 +64,7 @@ RUN = textwrap.dedent('''
         drop_stale_caches(pkg, ('.',))
     from pkg.caller import twice
     print(twice(1.0))
-''')
+""")
 
 
 def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_path):
@@ -74,16 +75,19 @@ def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_
     pkg = tmp_path / 'pkg'
     pkg.mkdir()
     (pkg / '__init__.py').write_text('')
-    (pkg / 'helper.py').write_text('import numba\n\n@numba.njit(cache=True, inline="always")\n'
-                                   'def gain(x):\n    return 2.0 * x\n')
-    (pkg / 'caller.py').write_text('import numba\nfrom pkg.helper import gain\n\n@numba.njit(cache=True)\n'
-                                   'def twice(x):\n    return gain(x)\n')
+    (pkg / 'helper.py').write_text(
+        'import numba\n\n@numba.njit(cache=True, inline="always")\ndef gain(x):\n    return 2.0 * x\n'
+    )
+    (pkg / 'caller.py').write_text(
+        'import numba\nfrom pkg.helper import gain\n\n@numba.njit(cache=True)\ndef twice(x):\n    return gain(x)\n'
+    )
 
     def run(mode):
         # numba's own default (next to the sources), whatever cache folder the user has set
         env = {k: v for k, v in os.environ.items() if k != 'NUMBA_CACHE_DIR'}
-        out = subprocess.run([sys.executable, '-c', RUN, str(tmp_path), mode], capture_output=True, text=True, env=env,
-                             timeout=120)
+        out = subprocess.run(
+            [sys.executable, '-c', RUN, str(tmp_path), mode], capture_output=True, text=True, env=env, timeout=120
+        )
         assert out.returncode == 0, out.stderr
         return float(out.stdout.split()[-1])
 
@@ -94,8 +98,9 @@ def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_
     assert in_tree() == [] and list((tmp_path / 'cache').rglob('*.nbi'))
     assert run('numba alone') == 2.0
     assert in_tree()
-    (pkg / 'helper.py').write_text('import numba\n\n@numba.njit(cache=True, inline="always")\n'
-                                   'def gain(x):\n    return 3.0 * x\n')
+    (pkg / 'helper.py').write_text(
+        'import numba\n\n@numba.njit(cache=True, inline="always")\ndef gain(x):\n    return 3.0 * x\n'
+    )
     assert run('numba alone') == 2.0  # numba alone: the cached caller is stale
     assert run('locator') == 3.0
     assert run('in-tree guard') == 3.0
@@ -104,9 +109,11 @@ def test_a_kernel_inlining_an_edited_helper_from_another_file_is_recompiled(tmp_
 def test_the_package_caches_its_kernels_outside_its_own_folder(tmp_path):
     pytest.importorskip('numba')
     cache = tmp_path / 'cache'
-    code = ('from sma_wrist.core.plant.kernel import step_many; from numba.core import caching;'
-            'loc = (getattr(caching, "CacheImpl", None) or caching._CacheImpl)._locator_classes[0];'
-            'print(loc.from_function(step_many.py_func, step_many.py_func.__code__.co_filename).get_cache_path())')
+    code = (
+        'from sma_wrist.core.plant.kernel import step_many; from numba.core import caching;'
+        'loc = (getattr(caching, "CacheImpl", None) or caching._CacheImpl)._locator_classes[0];'
+        'print(loc.from_function(step_many.py_func, step_many.py_func.__code__.co_filename).get_cache_path())'
+    )
     env = {**os.environ, 'NUMBA_CACHE_DIR': str(cache)}
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120, env=env)
     assert out.returncode == 0, out.stderr
@@ -133,8 +140,13 @@ def test_the_package_marks_the_cache_folders_it_uses(tmp_path):
     pytest.importorskip('numba')
     cache = tmp_path / 'cache'
     code = 'import sma_wrist.core.plant.kernel'
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=120,
-                         env={**os.environ, 'NUMBA_CACHE_DIR': str(cache)})
+    out = subprocess.run(
+        [sys.executable, '-c', code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**os.environ, 'NUMBA_CACHE_DIR': str(cache)},
+    )
     assert out.returncode == 0, out.stderr
     marks = {Path((d / jit.SOURCE_MARKER).read_text()) for d in cache.iterdir() if (d / jit.SOURCE_MARKER).is_file()}
     assert ROOT / 'core' / 'plant' in marks and all(m.is_dir() for m in marks)

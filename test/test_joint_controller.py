@@ -1,4 +1,5 @@
 """Mode composition of the joint controller (what adaptive_controller publishes)."""
+
 from __future__ import annotations
 
 import math
@@ -6,8 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointController, JointControllerParams,
-                                                     reference_ahead, time_to_meet, time_to_turn)
+from sma_wrist.core.control.joint_controller import (
+    REVERSAL_STEP_RAD,
+    JointController,
+    JointControllerParams,
+    reference_ahead,
+    time_to_meet,
+    time_to_turn,
+)
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.plant.wrist import PlantParams
 
@@ -105,7 +112,9 @@ def _sine_run(lead_s, t_end=90.0, dt=0.01):
     rows = []
     for t in np.arange(0.0, t_end, dt):
         q_d = 0.524 + 0.524 * math.sin(0.1 * t)
-        c = jc.update(q_d, 0.0524 * math.cos(0.1 * t), q_d, 0.0524 * math.cos(0.1 * t), -0.00524 * math.sin(0.1 * t), dt)
+        c = jc.update(
+            q_d, 0.0524 * math.cos(0.1 * t), q_d, 0.0524 * math.cos(0.1 * t), -0.00524 * math.sin(0.1 * t), dt
+        )
         rows.append((t, q_d, c.strain_desired.copy(), jc.strain_at(q_d)))
     return rows
 
@@ -149,11 +158,22 @@ def test_reversal_lead_zero_is_the_strain_at_q_d_throughout():
     assert all(np.allclose(s, s_qd) for _, _, s, s_qd in _sine_run(0.0, t_end=50.0))
 
 
-@pytest.mark.parametrize('kw', [dict(mode='mpc'), dict(temperature_mid_C=90.0), dict(force_per_degC_N=0.0),
-                                dict(temperature_min_C=float('nan')), dict(reversal_lead_s=-1.0),
-                                dict(pid_reference_lead_s=-0.5), dict(direct_reference_lead_s=float('inf')),
-                                dict(pid_output_filter_s=-0.1), dict(pid_output_filter_s=float('nan')),
-                                dict(direct_output_filter_s=-0.1), dict(direct_output_filter_s=float('inf'))])
+@pytest.mark.parametrize(
+    'kw',
+    [
+        dict(mode='mpc'),
+        dict(temperature_mid_C=90.0),
+        dict(force_per_degC_N=0.0),
+        dict(temperature_min_C=float('nan')),
+        dict(reversal_lead_s=-1.0),
+        dict(pid_reference_lead_s=-0.5),
+        dict(direct_reference_lead_s=float('inf')),
+        dict(pid_output_filter_s=-0.1),
+        dict(pid_output_filter_s=float('nan')),
+        dict(direct_output_filter_s=-0.1),
+        dict(direct_output_filter_s=float('inf')),
+    ],
+)
 def test_bad_parameters_are_refused(kw):
     with pytest.raises(ParameterError):
         JointControllerParams(**kw)
@@ -169,22 +189,25 @@ def test_reference_ahead_is_the_sine_ahead_and_each_mode_uses_its_own_lead():
         ahead, ahead_dot = reference_ahead(q_d, qd, qdd, 1.5)
         # Taylor remainders: a (w tau)^3 / 6 = 0.47 mrad and a w^3 tau^2 / 2 = 0.59 mrad/s
         assert ahead == pytest.approx(a + a * math.sin(w * (t + 1.5)), abs=a * (w * 1.5) ** 3 / 6)
-        assert ahead_dot == pytest.approx(a * w * math.cos(w * (t + 1.5)), abs=a * w ** 3 * 1.5 ** 2 / 2)
+        assert ahead_dot == pytest.approx(a * w * math.cos(w * (t + 1.5)), abs=a * w**3 * 1.5**2 / 2)
     for mode, lead in (('pid', 1.25), ('direct_adaptive', 1.0)):
         led = JointController(JointControllerParams(mode=mode))
         assert led.params.reference_lead_s == lead
-        plain = JointController(JointControllerParams(mode=mode, pid_reference_lead_s=0.0,
-                                                      direct_reference_lead_s=0.0))
+        plain = JointController(JointControllerParams(mode=mode, pid_reference_lead_s=0.0, direct_reference_lead_s=0.0))
         for k in range(20):
             q, ref = 0.3 + 0.001 * k, (0.5, 0.05, -0.005)
             c = led.update(q, 0.0, *ref, 0.01)
             d = plain.update(q, 0.0, *reference_ahead(*ref, lead), ref[2], 0.01)
             np.testing.assert_array_equal(c.temperature_desired_C, d.temperature_desired_C)
             np.testing.assert_array_equal(c.strain_desired, led.strain_at(ref[0]))  # strain at q_d(t) still
-    inv = [JointController(JointControllerParams(mode='inverse_adaptive', pid_reference_lead_s=x,
-                                                 direct_reference_lead_s=x)) for x in (0.0, 3.0)]
+    inv = [
+        JointController(
+            JointControllerParams(mode='inverse_adaptive', pid_reference_lead_s=x, direct_reference_lead_s=x)
+        )
+        for x in (0.0, 3.0)
+    ]
     assert inv[1].params.reference_lead_s == 0.0
-    for k in range(20):
+    for _ in range(20):
         c0, c1 = (jc.update(0.3, 0.0, 0.5, 0.05, -0.005, 0.01) for jc in inv)
         np.testing.assert_array_equal(c0.force_N, c1.force_N)
 
@@ -194,10 +217,13 @@ def test_pid_output_filter_is_a_first_order_lag_on_the_pid_output():
     1 - (tau / (tau + dt))^k (backward Euler); tau 0 gives the PID's output itself. No integral (ki 0) so the
     PID's own output is Kp e throughout."""
     from sma_wrist.core.control.pid import PIDParams
+
     pid = PIDParams(kp=300.0, ki=0.0, kd=0.0, output_min=-30.0, output_max=30.0)
     tau, dt = 0.3, 0.01
-    lagged, plain = (JointController(JointControllerParams(mode='pid', pid=pid, pid_reference_lead_s=0.0,
-                                                           pid_output_filter_s=x)) for x in (tau, 0.0))
+    lagged, plain = (
+        JointController(JointControllerParams(mode='pid', pid=pid, pid_reference_lead_s=0.0, pid_output_filter_s=x))
+        for x in (tau, 0.0)
+    )
     for jc in (lagged, plain):
         for _ in range(10):
             jc.update(0.5, 0.0, 0.5, 0.0, 0.0, dt)
@@ -215,11 +241,17 @@ def test_direct_output_filter_is_a_first_order_lag_on_the_temperature_map():
     from dataclasses import replace
 
     from sma_wrist.core.control.joint_controller import tuned_adaptive
+
     law = replace(tuned_adaptive(), gamma_a=0.0)
     tau, dt = 0.1, 0.01
-    lagged, plain = (JointController(JointControllerParams(mode='direct_adaptive', adaptive=law,
-                                                           direct_reference_lead_s=0.0, direct_output_filter_s=x))
-                     for x in (tau, 0.0))
+    lagged, plain = (
+        JointController(
+            JointControllerParams(
+                mode='direct_adaptive', adaptive=law, direct_reference_lead_s=0.0, direct_output_filter_s=x
+            )
+        )
+        for x in (tau, 0.0)
+    )
     assert lagged.params.output_filter_s == tau and JointControllerParams(mode='pid').output_filter_s == 0.3
     for jc in (lagged, plain):
         for _ in range(10):

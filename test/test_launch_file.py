@@ -1,4 +1,5 @@
 """The launch files run on the embedded launcher, and a required node's exit ends the launch."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,10 +14,13 @@ def _launch(name: str) -> str:
     return str(share_path(f'launch/{name}'))
 
 
-@pytest.mark.parametrize('launch, source, arguments', [
-    ('wrist_sim.launch.py', 'plant_sim', {'payload_kg': 5.0}),
-    ('wrist_hw.launch.py', 'hardware_bridge', {'payload_kg': 5.0, 'port': '/nonexistent/wrist'}),
-])
+@pytest.mark.parametrize(
+    'launch, source, arguments',
+    [
+        ('wrist_sim.launch.py', 'plant_sim', {'payload_kg': 5.0}),
+        ('wrist_hw.launch.py', 'hardware_bridge', {'payload_kg': 5.0, 'port': '/nonexistent/wrist'}),
+    ],
+)
 def test_a_refusing_plant_or_bridge_shuts_the_launch_down_with_the_reason_and_exit_code_1(launch, source, arguments):
     """The launch shut itself down, but ros2 launch exited 0, so a script could not tell a refused start from a
     normal end. The required node's non-zero exit now raises in its on_exit action: launch's LaunchService.run
@@ -51,8 +55,11 @@ def test_a_params_files_payload_stands_unless_payload_kg_is_given(tmp_path, capf
     files' payload stands; payload_kg:= given still wins."""
     f = tmp_path / 'mine.yaml'
     f.write_text('plant_sim:\n  ros__parameters:\n    payload_kg: 0.6\n')
-    for arguments, kg in (({'params_file': str(f)}, '0.6'), ({'params_file': str(f), 'payload_kg': '0.1'}, '0.1'),
-                          ({}, '0.3')):
+    for arguments, kg in (
+        ({'params_file': str(f)}, '0.6'),
+        ({'params_file': str(f), 'payload_kg': '0.1'}, '0.1'),
+        ({}, '0.3'),
+    ):
         capfd.readouterr()
         run_launch_file(_launch('wrist_sim.launch.py'), {'controller': 'pid', **arguments}, 0.1)
         out = capfd.readouterr()
@@ -66,11 +73,16 @@ def test_a_required_nodes_exit_during_a_shutdown_is_no_fault(monkeypatch):
 
     from sma_wrist.launch_support import REQUIRED_EXIT_REASONS, on_exit_actions
     from sma_wrist.runtime import launch_file as lf
+
     monkeypatch.setitem(sys.modules, 'launch', lf)  # the launch API subset the embedded launcher provides
     monkeypatch.setitem(sys.modules, 'launch.actions', lf)
     (action,) = on_exit_actions('plant_sim')
-    for shutting_down, code, want in ((True, 2, []), (True, 0, []), (False, 0, [REQUIRED_EXIT_REASONS['plant_sim']]),
-                                      (False, 2, [])):
+    for shutting_down, code, want in (
+        (True, 2, []),
+        (True, 0, []),
+        (False, 0, [REQUIRED_EXIT_REASONS['plant_sim']]),
+        (False, 2, []),
+    ):
         ctx = lf.LaunchContext({})
         ctx.is_shutdown = shutting_down
         result = lf.LaunchResult('time')
@@ -85,6 +97,7 @@ def test_a_required_nodes_exit_during_a_shutdown_is_no_fault(monkeypatch):
 def test_each_node_gets_config_wrist_yaml_once_and_a_params_file_after_it(launch, extra, tmp_path):
     """params_file:= defaulted to config/wrist.yaml, so every node's command line carried that file twice."""
     from sma_wrist.runtime import launch_file as lf
+
     mine = tmp_path / 'mine.yaml'
     mine.write_text('plant_sim:\n  ros__parameters:\n    payload_kg: 0.6\n')
     defaults = str(share_path('config/wrist.yaml'))
@@ -96,4 +109,3 @@ def test_each_node_gets_config_wrist_yaml_once_and_a_params_file_after_it(launch
             given = [lf._perform(p, context) for p in node.parameters]
             assert given[:-1] == files, (node.name, given)  # the last: the node's own overrides
             assert Path(given[-1]).name.startswith(node.name)
-

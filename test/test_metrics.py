@@ -1,4 +1,5 @@
 """Tracking metrics: analytic values on known signals, the Table 6.2 total, typed errors."""
+
 from __future__ import annotations
 
 import math
@@ -87,15 +88,18 @@ def test_short_record_has_no_total_and_to_dict() -> None:
         m.max_error_pct = 0.0  # type: ignore[misc]
 
 
-@pytest.mark.parametrize('t,q,qd,fragment', [
-    ([], [], [], 'len(t)'),
-    ([0, 1, 2], [0, np.nan, 0], [0, 1, 2], 'q = nan'),
-    ([0, 1, 2], [0, 1, 2], [0, 1, np.inf], 'q_d = inf'),
-    ([0, 2, 1], [0, 1, 2], [0, 1, 2], 't[2] - t[1] = -1.0'),
-    ([0, 1, 1], [0, 1, 2], [0, 1, 2], 't[2] - t[1] = 0.0'),
-    ([0, 1, 2], [0, 1], [0, 1, 2], 'len(q)'),
-    ([0, 1, 2], [0, 1, 2], [1, 1, 1], 'max(q_d) - min(q_d)'),
-])
+@pytest.mark.parametrize(
+    't,q,qd,fragment',
+    [
+        ([], [], [], 'len(t)'),
+        ([0, 1, 2], [0, np.nan, 0], [0, 1, 2], 'q = nan'),
+        ([0, 1, 2], [0, 1, 2], [0, 1, np.inf], 'q_d = inf'),
+        ([0, 2, 1], [0, 1, 2], [0, 1, 2], 't[2] - t[1] = -1.0'),
+        ([0, 1, 1], [0, 1, 2], [0, 1, 2], 't[2] - t[1] = 0.0'),
+        ([0, 1, 2], [0, 1], [0, 1, 2], 'len(q)'),
+        ([0, 1, 2], [0, 1, 2], [1, 1, 1], 'max(q_d) - min(q_d)'),
+    ],
+)
 def test_bad_inputs_raise_typed_errors(t: list, q: list, qd: list, fragment: str) -> None:
     with pytest.raises(ModelInputError) as ei:
         mt.tracking_metrics(t, q, qd)
@@ -117,10 +121,18 @@ def test_bad_options_raise_parameter_errors() -> None:
 
 def test_seed_claims_are_checked_against_the_rows_not_asserted():
     from sma_wrist.experiment import seed_claims
-    rows = [dict(controller=c, payload_kg=m, total_abs_error_pct=t, max_error_pct=x)
-            for c, m, t, x in (('inverse_adaptive', 0.1, 5.0, 2.0), ('pid', 0.1, 9.0, 9.0),
-                               ('inverse_adaptive', 0.2, 7.0, 3.0), ('pid', 0.2, 6.0, 8.5),
-                               ('inverse_adaptive', 0.3, 8.0, 3.5), ('pid', 0.3, 10.0, 11.0))]
+
+    rows = [
+        dict(controller=c, payload_kg=m, total_abs_error_pct=t, max_error_pct=x)
+        for c, m, t, x in (
+            ('inverse_adaptive', 0.1, 5.0, 2.0),
+            ('pid', 0.1, 9.0, 9.0),
+            ('inverse_adaptive', 0.2, 7.0, 3.0),
+            ('pid', 0.2, 6.0, 8.5),
+            ('inverse_adaptive', 0.3, 8.0, 3.5),
+            ('pid', 0.3, 10.0, 11.0),
+        )
+    ]
     claims = seed_claims(rows)
     assert 'inverse_adaptive has the lowest total absolute error. Here: at 2 of 3 loads -- differs.' in claims[0]
     assert 'pid has the highest total absolute error. Here: at 2 of 3 loads -- differs.' in claims[1]
@@ -135,9 +147,11 @@ def test_a_run_whose_reference_does_not_move_reads_on_the_seed_sines_scale() -> 
     after the whole run with "max(q_d) - min(q_d) = 0.0 rad is outside the valid range"; the % are now of the
     Sec. 6.1 sine's 1.048 rad and say so, and a moving reference keeps its own range."""
     from sma_wrist.runs import RunData, run_metrics
+
     t = np.arange(0.0, 5.0, 0.01)
-    still = RunData('b', t, np.full(t.size, 0.3), np.full(t.size, 0.5), np.zeros((t.size, 2)), t, np.zeros((t.size, 2)),
-                    0.3)
+    still = RunData(
+        'b', t, np.full(t.size, 0.3), np.full(t.size, 0.5), np.zeros((t.size, 2)), t, np.zeros((t.size, 2)), 0.3
+    )
     m = run_metrics(still)
     assert m['max_error_pct'] == pytest.approx(100 * 0.2 / 1.048) and m['range_of'].startswith('the Sec. 6.1 sine')
     moving = RunData('b', t, np.full(t.size, 0.3), 0.5 + 0.1 * t, np.zeros((t.size, 2)), t, np.zeros((t.size, 2)), 0.3)

@@ -5,6 +5,7 @@ effect generator (:mod:`sma_wrist.diagnose.distort`, which does not use the diag
 effect at ``ONSET_S`` and the rewritten run is written as a bag. The monitor must stay OK before the onset and name
 the right subsystem after it; a nominal run read through realistic sensors must raise nothing.
 """
+
 from __future__ import annotations
 
 import json
@@ -30,6 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def clean_run(tmp_path_factory):
     """A clean 150 s closed-loop recording (pid), loaded."""
     from sma_wrist.diagnose.bench import record_clean_runs
+
     bags = record_clean_runs(str(tmp_path_factory.mktemp('monitor')), ('pid',), RUN_S)
     return load_run(bags['pid'])
 
@@ -43,8 +45,13 @@ def _bag(run, path, d=None, onset=ONSET_S, realistic=False):  # type: ignore[no-
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
     env = {'PYTHONPATH': str(ROOT), 'PATH': '/usr/bin:/bin'}
-    return subprocess.run([sys.executable, '-m', 'sma_wrist', 'monitor', *args], capture_output=True, text=True,
-                          cwd=ROOT, env={**__import__('os').environ, **env})
+    return subprocess.run(
+        [sys.executable, '-m', 'sma_wrist', 'monitor', *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        env={**__import__('os').environ, **env},
+    )
 
 
 def test_the_generator_starts_an_effect_at_its_onset(clean_run):
@@ -62,10 +69,14 @@ def test_the_generator_starts_an_effect_at_its_onset(clean_run):
         assert np.abs(h.T[~before] - clean_run.T[~before]).max() > 0.1, kind
 
 
-@pytest.mark.parametrize('effect,subsystem', [
-    (('offset', 'T1', 3.0), 'sensor'),          # a thermocouple coming loose
-    (('payload', 'plant', 0.2), 'joint'),        # a heavier payload than /wrist/payload says
-], ids=['thermocouple offset', 'heavier payload'])
+@pytest.mark.parametrize(
+    'effect,subsystem',
+    [
+        (('offset', 'T1', 3.0), 'sensor'),  # a thermocouple coming loose
+        (('payload', 'plant', 0.2), 'joint'),  # a heavier payload than /wrist/payload says
+    ],
+    ids=['thermocouple offset', 'heavier payload'],
+)
 def test_an_effect_beginning_mid_run_is_named_after_its_onset_and_ok_before(clean_run, tmp_path, effect, subsystem):
     bag = _bag(clean_run, tmp_path / 'bag', ds.Distortion(*effect, ''))
     out = tmp_path / 'history.csv'
@@ -96,14 +107,17 @@ def test_a_nominal_run_through_realistic_sensors_raises_nothing(clean_run, tmp_p
     res = monitor_bag(bag)
     res.pop('_monitor')
     assert res['checks'] >= 5
-    assert all(v['level'] == 'OK' for v in res['verdicts']), [(v['t_s'], v['level'], v['summary'][:120])
-                                                              for v in res['verdicts']]
+    assert all(v['level'] == 'OK' for v in res['verdicts']), [
+        (v['t_s'], v['level'], v['summary'][:120]) for v in res['verdicts']
+    ]
     assert res['episodes'] == [] and res['onset_s'] == {}
 
 
 def test_a_bag_without_the_commands_is_refused_with_what_to_record(tmp_path):
     truth = td.simulate('none', seed=1, duration_s=40.0)
-    bag = td.write_bag(truth, tmp_path / 'no_commands', {'drop_topics': ['/wrist/tem_1/command', '/wrist/tem_2/command']})
+    bag = td.write_bag(
+        truth, tmp_path / 'no_commands', {'drop_topics': ['/wrist/tem_1/command', '/wrist/tem_2/command']}
+    )
     for args in ((), ('--json',)):
         r = _cli(str(bag), *args)
         text = r.stdout + r.stderr
@@ -118,10 +132,12 @@ def test_model_files_that_do_not_load_are_named(tmp_path):
     bag = td.write_bag(truth, tmp_path / 'bag')
     broken = tmp_path / 'hysteresis.yaml'
     broken.write_text('not: [a wire')
-    cases = [(('--hysteresis-file', str(tmp_path / 'missing.yaml')), 'missing.yaml: no such file'),
-             (('--hysteresis-file', str(broken)), 'model files do not load'),
-             (('--params-file', str(broken)), 'not a ROS 2 params file'),
-             (('--out', str(tmp_path / 'history.txt')), '.csv, .json or .md')]
+    cases = [
+        (('--hysteresis-file', str(tmp_path / 'missing.yaml')), 'missing.yaml: no such file'),
+        (('--hysteresis-file', str(broken)), 'model files do not load'),
+        (('--params-file', str(broken)), 'not a ROS 2 params file'),
+        (('--out', str(tmp_path / 'history.txt')), '.csv, .json or .md'),
+    ]
     for args, named in cases:
         r = _cli(str(bag), *args)
         assert r.returncode == 2 and named in r.stderr and 'Traceback' not in r.stderr, (args, r.stderr)
@@ -131,13 +147,44 @@ def test_persistence_raises_after_k_agreeing_checks_and_clears_after_k_clean_one
     """The rule on its own (no diagnosis): one odd check is no alarm; a changed subsystem must persist too."""
     mon = Monitor(MonitorConfig(persist_checks=2))
     ok = lambda t: Verdict(t, 'OK', None, None, 1.0)  # noqa: E731
-    warn = lambda t, s='sensor', c='temp_sensor_offsets', p=0.9: Verdict(t, 'WARN', c, s, p, check_cause=c,  # noqa: E731
-                                                                         check_subsystem=s, check_confidence=p)
-    seq = [ok(0), warn(15), ok(30), warn(45), warn(60), warn(75, c='temp_sensor_offset'), warn(90, 'joint',
-           'payload_mismatch'), warn(105), ok(120), ok(135)]
+
+    def warn(t, s='sensor', c='temp_sensor_offsets', p=0.9):
+        return Verdict(
+            t,
+            'WARN',
+            c,
+            s,
+            p,
+            check_cause=c,
+            check_subsystem=s,
+            check_confidence=p,
+        )
+
+    seq = [
+        ok(0),
+        warn(15),
+        ok(30),
+        warn(45),
+        warn(60),
+        warn(75, c='temp_sensor_offset'),
+        warn(90, 'joint', 'payload_mismatch'),
+        warn(105),
+        ok(120),
+        ok(135),
+    ]
     levels = [(v.level, v.subsystem) for v in (mon.decide(v) for v in seq)]
-    assert levels == [('OK', None), ('OK', None), ('OK', None), ('OK', None), ('WARN', 'sensor'), ('WARN', 'sensor'),
-                      ('WARN', 'sensor'), ('WARN', 'sensor'), ('WARN', 'sensor'), ('OK', None)]
+    assert levels == [
+        ('OK', None),
+        ('OK', None),
+        ('OK', None),
+        ('OK', None),
+        ('WARN', 'sensor'),
+        ('WARN', 'sensor'),
+        ('WARN', 'sensor'),
+        ('WARN', 'sensor'),
+        ('WARN', 'sensor'),
+        ('OK', None),
+    ]
     ep = mon.episodes()
     assert len(ep) == 1 and ep[0]['onset_s'] == 45 and ep[0]['raised_s'] == 60 and ep[0]['until_s'] == 135
     assert ep[0]['causes'] == ['temp_sensor_offsets', 'temp_sensor_offset']
@@ -150,8 +197,11 @@ def test_persistence_raises_after_k_agreeing_checks_and_clears_after_k_clean_one
 
 
 def test_bad_monitor_settings_are_refused():
-    for kw, named in (({'window_s': 5.0}, 'window_s'), ({'check_period_s': 0.0}, 'check_period_s'),
-                      ({'candidates': ('friction', 'nope')}, 'nope')):
+    for kw, named in (
+        ({'window_s': 5.0}, 'window_s'),
+        ({'check_period_s': 0.0}, 'check_period_s'),
+        ({'candidates': ('friction', 'nope')}, 'nope'),
+    ):
         with pytest.raises(MonitorInputError, match=named):
             MonitorConfig(**kw).check()
 
@@ -161,12 +211,25 @@ def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clea
     (checks inline, so that every one is made on the virtual clock)."""
     from sma_wrist.bag import read_bag
     from sma_wrist.nodes.twin_monitor import TwinMonitor
+
     hist = tmp_path / 'verdicts.json'
     run = ds.apply(clean_run, ds.Distortion('offset', 'T1', 3.0, 'degC'), 0.1, 1e-3, 2, onset_s=ONSET_S)
-    bag = td.write_run_bag(run, tmp_path / 'bag', nodes=[TwinMonitor], params={
-        '/twin_monitor': {'use_sim_time': True, 'worker': 'inline', 'history_file': str(hist)}})
-    data = read_bag(bag, ['/diagnostics', '/wrist/twin/muscle_1/temperature', '/wrist/twin/residual/muscle_1/temperature',
-                          '/wrist/twin/joint_states', '/wrist/twin/residual/angle'])
+    bag = td.write_run_bag(
+        run,
+        tmp_path / 'bag',
+        nodes=[TwinMonitor],
+        params={'/twin_monitor': {'use_sim_time': True, 'worker': 'inline', 'history_file': str(hist)}},
+    )
+    data = read_bag(
+        bag,
+        [
+            '/diagnostics',
+            '/wrist/twin/muscle_1/temperature',
+            '/wrist/twin/residual/muscle_1/temperature',
+            '/wrist/twin/joint_states',
+            '/wrist/twin/residual/angle',
+        ],
+    )
     t_res, res = data['/wrist/twin/residual/muscle_1/temperature']
     t_res = (np.asarray(t_res) - t_res[0]) * 1e-9
     r = np.array([m.data for m in res])
@@ -174,8 +237,16 @@ def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clea
     assert np.abs(r[t_res < ONSET_S - 1]).max() < 0.6  # the twin is the wrist (0.1 degC noise) ...
     assert np.median(r[t_res > ONSET_S + 1]) == pytest.approx(3.0, abs=0.5)  # ... until the thermocouple moves
     assert len(data['/wrist/twin/joint_states'][1]) == r.size
-    ours = [(s.level[0] if isinstance(s.level, bytes) else int(s.level), dict((kv.key, kv.value) for kv in s.values),
-             s.message) for m in data['/diagnostics'][1] for s in m.status if s.name == 'twin_monitor: model']
+    ours = [
+        (
+            s.level[0] if isinstance(s.level, bytes) else int(s.level),
+            dict((kv.key, kv.value) for kv in s.values),
+            s.message,
+        )
+        for m in data['/diagnostics'][1]
+        for s in m.status
+        if s.name == 'twin_monitor: model'
+    ]
     levels = [lv for lv, _, _ in ours]
     warn = [(vals, msg) for lv, vals, msg in ours if lv == 1]
     assert warn and warn[0][0]['subsystem'] == 'sensor', ours
@@ -189,6 +260,7 @@ def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clea
 def test_the_sim_launch_file_starts_twin_monitor_only_when_asked(monitor, started):
     from sma_wrist.runtime.launch_file import run_launch_file
     from sma_wrist.share import share_path
+
     r = run_launch_file(str(share_path('launch/wrist_sim.launch.py')), {'controller': 'pid', 'monitor': monitor}, 0.3)
     assert r.reason == 'time' and r.exits == {}
     assert ('twin_monitor' in r.started) == started
@@ -200,8 +272,19 @@ def test_an_unexplained_discrepancy_is_raised_only_once_the_window_holds_no_data
     'unexplained' before the cause can be named, and that transition is no verdict of its own."""
     cfg = MonitorConfig(persist_checks=2, window_s=45.0, settle_s=20.0, check_period_s=15.0)
     mon = Monitor(cfg)
-    un = lambda t: Verdict(t, 'WARN', 'unexplained', 'thermal', 1.0, check_cause='unexplained',  # noqa: E731
-                           check_subsystem='thermal', check_confidence=1.0)
+
+    def un(t):
+        return Verdict(
+            t,
+            'WARN',
+            'unexplained',
+            'thermal',
+            1.0,
+            check_cause='unexplained',
+            check_subsystem='thermal',
+            check_confidence=1.0,
+        )
+
     named = lambda t: Verdict(t, 'WARN', 'temp_sensor_offsets', 'sensor', 0.9)  # noqa: E731
     out = [mon.decide(v) for v in (un(15), un(30), un(45), named(60), named(75))]
     assert [v.level for v in out] == ['OK', 'OK', 'OK', 'OK', 'WARN'] and out[-1].subsystem == 'sensor'

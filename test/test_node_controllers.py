@@ -1,4 +1,5 @@
 """trajectory_generator, tem_controller and hysteresis_compensator on the embedded runtime."""
+
 from __future__ import annotations
 
 import math
@@ -13,6 +14,7 @@ from sma_wrist.sweep.simulate import STROKE_GAIN_PER_S
 def test_trajectory_generator_publishes_the_seed_sine_with_derivatives(probe_factory):
     """Without a soft start the reference is the Sec. 6.1 sine from its first tick, measured angle or not."""
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+
     with Runtime(params={'/trajectory_generator': {'soft_start_s': 0.0}}) as rt:
         probe = probe_factory(rt, ('/wrist/reference',))
         rt.add(TrajectoryGenerator)
@@ -36,6 +38,7 @@ def test_trajectory_generator_starts_from_the_measured_angle_and_joins_the_sine(
     from sma_wrist.core.control.trajectory import RUN_SOFT_START_S as SOFT_START_S
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
     from sma_wrist.runtime.rclpy import logging as rlog
+
     said = []
     remove = rlog.add_sink(lambda sev, name, msg, t: said.append(msg) if name == 'trajectory_generator' else None)
     with Runtime(params={'/trajectory_generator': {'soft_start_s': SOFT_START_S}}) as rt, rlog.silenced():
@@ -63,11 +66,12 @@ def test_trajectory_parameter_changes_are_validated_against_the_angle_limits():
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+
     with Runtime() as rt:
         node = rt.add(TrajectoryGenerator)
-        too_big, = node.set_parameters([Parameter('sine.amplitude_rad', value=0.9)])
-        shape, = node.set_parameters([Parameter('shape', value='square')])
-        step, = node.set_parameters([Parameter('shape', value='step')])
+        (too_big,) = node.set_parameters([Parameter('sine.amplitude_rad', value=0.9)])
+        (shape,) = node.set_parameters([Parameter('shape', value='square')])
+        (step,) = node.set_parameters([Parameter('shape', value='step')])
     assert not too_big.successful and 'angle limits' in too_big.reason
     assert not shape.successful and 'not one of' in shape.reason
     assert step.successful and type(node.trajectory).__name__ == 'Step'
@@ -76,6 +80,7 @@ def test_trajectory_parameter_changes_are_validated_against_the_angle_limits():
 def test_bad_params_file_value_stops_the_node_with_a_reason(tmp_path):
     from sma_wrist.core.errors import SmaWristError
     from sma_wrist.nodes.trajectory_generator import TrajectoryGenerator
+
     f = tmp_path / 'p.yaml'
     f.write_text('trajectory_generator:\n  ros__parameters:\n    shape: triangle\n')
     with Runtime(['--ros-args', '--params-file', str(f)]) as rt:
@@ -85,6 +90,7 @@ def test_bad_params_file_value_stops_the_node_with_a_reason(tmp_path):
 
 def _tem_run(probe_factory, T_meas, T_des, seconds=1.0, stop_meas_after=None):
     from sma_wrist.nodes.tem_controller import TemController
+
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/tem_1/command', '/wrist/tem_2/command'))
         node = rt.add(TemController)
@@ -123,14 +129,15 @@ def test_tem_controller_fixed_switch_falls_back_to_hold_limits_when_a_face_is_ho
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.tem_controller import TemController
+
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/tem_1/command',))
         node = rt.add(TemController)
         assert node.set_parameters([Parameter('predictive_protection', value=False)])[0].successful
         assert node.set_parameters([Parameter('face_max_C', value=40.0)])[0].successful
-        good, = node.set_parameters([Parameter('face_min_C', value=39.0)])
+        (good,) = node.set_parameters([Parameter('face_min_C', value=39.0)])
         assert good.successful
-        bad, = node.set_parameters([Parameter('face_min_C', value=40.0)])
+        (bad,) = node.set_parameters([Parameter('face_min_C', value=40.0)])
         assert not bad.successful and 'below face_max_C' in bad.reason
         assert node.set_parameters([Parameter('face_max_C', value=80.0)])[0].successful
         for i, T in ((1, 76.0), (2, 30.0)):
@@ -150,6 +157,7 @@ def test_tem_controller_times_its_law_by_the_measurement_stamps(probe_factory):
     from std_msgs.msg import Header
 
     from sma_wrist.nodes.tem_controller import TemController
+
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/tem_1/command',))
         rt.add(TemController)
@@ -158,8 +166,11 @@ def test_tem_controller_times_its_law_by_the_measurement_stamps(probe_factory):
         rt.run_until(0.05, until='steady')
         for k, stamp in enumerate((1.00, 1.00, 1.01)):  # the second sample repeats the first's stamp
             for i in (1, 2):
-                probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0,
-                              header=Header(stamp=Time(sec=int(stamp), nanosec=int(round(stamp % 1 * 1e9)))))
+                probe.publish(
+                    f'/wrist/muscle_{i}/temperature',
+                    temperature=40.0,
+                    header=Header(stamp=Time(sec=int(stamp), nanosec=int(round(stamp % 1 * 1e9)))),
+                )
             rt.run_until(0.06 + 0.01 * k, until='steady')
     assert len(probe.got['/wrist/tem_1/command']) == 2  # one per distinct stamp
     assert not any('law failed' in m for _, _, m in probe.diagnostics())
@@ -188,6 +199,7 @@ def test_compensator_node_matches_the_core_inverse(probe_factory):
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     g = MuscleGeometry()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     strain = np.array([2.0, 2.4]) / g.wire_length_mm
@@ -218,18 +230,28 @@ def test_compensator_pairs_one_cycles_targets_whatever_their_arrival_order(probe
 
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     g = MuscleGeometry()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     cycles = [np.array([2.0, 2.4]) / g.wire_length_mm, np.array([2.6, 1.8]) / g.wire_length_mm]
-    msgs = [(k, f'/wrist/muscle_{i}/{kind}_desired', float((cycles[k] if kind == 'strain' else stress)[i - 1]))
-            for k in (0, 1) for kind in ('strain', 'stress') for i in (1, 2)]
+    msgs = [
+        (k, f'/wrist/muscle_{i}/{kind}_desired', float((cycles[k] if kind == 'strain' else stress)[i - 1]))
+        for k in (0, 1)
+        for kind in ('strain', 'stress')
+        for i in (1, 2)
+    ]
     if order == 'interleaved':  # cycle 1's strains overtake cycle 0's stresses; stress_2 before stress_1
         msgs = [msgs[0], msgs[1], msgs[4], msgs[5], msgs[3], msgs[2], msgs[7], msgs[6]]
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
-        rt.add(HysteresisCompensator, parameter_overrides=[Parameter('stress_source', value='desired'),
-                                                           Parameter('memory_source', value='commanded'),
-                                                           Parameter('temperature_source', value='thermocouple')])
+        rt.add(
+            HysteresisCompensator,
+            parameter_overrides=[
+                Parameter('stress_source', value='desired'),
+                Parameter('memory_source', value='commanded'),
+                Parameter('temperature_source', value='thermocouple'),
+            ],
+        )
         for i in (1, 2):
             probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0)
             probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
@@ -242,6 +264,7 @@ def test_compensator_pairs_one_cycles_targets_whatever_their_arrival_order(probe
     assert len(got[0]) == len(got[1]) == 2  # one output per cycle
     from sma_wrist.core.hysteresis.compensation import MuscleCompensator
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
+
     ref = MuscleCompensator(default_sdgpi())
     ref.reset(np.array([40.0, 40.0]), stress)
     expected = [ref(c, stress).temperature_C for c in cycles]
@@ -257,13 +280,16 @@ def test_compensator_memory_follows_the_measured_or_the_commanded_temperature(pr
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     g = MuscleGeometry()
     stress = g.stress_Pa(np.array([0.8, 0.8]))
     first = np.array([1.0, 1.0]) / g.wire_length_mm  # contract: heat
     second = np.array([1.1, 1.1]) / g.wire_length_mm  # a little back
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired',))
-        node = rt.add(HysteresisCompensator, parameter_overrides=[Parameter('temperature_source', value='thermocouple')])
+        node = rt.add(
+            HysteresisCompensator, parameter_overrides=[Parameter('temperature_source', value='thermocouple')]
+        )
         assert node.set_parameters([Parameter('memory_source', value=memory_source)])[0].successful
         for i in (1, 2):
             probe.publish(f'/wrist/muscle_{i}/temperature', temperature=40.0)  # and it stays there
@@ -296,7 +322,9 @@ def _logged(node) -> list[str]:
     class Log:
         def info(self, m: str) -> None:
             logged.append(m)
+
         warning = error = info
+
     node.get_logger = lambda: Log()
     return logged
 
@@ -306,6 +334,7 @@ def test_flapping_condition_is_published_every_change_but_logged_at_most_every_1
 
     from sma_wrist.nodes.common import LOG_THROTTLE_S
     from sma_wrist.nodes.tem_controller import TemController
+
     with Runtime() as rt:
         probe = probe_factory(rt)
         node = rt.add(TemController)
@@ -337,24 +366,31 @@ def test_the_end_of_a_logged_problem_is_always_logged(probe_factory):
     from diagnostic_msgs.msg import DiagnosticStatus
 
     from sma_wrist.nodes.tem_controller import TemController
+
     with Runtime() as rt:
         probe_factory(rt)
         node = rt.add(TemController)
         logged = _logged(node)
         node.diagnose('command', DiagnosticStatus.OK, 'commands fresh')  # the first state: OK, not published
-        for t, level, text in ((4.5, DiagnosticStatus.WARN, 'TEM off'), (4.73, DiagnosticStatus.OK, 'commands fresh'),
-                               (5.0, DiagnosticStatus.WARN, 'TEM off'), (5.1, DiagnosticStatus.OK, 'commands fresh')):
+        for t, level, text in (
+            (4.5, DiagnosticStatus.WARN, 'TEM off'),
+            (4.73, DiagnosticStatus.OK, 'commands fresh'),
+            (5.0, DiagnosticStatus.WARN, 'TEM off'),
+            (5.1, DiagnosticStatus.OK, 'commands fresh'),
+        ):
             rt.run_until(t, until='steady')
             node.diagnose('command', level, text)
     # the second problem was a repeat inside the throttle: neither it nor its end was logged
     assert logged == ['command: TEM off', 'command: commands fresh']
 
 
-def _compensator_answers(probe_factory, stress: np.ndarray, msgs: list[tuple[str, dict]], overrides=()
-                         ) -> tuple[np.ndarray, int]:
+def _compensator_answers(
+    probe_factory, stress: np.ndarray, msgs: list[tuple[str, dict]], overrides=()
+) -> tuple[np.ndarray, int]:
     """hysteresis_compensator fed the measured stresses, then msgs one by one: its answers (n, 2) [degC]
     and its count of rejected inputs."""
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature_desired', '/wrist/muscle_2/temperature_desired'))
         node = rt.add(HysteresisCompensator, parameter_overrides=list(overrides))
@@ -384,11 +420,14 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.core.plant.wrist import PlantParams
+
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     n = 30
     k = np.arange(n)
-    T = np.stack([45.0 + 25.0 * np.sin(np.pi * k / 20), 60.0 - 15.0 * np.sin(np.pi * k / 20)], axis=1)  # turns at k = 10
+    T = np.stack(
+        [45.0 + 25.0 * np.sin(np.pi * k / 20), 60.0 - 15.0 * np.sin(np.pi * k / 20)], axis=1
+    )  # turns at k = 10
     q = 0.5 + 0.3 * np.sin(np.pi * k / 20)
     strain = np.stack([bundle_strain(plant, x + 0.02) for x in q])
 
@@ -399,23 +438,42 @@ def test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arri
         return f'/wrist/muscle_{i}/temperature', {'header': stamp(j), 'temperature': float(T[j, i - 1])}
 
     def q_msg(j: int) -> tuple[str, dict]:
-        return '/wrist/joint_states', {'header': stamp(j), 'name': ['wrist'], 'position': [float(q[j])],
-                                       'velocity': [0.0], 'effort': [0.0]}
+        return '/wrist/joint_states', {
+            'header': stamp(j),
+            'name': ['wrist'],
+            'position': [float(q[j])],
+            'velocity': [0.0],
+            'effort': [0.0],
+        }
 
     def targets(j: int) -> list[tuple[str, dict]]:
-        return [(f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
-                for kind in ('strain', 'stress') for i in (1, 2)]
+        return [
+            (f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
+            for kind in ('strain', 'stress')
+            for i in (1, 2)
+        ]
+
     msgs: list[tuple[str, dict]] = []
     for j in range(n):
         if order == 'in_order':
             msgs += [T_msg(j, 1), T_msg(j, 2), q_msg(j)] + targets(j)
         else:  # the angle first, T_1 of this tick overtaken by the next one's, an old T_2 late
-            msgs += [q_msg(j), T_msg(j, 2)] + ([T_msg(0, 1)] if j == 0 else []) + \
-                ([T_msg(j + 1, 1)] if j + 1 < n else []) + ([T_msg(j - 3, 2)] if j >= 3 else []) + targets(j)
+            msgs += (
+                [q_msg(j), T_msg(j, 2)]
+                + ([T_msg(0, 1)] if j == 0 else [])
+                + ([T_msg(j + 1, 1)] if j + 1 < n else [])
+                + ([T_msg(j - 3, 2)] if j >= 3 else [])
+                + targets(j)
+            )
     got, _ = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='thermocouple')])
     # the node's default: the inverse's window moves with each wire's shift
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True,
-                            stroke_gain_per_s=STROKE_GAIN_PER_S)
+    ref = MuscleCompensator(
+        default_sdgpi(),
+        shift_gain_per_s=2.0,
+        shift_limit_C=15.0,
+        window_follows_shift=True,
+        stroke_gain_per_s=STROKE_GAIN_PER_S,
+    )
     ref.reset(T[0], stress)
     expected = []
     for j in range(n):
@@ -443,6 +501,7 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL
+
     g, plant = MuscleGeometry(), PlantParams()
     stress = g.stress_Pa(np.array([0.8, 0.7]))
     n = 25
@@ -457,24 +516,45 @@ def test_compensator_observer_takes_the_command_of_the_previous_tick(probe_facto
 
     msgs: list[tuple[str, dict]] = []
     for j in range(n):
-        temps = [(f'/wrist/muscle_{i}/temperature', {'header': stamp(j), 'temperature': float(T[j, i - 1])}) for i in (1, 2)]
-        angle = [('/wrist/joint_states', {'header': stamp(j), 'name': ['wrist'], 'position': [float(q[j])],
-                                          'velocity': [0.0], 'effort': [0.0]})]
+        temps = [
+            (f'/wrist/muscle_{i}/temperature', {'header': stamp(j), 'temperature': float(T[j, i - 1])}) for i in (1, 2)
+        ]
+        angle = [
+            (
+                '/wrist/joint_states',
+                {'header': stamp(j), 'name': ['wrist'], 'position': [float(q[j])], 'velocity': [0.0], 'effort': [0.0]},
+            )
+        ]
         cmds = [(f'/wrist/tem_{i}/command', {'data': float(u[j, i - 1])}) for i in (1, 2)]
         if j == 5:
             cmds.insert(0, ('/wrist/tem_1/command', {'data': float('nan')}))
-        targets = [(f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
-                   for kind in ('strain', 'stress') for i in (1, 2)]
+        targets = [
+            (f'/wrist/muscle_{i}/{kind}_desired', {'data': float((strain[j] if kind == 'strain' else stress)[i - 1])})
+            for kind in ('strain', 'stress')
+            for i in (1, 2)
+        ]
         msgs += temps + (angle + cmds if order == 'in_order' else cmds + angle) + targets
-    got, rejected = _compensator_answers(probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')])
+    got, rejected = _compensator_answers(
+        probe_factory, stress, msgs, [Parameter('temperature_source', value='observer')]
+    )
     obs = MuscleTemperatureObserver(OBSERVER_THERMAL, TemperatureObserverParams())
-    raw = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True,
-                            stroke_gain_per_s=STROKE_GAIN_PER_S)
-    ref = MuscleCompensator(default_sdgpi(), shift_gain_per_s=2.0, shift_limit_C=15.0, window_follows_shift=True,
-                            stroke_gain_per_s=STROKE_GAIN_PER_S)
+    raw = MuscleCompensator(
+        default_sdgpi(),
+        shift_gain_per_s=2.0,
+        shift_limit_C=15.0,
+        window_follows_shift=True,
+        stroke_gain_per_s=STROKE_GAIN_PER_S,
+    )
+    ref = MuscleCompensator(
+        default_sdgpi(),
+        shift_gain_per_s=2.0,
+        shift_limit_C=15.0,
+        window_follows_shift=True,
+        stroke_gain_per_s=STROKE_GAIN_PER_S,
+    )
     expected, thermocouple = [], []
     for j in range(n):
-        est = obs.update(T[j:j + 1], u[j - 1:j] if j else np.zeros((1, 2)), 0.01)[0]
+        est = obs.update(T[j : j + 1], u[j - 1 : j] if j else np.zeros((1, 2)), 0.01)[0]
         if j:
             ref.track(est, stress, bundle_strain(plant, q[j]), 0.01)
             raw.track(T[j], stress, bundle_strain(plant, q[j]), 0.01)
@@ -518,6 +598,7 @@ def test_compensator_observer_runs_the_thermal_file_and_refuses_a_bad_one(tmp_pa
     from sma_wrist.core.thermal.heat_balance import ThermalParams
     from sma_wrist.core.thermal.params_file import write_thermal_file
     from sma_wrist.nodes.hysteresis_compensator import OBSERVER_THERMAL, HysteresisCompensator
+
     weak = dataclasses.replace(ThermalParams(), input_per_volt=0.7 * ThermalParams().input_per_volt)
     f = write_thermal_file(tmp_path / 'tems.yaml', weak, {'note': 'test'}, header='test')
     observer = {'temperature_source': 'observer'}
@@ -529,7 +610,9 @@ def test_compensator_observer_runs_the_thermal_file_and_refuses_a_bad_one(tmp_pa
     with Runtime(params={'/hysteresis_compensator': {**observer, 'thermal_file': missing}}) as rt:
         with pytest.raises(SmaWristError, match='missing.yaml'):
             rt.add(HysteresisCompensator)
-    with Runtime(params={'/hysteresis_compensator': {'temperature_source': 'thermocouple', 'thermal_file': missing}}) as rt:
+    with Runtime(
+        params={'/hysteresis_compensator': {'temperature_source': 'thermocouple', 'thermal_file': missing}}
+    ) as rt:
         assert rt.add(HysteresisCompensator).observer is None  # the thermocouple needs no heat balance
 
 
@@ -537,14 +620,16 @@ def test_compensator_observer_parameters_are_validated_with_a_reason():
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     with Runtime() as rt:
         node = rt.add(HysteresisCompensator)
-        name, = node.set_parameters([Parameter('temperature_source', value='kalman')])
-        negative, = node.set_parameters([Parameter('observer.correction_s', value=-0.1)])
-        ok = node.set_parameters([Parameter('temperature_source', value='observer'),
-                                  Parameter('observer.tc_lag_s', value=0.1)])
+        (name,) = node.set_parameters([Parameter('temperature_source', value='kalman')])
+        (negative,) = node.set_parameters([Parameter('observer.correction_s', value=-0.1)])
+        ok = node.set_parameters(
+            [Parameter('temperature_source', value='observer'), Parameter('observer.tc_lag_s', value=0.1)]
+        )
         on = node.observer is not None and node.observer.params.tc_lag_s == 0.1
-        commanded, = node.set_parameters([Parameter('memory_source', value='commanded')])
+        (commanded,) = node.set_parameters([Parameter('memory_source', value='commanded')])
     assert not name.successful and 'not one of' in name.reason
     assert not negative.successful and 'correction_s' in negative.reason
     assert all(r.successful for r in ok) and on
@@ -557,6 +642,7 @@ def test_compensator_hands_its_stroke_gain_to_the_core() -> None:
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     declared = {p.name: p for p in HysteresisCompensator.PARAMS}['stroke_gain_per_s']
     assert declared.default == STROKE_GAIN_PER_S == 0.5 and declared.range == (0.0, 20.0)
     with Runtime() as rt:
@@ -577,24 +663,39 @@ def test_compensator_warns_while_a_learnt_shift_sits_on_its_limit(probe_factory)
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
+
     stress = MuscleGeometry().stress_Pa(np.array([0.8, 0.7]))
     rest = bundle_strain(PlantParams(), 0.5)
 
-    def run(gain: float, hold: bool = False, q: float = -0.1, stress=stress, n: int = 400,  # type: ignore[no-untyped-def]
-            in_range: bool = True, temp: float = 55.0):
+    def run(
+        gain: float,
+        hold: bool = False,
+        q: float = -0.1,
+        stress=stress,
+        n: int = 400,  # type: ignore[no-untyped-def]
+        in_range: bool = True,
+        temp: float = 55.0,
+    ):
         with Runtime() as rt:
             probe = probe_factory(rt, ('/diagnostics',))
-            node = rt.add(HysteresisCompensator, parameter_overrides=[
-                Parameter('temperature_source', value='thermocouple'), Parameter('shift_gain_per_s', value=gain),
-                Parameter('hold_shift_on_stop', value=hold), Parameter('hold_shift_outside_load_range', value=in_range)])
+            node = rt.add(
+                HysteresisCompensator,
+                parameter_overrides=[
+                    Parameter('temperature_source', value='thermocouple'),
+                    Parameter('shift_gain_per_s', value=gain),
+                    Parameter('hold_shift_on_stop', value=hold),
+                    Parameter('hold_shift_outside_load_range', value=in_range),
+                ],
+            )
             for i in (1, 2):
                 probe.publish(f'/wrist/muscle_{i}/stress', data=float(stress[i - 1]))
             for j in range(n):  # 4 s at 100 Hz
                 header = Header(stamp=Time(sec=1 + j // 100, nanosec=(j % 100) * 10_000_000))
                 for i in (1, 2):
                     probe.publish(f'/wrist/muscle_{i}/temperature', header=header, temperature=temp)
-                probe.publish('/wrist/joint_states', header=header, name=['wrist'], position=[q], velocity=[0.0],
-                              effort=[0.0])
+                probe.publish(
+                    '/wrist/joint_states', header=header, name=['wrist'], position=[q], velocity=[0.0], effort=[0.0]
+                )
                 for kind, v in (('strain', rest), ('stress', stress)):
                     for i in (1, 2):
                         probe.publish(f'/wrist/muscle_{i}/{kind}_desired', data=float(v[i - 1]))
@@ -647,7 +748,9 @@ def test_a_runtime_parameter_change_keeps_what_the_tems_online_estimate_has_lear
         assert comp.set_parameters([Parameter('shift_gain_per_s', value=1.0)])[0].successful
         assert comp.estimator is est
         np.testing.assert_array_equal(comp.observer.coef_rows, rows)
-    assert est is not None and not np.array_equal(coef, scaled_constants(tem.loop.base_thermal, np.array([[1.0, 1.0, 0.0]]))[0])
+    assert est is not None and not np.array_equal(
+        coef, scaled_constants(tem.loop.base_thermal, np.array([[1.0, 1.0, 0.0]]))[0]
+    )
 
 
 def test_tem_controller_reports_its_chatter_guard_on_diagnostics(probe_factory):
@@ -656,12 +759,20 @@ def test_tem_controller_reports_its_chatter_guard_on_diagnostics(probe_factory):
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.tem_controller import TemController
+
     for limit in (1.0, 0.0):
         with Runtime() as rt:
             probe = probe_factory(rt, ('/wrist/tem_1/command',))
             node = rt.add(TemController)
-            assert all(r.successful for r in node.set_parameters([
-                Parameter('chatter_guard.limit_per_s', value=limit), Parameter('chatter_guard.window_s', value=2.0)]))
+            assert all(
+                r.successful
+                for r in node.set_parameters(
+                    [
+                        Parameter('chatter_guard.limit_per_s', value=limit),
+                        Parameter('chatter_guard.window_s', value=2.0),
+                    ]
+                )
+            )
             for i in (1, 2):
                 probe.every(0.01, f'/wrist/muscle_{i}/temperature', temperature=40.0)
             for k in range(400):
@@ -684,10 +795,16 @@ def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_facto
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.nodes import plant_sim
+
     real = PlantParams.from_files.__func__  # plant_sim builds its plant with it
     for bound in (0.8, MuscleGeometry().max_load_kgf):
-        monkeypatch.setattr(PlantParams, 'from_files', classmethod(
-            lambda cls, *a, bound=bound, **kw: real(cls, *a, muscle=MuscleGeometry(max_load_kgf=bound), **kw)))
+        monkeypatch.setattr(
+            PlantParams,
+            'from_files',
+            classmethod(
+                lambda cls, *a, bound=bound, **kw: real(cls, *a, muscle=MuscleGeometry(max_load_kgf=bound), **kw)
+            ),
+        )
         with Runtime() as rt:
             probe = probe_factory(rt, (), sim_time=True)
             node = rt.add(plant_sim.PlantSim)
@@ -703,18 +820,22 @@ def test_plant_sim_reports_a_wire_held_at_the_wire_models_load_bound(probe_facto
             assert 0.8 < peak_kgf < 1.5 and load == [], (peak_kgf, load)
 
 
-@pytest.mark.parametrize('executable, waits_for', [
-    ('trajectory_generator', '/clock'),
-    ('adaptive_controller', 'the reference (/wrist/reference) and the joint state'),
-    ('hysteresis_compensator', 'the desired strains and stresses (/wrist/muscle_{1,2}/strain_desired'),
-    ('tem_controller', 'desired muscle temperatures (/wrist/muscle_{1,2}/temperature, temperature_desired)'),
-])
+@pytest.mark.parametrize(
+    'executable, waits_for',
+    [
+        ('trajectory_generator', '/clock'),
+        ('adaptive_controller', 'the reference (/wrist/reference) and the joint state'),
+        ('hysteresis_compensator', 'the desired strains and stresses (/wrist/muscle_{1,2}/strain_desired'),
+        ('tem_controller', 'desired muscle temperatures (/wrist/muscle_{1,2}/temperature, temperature_desired)'),
+    ],
+)
 def test_a_controller_node_says_at_start_what_it_waits_for(executable, waits_for):
     """Started with `ros2 run`, the four controller nodes printed nothing until their inputs came: one INFO line at
     start now names the node's key settings and what it waits for."""
     from sma_wrist.closed_loop import ros_args
     from sma_wrist.runtime.launch_file import node_class
     from sma_wrist.runtime.rclpy import logging as rlog
+
     records: list[tuple[object, str]] = []
     remove = rlog.add_sink(lambda sev, name, msg, t: records.append((sev, msg)) if name == executable else None)
     try:

@@ -1,4 +1,5 @@
 """plant_sim on the embedded runtime: drive in, measurements and /clock out, bad input handled."""
+
 from __future__ import annotations
 
 import math
@@ -8,12 +9,23 @@ import pytest
 from sma_wrist.runtime.launch import Runtime
 
 
-def _measure(probe_factory, command_1: float | None, seconds: float = 3.0, params: dict | None = None,
-             bad: bool = False):
+def _measure(
+    probe_factory, command_1: float | None, seconds: float = 3.0, params: dict | None = None, bad: bool = False
+):
     from sma_wrist.nodes.plant_sim import PlantSim
+
     with Runtime(params={'/plant_sim': params or {}}) as rt:
-        probe = probe_factory(rt, ('/wrist/muscle_1/temperature', '/wrist/muscle_2/temperature',
-                                   '/wrist/joint_states', '/clock', '/wrist/payload', '/wrist/muscle_1/stress'))
+        probe = probe_factory(
+            rt,
+            (
+                '/wrist/muscle_1/temperature',
+                '/wrist/muscle_2/temperature',
+                '/wrist/joint_states',
+                '/clock',
+                '/wrist/payload',
+                '/wrist/muscle_1/stress',
+            ),
+        )
         node = rt.add(PlantSim)
         if command_1 is not None:
             probe.every(0.01, '/wrist/tem_1/command', data=command_1)
@@ -31,8 +43,13 @@ def test_heating_command_warms_muscle_1_and_moves_the_joint_up(probe_factory):
     T_hot = hot.got['/wrist/muscle_1/temperature'][-1].temperature
     assert T_hot > T_idle + 3.0
     # muscle 2 untouched
-    assert abs(hot.got['/wrist/muscle_2/temperature'][-1].temperature
-               - idle.got['/wrist/muscle_2/temperature'][-1].temperature) < 0.5
+    assert (
+        abs(
+            hot.got['/wrist/muscle_2/temperature'][-1].temperature
+            - idle.got['/wrist/muscle_2/temperature'][-1].temperature
+        )
+        < 0.5
+    )
     assert hot.got['/wrist/joint_states'][-1].position[0] >= idle.got['/wrist/joint_states'][-1].position[0]
 
 
@@ -58,6 +75,7 @@ def test_nan_commands_are_rejected_and_reported_not_applied(probe_factory):
 
 def test_stale_command_switches_the_tem_off(probe_factory):
     from sma_wrist.nodes.plant_sim import PlantSim
+
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/muscle_1/temperature',))
         rt.add(PlantSim)
@@ -74,13 +92,14 @@ def test_out_of_range_payload_update_is_rejected_with_a_reason_and_valid_one_app
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.plant_sim import PlantSim
+
     with Runtime() as rt:
         probe = probe_factory(rt, ('/wrist/payload',))
         node = rt.add(PlantSim)
-        bad, = node.set_parameters([Parameter('payload_kg', value=5.0)])
-        wrong_type, = node.set_parameters([Parameter('payload_kg', value='heavy')])
-        fixed, = node.set_parameters([Parameter('dt_s', value=0.002)])
-        good, = node.set_parameters([Parameter('payload_kg', value=0.5)])
+        (bad,) = node.set_parameters([Parameter('payload_kg', value=5.0)])
+        (wrong_type,) = node.set_parameters([Parameter('payload_kg', value='heavy')])
+        (fixed,) = node.set_parameters([Parameter('dt_s', value=0.002)])
+        (good,) = node.set_parameters([Parameter('payload_kg', value=0.5)])
         rt.run_until(0.1, until='steady')
     assert not bad.successful and 'out of range' in bad.reason
     assert not wrong_type.successful
@@ -90,27 +109,36 @@ def test_out_of_range_payload_update_is_rejected_with_a_reason_and_valid_one_app
     assert [m.data for m in probe.got['/wrist/payload']][-1] == 0.5
 
 
-@pytest.mark.parametrize('argv, message', [
-    (['-p', 'payload_kg:=1'], 'invalid parameter'),  # an integer for a double (write 1.0)
-    (['-p', 'payload_kg:=5.0'], 'invalid parameter'),  # outside the descriptor's range
-    (['-p', 'use_sim_time:=true'], 'publishes /clock itself'),  # it would wait for its own clock
-])
+@pytest.mark.parametrize(
+    'argv, message',
+    [
+        (['-p', 'payload_kg:=1'], 'invalid parameter'),  # an integer for a double (write 1.0)
+        (['-p', 'payload_kg:=5.0'], 'invalid parameter'),  # outside the descriptor's range
+        (['-p', 'use_sim_time:=true'], 'publishes /clock itself'),  # it would wait for its own clock
+    ],
+)
 def test_bad_startup_parameters_exit_2_with_the_reason_not_a_traceback(capsys, argv, message):
     from sma_wrist.nodes.common import main_for
     from sma_wrist.nodes.plant_sim import PlantSim
+
     assert main_for(PlantSim, ['plant_sim', '--ros-args', *argv]) == 2
     out = capsys.readouterr().out
     assert out.startswith('error: ') and message in out and 'Traceback' not in out
 
 
-@pytest.mark.parametrize('value, message', [
-    ('.nan', 'invalid parameter dt_s'),  # outside the descriptor's range
-    ('"fast"', "Trying to set parameter 'dt_s' to 'fast'"),  # a string for a double
-])
-def test_sma_wrist_run_refuses_a_bad_params_file_value_with_the_reason_not_a_traceback(tmp_path, capsys, value,
-                                                                                       message):
+@pytest.mark.parametrize(
+    'value, message',
+    [
+        ('.nan', 'invalid parameter dt_s'),  # outside the descriptor's range
+        ('"fast"', "Trying to set parameter 'dt_s' to 'fast'"),  # a string for a double
+    ],
+)
+def test_sma_wrist_run_refuses_a_bad_params_file_value_with_the_reason_not_a_traceback(
+    tmp_path, capsys, value, message
+):
     """sma-wrist run builds the nodes in-process: rclpy's refusal must reach the user as ros2 run's one line."""
     from sma_wrist.cli import main
+
     f = tmp_path / 'bad.yaml'
     f.write_text(f'plant_sim:\n  ros__parameters:\n    dt_s: {value}\n')
     assert main(['run', '--duration', '1', '--quiet', '--params-file', str(f)]) == 2
@@ -118,18 +146,27 @@ def test_sma_wrist_run_refuses_a_bad_params_file_value_with_the_reason_not_a_tra
     assert err.startswith('error: PlantSim: ') and message in err and err.count('\n') == 1, err
 
 
-@pytest.mark.parametrize('body, message', [
-    ('plant_sim:\n  ros__parameters:\n    dt_s: .nan\n', 'error: PlantSim: invalid parameter dt_s'),
-    ('plant_sim:\n  ros__parameters:\n    payload_kgs: 0.5\n',
-     'error: not a parameter of the node graph (misspelt?): payload_kgs under plant_sim'),
-    ('/**:\n  ros__parameters:\n    gain: 2.0\n', 'error: not a parameter of the node graph (misspelt?): gain under /**'),
-])
+@pytest.mark.parametrize(
+    'body, message',
+    [
+        ('plant_sim:\n  ros__parameters:\n    dt_s: .nan\n', 'error: PlantSim: invalid parameter dt_s'),
+        (
+            'plant_sim:\n  ros__parameters:\n    payload_kgs: 0.5\n',
+            'error: not a parameter of the node graph (misspelt?): payload_kgs under plant_sim',
+        ),
+        (
+            '/**:\n  ros__parameters:\n    gain: 2.0\n',
+            'error: not a parameter of the node graph (misspelt?): gain under /**',
+        ),
+    ],
+)
 def test_sma_wrist_run_refuses_a_params_file_before_it_records(tmp_path, capsys, body, message):
     """A value a node refused was met only after the bag had been opened: the bag was left behind and the rerun
     failed with "already exists". A misspelt name (ROS ignores it) ran the defaults in silence, as the sweep refuses
     it. Both are now refused before anything is recorded; a name of a node that is not in this graph (the hardware
     bridge's, in a simulated run) is not this run's business."""
     from sma_wrist.cli import main
+
     f = tmp_path / 'params.yaml'
     f.write_text(body)
     bag = tmp_path / 'bag'
@@ -137,8 +174,10 @@ def test_sma_wrist_run_refuses_a_params_file_before_it_records(tmp_path, capsys,
     err = capsys.readouterr().err
     assert err.startswith(message) and err.count('\n') == 1, err
     assert not bag.exists()
-    f.write_text('hardware_bridge:\n  ros__parameters:\n    no_such_name: 1\nplant_sim:\n  ros__parameters:\n'
-                 '    payload_kg: 0.2\n')
+    f.write_text(
+        'hardware_bridge:\n  ros__parameters:\n    no_such_name: 1\nplant_sim:\n  ros__parameters:\n'
+        '    payload_kg: 0.2\n'
+    )
     assert main(['run', '--duration', '0.5', '--quiet', '--params-file', str(f), '--bag', str(bag)]) == 0
     assert bag.is_dir()
 
@@ -147,14 +186,16 @@ def test_clock_owner_refuses_use_sim_time_at_run_time(probe_factory):
     from rclpy.parameter import Parameter
 
     from sma_wrist.nodes.plant_sim import PlantSim
+
     with Runtime() as rt:
         node = rt.add(PlantSim)
-        res, = node.set_parameters([Parameter('use_sim_time', value=True)])
+        (res,) = node.set_parameters([Parameter('use_sim_time', value=True)])
     assert not res.successful and 'publishes /clock itself' in res.reason
 
 
 def test_real_time_monitor_reports_the_achieved_factor_per_window():
     from sma_wrist.nodes.plant_sim import RealTimeMonitor
+
     m = RealTimeMonitor(window_s=5.0)
     assert m.update(0.0, 100.0) is None  # starts a window
     assert m.update(2.0, 104.0) is None  # window not over

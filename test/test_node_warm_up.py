@@ -6,6 +6,7 @@ the TEMs went off ("no fresh command on tem_1, tem_2: TEM off" 4.5 s into the fi
 mechanism: in a fresh interpreter, no kernel of the package gets its first compiled signature (compiled or
 loaded from numba's cache) after the nodes were constructed.
 """
+
 from __future__ import annotations
 
 import json
@@ -16,7 +17,7 @@ import pytest
 
 from sma_wrist.core.jit import AVAILABLE
 
-SCRIPT = r'''
+SCRIPT = r"""
 import json, sys
 from sma_wrist import runtime
 runtime.activate()
@@ -42,7 +43,7 @@ for mode in ('pid', 'direct_adaptive', 'inverse_adaptive'):
         rt.run_until(3.5, until='sim')  # the estimate's first window closes at ~2 s
         found[mode] = sorted(k for k, n in signatures().items() if n > before.get(k, 0))
 print(json.dumps(found))
-'''
+"""
 
 
 @pytest.mark.skipif(not AVAILABLE, reason='without numba nothing is compiled')

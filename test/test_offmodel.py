@@ -4,6 +4,7 @@ inverse, the TEM target prefilter, and short closed loops on perturbed and phase
 Bounds are the figures measured with ``sma_wrist.plants.loop`` (1 cycle, 0.3 kg) with a margin of
 about a third; doc/explanation/controllers.md has the full 126 s table.
 """
+
 from __future__ import annotations
 
 import functools
@@ -13,16 +14,28 @@ import numpy as np
 import pytest
 
 from sma_wrist.core.control.joint_controller import JointControllerParams
-from sma_wrist.core.control.tem import (DriveLimits, MuscleTemperatureObserver, TemControlParams, TemLoop,
-                                        TemperatureObserverParams)
+from sma_wrist.core.control.tem import (
+    DriveLimits,
+    MuscleTemperatureObserver,
+    TemControlParams,
+    TemLoop,
+    TemperatureObserverParams,
+)
 from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
 from sma_wrist.core.hysteresis.sdgpi import initial_state, step
 from sma_wrist.core.thermal import heat_balance as th
-from sma_wrist.plants.loop import (CASES, REVERSAL_BAND_V, LoopResult, reversals_per_s, run_cases, run_loop,
-                                   shifted_sdgpi)
+from sma_wrist.plants.loop import (
+    CASES,
+    REVERSAL_BAND_V,
+    LoopResult,
+    reversals_per_s,
+    run_cases,
+    run_loop,
+    shifted_sdgpi,
+)
 from sma_wrist.sweep.simulate import Case, simulate
 
 #: TEM command sign changes per second allowed (doc/explanation/controllers.md): one heating/cooling
@@ -67,14 +80,20 @@ def test_the_inverse_learns_a_shifted_temperature_axis() -> None:
 def test_prefilter_follows_ramps_without_lag_and_attenuates_noise() -> None:
     hold = th.ThermalParams()
     drive = DriveLimits()
-    loop = TemLoop(hold.with_limits(drive.boost_min_V, drive.boost_max_V),
-                   TemControlParams(rate_filter_s=0.05, target_filter_s=0.5), drive, hold, 85.0)
+    loop = TemLoop(
+        hold.with_limits(drive.boost_min_V, drive.boost_max_V),
+        TemControlParams(rate_filter_s=0.05, target_filter_s=0.5),
+        drive,
+        hold,
+        85.0,
+    )
     t = np.arange(0.0, 30.0, 0.01)
     rng = np.random.default_rng(0)
     ramp = 30.0 + 1.0 * t  # 1 degC/s, faster than the sine's targets
     noise = rng.normal(0.0, 1.0, t.size)
-    out = np.array([loop._prefilter(np.array([r + n, r]), 0.01 if k else None)
-                    for k, (r, n) in enumerate(zip(ramp, noise))])
+    out = np.array(
+        [loop._prefilter(np.array([r + n, r]), 0.01 if k else None) for k, (r, n) in enumerate(zip(ramp, noise))]
+    )
     late = t > 10.0
     # a ramp passes without lag: within one sample's step of it (explicit Euler), where a first-order
     # filter of 0.5 s would lag by 0.5 degC
@@ -88,8 +107,10 @@ def test_both_tem_paths_get_the_filtered_target() -> None:
     hold = th.ThermalParams()
     drive = DriveLimits()
     params = TemControlParams(rate_filter_s=0.05, target_filter_s=0.5)
-    loops = [TemLoop(hold.with_limits(drive.boost_min_V, drive.boost_max_V), params, drive, hold, 85.0,
-                     compiled=c) for c in (False, True)]
+    loops = [
+        TemLoop(hold.with_limits(drive.boost_min_V, drive.boost_max_V), params, drive, hold, 85.0, compiled=c)
+        for c in (False, True)
+    ]
     rng = np.random.default_rng(1)
     T, T_d = np.array([30.0, 30.0]), np.array([40.0, 25.0])
     for k in range(300):
@@ -125,9 +146,15 @@ def test_target_prefilter_removes_chattering_on_noisy_sensors() -> None:
     runs the PID as it was then (Kp / Ki 300 / 60, unfiltered)."""
     r = _one_cycle('sensors', 'pid')
     assert r.reversals_per_s < 1.5 * REVERSALS_LIMIT_PER_S and r.max_error_pct < 11.0
-    raw = _one_cycle('sensors', 'pid', tem_params=TemControlParams(rate_filter_s=0.05),
-                     controller_overrides={'pid_output_filter_s': 0.0, 'pid': replace(JointControllerParams().pid,
-                                                                                      kp=300.0, ki=60.0)})
+    raw = _one_cycle(
+        'sensors',
+        'pid',
+        tem_params=TemControlParams(rate_filter_s=0.05),
+        controller_overrides={
+            'pid_output_filter_s': 0.0,
+            'pid': replace(JointControllerParams().pid, kp=300.0, ki=60.0),
+        },
+    )
     assert raw.reversals_per_s > 15.0
 
 
@@ -142,11 +169,18 @@ def test_reference_lead_brings_direct_and_pid_onto_a_weaker_wire() -> None:
     led = [_without_inverse('stroke x0.7')[m] for m in ('direct_adaptive', 'pid')]
     assert [r.max_error_pct < 15.0 for r in led] == [True, True]
     assert all(r.reversals_per_s < REVERSALS_LIMIT_PER_S for r in led)
-    plain = run_cases(cases, 62.83, window_s=31.4,
-                      controller_overrides={'pid_reference_lead_s': 0.0, 'direct_reference_lead_s': 0.0,
-                                            'force_per_degC_N': 3.0, 'direct_output_filter_s': 0.0})
+    plain = run_cases(
+        cases,
+        62.83,
+        window_s=31.4,
+        controller_overrides={
+            'pid_reference_lead_s': 0.0,
+            'direct_reference_lead_s': 0.0,
+            'force_per_degC_N': 3.0,
+            'direct_output_filter_s': 0.0,
+        },
+    )
     assert [r.max_error_pct > 16.0 for r in plain] == [True, True]
-
 
 
 def test_direct_proportional_map_tracks_a_weaker_wire_without_chattering() -> None:
@@ -158,12 +192,13 @@ def test_direct_proportional_map_tracks_a_weaker_wire_without_chattering() -> No
     weak, noisy = (_without_inverse(c)['direct_adaptive'] for c in ('stroke x0.7', 'sensors'))
     assert weak.max_error_pct < 10.0 and noisy.reversals_per_s < REVERSALS_LIMIT_PER_S
     cases = [(CASES[c](0.3), 'direct_adaptive') for c in ('stroke x0.7', 'sensors')]
-    weak_before, noisy_before = run_cases(cases, 62.83, window_s=31.4,
-                                          controller_overrides={'force_per_degC_N': 3.0, 'direct_output_filter_s': 0.0})
+    weak_before, noisy_before = run_cases(
+        cases, 62.83, window_s=31.4, controller_overrides={'force_per_degC_N': 3.0, 'direct_output_filter_s': 0.0}
+    )
     assert weak_before.max_error_pct > 12.0 and noisy_before.reversals_per_s > REVERSALS_LIMIT_PER_S
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _one_cycle_all(case: str, modes: tuple[str, ...]) -> dict[str, LoopResult]:
     """:func:`_one_cycle` for several modes in one vectorised run (a loop does not depend on its
     neighbours, test_sweep), computed once for the parametrised tests that read it."""
@@ -171,12 +206,13 @@ def _one_cycle_all(case: str, modes: tuple[str, ...]) -> dict[str, LoopResult]:
     return dict(zip(modes, res))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _without_inverse_runs() -> dict[tuple[str, str], LoopResult]:
     """direct_adaptive and pid, one cycle (:func:`_one_cycle`), on the cases their tests read, in
     one vectorised run (the per-tick work is shared; a loop does not depend on its neighbours)."""
     keys = [(c, m) for c in ('losses +30%', 'stroke x0.7') for m in ('direct_adaptive', 'pid')] + [
-        ('sensors', 'direct_adaptive')]
+        ('sensors', 'direct_adaptive')
+    ]
     return dict(zip(keys, run_cases([(CASES[c](0.3), m) for c, m in keys], 62.83, window_s=31.4)))
 
 
@@ -207,8 +243,13 @@ PHASE_FRACTION = {'inverse_adaptive': 50.0, 'direct_adaptive': 75.0, 'pid': 60.0
 _SHORT = {'inverse_adaptive': 'inverse on the phase-fraction wrist: 58 % > 50 %, not yet solved'}
 
 
-@pytest.mark.parametrize('mode', [pytest.param(m, marks=pytest.mark.xfail(strict=True, reason=_SHORT[m]))
-                                  if m in _SHORT else m for m in PHASE_FRACTION])
+@pytest.mark.parametrize(
+    'mode',
+    [
+        pytest.param(m, marks=pytest.mark.xfail(strict=True, reason=_SHORT[m])) if m in _SHORT else m
+        for m in PHASE_FRACTION
+    ],
+)
 def test_each_mode_on_the_phase_fraction_wrist(mode: str) -> None:
     r = _one_cycle_all('phase_fraction', tuple(PHASE_FRACTION))[mode]
     assert r.max_error_pct < PHASE_FRACTION[mode]
@@ -235,15 +276,17 @@ def test_true_temperature_reaches_only_the_named_consumer() -> None:
     bit-equal."""
     sc = CASES['sensors'](0.3).scenario
     cases = [Case(0, 'inverse_adaptive', sc), Case(1, 'pid', sc)]
-    u = {tt: simulate(cases, 10.0, record=True, true_temperature=tt)[1].command_V
-         for tt in [(), ('compensator',), ('tem',)]}
+    u = {
+        tt: simulate(cases, 10.0, record=True, true_temperature=tt)[1].command_V
+        for tt in [(), ('compensator',), ('tem',)]
+    }
     assert not np.array_equal(u[('compensator',)][:, 0], u[()][:, 0])
     assert np.array_equal(u[('compensator',)][:, 1], u[()][:, 1])
     assert not np.array_equal(u[('tem',)][:, 1], u[()][:, 1])
 
 
 def test_true_temperature_names_known_consumers_only() -> None:
-    with pytest.raises(ParameterError, match="unknown consumer.*thermostat"):
+    with pytest.raises(ParameterError, match='unknown consumer.*thermostat'):
         run_loop(CASES['nominal'](0.3), 'pid', 1.0, true_temperature=('thermostat',))
 
 
@@ -287,10 +330,19 @@ def test_observer_in_front_of_the_compensator_recovers_the_inverse_on_noisy_sens
     front of the compensator (the true temperature there: 3.5 %); 3.38 % with the defaults
     (temperature_source observer, window following the shift, shift gain 2 /s)."""
     # the observer's own effect: without the online TEM estimate (core.thermal.online), which learns in this cycle
-    assert _one_cycle('sensors', 'inverse_adaptive', compensator_observer=None, window_follows_shift=False,
-                      online_thermal=None).max_error_pct > 10.0
-    r = _one_cycle('sensors', 'inverse_adaptive', compensator_observer=TemperatureObserverParams(),
-                   window_follows_shift=False, online_thermal=None)
+    assert (
+        _one_cycle(
+            'sensors', 'inverse_adaptive', compensator_observer=None, window_follows_shift=False, online_thermal=None
+        ).max_error_pct
+        > 10.0
+    )
+    r = _one_cycle(
+        'sensors',
+        'inverse_adaptive',
+        compensator_observer=TemperatureObserverParams(),
+        window_follows_shift=False,
+        online_thermal=None,
+    )
     assert r.max_error_pct < 4.0
     assert _one_cycle('sensors', 'inverse_adaptive', online_thermal=None).max_error_pct < 4.0
 
@@ -305,8 +357,7 @@ def test_inverse_window_follows_the_learnt_shift() -> None:
     that was the wrong-way drift the slope's sign had caused, not the window."""
     # the window's own effect: without the online TEM estimate, which rescues a fixed window too
     assert _one_cycle('T-10', 'inverse_adaptive', online_thermal=None).max_error_pct < 5.0
-    assert _one_cycle('T-10', 'inverse_adaptive', window_follows_shift=False,
-                      online_thermal=None).max_error_pct > 10.0
+    assert _one_cycle('T-10', 'inverse_adaptive', window_follows_shift=False, online_thermal=None).max_error_pct > 10.0
 
 
 def test_inverse_window_per_wire_is_checked_and_used() -> None:
@@ -314,8 +365,9 @@ def test_inverse_window_per_wire_is_checked_and_used() -> None:
     to the window's top (80 degC) on its own axis, the model's window moved to 30-90 degC; a window
     outside the model's validity or a non-numerical inverse is refused with the reason."""
     geo = MuscleGeometry()
-    comp = MuscleCompensator(default_sdgpi(), geo, T_range_C=(20.0, 80.0), shift_gain_per_s=1.0,
-                             window_follows_shift=True)
+    comp = MuscleCompensator(
+        default_sdgpi(), geo, T_range_C=(20.0, 80.0), shift_gain_per_s=1.0, window_follows_shift=True
+    )
     stress = np.full(2, 0.9 * 9.80665 / geo.wire_area_m2)
     comp.reset(np.array([40.0, 40.0]), stress)
     comp.shift_C = np.array([-10.0, 0.0])
@@ -333,7 +385,6 @@ def test_inverse_window_per_wire_is_checked_and_used() -> None:
     analytic.reset(np.array([40.0, 40.0]), stress)
     with pytest.raises(ParameterError, match='numerical'):
         analytic.inverse.solve(np.zeros(2), np.full(2, 0.9), window=(np.full(2, 20.0), np.full(2, 80.0)))
-
 
 
 def _stroke_run(stroke: float, gain: float) -> MuscleCompensator:
@@ -406,14 +457,26 @@ def test_the_inverse_adapts_on_a_wire_identified_from_measured_loops(tmp_path) -
     from sma_wrist.identify.wrist import rated_tems
     from sma_wrist.plants.spread import Scenario
     from sma_wrist.sweep.graph_params import loop_settings
+
     flex = Path(__file__).parent / 'data' / 'flexinol'
     tems = write_thermal_file(tmp_path / 'tems.yaml', rated_tems(120.0))
-    doc = run(Options([str(p) for p in sorted(flex.glob('*MPa.txt'))], out=str(tmp_path), loo=False, plots=False,
-                      model='saturating', thermal_file=str(tems)), progress=lambda m: None)
+    doc = run(
+        Options(
+            [str(p) for p in sorted(flex.glob('*MPa.txt'))],
+            out=str(tmp_path),
+            loo=False,
+            plots=False,
+            model='saturating',
+            thermal_file=str(tems),
+        ),
+        progress=lambda m: None,
+    )
     kw = loop_settings([doc['wrist_params']['file']]).kwargs
     assert kw['hold_shift_outside_load_range'] is False  # config/wrist.yaml's default
-    cases = [Case(0, 'inverse_adaptive', Scenario(payload_kg=0.3, noise_seed=5)),
-             Case(1, 'inverse_adaptive', Scenario(payload_kg=0.3, transition_shift_C=5.0, noise_seed=5))]
+    cases = [
+        Case(0, 'inverse_adaptive', Scenario(payload_kg=0.3, noise_seed=5)),
+        Case(1, 'inverse_adaptive', Scenario(payload_kg=0.3, transition_shift_C=5.0, noise_seed=5)),
+    ]
     tem = kw['tem_loop']
     unguarded = {**kw, 'tem_loop': replace(tem, params=replace(tem.params, chatter_limit_per_s=0.0))}
     rows = simulate(cases, 126.0, **kw)[0] + simulate(cases, 126.0, **unguarded)[0]

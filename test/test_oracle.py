@@ -3,6 +3,7 @@
 doc/explanation/controllers.md has the family's figures
 (126 s); these are short runs that check each switch reaches what it names and nothing else.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -36,8 +37,9 @@ def test_oracle_switches_are_validated() -> None:
 def test_oracle_models_are_the_plants_own() -> None:
     """The compensator inverts exactly the SD-GPI the plant steps and learns nothing; the TEM bank integrates
     exactly the plant's heat balance (TEM gain, losses, ambient) with the law's command limits."""
-    sc = Scenario(transition_shift_C=-7.0, stroke_scale=1.2, tem_gain_scale=0.75, heat_loss_scale=1.25,
-                  ambient_offset_C=4.0)
+    sc = Scenario(
+        transition_shift_C=-7.0, stroke_scale=1.2, tem_gain_scale=0.75, heat_loss_scale=1.25, ambient_offset_C=4.0
+    )
     own = scenario_params(sc)
     built_tem = TemLoopBank.like_node(3)
     tem = oracle.own_tem_bank(built_tem, sc)
@@ -77,8 +79,10 @@ def test_payload_oracle_reaches_the_adaptive_law_only() -> None:
     params = JointControllerParams(mode='direct_adaptive')
     known = oracle.knows_payload(params, 0.55)
     assert known.adaptive.theta0_kg == 0.55 and known.adaptive.gamma_a == 0.0
-    forces = [JointControllerBank(p, 1).update(np.array([0.6]), np.full(1, 0.1), 0.6, 0.1, 0.0, 0.01)[0]
-              for p in (params, known)]
+    forces = [
+        JointControllerBank(p, 1).update(np.array([0.6]), np.full(1, 0.1), 0.6, 0.1, 0.0, 0.01)[0]
+        for p in (params, known)
+    ]
     assert not np.allclose(forces[0], forces[1])
 
 
@@ -96,20 +100,49 @@ def test_own_sdgpi_tracks_a_colder_wire_without_learning() -> None:
     measured over the last 10 s of 25 s); the as-built compensator with its adaptation off does not (166 %).
     The reference starts at its first value: 25 s of a soft start would be the muscles' warm-up alone."""
     case = CASES['T-10'](0.3)
-    own, blind = (run_cases([(case, 'inverse_adaptive')], 25.0, window_s=10.0, oracle=o, shift_gain_per_s=0.0,
-                            stroke_gain_per_s=0.0, soft_start_s=0.0)[0].max_error_pct for o in (('hysteresis',), ()))
+    own, blind = (
+        run_cases(
+            [(case, 'inverse_adaptive')],
+            25.0,
+            window_s=10.0,
+            oracle=o,
+            shift_gain_per_s=0.0,
+            stroke_gain_per_s=0.0,
+            soft_start_s=0.0,
+        )[0].max_error_pct
+        for o in (('hysteresis',), ())
+    )
     assert own < 10.0
     assert blind > 50.0
 
 
 def test_summary_counts_the_family_and_its_reachable_plants() -> None:
-    rows = [{'group': 'spread', 'plant_index': i, 'variant': 'reach', 'reach_floor_pct': f}
-            for i, f in enumerate((0.0, 2.0, 20.0))]
-    rows += [{'group': 'spread', 'plant_index': i, 'variant': v, 'controller': 'inverse_adaptive',
-              'max_error_pct': e, **Scenario().to_dict()}
-             for v, errs in (('as_built', (5.0, 12.0, 40.0)), ('all', (3.0, 6.0, 30.0))) for i, e in enumerate(errs)]
-    rows += [{'group': 'nominal', 'plant_index': 0, 'variant': 'as_built', 'controller': 'inverse_adaptive',
-              'max_error_pct': 2.5, **Scenario().to_dict()}]
+    rows = [
+        {'group': 'spread', 'plant_index': i, 'variant': 'reach', 'reach_floor_pct': f}
+        for i, f in enumerate((0.0, 2.0, 20.0))
+    ]
+    rows += [
+        {
+            'group': 'spread',
+            'plant_index': i,
+            'variant': v,
+            'controller': 'inverse_adaptive',
+            'max_error_pct': e,
+            **Scenario().to_dict(),
+        }
+        for v, errs in (('as_built', (5.0, 12.0, 40.0)), ('all', (3.0, 6.0, 30.0)))
+        for i, e in enumerate(errs)
+    ]
+    rows += [
+        {
+            'group': 'nominal',
+            'plant_index': 0,
+            'variant': 'as_built',
+            'controller': 'inverse_adaptive',
+            'max_error_pct': 2.5,
+            **Scenario().to_dict(),
+        }
+    ]
     s = {r['variant']: r for r in oracle.summary(rows)}
     assert s['as_built']['median'] == 12.0 and s['as_built']['under_15'] == pytest.approx(2 / 3)
     assert s['as_built']['n_reachable'] == 2 and s['as_built']['median_reachable'] == 8.5

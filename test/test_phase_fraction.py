@@ -1,4 +1,5 @@
 """The phase-fraction benchmark wrist: its own physics, and the controllers on it."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -9,8 +10,15 @@ import pytest
 from sma_wrist.core.errors import ModelInputError, ParameterError
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.loop import reversals_per_s
-from sma_wrist.plants.phase_fraction import (PhaseFractionParams, PhaseFractionPlant, SensorParams, WireParams,
-                                             fraction_path, major_cooling, major_heating)
+from sma_wrist.plants.phase_fraction import (
+    PhaseFractionParams,
+    PhaseFractionPlant,
+    SensorParams,
+    WireParams,
+    fraction_path,
+    major_cooling,
+    major_heating,
+)
 
 W = WireParams()
 
@@ -130,9 +138,12 @@ def test_a_rig_on_this_wire_gives_identify_its_clausius_clapeyron_slopes(tmp_pat
     the largest stroke): left out, with a warning; with it the A_50 slope read 0.25 degC/MPa."""
     from sma_wrist.identify.hysteresis import Options, run
     from sma_wrist.plants.phase_fraction import WireParams, isobaric_loops, write_isobaric_loops
+
     files = write_isobaric_loops(tmp_path / 'loops', isobaric_loops([50, 100, 150, 200, 250]))
-    doc = run(Options([str(f) for f in files], out=str(tmp_path / 'id'), loo=False, plots=False, model='saturating'),
-              progress=lambda m: None)
+    doc = run(
+        Options([str(f) for f in files], out=str(tmp_path / 'id'), loo=False, plots=False, model='saturating'),
+        progress=lambda m: None,
+    )
     w = WireParams()
     tr = doc['transitions']
     stress = [round(d['stress_MPa']) for d in doc['fit']['per_load']]

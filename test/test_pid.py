@@ -1,4 +1,5 @@
 """Sec. 6.1 PID: term arithmetic, P x error-rate variants, derivative filter/kick, anti-windup, closed loop."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -41,11 +42,14 @@ def test_derivative_on_measurement_has_no_setpoint_kick() -> None:
         assert bool(abs(o.d_term[0]) > 10.0) is kicks  # np.bool_ is not the bool singleton
 
 
-@pytest.mark.parametrize('e0,slope,sign_literal,sign_abs', [
-    (0.1, +1.0, +1, +1),   # e > 0 growing: both push +u
-    (0.1, -1.0, -1, +1),   # e > 0 shrinking: literal brakes, |rate| keeps pushing
-    (-0.1, -1.0, +1, -1),  # e < 0 growing: literal pushes the WRONG way (+u); |rate| pushes -u
-])
+@pytest.mark.parametrize(
+    'e0,slope,sign_literal,sign_abs',
+    [
+        (0.1, +1.0, +1, +1),  # e > 0 growing: both push +u
+        (0.1, -1.0, -1, +1),  # e > 0 shrinking: literal brakes, |rate| keeps pushing
+        (-0.1, -1.0, +1, -1),  # e < 0 growing: literal pushes the WRONG way (+u); |rate| pushes -u
+    ],
+)
 def test_p_times_rate_variants_signs(e0: float, slope: float, sign_literal: int, sign_abs: int) -> None:
     for mode, sign in (('p_times_rate', sign_literal), ('p_times_abs_rate', sign_abs)):
         c = PID(PIDParams(kp=9.0, ki=0.0, kd=0.0, p_mode=mode, derivative_filter_s=0.0, **WIDE))
@@ -133,12 +137,19 @@ def test_closed_loop_on_a_quasi_static_muscle_plant() -> None:
     assert 5e4 < m.total_abs_error_pct < 1.2e5  # the Table 6.2 order of magnitude
 
 
-@pytest.mark.parametrize('kw,fragment', [
-    ({'kp': -1.0}, 'kp'), ({'ki': float('nan')}, 'ki'), ({'p_mode': 'pd'}, 'p_mode'),
-    ({'derivative_on': 'both'}, 'derivative_on'), ({'anti_windup': 'clamp'}, 'anti_windup'),
-    ({'derivative_filter_s': -0.1}, 'derivative_filter_s'), ({'tracking_time_s': 0.0}, 'tracking_time_s'),
-    ({'output_min': 1.0, 'output_max': 1.0}, 'output_min'),
-])
+@pytest.mark.parametrize(
+    'kw,fragment',
+    [
+        ({'kp': -1.0}, 'kp'),
+        ({'ki': float('nan')}, 'ki'),
+        ({'p_mode': 'pd'}, 'p_mode'),
+        ({'derivative_on': 'both'}, 'derivative_on'),
+        ({'anti_windup': 'clamp'}, 'anti_windup'),
+        ({'derivative_filter_s': -0.1}, 'derivative_filter_s'),
+        ({'tracking_time_s': 0.0}, 'tracking_time_s'),
+        ({'output_min': 1.0, 'output_max': 1.0}, 'output_min'),
+    ],
+)
 def test_bad_parameters(kw: dict, fragment: str) -> None:
     with pytest.raises(ParameterError, match=fragment):
         PIDParams(**kw)
@@ -177,8 +188,9 @@ class _NumpyPID:
         self.edot = self._rate(e, self.e_prev, self.edot, dt)
         self.ydot = self._rate(y, self.y_prev, self.ydot, dt)
         self.e_prev, self.y_prev = e, y
-        P = {'plain': p.kp * e, 'p_times_rate': p.kp * e * self.edot,
-             'p_times_abs_rate': p.kp * e * np.abs(self.edot)}[p.p_mode]
+        P = {'plain': p.kp * e, 'p_times_rate': p.kp * e * self.edot, 'p_times_abs_rate': p.kp * e * np.abs(self.edot)}[
+            p.p_mode
+        ]
         D = -p.kd * self.ydot if p.derivative_on == 'measurement' else p.kd * self.edot
         I = self.integral.copy()
         u = P + I + D
@@ -199,8 +211,17 @@ def test_kernel_is_the_numpy_law_bit_for_bit(p_mode, derivative_on, anti_windup)
     """pid_kernel's loop against the vectorised numpy law, every output to the bit, for every
     option, one wrist and three, through saturation (tight limits) and irregular steps."""
     rng = np.random.default_rng(7)
-    p = PIDParams(kp=2.0, ki=5.0, kd=0.01, p_mode=p_mode, derivative_on=derivative_on,
-                  anti_windup=anti_windup, output_min=-0.6, output_max=0.4, derivative_filter_s=0.05)
+    p = PIDParams(
+        kp=2.0,
+        ki=5.0,
+        kd=0.01,
+        p_mode=p_mode,
+        derivative_on=derivative_on,
+        anti_windup=anti_windup,
+        output_min=-0.6,
+        output_max=0.4,
+        derivative_filter_s=0.05,
+    )
     for n in (1, 3):
         got, ref = PID(p, n), _NumpyPID(p, n)
         saturated = 0

@@ -1,5 +1,6 @@
 """The coupled plant: joint range and capacity, step-size convergence, typed errors, flags,
 and the equivalence of the batched, per-sample and plain-reference paths (doc/explanation/model.md)."""
+
 from __future__ import annotations
 
 import math
@@ -90,7 +91,7 @@ def test_batched_equals_per_sample() -> None:
             u = rng.uniform(-14.0, 14.0, u.shape)
         batched.step(u)
         for i, s in enumerate(singles):
-            s.step(u[i:i + 1])
+            s.step(u[i : i + 1])
     q_single = np.array([s.state.q[0] for s in singles])
     load_single = np.array([s.state.load_kgf for s in singles])
     np.testing.assert_allclose(batched.state.q, q_single, rtol=0, atol=1e-9)
@@ -130,6 +131,7 @@ def test_matches_plain_reference() -> None:
 
 
 # ------------------------------------------------------------------ errors and flags
+
 
 @pytest.mark.parametrize('bad', [math.nan, math.inf, -math.inf])
 def test_non_finite_command_raises_naming_it(bad: float) -> None:

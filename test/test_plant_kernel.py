@@ -1,4 +1,5 @@
 """The compiled per-sample plant (plant_kernel, numba) gives the numpy path's numbers."""
+
 from __future__ import annotations
 
 from dataclasses import replace

@@ -1,6 +1,7 @@
 """Plants that are not the controllers' model (sma_wrist.plants): the parameter-spread family, its
 validation, the varied plant against the plain one, sensors on what is published, and the node graph
 running a perturbed plant (where the sweep's loops must be the graph's, doc/howto/sweep.md)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,9 +19,18 @@ from sma_wrist.plants import PLANTS, load_hysteresis, make_plant
 from sma_wrist.plants.spread import FAMILY, VALIDITY, Scenario, SensorBank, perturbed_hysteresis, sample
 
 #: a plant inside the default family, away from nominal on every axis
-PERTURBED = Scenario(payload_kg=0.4, transition_shift_C=4.0, stroke_scale=0.9, tem_gain_scale=1.1,
-                     heat_loss_scale=0.9, ambient_offset_C=2.0, temp_noise_C=0.1, temp_lag_s=0.1,
-                     angle_noise_rad=0.002, noise_seed=7)
+PERTURBED = Scenario(
+    payload_kg=0.4,
+    transition_shift_C=4.0,
+    stroke_scale=0.9,
+    tem_gain_scale=1.1,
+    heat_loss_scale=0.9,
+    ambient_offset_C=2.0,
+    temp_noise_C=0.1,
+    temp_lag_s=0.1,
+    angle_noise_rad=0.002,
+    noise_seed=7,
+)
 
 
 def test_sample_is_seeded_and_inside_the_family() -> None:
@@ -52,6 +62,7 @@ def test_unknown_names_and_invalid_ranges_are_refused() -> None:
 def test_scenario_file_round_trip_and_bad_file(tmp_path: Path) -> None:
     f = tmp_path / 'sc.json'
     import json
+
     f.write_text(json.dumps(PERTURBED.to_dict()))
     assert Scenario.from_file(f) == PERTURBED
     row = {**PERTURBED.to_dict(), 'index': 4, 'controller': 'pid', 'max_error_pct': 12.0}  # a results.jsonl line
@@ -122,8 +133,9 @@ def test_sensors_act_on_the_measurement_not_the_plant() -> None:
         Tm = lagged.measure(T + 10.0, np.zeros(1), np.zeros(1))[0]
     assert Tm[0, 0] - 30.0 == pytest.approx(10.0 * (1 - np.exp(-1.0)), rel=1e-9)
     noisy = SensorBank([Scenario(temp_noise_C=0.3, angle_noise_rad=0.003, noise_seed=5)], dt)
-    got = np.array([np.concatenate([x.ravel() for x in noisy.measure(T, np.array([0.5]), np.zeros(1))[:2]])
-                    for _ in range(4000)])
+    got = np.array(
+        [np.concatenate([x.ravel() for x in noisy.measure(T, np.array([0.5]), np.zeros(1))[:2]]) for _ in range(4000)]
+    )
     assert np.std(got[:, 0]) == pytest.approx(0.3, rel=0.05) and np.std(got[:, 2]) == pytest.approx(0.003, rel=0.05)
     assert abs(np.mean(got[:, 0]) - 30.0) < 0.03
     again = SensorBank([Scenario(temp_noise_C=0.3, angle_noise_rad=0.003, noise_seed=5)], dt)
@@ -134,6 +146,7 @@ def test_identified_wire_is_the_plant_s_wire_and_a_bad_file_is_refused(tmp_path:
     """``hysteresis_file``: the family perturbs the identified wire, not the default."""
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.plants.spread import perturbed_hysteresis
+
     hot = perturbed_hysteresis(default_sdgpi(), 25.0, 1.0)  # a wire transforming 25 degC higher
     path = save_hysteresis(tmp_path / 'hysteresis.yaml', hot)
     got = make_plant('sdgpi', [Scenario()], hysteresis_file=str(path))
@@ -158,9 +171,15 @@ def test_graph_runs_a_perturbed_plant_and_the_sweep_is_the_graph(mode: str) -> N
     modes on the nominal and this plant; 12 s here)."""
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.sweep.simulate import Case, simulate
+
     sc = PERTURBED
-    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
-                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}}}
+    extra = {
+        '/plant_sim': {
+            'plant': 'sdgpi',
+            'scenario.noise_seed': sc.noise_seed,
+            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')},
+        }
+    }
     with tempfile.TemporaryDirectory() as d:
         run = run_closed_loop(mode, sc.payload_kg, 12.0, Path(d) / 'bag', extra_params=extra).run
     rows, tr = simulate([Case(0, mode, sc)], 12.0, record=True)
@@ -182,11 +201,20 @@ def test_graph_with_the_temperature_observer_is_the_sweep_with_it() -> None:
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.core.control.tem import TemperatureObserverParams
     from sma_wrist.sweep.simulate import Case, simulate
+
     sc, obs = PERTURBED, TemperatureObserverParams(correction_s=0.25, tc_lag_s=0.15)
-    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
-                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}},
-             '/hysteresis_compensator': {'temperature_source': 'observer', 'observer.correction_s': obs.correction_s,
-                                         'observer.tc_lag_s': obs.tc_lag_s}}
+    extra = {
+        '/plant_sim': {
+            'plant': 'sdgpi',
+            'scenario.noise_seed': sc.noise_seed,
+            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')},
+        },
+        '/hysteresis_compensator': {
+            'temperature_source': 'observer',
+            'observer.correction_s': obs.correction_s,
+            'observer.tc_lag_s': obs.tc_lag_s,
+        },
+    }
     with tempfile.TemporaryDirectory() as d:
         run = run_closed_loop('inverse_adaptive', sc.payload_kg, 5.0, Path(d) / 'bag', extra_params=extra).run
     _, tr = simulate([Case(0, 'inverse_adaptive', sc)], 5.0, record=True, compensator_observer=obs)
@@ -207,15 +235,24 @@ def test_graph_learning_the_tems_online_is_the_sweep_learning_them(mode: str) ->
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.core.thermal.online import OnlineThermalParams
     from sma_wrist.sweep.simulate import Case, simulate
+
     sc = PERTURBED
     early = {'thermal_adaptation.apply_after_s': 4.0}
-    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
-                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}},
-             '/tem_controller': early, '/hysteresis_compensator': early, '/trajectory_generator': {'soft_start_s': 0.0}}
+    extra = {
+        '/plant_sim': {
+            'plant': 'sdgpi',
+            'scenario.noise_seed': sc.noise_seed,
+            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')},
+        },
+        '/tem_controller': early,
+        '/hysteresis_compensator': early,
+        '/trajectory_generator': {'soft_start_s': 0.0},
+    }
     with tempfile.TemporaryDirectory() as d:
         run = run_closed_loop(mode, sc.payload_kg, 10.0, Path(d) / 'bag', extra_params=extra).run
-    _, tr = simulate([Case(0, mode, sc)], 10.0, record=True, online_thermal=OnlineThermalParams(apply_after_s=4.0),
-                     soft_start_s=0.0)
+    _, tr = simulate(
+        [Case(0, mode, sc)], 10.0, record=True, online_thermal=OnlineThermalParams(apply_after_s=4.0), soft_start_s=0.0
+    )
     k, kc = np.rint(run.t / 0.01).astype(int), np.rint(run.command_t / 0.01).astype(int)
     assert np.max(np.abs(run.q - tr.q_measured[k, 0])) <= 1e-12
     np.testing.assert_array_equal(run.command_V, tr.command_V[kc, 0])
@@ -230,9 +267,15 @@ def test_graph_runs_the_phase_fraction_wrist_and_the_sweep_is_the_graph() -> Non
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.plants import make_plant
     from sma_wrist.sweep.simulate import Case, simulate
+
     sc = Scenario(payload_kg=0.3, transition_shift_C=-3.0, temp_noise_C=0.1, angle_noise_rad=0.002, noise_seed=3)
-    extra = {'/plant_sim': {'plant': 'phase_fraction', 'scenario.noise_seed': sc.noise_seed,
-                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}}}
+    extra = {
+        '/plant_sim': {
+            'plant': 'phase_fraction',
+            'scenario.noise_seed': sc.noise_seed,
+            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')},
+        }
+    }
     with tempfile.TemporaryDirectory() as d:
         run = run_closed_loop('inverse_adaptive', sc.payload_kg, 4.0, Path(d) / 'bag', extra_params=extra).run
     assert run.t[-1] >= 3.9 and np.isfinite(run.q).all()

@@ -1,4 +1,5 @@
 """Property tests of the play/stop operators and the GPI model (Eqs. 3.19, 5.4, 5.17-5.19)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -14,8 +15,16 @@ finite = st.floats(-10, 10, allow_nan=False)
 series = st.lists(finite, min_size=2, max_size=40)
 
 # a GPI whose envelopes are ordered (gamma_l <= gamma_r everywhere)
-GPI = SDGPIParams.from_gpi([2.0, 0.1, -5.0, 2.0], [2.0, 0.1, -6.0, 1.5], [0.1, 0.05, -2.0, 0.0], [0.1, 0.05, -2.5, 0.0],
-                           rho=0.3, tau=2.0, c_thr=0.1, n=7)
+GPI = SDGPIParams.from_gpi(
+    [2.0, 0.1, -5.0, 2.0],
+    [2.0, 0.1, -6.0, 1.5],
+    [0.1, 0.05, -2.0, 0.0],
+    [0.1, 0.05, -2.5, 0.0],
+    rho=0.3,
+    tau=2.0,
+    c_thr=0.1,
+    n=7,
+)
 temps = st.lists(st.floats(0, 100, allow_nan=False), min_size=2, max_size=40)
 
 
@@ -29,6 +38,7 @@ def test_play_output_within_bounds(v: list[float]) -> None:
 @given(temps)
 def test_gpi_play_states_within_envelope_band(T: list[float]) -> None:
     from sma_wrist.core.hysteresis.sdgpi import initial_state, step
+
     s = initial_state(GPI, T[0], 0.0)
     for t in T:
         step(GPI, s, np.array([t]), np.array([0.0]))
@@ -49,11 +59,11 @@ def test_rate_independence(v: list[float], repeats: list[int], k: int) -> None:
     # k extra samples between each pair (linear interpolation keeps each segment monotone)
     fine = np.concatenate([np.linspace(v[i], v[i + 1], k + 1, endpoint=False) for i in range(v.size - 1)] + [v[-1:]])
     out = play_series(fine, R)
-    np.testing.assert_allclose(out[::k + 1], ref, atol=1e-12)
+    np.testing.assert_allclose(out[:: k + 1], ref, atol=1e-12)
     # and the GPI with temperature
     T = 50 + 4 * v
     Tf = 50 + 4 * fine
-    np.testing.assert_allclose(simulate(GPI, Tf, 0.0)[::k + 1], simulate(GPI, T, 0.0), atol=1e-12)
+    np.testing.assert_allclose(simulate(GPI, Tf, 0.0)[:: k + 1], simulate(GPI, T, 0.0), atol=1e-12)
 
 
 @given(st.floats(-5, 5), st.floats(0.1, 8), st.floats(0.05, 0.95), st.floats(0.05, 0.95), finite)

@@ -1,5 +1,6 @@
 """The chain's pre-load elongation for a wire (core/plant/preload.py, doc/explanation/model.md)
 and the nodes' preload_elongation_mm parameter."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,18 +23,21 @@ def test_the_calibration_gives_the_built_in_pre_load_for_the_built_in_wire() -> 
 
 def test_the_calibration_says_what_no_pre_load_can_reach() -> None:
     with pytest.raises(ParameterError, match='lifts 1.5 kg'):
-        calibrate_preload(PlantParams(), reachable_window(ThermalParams()), payload_kg=(0.0, 1.5),
-                          bracket_mm=(1.5, 2.5), step_mm=0.5)
+        calibrate_preload(
+            PlantParams(), reachable_window(ThermalParams()), payload_kg=(0.0, 1.5), bracket_mm=(1.5, 2.5), step_mm=0.5
+        )
     with pytest.raises(ParameterError, match='window lo < hi'):
         calibrate_preload(PlantParams(), (80.0, 20.0))
 
 
 def test_the_nodes_take_the_pre_load_and_refuse_a_bad_one() -> None:
     from sma_wrist import runtime
+
     runtime.activate()
     from sma_wrist.nodes.adaptive_controller import AdaptiveController
     from sma_wrist.nodes.hysteresis_compensator import HysteresisCompensator
     from sma_wrist.nodes.plant_sim import PlantSim
+
     e0 = {'preload_elongation_mm': 2.4}
     with Runtime(params={f'/{n}': e0 for n in ('plant_sim', 'hysteresis_compensator', 'adaptive_controller')}) as rt:
         plant, comp, ctrl = rt.add(PlantSim), rt.add(HysteresisCompensator), rt.add(AdaptiveController)
@@ -45,9 +49,12 @@ def test_the_nodes_take_the_pre_load_and_refuse_a_bad_one() -> None:
     from rclpy.exceptions import InvalidParameterValueException
 
     from sma_wrist.nodes.common import start_up_refusal
+
     for bad in (-1.0, float('nan')):
-        with Runtime(params={'/plant_sim': {'preload_elongation_mm': bad}}) as rt, \
-                pytest.raises((InvalidParameterValueException, SmaWristError), match='preload_elongation_mm') as e:
+        with (
+            Runtime(params={'/plant_sim': {'preload_elongation_mm': bad}}) as rt,
+            pytest.raises((InvalidParameterValueException, SmaWristError), match='preload_elongation_mm') as e,
+        ):
             rt.add(PlantSim)
         assert 'preload_elongation_mm' in (start_up_refusal(e.value, PlantSim) or '')  # what the user is told
     assert np.isfinite(PlantParams().preload_elongation_mm)

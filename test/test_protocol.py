@@ -1,5 +1,6 @@
 """The serial line protocol (sma_wrist/hw/protocol.py, doc/explanation/protocol.md): round trip,
 robustness against garbage, corruption, cut lines and chunking, sequence tracking."""
+
 from __future__ import annotations
 
 from hypothesis import given, settings
@@ -9,12 +10,21 @@ from sma_wrist.hw import protocol as P
 
 u16 = st.integers(0, P.ADC_MAX)
 text = st.from_regex(r'[A-Za-z0-9_.\-]{0,40}', fullmatch=True)
-samples = st.builds(P.Sample, st.integers(0, P.SEQ_MODULUS - 1), st.integers(0, (1 << 64) - 1),
-                    st.tuples(u16, u16, u16, u16, u16), st.integers(0, 0xFFFF))
+samples = st.builds(
+    P.Sample,
+    st.integers(0, P.SEQ_MODULUS - 1),
+    st.integers(0, (1 << 64) - 1),
+    st.tuples(u16, u16, u16, u16, u16),
+    st.integers(0, 0xFFFF),
+)
 frames = st.one_of(
     samples,
-    st.builds(P.Command, st.integers(0, P.SEQ_MODULUS - 1), st.integers(-P.MV_LIMIT, P.MV_LIMIT),
-              st.integers(-P.MV_LIMIT, P.MV_LIMIT)),
+    st.builds(
+        P.Command,
+        st.integers(0, P.SEQ_MODULUS - 1),
+        st.integers(-P.MV_LIMIT, P.MV_LIMIT),
+        st.integers(-P.MV_LIMIT, P.MV_LIMIT),
+    ),
     st.builds(P.Hello, text, text, st.integers(1, 100000)),
     st.builds(P.Reset, text),
     st.builds(P.Error, st.integers(0, 65535), text),
@@ -29,7 +39,7 @@ def parse_all(data: bytes, chunks: list[int] | None = None) -> tuple[list[P.Fram
         return p.feed(data), p
     i = 0
     for c in chunks:
-        out += p.feed(data[i:i + c])
+        out += p.feed(data[i : i + c])
         i += c
     out += p.feed(data[i:])
     return out, p
@@ -38,11 +48,15 @@ def parse_all(data: bytes, chunks: list[int] | None = None) -> tuple[list[P.Fram
 def test_crc_check_value_and_example_lines():
     assert P.crc16(b'123456789') == 0x29B1  # CRC-16/CCITT-FALSE check value
     # the examples of doc/explanation/protocol.md
-    assert P.encode(P.Sample(41, 41000, (25000, 24987, 17500, 17512, 35388), 0)) == \
-        b'$S,1,41,41000,25000,24987,17500,17512,35388,0*' + b'%04X' % P.crc16(
-            b'S,1,41,41000,25000,24987,17500,17512,35388,0') + b'\n'
-    assert P.Parser().feed(b'$C,1,7,-12000,13000*' + b'%04X' % P.crc16(b'C,1,7,-12000,13000') + b'\r\n') == \
-        [P.Command(7, -12000, 13000)]
+    assert (
+        P.encode(P.Sample(41, 41000, (25000, 24987, 17500, 17512, 35388), 0))
+        == b'$S,1,41,41000,25000,24987,17500,17512,35388,0*'
+        + b'%04X' % P.crc16(b'S,1,41,41000,25000,24987,17500,17512,35388,0')
+        + b'\n'
+    )
+    assert P.Parser().feed(b'$C,1,7,-12000,13000*' + b'%04X' % P.crc16(b'C,1,7,-12000,13000') + b'\r\n') == [
+        P.Command(7, -12000, 13000)
+    ]
 
 
 @given(st.lists(frames, max_size=20), st.lists(st.integers(1, 40), max_size=30))
@@ -75,7 +89,7 @@ def test_any_single_byte_corruption_is_detected(frame, data):
     line = P.encode(frame)
     i = data.draw(st.integers(0, len(line) - 2), label='position')  # the '\n' is framing, tested below
     b = data.draw(st.integers(0, 255).filter(lambda v: v != line[i]), label='byte')
-    bad = line[:i] + bytes([b]) + line[i + 1:]
+    bad = line[:i] + bytes([b]) + line[i + 1 :]
     got, p = parse_all(bad + P.encode(P.Query()))
     assert got == [P.Query()]
     assert p.stats.rejected_lines + p.stats.garbage_bytes > 0
@@ -110,11 +124,18 @@ def test_each_kind_of_damage_is_counted_once():
 
 
 def test_out_of_range_and_non_canonical_fields_are_rejected():
-    bodies = ['S,1,5,5000,1,2,3,4,65536,0',  # ADC above 16 bits
-              'S,1,05,5000,1,2,3,4,5,0',  # leading zero
-              'S,1,+5,5000,1,2,3,4,5,0', 'S,1,5,5_000,1,2,3,4,5,0', 'S,1,5,5000,1,2,3,4,0',  # too few
-              'S,1,4294967296,5000,1,2,3,4,5,0',  # sequence beyond 32 bits
-              'C,1,1,30001,0', 'C,1,1,-0,0', 'X,1,2', 'S,1,5,5000,1,2,3,4,5,0,9']
+    bodies = [
+        'S,1,5,5000,1,2,3,4,65536,0',  # ADC above 16 bits
+        'S,1,05,5000,1,2,3,4,5,0',  # leading zero
+        'S,1,+5,5000,1,2,3,4,5,0',
+        'S,1,5,5_000,1,2,3,4,5,0',
+        'S,1,5,5000,1,2,3,4,0',  # too few
+        'S,1,4294967296,5000,1,2,3,4,5,0',  # sequence beyond 32 bits
+        'C,1,1,30001,0',
+        'C,1,1,-0,0',
+        'X,1,2',
+        'S,1,5,5000,1,2,3,4,5,0,9',
+    ]
     for b in bodies:
         got, p = parse_all(P.encode_unchecked(b))
         assert got == [] and p.stats.malformed == 1, b
@@ -129,6 +150,7 @@ def test_lowercase_checksum_is_malformed():
 
 def test_encode_refuses_out_of_range_frames():
     import pytest
+
     for f in (P.Sample(0, 0, (0, 0, 0, 0, 70000)), P.Command(0, 40000, 0), P.Reset('a,b'), P.Hello('x', 'y', 0)):
         with pytest.raises(ValueError):
             P.encode(f)

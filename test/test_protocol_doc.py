@@ -3,6 +3,7 @@
 The emulator is driven sample by sample (``_read_commands`` / ``_sample``), so everything is in
 device time and deterministic; commands go in through the pty as a host writes them.
 """
+
 from __future__ import annotations
 
 import os
@@ -52,6 +53,7 @@ def device(tmp_path):
     def make(**cfg) -> Device:
         made.append(Device(tmp_path, **cfg))
         return made[-1]
+
     yield make
     for d in made:
         d.close()
@@ -87,7 +89,7 @@ def test_device_watchdog_counts_device_time(device):
     assert on[0] == 0  # the command took effect at the first sample 1 ms after it arrived
     # driven while t - t_command <= watchdog_s (samples at 1..501 ms), zero from the first sample past it
     assert on == list(range(501))
-    assert all(f & P.FLAG_WATCHDOG for f in flags[on[-1] + 1:])
+    assert all(f & P.FLAG_WATCHDOG for f in flags[on[-1] + 1 :])
 
 
 def test_flag_2_stays_set_while_a_clipped_command_is_in_force(device):
@@ -112,12 +114,19 @@ def test_minus_zero_is_not_canonical():
 
 def test_the_doc_states_each_answer_and_the_bridges_safe_angle_range():
     from sma_wrist import runtime
+
     runtime.activate()
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
     d = {p.name: p.default for p in HardwareBridge.PARAMS}
     assert f'[{d["angle_min_rad"]:g}, {d["angle_max_rad"]:g}] rad' in DOC
-    for statement in ('positive `u1_mV` heats muscle 1', 'first sample after boot has `seq` 0 and `t_us` 0',
-                      'counts device time', 'set from boot until the first command',
-                      'stays set on every sample while a clipped command is in force', '`-0` is not canonical'):
+    for statement in (
+        'positive `u1_mV` heats muscle 1',
+        'first sample after boot has `seq` 0 and `t_us` 0',
+        'counts device time',
+        'set from boot until the first command',
+        'stays set on every sample while a clipped command is in force',
+        '`-0` is not canonical',
+    ):
         assert statement in DOC, statement
     assert re.search(r'\| `C` \|', DOC)

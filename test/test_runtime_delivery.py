@@ -1,5 +1,6 @@
 """The embedded runtime's optional delivery model (sma_wrist/runtime/delivery.py): latency and
 jitter per delivery from a seeded generator, off by default."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -13,6 +14,7 @@ def _arrivals(delivery: DeliveryModel | None, n: int = 200) -> list[tuple[str, i
     """(topic, index, arrival [ns]) of n messages on each of /a and /b, published together every 1 ms."""
     from rclpy.node import Node
     from std_msgs.msg import Int64
+
     log: list[tuple[str, int, int]] = []
     with Runtime(delivery=delivery) as rt:
         src = rt.add(Node('src'))
@@ -24,6 +26,7 @@ def _arrivals(delivery: DeliveryModel | None, n: int = 200) -> list[tuple[str, i
                 for p in pubs.values():
                     p.publish(Int64(data=k[0]))
                 k[0] += 1
+
         src.create_timer(0.001, tick)
         sink = rt.add(Node('sink'))
         for t in pubs:
@@ -65,6 +68,7 @@ def test_closed_loop_with_dds_like_delivery_agrees_with_the_deterministic_run(tm
     is a smoke test of the model in the loop -- the arrival-order test is
     test_node_controllers.py::test_compensator_memory_takes_every_measured_tick_by_stamp_whatever_the_arrival_order)."""
     from sma_wrist.closed_loop import run_closed_loop
+
     det = run_closed_loop('inverse_adaptive', 0.3, 12.0, tmp_path / 'det').run
     jit = run_closed_loop('inverse_adaptive', 0.3, 12.0, tmp_path / 'jit', delivery=DeliveryModel(seed=1)).run
     q = np.interp(det.t, jit.t, jit.q)

@@ -1,4 +1,5 @@
 """Parameter semantics of the embedded rclpy (rclpy/node.py, Humble)."""
+
 from __future__ import annotations
 
 import pytest
@@ -29,6 +30,7 @@ from rclpy.parameter import Parameter  # noqa: E402
 def ros():
     def init(args=None):
         rclpy.init(args=args)
+
     yield init
     rclpy.try_shutdown()
 
@@ -39,6 +41,7 @@ def test_embedded_is_active():
     import rclpy.node as rn
 
     from sma_wrist.runtime.rclpy import node as en
+
     assert rn.Node is en.Node
 
 
@@ -54,8 +57,14 @@ def test_floating_point_range_and_step(ros):
     n = Node('n')
     d = ParameterDescriptor(floating_point_range=[FloatingPointRange(from_value=0.0, to_value=1.0, step=0.25)])
     assert n.declare_parameter('k', 0.5, d).value == 0.5
-    ok, out, step, edge = n.set_parameters([Parameter('k', value=0.75), Parameter('k', value=1.5),
-                                            Parameter('k', value=0.3), Parameter('k', value=1.0 + 1e-9)])
+    ok, out, step, edge = n.set_parameters(
+        [
+            Parameter('k', value=0.75),
+            Parameter('k', value=1.5),
+            Parameter('k', value=0.3),
+            Parameter('k', value=1.0 + 1e-9),
+        ]
+    )
     assert ok.successful
     assert not out.successful
     assert out.reason == 'Parameter k out of range Min: 0.0, Max: 1.0, value: 1.5'
@@ -74,7 +83,9 @@ def test_integer_range_step(ros):
     assert r.reason == 'The parameter value for i is not a valid step. Min: 0, max: 10, value: 5, step: 2'
     assert n.get_parameter('i').value == 4
     with pytest.raises(InvalidParameterValueException):
-        n.declare_parameter('j', 11, ParameterDescriptor(integer_range=[IntegerRange(from_value=0, to_value=10, step=1)]))
+        n.declare_parameter(
+            'j', 11, ParameterDescriptor(integer_range=[IntegerRange(from_value=0, to_value=10, step=1)])
+        )
 
 
 def test_read_only_and_type_mismatch(ros):
@@ -149,7 +160,8 @@ def test_params_file_wildcards_namespaces_and_cli_order(ros, tmp_path):
     f.write_text(
         '/**:\n  ros__parameters:\n    common: 1\n    gain: 0.5\n'
         'ctrl:\n  ros__parameters:\n    gain: 2.0\n    nested:\n      k: [1.0, 2.0]\n    name: "007"\n'
-        '/robot:\n  ctrl:\n    ros__parameters:\n      gain: 9.0\n')
+        '/robot:\n  ctrl:\n    ros__parameters:\n      gain: 9.0\n'
+    )
     ros(['--ros-args', '--params-file', str(f), '-p', 'ctrl:common:=5', '-p', 'flag:=true'])
     a = Node('ctrl')
     b = Node('other')
@@ -184,30 +196,42 @@ def test_params_merge_by_node_key_in_order_of_first_appearance_as_rcl_does(ros, 
 
 def test_cli_args_remap_and_constructor_overrides(ros):
     ros(['--ros-args', '-p', 'x:=1'])
-    n = Node('orig', cli_args=['--ros-args', '-r', '__node:=renamed', '-p', 'x:=2'],
-             parameter_overrides=[Parameter('y', value='o')])
+    n = Node(
+        'orig',
+        cli_args=['--ros-args', '-r', '__node:=renamed', '-p', 'x:=2'],
+        parameter_overrides=[Parameter('y', value='o')],
+    )
     assert n.get_name() == 'renamed'
     assert n.declare_parameter('x', 0).value == 2  # node args after global ones
     assert n.declare_parameter('y', '').value == 'o'
-    m = Node('free', use_global_arguments=False, automatically_declare_parameters_from_overrides=True,
-             parameter_overrides=[Parameter('z', value=1.5)])
+    m = Node(
+        'free',
+        use_global_arguments=False,
+        automatically_declare_parameters_from_overrides=True,
+        parameter_overrides=[Parameter('z', value=1.5)],
+    )
     assert m.get_parameter('z').value == 1.5
     assert not m.has_parameter('x')
 
 
 def test_bad_argument_is_a_typed_error(ros):
     from sma_wrist.runtime.errors import ArgumentError
+
     with pytest.raises(ArgumentError):
         rclpy.init(args=['--ros-args', '--bogus'])
 
 
-@pytest.mark.parametrize('content, message', [
-    (b'\xff\xfe\x00garbage\x80: 1\n', 'not a UTF-8 text file'),  # a binary file named .yaml
-    (b'a: [unclosed\n', "invalid YAML: expected ',' or ']'"),
-])
+@pytest.mark.parametrize(
+    'content, message',
+    [
+        (b'\xff\xfe\x00garbage\x80: 1\n', 'not a UTF-8 text file'),  # a binary file named .yaml
+        (b'a: [unclosed\n', "invalid YAML: expected ',' or ']'"),
+    ],
+)
 def test_unreadable_params_file_is_one_line_error_naming_it(tmp_path, capsys, content, message):
     """sma-wrist run --params-file: a binary or malformed file is `error: FILE: ...` on one line, exit 2."""
     from sma_wrist.cli import main
+
     f = tmp_path / 'params.yaml'
     f.write_bytes(content)
     assert main(['run', '--duration', '1', '--quiet', '--params-file', str(f)]) == 2

@@ -1,4 +1,5 @@
 """Timers, virtual/sim time, QoS depth and determinism of the embedded executor."""
+
 from __future__ import annotations
 
 import pytest
@@ -193,6 +194,7 @@ def test_subscriber_gets_a_copy():
 def _pingpong_trace():
     trace = []
     with Runtime() as rt:
+
         class A(Node):
             def __init__(self):
                 super().__init__('a')
@@ -236,6 +238,7 @@ def test_stop_condition_and_spin_once():
 
 def test_logger_filters():
     from rclpy import logging as rlog
+
     rclpy.init()
     records = []
     remove = rlog.add_sink(lambda sev, name, msg, t: records.append(msg))
@@ -262,6 +265,7 @@ def test_force_activation_refused_when_real_rclpy_imported(monkeypatch):
     import types
 
     from sma_wrist.runtime.errors import ActivationError
+
     fake = types.ModuleType('rclpy')
     monkeypatch.setattr(runtime, '_finder', None)
     monkeypatch.setitem(sys.modules, 'rclpy', fake)
@@ -275,6 +279,7 @@ def test_silenced_keeps_records_off_stderr_and_restores_the_stream(capsys):
     sweep benchmark) print none of the nodes' lines; sinks (the bag's /rosout) still get them, and the stream comes
     back as it was, also after an error inside."""
     from sma_wrist.runtime.rclpy import logging as rlog
+
     records = []
     remove = rlog.add_sink(lambda sev, name, msg, t: records.append(msg))
     try:

@@ -3,6 +3,7 @@
 The digit check parses the seed dissertation at test time (../shared/seed beside the repo,
 or /work/shared/seed) and is skipped when the text is absent.
 """
+
 from __future__ import annotations
 
 import re
@@ -13,8 +14,10 @@ import pytest
 from sma_wrist.data import seed_tables as st
 
 _SEED_NAME = '000_e2c907079a974115.txt'
-_CANDIDATES = [Path(__file__).resolve().parents[1].parent / 'shared' / 'seed' / _SEED_NAME,
-               Path('/work/shared/seed') / _SEED_NAME]
+_CANDIDATES = [
+    Path(__file__).resolve().parents[1].parent / 'shared' / 'seed' / _SEED_NAME,
+    Path('/work/shared/seed') / _SEED_NAME,
+]
 
 
 def _seed_lines() -> list[str]:
@@ -28,7 +31,7 @@ def _table_block(lines: list[str], caption: str) -> list[list[str]]:
     """Tab-separated rows following the line that starts with ``caption`` up to the next caption/heading."""
     start = next(i for i, ln in enumerate(lines) if ln.startswith(caption))
     rows = []
-    for ln in lines[start + 1:]:
+    for ln in lines[start + 1 :]:
         if ln.startswith(('Table ', '#', 'Figure', 'Figures', 'The ', 'Further')):
             break
         if '\t' in ln:
@@ -80,7 +83,7 @@ def test_table_5_1_to_5_3_digits() -> None:
         assert heads and [h for h in heads[0] if h] == [f'{lo}-{hi}' for lo, hi in sections]
         assert [_label(r[0]) for r in rows] == list(st.INVERSE_PARAMETER_NAMES)
         for k, sec in enumerate(sections):
-            got = {_label(r[0]): tuple(_num(c) for c in r[1 + 3 * k: 4 + 3 * k]) for r in rows}
+            got = {_label(r[0]): tuple(_num(c) for c in r[1 + 3 * k : 4 + 3 * k]) for r in rows}
             assert got == st.TABLES_5_2_5_3[sec], (caption, sec)
 
 
@@ -102,7 +105,10 @@ from sma_wrist.core.hysteresis import seed_params as sp  # noqa: E402
 
 
 def test_literal_750g_row_has_no_hysteresis_and_is_not_sma_like() -> None:
-    res = {(r.p0_label, r.mirror): r.metrics for r in sp.evaluate_conventions([750], sources=['GPI'], envelopes=['literal'])}
+    res = {
+        (r.p0_label, r.mirror): r.metrics
+        for r in sp.evaluate_conventions([750], sources=['GPI'], envelopes=['literal'])
+    }
     m = res[('1', False)]  # the design doc's -47.5..-32.1
     assert m.y_min == pytest.approx(-47.49, abs=0.05) and m.y_max == pytest.approx(-32.07, abs=0.05)
     assert abs(m.width_C) < 2.0 and not m.sma_like
@@ -117,8 +123,9 @@ def test_literal_envelopes_cross_swapped_mostly_ordered() -> None:
 
 
 def test_swapped_p0_zero_gives_superelastic_loops_750_to_900g() -> None:
-    res = sp.evaluate_conventions([750, 800, 850, 900], sources=['GPI'], envelopes=['swapped'], p0s=[0.0, 1.0],
-                                  mirrors=[True])
+    res = sp.evaluate_conventions(
+        [750, 800, 850, 900], sources=['GPI'], envelopes=['swapped'], p0s=[0.0, 1.0], mirrors=[True]
+    )
     for r in res:
         if r.p0 == 0.0:
             assert r.metrics.sma_like

@@ -4,6 +4,7 @@ Each case runs ``main_for`` in a child process with real signals (a SIGINT to it
 the kernel sends a user's Ctrl-C), on the embedded runtime: a KeyboardInterrupt raised in
 the parent pytest process would end the test run instead of failing a test.
 """
+
 from __future__ import annotations
 
 import subprocess
@@ -12,7 +13,7 @@ import textwrap
 
 import pytest
 
-_PRELUDE = '''
+_PRELUDE = """
 import os, signal, sys
 # an interactive shell's foreground job: SIGINT raises KeyboardInterrupt (a child started
 # from a background job would inherit SIGINT ignored)
@@ -25,21 +26,27 @@ from sma_wrist.nodes.common import main_for
 
 def ctrl_c():
     os.kill(os.getpid(), signal.SIGINT)
-'''
+"""
 
 
 def _run(body: str, after: str = '') -> subprocess.CompletedProcess:
-    code = _PRELUDE + textwrap.dedent(body) + '''
+    code = (
+        _PRELUDE
+        + textwrap.dedent(body)
+        + """
 rc = main_for(Subject, ['subject'])
-''' + after + '''
+"""
+        + after
+        + """
 print('rclpy.ok after main_for:', rclpy.ok(), flush=True)
 sys.exit(rc)
-'''
+"""
+    )
     return subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, timeout=60)
 
 
 def test_second_ctrl_c_while_destroying_the_node_exits_0_without_traceback():
-    p = _run('''
+    p = _run("""
     class Subject(Node):
         def __init__(self):
             super().__init__('subject')
@@ -47,7 +54,7 @@ def test_second_ctrl_c_while_destroying_the_node_exits_0_without_traceback():
         def destroy_node(self):
             ctrl_c()                                    # and a second one during the teardown
             super().destroy_node()
-    ''')
+    """)
     assert p.returncode == 0, p.stderr
     assert 'Traceback' not in p.stderr
     assert 'rclpy.ok after main_for: False' in p.stdout  # rclpy was still shut down
@@ -56,7 +63,8 @@ def test_second_ctrl_c_while_destroying_the_node_exits_0_without_traceback():
 def test_a_third_ctrl_c_while_the_process_exits_does_not_kill_it():
     # under ros2 launch a node gets the terminal's SIGINT twice and launch's forwarded one: seen
     # under Humble, the last arrived after main_for returned and the node died with exit -2
-    p = _run('''
+    p = _run(
+        """
     class Subject(Node):
         def __init__(self):
             super().__init__('subject')
@@ -64,7 +72,9 @@ def test_a_third_ctrl_c_while_the_process_exits_does_not_kill_it():
         def destroy_node(self):
             ctrl_c()
             super().destroy_node()
-    ''', after='ctrl_c()\nctrl_c()')
+    """,
+        after='ctrl_c()\nctrl_c()',
+    )
     assert p.returncode == 0, (p.returncode, p.stderr)
     assert 'Traceback' not in p.stderr and 'rclpy.ok after main_for: False' in p.stdout
 
@@ -73,7 +83,7 @@ def test_take_message_runtime_error_after_ctrl_c_exits_0():
     # Humble under load: the signal lands inside rclpy's take_message, pybind11 turns it into
     # a RuntimeError, and rclpy.ok() is still true because rclpy shuts the context down on
     # its own thread a moment later
-    p = _run('''
+    p = _run("""
     class Subject(Node):
         def __init__(self):
             super().__init__('subject')
@@ -83,34 +93,44 @@ def test_take_message_runtime_error_after_ctrl_c_exits_0():
                 ctrl_c()
             except KeyboardInterrupt:
                 raise RuntimeError("Unable to convert call argument '0' of type 'object' to Python object")
-    ''')
+    """)
     assert p.returncode == 0, p.stderr
     assert 'Traceback' not in p.stderr
 
 
 def test_a_failure_without_a_shutdown_request_is_not_hidden():
-    p = _run('''
+    p = _run("""
     class Subject(Node):
         def __init__(self):
             super().__init__('subject')
             self.create_timer(0.01, self.fail)
         def fail(self):
             raise RuntimeError('a real bug')
-    ''')
+    """)
     assert p.returncode == 1
     assert 'RuntimeError: a real bug' in p.stderr
     assert 'rclpy.ok after main_for' not in p.stdout
 
 
-@pytest.mark.parametrize('argv, expected', [
-    (['-p', 'payload_kg:=5.0'], 'error: PlantSim: invalid parameter payload_kg: Invalid parameter value (5.0) '
-                                'for parameter. Reason: Parameter payload_kg out of range'),
-    (['-p', 'payload_kg:=1'], "error: PlantSim: invalid parameter: Trying to set parameter 'payload_kg' to '1' "
-                              "of type 'INTEGER', expecting type 'DOUBLE'\n"),
-])
+@pytest.mark.parametrize(
+    'argv, expected',
+    [
+        (
+            ['-p', 'payload_kg:=5.0'],
+            'error: PlantSim: invalid parameter payload_kg: Invalid parameter value (5.0) '
+            'for parameter. Reason: Parameter payload_kg out of range',
+        ),
+        (
+            ['-p', 'payload_kg:=1'],
+            "error: PlantSim: invalid parameter: Trying to set parameter 'payload_kg' to '1' "
+            "of type 'INTEGER', expecting type 'DOUBLE'\n",
+        ),
+    ],
+)
 def test_start_up_refusal_names_the_parameter_before_the_reason(capsys, argv, expected):
     from sma_wrist.nodes.common import main_for
     from sma_wrist.nodes.plant_sim import PlantSim
+
     assert main_for(PlantSim, ['plant_sim', '--ros-args', *argv]) == 2
     out = capsys.readouterr().out
     assert out.startswith(expected)
@@ -123,6 +143,7 @@ def test_ctrl_c_inside_a_finaliser_is_not_raised_there():
     There the request is only noted (rclpy's own handler has shut the context down); anywhere else it
     raises as Python's default handler does."""
     from sma_wrist.nodes.common import _ShutdownRequest
+
     frames = []
 
     class Finalised:

@@ -1,5 +1,6 @@
 """sma-wrist sweep: the N-wrist compositions equal the one-wrist ones, the vectorised loops agree with
 the node graph, chunking and Dask change nothing, bad input and Ctrl-C (doc/howto/sweep.md)."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -18,8 +19,16 @@ from sma_wrist.core.errors import ModelInputError, ParameterError, SmaWristError
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.plants.spread import Scenario, sample
 from sma_wrist.sweep.laws import JointControllerBank, TemLoopBank
-from sma_wrist.sweep.run import (SweepConfig, add_reach_floors, format_table, make_cases, parse_perturbations,
-                                 run_sweep, split_chunks, summarise)
+from sma_wrist.sweep.run import (
+    SweepConfig,
+    add_reach_floors,
+    format_table,
+    make_cases,
+    parse_perturbations,
+    run_sweep,
+    split_chunks,
+    summarise,
+)
 from sma_wrist.sweep.simulate import Case, sign_changes_per_s, simulate
 
 
@@ -66,8 +75,7 @@ def test_tem_loop_bank_equals_one_wrist_loops() -> None:
     bank = TemLoopBank.like_node(n)
     ref = TemLoopBank.like_node(1)  # the constants as the node builds them
     assert ref.params.target_filter_s > 0  # the node's prefilter is part of what is compared
-    ones = [TemLoop(ref.thermal, ref.params, ref.drive, ref.hold, 85.0, compiled=True)
-            for _ in range(n)]
+    ones = [TemLoop(ref.thermal, ref.params, ref.drive, ref.hold, 85.0, compiled=True) for _ in range(n)]
     T = np.full((n, 2), 30.0)
     for k in range(600):
         t = 0.01 * k
@@ -129,19 +137,31 @@ def test_bad_input_gives_clear_errors() -> None:
 
 def test_cli_reports_bad_input_without_traceback() -> None:
     env = {**os.environ, 'PYTHONPATH': os.getcwd()}
-    for args, text in ((['--plants', '0'], 'N = 0'), (['--perturb', 'foo=1'], "unknown perturbation 'foo'"),
-                       (['--perturb', 'temp_lag_s=0:5'], 'outside the model')):
-        p = subprocess.run([sys.executable, '-m', 'sma_wrist', 'sweep', *args], capture_output=True, text=True,
-                           env=env, timeout=120)
+    for args, text in (
+        (['--plants', '0'], 'N = 0'),
+        (['--perturb', 'foo=1'], "unknown perturbation 'foo'"),
+        (['--perturb', 'temp_lag_s=0:5'], 'outside the model'),
+    ):
+        p = subprocess.run(
+            [sys.executable, '-m', 'sma_wrist', 'sweep', *args], capture_output=True, text=True, env=env, timeout=120
+        )
         assert p.returncode == 2 and text in p.stderr and 'Traceback' not in p.stderr
 
 
-@pytest.mark.parametrize('argv', [['sweep', '--seed', '-1'], ['experiment', '--family-seed', '-1'],
-                                  ['experiment', '--workers', '-3'], ['emulate-device', '--seed', '-1']])
+@pytest.mark.parametrize(
+    'argv',
+    [
+        ['sweep', '--seed', '-1'],
+        ['experiment', '--family-seed', '-1'],
+        ['experiment', '--workers', '-3'],
+        ['emulate-device', '--seed', '-1'],
+    ],
+)
 def test_negative_seeds_and_worker_counts_are_refused_by_the_parser(argv, capsys) -> None:
     """A negative seed reached numpy's SeedSequence (ValueError traceback after the set-up), a negative
     --workers the process pool; both are usage errors naming the option, exit 2, before anything runs."""
     from sma_wrist.cli import build_parser
+
     with pytest.raises(SystemExit) as e:
         build_parser().parse_args(argv)
     assert e.value.code == 2 and f'argument {argv[1]}: {argv[2]!r} must be >= 0' in capsys.readouterr().err
@@ -152,12 +172,30 @@ def test_an_output_path_that_cannot_be_made_is_a_clear_error(tmp_path) -> None:
     any loop runs (a traceback from mkdir before)."""
     (tmp_path / 'file').write_text('')
     under_file = str(tmp_path / 'file' / 'out')
-    for args in (['sweep', '--plants', '1', '--controllers', 'pid', '--duration', '2', '--no-nominal', '--quiet',
-                  '--out', under_file],
-                 ['run', '--duration', '0.5', '--bag', under_file],
-                 ['experiment', '--duration', '0.5', '--payloads', '0.3', '--out', under_file]):
-        p = subprocess.run([sys.executable, '-m', 'sma_wrist', *args], capture_output=True, text=True,
-                           env={**os.environ, 'PYTHONPATH': os.getcwd()}, timeout=120)
+    for args in (
+        [
+            'sweep',
+            '--plants',
+            '1',
+            '--controllers',
+            'pid',
+            '--duration',
+            '2',
+            '--no-nominal',
+            '--quiet',
+            '--out',
+            under_file,
+        ],
+        ['run', '--duration', '0.5', '--bag', under_file],
+        ['experiment', '--duration', '0.5', '--payloads', '0.3', '--out', under_file],
+    ):
+        p = subprocess.run(
+            [sys.executable, '-m', 'sma_wrist', *args],
+            capture_output=True,
+            text=True,
+            env={**os.environ, 'PYTHONPATH': os.getcwd()},
+            timeout=120,
+        )
         assert p.returncode == 2 and f'error: cannot use {under_file}' in p.stderr, (args, p.stderr[-500:])
         assert 'Traceback' not in p.stderr
 
@@ -165,6 +203,7 @@ def test_an_output_path_that_cannot_be_made_is_a_clear_error(tmp_path) -> None:
 def test_an_output_folder_that_is_a_file_is_named_without_the_run_only_bag_hint(tmp_path, capsys) -> None:
     """experiment --out FILE told the user to 'choose a new --bag directory', an option it does not have."""
     from sma_wrist.cli import main
+
     f = tmp_path / 'file'
     f.write_text('')
     assert main(['experiment', '--duration', '0.5', '--payloads', '0.3', '--family', '0', '--out', str(f)]) == 2
@@ -227,9 +266,12 @@ def test_each_loop_reports_the_highest_stress_its_wires_carried() -> None:
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.plants import make_plant
     from sma_wrist.sweep.simulate import TICK_S
-    cases = [Case(0, 'pid', Scenario(payload_kg=0.1), 'nominal'),
-             Case(1, 'inverse_adaptive', Scenario(payload_kg=0.6), 'nominal'),
-             Case(2, 'pid', Scenario(payload_kg=0.6, stroke_scale=0.8), 'spread')]
+
+    cases = [
+        Case(0, 'pid', Scenario(payload_kg=0.1), 'nominal'),
+        Case(1, 'inverse_adaptive', Scenario(payload_kg=0.6), 'nominal'),
+        Case(2, 'pid', Scenario(payload_kg=0.6, stroke_scale=0.8), 'spread'),
+    ]
     rows, tr = simulate(cases, 8.0, record=True)
     wrists = make_plant('sdgpi', [c.scenario for c in cases], PlantParams())
     steps = int(round(TICK_S / wrists.params.dt))
@@ -252,6 +294,7 @@ def test_a_loop_that_holds_a_wire_at_the_models_load_bound_is_marked_not_physics
     the real 3 kgf it does not, and the table says which loops left the model."""
     from sma_wrist.core.hysteresis.muscle import MuscleGeometry
     from sma_wrist.core.plant.wrist import PlantParams
+
     cases = [Case(0, 'inverse_adaptive', Scenario(payload_kg=0.6), 'nominal')]
     low = PlantParams(muscle=MuscleGeometry(max_load_kgf=0.8))
     rows_low, _ = simulate(cases, 40.0, base=low)
@@ -290,11 +333,21 @@ def test_reach_floors_split_the_family_into_plants_a_controller_can_track_and_th
     each plant's floor once, on every controller's row, and the summary over the plants under 15 %
     (rows as the sweep writes them; the loops' errors are made up, the floors are computed)."""
     from sma_wrist.plants.spread import Scenario
+
     rows = []
     for shift, err in ((10.0, 40.0), (5.0, 6.0)):
         for c in ('pid', 'inverse_adaptive'):
-            rows.append({'index': len(rows), 'group': 'spread', 'controller': c, 'max_error_pct': err + len(rows),
-                         'rms_error_pct': 1.0, 'sign_changes_per_s': 1.0, **Scenario(transition_shift_C=shift, payload_kg=0.3, temp_noise_C=0.0).to_dict()})
+            rows.append(
+                {
+                    'index': len(rows),
+                    'group': 'spread',
+                    'controller': c,
+                    'max_error_pct': err + len(rows),
+                    'rms_error_pct': 1.0,
+                    'sign_changes_per_s': 1.0,
+                    **Scenario(transition_shift_C=shift, payload_kg=0.3, temp_noise_C=0.0).to_dict(),
+                }
+            )
             rows[-1]['temp_noise_C'] = 0.1 * len(rows)  # sensors differ per row: the same plant all the same
     add_reach_floors(rows)
     hot, warm = rows[0]['reach_floor_pct'], rows[2]['reach_floor_pct']
@@ -315,16 +368,24 @@ def _identified_wrist_params(tmp_path: Path) -> Path:
     from sma_wrist.core.thermal.heat_balance import ThermalParams
     from sma_wrist.core.thermal.params_file import write_thermal_file
     from sma_wrist.identify.wrist import shifted_wire, wrist_params
+
     wire, tems = tmp_path / 'hysteresis.yaml', tmp_path / 'thermal.yaml'
     save_hysteresis(wire, shifted_wire(default_sdgpi(), 4.0))
     write_thermal_file(tems, ThermalParams().scaled(gain=1.1, losses=0.85))
     nodes, _ = wrist_params(wire, shifted_wire(default_sdgpi(), 4.0), tems, preload_mm=2.1)
-    tuned = {'adaptive_controller': {'reversal_lead_s': 2.0, 'pid.kp': 300.0, 'adaptive.c1': 4.0},
-             # a chatter guard that engages within the test's 6 s (the default's 2.5 /s over 20 s would not)
-             'tem_controller': {'gain_per_s': 1.5, 'target_filter_s': 0.3, 'chatter_guard.limit_per_s': 0.4,
-                                'chatter_guard.window_s': 1.0, 'chatter_guard.rate_filter_s': 0.3},
-             'hysteresis_compensator': {'shift_gain_per_s': 1.5, 'observer.correction_s': 0.25},
-             'plant_sim': {'real_time_factor': 2.0}}
+    tuned = {
+        'adaptive_controller': {'reversal_lead_s': 2.0, 'pid.kp': 300.0, 'adaptive.c1': 4.0},
+        # a chatter guard that engages within the test's 6 s (the default's 2.5 /s over 20 s would not)
+        'tem_controller': {
+            'gain_per_s': 1.5,
+            'target_filter_s': 0.3,
+            'chatter_guard.limit_per_s': 0.4,
+            'chatter_guard.window_s': 1.0,
+            'chatter_guard.rate_filter_s': 0.3,
+        },
+        'hysteresis_compensator': {'shift_gain_per_s': 1.5, 'observer.correction_s': 0.25},
+        'plant_sim': {'real_time_factor': 2.0},
+    }
     for node, values in tuned.items():
         nodes.setdefault(node, {}).update(values)
     f = tmp_path / 'wrist_params.yaml'
@@ -340,11 +401,27 @@ def test_a_params_file_reaches_the_sweep_as_it_reaches_the_graph(mode: str, tmp_
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.sweep.graph_params import loop_settings
     from sma_wrist.sweep.simulate import Case, simulate
+
     f = _identified_wrist_params(tmp_path)
-    sc = Scenario(payload_kg=0.4, transition_shift_C=-3.0, stroke_scale=0.9, tem_gain_scale=1.1, heat_loss_scale=0.9,
-                  ambient_offset_C=2.0, temp_noise_C=0.1, temp_lag_s=0.1, angle_noise_rad=0.002, noise_seed=7)
-    extra = {'/plant_sim': {'plant': 'sdgpi', 'scenario.noise_seed': sc.noise_seed,
-                            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')}}}
+    sc = Scenario(
+        payload_kg=0.4,
+        transition_shift_C=-3.0,
+        stroke_scale=0.9,
+        tem_gain_scale=1.1,
+        heat_loss_scale=0.9,
+        ambient_offset_C=2.0,
+        temp_noise_C=0.1,
+        temp_lag_s=0.1,
+        angle_noise_rad=0.002,
+        noise_seed=7,
+    )
+    extra = {
+        '/plant_sim': {
+            'plant': 'sdgpi',
+            'scenario.noise_seed': sc.noise_seed,
+            **{f'scenario.{k}': v for k, v in sc.to_dict().items() if k not in ('payload_kg', 'noise_seed')},
+        }
+    }
     run = run_closed_loop(mode, sc.payload_kg, 6.0, tmp_path / 'bag', params_files=[f], extra_params=extra).run
     settings = loop_settings([f])
     assert settings.changed['plant_sim']['hysteresis_file'] == str(tmp_path / 'hysteresis.yaml')
@@ -357,8 +434,13 @@ def test_a_params_file_reaches_the_sweep_as_it_reaches_the_graph(mode: str, tmp_
     assert np.max(np.abs(plain.command_V[kc, 0] - run.command_V)) > 1e-2  # the file reached the loop
     if mode == 'pid':  # no sign change in its first 6 s: nothing for the guard to count
         return
-    unguarded = dict(settings.kwargs, tem_loop=dataclasses.replace(settings.kwargs["tem_loop"], params=dataclasses.replace(
-        settings.kwargs['tem_loop'].params, chatter_limit_per_s=0.0)))
+    unguarded = dict(
+        settings.kwargs,
+        tem_loop=dataclasses.replace(
+            settings.kwargs['tem_loop'],
+            params=dataclasses.replace(settings.kwargs['tem_loop'].params, chatter_limit_per_s=0.0),
+        ),
+    )
     _, free = simulate([Case(0, mode, sc)], 6.0, record=True, **unguarded)
     assert np.max(np.abs(free.command_V[kc, 0] - run.command_V)) > 1e-2  # and its guard engaged in both
 
@@ -375,6 +457,7 @@ def test_the_sweep_refuses_what_it_cannot_honour_and_names_it(tmp_path: Path) ->
         f = tmp_path / f'p{len(list(tmp_path.iterdir()))}.yaml'
         f.write_text(yaml.safe_dump({n: {'ros__parameters': v} for n, v in nodes.items()}))
         return f
+
     with pytest.raises(ParameterError, match=r'stress_source = .desired. .*memory_source = .commanded.'):
         loop_settings([Path(__file__).parent.parent / 'config' / 'paper_table_6_1.yaml'])
     with pytest.raises(ParameterError, match=r'adaptive_controller.mode .*--controllers'):
@@ -392,13 +475,31 @@ def test_the_sweep_refuses_what_it_cannot_honour_and_names_it(tmp_path: Path) ->
     (tmp_path / 'broken.yaml').write_text('tem_controller:\n  ros__parameters:\n    gain_per_s: [1.0\n')
     with pytest.raises(SmaWristError, match=r'broken.yaml: invalid YAML'):
         loop_settings([tmp_path / 'broken.yaml'])
-    with pytest.raises(ParameterError, match=r"TemController: invalid parameter.*'gain_per_s'.*expecting type 'DOUBLE'"):
+    with pytest.raises(
+        ParameterError, match=r"TemController: invalid parameter.*'gain_per_s'.*expecting type 'DOUBLE'"
+    ):
         loop_settings([params({'tem_controller': {'gain_per_s': 'fast'}})])
     with pytest.raises(ParameterError, match=r'thermal_adaptation'):
         loop_settings([params({'tem_controller': {'thermal_adaptation.apply_after_s': 20.0}})])
-    out = subprocess.run([sys.executable, '-m', 'sma_wrist', 'sweep', '--plants', '1', '--duration', '2', '--quiet',
-                          '--out', str(tmp_path / 'sw'), '--params-file', str(params({'plant_sim': {'payload_kg': 0.5}}))],
-                         capture_output=True, text=True)
+    out = subprocess.run(
+        [
+            sys.executable,
+            '-m',
+            'sma_wrist',
+            'sweep',
+            '--plants',
+            '1',
+            '--duration',
+            '2',
+            '--quiet',
+            '--out',
+            str(tmp_path / 'sw'),
+            '--params-file',
+            str(params({'plant_sim': {'payload_kg': 0.5}})),
+        ],
+        capture_output=True,
+        text=True,
+    )
     assert out.returncode == 2 and 'Traceback' not in out.stderr, out.stderr
     assert 'plant_sim.payload_kg = 0.5' in out.stderr and '--payloads' in out.stderr
     assert not (tmp_path / 'sw' / 'results.jsonl').exists()  # refused before any loop ran
@@ -408,21 +509,38 @@ def test_a_sweep_with_a_params_file_runs_it_in_every_worker_and_records_it(tmp_p
     """The graph's settings travel to the worker processes (and, the same way, to Dask's): the loops are those of
     one process with the same file, differ from the defaults', and sweep.json names what the file changed."""
     import yaml
+
     f = tmp_path / 'tuned.yaml'
-    f.write_text(yaml.safe_dump({'tem_controller': {'ros__parameters': {'gain_per_s': 2.0}},
-                                 'adaptive_controller': {'ros__parameters': {'pid.kp': 250.0}}}))
-    cfg = SweepConfig(n_plants=2, controllers=('pid', 'inverse_adaptive'), duration_s=8.0, chunk=8, nominal=False,
-                      params_files=(str(f),))
+    f.write_text(
+        yaml.safe_dump(
+            {
+                'tem_controller': {'ros__parameters': {'gain_per_s': 2.0}},
+                'adaptive_controller': {'ros__parameters': {'pid.kp': 250.0}},
+            }
+        )
+    )
+    cfg = SweepConfig(
+        n_plants=2,
+        controllers=('pid', 'inverse_adaptive'),
+        duration_s=8.0,
+        chunk=8,
+        nominal=False,
+        params_files=(str(f),),
+    )
     one = run_sweep(cfg)
     forked = run_sweep(cfg, tmp_path / 'out', workers=2)
     assert forked.rows == one.rows
     plain = run_sweep(dataclasses.replace(cfg, params_files=()))
     assert all(a['rms_error_pct'] != b['rms_error_pct'] for a, b in zip(one.rows, plain.rows))
     data = json.loads((tmp_path / 'out' / 'sweep.json').read_text())
-    assert data['parameters_changed'] == {'tem_controller': {'gain_per_s': 2.0}, 'adaptive_controller': {'pid.kp': 250.0}}
+    assert data['parameters_changed'] == {
+        'tem_controller': {'gain_per_s': 2.0},
+        'adaptive_controller': {'pid.kp': 250.0},
+    }
     assert data['config']['params_files'] == [str(f)]
     # reading the files leaves the process's logging as it was (a --log-level for the nodes would set it for good)
     from sma_wrist.runtime.rclpy import logging as rlog
+
     assert rlog.get_logger_effective_level('') == rlog.LoggingSeverity.INFO and rlog.stream_output
 
 
@@ -430,6 +548,7 @@ def test_an_experiment_refuses_a_params_file_its_family_cannot_honour_before_any
     """`sma-wrist experiment --family N --params-file F`: the family honours F as the graph runs do, so a file the
     sweep cannot honour stops the experiment before its first run, not after them."""
     from sma_wrist.experiment import run_experiment
+
     paper = Path(__file__).parent.parent / 'config' / 'paper_table_6_1.yaml'
     with pytest.raises(ParameterError, match='stress_source'):
         run_experiment(['pid'], [0.3], tmp_path / 'exp', duration_s=2.0, params_files=[str(paper)], family=1)
@@ -445,13 +564,23 @@ def test_an_experiment_reads_its_params_files_for_the_family_once(tmp_path: Path
 
     from sma_wrist.experiment import run_experiment
     from sma_wrist.sweep import graph_params
+
     f = tmp_path / 'tuned.yaml'
     f.write_text(yaml.safe_dump({'tem_controller': {'ros__parameters': {'gain_per_s': 2.0}}}))
     calls = []
     real = graph_params.loop_settings
     monkeypatch.setattr(graph_params, 'loop_settings', lambda *a, **k: calls.append(a) or real(*a, **k))
-    run_experiment(['pid'], [0.3], tmp_path / 'exp', duration_s=2.0, params_files=[str(f)], family=1, workers=1,
-                   plots=False, log=io.StringIO())
+    run_experiment(
+        ['pid'],
+        [0.3],
+        tmp_path / 'exp',
+        duration_s=2.0,
+        params_files=[str(f)],
+        family=1,
+        workers=1,
+        plots=False,
+        log=io.StringIO(),
+    )
     assert len(calls) == 1
     data = json.loads((tmp_path / 'exp' / 'family' / 'sweep.json').read_text())
     assert data['parameters_changed'] == {'tem_controller': {'gain_per_s': 2.0}}
@@ -464,6 +593,7 @@ def test_the_sweep_reads_a_tick_as_a_node_reads_its_header_stamp() -> None:
     from rclpy.time import Time
 
     from sma_wrist.core.stamps import stamp_seconds
+
     ns = np.random.default_rng(0).integers(0, 200 * 10**9, 2000).tolist() + [10**9, 126 * 10**9 + 10**7]
     for n in ns:
         st = Time(nanoseconds=n).to_msg()
@@ -476,10 +606,13 @@ def test_a_params_files_soft_start_reaches_the_sweeps_loops(tmp_path: Path) -> N
     changes where their references start."""
     from sma_wrist.sweep.graph_params import loop_settings
     from sma_wrist.sweep.simulate import Case, simulate
+
     f = tmp_path / 'p.yaml'
     f.write_text('trajectory_generator:\n  ros__parameters:\n    soft_start_s: 5.0\n')
     settings = loop_settings([f])
-    assert settings.kwargs['soft_start_s'] == 5.0 and settings.changed == {'trajectory_generator': {'soft_start_s': 5.0}}
+    assert settings.kwargs['soft_start_s'] == 5.0 and settings.changed == {
+        'trajectory_generator': {'soft_start_s': 5.0}
+    }
     _, soft = simulate([Case(0, 'pid', Scenario(payload_kg=0.3))], 6.0, record=True, **settings.kwargs)
     _, plain = simulate([Case(0, 'pid', Scenario(payload_kg=0.3))], 6.0, record=True, soft_start_s=0.0)
     assert abs(soft.q_d[1, 0] - soft.q_measured[1, 0]) < 1e-12 and abs(plain.q_d[1, 0] - 0.524) < 1e-12

@@ -1,7 +1,8 @@
 """Feedback-linearising TEM controller (Eqs. 5.38-5.47): root choice, flags, limits, Figs. 5.24-5.28 story."""
+
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -54,16 +55,17 @@ def run(p: th.ThermalParams, ref: Ref, mode: str, T_end: float = 400.0) -> dict[
 
 
 def tail(x: np.ndarray, t_from: float = 200.0) -> np.ndarray:
-    return x[int(round(t_from / DT)):]
+    return x[int(round(t_from / DT)) :]
 
 
 # ------------------------------------------------------------------ the story
+
 
 def test_one_module_cannot_hold_two_temperatures_fig_5_24_5_25() -> None:
     """h1 = h2 = 1 on one module: large steady errors on both faces, even without command limits."""
     for ref, min_rms in ((steps, 10.0), (seed_sine, 3.0)):
         e = tail(run(WIDE, ref, 'one')['e'])
-        rms = np.sqrt((e ** 2).mean(axis=0))
+        rms = np.sqrt((e**2).mean(axis=0))
         assert np.all(rms > min_rms), (ref.__name__, rms)  # measured: step 15.4 / 14.9, sine 4.5 / 6.5 degC
 
 
@@ -125,8 +127,7 @@ def test_printed_sign_of_eq_5_44_makes_the_error_grow() -> None:
             a, b, c = tc.quadratic_coefficients(P, T, T_d, 0.0, gain)
             I, real = tc.small_root(a, b, c)
             assert real[..., 0].all() or grows  # the growing error eventually asks for unreachable rates
-            T = th.step(P.with_limits(-100, 100), T, th.command_from_input(P, I[..., 0]), 0.001,
-                        validate=False)
+            T = th.step(P.with_limits(-100, 100), T, th.command_from_input(P, I[..., 0]), 0.001, validate=False)
         e = float(T_d[0, 0, 0] - T[0, 0, 0])
         if grows:
             assert e > e0 * 1.5  # e0 exp(+1) = 8.2 while the rate is reachable
@@ -136,9 +137,9 @@ def test_printed_sign_of_eq_5_44_makes_the_error_grow() -> None:
 
 # --------------------------------------------------------------- root choice
 
+
 @settings(max_examples=200, deadline=None)
-@given(st.floats(5.0, 80.0), st.floats(5.0, 80.0), st.floats(5.0, 80.0), st.floats(-3.0, 3.0),
-       st.floats(0.1, 5.0))
+@given(st.floats(5.0, 80.0), st.floats(5.0, 80.0), st.floats(5.0, 80.0), st.floats(-3.0, 3.0), st.floats(0.1, 5.0))
 def test_chosen_root_is_a_true_inverse(T1: float, T2: float, T_d: float, rate: float, gain: float) -> None:
     """Where the root exists and is inside the limits, the plant's rate equals dT_d/dt + k e exactly."""
     T = np.array([[[T1, T2]]])
@@ -160,8 +161,9 @@ def test_root_is_continuous_along_a_target_sweep() -> None:
     """Over the targets whose rate is reachable (one interval around e = 0) the root is monotone, without jumps."""
     T = np.array([[[40.0, 30.0]]])
     T_d = np.linspace(20, 80, 6001)
-    a, b, c = tc.quadratic_coefficients(P, np.broadcast_to(T, (6001, 1, 2)),
-                                        np.stack([T_d, np.full_like(T_d, 30.0)], -1)[:, None], 0.0)
+    a, b, c = tc.quadratic_coefficients(
+        P, np.broadcast_to(T, (6001, 1, 2)), np.stack([T_d, np.full_like(T_d, 30.0)], -1)[:, None], 0.0
+    )
     I, real = tc.small_root(a, b, c)
     idx = np.flatnonzero(real[:, 0, 0])
     assert idx.size > 100 and np.all(np.diff(idx) == 1)  # one contiguous interval
@@ -187,10 +189,16 @@ def test_no_real_root_is_flagged_and_saturates_toward_the_vertex() -> None:
 
 
 @settings(max_examples=150, deadline=None)
-@given(st.lists(st.floats(0.0, 80.0), min_size=4, max_size=4), st.floats(0.0, 90.0), st.floats(0.0, 90.0),
-       st.floats(-20.0, 20.0), st.floats(-20.0, 20.0))
-def test_limits_never_exceeded_and_every_clip_reported(T_list: list[float], d1: float, d2: float, r1: float,
-                                                       r2: float) -> None:
+@given(
+    st.lists(st.floats(0.0, 80.0), min_size=4, max_size=4),
+    st.floats(0.0, 90.0),
+    st.floats(0.0, 90.0),
+    st.floats(-20.0, 20.0),
+    st.floats(-20.0, 20.0),
+)
+def test_limits_never_exceeded_and_every_clip_reported(
+    T_list: list[float], d1: float, d2: float, r1: float, r2: float
+) -> None:
     T = np.array(T_list).reshape(1, 2, 2)
     r = tc.two_layer_command(P, T, [[d1, d2]], [[r1, r2]])
     assert np.all((r.command_V >= P.u_min_V) & (r.command_V <= P.u_max_V))
@@ -225,6 +233,7 @@ def test_safe_command_range_keeps_every_face_in_the_window_over_the_horizon():
     """Held for the horizon (checked with 0.05 s steps, the range was found with 1 s RK4 steps),
     the range's ends keep every face inside 0-80 degC; one volt further leaves it."""
     from sma_wrist.core.control.tem import DriveLimits, safe_command_range
+
     P = th.ThermalParams()
     D = DriveLimits()
     wide = th.ThermalParams().with_limits(D.boost_min_V, D.boost_max_V)
@@ -239,10 +248,10 @@ def test_safe_command_range_keeps_every_face_in_the_window_over_the_horizon():
         for _ in range(int(D.horizon_s / 0.05)):
             X = th.step(wide, X, u_end, 0.05, validate=False)
             peak, low = np.maximum(peak, X.max(axis=-1)), np.minimum(low, X.min(axis=-1))
-        ok = (lo <= hi)  # a layer with no safe command gets the least-bad one: not checked here
+        ok = lo <= hi  # a layer with no safe command gets the least-bad one: not checked here
         assert (peak[ok] <= D.face_max_C + 0.05).all() and (low[ok] >= D.face_min_C - 0.05).all()
     beyond = np.minimum(hi + 1.0, D.boost_max_V)
-    inner = (hi < D.boost_max_V - 1.0)
+    inner = hi < D.boost_max_V - 1.0
     X, peak = x.copy(), x.max(axis=-1)
     for _ in range(3):
         X = th.step(wide, X, beyond, 1.0, validate=False)
@@ -253,6 +262,7 @@ def test_safe_command_range_keeps_every_face_in_the_window_over_the_horizon():
 
 def test_predictive_protection_passes_a_safe_request_and_reports_a_clipped_one():
     from sma_wrist.core.control.tem import DriveLimits, protected_command
+
     P = th.ThermalParams()
     x = th.rest_state(P, 1)
     x[0, :, 0] = [40.0, 79.0]
@@ -270,6 +280,7 @@ def test_one_wrist_kernels_agree_with_the_numpy_path(seed):
     reference: observer step, linearising law (roots, vertex, flags, saturation) and the
     predictive command range, on random faces, targets and rates."""
     from sma_wrist.core.control.tem import DriveLimits, observer_step, safe_command_range
+
     rng = np.random.default_rng(seed)
     x = th.rest_state(P, 1) + rng.uniform(-20.0, 55.0, (1, 2, 2))
     T_d = rng.uniform(0.0, 90.0, (1, 2, 2))
@@ -283,8 +294,12 @@ def test_one_wrist_kernels_agree_with_the_numpy_path(seed):
             np.testing.assert_allclose(getattr(got, name), getattr(ref, name), rtol=1e-12, atol=1e-12)
         for name in ('no_root', 'saturated'):
             np.testing.assert_array_equal(getattr(got, name), getattr(ref, name))
-    np.testing.assert_allclose(observer_step(P, x, u, 0.01, compiled=True),
-                               observer_step(P, x, u, 0.01, compiled=False), rtol=1e-13, atol=1e-12)
+    np.testing.assert_allclose(
+        observer_step(P, x, u, 0.01, compiled=True),
+        observer_step(P, x, u, 0.01, compiled=False),
+        rtol=1e-13,
+        atol=1e-12,
+    )
     D = DriveLimits()
     for a, b in zip(safe_command_range(P, D, x, compiled=True), safe_command_range(P, D, x, compiled=False)):
         np.testing.assert_array_equal(a, b)
@@ -308,6 +323,7 @@ def test_tem_loop_compiled_sample_matches_the_numpy_functions(seed, predictive):
     the numpy functions it fuses, over 300 samples of a loop closed through the heat balance:
     irregular sample times, targets that jump, stale stretches, a muscle above the limit."""
     from sma_wrist.core.control.tem import DriveLimits, TemLoop
+
     rng = np.random.default_rng(seed)
     drive = DriveLimits(predictive=predictive, protect_above_C=float(rng.uniform(40.0, 75.0)))
     params = tc.TemControlParams(gain_per_s=float(rng.uniform(0.3, 3.0)), rate_filter_s=float(rng.uniform(0.0, 0.2)))
@@ -392,8 +408,15 @@ def test_engaged_chatter_guard_switches_the_rate_filter_in_both_paths():
     """TemLoop with its guard: targets that jump every 0.2 s make the commands swing; once engaged the law's
     rate filter is chatter_rate_filter_s in the compiled and the numpy path alike (the two stay equal)."""
     from sma_wrist.core.control.tem import DriveLimits, TemLoop
-    params = tc.TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.0, chatter_limit_per_s=1.0,
-                                 chatter_window_s=2.0, chatter_rate_filter_s=0.3)
+
+    params = tc.TemControlParams(
+        gain_per_s=1.0,
+        rate_filter_s=0.05,
+        target_filter_s=0.0,
+        chatter_limit_per_s=1.0,
+        chatter_window_s=2.0,
+        chatter_rate_filter_s=0.3,
+    )
     loops = [TemLoop(P.with_limits(-24.0, 24.0), params, DriveLimits(), P, 85.0, compiled=c) for c in (False, True)]
     x = th.rest_state(P, 1) + 20.0
     engaged_at = None

@@ -1,4 +1,5 @@
 """TEM heat balance (Eqs. 4.13-4.15, Table 4.9): digits, equilibrium, RK4 order, sign, limits, errors."""
+
 from __future__ import annotations
 
 import dataclasses
@@ -16,7 +17,10 @@ from sma_wrist.core.thermal import heat_balance as th
 
 P = th.ThermalParams()
 _SEED = '000_e2c907079a974115.txt'
-_CANDIDATES = [Path(__file__).resolve().parents[1].parent / 'shared' / 'seed' / _SEED, Path('/work/shared/seed') / _SEED]
+_CANDIDATES = [
+    Path(__file__).resolve().parents[1].parent / 'shared' / 'seed' / _SEED,
+    Path('/work/shared/seed') / _SEED,
+]
 
 
 def _rk4_reference(p: th.ThermalParams, T: np.ndarray, u: np.ndarray, h: float) -> np.ndarray:
@@ -33,15 +37,21 @@ def test_table_4_9_digits_match_seed_text() -> None:
     if path is None:
         pytest.skip('seed text not present')
     text = path.read_text(encoding='utf-8')
-    block = text[text.index('Table 4.9: TEM and SMA heat flow model parameters.'):]
-    block = block[:block.index('The TEM SMA heat flow fitted models')]
+    block = text[text.index('Table 4.9: TEM and SMA heat flow model parameters.') :]
+    block = block[: block.index('The TEM SMA heat flow fitted models')]
     rows = {}
     for line in block.splitlines():
         m = re.match(r'\$K_\{?([^$}]*)\}?\$\s+(\S+)\s+(\S+)', line.strip())
         if m:
             rows[m.group(1)] = (float(m.group(2)), float(m.group(3)))
-    names = {r'\alpha\tau': 'K_alpha_tau', r'\tau': 'K_tau', r'T\infty': 'K_T_inf', 'TC': 'K_T', 'I': 'K_R',
-             r'\infty': 'K_inf'}
+    names = {
+        r'\alpha\tau': 'K_alpha_tau',
+        r'\tau': 'K_tau',
+        r'T\infty': 'K_T_inf',
+        'TC': 'K_T',
+        'I': 'K_R',
+        r'\infty': 'K_inf',
+    }
     assert set(rows) == set(names)
     for key, attr in names.items():
         assert (getattr(th.TABLE_4_9_T1, attr), getattr(th.TABLE_4_9_T2, attr)) == rows[key], key
@@ -55,8 +65,10 @@ def test_defaults_reproduce_table_4_9_exactly() -> None:
     u = np.array([[7.5]])
     i = -0.4 * 7.5
     a, b = th.TABLE_4_9_T1, th.TABLE_4_9_T2
-    by_hand = [(-0.004472 * 41 - 0.004207 * 33) * i - 0.052345 * 41 + 0.028312 * 33 + 0.012524 * i * i + 0.615142,
-               (0.006162 * 33 + 0.003737 * 41) * i - 0.056143 * 33 + 0.036657 * 41 + 0.012524 * i * i + 0.615142]
+    by_hand = [
+        (-0.004472 * 41 - 0.004207 * 33) * i - 0.052345 * 41 + 0.028312 * 33 + 0.012524 * i * i + 0.615142,
+        (0.006162 * 33 + 0.003737 * 41) * i - 0.056143 * 33 + 0.036657 * 41 + 0.012524 * i * i + 0.615142,
+    ]
     assert a.K_alpha_tau == -0.004472 and b.K_tau == 0.003737
     np.testing.assert_allclose(th.derivative(P, T, u)[0, 0], by_hand, rtol=1e-13)
 
@@ -119,6 +131,7 @@ def test_compiled_step_is_the_numpy_step_to_the_bit(coupling: float, shape: tupl
     from unittest import mock
 
     from sma_wrist.core import jit
+
     if not jit.AVAILABLE:
         pytest.skip('numba is not installed: there is only the numpy path')
     p = dataclasses.replace(P, coupling_per_s=coupling, ambient_C=(23.0, 27.0))
@@ -234,9 +247,22 @@ def test_saturate_command_reports_every_clip() -> None:
         th.saturate_command(P, [[np.nan, 0.0]])
 
 
-@pytest.mark.parametrize('bad', [
-    dict(state=np.nan), dict(state=np.inf), dict(command=np.nan), dict(command=-np.inf), dict(command=13.5),
-    dict(command=-12.5), dict(dt=0.0), dict(dt=-0.1), dict(dt=1.5), dict(dt=np.nan), dict(dt=np.inf)])
+@pytest.mark.parametrize(
+    'bad',
+    [
+        dict(state=np.nan),
+        dict(state=np.inf),
+        dict(command=np.nan),
+        dict(command=-np.inf),
+        dict(command=13.5),
+        dict(command=-12.5),
+        dict(dt=0.0),
+        dict(dt=-0.1),
+        dict(dt=1.5),
+        dict(dt=np.nan),
+        dict(dt=np.inf),
+    ],
+)
 def test_step_rejects_bad_inputs_with_typed_errors(bad: dict) -> None:
     T = th.rest_state(P, 2)
     u = np.zeros((2, 2))
@@ -264,8 +290,15 @@ def test_bad_state_shape_and_simulate_errors() -> None:
 
 
 def test_parameters_are_validated() -> None:
-    for kw in (dict(input_per_volt=0.0), dict(u_min_V=1.0), dict(u_max_V=-1.0), dict(coupling_per_s=-1e-3),
-               dict(dt_max_s=50.0), dict(ambient_C=(np.nan, 20.0)), dict(window_C=(80.0, 0.0))):
+    for kw in (
+        dict(input_per_volt=0.0),
+        dict(u_min_V=1.0),
+        dict(u_max_V=-1.0),
+        dict(coupling_per_s=-1e-3),
+        dict(dt_max_s=50.0),
+        dict(ambient_C=(np.nan, 20.0)),
+        dict(window_C=(80.0, 0.0)),
+    ):
         with pytest.raises(ParameterError):
             th.ThermalParams(**kw)
 
@@ -283,10 +316,15 @@ def test_simulate_equals_repeated_steps() -> None:
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(0.0, 80.0), min_size=4, max_size=4), st.floats(-12.0, 13.0), st.floats(-12.0, 13.0),
-       st.floats(0.05, 1.0))
-def test_step_is_rk4_with_fourth_order_step_doubling_error(T_list: list[float], u1: float, u2: float,
-                                                          dt: float) -> None:
+@given(
+    st.lists(st.floats(0.0, 80.0), min_size=4, max_size=4),
+    st.floats(-12.0, 13.0),
+    st.floats(-12.0, 13.0),
+    st.floats(0.05, 1.0),
+)
+def test_step_is_rk4_with_fourth_order_step_doubling_error(
+    T_list: list[float], u1: float, u2: float, dt: float
+) -> None:
     T = np.array(T_list).reshape(1, 2, 2)
     u = np.array([[u1, u2]])
     np.testing.assert_allclose(th.step(P, T, u, dt), _rk4_reference(P, T, u, dt), atol=1e-11)
@@ -294,6 +332,7 @@ def test_step_is_rk4_with_fourth_order_step_doubling_error(T_list: list[float], 
     def doubling_error(h: float) -> float:
         half = th.step(P, th.step(P, T, u, h / 2), u, h / 2)
         return float(np.abs(th.step(P, T, u, h) - half).max())
+
     # The state-dependent Joule/Peltier terms make a fixed a-priori bound unreliable (a former |v| < 10 degC/s
     # bound was falsified at T=(0,0,0,39), u2=13 V); the order is the property: halving h must cut the
     # step-doubling error by ~2^5, and 16x leaves room for the h^6 term.

@@ -4,6 +4,7 @@ The data come from the plant's heat balance with the family's perturbations (``p
 plant's code, not the estimator's), driven by commands the estimator never chose, read through a
 thermocouple the way a real one reads: a first-order junction lag and white noise.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -12,16 +13,22 @@ import pytest
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal.kernel import thermal_constants
-from sma_wrist.core.thermal.online import (OnlineThermalParams, ThermalScaleEstimator, scaled_constants, theta_of,
-                                           with_scales)
+from sma_wrist.core.thermal.online import (
+    OnlineThermalParams,
+    ThermalScaleEstimator,
+    scaled_constants,
+    theta_of,
+    with_scales,
+)
 from sma_wrist.plants.spread import Scenario, scenario_params
 
 BASE = th.ThermalParams().with_limits(-24.0, 24.0)
 DT = 0.01
 
 
-def _thermocouple_run(thermal: th.ThermalParams, seconds: float, lag_s: float, noise_C: float,
-                      seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _thermocouple_run(
+    thermal: th.ThermalParams, seconds: float, lag_s: float, noise_C: float, seed: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, T_meas (K, 2), u (K, 2)): both TEMs of one wrist under slow random square-ish commands (+-20 V,
     held 1-6 s), the plant's heat balance at 1 ms, a lagging noisy thermocouple sampled at 100 Hz."""
     rng = np.random.default_rng(seed)
@@ -31,7 +38,7 @@ def _thermocouple_run(thermal: th.ThermalParams, seconds: float, lag_s: float, n
         i = 0
         while i < k:
             n = int(rng.uniform(1.0, 6.0) / DT)
-            u[i:i + n, j] = rng.uniform(-20.0, 20.0)
+            u[i : i + n, j] = rng.uniform(-20.0, 20.0)
             i += n
     x = th.rest_state(thermal, 1)
     z = x[0, :, th.MUSCLE_FACE].copy()
@@ -55,8 +62,9 @@ def test_the_scales_are_the_plants_perturbations_exactly():
 
 @pytest.mark.parametrize('truth', [(0.75, 1.25, 4.0), (1.25, 0.8, -3.0)])
 def test_it_learns_a_weaker_or_stronger_tem_through_a_lagging_noisy_thermocouple(truth):
-    plant = scenario_params(Scenario(tem_gain_scale=truth[0], heat_loss_scale=truth[1],
-                                     ambient_offset_C=truth[2])).thermal
+    plant = scenario_params(
+        Scenario(tem_gain_scale=truth[0], heat_loss_scale=truth[1], ambient_offset_C=truth[2])
+    ).thermal
     t, T, u = _thermocouple_run(plant, 100.0, lag_s=0.15, noise_C=0.2, seed=1)
     est = ThermalScaleEstimator(BASE, 1, OnlineThermalParams())
     u_now, T_now = np.empty((1, 2)), np.empty((1, 2))  # reused in place, as the TEM kernel reuses its command array
@@ -70,8 +78,10 @@ def test_it_learns_a_weaker_or_stronger_tem_through_a_lagging_noisy_thermocouple
 
 
 def test_a_wrist_learns_the_same_alone_as_among_others_and_a_bad_sample_costs_one_window():
-    runs = [_thermocouple_run(scenario_params(Scenario(tem_gain_scale=g)).thermal, 12.0, 0.1, 0.1, seed=s)
-            for g, s in ((0.8, 2), (1.1, 3), (0.9, 4))]
+    runs = [
+        _thermocouple_run(scenario_params(Scenario(tem_gain_scale=g)).thermal, 12.0, 0.1, 0.1, seed=s)
+        for g, s in ((0.8, 2), (1.1, 3), (0.9, 4))
+    ]
     many = ThermalScaleEstimator(BASE, 3)
     one = ThermalScaleEstimator(BASE, 1)
     for k in range(runs[0][0].size):
@@ -84,9 +94,19 @@ def test_a_wrist_learns_the_same_alone_as_among_others_and_a_bad_sample_costs_on
     assert one.updates == n and np.array_equal(one.theta, before)
 
 
-@pytest.mark.parametrize('bad', [dict(window_s=0.0), dict(points=0), dict(avg_s=5.0), dict(tc_lag_s=-1.0),
-                                 dict(prior_sd=(0.1, 0.1)), dict(max_step=(0.1, -0.1, 1.0)),
-                                 dict(noise_sd_C=0.0), dict(apply_after_s=float('nan'))])
+@pytest.mark.parametrize(
+    'bad',
+    [
+        dict(window_s=0.0),
+        dict(points=0),
+        dict(avg_s=5.0),
+        dict(tc_lag_s=-1.0),
+        dict(prior_sd=(0.1, 0.1)),
+        dict(max_step=(0.1, -0.1, 1.0)),
+        dict(noise_sd_C=0.0),
+        dict(apply_after_s=float('nan')),
+    ],
+)
 def test_bad_settings_are_clear_errors(bad):
     with pytest.raises(ParameterError):
         OnlineThermalParams(**bad)
@@ -112,6 +132,7 @@ def test_a_gap_or_tems_switched_off_between_samples_break_the_window():
     """Lost samples, or tem_controller's watchdog switching the TEMs off between samples: the commands the window
     recorded are not the ones that were in force, so the window is dropped, not fitted."""
     from sma_wrist.core.control.tem import DriveLimits, TemControlParams, TemLoop
+
     t, T, u = _thermocouple_run(scenario_params(Scenario(tem_gain_scale=0.8)).thermal, 6.0, 0.1, 0.1, seed=6)
     est = ThermalScaleEstimator(BASE, 1)
     for k in range(150):
@@ -135,9 +156,12 @@ def test_a_stronger_tem_keeps_its_hot_faces_in_the_window_with_the_estimate_in_u
     the hottest face is 78.9 degC. simulate's rows report both (tem_face_max_C, tem_face_outside_s)."""
     from sma_wrist.plants.spread import sample
     from sma_wrist.sweep.simulate import Case, simulate
+
     sc = sample(40, seed=1)[12]  # the sweep's family (its parameters to the last digit: the loop is chaotic)
     assert sc.tem_gain_scale > 1.25
     now = simulate([Case(0, 'inverse_adaptive', sc)], 40.0)[0][0]
-    late = simulate([Case(0, 'inverse_adaptive', sc)], 40.0, online_thermal=OnlineThermalParams(apply_after_s=30.0))[0][0]
+    late = simulate([Case(0, 'inverse_adaptive', sc)], 40.0, online_thermal=OnlineThermalParams(apply_after_s=30.0))[0][
+        0
+    ]
     assert now['tem_face_outside_s'] == 0.0 and now['tem_face_max_C'] < 80.0
     assert late['tem_face_outside_s'] > 5.0 and late['tem_face_max_C'] > 85.0

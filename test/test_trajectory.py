@@ -1,4 +1,5 @@
 """Trajectory generators: seed values, analytic derivatives vs finite differences, validation."""
+
 from __future__ import annotations
 
 import math
@@ -38,9 +39,11 @@ def test_derivatives_match_central_differences(name: str, kw: dict) -> None:
     qp, qdp, _ = traj(t + h)
     qm, qdm, _ = traj(t - h)
     # skip samples within h of a kink (ramp corners, step start/end, sweep ends)
-    kinks = {'step': [kw.get('t_step_s', 0), kw.get('t_step_s', 0) + kw.get('rise_time_s', 0)],
-             'ramp': [kw.get('t_start_s', 0), kw.get('t_start_s', 0) + 6.0],
-             'sine_sweep': [0.0, kw.get('duration_s', 0)]}.get(name, [])
+    kinks = {
+        'step': [kw.get('t_step_s', 0), kw.get('t_step_s', 0) + kw.get('rise_time_s', 0)],
+        'ramp': [kw.get('t_start_s', 0), kw.get('t_start_s', 0) + 6.0],
+        'sine_sweep': [0.0, kw.get('duration_s', 0)],
+    }.get(name, [])
     ok = np.ones_like(t, bool)
     for tk in kinks:
         ok &= np.abs(t - tk) > 3 * h
@@ -87,17 +90,20 @@ def test_sweep_instantaneous_frequency() -> None:
     np.testing.assert_allclose(qd, [0.2 * 1.0, 0.2 * 3.0 * math.cos(psi_20)], rtol=1e-12)
 
 
-@pytest.mark.parametrize('name,kw,fragment', [
-    ('circle', {}, "'circle'"),
-    ('sine', {'omega_rad_s': 0.0}, 'omega_rad_s = 0.0'),
-    ('sine', {'amplitude_rad': float('nan')}, 'amplitude_rad = nan'),
-    ('sine', {'offset_rad': 0.8}, '1.324'),           # leaves [0, 1.05]
-    ('step', {'rise_time_s': -1.0}, 'rise_time_s = -1.0'),
-    ('ramp', {'rate_rad_s': 0.0}, 'rate_rad_s'),
-    ('sine_sweep', {'duration_s': 0.0}, 'duration_s'),
-    ('constant', {'value_rad': -0.1}, '-0.1'),
-    ('sine', {'frequency': 1.0}, 'frequency'),
-])
+@pytest.mark.parametrize(
+    'name,kw,fragment',
+    [
+        ('circle', {}, "'circle'"),
+        ('sine', {'omega_rad_s': 0.0}, 'omega_rad_s = 0.0'),
+        ('sine', {'amplitude_rad': float('nan')}, 'amplitude_rad = nan'),
+        ('sine', {'offset_rad': 0.8}, '1.324'),  # leaves [0, 1.05]
+        ('step', {'rise_time_s': -1.0}, 'rise_time_s = -1.0'),
+        ('ramp', {'rate_rad_s': 0.0}, 'rate_rad_s'),
+        ('sine_sweep', {'duration_s': 0.0}, 'duration_s'),
+        ('constant', {'value_rad': -0.1}, '-0.1'),
+        ('sine', {'frequency': 1.0}, 'frequency'),
+    ],
+)
 def test_factory_validation_names_the_value(name: str, kw: dict, fragment: str) -> None:
     with pytest.raises(ParameterError) as ei:
         tj.make_trajectory(name, **kw)
@@ -123,6 +129,7 @@ def test_a_soft_start_leaves_the_angle_at_rest_and_joins_the_shape_smoothly_and_
     derivatives of the angle throughout (a blend, not a jump); from duration_s on it is the shape to the last bit;
     its bounds hold the start angle."""
     from sma_wrist.core.control.trajectory import SoftStart, make_trajectory
+
     base = make_trajectory(shape)
     soft = SoftStart(base, 0.08, 20.0)
     q, qd, qdd = soft(np.array([0.0, -1.0]))
@@ -141,6 +148,7 @@ def test_a_soft_start_leaves_the_angle_at_rest_and_joins_the_shape_smoothly_and_
 def test_a_soft_start_takes_one_start_angle_per_wrist_and_zero_length_is_the_shape() -> None:
     """soft_start on an array of start angles (the sweep's loops) gives each loop what SoftStart gives one wrist."""
     from sma_wrist.core.control.trajectory import SoftStart, make_trajectory, soft_start
+
     base = make_trajectory('sine')
     starts = np.array([0.0, 0.08, 0.3])
     for t in (0.0, 3.7, 19.99, 20.0, 55.0):

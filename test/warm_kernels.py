@@ -5,6 +5,7 @@ kernel is compiled twice. conftest.py runs the parts below side by side once, be
 and the workers then load the cache. Each part drives the public entry points on tiny inputs; a kernel a
 part misses is compiled by the first test that needs it, as before. Nothing here is asserted.
 """
+
 from __future__ import annotations
 
 import sys
@@ -17,6 +18,7 @@ def closed_loops() -> None:
     from sma_wrist.core.control import adaptive_kernel, pid_kernel, tem_kernel
     from sma_wrist.core.control.joint_controller import JointController
     from sma_wrist.sweep.simulate import simulate
+
     simulate(_cases(), 0.05)
     tem_kernel.warm_up()
     adaptive_kernel.warm_up()
@@ -29,10 +31,13 @@ def closed_loops() -> None:
 def _cases() -> list:
     from sma_wrist.plants.spread import Scenario
     from sma_wrist.sweep.simulate import Case
+
     noisy = dict(temp_lag_s=0.2, temp_noise_C=0.2, angle_noise_rad=0.003)
-    return [Case(0, 'inverse_adaptive', Scenario(payload_kg=0.3)),
-            Case(1, 'direct_adaptive', Scenario(payload_kg=0.3, transition_shift_C=-3.0, stroke_scale=1.1, **noisy)),
-            Case(2, 'pid', Scenario(payload_kg=0.3, tem_gain_scale=0.9, **noisy))]
+    return [
+        Case(0, 'inverse_adaptive', Scenario(payload_kg=0.3)),
+        Case(1, 'direct_adaptive', Scenario(payload_kg=0.3, transition_shift_C=-3.0, stroke_scale=1.1, **noisy)),
+        Case(2, 'pid', Scenario(payload_kg=0.3, tem_gain_scale=0.9, **noisy)),
+    ]
 
 
 def replays() -> None:
@@ -43,6 +48,7 @@ def replays() -> None:
     from sma_wrist.diagnose import diagnose_run
     from sma_wrist.diagnose.testdata import run_from_truth, simulate
     from sma_wrist.sweep.simulate import simulate as closed_loops_on
+
     WristPlant().advance(np.zeros((1, 2)), 5)
     closed_loops_on(_cases(), 0.05, plant='phase_fraction')
     diagnose_run(run_from_truth(simulate('none', seed=0, duration_s=4.0)), candidates=['backlash', 'tem_mismatch'])

@@ -18,13 +18,15 @@ Every sample is checked against the bring-up limits (an ADC channel at a rail, a
 the joint further than ``max_excursion_rad`` from where it started); the device time, not wall time, paces
 everything, so a device emulated faster than real time runs the same procedure.
 """
+
 from __future__ import annotations
 
 import bisect
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -73,7 +75,7 @@ class BringUpLimits:
         if self.max_drive_V > 24.0:
             return f'bring-up drive {self.max_drive_V:g} V is above the TEM driver rating 24 V'
         if self.max_muscle_C > 90.0:
-            return f'bring-up muscle limit {self.max_muscle_C:g} degC is above the bridge\'s 90 degC'
+            return f"bring-up muscle limit {self.max_muscle_C:g} degC is above the bridge's 90 degC"
         return None
 
 
@@ -97,15 +99,25 @@ class Record:
     def arrays(self, since: float = -math.inf) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(t, counts (n, 5), drive (n, 2)) of the samples from device time ``since`` on."""
         i = bisect.bisect_left(self.t, since)
-        return (np.asarray(self.t[i:], float), np.asarray(self.adc[i:], float).reshape(-1, 5),
-                np.asarray(self.u[i:], float).reshape(-1, 2))
+        return (
+            np.asarray(self.t[i:], float),
+            np.asarray(self.adc[i:], float).reshape(-1, 5),
+            np.asarray(self.u[i:], float).reshape(-1, 2),
+        )
 
 
 class BringUp:
     """One bring-up on ``device`` (SerialDevice or SimDevice) with the bridge's ``calibration`` and ``wiring``."""
 
-    def __init__(self, device: Any, calibration: Calibration, wiring: Wiring, limits: BringUpLimits | None = None,
-                 accept_fixes: bool = False, progress: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self,
+        device: Any,
+        calibration: Calibration,
+        wiring: Wiring,
+        limits: BringUpLimits | None = None,
+        accept_fixes: bool = False,
+        progress: Callable[[str], None] | None = None,
+    ) -> None:
         self.dev = device
         self.cal = calibration
         self.wiring = wiring
@@ -150,8 +162,14 @@ class BringUp:
 
     def _take(self, s: P.Sample) -> None:
         if self._t0_us is not None and s.flags & P.FLAG_BOOT:
-            raise Stop(D.Fault('device_reset', None, f'the device restarted at {self.t:.1f} s of the procedure',
-                               'check the supply (brown-out) and the firmware; then run commissioning again'))
+            raise Stop(
+                D.Fault(
+                    'device_reset',
+                    None,
+                    f'the device restarted at {self.t:.1f} s of the procedure',
+                    'check the supply (brown-out) and the firmware; then run commissioning again',
+                )
+            )
         if self._seq.update(s.seq) < 0:
             return  # a repeated or late line
         if self._t0_us is None:
@@ -168,29 +186,57 @@ class BringUp:
         """The bring-up limits on one sample: any breach stops the procedure (the TEMs go off in run())."""
         for ch, c in enumerate(adc):
             if c in (0, P.ADC_MAX):
-                raise Stop(D.Fault('sensor_saturated', ch + 1, f'{CHANNEL_NAMES[ch]} (ADC channel {ch + 1}) reads '
-                                   f'{c}, the end of the ADC range, at {self.t:.2f} s',
-                                   f'check the {CHANNEL_NAMES[ch]}: an open or shorted sensor, its connector and '
-                                   'its supply'))
+                raise Stop(
+                    D.Fault(
+                        'sensor_saturated',
+                        ch + 1,
+                        f'{CHANNEL_NAMES[ch]} (ADC channel {ch + 1}) reads '
+                        f'{c}, the end of the ADC range, at {self.t:.2f} s',
+                        f'check the {CHANNEL_NAMES[ch]}: an open or shorted sensor, its connector and its supply',
+                    )
+                )
         temps, q = self.cal.to_physical_fast(self.wiring.muscle_counts(adc))  # plain floats: every sample
         if not (math.isfinite(sum(temps)) and math.isfinite(q)):
-            raise Stop(D.Fault('sensor_not_finite', None, 'a reading is not a finite number',
-                               'check the calibration parameters (adc.*, calibration.*)'))
+            raise Stop(
+                D.Fault(
+                    'sensor_not_finite',
+                    None,
+                    'a reading is not a finite number',
+                    'check the calibration parameters (adc.*, calibration.*)',
+                )
+            )
         if max(temps[:2]) > self.lim.max_muscle_C:
             m = 0 if temps[0] >= temps[1] else 1
-            raise Stop(D.Fault('over_temperature', m + 1, f'muscle {m + 1} at {temps[m]:.1f} degC, above the bring-up '
-                               f'limit {self.lim.max_muscle_C:g} degC', 'let the wrist cool down; if it was not heated, '
-                               'check its thermocouple'))
+            raise Stop(
+                D.Fault(
+                    'over_temperature',
+                    m + 1,
+                    f'muscle {m + 1} at {temps[m]:.1f} degC, above the bring-up limit {self.lim.max_muscle_C:g} degC',
+                    'let the wrist cool down; if it was not heated, check its thermocouple',
+                )
+            )
         if max(temps[2:]) > self.lim.max_face_C:
             f = 0 if temps[2] >= temps[3] else 1
-            raise Stop(D.Fault('over_temperature', f + 1, f'TEM {f + 1} face at {temps[2 + f]:.1f} degC, above the '
-                               f'bring-up limit {self.lim.max_face_C:g} degC', 'check the TEM\'s cooling (coolant flow, '
-                               'heat sink)'))
+            raise Stop(
+                D.Fault(
+                    'over_temperature',
+                    f + 1,
+                    f'TEM {f + 1} face at {temps[2 + f]:.1f} degC, above the '
+                    f'bring-up limit {self.lim.max_face_C:g} degC',
+                    "check the TEM's cooling (coolant flow, heat sink)",
+                )
+            )
         q0 = getattr(self, '_q_start', None)
         if q0 is not None and abs(q - q0) > self.lim.max_excursion_rad:
-            raise Stop(D.Fault('angle_excursion', None, f'the joint moved {q - q0:+.3f} rad from where it started, '
-                               f'beyond the bring-up limit {self.lim.max_excursion_rad:g} rad',
-                               'check the joint, its stops and the potentiometer'))
+            raise Stop(
+                D.Fault(
+                    'angle_excursion',
+                    None,
+                    f'the joint moved {q - q0:+.3f} rad from where it started, '
+                    f'beyond the bring-up limit {self.lim.max_excursion_rad:g} rad',
+                    'check the joint, its stops and the potentiometer',
+                )
+            )
 
     def pump(self) -> int:
         """Take the frames that arrived; repeat the drive command as needed. Returns the number of samples taken."""
@@ -204,8 +250,14 @@ class BringUp:
             elif isinstance(f, P.Hello):
                 self.hello = f
             elif isinstance(f, P.Reset) and self._t0_us is not None:
-                raise Stop(D.Fault('device_reset', None, f'the device restarted ({f.reason}) at {self.t:.1f} s',
-                                   'check the supply (brown-out) and the firmware; then run commissioning again'))
+                raise Stop(
+                    D.Fault(
+                        'device_reset',
+                        None,
+                        f'the device restarted ({f.reason}) at {self.t:.1f} s',
+                        'check the supply (brown-out) and the firmware; then run commissioning again',
+                    )
+                )
             elif isinstance(f, P.Error):
                 self.warnings.append(f'device error {f.code}: {f.text}')
         self._command()
@@ -229,8 +281,12 @@ class BringUp:
         """All bring-up steps; returns 'passed', 'fault' or raises KeyboardInterrupt / DeviceLost after turning the
         TEMs off. The findings are in ``steps`` / ``faults`` in every case."""
         try:
-            for name, step in (('link', self.step_link), ('sensors', self.step_sensors),
-                               ('tem_pulses', self.step_pulses), ('angle', self.step_angle)):
+            for name, step in (
+                ('link', self.step_link),
+                ('sensors', self.step_sensors),
+                ('tem_pulses', self.step_pulses),
+                ('angle', self.step_angle),
+            ):
                 self.step = name
                 self.progress(name)
                 step()
@@ -241,9 +297,14 @@ class BringUp:
                 self.faults.append(e.fault)
             return 'fault'
         except DeviceLost as e:
-            self.faults.append(D.Fault('link_lost', None, f'{e} during the {self.step} step',
-                                       'check the cable, the port and the device\'s supply; then run commissioning '
-                                       'again'))
+            self.faults.append(
+                D.Fault(
+                    'link_lost',
+                    None,
+                    f'{e} during the {self.step} step',
+                    "check the cable, the port and the device's supply; then run commissioning again",
+                )
+            )
             return 'fault'
         finally:
             self.off()
@@ -264,12 +325,22 @@ class BringUp:
             self.pump()
             if self.hello is None and time.monotonic() - wall0 > HELLO_TIMEOUT_S:
                 st = self.dev.parser_stats
-                seen = (f'its lines are protocol version {self.dev.parser.foreign_version}, this host speaks '
-                        f'{P.PROTOCOL_VERSION}' if st.version_mismatch else
-                        f'{st.rejected_lines} lines and {st.garbage_bytes} bytes failed their checks' if
-                        st.rejected_lines or st.garbage_bytes else 'nothing valid arrived')
-                raise Stop(D.Fault('no_hello', None, f'the device sends no hello (H frame) in answer to a query: {seen}',
-                                   'check the baud rate, the port and that the firmware speaks doc/explanation/protocol.md'))
+                seen = (
+                    f'its lines are protocol version {self.dev.parser.foreign_version}, this host speaks '
+                    f'{P.PROTOCOL_VERSION}'
+                    if st.version_mismatch
+                    else f'{st.rejected_lines} lines and {st.garbage_bytes} bytes failed their checks'
+                    if st.rejected_lines or st.garbage_bytes
+                    else 'nothing valid arrived'
+                )
+                raise Stop(
+                    D.Fault(
+                        'no_hello',
+                        None,
+                        f'the device sends no hello (H frame) in answer to a query: {seen}',
+                        'check the baud rate, the port and that the firmware speaks doc/explanation/protocol.md',
+                    )
+                )
         self._wall0 = time.monotonic()
         self.hold(1.0)
         t, adc, _ = self.rec.arrays()
@@ -277,10 +348,18 @@ class BringUp:
         rate = (len(t) - 1) / (t[-1] - t[0]) if len(t) > 1 and t[-1] > t[0] else float('nan')
         st = self.dev.parser_stats
         h = self.hello
-        info = {'device_id': h.device_id, 'firmware': h.firmware, 'protocol_version': h.version,
-                'rate_hz_announced': h.rate_hz, 'rate_hz_measured': round(rate, 2), 'samples': len(t),
-                'lost_samples': self._seq.lost, 'rejected_lines': st.rejected_lines, 'garbage_bytes': st.garbage_bytes,
-                'device_s_per_wall_s': round(t[-1] / wall, 3) if wall > 0 and len(t) and self.dev.port != 'sim' else None}
+        info = {
+            'device_id': h.device_id,
+            'firmware': h.firmware,
+            'protocol_version': h.version,
+            'rate_hz_announced': h.rate_hz,
+            'rate_hz_measured': round(rate, 2),
+            'samples': len(t),
+            'lost_samples': self._seq.lost,
+            'rejected_lines': st.rejected_lines,
+            'garbage_bytes': st.garbage_bytes,
+            'device_s_per_wall_s': round(t[-1] / wall, 3) if wall > 0 and len(t) and self.dev.port != 'sim' else None,
+        }
         self.steps['link'] = info
         if not (math.isfinite(rate) and abs(rate - h.rate_hz) <= 0.02 * h.rate_hz):
             self.warnings.append(f'the device announces {h.rate_hz} Hz and sends {rate:.1f} Hz of device time')
@@ -293,10 +372,16 @@ class BringUp:
         values = np.column_stack([temps, q])
         units = ('degC',) * 4 + ('rad',)
         names = ('muscle_1', 'muscle_2', 'tem_face_1', 'tem_face_2', 'angle')
-        self.steps['sensors'] = {n: {'mean': round(float(values[:, i].mean()), 4),
-                                     'noise': float(f'{D.noise_level(t, values[:, i]):.3g}'), 'unit': units[i],
-                                     'adc_min': int(adc[:, i].min()), 'adc_max': int(adc[:, i].max())}
-                                 for i, n in enumerate(names)}
+        self.steps['sensors'] = {
+            n: {
+                'mean': round(float(values[:, i].mean()), 4),
+                'noise': float(f'{D.noise_level(t, values[:, i]):.3g}'),
+                'unit': units[i],
+                'adc_min': int(adc[:, i].min()),
+                'adc_max': int(adc[:, i].max()),
+            }
+            for i, n in enumerate(names)
+        }
         self.steps['sensors']['seconds'] = round(float(t[-1] - t[0]), 3)
         self._q_start = float(q.mean())
         self._T_start = temps.mean(axis=0)
@@ -337,8 +422,13 @@ class BringUp:
         frozen = np.ptp(adc[sel][:, :2], axis=0) == 0 if sel.any() else np.zeros(2, bool)
         frozen = frozen[self.wiring.channel_order()[:2]]
         found = D.classify_pulses(muscle, face, floor, floor_f, frozen=frozen, current=self.wiring)
-        self._pulse_table = {'muscle_change_C': np.round(muscle, 3).tolist(), 'face_change_C': np.round(face, 3).tolist(),
-                             'response_floor_C': round(floor, 3), 'face_response_floor_C': round(floor_f, 3), 'frozen_readings': [bool(x) for x in frozen]}
+        self._pulse_table = {
+            'muscle_change_C': np.round(muscle, 3).tolist(),
+            'face_change_C': np.round(face, 3).tolist(),
+            'response_floor_C': round(floor, 3),
+            'face_response_floor_C': round(floor_f, 3),
+            'frozen_readings': [bool(x) for x in frozen],
+        }
         return found
 
     def step_pulses(self) -> None:
@@ -358,8 +448,14 @@ class BringUp:
         info['verified'] = self._pulse_table
         if again.faults:
             self.faults.extend(found.faults)
-            raise Stop(D.Fault('fix_not_verified', None, 'the corrected wiring did not pass the pulses again: '
-                               + again.faults[0].message, again.faults[0].fix))
+            raise Stop(
+                D.Fault(
+                    'fix_not_verified',
+                    None,
+                    'the corrected wiring did not pass the pulses again: ' + again.faults[0].message,
+                    again.faults[0].fix,
+                )
+            )
         for f in found.faults:
             f.fixed = True
             self.faults.append(f)
@@ -386,8 +482,10 @@ class BringUp:
                 why[0] = 'moved'
             elif T >= lim.max_muscle_C - 1.0:
                 why[0] = 'limit'
-            elif self.t - t_on > lim.stall_window_s and \
-                    T - next(x for tt, x in hist if tt >= self.t - lim.stall_window_s) < lim.stall_C:
+            elif (
+                self.t - t_on > lim.stall_window_s
+                and T - next(x for tt, x in hist if tt >= self.t - lim.stall_window_s) < lim.stall_C
+            ):
                 why[0] = 'stalled'
             else:
                 return False
@@ -411,32 +509,53 @@ class BringUp:
         self.set_drive(*drive)
         t_cool = self.hold(lim.cool_timeout_s, cooled)
         self.set_drive(0.0, 0.0)
-        return {'start_C': round(T0, 2), 'peak_C': round(peak, 2), 'angle_change_rad': round(dq, 5),
-                'heated_s': round(t_heat, 2), 'ended': why[0], 'cooled_s': round(t_cool, 2)}
+        return {
+            'start_C': round(T0, 2),
+            'peak_C': round(peak, 2),
+            'angle_change_rad': round(dq, 5),
+            'heated_s': round(t_heat, 2),
+            'ended': why[0],
+            'cooled_s': round(t_cool, 2),
+        }
 
     def step_angle(self) -> None:
         lim = self.lim
         res = [self._heat(0), self._heat(1)]
         self.hold(0.5)
         rev = self.cal.reversed_angle()
-        found = D.angle_direction([r['angle_change_rad'] for r in res], [r['ended'] == 'moved' for r in res],
-                                  [r['ended'] == 'limit' for r in res], lim.max_muscle_C, [r['peak_C'] for r in res],
-                                  {'calibration.angle_gain_rad_per_count': rev.angle_gain_rad_per_count,
-                                   'calibration.angle_offset_rad': rev.angle_offset_rad})
+        found = D.angle_direction(
+            [r['angle_change_rad'] for r in res],
+            [r['ended'] == 'moved' for r in res],
+            [r['ended'] == 'limit' for r in res],
+            lim.max_muscle_C,
+            [r['peak_C'] for r in res],
+            {
+                'calibration.angle_gain_rad_per_count': rev.angle_gain_rad_per_count,
+                'calibration.angle_offset_rad': rev.angle_offset_rad,
+            },
+        )
         info: dict[str, Any] = {'muscle_1': res[0], 'muscle_2': res[1], 'angle_sign': found.sign}
         self.steps['angle'] = info
         for r, m in zip(res, (1, 2)):
             if r['ended'] in ('stalled', 'timeout'):
-                self.warnings.append(f'muscle {m} got to {r["peak_C"]:.1f} degC at {lim.heat_V:g} V and the joint did '
-                                     f'not turn {lim.move_rad:g} rad ({r["angle_change_rad"]:+.4f}): the angle\'s '
-                                     'direction rests on the other muscle' if found.sign is not None else
-                                     f'muscle {m} got to {r["peak_C"]:.1f} degC at {lim.heat_V:g} V without turning the '
-                                     'joint')
+                self.warnings.append(
+                    f'muscle {m} got to {r["peak_C"]:.1f} degC at {lim.heat_V:g} V and the joint did '
+                    f"not turn {lim.move_rad:g} rad ({r['angle_change_rad']:+.4f}): the angle's "
+                    'direction rests on the other muscle'
+                    if found.sign is not None
+                    else f'muscle {m} got to {r["peak_C"]:.1f} degC at {lim.heat_V:g} V without turning the joint'
+                )
         if found.sign is None and not found.faults:
-            raise Stop(D.Fault('angle_not_determined', None, 'neither muscle turned the joint within the bring-up '
-                               f'limits ({lim.heat_V:g} V, {lim.max_muscle_C:g} degC)',
-                               'check that the wires are hooked to the joint; TEMs too weak or a wire transforming '
-                               'hotter than the limits allow: raise --heat-V / --max-muscle-C'))
+            raise Stop(
+                D.Fault(
+                    'angle_not_determined',
+                    None,
+                    'neither muscle turned the joint within the bring-up '
+                    f'limits ({lim.heat_V:g} V, {lim.max_muscle_C:g} degC)',
+                    'check that the wires are hooked to the joint; TEMs too weak or a wire transforming '
+                    'hotter than the limits allow: raise --heat-V / --max-muscle-C',
+                )
+            )
         if not found.faults:
             return
         fixable = all(f.kind == 'angle_reversed' for f in found.faults)
@@ -444,8 +563,10 @@ class BringUp:
             self.faults.extend(found.faults)
             raise Stop(found.faults[0])
         self.cal = rev
-        info['calibration_corrected'] = {'calibration.angle_gain_rad_per_count': rev.angle_gain_rad_per_count,
-                                         'calibration.angle_offset_rad': rev.angle_offset_rad}
+        info['calibration_corrected'] = {
+            'calibration.angle_gain_rad_per_count': rev.angle_gain_rad_per_count,
+            'calibration.angle_offset_rad': rev.angle_offset_rad,
+        }
         for f in found.faults:
             f.fixed = True
             self.faults.append(f)

@@ -14,10 +14,12 @@ joint to positive angles, muscle 2 to negative ones (the model's convention, ``s
 Each finding is a :class:`Fault` that names its fix; :func:`found_wiring` turns the findings into the wiring
 measured through the one in use (``Wiring.then`` composes them).
 """
+
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -61,8 +63,9 @@ def noise_level(t: np.ndarray, y: np.ndarray) -> float:
     return float(np.std(y - A @ coef, ddof=2))
 
 
-def step_change(t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baseline_s: float = 2.0,
-                tail_s: float = 0.5) -> StepChange:
+def step_change(
+    t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baseline_s: float = 2.0, tail_s: float = 0.5
+) -> StepChange:
     """How much ``y`` changed by the end of a pulse from ``t_on`` to ``t_off`` [s]: the mean over the pulse's last
     ``tail_s`` minus the baseline (the line fitted over the ``baseline_s`` before ``t_on``, extrapolated to the
     tail's mean time, so that a drift left by an earlier pulse is not taken for a response).
@@ -72,8 +75,9 @@ def step_change(t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baselin
     base = (t >= t_on - baseline_s) & (t < t_on)
     tail = (t > t_off - tail_s) & (t <= t_off)
     if base.sum() < 3 or tail.sum() < 3:
-        raise ValueError(f'too few samples around the pulse {t_on:g}..{t_off:g} s (baseline {base.sum()}, '
-                         f'tail {tail.sum()})')
+        raise ValueError(
+            f'too few samples around the pulse {t_on:g}..{t_off:g} s (baseline {base.sum()}, tail {tail.sum()})'
+        )
     tb, yb = t[base], y[base]
     slope, icpt = np.polyfit(tb - tb.mean(), yb, 1)
     t_tail = t[tail].mean()
@@ -81,8 +85,9 @@ def step_change(t: np.ndarray, y: np.ndarray, t_on: float, t_off: float, baselin
     sd = noise_level(tb, yb)
     # the tail's mean, the baseline's level and its slope extrapolated over (t_tail - its mean): the last dominates
     # (a 1 s baseline of 0.1 degC noise extrapolated 2 s ahead: 0.02 degC, five times the other two)
-    stderr = sd * float(np.sqrt(1.0 / tail.sum() + 1.0 / base.sum()
-                                + (t_tail - tb.mean()) ** 2 / np.sum((tb - tb.mean()) ** 2)))
+    stderr = sd * float(
+        np.sqrt(1.0 / tail.sum() + 1.0 / base.sum() + (t_tail - tb.mean()) ** 2 / np.sum((tb - tb.mean()) ** 2))
+    )
     return StepChange(float(y[tail].mean() - expected), stderr)
 
 
@@ -118,9 +123,16 @@ def _dominant(changes: Sequence[float], floor: float, ratio: float) -> int | Non
     return i
 
 
-def classify_pulses(muscle: np.ndarray, face: np.ndarray, muscle_floor_C: float, face_floor_C: float,
-                    frozen: np.ndarray | None = None, ratio: float = 3.0, face_ratio: float = 2.0,
-                    current: Wiring = Wiring()) -> PulseFindings:
+def classify_pulses(
+    muscle: np.ndarray,
+    face: np.ndarray,
+    muscle_floor_C: float,
+    face_floor_C: float,
+    frozen: np.ndarray | None = None,
+    ratio: float = 3.0,
+    face_ratio: float = 2.0,
+    current: Wiring = Wiring(),
+) -> PulseFindings:
     """Wiring findings from a positive pulse on each command of the wiring in use.
 
     ``muscle[k, j]`` [degC]: change of temperature reading j (muscle-ordered by the wiring in use) during the pulse
@@ -141,68 +153,129 @@ def classify_pulses(muscle: np.ndarray, face: np.ndarray, muscle_floor_C: float,
         f = _dominant(face[k], face_floor_C, face_ratio)
         j = _dominant(muscle[k], muscle_floor_C, ratio)
         if f is None and j is None:
-            faults.append(Fault('tem_no_response', k + 1, f'TEM command {k + 1} changed neither TEM face nor '
-                                f'muscle temperature (faces {_fmt(face[k])} degC, muscles {_fmt(muscle[k])} degC)',
-                                f'check driver output {k + 1}, its fuse and the TEM wires on it'))
+            faults.append(
+                Fault(
+                    'tem_no_response',
+                    k + 1,
+                    f'TEM command {k + 1} changed neither TEM face nor '
+                    f'muscle temperature (faces {_fmt(face[k])} degC, muscles {_fmt(muscle[k])} degC)',
+                    f'check driver output {k + 1}, its fuse and the TEM wires on it',
+                )
+            )
             continue
         if f is None:  # without the face the TEM cannot be told apart from its muscle's thermocouple
-            faults.append(Fault('face_sensor_no_response', k + 1, f'TEM command {k + 1} moved a muscle temperature '
-                                f'({_fmt(muscle[k])} degC) but no TEM face ({_fmt(face[k])} degC)',
-                                'check the TEM face thermocouples (ADC channels 3 and 4): without them a swapped TEM '
-                                'channel cannot be told from swapped muscle thermocouples'))
+            faults.append(
+                Fault(
+                    'face_sensor_no_response',
+                    k + 1,
+                    f'TEM command {k + 1} moved a muscle temperature '
+                    f'({_fmt(muscle[k])} degC) but no TEM face ({_fmt(face[k])} degC)',
+                    'check the TEM face thermocouples (ADC channels 3 and 4): without them a swapped TEM '
+                    'channel cannot be told from swapped muscle thermocouples',
+                )
+            )
             continue
         if tem_of_muscle[f] is not None:
-            faults.append(Fault('tem_wiring_unclear', None, f'both TEM commands moved TEM face {f + 1}',
-                                'check that each driver output is wired to one TEM'))
+            faults.append(
+                Fault(
+                    'tem_wiring_unclear',
+                    None,
+                    f'both TEM commands moved TEM face {f + 1}',
+                    'check that each driver output is wired to one TEM',
+                )
+            )
             continue
         tem_of_muscle[f] = k + 1
         if j is None:
             if frozen.any():
                 jf = int(np.argmax(frozen))
-                faults.append(Fault('sensor_frozen', jf + 1, f'temperature reading {jf + 1} did not change at all '
-                                    f'while TEM {f + 1} moved its face by {face[k, f]:+.2f} degC',
-                                    f'check the thermocouple on ADC channel {jf + 1}, its connector and converter'))
+                faults.append(
+                    Fault(
+                        'sensor_frozen',
+                        jf + 1,
+                        f'temperature reading {jf + 1} did not change at all '
+                        f'while TEM {f + 1} moved its face by {face[k, f]:+.2f} degC',
+                        f'check the thermocouple on ADC channel {jf + 1}, its connector and converter',
+                    )
+                )
             else:
-                faults.append(Fault('muscle_sensor_no_response', f + 1, f'TEM {f + 1} moved its face by '
-                                    f'{face[k, f]:+.2f} degC but no muscle temperature changed clearly '
-                                    f'({_fmt(muscle[k])} degC)', f'check that TEM {f + 1} touches its muscle and '
-                                    'that the muscle thermocouples sit on the wires'))
+                faults.append(
+                    Fault(
+                        'muscle_sensor_no_response',
+                        f + 1,
+                        f'TEM {f + 1} moved its face by '
+                        f'{face[k, f]:+.2f} degC but no muscle temperature changed clearly '
+                        f'({_fmt(muscle[k])} degC)',
+                        f'check that TEM {f + 1} touches its muscle and that the muscle thermocouples sit on the wires',
+                    )
+                )
             continue
         reading_of_muscle[f] = j + 1
         # u > 0 heats the muscle (and cools the face): the muscle's sign is the TEM's polarity
         polarity[f] = 1 if muscle[k, j] > 0 else -1
     if None not in reading_of_muscle and reading_of_muscle[0] == reading_of_muscle[1]:
-        faults.append(Fault('tem_wiring_unclear', None, 'both TEMs moved the same muscle thermocouple',
-                            'check that each muscle has its own thermocouple'))
+        faults.append(
+            Fault(
+                'tem_wiring_unclear',
+                None,
+                'both TEMs moved the same muscle thermocouple',
+                'check that each muscle has its own thermocouple',
+            )
+        )
         reading_of_muscle = [None, None]
     complete = None not in tem_of_muscle + polarity + reading_of_muscle
     # the parameters that correct it: the wiring in use corrected by what was found (where that is all known)
-    fixed = current.then(Wiring(tuple(polarity), tuple(tem_of_muscle), tuple(reading_of_muscle))).params() \
-        if complete else {}  # type: ignore[arg-type]
+    fixed = (
+        current.then(Wiring(tuple(polarity), tuple(tem_of_muscle), tuple(reading_of_muscle))).params()
+        if complete
+        else {}
+    )  # type: ignore[arg-type]
 
     def fix(key: str, wires: str) -> tuple[str, dict[str, Any]]:
         if key not in fixed:
             return wires, {}
-        return (f'set {key}: {fixed[key]} (sma-wrist commission --accept-fixes writes it), or {wires}',
-                {key: fixed[key]})
+        return (
+            f'set {key}: {fixed[key]} (sma-wrist commission --accept-fixes writes it), or {wires}',
+            {key: fixed[key]},
+        )
 
     if tem_of_muscle == [2, 1]:
-        faults.append(Fault('tem_channels_swapped', None, 'TEM command 1 moves TEM 2 (on muscle 2) and command 2 '
-                            'moves TEM 1: the TEM drive channels are swapped',
-                            *fix('calibration.tem_channel_map', 'swap the TEM drive wires between driver outputs 1 '
-                                 'and 2')))
+        faults.append(
+            Fault(
+                'tem_channels_swapped',
+                None,
+                'TEM command 1 moves TEM 2 (on muscle 2) and command 2 moves TEM 1: the TEM drive channels are swapped',
+                *fix('calibration.tem_channel_map', 'swap the TEM drive wires between driver outputs 1 and 2'),
+            )
+        )
     if reading_of_muscle == [2, 1]:
-        faults.append(Fault('thermocouples_swapped', None, 'heating muscle 1 moves temperature reading 2 and heating '
-                            'muscle 2 reading 1: the muscle thermocouples are swapped',
-                            *fix('calibration.thermocouple_map', 'swap the two muscle thermocouple plugs')))
+        faults.append(
+            Fault(
+                'thermocouples_swapped',
+                None,
+                'heating muscle 1 moves temperature reading 2 and heating '
+                'muscle 2 reading 1: the muscle thermocouples are swapped',
+                *fix('calibration.thermocouple_map', 'swap the two muscle thermocouple plugs'),
+            )
+        )
     for m in range(2):
         if polarity[m] == -1:
             dT = muscle[tem_of_muscle[m] - 1, reading_of_muscle[m] - 1]  # type: ignore[operator]
-            faults.append(Fault('tem_polarity', m + 1, f'a positive drive of TEM {m + 1} cooled muscle {m + 1} (by '
-                                f'{-dT:.2f} degC): TEM {m + 1} is wired with reversed polarity',
-                                *fix('calibration.tem_sign', f'swap the two leads of TEM {m + 1} at the driver')))
-    return PulseFindings(tuple(tem_of_muscle), tuple(polarity), tuple(reading_of_muscle),  # type: ignore[arg-type]
-                         tuple(faults))
+            faults.append(
+                Fault(
+                    'tem_polarity',
+                    m + 1,
+                    f'a positive drive of TEM {m + 1} cooled muscle {m + 1} (by '
+                    f'{-dT:.2f} degC): TEM {m + 1} is wired with reversed polarity',
+                    *fix('calibration.tem_sign', f'swap the two leads of TEM {m + 1} at the driver'),
+                )
+            )
+    return PulseFindings(
+        tuple(tem_of_muscle),
+        tuple(polarity),
+        tuple(reading_of_muscle),  # type: ignore[arg-type]
+        tuple(faults),
+    )
 
 
 @dataclass(frozen=True)
@@ -213,8 +286,14 @@ class AngleFindings:
     faults: tuple[Fault, ...]
 
 
-def angle_direction(dq: Sequence[float], moved: Sequence[bool], reached_limit: Sequence[bool], limit_C: float,
-                    peak_C: Sequence[float], angle_params: dict[str, float] | None = None) -> AngleFindings:
+def angle_direction(
+    dq: Sequence[float],
+    moved: Sequence[bool],
+    reached_limit: Sequence[bool],
+    limit_C: float,
+    peak_C: Sequence[float],
+    angle_params: dict[str, float] | None = None,
+) -> AngleFindings:
     """The angle's sign from heating each muscle: ``dq[m]`` [rad] the angle's change while muscle m+1 was heated,
     ``moved[m]`` whether that exceeded the motion threshold, ``reached_limit[m]`` whether the muscle got to the
     bring-up temperature limit ``limit_C`` (its peak: ``peak_C[m]``) without the joint moving.
@@ -229,25 +308,43 @@ def angle_direction(dq: Sequence[float], moved: Sequence[bool], reached_limit: S
         if moved[m]:
             signs.append(int(np.sign(dq[m])) * expected[m])
         elif reached_limit[m]:
-            faults.append(Fault('muscle_not_moving', m + 1, f'muscle {m + 1} reached {peak_C[m]:.1f} degC (the '
-                                f'bring-up limit {limit_C:g} degC) and the joint moved only {dq[m]:+.4f} rad',
-                                f'check muscle {m + 1}\'s wire: broken, unhooked from the joint or its crimp slipped '
-                                '(a wire transforming above the limit: raise --max-muscle-C)'))
+            faults.append(
+                Fault(
+                    'muscle_not_moving',
+                    m + 1,
+                    f'muscle {m + 1} reached {peak_C[m]:.1f} degC (the '
+                    f'bring-up limit {limit_C:g} degC) and the joint moved only {dq[m]:+.4f} rad',
+                    f"check muscle {m + 1}'s wire: broken, unhooked from the joint or its crimp slipped "
+                    '(a wire transforming above the limit: raise --max-muscle-C)',
+                )
+            )
     if not signs:
         return AngleFindings(None, tuple(faults))
     if len(set(signs)) > 1:
-        faults.append(Fault('angle_inconsistent', None, f'heating muscle 1 and muscle 2 turned the joint the same way '
-                            f'({dq[0]:+.4f}, {dq[1]:+.4f} rad)', 'check the joint, its stops and the potentiometer\'s '
-                            'coupling to it'))
+        faults.append(
+            Fault(
+                'angle_inconsistent',
+                None,
+                f'heating muscle 1 and muscle 2 turned the joint the same way ({dq[0]:+.4f}, {dq[1]:+.4f} rad)',
+                "check the joint, its stops and the potentiometer's coupling to it",
+            )
+        )
         return AngleFindings(None, tuple(faults))
     sign = signs[0]
     if sign < 0:
-        faults.append(Fault('angle_reversed', None, 'heating muscle 1 turned the measured angle to negative values '
-                            f'({dq[0]:+.4f} rad) and muscle 2 to positive ones ({dq[1]:+.4f} rad): the potentiometer '
-                            'reads the angle reversed',
-                            'set ' + ', '.join(f'{k}: {v:.6g}' for k, v in (angle_params or {}).items()) +
-                            ' (--accept-fixes writes them), or swap the potentiometer\'s two outer leads',
-                            dict(angle_params or {})))
+        faults.append(
+            Fault(
+                'angle_reversed',
+                None,
+                'heating muscle 1 turned the measured angle to negative values '
+                f'({dq[0]:+.4f} rad) and muscle 2 to positive ones ({dq[1]:+.4f} rad): the potentiometer '
+                'reads the angle reversed',
+                'set '
+                + ', '.join(f'{k}: {v:.6g}' for k, v in (angle_params or {}).items())
+                + " (--accept-fixes writes them), or swap the potentiometer's two outer leads",
+                dict(angle_params or {}),
+            )
+        )
     return AngleFindings(sign, tuple(faults))
 
 
@@ -255,5 +352,14 @@ def _fmt(v: Sequence[float]) -> str:
     return '[' + ', '.join(f'{x:+.2f}' for x in v) + ']'
 
 
-__all__ = ['Fault', 'StepChange', 'PulseFindings', 'AngleFindings', 'SOFTWARE_FIXABLE', 'noise_level', 'step_change',
-           'classify_pulses', 'angle_direction']
+__all__ = [
+    'Fault',
+    'StepChange',
+    'PulseFindings',
+    'AngleFindings',
+    'SOFTWARE_FIXABLE',
+    'noise_level',
+    'step_change',
+    'classify_pulses',
+    'angle_direction',
+]

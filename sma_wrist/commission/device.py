@@ -1,6 +1,7 @@
 """The two devices commissioning talks to: a serial port (:class:`SerialDevice`, the bridge's link) and the emulated
 device stepped in lockstep (:class:`SimDevice`, for ``--sim`` and tests). Both speak doc/explanation/protocol.md: the same
 frames, parsed by the same :class:`sma_wrist.hw.protocol.Parser`."""
+
 from __future__ import annotations
 
 import queue
@@ -24,6 +25,7 @@ class SerialDevice:
 
     def __init__(self, port: str, baud: int = 921600, open_timeout_s: float = 3.0, stall_s: float = 1.0) -> None:
         from sma_wrist.hw.link import SerialLink
+
         self.port = port
         self.stall_s = stall_s
         self.open_timeout_s = open_timeout_s
@@ -47,8 +49,10 @@ class SerialDevice:
                 return
         why = self.link.stats.last_error or 'no answer'
         self.link.stop()
-        raise PortError(f'the port {self.port} does not open ({why}): check the port name and that the wrist '
-                        'controller is plugged in and powered')
+        raise PortError(
+            f'the port {self.port} does not open ({why}): check the port name and that the wrist '
+            'controller is plugged in and powered'
+        )
 
     def send(self, u1_V: float, u2_V: float) -> None:
         self.link.send_command(u1_V, u2_V)
@@ -91,6 +95,7 @@ class SimDevice:
 
     def __init__(self, config: Any, chunk: int = 20) -> None:
         from sma_wrist.hw.emulator import DeviceEmulator
+
         self.emulator = DeviceEmulator(config)
         self.parser = P.Parser()
         self.parser_stats = self.parser.stats

@@ -6,6 +6,7 @@ quiet (2 counts) and noisy (25 counts: 0.1 degC, 2.5 mrad) sensors; and on devic
 the model. It prints one JSON object: per case the faults named, the largest |drive| the device received and the
 device time.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -37,10 +38,15 @@ def _one(cfg: dict[str, Any], out: str) -> dict[str, Any]:
     from sma_wrist.commission.device import SimDevice
     from sma_wrist.commission.run import commission
     from sma_wrist.hw.emulator import EmulatorConfig
+
     dev = SimDevice(EmulatorConfig(**cfg))
     res = commission(out, dev)
-    return {'named': [(f['kind'], f['channel']) for f in res['faults']], 'status': res['status'],
-            'device_max_drive_V': dev.emulator.stats.max_abs_command_V, 'device_time_s': res['device_time_s']}
+    return {
+        'named': [(f['kind'], f['channel']) for f in res['faults']],
+        'status': res['status'],
+        'device_max_drive_V': dev.emulator.stats.max_abs_command_V,
+        'device_time_s': res['device_time_s'],
+    }
 
 
 def measure(seeds: int = 3, rate_hz: float = 1000.0, cases: str = 'all') -> dict[str, Any]:
@@ -48,23 +54,32 @@ def measure(seeds: int = 3, rate_hz: float = 1000.0, cases: str = 'all') -> dict
     rows: dict[str, Any] = {}
     t0 = time.time()
     with tempfile.TemporaryDirectory() as d:
-        for name, (fault, expected) in (FAULTS.items() if cases in ('all', 'faults') else ()):
+        for name, (fault, expected) in FAULTS.items() if cases in ('all', 'faults') else ():
             for plant in ('model', 'phase_fraction'):
-                runs = [_one({'plant': plant, 'seed': s, 'rate_hz': rate_hz, 'noise_counts': noise, **fault}, d)
-                        for s in range(seeds) for noise in (2.0, 25.0)]
+                runs = [
+                    _one({'plant': plant, 'seed': s, 'rate_hz': rate_hz, 'noise_counts': noise, **fault}, d)
+                    for s in range(seeds)
+                    for noise in (2.0, 25.0)
+                ]
                 rows[f'{name}, {plant}'] = {
-                    'runs': len(runs), 'named_right': sum(sorted(r['named'], key=str) == sorted(expected, key=str)
-                                                          for r in runs),
+                    'runs': len(runs),
+                    'named_right': sum(sorted(r['named'], key=str) == sorted(expected, key=str) for r in runs),
                     'max_device_drive_V': max(r['device_max_drive_V'] for r in runs),
-                    'device_time_s': [min(r['device_time_s'] for r in runs), max(r['device_time_s'] for r in runs)]}
-        for name, cfg in (HEALTHY.items() if cases in ('all', 'healthy') else ()):
-            runs = [_one({'seed': s, 'rate_hz': rate_hz, 'noise_counts': noise, **cfg}, d)
-                    for s in range(seeds) for noise in (2.0, 25.0)]
+                    'device_time_s': [min(r['device_time_s'] for r in runs), max(r['device_time_s'] for r in runs)],
+                }
+        for name, cfg in HEALTHY.items() if cases in ('all', 'healthy') else ():
+            runs = [
+                _one({'seed': s, 'rate_hz': rate_hz, 'noise_counts': noise, **cfg}, d)
+                for s in range(seeds)
+                for noise in (2.0, 25.0)
+            ]
             rows[f'no fault, {name}'] = {
-                'runs': len(runs), 'false_faults': sum(bool(r['named']) for r in runs),
+                'runs': len(runs),
+                'false_faults': sum(bool(r['named']) for r in runs),
                 'commissioned': sum(r['status'] == 'commissioned' for r in runs),
                 'max_device_drive_V': max(r['device_max_drive_V'] for r in runs),
-                'device_time_s': [min(r['device_time_s'] for r in runs), max(r['device_time_s'] for r in runs)]}
+                'device_time_s': [min(r['device_time_s'] for r in runs), max(r['device_time_s'] for r in runs)],
+            }
     return {'seeds': seeds, 'rate_hz': rate_hz, 'wall_s': round(time.time() - t0, 1), 'cases': rows}
 
 

@@ -1,4 +1,5 @@
 """The commissioning report: ``commission.md`` and PNGs of what each step measured."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,21 +11,25 @@ import numpy as np
 def _plot(bring: Any, out: Path) -> list[str]:
     """PNGs of the recorded samples: the sensors at rest, the pulses, the angle check (those that ran)."""
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+
     t, adc, u = bring.rec.arrays()
     if len(t) < 2:
         return []
     temps, q = bring.physical(adc)
     marks = bring.rec.marks
     files = []
-    spans = {'pulses': [m for m in marks if m[1].startswith('pulse')], 'angle': [m for m in marks if
-                                                                                 m[1].startswith(('heat', 'cool'))]}
+    spans = {
+        'pulses': [m for m in marks if m[1].startswith('pulse')],
+        'angle': [m for m in marks if m[1].startswith(('heat', 'cool'))],
+    }
     for name, ms in spans.items():
         if not ms:
             continue
         t0 = ms[0][0] - bring.lim.rest_s
-        t1 = (spans['angle'][0][0] if name == 'pulses' and spans['angle'] else t[-1])
+        t1 = spans['angle'][0][0] if name == 'pulses' and spans['angle'] else t[-1]
         sel = (t >= t0) & (t <= t1)
         if sel.sum() < 2:
             continue
@@ -42,7 +47,7 @@ def _plot(bring: Any, out: Path) -> list[str]:
         ax[2].set_xlabel('device time [s]')
         for a in ax[:2]:
             a.legend(fontsize=7, loc='upper left')
-        for tm, label in ms:
+        for tm, _label in ms:
             for a in ax:
                 a.axvline(tm, color='grey', lw=0.5)
         ax[0].set_title(f'{name}: readings through the wiring in use at the end (commands per muscle)')
@@ -58,23 +63,32 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
     """``out/commission.md`` (and PNGs): the result, each step's findings, the faults and their fixes."""
     out.mkdir(parents=True, exist_ok=True)
     pngs = _plot(bring, out) if bring is not None else []
-    lines = ['# Wrist commissioning report', '',
-             f'Status: **{result["status"]}** ({result["device_time_s"]:.1f} s of device time, largest drive sent '
-             f'{result["max_drive_V"]:g} V, bring-up limit {result["limits"]["max_drive_V"]:g} V). '
-             f'Device: `{result["port"]}`.', '']
+    lines = [
+        '# Wrist commissioning report',
+        '',
+        f'Status: **{result["status"]}** ({result["device_time_s"]:.1f} s of device time, largest drive sent '
+        f'{result["max_drive_V"]:g} V, bring-up limit {result["limits"]["max_drive_V"]:g} V). '
+        f'Device: `{result["port"]}`.',
+        '',
+    ]
     if result.get('message'):
         lines += [result['message'], '']
     if result['faults']:
         lines += ['## Faults', '', '| kind | channel | what was seen | fix | corrected |', '|---|---|---|---|---|']
         for f in result['faults']:
-            lines.append(f'| {f["kind"]} | {f["channel"] or "-"} | {f["message"]} | {f["fix"]} | '
-                         f'{"yes" if f["fixed"] else "no"} |')
+            lines.append(
+                f'| {f["kind"]} | {f["channel"] or "-"} | {f["message"]} | {f["fix"]} | '
+                f'{"yes" if f["fixed"] else "no"} |'
+            )
         lines.append('')
     if result['warnings']:
         lines += ['## Warnings', ''] + [f'- {w}' for w in result['warnings']] + ['']
-    titles = {'link': 'Link, sample rate, protocol', 'sensors': 'Sensors at rest (TEMs 0 V)',
-              'tem_pulses': 'TEM pulses: which TEM moves which muscle, and which way',
-              'angle': 'Angle: which way each muscle turns the joint'}
+    titles = {
+        'link': 'Link, sample rate, protocol',
+        'sensors': 'Sensors at rest (TEMs 0 V)',
+        'tem_pulses': 'TEM pulses: which TEM moves which muscle, and which way',
+        'angle': 'Angle: which way each muscle turns the joint',
+    }
     for key, title in titles.items():
         lines += [f'## {title}', '']
         step = result['steps'].get(key)
@@ -89,9 +103,15 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
         if png in pngs:
             lines += [f'![{key}]({png})', '']
     lines += ['## Parameters', '']
-    lines += ([f'Written to `{result["params_file"]}`:', '', '```yaml'] +
-              [f'{k}: {v}' for k, v in result['bridge_params'].items()] + ['```', '']) if result['params_file'] else \
-        ['No params file written (commissioning did not pass).', '']
+    lines += (
+        (
+            [f'Written to `{result["params_file"]}`:', '', '```yaml']
+            + [f'{k}: {v}' for k, v in result['bridge_params'].items()]
+            + ['```', '']
+        )
+        if result['params_file']
+        else ['No params file written (commissioning did not pass).', '']
+    )
     path = out / 'commission.md'
     path.write_text('\n'.join(lines))
     return path
@@ -99,17 +119,25 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
 
 def _pulses(step: dict[str, Any]) -> list[str]:
     """The pulses' temperature changes as a table per run (first, and through the corrected wiring)."""
-    out = [f'Wiring in use: `{step["wiring_in_use"]}`.', '',
-           'Change of each reading by the end of a positive pulse on each TEM command [degC]. A wrist wired as '
-           'documented warms its own muscle and cools its own TEM face: positive muscle and negative face changes '
-           'on the diagonal only.', '']
+    out = [
+        f'Wiring in use: `{step["wiring_in_use"]}`.',
+        '',
+        'Change of each reading by the end of a positive pulse on each TEM command [degC]. A wrist wired as '
+        'documented warms its own muscle and cools its own TEM face: positive muscle and negative face changes '
+        'on the diagonal only.',
+        '',
+    ]
     for name, title in (('first', 'pulses'), ('verified', 'pulses through the corrected wiring')):
         p = step.get(name)
         if p is None:
             continue
-        out += [f'{title} (responses count from {p["response_floor_C"]:g} degC on a muscle, '
-                f'{p["face_response_floor_C"]:g} degC on a face; frozen readings: {p["frozen_readings"]}):', '',
-                '| pulse on | muscle reading 1 | muscle reading 2 | TEM face 1 | TEM face 2 |', '|---|---|---|---|---|']
+        out += [
+            f'{title} (responses count from {p["response_floor_C"]:g} degC on a muscle, '
+            f'{p["face_response_floor_C"]:g} degC on a face; frozen readings: {p["frozen_readings"]}):',
+            '',
+            '| pulse on | muscle reading 1 | muscle reading 2 | TEM face 1 | TEM face 2 |',
+            '|---|---|---|---|---|',
+        ]
         for k in range(2):
             m, f = p['muscle_change_C'][k], p['face_change_C'][k]
             out.append(f'| TEM command {k + 1} | {m[0]:+.3f} | {m[1]:+.3f} | {f[0]:+.3f} | {f[1]:+.3f} |')

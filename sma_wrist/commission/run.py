@@ -5,6 +5,7 @@ device stopped it (wiring, sensor, link; the JSON is printed all the same), 2 ba
 port that does not open), 130 interrupted (Ctrl-C). In every case the TEMs are left at 0 V and the report holds
 what was learnt.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -12,8 +13,9 @@ import copy
 import json
 import math
 import sys
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from sma_wrist.commission.bringup import BringUp, BringUpLimits
 from sma_wrist.commission.device import PortError, SerialDevice, SimDevice
@@ -29,11 +31,13 @@ def bridge_values(params_files: Sequence[str | Path] = ()) -> dict[str, Any]:
     """hardware_bridge's parameter values after config/wrist.yaml and ``params_files`` (as the graph would get
     them); ParameterError for a missing file, a misspelt key or a value the bridge refuses."""
     from sma_wrist import runtime
+
     runtime.activate()
     from sma_wrist.nodes.common import refuse_undeclared
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
     from sma_wrist.runtime.arguments import load_params_file
     from sma_wrist.share import share_path
+
     values = {p.name: p.default for p in HardwareBridge.PARAMS}
     files = [share_path('config/wrist.yaml'), *params_files]
     for f in params_files:
@@ -59,32 +63,46 @@ def bridge_values(params_files: Sequence[str | Path] = ()) -> dict[str, Any]:
 def calibration_of(values: dict[str, Any]) -> Calibration:
     """The bridge's calibration from its parameter values (the bridge's own map, one place)."""
     from sma_wrist.nodes.hardware_bridge import HardwareBridge
+
     return HardwareBridge._calibration(values)
 
 
 def write_params(path: Path, params_files: Sequence[str | Path], bridge: dict[str, Any]) -> Path:
     """``params_files`` merged (later ones win) with ``bridge`` set under hardware_bridge: the file to hand over."""
     import yaml
+
     doc: dict[str, Any] = {}
     for f in params_files:
         for node, body in (yaml.safe_load(Path(f).read_text()) or {}).items():
             doc.setdefault(node, {'ros__parameters': {}})['ros__parameters'].update(
-                copy.deepcopy((body or {}).get('ros__parameters', {})))
+                copy.deepcopy((body or {}).get('ros__parameters', {}))
+            )
     key = next((k for k in doc if k.strip('/') == BRIDGE), BRIDGE)
     doc.setdefault(key, {'ros__parameters': {}})['ros__parameters'].update(bridge)
-    head = ('# sma_wrist parameters of a commissioned wrist (sma-wrist commission; doc/howto/commission.md).\n'
-            '# hardware_bridge: the wiring and the angle calibration the bring-up measured.\n')
+    head = (
+        '# sma_wrist parameters of a commissioned wrist (sma-wrist commission; doc/howto/commission.md).\n'
+        '# hardware_bridge: the wiring and the angle calibration the bring-up measured.\n'
+    )
     path.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     return path
 
 
-def commission(out: str | Path, device: Any, *, params_files: Sequence[str | Path] = (), payload_kg: float | None = None,
-               accept_fixes: bool = False, limits: BringUpLimits | None = None,
-               progress: Callable[[str], None] | None = None, port: str | None = None) -> dict[str, Any]:
+def commission(
+    out: str | Path,
+    device: Any,
+    *,
+    params_files: Sequence[str | Path] = (),
+    payload_kg: float | None = None,
+    accept_fixes: bool = False,
+    limits: BringUpLimits | None = None,
+    progress: Callable[[str], None] | None = None,
+    port: str | None = None,
+) -> dict[str, Any]:
     """Bring the wrist on ``device`` (SerialDevice or SimDevice) up; write the report (and, when it passes, the
     params file) into ``out``; return the result (JSON-ready). KeyboardInterrupt is caught: status 'interrupted'.
     PortError (bad input) propagates after the report is written."""
     from sma_wrist.commission.report import write_report
+
     out = Path(out)
     values = bridge_values(params_files)
     lim = limits or BringUpLimits()
@@ -109,9 +127,11 @@ def commission(out: str | Path, device: Any, *, params_files: Sequence[str | Pat
     finally:
         result = _result(bring, status, message, port or getattr(device, 'port', ''), lim)
         if status == 'commissioned':
-            bridge = {**bring.wiring.params(),
-                      'calibration.angle_gain_rad_per_count': bring.cal.angle_gain_rad_per_count,
-                      'calibration.angle_offset_rad': bring.cal.angle_offset_rad}
+            bridge = {
+                **bring.wiring.params(),
+                'calibration.angle_gain_rad_per_count': bring.cal.angle_gain_rad_per_count,
+                'calibration.angle_offset_rad': bring.cal.angle_offset_rad,
+            }
             if port:
                 bridge['port'] = port
             if payload_kg is not None:
@@ -123,12 +143,28 @@ def commission(out: str | Path, device: Any, *, params_files: Sequence[str | Pat
 
 
 def _result(bring: BringUp, status: str, message: str, port: str, lim: BringUpLimits) -> dict[str, Any]:
-    return {'status': status, 'message': message, 'port': port,
-            'faults': [f.to_json() for f in bring.faults], 'warnings': list(bring.warnings), 'steps': bring.steps,
-            'wiring': bring.wiring.params(), 'bridge_params': {}, 'params_file': None, 'report': None,
-            'device_time_s': round(bring.t, 3), 'max_drive_V': round(bring.max_drive_sent_V, 3),
-            'limits': {'max_drive_V': lim.max_drive_V, 'pulse_V': lim.pulse_V, 'pulse_s': lim.pulse_s,
-                       'heat_V': lim.heat_V, 'cool_V': lim.cool_V, 'max_muscle_C': lim.max_muscle_C}}
+    return {
+        'status': status,
+        'message': message,
+        'port': port,
+        'faults': [f.to_json() for f in bring.faults],
+        'warnings': list(bring.warnings),
+        'steps': bring.steps,
+        'wiring': bring.wiring.params(),
+        'bridge_params': {},
+        'params_file': None,
+        'report': None,
+        'device_time_s': round(bring.t, 3),
+        'max_drive_V': round(bring.max_drive_sent_V, 3),
+        'limits': {
+            'max_drive_V': lim.max_drive_V,
+            'pulse_V': lim.pulse_V,
+            'pulse_s': lim.pulse_s,
+            'heat_V': lim.heat_V,
+            'cool_V': lim.cool_V,
+            'max_muscle_C': lim.max_muscle_C,
+        },
+    }
 
 
 def exit_code(result: dict[str, Any]) -> int:
@@ -145,21 +181,28 @@ def exit_code(result: dict[str, Any]) -> int:
 def sim_device(params_files: Sequence[str | Path], payload_kg: float, seed: int) -> SimDevice:
     """The simulated plant of ``params_files`` (as plant_sim would build it) behind the emulated device."""
     from sma_wrist.hw.emulator import EmulatorConfig
+
     base = None
     if params_files:
         from sma_wrist.sweep.graph_params import plant_params
+
         base = plant_params(params_files)
     return SimDevice(EmulatorConfig(payload_kg=payload_kg, seed=seed, base=base))
 
 
 def _print_text(result: dict[str, Any]) -> None:
-    print(f'commission: {result["status"]} after {result["device_time_s"]:.1f} s of device time '
-          f'(largest drive {result["max_drive_V"]:g} V)')
+    print(
+        f'commission: {result["status"]} after {result["device_time_s"]:.1f} s of device time '
+        f'(largest drive {result["max_drive_V"]:g} V)'
+    )
     if result['message']:
         print(result['message'])
     for f in result['faults']:
-        print(f'{"FIXED" if f["fixed"] else "FAULT"} {f["kind"]}' + (f' (channel {f["channel"]})' if f['channel'] else '')
-              + f': {f["message"]}\n  fix: {f["fix"]}')
+        print(
+            f'{"FIXED" if f["fixed"] else "FAULT"} {f["kind"]}'
+            + (f' (channel {f["channel"]})' if f['channel'] else '')
+            + f': {f["message"]}\n  fix: {f["fix"]}'
+        )
     for w in result['warnings']:
         print(f'warning: {w}')
     if result['params_file']:
@@ -170,24 +213,38 @@ def _print_text(result: dict[str, Any]) -> None:
 def run_cli(a: argparse.Namespace) -> int:
     """``sma-wrist commission``; errors of the user's input are 'error: ...' with exit 2."""
     from sma_wrist.contract import PAYLOAD_RANGE_KG
+
     if (a.hardware is None) == (not a.sim):
         print('error: give either --hardware PORT or --sim', file=sys.stderr)
         return EXIT_BAD_INPUT
     payload = a.payload_kg
     if payload is not None and not PAYLOAD_RANGE_KG[0] <= payload <= PAYLOAD_RANGE_KG[1]:
-        print(f'error: --payload-kg {payload:g} is outside [{PAYLOAD_RANGE_KG[0]:g}, {PAYLOAD_RANGE_KG[1]:g}] kg',
-              file=sys.stderr)
+        print(
+            f'error: --payload-kg {payload:g} is outside [{PAYLOAD_RANGE_KG[0]:g}, {PAYLOAD_RANGE_KG[1]:g}] kg',
+            file=sys.stderr,
+        )
         return EXIT_BAD_INPUT
     if not (math.isfinite(a.stall_s) and a.stall_s > 0):
         print(f'error: --stall-s {a.stall_s!r} must be a finite number > 0', file=sys.stderr)
         return EXIT_BAD_INPUT
     try:
         lim = BringUpLimits(heat_V=a.heat_V, max_muscle_C=a.max_muscle_C)
-        device = (sim_device(a.params_file, 0.3 if payload is None else payload, a.seed) if a.sim else
-                  SerialDevice(a.hardware, a.baud_rate, stall_s=a.stall_s))
+        device = (
+            sim_device(a.params_file, 0.3 if payload is None else payload, a.seed)
+            if a.sim
+            else SerialDevice(a.hardware, a.baud_rate, stall_s=a.stall_s)
+        )
         progress = None if a.json else (lambda step: print(f'step: {step}', file=sys.stderr, flush=True))
-        result = commission(a.out, device, params_files=a.params_file, payload_kg=payload,
-                            accept_fixes=a.accept_fixes, limits=lim, progress=progress, port=a.hardware)
+        result = commission(
+            a.out,
+            device,
+            params_files=a.params_file,
+            payload_kg=payload,
+            accept_fixes=a.accept_fixes,
+            limits=lim,
+            progress=progress,
+            port=a.hardware,
+        )
     except PortError as e:
         print(f'error: {e} (report: {Path(a.out) / "commission.md"})', file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -203,5 +260,15 @@ def run_cli(a: argparse.Namespace) -> int:
     return exit_code(result)
 
 
-__all__ = ['commission', 'bridge_values', 'write_params', 'run_cli', 'exit_code', 'sim_device', 'EXIT_OK',
-           'EXIT_BAD_INPUT', 'EXIT_FAULT', 'EXIT_INTERRUPTED']
+__all__ = [
+    'commission',
+    'bridge_values',
+    'write_params',
+    'run_cli',
+    'exit_code',
+    'sim_device',
+    'EXIT_OK',
+    'EXIT_BAD_INPUT',
+    'EXIT_FAULT',
+    'EXIT_INTERRUPTED',
+]

@@ -3,10 +3,11 @@
 Every error names the offending quantity, its value and the valid range, so a node
 adapter can log it verbatim and a CLI user sees what to change.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 

@@ -30,6 +30,7 @@ each, which otherwise pile up), at most once an hour, and never a folder it did 
 The locator plugs into numba's cache-locator list, which is not a public API; a numba without it
 gets the older guard, :func:`drop_stale_caches`, on numba's in-tree cache.
 """
+
 from __future__ import annotations
 
 import functools
@@ -106,6 +107,7 @@ def prune_caches(cache_dir: Path, *, force: bool = False) -> list[Path]:
     unless ``force``; a race with another process pruning or compiling only skips a folder."""
     import shutil
     import time
+
     stamp = cache_dir / PRUNE_STAMP
     try:
         if not force and time.time() - stamp.stat().st_mtime < PRUNE_EVERY_S:
@@ -129,13 +131,13 @@ def prune_caches(cache_dir: Path, *, force: bool = False) -> list[Path]:
     return gone
 
 
-def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS,
-                          cache_dir: Path | None = None) -> bool:
+def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS, cache_dir: Path | None = None) -> bool:
     """Cache every kernel compiled from a file under ``root`` in ``cache_dir`` (default
     :func:`user_cache_dir`), stamped with :func:`source_digest` of ``folders``; other packages' kernels
     keep numba's locators. False (nothing installed) if this numba has no locator list to extend."""
     try:
         from numba.core import caching
+
         impl = getattr(caching, 'CacheImpl', None) or caching._CacheImpl  # renamed in numba 0.59
         base = (caching._SourceFileBackedLocatorMixin, caching._CacheLocator)
     except (ImportError, AttributeError):
@@ -173,8 +175,7 @@ def install_cache_locator(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS,
                 return None
             return super().from_function(py_func, py_file)  # None if the folder cannot be written
 
-    impl._locator_classes = [c for c in impl._locator_classes
-                             if getattr(c, '_sma_wrist_root', None) != root]
+    impl._locator_classes = [c for c in impl._locator_classes if getattr(c, '_sma_wrist_root', None) != root]
     PackageCacheLocator._sma_wrist_root = root
     impl._locator_classes.insert(0, PackageCacheLocator)
     return True

@@ -26,6 +26,7 @@ It is None when the record is shorter than one period. It is rate-dependent by c
 (it is a sum, not an integral); ``mean_abs_error_pct`` is the rate-free quantity
 (total = mean x samples per cycle).
 """
+
 from __future__ import annotations
 
 import math
@@ -74,11 +75,16 @@ def _as_1d(name: str, x: ArrayLike, unit: str) -> np.ndarray:
     return arr
 
 
-def tracking_metrics(t: ArrayLike, q: ArrayLike, q_d: ArrayLike, *,
-                     reference_range_rad: float | None = None,
-                     period_s: float | None = SEED_PERIOD_S,
-                     cycle: Literal['first', 'last'] = 'last',
-                     total_rate_hz: float = SEED_TOTAL_RATE_HZ) -> TrackingMetrics:
+def tracking_metrics(
+    t: ArrayLike,
+    q: ArrayLike,
+    q_d: ArrayLike,
+    *,
+    reference_range_rad: float | None = None,
+    period_s: float | None = SEED_PERIOD_S,
+    cycle: Literal['first', 'last'] = 'last',
+    total_rate_hz: float = SEED_TOTAL_RATE_HZ,
+) -> TrackingMetrics:
     """Metrics of q tracking q_d sampled at times t (1-D, strictly increasing, finite).
 
     Statistics other than the total are over the samples as given (use a uniform sample
@@ -96,7 +102,7 @@ def tracking_metrics(t: ArrayLike, q: ArrayLike, q_d: ArrayLike, *,
             k = int(np.argmax(dt <= 0))
             raise ModelInputError(f't[{k + 1}] - t[{k}]', float(dt[k]), '(0, inf) (strictly increasing)', 's')
     if cycle not in ('first', 'last'):
-        raise ParameterError(f"cycle = {cycle!r} is not one of {{first, last}}")
+        raise ParameterError(f'cycle = {cycle!r} is not one of {{first, last}}')
     if not (math.isfinite(total_rate_hz) and total_rate_hz > 0):
         raise ParameterError(f'total_rate_hz = {total_rate_hz!r} is outside the valid range (0, inf)')
     if period_s is not None and not (math.isfinite(period_s) and period_s > 0):
@@ -125,11 +131,19 @@ def tracking_metrics(t: ArrayLike, q: ArrayLike, q_d: ArrayLike, *,
 
     rms = float(np.sqrt(np.mean(e * e)))
     return TrackingMetrics(
-        max_abs_error_rad=float(e.max()), max_error_pct=float(e.max() * to_pct),
-        rms_error_rad=rms, rms_error_pct=rms * to_pct,
-        mean_abs_error_rad=float(e.mean()), mean_abs_error_pct=float(e.mean() * to_pct),
-        reference_range_rad=rng, total_abs_error_pct=total, total_rate_hz=float(total_rate_hz),
-        cycle_start_s=start, cycle_period_s=period_s if total is not None else None, n_samples=int(tt.size))
+        max_abs_error_rad=float(e.max()),
+        max_error_pct=float(e.max() * to_pct),
+        rms_error_rad=rms,
+        rms_error_pct=rms * to_pct,
+        mean_abs_error_rad=float(e.mean()),
+        mean_abs_error_pct=float(e.mean() * to_pct),
+        reference_range_rad=rng,
+        total_abs_error_pct=total,
+        total_rate_hz=float(total_rate_hz),
+        cycle_start_s=start,
+        cycle_period_s=period_s if total is not None else None,
+        n_samples=int(tt.size),
+    )
 
 
 __all__ = ['TrackingMetrics', 'tracking_metrics', 'SEED_PERIOD_S', 'SEED_TOTAL_RATE_HZ']

@@ -1,4 +1,5 @@
 """Signal operations shared by the model's users: sensor effects applied to, or fitted on, simulated series."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -14,6 +15,7 @@ def first_order(x: np.ndarray, tau: Any, dt: float) -> np.ndarray:
     a = np.exp(-dt / tau)
     a = float(a) if np.isrealobj(a) else complex(a)
     from scipy.signal import lfilter
+
     zi = (a * x[0])[None] if x.ndim > 1 else np.array([a * x[0]])
     y, _ = lfilter([1 - a], [1, -a], x, axis=0, zi=zi)
     return y

@@ -1,4 +1,5 @@
 """Header stamps as the nodes read them (no ROS import: the sweep reads its ticks the same way)."""
+
 from __future__ import annotations
 
 

@@ -10,15 +10,17 @@
 
 See doc/explanation/diagnosis.md.
 """
+
 from __future__ import annotations
 
 import argparse
 import json
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -59,18 +61,18 @@ N_CONFIDENCE = 500
 #: the measurement that separates two subsystems that explain a run almost equally well
 SEPARATING_MEASUREMENT = {
     frozenset({'sensor', 'actuator'}): 'a command step test with the TEM-face temperatures (or the drive current) '
-                                       'recorded: a late or weak drive shows at the TEM faces, a faulty thermocouple does not',
+    'recorded: a late or weak drive shows at the TEM faces, a faulty thermocouple does not',
     frozenset({'sensor', 'thermal'}): 'a reference thermometer on the bundle (or an ice-point / warm-bath check of '
-                                      'the thermocouples) against the recorded readings',
+    'the thermocouples) against the recorded readings',
     frozenset({'sensor', 'hysteresis'}): 'a slow, nearly isothermal temperature sweep with a reference thermometer: '
-                                         'wire physics moves the angle, a sensor fault only the reading',
+    'wire physics moves the angle, a sensor fault only the reading',
     frozenset({'sensor', 'joint'}): 'a static check of the angle against a protractor or second encoder at a few '
-                                    'positions, with and without the payload',
+    'positions, with and without the payload',
     frozenset({'actuator', 'thermal'}): 'a command step test with the TEM-face temperatures and the drive current '
-                                        'recorded: the driver and the heat balance act at different points',
+    'recorded: the driver and the heat balance act at different points',
     frozenset({'actuator', 'hysteresis'}): 'a command step test with the TEM-face temperatures recorded',
     frozenset({'thermal', 'hysteresis'}): 'slow and fast temperature cycles: rate-dependent wires and heat-balance '
-                                          'errors scale differently with the heating rate',
+    'errors scale differently with the heating rate',
     frozenset({'hysteresis', 'joint'}): 'slow and fast cycles at two payloads: rate and load dependence separate them',
     frozenset({'thermal', 'joint'}): 'a payload step at constant temperatures',
     frozenset({'actuator', 'joint'}): 'a payload step at constant temperatures',
@@ -136,7 +138,9 @@ def _param_dict(row: np.ndarray, names: Sequence[str]) -> dict[str, dict[str, An
     return out
 
 
-def _regressors(ev: ft.Evaluator, q_model: np.ndarray | None, load: np.ndarray | None, sl: slice) -> dict[str, np.ndarray]:
+def _regressors(
+    ev: ft.Evaluator, q_model: np.ndarray | None, load: np.ndarray | None, sl: slice
+) -> dict[str, np.ndarray]:
     run, m = ev.run, ev.model
     reg: dict[str, np.ndarray] = {'time': run.t[sl]}
     if run.T is not None:
@@ -155,21 +159,28 @@ def _regressors(ev: ft.Evaluator, q_model: np.ndarray | None, load: np.ndarray |
     return reg
 
 
-def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str | Path | None = None,
-                 candidates: Sequence[str] | None = None, hysteresis_file: str | None = None,
-                 thermal_file: str | None = None) -> DiagnosisResult:
+def diagnose_run(
+    run: Run,
+    report_dir: str | Path | None = None,
+    params_out: str | Path | None = None,
+    candidates: Sequence[str] | None = None,
+    hysteresis_file: str | None = None,
+    thermal_file: str | None = None,
+) -> DiagnosisResult:
     """Diagnose an aligned run (see :func:`diagnose` for a bag); ``hysteresis_file``: the wire's SD-GPI;
     ``thermal_file``: the TEMs' heat balance (``sma-wrist identify thermal``), so that what is left is the rest."""
     t_start = time.perf_counter()
     base = None
     if hysteresis_file or thermal_file:  # the plant plant_sim would run with these files
         from sma_wrist.core.plant.wrist import PlantParams
+
         base = PlantParams.from_files(hysteresis_file, thermal_file, dt=min(run.dt, 0.01))
     model = fx.ExtendedModel(run, base)
     ev = ft.Evaluator(model)
     if not ev.channels:
-        raise DiagnoseInputError('no channel can be replayed: need commands + temperatures, temperatures + angle, '
-                                 'or commands + angle')
+        raise DiagnoseInputError(
+            'no channel can be replayed: need commands + temperatures, temperatures + angle, or commands + angle'
+        )
     fits: list[ft.Fit] = []
     for e in fx.CATALOGUE:
         if candidates is not None and e.id not in candidates:
@@ -181,16 +192,20 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
     # a cause is named only if its fit is an interior value that explains every channel it
     # touches (cross-channel consistency); the rest stay ranked, flagged
     bounds = {id(f): at_bound(f) for f in fits}
-    consistent = {id(f): all(f.log_ratio[c] <= CONSISTENT_LOG for c in ft.channels_of(f.effect, ev.channels))
-                  for f in fits}
+    consistent = {
+        id(f): all(f.log_ratio[c] <= CONSISTENT_LOG for c in ft.channels_of(f.effect, ev.channels)) for f in fits
+    }
     eligible = [f for f in fits if consistent[id(f)] and not bounds[id(f)]]
     # parsimony: among candidates within PARSIMONY_LOG of the best held-out score, the one
     # with the fewest parameters (a recalibration of three numbers always polishes a little
     # more than the one physical effect that explains the data)
     near = [f for f in eligible if f.score <= eligible[0].score + PARSIMONY_LOG] if eligible else []
     best = min(near, key=lambda f: (len(f.effect.params), f.score)) if near else None
-    fits = ([best] if best is not None else []) + [f for f in eligible if f is not best] + \
-        [f for f in fits if f not in eligible]
+    fits = (
+        ([best] if best is not None else [])
+        + [f for f in eligible if f is not best]
+        + [f for f in fits if f not in eligible]
+    )
 
     def main_channel(f: ft.Fit) -> str:
         return min(f.log_ratio, key=lambda c: f.log_ratio[c])
@@ -199,23 +214,39 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
     for f in fits:
         c = main_channel(f)
         g = ev.gain(f, c)
-        alternatives.append({'cause': f.effect.id, 'subsystem': f.effect.subsystem, 'score': round(f.score, 4),
-                             'channel': c, 'gain_pct': round(g['gain_pct'], 2),
-                             'parameters': _param_dict(f.row, f.effect.params),
-                             'at_bound': [h['parameter'] for h in bounds[id(f)]],
-                             'consistent': consistent[id(f)]})
+        alternatives.append(
+            {
+                'cause': f.effect.id,
+                'subsystem': f.effect.subsystem,
+                'score': round(f.score, 4),
+                'channel': c,
+                'gain_pct': round(g['gain_pct'], 2),
+                'parameters': _param_dict(f.row, f.effect.params),
+                'at_bound': [h['parameter'] for h in bounds[id(f)]],
+                'consistent': consistent[id(f)],
+            }
+        )
     channel = main_channel(best) if best else ev.channels[0]
     g_best = ev.gain(best, channel) if best else None
     # significant: beats nominal on held-out data, reliably, and the nominal misfit itself is
     # beyond the noise / replay resolution (else a fit only polishes numerical error)
-    significant = bool(best is not None and best.score < -MIN_SCORE and g_best['gain_pct_p05'] > MIN_GAIN_P05
-                       and g_best['rmse_before'] > STRUCTURE_RATIO * ev.sigma[channel])
-    partial = bool(significant and g_best['rmse_after'] > PARTIAL_RATIO * ev.sigma[channel]
-                   and g_best['gain_pct'] < PARTIAL_GAIN_PCT)
+    significant = bool(
+        best is not None
+        and best.score < -MIN_SCORE
+        and g_best['gain_pct_p05'] > MIN_GAIN_P05
+        and g_best['rmse_before'] > STRUCTURE_RATIO * ev.sigma[channel]
+    )
+    partial = bool(
+        significant
+        and g_best['rmse_after'] > PARTIAL_RATIO * ev.sigma[channel]
+        and g_best['gain_pct'] < PARTIAL_GAIN_PCT
+    )
     if partial:
         significant = False
     final_row = best.row if significant else fx.NOMINAL
-    final_fit = best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), fx.NOMINAL.copy()))
+    final_fit = (
+        best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), fx.NOMINAL.copy()))
+    )
 
     # residual statistics, nominal and final, after the burn-in
     sl = slice(ev.i0, run.n)
@@ -255,28 +286,45 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
                 seen.add(f.effect.subsystem)
                 ambiguous.append({'cause': f.effect.id, 'subsystem': f.effect.subsystem, 'score': round(f.score, 4)})
         if ambiguous:
-            separating = '; '.join(SEPARATING_MEASUREMENT.get(frozenset({best.effect.subsystem, a['subsystem']}),
-                                                              'a dedicated excitation run of the subsystems involved')
-                                   for a in ambiguous)
+            separating = '; '.join(
+                SEPARATING_MEASUREMENT.get(
+                    frozenset({best.effect.subsystem, a['subsystem']}),
+                    'a dedicated excitation run of the subsystems involved',
+                )
+                for a in ambiguous
+            )
     # fits that ended on a bound and would otherwise have been named: never reported as the value
-    top_bound = [f for f in fits if bounds[id(f)] and f.score < -MIN_SCORE
-                 and f.score <= (best.score if significant else 0.0) - PARSIMONY_LOG]
+    top_bound = [
+        f
+        for f in fits
+        if bounds[id(f)] and f.score < -MIN_SCORE and f.score <= (best.score if significant else 0.0) - PARSIMONY_LOG
+    ]
     hits = [{'cause': f.effect.id, **h} for f in top_bound[:3] for h in bounds[id(f)]]
     hit_text = ''
     if top_bound:
-        hit_text = ('; '.join(f'{h["cause"]} would need {h["parameter"]} beyond its catalogue bound {h["bound"]:g}'
-                              for h in hits)
-                    + ': the effect is larger than the catalogue allows, or another cause is at work (not reported as a value)')
+        hit_text = (
+            '; '.join(
+                f'{h["cause"]} would need {h["parameter"]} beyond its catalogue bound {h["bound"]:g}' for h in hits
+            )
+            + ': the effect is larger than the catalogue allows, or another cause is at work (not reported as a value)'
+        )
     if significant:
         e = best.effect
         ps = ', '.join(f'{k} = {v["value"]:.4g} {v["unit"]}' for k, v in _param_dict(best.row, e.params).items())
-        summary = (f'{e.subsystem} discrepancy: {e.name} ({e.id}; {ps}); held-out {channel} RMS '
-                   f'{g_best["rmse_before"]:.4g} -> {g_best["rmse_after"]:.4g} ({g_best["gain_pct"]:.1f} % better)')
-        rivals = [f.effect.id for f in eligible if f is not best and f.score <= best.score + PARSIMONY_LOG
-                  and f.effect.subsystem == best.effect.subsystem]
+        summary = (
+            f'{e.subsystem} discrepancy: {e.name} ({e.id}; {ps}); held-out {channel} RMS '
+            f'{g_best["rmse_before"]:.4g} -> {g_best["rmse_after"]:.4g} ({g_best["gain_pct"]:.1f} % better)'
+        )
+        rivals = [
+            f.effect.id
+            for f in eligible
+            if f is not best and f.score <= best.score + PARSIMONY_LOG and f.effect.subsystem == best.effect.subsystem
+        ]
         if rivals:
-            summary += (f'; {", ".join(rivals)} explain(s) this run almost as well (held-out score within '
-                        f'{PARSIMONY_LOG}): a longer run or larger excitation would separate them')
+            summary += (
+                f'; {", ".join(rivals)} explain(s) this run almost as well (held-out score within '
+                f'{PARSIMONY_LOG}): a longer run or larger excitation would separate them'
+            )
         if ambiguous:
             names = ', '.join(f'{a["cause"]} ({a["subsystem"]})' for a in ambiguous)
             summary += f'; AMBIGUOUS: {names} explain(s) it almost as well; to separate them: {separating}'
@@ -284,10 +332,12 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
             summary += f'; structure remains in {", ".join(structure)}'
     elif unexplained:
         top = ', '.join(f'{x["regressor"]} ({x["r"]:+.2f})' for x in corr[:3])
-        summary = (f'unexplained discrepancy in {", ".join(structure)}: no catalogue effect explains it '
-                   f'(best {best.effect.id if best else "-"}, score {best.score if best else 0:.3f}'
-                   + (f', removes only {g_best["gain_pct"]:.0f} % of the {channel} misfit' if partial else '')
-                   + f'); correlates: {top}')
+        summary = (
+            f'unexplained discrepancy in {", ".join(structure)}: no catalogue effect explains it '
+            f'(best {best.effect.id if best else "-"}, score {best.score if best else 0:.3f}'
+            + (f', removes only {g_best["gain_pct"]:.0f} % of the {channel} misfit' if partial else '')
+            + f'); correlates: {top}'
+        )
     else:
         summary = 'no significant discrepancy: the nominal model explains the run to the sensor noise and the replay resolution'
     if hit_text:
@@ -296,11 +346,14 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         # a cause would explain the run only beyond its range: a discrepancy, but not a named one
         unexplained = True
         structure = [main_channel(top_bound[0])]
-        summary = f'unexplained discrepancy in {structure[0]}: no catalogue effect explains it within its range; ' + hit_text
+        summary = (
+            f'unexplained discrepancy in {structure[0]}: no catalogue effect explains it within its range; ' + hit_text
+        )
         hit_text = ''
     unnamed = unexplained and not significant
-    confidence = ft.verdict_confidence(ev, fits if unnamed else eligible, best if significant else None, MIN_SCORE,
-                                       N_CONFIDENCE, unexplained=unnamed)
+    confidence = ft.verdict_confidence(
+        ev, fits if unnamed else eligible, best if significant else None, MIN_SCORE, N_CONFIDENCE, unexplained=unnamed
+    )
     if ambiguous:
         confidence = min(confidence, AMBIGUOUS_CONFIDENCE)
     if significant:
@@ -313,17 +366,29 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
     # those of the best fit's channel: the report printed mechanics' RMS under "thermal")
     shown = channel if significant else (structure[0] if structure else channel)
     res = DiagnosisResult(
-        discrepancy=significant or unexplained, subsystem=subsystem, cause=best.effect.id if significant else None,
+        discrepancy=significant or unexplained,
+        subsystem=subsystem,
+        cause=best.effect.id if significant else None,
         parameters=_param_dict(best.row, best.effect.params) if significant else {},
         channel=shown,
         rmse_before=g_best['rmse_before'] if significant else chan_gains[shown]['rmse_before'],
         rmse_after=g_best['rmse_after'] if significant else chan_gains[shown]['rmse_after'],
         gain_pct=g_best['gain_pct'] if significant else 0.0,
         gain_ci=(g_best['gain_pct_p05'], g_best['gain_pct_p95']) if significant else (0.0, 0.0),
-        alternatives=alternatives, unexplained=unexplained, correlates=corr, channels=chan_gains,
-        residual_stats=stats, summary=summary, confidence=round(float(confidence), 3), ambiguous_with=ambiguous,
-        separating_measurement=separating, bound_hits=hits, warnings=list(run.warnings), source=run.source,
-        duration_s=run.duration)
+        alternatives=alternatives,
+        unexplained=unexplained,
+        correlates=corr,
+        channels=chan_gains,
+        residual_stats=stats,
+        summary=summary,
+        confidence=round(float(confidence), 3),
+        ambiguous_with=ambiguous,
+        separating_measurement=separating,
+        bound_hits=hits,
+        warnings=list(run.warnings),
+        source=run.source,
+        duration_s=run.duration,
+    )
     if params_out is not None:
         res.params_file = str(write_params(res, params_out, run, hysteresis_file, thermal_file))
     if report_dir is not None:
@@ -331,10 +396,14 @@ def diagnose_run(run: Run, report_dir: str | Path | None = None, params_out: str
         d.mkdir(parents=True, exist_ok=True)
         if res.params_file is None:
             res.params_file = str(write_params(res, d / 'extended_params.yaml', run, hysteresis_file, thermal_file))
-        traces = {'t': run.t[sl], 'i_train': ev.i_train - ev.i0, 'regressors': reg,
-                  'meas': {c: ev.measured(c)[sl] for c in ev.channels},
-                  'nominal': {c: ev.pred_nom[c][sl, 0] for c in ev.channels},
-                  'best': {c: pred_final[c][sl, 0] for c in ev.channels}}
+        traces = {
+            't': run.t[sl],
+            'i_train': ev.i_train - ev.i0,
+            'regressors': reg,
+            'meas': {c: ev.measured(c)[sl] for c in ev.channels},
+            'nominal': {c: ev.pred_nom[c][sl, 0] for c in ev.channels},
+            'best': {c: pred_final[c][sl, 0] for c in ev.channels},
+        }
         res.wall_s = time.perf_counter() - t_start
         rp.write_report(res, d, traces)
     res.wall_s = time.perf_counter() - t_start
@@ -354,8 +423,13 @@ def at_bound(f: ft.Fit) -> list[dict[str, Any]]:
     return out
 
 
-def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_file: str | Path | None = None,
-                 thermal_file: str | Path | None = None) -> Path:
+def write_params(
+    res: DiagnosisResult,
+    path: str | Path,
+    run: Run,
+    hysteresis_file: str | Path | None = None,
+    thermal_file: str | Path | None = None,
+) -> Path:
     """The extended model as a ROS 2 params file for plant_sim (schema: doc/explanation/diagnosis.md).
 
     ``hysteresis_file``, ``thermal_file``: the wire and TEMs the diagnosis replayed; carried (absolute) so that
@@ -364,6 +438,7 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
     import yaml
 
     from sma_wrist.core.plant import extensions as mx
+
     # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
     # model.payload_err_kg the joint carries on top of it
     params: dict[str, Any] = {'payload_kg': float(run.payload_kg)}
@@ -376,18 +451,30 @@ def write_params(res: DiagnosisResult, path: str | Path, run: Run, hysteresis_fi
     doc = {'plant_sim': {'ros__parameters': params}}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    head = (f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
-            f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
-            f'# schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
-            + (f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
-               f'which refuses this file\n' if replay_only else ''))
+    head = (
+        f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
+        f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
+        f'# schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
+        + (
+            f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
+            f'which refuses this file\n'
+            if replay_only
+            else ''
+        )
+    )
     out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     return out
 
 
-def diagnose(path: str | Path, report_dir: str | Path | None = None, params_out: str | Path | None = None,
-             candidates: Sequence[str] | None = None, hysteresis_file: str | None = None,
-             thermal_file: str | None = None, recording: Recording | None = None) -> DiagnosisResult:
+def diagnose(
+    path: str | Path,
+    report_dir: str | Path | None = None,
+    params_out: str | Path | None = None,
+    candidates: Sequence[str] | None = None,
+    hysteresis_file: str | None = None,
+    thermal_file: str | None = None,
+    recording: Recording | None = None,
+) -> DiagnosisResult:
     """Diagnose the bag at `path` (``recording``: how it names the contract's topics and the joint, if otherwise);
     raises DiagnoseInputError for unusable input."""
     run = load_run(path, recording=recording)
@@ -401,14 +488,24 @@ def run_cli(args: argparse.Namespace) -> int:
         if cands:
             unknown = [c for c in cands if c not in fx.EFFECTS]
             if unknown:
-                raise DiagnoseInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
+                raise DiagnoseInputError(
+                    f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}'
+                )
         from sma_wrist.outputs import check_output_file, check_output_folder
+
         models = [f for f in (getattr(args, 'hysteresis_file', None), getattr(args, 'thermal_file', None)) if f]
         check_output_file(args.params, '--params', [args.bag, *models], DiagnoseInputError)
         check_output_folder(args.report, '--report', [args.bag, *models], DiagnoseInputError)
         recording = Recording.from_options(getattr(args, 'topic', None), getattr(args, 'joint', None))
-        res = diagnose(args.bag, args.report, args.params, cands, getattr(args, 'hysteresis_file', None),
-                       getattr(args, 'thermal_file', None), recording)
+        res = diagnose(
+            args.bag,
+            args.report,
+            args.params,
+            cands,
+            getattr(args, 'hysteresis_file', None),
+            getattr(args, 'thermal_file', None),
+            recording,
+        )
     except (DiagnoseInputError, ParameterError, ContractError) as exc:
         if args.json:
             print(json.dumps({'error': str(exc)}))
@@ -417,7 +514,10 @@ def run_cli(args: argparse.Namespace) -> int:
         return 2
     except Exception as exc:  # noqa: BLE001 - the command never shows a traceback
         msg = f'internal error {type(exc).__name__}: {exc} (please report with the bag)'
-        print(json.dumps({'error': msg}) if args.json else f'error: {msg}', file=sys.stderr if not args.json else sys.stdout)
+        print(
+            json.dumps({'error': msg}) if args.json else f'error: {msg}',
+            file=sys.stderr if not args.json else sys.stdout,
+        )
         return 1
     if args.json:
         print(json.dumps(res.to_json()))
@@ -437,6 +537,10 @@ def run_cli(args: argparse.Namespace) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m sma_wrist.diagnose BAG [--json] [--report DIR] [--params FILE]``."""
-    ap = add_arguments(argparse.ArgumentParser(
-        prog='sma-wrist diagnose', description='Locate and name the model discrepancy of a recorded run (doc/explanation/diagnosis.md).'))
+    ap = add_arguments(
+        argparse.ArgumentParser(
+            prog='sma-wrist diagnose',
+            description='Locate and name the model discrepancy of a recorded run (doc/explanation/diagnosis.md).',
+        )
+    )
     return run_cli(ap.parse_args(list(argv) if argv is not None else None))

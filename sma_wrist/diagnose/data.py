@@ -16,6 +16,7 @@ reported in ``Run.warnings`` (NaNs dropped, unsorted or duplicate stamps sorted/
 Kelvin temperatures or degree angles converted, gaps: the longest gap-free stretch is
 analysed) or raised as :class:`DiagnoseInputError` naming the problem and what is needed.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -29,9 +30,12 @@ from sma_wrist.contract import IMPOSSIBLE, ContractError, Recording, joint_posit
 from sma_wrist.core.errors import SmaWristError
 
 TOPICS = {
-    'u1': '/wrist/tem_1/command', 'u2': '/wrist/tem_2/command',
-    'T1': '/wrist/muscle_1/temperature', 'T2': '/wrist/muscle_2/temperature',
-    'joint': '/wrist/joint_states', 'payload': '/wrist/payload',
+    'u1': '/wrist/tem_1/command',
+    'u2': '/wrist/tem_2/command',
+    'T1': '/wrist/muscle_1/temperature',
+    'T2': '/wrist/muscle_2/temperature',
+    'joint': '/wrist/joint_states',
+    'payload': '/wrist/payload',
 }
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
@@ -87,8 +91,9 @@ def _stamp_ns(msg: Any) -> int:
     return int(h.stamp.sec) * 10**9 + int(h.stamp.nanosec)
 
 
-def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: list[str],
-            joint_name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _series(
+    name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: list[str], joint_name: str | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], values) of one topic, cleaned: NaNs dropped, sorted, de-duplicated."""
     if kind == 'temperature':
         vals = np.array([float(m.temperature) for m in msgs])
@@ -100,19 +105,25 @@ def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: 
     t = (stamps if stamps is not None and np.all(stamps > 0) else np.asarray(t_log, np.int64)).astype(float) * 1e-9
     bad = ~np.isfinite(vals)
     if bad.any():
-        warnings.append(f'{name}: {int(bad.sum())} of {vals.size} samples are NaN/inf and were dropped '
-                        f'(need finite values; the gaps they leave are handled like missing samples)')
+        warnings.append(
+            f'{name}: {int(bad.sum())} of {vals.size} samples are NaN/inf and were dropped '
+            f'(need finite values; the gaps they leave are handled like missing samples)'
+        )
         t, vals = t[~bad], vals[~bad]
     # a glitch no sensor of this wrist can give, in any unit the checks below recognise (K, degF, degrees): one
     # 1e300 overflowed the fit ('internal error'), one 1e6 rad refused the whole bag as 'not radians'
     wild = np.abs(vals) > IMPOSSIBLE[kind]  # sma_wrist.contract.IMPOSSIBLE
     if wild.any():
-        warnings.append(f'{name}: {int(wild.sum())} of {vals.size} samples beyond +-{IMPOSSIBLE[kind]:g} (up to '
-                        f'{np.abs(vals[wild]).max():.3g}) are no measurement of this wrist and were dropped')
+        warnings.append(
+            f'{name}: {int(wild.sum())} of {vals.size} samples beyond +-{IMPOSSIBLE[kind]:g} (up to '
+            f'{np.abs(vals[wild]).max():.3g}) are no measurement of this wrist and were dropped'
+        )
         t, vals = t[~wild], vals[~wild]
     if t.size > 1 and np.any(np.diff(t) < 0):
-        warnings.append(f'{name}: stamps are not sorted ({int((np.diff(t) < 0).sum())} steps back in time); '
-                        f'samples were sorted by stamp (need monotonic header stamps)')
+        warnings.append(
+            f'{name}: stamps are not sorted ({int((np.diff(t) < 0).sum())} steps back in time); '
+            f'samples were sorted by stamp (need monotonic header stamps)'
+        )
         o = np.argsort(t, kind='stable')
         t, vals = t[o], vals[o]
     if t.size > 1 and np.any(np.diff(t) == 0):
@@ -122,8 +133,9 @@ def _series(name: str, t_log: np.ndarray, msgs: list[Any], kind: str, warnings: 
     return t, vals
 
 
-def _without_frozen(key: str, temp: tuple[np.ndarray, np.ndarray], drive: tuple[np.ndarray, np.ndarray],
-                    warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+def _without_frozen(
+    key: str, temp: tuple[np.ndarray, np.ndarray], drive: tuple[np.ndarray, np.ndarray], warnings: list[str]
+) -> tuple[np.ndarray, np.ndarray]:
     """The temperature series without the samples of a sensor that stopped: one value repeated exactly for more
     than STALE_S while its TEM was driven (mean |u| over STALE_DRIVE_V). Such a stretch is no measurement; it
     was fitted as one (a frozen thermocouple moved identify's hold limits, and diagnose called it an
@@ -143,9 +155,11 @@ def _without_frozen(key: str, temp: tuple[np.ndarray, np.ndarray], drive: tuple[
         inside = (tu >= t[a]) & (tu <= t[b])
         if not inside.any() or float(np.mean(np.abs(vu[inside]))) <= STALE_DRIVE_V:
             continue
-        keep[a + 1:b + 1] = False
-        warnings.append(f'{TOPICS[key]}: the same value {v[a]:.4g} for {t[b] - t[a]:.1f} s while its TEM was driven '
-                        f'(mean |u| {np.mean(np.abs(vu[inside])):.1f} V): a stale sensor? Those samples are left out')
+        keep[a + 1 : b + 1] = False
+        warnings.append(
+            f'{TOPICS[key]}: the same value {v[a]:.4g} for {t[b] - t[a]:.1f} s while its TEM was driven '
+            f'(mean |u| {np.mean(np.abs(vu[inside])):.1f} V): a stale sensor? Those samples are left out'
+        )
     return (t[keep], v[keep]) if not keep.all() else temp
 
 
@@ -159,7 +173,7 @@ def _longest_gap_free(t: np.ndarray, dt: float) -> tuple[float, float, int, list
     lengths = [t[e - 1] - t[s] for s, e in zip(edges[:-1], edges[1:])]
     i = int(np.argmax(lengths))
     a, b = edges[i], edges[i + 1]
-    short = [(float(t[k]), float(t[k + 1])) for k in np.flatnonzero(d[a:b - 1] > 5.0 * dt) + a]
+    short = [(float(t[k]), float(t[k + 1])) for k in np.flatnonzero(d[a : b - 1] > 5.0 * dt) + a]
     return float(t[a]), float(t[b - 1]), int(long_gaps.size), short
 
 
@@ -170,23 +184,32 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
     warnings: list[str] = []
     p = Path(path)
     if not p.exists():
-        raise DiagnoseInputError(f'{p}: no such bag (need a rosbag2 directory with metadata.yaml and .mcap, '
-                                 f'or an .mcap file)')
+        raise DiagnoseInputError(
+            f'{p}: no such bag (need a rosbag2 directory with metadata.yaml and .mcap, or an .mcap file)'
+        )
     try:
         data = read_bag(p, rec.recorded(TOPICS.values()))
     except BagError as exc:
         if not exc.salvaged:
             raise DiagnoseInputError(f'{p}: cannot read the bag: {exc.problem}') from None
-        warnings.append(f'bag damaged ({exc.problem}); analysing the {sum(len(v[1]) for v in exc.salvaged.values())} '
-                        f'messages that could be salvaged')
+        warnings.append(
+            f'bag damaged ({exc.problem}); analysing the {sum(len(v[1]) for v in exc.salvaged.values())} '
+            f'messages that could be salvaged'
+        )
         data = exc.salvaged
     except Exception as exc:  # noqa: BLE001 - anything rosbags raises
         raise DiagnoseInputError(f'{p}: cannot read the bag: {type(exc).__name__}: {exc}') from None
     data = rec.as_contract(data)
 
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    kinds = {'u1': 'float', 'u2': 'float', 'T1': 'temperature', 'T2': 'temperature', 'joint': 'joint',
-             'payload': 'float'}
+    kinds = {
+        'u1': 'float',
+        'u2': 'float',
+        'T1': 'temperature',
+        'T2': 'temperature',
+        'joint': 'joint',
+        'payload': 'float',
+    }
     for key, topic in TOPICS.items():
         if topic in data and len(data[topic][1]):
             try:
@@ -194,15 +217,17 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
             except ContractError as exc:
                 raise DiagnoseInputError(f'{topic}: {exc}') from None
             except (AttributeError, TypeError, ValueError) as exc:
-                raise DiagnoseInputError(f'{topic}: unexpected message content ({exc}); the contract type is '
-                                         f'required (msg_defs/topics.yaml)') from None
+                raise DiagnoseInputError(
+                    f'{topic}: unexpected message content ({exc}); the contract type is required (msg_defs/topics.yaml)'
+                ) from None
             if s[0].size:
                 series[key] = s
     return run_from_series(series, str(p), warnings, max_rate_hz)
 
 
-def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: str, warnings: list[str],
-                    max_rate_hz: float = 100.0) -> Run:
+def run_from_series(
+    series: dict[str, tuple[np.ndarray, np.ndarray]], source: str, warnings: list[str], max_rate_hz: float = 100.0
+) -> Run:
     """Align cleaned series {key of TOPICS: (t [s], values)} into a Run, with the unit, stale-sensor and gap
     checks of :func:`load_run`; the same path for a bag and for the samples a live monitor buffered."""
     p = source
@@ -213,7 +238,9 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
     if missing:
         what = []
         if not have_u:
-            what.append('without TEM commands the thermal replay (commands -> temperatures) and the whole chain are skipped')
+            what.append(
+                'without TEM commands the thermal replay (commands -> temperatures) and the whole chain are skipped'
+            )
         if not have_T:
             what.append('without muscle temperatures the thermal and hysteresis replays are skipped')
         if not have_q:
@@ -225,7 +252,8 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
             f'{p}: nothing to compare: found {sorted(TOPICS[k] for k in series) or "no contract topics"}; need the '
             f'TEM commands {TOPICS["u1"]}, {TOPICS["u2"]} (std_msgs/Float64, V) with the muscle temperatures '
             f'{TOPICS["T1"]}, {TOPICS["T2"]} (sensor_msgs/Temperature, degC), and/or {TOPICS["joint"]} '
-            f'(sensor_msgs/JointState, rad); a bag that names them otherwise: --topic CONTRACT=RECORDED')
+            f'(sensor_msgs/JointState, rad); a bag that names them otherwise: --topic CONTRACT=RECORDED'
+        )
 
     # units
     if have_T:
@@ -233,18 +261,24 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
             t, v = series[k]
             med = float(np.median(v))
             if med > 150.0 and 200.0 < med < 450.0:
-                warnings.append(f'{TOPICS[k]}: median {med:.1f} looks like Kelvin; converted to degC (-273.15). '
-                                f'The contract (sensor_msgs/Temperature) is degC')
+                warnings.append(
+                    f'{TOPICS[k]}: median {med:.1f} looks like Kelvin; converted to degC (-273.15). '
+                    f'The contract (sensor_msgs/Temperature) is degC'
+                )
                 series[k] = (t, v - 273.15)
             elif not (-40.0 < med < 150.0):
-                raise DiagnoseInputError(f'{TOPICS[k]}: median temperature {med:g} is not a muscle temperature in '
-                                         f'degC (expected about 15-90 degC)')
+                raise DiagnoseInputError(
+                    f'{TOPICS[k]}: median temperature {med:g} is not a muscle temperature in '
+                    f'degC (expected about 15-90 degC)'
+                )
     if have_q:
         t, v = series['joint']
         if np.nanmax(np.abs(v)) > 2 * np.pi:
             if np.nanmax(np.abs(v)) < 400:
-                warnings.append(f'{TOPICS["joint"]}: angles up to {np.nanmax(np.abs(v)):.0f} look like degrees; '
-                                f'converted to rad (the contract is rad, REP-103)')
+                warnings.append(
+                    f'{TOPICS["joint"]}: angles up to {np.nanmax(np.abs(v)):.0f} look like degrees; '
+                    f'converted to rad (the contract is rad, REP-103)'
+                )
                 series['joint'] = (t, np.deg2rad(v))
             else:
                 raise DiagnoseInputError(f'{TOPICS["joint"]}: angles up to {np.nanmax(np.abs(v)):g} are not radians')
@@ -252,8 +286,10 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
         for k in ('u1', 'u2'):
             mx = float(np.max(np.abs(series[k][1])))
             if mx > MAX_COMMAND_V:
-                raise DiagnoseInputError(f'{TOPICS[k]}: commands up to {mx:g} are not volts (the TEM drive is '
-                                         f'within +-{MAX_COMMAND_V:g} V; mV or a duty cycle in % ?)')
+                raise DiagnoseInputError(
+                    f'{TOPICS[k]}: commands up to {mx:g} are not volts (the TEM drive is '
+                    f'within +-{MAX_COMMAND_V:g} V; mV or a duty cycle in % ?)'
+                )
 
     if have_T and have_u:
         for k, ku in (('T1', 'u1'), ('T2', 'u2')):
@@ -263,8 +299,9 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
     ref_key = 'joint' if have_q else 'T1'
     t_ref = series[ref_key][0]
     if t_ref.size < 3:
-        raise DiagnoseInputError(f'{TOPICS[ref_key]}: only {t_ref.size} samples; need at least '
-                                 f'{MIN_DURATION_S:g} s of data')
+        raise DiagnoseInputError(
+            f'{TOPICS[ref_key]}: only {t_ref.size} samples; need at least {MIN_DURATION_S:g} s of data'
+        )
     dt_med = float(np.median(np.diff(t_ref)))
     bridged: list[tuple[float, float]] = []
     lo = max(series[k][0][0] for k in series if k != 'payload')
@@ -279,19 +316,24 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
         d = float(np.median(np.diff(tk))) if tk.size > 1 else dt_med
         a, b, n_gaps, short = _longest_gap_free(sel, max(d, dt_med))
         if n_gaps:
-            warnings.append(f'{TOPICS[k]}: {n_gaps} gap(s) longer than {MAX_BRIDGE_S:g} s; only the longest '
-                            f'stretch {a - t_ref[0]:.1f}-{b - t_ref[0]:.1f} s is analysed (the replay needs '
-                            f'continuous inputs)')
+            warnings.append(
+                f'{TOPICS[k]}: {n_gaps} gap(s) longer than {MAX_BRIDGE_S:g} s; only the longest '
+                f'stretch {a - t_ref[0]:.1f}-{b - t_ref[0]:.1f} s is analysed (the replay needs '
+                f'continuous inputs)'
+            )
         if short:
-            warnings.append(f'{TOPICS[k]}: {len(short)} gap(s) of up to {max(y - x for x, y in short):.2f} s were '
-                            f'bridged (interpolated, commands held) and are left out of the residuals')
+            warnings.append(
+                f'{TOPICS[k]}: {len(short)} gap(s) of up to {max(y - x for x, y in short):.2f} s were '
+                f'bridged (interpolated, commands held) and are left out of the residuals'
+            )
             bridged.extend(short)
         lo, hi = max(lo, a), min(hi, b)
     if hi - lo < MIN_DURATION_S:
         raise DiagnoseInputError(
             f'{p}: only {max(hi - lo, 0):.1f} s of overlapping, gap-free data; need at least {MIN_DURATION_S:g} s '
             f'(better several minutes with the muscles cycling through their transitions)'
-            + ''.join(f'. {w}' for w in warnings if 'stale sensor' in w))
+            + ''.join(f'. {w}' for w in warnings if 'stale sensor' in w)
+        )
     step = max(1, int(round((1.0 / max_rate_hz) / dt_med)))
     dt = dt_med * step
     grid = np.arange(lo, hi + 1e-9, dt)
@@ -312,16 +354,30 @@ def run_from_series(series: dict[str, tuple[np.ndarray, np.ndarray]], source: st
         pv = series['payload'][1]
         payload = float(pv[0])
         if np.ptp(pv) > 1e-9:
-            warnings.append(f'/wrist/payload changed during the run ({pv.min():g}-{pv.max():g} kg); the first value '
-                            f'{payload:g} kg is used')
+            warnings.append(
+                f'/wrist/payload changed during the run ({pv.min():g}-{pv.max():g} kg); the first value '
+                f'{payload:g} kg is used'
+            )
         if not (0.0 <= payload <= 2.0):
             raise DiagnoseInputError(f'/wrist/payload = {payload:g} is not a payload in kg (0-2 kg)')
     else:
         payload = DEFAULT_PAYLOAD_KG
-        warnings.append(f'/wrist/payload missing: assuming the plant default {DEFAULT_PAYLOAD_KG} kg (record the latched '
-                        f'/wrist/payload, std_msgs/Float64 kg); a payload mismatch may then be reported')
+        warnings.append(
+            f'/wrist/payload missing: assuming the plant default {DEFAULT_PAYLOAD_KG} kg (record the latched '
+            f'/wrist/payload, std_msgs/Float64 kg); a payload mismatch may then be reported'
+        )
     valid = np.ones(grid.size, bool)
     for x, y in bridged:
         valid[(grid > x) & (grid < y)] = False
-    return Run(t=grid - grid[0], dt=dt, u=u, T=T, q=q, payload_kg=payload, t0_s=float(grid[0]), warnings=warnings,
-               source=source, valid=valid)
+    return Run(
+        t=grid - grid[0],
+        dt=dt,
+        u=u,
+        T=T,
+        q=q,
+        payload_kg=payload,
+        t0_s=float(grid[0]),
+        warnings=warnings,
+        source=source,
+        valid=valid,
+    )

@@ -23,11 +23,12 @@ Conventions (what a parameter means): a thermocouple gain error scales the readi
 25 degC (a cold junction at room temperature), a potentiometer gain error about the
 neutral angle 0.524 rad; drifts start at the first sample; a delay holds the first value.
 """
+
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -40,8 +41,12 @@ GAIN_REF_C = 25.0
 Q_REF_RAD = 0.524
 #: off-model heat balance: (face, coefficient, factor) -- Peltier and Joule of the muscle face,
 #: losses of the exchanger face; no catalogue parameter scales these alone
-OFF_MODEL_THERMAL = (('muscle_face', 'K_alpha_tau', 0.7), ('muscle_face', 'K_R', 1.3),
-                     ('exchanger_face', 'K_T_inf', 1.35), ('exchanger_face', 'K_inf', 1.35))
+OFF_MODEL_THERMAL = (
+    ('muscle_face', 'K_alpha_tau', 0.7),
+    ('muscle_face', 'K_R', 1.3),
+    ('exchanger_face', 'K_T_inf', 1.35),
+    ('exchanger_face', 'K_inf', 1.35),
+)
 
 
 #: plant changes a running wrist undergoes (re-simulated from their onset on), and the subsystem each belongs to:
@@ -129,8 +134,10 @@ def weak_tem_params(fraction: float, base: PlantParams | None = None) -> PlantPa
     and losses unchanged): a module weakening with age or a failing solder joint."""
     p = base or PlantParams()
     tp = p.thermal
-    faces = [dataclasses.replace(f, K_alpha_tau=f.K_alpha_tau * (1.0 - fraction), K_tau=f.K_tau * (1.0 - fraction))
-             for f in (tp.muscle_face, tp.exchanger_face)]
+    faces = [
+        dataclasses.replace(f, K_alpha_tau=f.K_alpha_tau * (1.0 - fraction), K_tau=f.K_tau * (1.0 - fraction))
+        for f in (tp.muscle_face, tp.exchanger_face)
+    ]
     return dataclasses.replace(p, thermal=dataclasses.replace(tp, muscle_face=faces[0], exchanger_face=faces[1]))
 
 
@@ -138,12 +145,19 @@ def ambient_params(shift_C: float, base: PlantParams | None = None) -> PlantPara
     """The plant with both faces' ambient / coolant temperatures `shift_C` [degC] away from Table 4.9's."""
     p = base or PlantParams()
     amb = p.thermal.effective_ambient_C
-    return dataclasses.replace(p, thermal=dataclasses.replace(p.thermal, ambient_C=(amb[0] + shift_C, amb[1] + shift_C)))
+    return dataclasses.replace(
+        p, thermal=dataclasses.replace(p.thermal, ambient_C=(amb[0] + shift_C, amb[1] + shift_C))
+    )
 
 
-def resimulate(run: Run, params: PlantParams | None = None, drive: Callable[[np.ndarray], np.ndarray] | None = None,
-               command_delay_s: float = 0.0, onset_s: float = 0.0,
-               change: Callable[[WristPlant, float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+def resimulate(
+    run: Run,
+    params: PlantParams | None = None,
+    drive: Callable[[np.ndarray], np.ndarray] | None = None,
+    command_delay_s: float = 0.0,
+    onset_s: float = 0.0,
+    change: Callable[[WristPlant, float], None] | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Open-loop plant run on the recorded commands: (T (K, 2) [degC], q (K,) [rad]) at the run's samples.
 
     The command recorded at sample k drives the plant until sample k+1 (plant_sim's
@@ -181,6 +195,7 @@ def plant_change(kind: str, value: float, base: PlantParams | None = None) -> Ca
 
         def tem(plant: WristPlant, t: float) -> None:
             plant.params = weak
+
         return tem
     if kind == 'payload':
         before: list[float] = []
@@ -189,6 +204,7 @@ def plant_change(kind: str, value: float, base: PlantParams | None = None) -> Ca
             if not before:  # the mass the wrist carried until the onset
                 before.append(float(plant.state.payload_kg[0]))
             plant.state.payload_kg[:] = before[0] + value
+
         return payload
     if kind == 'ambient_drift':
         state = {'step': -1}
@@ -198,13 +214,20 @@ def plant_change(kind: str, value: float, base: PlantParams | None = None) -> Ca
             if step != state['step']:
                 state['step'] = step
                 plant.params = ambient_params(value / 3600.0 * step, base)
+
         return ambient
     raise ValueError(f'unknown plant change {kind!r}')
 
 
 # ----------------------------------------------------------------------------- one case
-def apply(run: Run, d: Distortion | None = None, noise_T_C: float = 0.0, noise_q_rad: float = 0.0,
-          seed: int = 0, onset_s: float = 0.0) -> Run:
+def apply(
+    run: Run,
+    d: Distortion | None = None,
+    noise_T_C: float = 0.0,
+    noise_q_rad: float = 0.0,
+    seed: int = 0,
+    onset_s: float = 0.0,
+) -> Run:
     """A copy of `run` with the distortion `d` (or none), beginning at `onset_s` [s of the run], and white sensor
     noise. A sensor fault that begins mid-run starts from the true reading: a drift from zero, a lag from the
     value at the onset, a delay from the onset on."""
@@ -226,25 +249,39 @@ def apply(run: Run, d: Distortion | None = None, noise_T_C: float = 0.0, noise_q
         elif d.channel == 'plant':
             T, q = resimulate(run, onset_s=onset_s, change=plant_change(d.kind, d.value))
         elif d.channel == 'q':
-            q[i_on:] = rewrite(t_on, q[i_on:], d.kind, d.value, Q_REF_RAD) if d.kind != 'delay' else \
-                late(run.t, q, d.value)[i_on:]
+            q[i_on:] = (
+                rewrite(t_on, q[i_on:], d.kind, d.value, Q_REF_RAD)
+                if d.kind != 'delay'
+                else late(run.t, q, d.value)[i_on:]
+            )
         else:
             for i in {'T1': (0,), 'T2': (1,), 'T': (0, 1)}[d.channel]:
-                T[i_on:, i] = rewrite(t_on, T[i_on:, i], d.kind, d.value, GAIN_REF_C) if d.kind != 'delay' else \
-                    late(run.t, T[:, i], d.value)[i_on:]
+                T[i_on:, i] = (
+                    rewrite(t_on, T[i_on:, i], d.kind, d.value, GAIN_REF_C)
+                    if d.kind != 'delay'
+                    else late(run.t, T[:, i], d.value)[i_on:]
+                )
     rng = np.random.default_rng(seed)
     if noise_T_C > 0:
         T = T + rng.normal(0.0, noise_T_C, T.shape)
     if noise_q_rad > 0:
         q = q + rng.normal(0.0, noise_q_rad, q.shape)
-    label = (d.id + f'={d.value:g}{d.unit}' + (f' from {onset_s:g} s' if onset_s > 0 else '')) if d is not None else 'clean'
-    return dataclasses.replace(run, T=T, q=q, warnings=list(run.warnings),
-                               source=f'{run.source} [{label}, noise {noise_T_C:g} degC / {noise_q_rad:g} rad]')
+    label = (
+        (d.id + f'={d.value:g}{d.unit}' + (f' from {onset_s:g} s' if onset_s > 0 else '')) if d is not None else 'clean'
+    )
+    return dataclasses.replace(
+        run,
+        T=T,
+        q=q,
+        warnings=list(run.warnings),
+        source=f'{run.source} [{label}, noise {noise_T_C:g} degC / {noise_q_rad:g} rad]',
+    )
 
 
 def _switch(params: PlantParams) -> Callable[[WristPlant, float], None]:
     def switch(plant: WristPlant, t: float) -> None:
         plant.params = params
+
     return switch
 
 
@@ -252,8 +289,16 @@ def _switch(params: PlantParams) -> Callable[[WristPlant, float], None]:
 #: (temperatures over -50..150 degC, angle over -pi..pi) and periodic interference: mains hum at 50.1 Hz sampled at
 #: 100 Hz (aliased to 49.9 Hz) and a 0.7 Hz pump / fan line. Jittering stamps and dropped samples are the bag
 #: writer's (testdata.write_bag's ``stamp_jitter_s``, ``drop_rate``)
-REALISTIC = {'noise_T_C': 0.3, 'noise_q_rad': 3e-3, 'hum_T_C': 0.1, 'hum_q_rad': 1e-3, 'hum_hz': 50.1,
-             'line_T_C': 0.05, 'line_q_rad': 5e-4, 'line_hz': 0.7}
+REALISTIC = {
+    'noise_T_C': 0.3,
+    'noise_q_rad': 3e-3,
+    'hum_T_C': 0.1,
+    'hum_q_rad': 1e-3,
+    'hum_hz': 50.1,
+    'line_T_C': 0.05,
+    'line_q_rad': 5e-4,
+    'line_hz': 0.7,
+}
 
 
 def realistic(run: Run, seed: int = 0, scale: float = 1.0) -> Run:
@@ -262,15 +307,24 @@ def realistic(run: Run, seed: int = 0, scale: float = 1.0) -> Run:
     rng = np.random.default_rng(seed)
     phase = rng.uniform(0, 2 * np.pi, 4)
     t = run.t[:, None]
-    T = (run.T + scale * (rng.normal(0.0, r['noise_T_C'], run.T.shape)
-                          + r['hum_T_C'] * np.sin(2 * np.pi * r['hum_hz'] * t + phase[:2])
-                          + r['line_T_C'] * np.sin(2 * np.pi * r['line_hz'] * t + phase[2:])))
-    q = (run.q + scale * (rng.normal(0.0, r['noise_q_rad'], run.q.shape)
-                          + r['hum_q_rad'] * np.sin(2 * np.pi * r['hum_hz'] * run.t + phase[0])
-                          + r['line_q_rad'] * np.sin(2 * np.pi * r['line_hz'] * run.t + phase[2])))
-    lsb_T, lsb_q = 200.0 / 2 ** 16, 2 * np.pi / 2 ** 16
-    return dataclasses.replace(run, T=np.round(T / lsb_T) * lsb_T, q=np.round(q / lsb_q) * lsb_q,
-                               warnings=list(run.warnings), source=f'{run.source} [realistic sensors x{scale:g}]')
+    T = run.T + scale * (
+        rng.normal(0.0, r['noise_T_C'], run.T.shape)
+        + r['hum_T_C'] * np.sin(2 * np.pi * r['hum_hz'] * t + phase[:2])
+        + r['line_T_C'] * np.sin(2 * np.pi * r['line_hz'] * t + phase[2:])
+    )
+    q = run.q + scale * (
+        rng.normal(0.0, r['noise_q_rad'], run.q.shape)
+        + r['hum_q_rad'] * np.sin(2 * np.pi * r['hum_hz'] * run.t + phase[0])
+        + r['line_q_rad'] * np.sin(2 * np.pi * r['line_hz'] * run.t + phase[2])
+    )
+    lsb_T, lsb_q = 200.0 / 2**16, 2 * np.pi / 2**16
+    return dataclasses.replace(
+        run,
+        T=np.round(T / lsb_T) * lsb_T,
+        q=np.round(q / lsb_q) * lsb_q,
+        warnings=list(run.warnings),
+        source=f'{run.source} [realistic sensors x{scale:g}]',
+    )
 
 
 #: the sweep of the benchmark: effect -> magnitudes (weak, strong) and the catalogue causes
@@ -293,21 +347,34 @@ SWEEP: dict[tuple[str, str], tuple[tuple[float, ...], str, frozenset[str]]] = {
     ('u', 'command_delay'): ((0.2, 0.5), 's', frozenset({'actuator_delay'})),
     ('plant', 'thermal_physics'): ((0.6, 1.0), 'x', frozenset({'recalibrate_thermal', 'tem_mismatch'})),
 }
+
+
 def parameters_of(d: Distortion, cause: str | None) -> list[str]:
     """Catalogue parameters that should come back as the distortion's magnitude under `cause`."""
     ch = {'T1': ('1',), 'T2': ('2',), 'T': ('1', '2')}.get(d.channel, ())
-    per = {'offset': 'temp_offset_{}_C', 'gain': 'temp_gain_err_{}', 'delay': 'temp_delay_{}_s', 'lag': 'temp_lag_{}_s',
-           'drift': 'temp_drift_{}_C_per_h'}
+    per = {
+        'offset': 'temp_offset_{}_C',
+        'gain': 'temp_gain_err_{}',
+        'delay': 'temp_delay_{}_s',
+        'lag': 'temp_lag_{}_s',
+        'drift': 'temp_drift_{}_C_per_h',
+    }
     if d.channel in ('T1', 'T2', 'T'):
         if cause == 'temp_sensor_offset':
             return ['temp_offset_C']
         if cause == 'sensor_lag':
             return ['temp_lag_s']
         return [per[d.kind].format(i) for i in ch] if d.kind in per else []
-    return {('q', 'offset'): ['angle_offset_rad'], ('q', 'gain'): ['angle_gain_err'], ('q', 'delay'): ['angle_delay_s'],
-            ('q', 'lag'): ['angle_lag_s'], ('q', 'drift'): ['angle_drift_rad_per_h'],
-            ('u', 'dead_zone'): ['tem_dead_zone_V'], ('u', 'saturation'): ['tem_headroom_V'],
-            ('u', 'command_delay'): ['command_delay_s']}.get((d.channel, d.kind), [])
+    return {
+        ('q', 'offset'): ['angle_offset_rad'],
+        ('q', 'gain'): ['angle_gain_err'],
+        ('q', 'delay'): ['angle_delay_s'],
+        ('q', 'lag'): ['angle_lag_s'],
+        ('q', 'drift'): ['angle_drift_rad_per_h'],
+        ('u', 'dead_zone'): ['tem_dead_zone_V'],
+        ('u', 'saturation'): ['tem_headroom_V'],
+        ('u', 'command_delay'): ['command_delay_s'],
+    }.get((d.channel, d.kind), [])
 
 
 def sweep(magnitude: int | None = None) -> list[Distortion]:

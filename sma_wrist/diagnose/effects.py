@@ -15,6 +15,7 @@ Signal chain of the extended model (doc/explanation/diagnosis.md has the equatio
     T_wire + payload --SD-GPI + joint (payload, Coulomb/static, viscous, pre-load)--> q
     q --chain backlash (play), potentiometer (delay, lag, offset, gain, drift)--> q_measured
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -49,13 +50,38 @@ STEP_ERROR_FRACTION = 0.5
 #: one "cycle" of the hysteresis-drift effect: this much temperature travel (40 degC up and down)
 CYCLE_TRAVEL_C = 80.0
 
-THERMAL_KEYS = ('tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C', 'ambient_drift_C_per_h',
-                'coupling_per_s', 'temp_offset_C', 'command_delay_s', 'tem_dead_zone_V', 'tem_headroom_V',
-                'temp_offset_1_C', 'temp_offset_2_C', 'temp_gain_err_1', 'temp_gain_err_2')
+THERMAL_KEYS = (
+    'tem_gain_err',
+    'loss_scale_err',
+    'joule_scale_err',
+    'ambient_offset_C',
+    'ambient_drift_C_per_h',
+    'coupling_per_s',
+    'temp_offset_C',
+    'command_delay_s',
+    'tem_dead_zone_V',
+    'tem_headroom_V',
+    'temp_offset_1_C',
+    'temp_offset_2_C',
+    'temp_gain_err_1',
+    'temp_gain_err_2',
+)
 #: parameters that change the drive the heat balance sees (one kernel call per distinct combination)
 DRIVE_KEYS = ('command_delay_s', 'tem_dead_zone_V', 'tem_headroom_V')
-MECH_KEYS = ('temp_offset_C', 'temp_lag_s', 'hyst_lag_s', 'hyst_drift_C_per_cycle', 'payload_err_kg', 'coulomb_Nm',
-             'viscous_Nms', 'preload_err_mm') + TEMP_CHANNEL_KEYS[1] + TEMP_CHANNEL_KEYS[2]
+MECH_KEYS = (
+    (
+        'temp_offset_C',
+        'temp_lag_s',
+        'hyst_lag_s',
+        'hyst_drift_C_per_cycle',
+        'payload_err_kg',
+        'coulomb_Nm',
+        'viscous_Nms',
+        'preload_err_mm',
+    )
+    + TEMP_CHANNEL_KEYS[1]
+    + TEMP_CHANNEL_KEYS[2]
+)
 _TH_IDX = [INDEX[k] for k in THERMAL_KEYS]
 #: per thermocouple: indices of (offset, gain error, delay, lag, drift)
 CHANNEL_IDX = tuple(tuple(INDEX[k] for k in TEMP_CHANNEL_KEYS[i]) for i in (1, 2))
@@ -70,61 +96,180 @@ class Effect:
     params: tuple[str, ...]
     meaning: str
 
+
 CATALOGUE: tuple[Effect, ...] = (
-    Effect('sensor_delay', 'angle sensor delay', 'sensor', ('angle_delay_s',),
-           'the measured angle is the true angle some time ago (filtering, acquisition)'),
-    Effect('sensor_lag', 'temperature sensor first-order lag', 'sensor', ('temp_lag_s',),
-           'thermocouples respond with a time constant (poor contact with the bundle)'),
-    Effect('sensor_offset_gain', 'angle sensor offset and gain error', 'sensor', ('angle_offset_rad', 'angle_gain_err'),
-           'potentiometer mis-calibrated: q_meas = q + offset + gain_err (q - q_neutral)'),
-    Effect('temp_sensor_offset', 'temperature sensor offset', 'sensor', ('temp_offset_C',),
-           'both thermocouple channels read too high/low (cold-junction error)'),
-    Effect('ambient_drift', 'ambient/coolant temperature drift', 'thermal', ('ambient_drift_C_per_h',),
-           'room or coolant temperature changes linearly during the run'),
-    Effect('thermal_coupling', 'thermal coupling between the muscles', 'thermal', ('coupling_per_s',),
-           'heat flows between the two bundles (ThermalParams.coupling_per_s)'),
-    Effect('tem_mismatch', 'TEM drive gain mismatch', 'thermal', ('tem_gain_err',),
-           'the TEM pumps more/less heat per volt than Table 4.9 with input_per_volt = 0.4'),
-    Effect('actuator_delay', 'TEM command delay', 'actuator', ('command_delay_s',),
-           'the drive applies each command late (serial link, driver, a host that falls behind)'),
-    Effect('payload_mismatch', 'payload mismatch', 'joint', ('payload_err_kg',),
-           'the mass at the lever differs from /wrist/payload'),
-    Effect('friction', 'Coulomb/static friction', 'joint', ('coulomb_Nm',),
-           'more dry friction in bearings/chain (static = 1.5 x Coulomb)'),
-    Effect('viscous_damping', 'viscous damping', 'joint', ('viscous_Nms',),
-           'the joint is more/less damped than 0.15 N m s'),
-    Effect('backlash', 'backlash', 'joint', ('backlash_rad',),
-           'play between chain/sprocket and the output shaft (play operator on the angle)'),
-    Effect('hysteresis_rate', 'rate-dependent hysteresis', 'hysteresis', ('hyst_lag_s',),
-           'the wires lag the measured temperature, loops widen with the heating rate'),
-    Effect('hysteresis_drift', 'hysteresis drift over cycles', 'hysteresis', ('hyst_drift_C_per_cycle',),
-           'transition temperatures move with the number of cycles (functional fatigue)'),
+    Effect(
+        'sensor_delay',
+        'angle sensor delay',
+        'sensor',
+        ('angle_delay_s',),
+        'the measured angle is the true angle some time ago (filtering, acquisition)',
+    ),
+    Effect(
+        'sensor_lag',
+        'temperature sensor first-order lag',
+        'sensor',
+        ('temp_lag_s',),
+        'thermocouples respond with a time constant (poor contact with the bundle)',
+    ),
+    Effect(
+        'sensor_offset_gain',
+        'angle sensor offset and gain error',
+        'sensor',
+        ('angle_offset_rad', 'angle_gain_err'),
+        'potentiometer mis-calibrated: q_meas = q + offset + gain_err (q - q_neutral)',
+    ),
+    Effect(
+        'temp_sensor_offset',
+        'temperature sensor offset',
+        'sensor',
+        ('temp_offset_C',),
+        'both thermocouple channels read too high/low (cold-junction error)',
+    ),
+    Effect(
+        'ambient_drift',
+        'ambient/coolant temperature drift',
+        'thermal',
+        ('ambient_drift_C_per_h',),
+        'room or coolant temperature changes linearly during the run',
+    ),
+    Effect(
+        'thermal_coupling',
+        'thermal coupling between the muscles',
+        'thermal',
+        ('coupling_per_s',),
+        'heat flows between the two bundles (ThermalParams.coupling_per_s)',
+    ),
+    Effect(
+        'tem_mismatch',
+        'TEM drive gain mismatch',
+        'thermal',
+        ('tem_gain_err',),
+        'the TEM pumps more/less heat per volt than Table 4.9 with input_per_volt = 0.4',
+    ),
+    Effect(
+        'actuator_delay',
+        'TEM command delay',
+        'actuator',
+        ('command_delay_s',),
+        'the drive applies each command late (serial link, driver, a host that falls behind)',
+    ),
+    Effect(
+        'payload_mismatch',
+        'payload mismatch',
+        'joint',
+        ('payload_err_kg',),
+        'the mass at the lever differs from /wrist/payload',
+    ),
+    Effect(
+        'friction',
+        'Coulomb/static friction',
+        'joint',
+        ('coulomb_Nm',),
+        'more dry friction in bearings/chain (static = 1.5 x Coulomb)',
+    ),
+    Effect(
+        'viscous_damping', 'viscous damping', 'joint', ('viscous_Nms',), 'the joint is more/less damped than 0.15 N m s'
+    ),
+    Effect(
+        'backlash',
+        'backlash',
+        'joint',
+        ('backlash_rad',),
+        'play between chain/sprocket and the output shaft (play operator on the angle)',
+    ),
+    Effect(
+        'hysteresis_rate',
+        'rate-dependent hysteresis',
+        'hysteresis',
+        ('hyst_lag_s',),
+        'the wires lag the measured temperature, loops widen with the heating rate',
+    ),
+    Effect(
+        'hysteresis_drift',
+        'hysteresis drift over cycles',
+        'hysteresis',
+        ('hyst_drift_C_per_cycle',),
+        'transition temperatures move with the number of cycles (functional fatigue)',
+    ),
     # per-channel sensor chain and TEM driver: what a real sensor, driver or wire does
-    Effect('temp_sensor_offsets', 'thermocouple offsets (per channel)', 'sensor', ('temp_offset_1_C', 'temp_offset_2_C'),
-           'each thermocouple reads high/low by its own amount (one bad junction, a cold-junction error on one input)'),
-    Effect('temp_sensor_gain', 'thermocouple gain errors (per channel)', 'sensor', ('temp_gain_err_1', 'temp_gain_err_2'),
-           'a thermocouple amplifier scales the reading about 25 degC (wrong type, wrong gain resistor)'),
-    Effect('temp_sensor_delay', 'thermocouple delays (per channel)', 'sensor', ('temp_delay_1_s', 'temp_delay_2_s'),
-           'a thermocouple reading is the temperature some time ago (filter, slow acquisition, buffered link)'),
-    Effect('temp_sensor_lags', 'thermocouple lags (per channel)', 'sensor', ('temp_lag_1_s', 'temp_lag_2_s'),
-           'each thermocouple responds with its own time constant (one junction loose in the bundle)'),
-    Effect('temp_sensor_drift', 'thermocouple drift (per channel)', 'sensor',
-           ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h'),
-           'a thermocouple reading drifts linearly in time (cold-junction warming, amplifier drift)'),
-    Effect('angle_sensor_lag', 'potentiometer lag', 'sensor', ('angle_lag_s',),
-           'the angle reading responds with a first-order time constant (RC anti-alias filter)'),
-    Effect('angle_sensor_drift', 'potentiometer drift', 'sensor', ('angle_drift_rad_per_h',),
-           'the angle reading drifts linearly in time (reference voltage, temperature of the pot)'),
-    Effect('tem_dead_zone', 'TEM driver dead zone', 'actuator', ('tem_dead_zone_V',),
-           'the TEM driver gives nothing below a threshold and |command| - threshold above it'),
-    Effect('tem_saturation', 'TEM driver saturation', 'actuator', ('tem_headroom_V',),
-           'the TEM driver saturates below the nominal drive limit (weak supply, current limit)'),
-    Effect('recalibrate_thermal', 'thermal parameter recalibration', 'thermal',
-           ('tem_gain_err', 'loss_scale_err', 'ambient_offset_C'),
-           'no new physics: Table 4.9 drive gain, heat loss and ambient refitted'),
-    Effect('recalibrate_mechanics', 'mechanical parameter recalibration', 'joint',
-           ('preload_err_mm', 'payload_err_kg', 'viscous_Nms'),
-           'no new physics: pre-load elongation, payload and damping refitted'),
+    Effect(
+        'temp_sensor_offsets',
+        'thermocouple offsets (per channel)',
+        'sensor',
+        ('temp_offset_1_C', 'temp_offset_2_C'),
+        'each thermocouple reads high/low by its own amount (one bad junction, a cold-junction error on one input)',
+    ),
+    Effect(
+        'temp_sensor_gain',
+        'thermocouple gain errors (per channel)',
+        'sensor',
+        ('temp_gain_err_1', 'temp_gain_err_2'),
+        'a thermocouple amplifier scales the reading about 25 degC (wrong type, wrong gain resistor)',
+    ),
+    Effect(
+        'temp_sensor_delay',
+        'thermocouple delays (per channel)',
+        'sensor',
+        ('temp_delay_1_s', 'temp_delay_2_s'),
+        'a thermocouple reading is the temperature some time ago (filter, slow acquisition, buffered link)',
+    ),
+    Effect(
+        'temp_sensor_lags',
+        'thermocouple lags (per channel)',
+        'sensor',
+        ('temp_lag_1_s', 'temp_lag_2_s'),
+        'each thermocouple responds with its own time constant (one junction loose in the bundle)',
+    ),
+    Effect(
+        'temp_sensor_drift',
+        'thermocouple drift (per channel)',
+        'sensor',
+        ('temp_drift_1_C_per_h', 'temp_drift_2_C_per_h'),
+        'a thermocouple reading drifts linearly in time (cold-junction warming, amplifier drift)',
+    ),
+    Effect(
+        'angle_sensor_lag',
+        'potentiometer lag',
+        'sensor',
+        ('angle_lag_s',),
+        'the angle reading responds with a first-order time constant (RC anti-alias filter)',
+    ),
+    Effect(
+        'angle_sensor_drift',
+        'potentiometer drift',
+        'sensor',
+        ('angle_drift_rad_per_h',),
+        'the angle reading drifts linearly in time (reference voltage, temperature of the pot)',
+    ),
+    Effect(
+        'tem_dead_zone',
+        'TEM driver dead zone',
+        'actuator',
+        ('tem_dead_zone_V',),
+        'the TEM driver gives nothing below a threshold and |command| - threshold above it',
+    ),
+    Effect(
+        'tem_saturation',
+        'TEM driver saturation',
+        'actuator',
+        ('tem_headroom_V',),
+        'the TEM driver saturates below the nominal drive limit (weak supply, current limit)',
+    ),
+    Effect(
+        'recalibrate_thermal',
+        'thermal parameter recalibration',
+        'thermal',
+        ('tem_gain_err', 'loss_scale_err', 'ambient_offset_C'),
+        'no new physics: Table 4.9 drive gain, heat loss and ambient refitted',
+    ),
+    Effect(
+        'recalibrate_mechanics',
+        'mechanical parameter recalibration',
+        'joint',
+        ('preload_err_mm', 'payload_err_kg', 'viscous_Nms'),
+        'no new physics: pre-load elongation, payload and damping refitted',
+    ),
 )
 EFFECTS = {e.id: e for e in CATALOGUE}
 
@@ -210,8 +355,13 @@ def thermocouples(T: np.ndarray, r: np.ndarray, dt: float) -> np.ndarray:
     y = first_order(T, r[INDEX['temp_lag_s']], dt)
     for c, (ko, kg, kd, kl, kr) in enumerate(CHANNEL_IDX):
         yc = delayed(first_order(y[:, c], r[kl], dt), r[kd], dt)
-        out[:, c] = (TEMP_GAIN_REF_C + (1.0 + r[kg]) * (yc - TEMP_GAIN_REF_C) + r[INDEX['temp_offset_C']]
-                     + r[ko] + r[kr] / 3600.0 * t)
+        out[:, c] = (
+            TEMP_GAIN_REF_C
+            + (1.0 + r[kg]) * (yc - TEMP_GAIN_REF_C)
+            + r[INDEX['temp_offset_C']]
+            + r[ko]
+            + r[kr] / 3600.0 * t
+        )
     return out
 
 
@@ -265,8 +415,11 @@ class ExtendedModel:
             self.cycles = cycle_count(run.T, run.dt)
             # the thermal replay starts from the first reading: of a noisy one, the start of a
             # local quadratic fit (a single noisy sample offsets the replay for tens of seconds)
-            self.T_start = run.T[0].copy() if self.T_noise < SMOOTH_ABOVE_C else \
-                smooth_and_rate(run.T[:max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)[0][0]
+            self.T_start = (
+                run.T[0].copy()
+                if self.T_noise < SMOOTH_ABOVE_C
+                else smooth_and_rate(run.T[: max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)[0][0]
+            )
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
 
@@ -298,7 +451,7 @@ class ExtendedModel:
                     # (from rest, a 45 s window of a clean run was an 'unexplained thermal discrepancy')
                     x0[:, 1] += np.asarray(run.thermal_x0)[:, 1] - self._rest[:, 1]
                 else:
-                    x0[:, 1] += (T0 - self._rest[:, 0])
+                    x0[:, 1] += T0 - self._rest[:, 0]
                 x0[:, 0] = T0
                 x0s.append(x0)
             # one kernel call per distinct drive (delay, dead zone, saturation change the input itself)
@@ -307,8 +460,9 @@ class ExtendedModel:
             for dk in sorted({tuple(key[i] for i in i_drive) for key in missing}):
                 sel = [i for i, key in enumerate(missing) if tuple(key[i] for i in i_drive) == dk]
                 u = drive(delayed(run.u, dk[0], self.dt), dk[1], dk[2], self.consts.u_limits[1])
-                T[:, sel], _ = self.consts.thermal(u[:K], self.dt, np.array(coefs)[sel],
-                                                   np.array(x0s)[sel], np.array(drifts)[sel], self.substeps)
+                T[:, sel], _ = self.consts.thermal(
+                    u[:K], self.dt, np.array(coefs)[sel], np.array(x0s)[sel], np.array(drifts)[sel], self.substeps
+                )
             if len(self._th_cache) > 200:  # bound memory; never evict what this call returns
                 for k in [k for k in self._th_cache if k not in todo][:100]:
                     del self._th_cache[k]
@@ -338,8 +492,9 @@ class ExtendedModel:
         return out
 
     # -- mechanics ----------------------------------------------------------------------
-    def wire_temperature(self, r: np.ndarray, T_meas_s: np.ndarray, T_rate: np.ndarray, cycles: np.ndarray
-                         ) -> np.ndarray:
+    def wire_temperature(
+        self, r: np.ndarray, T_meas_s: np.ndarray, T_rate: np.ndarray, cycles: np.ndarray
+    ) -> np.ndarray:
         """Wire temperatures from (smoothed) measured ones under a parameter row: the inverse
         sensor chain (drift, offset, gain; delay undone by a lead; lags by y + tau dy/dt), then
         the wire's own lag and cycle drift."""
@@ -347,8 +502,9 @@ class ExtendedModel:
         T = np.empty_like(T_meas_s)
         for c, (ko, kg, kd, kl, kr) in enumerate(CHANNEL_IDX):
             g = 1.0 + r[kg]
-            y = (T_meas_s[:, c] - r[INDEX['temp_offset_C']] - r[ko] - r[kr] / 3600.0 * t - TEMP_GAIN_REF_C) / g \
-                + TEMP_GAIN_REF_C
+            y = (
+                T_meas_s[:, c] - r[INDEX['temp_offset_C']] - r[ko] - r[kr] / 3600.0 * t - TEMP_GAIN_REF_C
+            ) / g + TEMP_GAIN_REF_C
             y_rate = (T_rate[:, c] - r[kr] / 3600.0) / g
             y, y_rate = advanced(y, r[kd], self.dt), advanced(y_rate, r[kd], self.dt)
             T[:, c] = y + (r[INDEX['temp_lag_s']] + r[kl]) * y_rate
@@ -365,8 +521,9 @@ class ExtendedModel:
         jr[4] = min(max(self.run.payload_kg + r[INDEX['payload_err_kg']], 0.0), 2.0)
         return jr
 
-    def mechanics(self, rows: np.ndarray, upto: int | None = None, source: str = 'measured'
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def mechanics(
+        self, rows: np.ndarray, upto: int | None = None, source: str = 'measured'
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q_true, qd, load) (K, N) / (K, N, 2) from measured temperatures ('measured') or the
         thermal model ('chain')."""
         K = self.run.n if upto is None else upto
@@ -390,7 +547,9 @@ class ExtendedModel:
                 r = rows[todo[key][0]]
                 if source == 'chain':
                     Tt = chain_T[:, i]
-                    Tw = first_order(Tt, r[INDEX['hyst_lag_s']], self.dt) - r[INDEX['hyst_drift_C_per_cycle']] * cycle_count(Tt, self.dt)
+                    Tw = first_order(Tt, r[INDEX['hyst_lag_s']], self.dt) - r[
+                        INDEX['hyst_drift_C_per_cycle']
+                    ] * cycle_count(Tt, self.dt)
                 else:
                     Tw = self.wire_temperature(r, self.T_s[:K], self.T_rate[:K], self.cycles[:K])
                 Ts.append(Tw)
@@ -488,7 +647,11 @@ class ExtendedModel:
         y = delayed(y, r[INDEX['angle_delay_s']], self.dt)
         y = first_order(y, r[INDEX['angle_lag_s']], self.dt)
         qn = self.consts.params.joint.q_neutral_rad
-        drift = r[INDEX['angle_drift_rad_per_h']] / 3600.0 * np.arange(y.shape[0]) * self.dt if r[INDEX['angle_drift_rad_per_h']] else 0.0
+        drift = (
+            r[INDEX['angle_drift_rad_per_h']] / 3600.0 * np.arange(y.shape[0]) * self.dt
+            if r[INDEX['angle_drift_rad_per_h']]
+            else 0.0
+        )
         return y + r[INDEX['angle_offset_rad']] + r[INDEX['angle_gain_err']] * (y - qn) + drift
 
     def angle_measured(self, rows: np.ndarray, upto: int | None = None, source: str = 'measured') -> np.ndarray:

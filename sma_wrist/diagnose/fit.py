@@ -12,6 +12,7 @@ Split: samples after a 5 s burn-in up to 60 % of the run train; the rest is held
 
 (lower is better; nominal has L = 0).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -32,8 +33,17 @@ MAX_FIT_SAMPLES = 12000  # residual samples per channel in a fit (evenly subsamp
 #: misses the angle by 4.3e-4 rad RMS on a 1.05 rad range (doc/explanation/diagnosis.md)
 REPLAY_RESOLUTION = 1e-3
 
-THERMAL_EFFECT_PARAMS = {'command_delay_s', 'tem_gain_err', 'loss_scale_err', 'joule_scale_err', 'ambient_offset_C',
-                         'ambient_drift_C_per_h', 'coupling_per_s', 'tem_dead_zone_V', 'tem_headroom_V'}
+THERMAL_EFFECT_PARAMS = {
+    'command_delay_s',
+    'tem_gain_err',
+    'loss_scale_err',
+    'joule_scale_err',
+    'ambient_offset_C',
+    'ambient_drift_C_per_h',
+    'coupling_per_s',
+    'tem_dead_zone_V',
+    'tem_headroom_V',
+}
 TEMP_SENSOR_PARAMS = {'temp_offset_C', 'temp_lag_s'} | set(fx.TEMP_CHANNEL_KEYS[1]) | set(fx.TEMP_CHANNEL_KEYS[2])
 
 
@@ -96,12 +106,13 @@ class Evaluator:
         # (simulated) data is not held to a standard the replay cannot meet
         self.sigma = {}
         if run.T is not None:
-            self.sigma['thermal'] = max(fx.noise_sigma(run.T, 200.0 / 2 ** 16), REPLAY_RESOLUTION * float(np.ptp(run.T)))
+            self.sigma['thermal'] = max(fx.noise_sigma(run.T, 200.0 / 2**16), REPLAY_RESOLUTION * float(np.ptp(run.T)))
         self.input_noise = 0.0
         self.step_error = 0.0
         if run.q is not None:
-            self.sigma['mechanics'] = self.sigma['chain'] = max(fx.noise_sigma(run.q, 2 * np.pi / 2 ** 16),
-                                                                REPLAY_RESOLUTION * float(np.ptp(run.q)))
+            self.sigma['mechanics'] = self.sigma['chain'] = max(
+                fx.noise_sigma(run.q, 2 * np.pi / 2**16), REPLAY_RESOLUTION * float(np.ptp(run.q))
+            )
             if run.T is not None and 'mechanics' in ch:
                 # errors in the input variables: the thermocouple noise the replay is driven by
                 self.input_noise = model.input_noise_angle(self.i0)
@@ -114,13 +125,14 @@ class Evaluator:
         self.pred_nom = self.predict(self.nominal[None])
         self.w = {}
         for c in ch:
-            r = self.residual(c, self.pred_nom[c][:, 0])[self.i0:self.i_train:self.sub]
-            self.w[c] = 1.0 / np.sqrt(max(float(np.sum(r ** 2)), 1e-30))
+            r = self.residual(c, self.pred_nom[c][:, 0])[self.i0 : self.i_train : self.sub]
+            self.w[c] = 1.0 / np.sqrt(max(float(np.sum(r**2)), 1e-30))
         self.sse_nom = {c: self.segment_sse(c, self.pred_nom[c][:, 0]) for c in ch}
 
     # -- predictions -----------------------------------------------------------------
-    def predict(self, rows: np.ndarray, channels: list[str] | None = None, upto: int | None = None
-                ) -> dict[str, np.ndarray]:
+    def predict(
+        self, rows: np.ndarray, channels: list[str] | None = None, upto: int | None = None
+    ) -> dict[str, np.ndarray]:
         out = {}
         for c in channels or self.channels:
             if c == 'thermal':
@@ -142,7 +154,7 @@ class Evaluator:
 
     def segment_sse(self, c: str, pred: np.ndarray) -> np.ndarray:
         r = self.residual(c, pred)
-        r2 = r ** 2 if r.ndim == 1 else (r ** 2).sum(axis=1)
+        r2 = r**2 if r.ndim == 1 else (r**2).sum(axis=1)
         e = self.seg_edges
         return np.array([r2[a:b].sum() for a, b in zip(e[:-1], e[1:])])
 
@@ -152,11 +164,14 @@ class Evaluator:
         pred = self.predict(rows, chans, upto=self.i_train)
         blocks = []
         for c in chans:
-            meas = self.measured(c)[self.i0:self.i_train:self.sub]
-            p = pred[c][self.i0:self.i_train:self.sub]
-            m = self.mask[self.i0:self.i_train:self.sub]
-            r = ((meas[:, None] - p) * m[:, None] if p.ndim == 2 else
-                 ((meas[:, None, :] - p) * m[:, None, None]).transpose(0, 2, 1).reshape(meas.shape[0] * 2, -1))
+            meas = self.measured(c)[self.i0 : self.i_train : self.sub]
+            p = pred[c][self.i0 : self.i_train : self.sub]
+            m = self.mask[self.i0 : self.i_train : self.sub]
+            r = (
+                (meas[:, None] - p) * m[:, None]
+                if p.ndim == 2
+                else ((meas[:, None, :] - p) * m[:, None, None]).transpose(0, 2, 1).reshape(meas.shape[0] * 2, -1)
+            )
             blocks.append(self.w[c] * r)
         return np.concatenate(blocks, axis=0).T
 
@@ -185,7 +200,7 @@ class Evaluator:
         G = np.unique(np.array(grid), axis=0)
         R = self._train_residuals(rows_for(G), chans)
         nfev += G.shape[0]
-        x_start = G[int(np.argmin((R ** 2).sum(axis=1)))]
+        x_start = G[int(np.argmin((R**2).sum(axis=1)))]
         cache: dict[bytes, np.ndarray] = {}
 
         def fun(x: np.ndarray) -> np.ndarray:
@@ -212,8 +227,17 @@ class Evaluator:
 
         x_start = np.clip(x_start, lo + 1e-12, hi - 1e-12)
         try:
-            res = least_squares(fun, x_start, jac=jac, bounds=(lo, hi), x_scale=typ, max_nfev=max_nfev,
-                                xtol=1e-4, ftol=1e-5, method='trf')
+            res = least_squares(
+                fun,
+                x_start,
+                jac=jac,
+                bounds=(lo, hi),
+                x_scale=typ,
+                max_nfev=max_nfev,
+                xtol=1e-4,
+                ftol=1e-5,
+                method='trf',
+            )
             x, ok, msg, cost = res.x, bool(res.success), str(res.message), float(res.cost)
         except Exception as exc:  # noqa: BLE001 - a failed fit is a result, not a crash
             x, ok, msg, cost = x_start, False, f'{type(exc).__name__}: {exc}', float('nan')
@@ -250,8 +274,7 @@ class Evaluator:
                 x, ok, msg = float(res.x), bool(res.success), str(res.message)
         row = self.nominal.copy()
         row[i] = x
-        return self.score(Fit(effect, row, train_cost=0.5 * min(costs[k], cost(x)), nfev=nfev, success=ok,
-                              message=msg))
+        return self.score(Fit(effect, row, train_cost=0.5 * min(costs[k], cost(x)), nfev=nfev, success=ok, message=msg))
 
     def score(self, f: Fit) -> Fit:
         pred = self.predict(f.row[None])
@@ -271,7 +294,7 @@ class Evaluator:
 
     def n_test(self, c: str) -> float:
         """Number of held-out residual samples of channel c (valid samples; two muscles for thermal)."""
-        return max(float(self.mask[self.i_train:].sum()), 1.0) * (2 if c == 'thermal' else 1)
+        return max(float(self.mask[self.i_train :].sum()), 1.0) * (2 if c == 'thermal' else 1)
 
     # -- statistics -----------------------------------------------------------------------
     def gain(self, f: Fit, c: str, n_boot: int = 1000, seed: int = 0) -> dict[str, float]:
@@ -282,13 +305,25 @@ class Evaluator:
         rng = np.random.default_rng(seed)
         idx = rng.integers(0, a.size, (n_boot, a.size))
         g = 100.0 * (1.0 - np.sqrt(b[idx].sum(axis=1) / np.maximum(a[idx].sum(axis=1), 1e-300)))
-        return {'rmse_before': before, 'rmse_after': after, 'gain_pct': 100.0 * (1.0 - after / before) if before else 0.0,
-                'gain_pct_p05': float(np.percentile(g, 5)), 'gain_pct_p95': float(np.percentile(g, 95)),
-                'gain_pct_std': float(np.std(g))}
+        return {
+            'rmse_before': before,
+            'rmse_after': after,
+            'gain_pct': 100.0 * (1.0 - after / before) if before else 0.0,
+            'gain_pct_p05': float(np.percentile(g, 5)),
+            'gain_pct_p95': float(np.percentile(g, 95)),
+            'gain_pct_std': float(np.std(g)),
+        }
 
 
-def verdict_confidence(ev: Evaluator, candidates: list[Fit], named: Fit | None, min_score: float,
-                       n_boot: int = 500, seed: int = 1, unexplained: bool = False) -> float:
+def verdict_confidence(
+    ev: Evaluator,
+    candidates: list[Fit],
+    named: Fit | None,
+    min_score: float,
+    n_boot: int = 500,
+    seed: int = 1,
+    unexplained: bool = False,
+) -> float:
     """Fraction of bootstrap resamples of the held-out segments that reach the same verdict.
 
     In each resample every candidate's held-out score is recomputed from its per-segment

@@ -11,6 +11,7 @@ the numbers are the plant's. What the plant kernel cannot do and this module add
 
 test_diagnose checks both kernels against :class:`sma_wrist.core.plant.wrist.WristPlant`.
 """
+
 from __future__ import annotations
 
 import math
@@ -64,9 +65,13 @@ def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pra
             for f in range(2):
                 o = 1 - f
                 b = 2 + 6 * f
-                d = (coef[b + 4] * cur + coef[b] * tmp[l, f] + coef[b + 1] * tmp[l, o]) * cur \
-                    - coef[b + 2] * tmp[l, f] + coef[b + 3] * tmp[l, o] + coef[b + 5] \
+                d = (
+                    (coef[b + 4] * cur + coef[b] * tmp[l, f] + coef[b + 1] * tmp[l, o]) * cur
+                    - coef[b + 2] * tmp[l, f]
+                    + coef[b + 3] * tmp[l, o]
+                    + coef[b + 5]
                     + (coef[b + 2] - coef[b + 3]) * ambient_shift
+                )
                 if f == 0 and coupling != 0.0:
                     d += coupling * (tmp[1 - l, 0] - tmp[l, 0])
                 out[l, f] = d
@@ -101,7 +106,7 @@ def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma
         out_T[0, j, 1] = x[1, 0]
         t = 0.0
         for k in range(1, K):
-            for s in range(substeps):
+            for _s in range(substeps):
                 _rk4_layers(x, u[k - 1, 0], u[k - 1, 1], coef[j], drift_per_s[j] * t, h, k1, k2, k3, k4, tmp)
                 t += h
             out_T[k, j, 0] = x[0, 0]
@@ -112,8 +117,28 @@ def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma
 
 
 @_jit
-def _loads(T1, T2, q, w, i1, i2, w_now, heating, load, compliance, y_mem1, y_mem2, preload, n_total, commit,
-           stacked, edges, r, p, mech):  # pragma: no cover - compiled
+def _loads(
+    T1,
+    T2,
+    q,
+    w,
+    i1,
+    i2,
+    w_now,
+    heating,
+    load,
+    compliance,
+    y_mem1,
+    y_mem2,
+    preload,
+    n_total,
+    commit,
+    stacked,
+    edges,
+    r,
+    p,
+    mech,
+):  # pragma: no cover - compiled
     """Solve both bundles' loads at angle q; returns (torque, stiffness)."""
     scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
     max_it = int(mech[8])
@@ -126,8 +151,26 @@ def _loads(T1, T2, q, w, i1, i2, w_now, heating, load, compliance, y_mem1, y_mem
         T = T1 if side == 0 else T2
         y_mem = y_mem1 if side == 0 else y_mem2
         y_geo = preload - x_mm if side == 0 else preload + x_mm
-        m, dy, res = _solve_load(T, y_geo, w[i], w_now, y_mem, load[i], stacked, edges, r, p, m_lo, m_hi,
-                                 scale, c_el, k_f, m_max, tol, max_it)
+        m, dy, res = _solve_load(
+            T,
+            y_geo,
+            w[i],
+            w_now,
+            y_mem,
+            load[i],
+            stacked,
+            edges,
+            r,
+            p,
+            m_lo,
+            m_hi,
+            scale,
+            c_el,
+            k_f,
+            m_max,
+            tol,
+            max_it,
+        )
         if commit:
             w[i, :] = w_now
             load[i] = m
@@ -145,8 +188,9 @@ def _memoryless(T, heating, mem_c, mem_d, p0):  # pragma: no cover - compiled
 
 
 @_jit
-def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mech, joint,
-                  out_q, out_qd, out_load):  # pragma: no cover - compiled
+def mechanics_sim(
+    T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mech, joint, out_q, out_qd, out_load
+):  # pragma: no cover - compiled
     """Angle from prescribed muscle temperatures (WristPlant.step_mechanics, compiled).
 
     T (K, N, 2) [degC] per scenario; temperatures are interpolated linearly inside a sample
@@ -192,16 +236,37 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
         hi = q_max
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            tau, _s = _loads(T1, T2, mid, w, 0, 1, w_now, heating, load, compliance, ym1, ym2, preload, 2, False,
-                             stacked, edges, r, p, mech)
+            tau, _s = _loads(
+                T1,
+                T2,
+                mid,
+                w,
+                0,
+                1,
+                w_now,
+                heating,
+                load,
+                compliance,
+                ym1,
+                ym2,
+                preload,
+                2,
+                False,
+                stacked,
+                edges,
+                r,
+                p,
+                mech,
+            )
             tau -= payload * g * lever * math.cos(mid)
             if tau > 0:
                 lo = mid
             else:
                 hi = mid
         q = 0.5 * (lo + hi)
-        _loads(T1, T2, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2, preload, 2, True,
-               stacked, edges, r, p, mech)
+        _loads(
+            T1, T2, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2, preload, 2, True, stacked, edges, r, p, mech
+        )
         qd = 0.0
         out_q[0, j] = q
         out_qd[0, j] = 0.0
@@ -223,8 +288,28 @@ def mechanics_sim(T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mec
                     T_prev[side] = Tn
                 ym1 = _memoryless(Ts0, heating[0], mem_c, mem_d, p0)
                 ym2 = _memoryless(Ts1, heating[1], mem_c, mem_d, p0)
-                torque, stiffness = _loads(Ts0, Ts1, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2,
-                                           preload, 2, True, stacked, edges, r, p, mech)
+                torque, stiffness = _loads(
+                    Ts0,
+                    Ts1,
+                    q,
+                    w,
+                    0,
+                    1,
+                    w_now,
+                    heating,
+                    load,
+                    compliance,
+                    ym1,
+                    ym2,
+                    preload,
+                    2,
+                    True,
+                    stacked,
+                    edges,
+                    r,
+                    p,
+                    mech,
+                )
                 q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
             out_q[k, j] = q
             out_qd[k, j] = qd
@@ -243,24 +328,35 @@ class Constants:
         self.stacked, self.edges, self.r, self.p = stacked, edges, r, p
         self.mem_c, self.mem_d, self.joint = mem_c, mem_d, joint
         jp = self.params.joint
-        self.joint_row = np.array([jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm,
-                                   self.params.preload_elongation_mm, jp.payload_kg])
+        self.joint_row = np.array(
+            [jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm, self.params.preload_elongation_mm, jp.payload_kg]
+        )
         self.u_limits = (self.params.thermal.u_min_V, self.params.thermal.u_max_V)
 
-    def thermal(self, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift_per_s: np.ndarray,
-                substeps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    def thermal(
+        self, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift_per_s: np.ndarray, substeps: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(K, N, 2) muscle temperatures and the (N, 2, 2) final state; see :func:`thermal_sim`."""
         u = np.ascontiguousarray(np.clip(u, *self.u_limits), dtype=float)
         coef = np.ascontiguousarray(np.atleast_2d(coef), dtype=float)
         n = coef.shape[0]
         out = np.empty((u.shape[0], n, 2))
         X = np.empty((n, 2, 2))
-        thermal_sim(u, float(dt), int(substeps), coef, np.ascontiguousarray(np.broadcast_to(x0, (n, 2, 2)), dtype=float),
-                    np.ascontiguousarray(np.broadcast_to(drift_per_s, (n,)), dtype=float), out, X)
+        thermal_sim(
+            u,
+            float(dt),
+            int(substeps),
+            coef,
+            np.ascontiguousarray(np.broadcast_to(x0, (n, 2, 2)), dtype=float),
+            np.ascontiguousarray(np.broadcast_to(drift_per_s, (n,)), dtype=float),
+            out,
+            X,
+        )
         return out, X
 
-    def mechanics(self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def mechanics(
+        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim`."""
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
@@ -268,6 +364,21 @@ class Constants:
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))
-        mechanics_sim(T, float(dt), int(substeps), jrow, self.stacked, self.edges, self.r, self.p, self.mem_c,
-                      self.mem_d, self.mech, self.joint, q, qd, load)
+        mechanics_sim(
+            T,
+            float(dt),
+            int(substeps),
+            jrow,
+            self.stacked,
+            self.edges,
+            self.r,
+            self.p,
+            self.mem_c,
+            self.mem_d,
+            self.mech,
+            self.joint,
+            q,
+            qd,
+            load,
+        )
         return q, qd, load

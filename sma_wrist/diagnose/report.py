@@ -1,5 +1,6 @@
 """Residual statistics (whiteness, cross-correlation, lag, binned correlates) and the
 markdown + PNG report of a diagnosis."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -21,7 +22,7 @@ def ljung_box(r: np.ndarray, lags: int = LB_LAGS) -> tuple[float, float]:
         return 0.0, 1.0
     d = np.dot(r, r)
     acf = np.array([np.dot(r[:-k], r[k:]) / d for k in range(1, lags + 1)])
-    q = n * (n + 2) * np.sum(acf ** 2 / (n - np.arange(1, lags + 1)))
+    q = n * (n + 2) * np.sum(acf**2 / (n - np.arange(1, lags + 1)))
     return float(q), float(stats.chi2.sf(q, lags))
 
 
@@ -74,21 +75,30 @@ def binned(r: np.ndarray, x: np.ndarray, bins: int = 12) -> tuple[np.ndarray, np
     return cs, m, s
 
 
-def channel_stats(r: np.ndarray, sigma: float, regressors: dict[str, np.ndarray], meas: np.ndarray,
-                  model: np.ndarray, dt: float) -> dict[str, Any]:
+def channel_stats(
+    r: np.ndarray, sigma: float, regressors: dict[str, np.ndarray], meas: np.ndarray, model: np.ndarray, dt: float
+) -> dict[str, Any]:
     """Statistics of one channel's residual (1-D; thermal channels are passed per muscle, stacked)."""
     q, p = ljung_box(r[::LB_DECIMATE])
-    rms = float(np.sqrt(np.mean(r ** 2)))
-    return {'rms': rms, 'mean': float(np.mean(r)), 'noise_sigma': sigma, 'rms_over_noise': rms / sigma,
-            'ljung_box_Q': q, 'ljung_box_p': p, 'white': bool(p > 0.01),
-            'lag_s': lag_estimate(meas, model, dt),
-            'correlates': correlates(r, regressors)[:5]}
+    rms = float(np.sqrt(np.mean(r**2)))
+    return {
+        'rms': rms,
+        'mean': float(np.mean(r)),
+        'noise_sigma': sigma,
+        'rms_over_noise': rms / sigma,
+        'ljung_box_Q': q,
+        'ljung_box_p': p,
+        'white': bool(p > 0.01),
+        'lag_s': lag_estimate(meas, model, dt),
+        'correlates': correlates(r, regressors)[:5],
+    }
 
 
 # ----------------------------------------------------------------------------- report
 def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Path:
     """Markdown summary + PNG plots into out_dir; returns the markdown path."""
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
@@ -158,15 +168,24 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
     lines.append('')
     if result.warnings:
         lines += ['## Input warnings', ''] + [f'- {w}' for w in result.warnings] + ['']
-    lines += ['## Result', '', '| | |', '|---|---|',
-              f'| discrepancy | {result.discrepancy} |', f'| subsystem | {result.subsystem} |',
-              f'| cause | {result.cause} |', f'| unexplained structure left | {result.unexplained} |',
-              f'| held-out RMS before / after ({result.channel}) | {result.rmse_before:.4g} / {result.rmse_after:.4g} |',
-              f'| gain | {result.gain_pct:.1f} % (bootstrap 5-95 %: {result.gain_ci[0]:.1f} .. {result.gain_ci[1]:.1f}) |',
-              f'| confidence | {result.confidence:.2f} |']
+    lines += [
+        '## Result',
+        '',
+        '| | |',
+        '|---|---|',
+        f'| discrepancy | {result.discrepancy} |',
+        f'| subsystem | {result.subsystem} |',
+        f'| cause | {result.cause} |',
+        f'| unexplained structure left | {result.unexplained} |',
+        f'| held-out RMS before / after ({result.channel}) | {result.rmse_before:.4g} / {result.rmse_after:.4g} |',
+        f'| gain | {result.gain_pct:.1f} % (bootstrap 5-95 %: {result.gain_ci[0]:.1f} .. {result.gain_ci[1]:.1f}) |',
+        f'| confidence | {result.confidence:.2f} |',
+    ]
     if result.ambiguous_with:
-        lines += [f'| explain(s) it almost as well | {", ".join(a["cause"] + " (" + a["subsystem"] + ")" for a in result.ambiguous_with)} |',
-                  f'| measurement that would separate them | {result.separating_measurement} |']
+        lines += [
+            f'| explain(s) it almost as well | {", ".join(a["cause"] + " (" + a["subsystem"] + ")" for a in result.ambiguous_with)} |',
+            f'| measurement that would separate them | {result.separating_measurement} |',
+        ]
     for h in result.bound_hits:
         lines.append(f'| on its bound (not a value) | {h["cause"]}: {h["parameter"]} = {h["bound"]:g} |')
     lines.append('')
@@ -175,25 +194,46 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
         for k, v in result.parameters.items():
             lines.append(f'| {k} | {v["value"]:.5g} | {v["unit"]} | {v["nominal"]:.5g} |')
         lines.append('')
-    lines += ['## Per-channel held-out RMS', '', '| channel | before | after | gain % | 5-95 % |', '|---|---|---|---|---|']
+    lines += [
+        '## Per-channel held-out RMS',
+        '',
+        '| channel | before | after | gain % | 5-95 % |',
+        '|---|---|---|---|---|',
+    ]
     for c, g in result.channels.items():
-        lines.append(f'| {c} | {g["rmse_before"]:.4g} | {g["rmse_after"]:.4g} | {g["gain_pct"]:.1f} | '
-                     f'{g["gain_pct_p05"]:.1f} .. {g["gain_pct_p95"]:.1f} |')
-    lines += ['', '## Residual statistics (whole run after burn-in)', '',
-              '| channel | model | RMS | RMS / noise | Ljung-Box p | lag [s] | strongest correlates |', '|---|---|---|---|---|---|---|']
+        lines.append(
+            f'| {c} | {g["rmse_before"]:.4g} | {g["rmse_after"]:.4g} | {g["gain_pct"]:.1f} | '
+            f'{g["gain_pct_p05"]:.1f} .. {g["gain_pct_p95"]:.1f} |'
+        )
+    lines += [
+        '',
+        '## Residual statistics (whole run after burn-in)',
+        '',
+        '| channel | model | RMS | RMS / noise | Ljung-Box p | lag [s] | strongest correlates |',
+        '|---|---|---|---|---|---|---|',
+    ]
     for c, per in result.residual_stats.items():
         for which, s in per.items():
             cor = ', '.join(f'{x["regressor"]} {x["r"]:+.2f}' for x in s['correlates'][:3])
-            lines.append(f'| {c} | {which} | {s["rms"]:.4g} | {s["rms_over_noise"]:.2f} | {s["ljung_box_p"]:.3g} | '
-                         f'{s["lag_s"]:.3f} | {cor} |')
-    lines += ['', '## Candidates (ranked)', '', '| rank | cause | subsystem | score L | main gain % | parameters |',
-              '|---|---|---|---|---|---|']
+            lines.append(
+                f'| {c} | {which} | {s["rms"]:.4g} | {s["rms_over_noise"]:.2f} | {s["ljung_box_p"]:.3g} | '
+                f'{s["lag_s"]:.3f} | {cor} |'
+            )
+    lines += [
+        '',
+        '## Candidates (ranked)',
+        '',
+        '| rank | cause | subsystem | score L | main gain % | parameters |',
+        '|---|---|---|---|---|---|',
+    ]
     for i, a in enumerate(alts, 1):
         ps = ', '.join(f'{k}={v["value"]:.4g} {v["unit"]}' for k, v in a['parameters'].items())
         lines.append(f'| {i} | {a["cause"]} | {a["subsystem"]} | {a["score"]:.3f} | {a["gain_pct"]:.1f} | {ps} |')
     lines += [''] + [f'![{p}]({p})' for p in pngs] + ['']
     if result.params_file:
-        lines.append(f'Extended model parameters: `{Path(result.params_file).name}` (schema in doc/explanation/diagnosis.md).')
+        lines.append(
+            f'Extended model parameters: `{Path(result.params_file).name}` (schema in doc/explanation/diagnosis.md).'
+        )
     md = d / 'diagnosis.md'
     md.write_text('\n'.join(lines) + '\n')
     return md

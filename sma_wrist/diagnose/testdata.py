@@ -14,11 +14,13 @@ publishes, at every 10 ms tick of the virtual clock, ``/clock``, both temperatur
 that drives the next interval, as plant_sim's graph does); ``/wrist/payload`` is latched
 once. ``corrupt=`` makes bad bags for the input checks.
 """
+
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from scipy.signal import lfilter
@@ -93,7 +95,7 @@ def commands(duration_s: float, dt: float, rng: np.random.Generator) -> np.ndarr
     sign = 1.0 if rng.random() < 0.5 else -1.0
     while k < K:
         n = int(rng.uniform(45.0, 105.0) / dt)
-        s[k:k + n] = sign
+        s[k : k + n] = sign
         sign = -sign
         k += n
     a = dt / 3.0
@@ -118,12 +120,18 @@ def sample_params(effect: str, rng: np.random.Generator) -> dict[str, float]:
 
 
 def quantise(x: np.ndarray, span: tuple[float, float], bits: int = ADC_BITS) -> np.ndarray:
-    lsb = (span[1] - span[0]) / (2 ** bits)
+    lsb = (span[1] - span[0]) / (2**bits)
     return np.clip(np.round((x - span[0]) / lsb) * lsb + span[0], *span)
 
 
-def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, params: dict[str, float] | None = None,
-             payload_kg: float | None = None, dt: float = 0.01) -> Truth:
+def simulate(
+    effect: str = 'none',
+    seed: int = 0,
+    duration_s: float = 240.0,
+    params: dict[str, float] | None = None,
+    payload_kg: float | None = None,
+    dt: float = 0.01,
+) -> Truth:
     """The measured signals of one synthetic run (no bag)."""
     if effect != 'none' and effect not in fx.EFFECTS:
         raise ValueError(f'unknown effect {effect!r}; catalogue: {", ".join(fx.EFFECTS)}')
@@ -137,12 +145,17 @@ def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, par
     coef, drift, off = fx.thermal_coef(consts, r[[fx.INDEX[k] for k in fx.THERMAL_KEYS]])
     x0 = th.rest_state(consts.params.thermal, 1)
     x0 = x0 + off  # the ambient offset moves the rest state by exactly off
-    u_applied = fx.drive(fx.delayed(u, r[fx.INDEX['command_delay_s']], dt), r[fx.INDEX['tem_dead_zone_V']],
-                         r[fx.INDEX['tem_headroom_V']], consts.u_limits[1])
+    u_applied = fx.drive(
+        fx.delayed(u, r[fx.INDEX['command_delay_s']], dt),
+        r[fx.INDEX['tem_dead_zone_V']],
+        r[fx.INDEX['tem_headroom_V']],
+        consts.u_limits[1],
+    )
     T_true, _ = consts.thermal(u_applied, dt, coef, x0, np.array([drift]), SUBSTEPS)
     T_true = T_true[:, 0]
-    T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) \
-        - r[fx.INDEX['hyst_drift_C_per_cycle']] * fx.cycle_count(T_true, dt)
+    T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) - r[
+        fx.INDEX['hyst_drift_C_per_cycle']
+    ] * fx.cycle_count(T_true, dt)
     jr = consts.joint_row.copy()
     jr[0] = r[fx.INDEX['coulomb_Nm']]
     jr[1] = r[fx.INDEX['viscous_Nms']]
@@ -163,19 +176,32 @@ def simulate(effect: str = 'none', seed: int = 0, duration_s: float = 240.0, par
     return Truth(effect, injected, seed, payload, dt, t, u, T_meas, q_meas, T_true, q_true)
 
 
-def run_from_truth(truth: Truth) -> 'Run':
+def run_from_truth(truth: Truth) -> Run:
     """The Run that :func:`sma_wrist.diagnose.data.load_run` makes of ``write_bag(truth)``, without the bag.
 
     Sweeps (the benchmark, most tests) use it: same arrays, no recording cost.
     """
     from sma_wrist.diagnose.data import Run
-    return Run(t=truth.t.copy(), dt=truth.dt, u=truth.u.copy(), T=truth.T.copy(), q=truth.q.copy(),
-               payload_kg=truth.payload_kg, source=f'synthetic {truth.effect} seed {truth.seed}')
+
+    return Run(
+        t=truth.t.copy(),
+        dt=truth.dt,
+        u=truth.u.copy(),
+        T=truth.T.copy(),
+        q=truth.q.copy(),
+        payload_kg=truth.payload_kg,
+        source=f'synthetic {truth.effect} seed {truth.seed}',
+    )
 
 
 # ----------------------------------------------------------------------------- bags
-def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = None, nodes: Sequence[type] = (),
-              params: dict[str, dict[str, Any]] | None = None) -> Path:
+def write_bag(
+    truth: Truth,
+    path: str | Path,
+    corrupt: dict[str, Any] | None = None,
+    nodes: Sequence[type] = (),
+    params: dict[str, dict[str, Any]] | None = None,
+) -> Path:
     """Write a Truth as a rosbag2 (MCAP) bag through the embedded runtime and BagRecorder.
 
     ``nodes``: node classes that run beside the publisher (they see the data live and their topics are recorded
@@ -187,6 +213,7 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     with probability p)}.
     """
     from sma_wrist import runtime
+
     runtime.activate()
     import rclpy
     from rclpy.node import Node
@@ -205,7 +232,7 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     q = truth.q.copy()
     if 'nan_T' in c:
         a, n = c['nan_T']
-        T[a:a + n, 0] = np.nan
+        T[a : a + n, 0] = np.nan
     if c.get('kelvin'):
         T = T + 273.15
     if c.get('degrees'):
@@ -213,7 +240,7 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
     skip = np.zeros(K, bool)
     if 'gap' in c:
         a, n = c['gap']
-        skip[int(a / truth.dt):int((a + n) / truth.dt)] = True
+        skip[int(a / truth.dt) : int((a + n) / truth.dt)] = True
     stamp_ns = (np.arange(K) + 1) * int(round(truth.dt * 1e9))
     head = stamp_ns.copy()
     rng = np.random.default_rng(truth.seed + 7)
@@ -235,9 +262,14 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
             super().__init__('measured_wrist')
             self.k = 0
             self.pub = {}
-            for name, typ in (('/clock', Clock), ('/wrist/muscle_1/temperature', Temperature),
-                              ('/wrist/muscle_2/temperature', Temperature), ('/wrist/joint_states', JointState),
-                              ('/wrist/tem_1/command', Float64), ('/wrist/tem_2/command', Float64)):
+            for name, typ in (
+                ('/clock', Clock),
+                ('/wrist/muscle_1/temperature', Temperature),
+                ('/wrist/muscle_2/temperature', Temperature),
+                ('/wrist/joint_states', JointState),
+                ('/wrist/tem_1/command', Float64),
+                ('/wrist/tem_2/command', Float64),
+            ):
                 if name not in drop:
                     self.pub[name] = self.create_publisher(typ, name, 10)
             if '/wrist/payload' not in drop:
@@ -259,7 +291,7 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
             for i in (1, 2):
                 name = f'/wrist/muscle_{i}/temperature'
                 if name in p and not lost[k, i - 1]:
-                    m = Temperature(temperature=float(T[k, i - 1]), variance=NOISE_T_C ** 2)
+                    m = Temperature(temperature=float(T[k, i - 1]), variance=NOISE_T_C**2)
                     m.header.stamp = stamp
                     m.header.frame_id = f'muscle_{i}'
                     p[name].publish(m)
@@ -275,22 +307,35 @@ def write_bag(truth: Truth, path: str | Path, corrupt: dict[str, Any] | None = N
 
     path = Path(path)
     try:
-        run_nodes([Measured, *nodes], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady',
-                  params=params)
+        run_nodes(
+            [Measured, *nodes], duration=K * truth.dt + 0.5 * truth.dt, bag=str(path), until='steady', params=params
+        )
     finally:
         rclpy.try_shutdown()
     return path
 
 
-def write_run_bag(run: 'Run', path: str | Path, corrupt: dict[str, Any] | None = None, seed: int = 0,
-                  nodes: Sequence[type] = (), params: dict[str, dict[str, Any]] | None = None) -> Path:
+def write_run_bag(
+    run: Run,
+    path: str | Path,
+    corrupt: dict[str, Any] | None = None,
+    seed: int = 0,
+    nodes: Sequence[type] = (),
+    params: dict[str, dict[str, Any]] | None = None,
+) -> Path:
     """Write an aligned Run (e.g. a recording rewritten by :mod:`.distort`) as a bag, like :func:`write_bag`."""
     truth = Truth('recorded', {}, seed, run.payload_kg, run.dt, run.t, run.u, run.T, run.q)
     return write_bag(truth, path, corrupt, nodes, params)
 
 
-def make_bag(path: str | Path, effect: str = 'none', seed: int = 0, duration_s: float = 240.0,
-             corrupt: dict[str, Any] | None = None, **kw: Any) -> Truth:
+def make_bag(
+    path: str | Path,
+    effect: str = 'none',
+    seed: int = 0,
+    duration_s: float = 240.0,
+    corrupt: dict[str, Any] | None = None,
+    **kw: Any,
+) -> Truth:
     """simulate + write_bag; returns the Truth (injected effect and parameters)."""
     truth = simulate(effect, seed, duration_s, **kw)
     write_bag(truth, path, corrupt)

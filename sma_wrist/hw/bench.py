@@ -7,6 +7,7 @@ latency from the emulator queueing a line to the link parsing it (monotonic ms, 
 the achieved rate. Both ends share one Python process (GIL), as the in-process
 test set-up does; the ROS side is not included (see doc/explanation/protocol.md for numbers).
 """
+
 from __future__ import annotations
 
 import os
@@ -90,4 +91,5 @@ def bench_bridge(duration_s: float = 60.0, rate_hz: float = 1000.0) -> dict[str,
 if __name__ == '__main__':
     import json
     import sys
+
     print(json.dumps(bench_bridge(float(sys.argv[1]) if len(sys.argv) > 1 else 60.0), indent=2))

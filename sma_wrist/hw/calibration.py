@@ -9,10 +9,12 @@ the real wrist.
 Channels, in protocol order: muscle 1 thermocouple, muscle 2 thermocouple, TEM 1
 exchanger face, TEM 2 exchanger face (all degC), angle potentiometer (rad).
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -51,23 +53,28 @@ class Calibration:
     def to_physical_fast(self, counts: tuple[int, ...]) -> tuple[tuple[float, float, float, float], float]:
         """As :meth:`to_physical` in plain Python floats (the bridge's per-sample path, ~1 us)."""
         g, z, o = self.temperature_gain_C_per_count, self.temperature_zero_C, self.offsets_C
-        return ((z + g * counts[0] + o[0], z + g * counts[1] + o[1], z + g * counts[2] + o[2],
-                 z + g * counts[3] + o[3]), self.angle_offset_rad + self.angle_gain_rad_per_count * counts[4])
+        return (
+            (z + g * counts[0] + o[0], z + g * counts[1] + o[1], z + g * counts[2] + o[2], z + g * counts[3] + o[3]),
+            self.angle_offset_rad + self.angle_gain_rad_per_count * counts[4],
+        )
 
     def to_counts(self, temps_C: np.ndarray, angle_rad: float) -> np.ndarray:
         """Un-quantised counts (float, 5) that :meth:`to_physical` maps back to the inputs."""
-        t = (np.asarray(temps_C, float) - np.asarray(self.offsets_C) - self.temperature_zero_C) \
-            / self.temperature_gain_C_per_count
+        t = (
+            np.asarray(temps_C, float) - np.asarray(self.offsets_C) - self.temperature_zero_C
+        ) / self.temperature_gain_C_per_count
         a = (angle_rad - self.angle_offset_rad) / self.angle_gain_rad_per_count
         return np.append(t, a)
 
-
-    def reversed_angle(self) -> 'Calibration':
+    def reversed_angle(self) -> Calibration:
         """The calibration of the same joint read through a potentiometer with its outer leads swapped (it reads
         ``ADC_MAX - counts``): value = offset + gain * (ADC_MAX - counts'), i.e. the gain negated and the offset
         moved by gain * ADC_MAX. Applying it twice gives the original back."""
-        return replace(self, angle_gain_rad_per_count=-self.angle_gain_rad_per_count,
-                       angle_offset_rad=self.angle_offset_rad + self.angle_gain_rad_per_count * ADC_MAX)
+        return replace(
+            self,
+            angle_gain_rad_per_count=-self.angle_gain_rad_per_count,
+            angle_offset_rad=self.angle_offset_rad + self.angle_gain_rad_per_count * ADC_MAX,
+        )
 
 
 #: a pair of signs / 1-based channel numbers, one per muscle
@@ -126,7 +133,7 @@ class Wiring:
         k1, k2 = self.thermocouple_map
         return (adc[k1 - 1], adc[k2 - 1], *adc[2:])
 
-    def then(self, found: 'Wiring') -> 'Wiring':
+    def then(self, found: Wiring) -> Wiring:
         """This wiring corrected by ``found``, a wiring measured *through* this one (found.tem_channel_map[i]: the
         command of this wiring that reaches muscle i+1's TEM, found.tem_sign[i] its sign; found.thermocouple_map[i]:
         the temperature of this wiring that reads muscle i+1)."""
@@ -137,14 +144,21 @@ class Wiring:
 
     def params(self) -> dict[str, list[int]]:
         """The bridge's parameters for this wiring."""
-        return {'calibration.tem_sign': list(self.tem_sign), 'calibration.tem_channel_map': list(self.tem_channel_map),
-                'calibration.thermocouple_map': list(self.thermocouple_map)}
+        return {
+            'calibration.tem_sign': list(self.tem_sign),
+            'calibration.tem_channel_map': list(self.tem_channel_map),
+            'calibration.thermocouple_map': list(self.thermocouple_map),
+        }
 
     @classmethod
-    def from_params(cls, p: Mapping[str, Any]) -> 'Wiring':
+    def from_params(cls, p: Mapping[str, Any]) -> Wiring:
         """From the bridge's parameter values (lists or arrays of ints)."""
-        return cls(*(tuple(int(x) for x in p[f'calibration.{k}'])  # type: ignore[arg-type]
-                     for k in ('tem_sign', 'tem_channel_map', 'thermocouple_map')))
+        return cls(
+            *(
+                tuple(int(x) for x in p[f'calibration.{k}'])  # type: ignore[arg-type]
+                for k in ('tem_sign', 'tem_channel_map', 'thermocouple_map')
+            )
+        )
 
 
 def quantise(counts: np.ndarray) -> tuple[int, int, int, int, int]:

@@ -22,6 +22,7 @@ built (``--swap-tem-polarity N``, ``--swap-tem-channels``, ``--swap-thermocouple
 for is kept (``stats.max_abs_command_V``) and printed on exit. :meth:`DeviceEmulator.receive` /
 :meth:`DeviceEmulator.emit` step the device in lockstep with a host that is no serial port.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -34,8 +35,9 @@ import threading
 import time
 import tty
 from collections import deque
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -87,7 +89,9 @@ class EmulatorConfig:
     tem_channels_swapped: bool = False  # driver output 1 wired to TEM 2, output 2 to TEM 1
     thermocouples_swapped: bool = False  # ADC channel 1 reads muscle 2's thermocouple, channel 2 muscle 1's
     angle_reversed: bool = False  # the potentiometer's outer leads swapped: it reads 65535 - counts
-    broken_wire: int = 0  # muscle 1 or 2 whose wire does not pull (broken, unhooked): heating it moves nothing (0: none)
+    broken_wire: int = (
+        0  # muscle 1 or 2 whose wire does not pull (broken, unhooked): heating it moves nothing (0: none)
+    )
 
 
 @dataclass
@@ -110,9 +114,15 @@ class DeviceEmulator:
     ``(wall time of ``clock`` when queued for writing, Sample)`` of every sample sent, for latency benchmarks.
     """
 
-    def __init__(self, config: EmulatorConfig | None = None, link: str | None = None, log_sent: bool = False,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        config: EmulatorConfig | None = None,
+        link: str | None = None,
+        log_sent: bool = False,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+
         self.clock = clock  # wall seconds: when samples are due (a test drives it and calls serve(), no thread)
         self.cfg = c = config or EmulatorConfig()
         if not (c.rate_hz > 0 and c.time_scale > 0):
@@ -127,6 +137,7 @@ class DeviceEmulator:
         else:
             from sma_wrist.plants import make_plant
             from sma_wrist.plants.spread import Scenario, SensorBank
+
             sc = Scenario.from_mapping({'payload_kg': c.payload_kg, **c.scenario})
             self.plant = make_plant(c.plant, [sc], base)
             self.sensors = SensorBank([sc], 1.0 / c.rate_hz)
@@ -167,8 +178,10 @@ class DeviceEmulator:
             if not os.path.isdir(folder):
                 raise SmaWristError(f'--port {self.link}: the folder {folder} does not exist')
             if os.path.lexists(self.link) and not os.path.islink(self.link):
-                raise SmaWristError(f'--port {self.link} exists and is not a symlink (a file, folder or device); '
-                                    'refusing to replace it: give a new path')
+                raise SmaWristError(
+                    f'--port {self.link} exists and is not a symlink (a file, folder or device); '
+                    'refusing to replace it: give a new path'
+                )
         master, slave = os.openpty()
         tty.setraw(slave)
         os.set_blocking(master, False)
@@ -206,8 +219,9 @@ class DeviceEmulator:
         self._u[:] = 0.0
         self._pending.clear()
         self.parser.reset()
-        self._out += P.encode(P.Reset(reason)) + P.encode(P.Hello(self.cfg.device_id, self.cfg.firmware,
-                                                                   int(round(self.cfg.rate_hz))))
+        self._out += P.encode(P.Reset(reason)) + P.encode(
+            P.Hello(self.cfg.device_id, self.cfg.firmware, int(round(self.cfg.rate_hz)))
+        )
         self._boot_flag = True
 
     @property
@@ -463,50 +477,70 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
     try:
         offsets = tuple(float(x) for x in a.thermocouple_offsets_C.split(','))
     except ValueError:
-        raise ValueError(f'--thermocouple-offsets-C {a.thermocouple_offsets_C!r}: 4 numbers [degC], comma separated') \
-            from None
+        raise ValueError(
+            f'--thermocouple-offsets-C {a.thermocouple_offsets_C!r}: 4 numbers [degC], comma separated'
+        ) from None
     if len(offsets) != 4 or not all(math.isfinite(o) for o in offsets):
         raise ValueError('--thermocouple-offsets-C needs 4 finite comma-separated values')
     if not (a.rate_hz > 0 and a.time_scale > 0 and PAYLOAD_RANGE_KG[0] <= a.payload_kg <= PAYLOAD_RANGE_KG[1]):
-        raise ValueError('--rate-hz and --time-scale must be > 0, --payload-kg in [%g, %g]' % PAYLOAD_RANGE_KG)
+        raise ValueError(
+            '--rate-hz and --time-scale must be > 0, --payload-kg in [{:g}, {:g}]'.format(*PAYLOAD_RANGE_KG)
+        )
     # a NaN or negative value here did not fail: it made a device without noise, latency or watchdog in silence
     if not (math.isfinite(a.watchdog_s) and a.watchdog_s > 0):
         raise ValueError(f'--watchdog-s {a.watchdog_s!r} must be a finite number > 0')
     tc_rate, tc_res = getattr(a, 'thermocouple_rate_hz', 0.0), getattr(a, 'thermocouple_resolution_C', 0.0)
-    for flag, v in (('--noise-counts', a.noise_counts), ('--latency-ms', a.latency_ms),
-                    ('--reset-every-s', a.reset_every_s), ('--unplug-every-s', a.unplug_every_s),
-                    ('--unplug-wall-s', a.unplug_wall_s), ('--thermocouple-rate-hz', tc_rate),
-                    ('--thermocouple-resolution-C', tc_res)):
+    for flag, v in (
+        ('--noise-counts', a.noise_counts),
+        ('--latency-ms', a.latency_ms),
+        ('--reset-every-s', a.reset_every_s),
+        ('--unplug-every-s', a.unplug_every_s),
+        ('--unplug-wall-s', a.unplug_wall_s),
+        ('--thermocouple-rate-hz', tc_rate),
+        ('--thermocouple-resolution-C', tc_res),
+    ):
         if not (math.isfinite(v) and v >= 0):
             raise ValueError(f'{flag} {v!r} must be a finite number >= 0')
     if tc_rate > a.rate_hz:
         raise ValueError(f'--thermocouple-rate-hz {tc_rate:g} is above the sample rate {a.rate_hz:g} Hz')
     if tc_res > 0 and not tc_rate > 0:
         raise ValueError('--thermocouple-resolution-C models a converter chip: give --thermocouple-rate-hz too')
-    for flag, v in (('--garbage-rate', a.garbage_rate), ('--checksum-error-rate', a.checksum_error_rate),
-                    ('--partial-rate', a.partial_rate)):
+    for flag, v in (
+        ('--garbage-rate', a.garbage_rate),
+        ('--checksum-error-rate', a.checksum_error_rate),
+        ('--partial-rate', a.partial_rate),
+    ):
         if not 0 <= v <= 1:  # a probability per line (False for NaN)
             raise ValueError(f'{flag} {v!r} must be a probability in [0, 1]')
     # the device's sensor error: it reads `offset` too high, i.e. counts of (T + offset)
     cal = Calibration(offsets_C=tuple(-o for o in offsets))  # type: ignore[arg-type]
     plant = getattr(a, 'plant', 'model')
     from sma_wrist.plants import PLANTS
+
     if plant != 'model' and plant not in PLANTS:
         raise ValueError(f'--plant {plant!r}: one of model, {", ".join(sorted(PLANTS))}')
     scenario: dict[str, Any] = {}
     # a wire transforming hotter or colder, TEMs weaker or stronger than the model's: the model so perturbed
-    off_model = {k: v for k, v in (('transition_shift_C', getattr(a, 'transition_shift_C', None)),
-                                   ('tem_gain_scale', getattr(a, 'tem_gain_scale', None))) if v is not None}
+    off_model = {
+        k: v
+        for k, v in (
+            ('transition_shift_C', getattr(a, 'transition_shift_C', None)),
+            ('tem_gain_scale', getattr(a, 'tem_gain_scale', None)),
+        )
+        if v is not None
+    }
     if off_model and plant == 'model':
         plant = 'sdgpi'
     if getattr(a, 'scenario_file', None):
         if plant == 'model':
             raise ValueError('--scenario-file perturbs a registered plant: give --plant sdgpi or phase_fraction too')
         from sma_wrist.plants.spread import Scenario
+
         # as plant_sim's scenario_file: axes it names (a sweep row's payload too) win; ParameterError is a ValueError
         scenario = Scenario.from_file(a.scenario_file, {'payload_kg': a.payload_kg}).to_dict()
     if off_model:
         from sma_wrist.plants.spread import Scenario
+
         scenario = Scenario.from_mapping({'payload_kg': a.payload_kg, **scenario, **off_model}).to_dict()
     polarity = set(getattr(a, 'swap_tem_polarity', None) or ())
     broken = getattr(a, 'broken_wire', None) or 0
@@ -515,20 +549,37 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
     base = None
     if getattr(a, 'params_file', None):  # the wrist plant_sim would simulate with these files
         from sma_wrist import runtime
+
         runtime.activate()
         from sma_wrist.sweep.graph_params import plant_params
+
         base = plant_params(a.params_file)  # ParameterError (a ValueError) names a bad file or value
-    return EmulatorConfig(plant=plant, scenario=scenario, base=base,
-                          rate_hz=a.rate_hz, time_scale=a.time_scale, payload_kg=a.payload_kg,
-                          noise_counts=a.noise_counts, latency_s=a.latency_ms / 1000.0, watchdog_s=a.watchdog_s,
-                          seed=a.seed, calibration=cal, garbage_rate=a.garbage_rate,
-                          checksum_error_rate=a.checksum_error_rate, partial_rate=a.partial_rate,
-                          reset_every_s=a.reset_every_s, unplug_every_s=a.unplug_every_s,
-                          unplug_wall_s=a.unplug_wall_s, thermocouple_rate_hz=tc_rate,
-                          thermocouple_resolution_C=tc_res, tem_polarity_swapped=(1 in polarity, 2 in polarity),
-                          tem_channels_swapped=bool(getattr(a, 'swap_tem_channels', False)),
-                          thermocouples_swapped=bool(getattr(a, 'swap_thermocouples', False)),
-                          angle_reversed=bool(getattr(a, 'reverse_angle', False)), broken_wire=broken)
+    return EmulatorConfig(
+        plant=plant,
+        scenario=scenario,
+        base=base,
+        rate_hz=a.rate_hz,
+        time_scale=a.time_scale,
+        payload_kg=a.payload_kg,
+        noise_counts=a.noise_counts,
+        latency_s=a.latency_ms / 1000.0,
+        watchdog_s=a.watchdog_s,
+        seed=a.seed,
+        calibration=cal,
+        garbage_rate=a.garbage_rate,
+        checksum_error_rate=a.checksum_error_rate,
+        partial_rate=a.partial_rate,
+        reset_every_s=a.reset_every_s,
+        unplug_every_s=a.unplug_every_s,
+        unplug_wall_s=a.unplug_wall_s,
+        thermocouple_rate_hz=tc_rate,
+        thermocouple_resolution_C=tc_res,
+        tem_polarity_swapped=(1 in polarity, 2 in polarity),
+        tem_channels_swapped=bool(getattr(a, 'swap_tem_channels', False)),
+        thermocouples_swapped=bool(getattr(a, 'swap_thermocouples', False)),
+        angle_reversed=bool(getattr(a, 'reverse_angle', False)),
+        broken_wire=broken,
+    )
 
 
 def run_from_args(a: argparse.Namespace) -> int:
@@ -544,8 +595,12 @@ def run_from_args(a: argparse.Namespace) -> int:
     except SmaWristError as e:
         print(f'error: {e}', flush=True)
         return 2
-    print(f'emulated wrist on {emu.slave_path}' + (f' (linked at {a.port})' if a.port else '')
-          + f', {cfg.rate_hz:g} Hz, time x{cfg.time_scale:g}', flush=True)
+    print(
+        f'emulated wrist on {emu.slave_path}'
+        + (f' (linked at {a.port})' if a.port else '')
+        + f', {cfg.rate_hz:g} Hz, time x{cfg.time_scale:g}',
+        flush=True,
+    )
     print(path, flush=True)
     signal.signal(signal.SIGTERM, lambda *_: emu._stop.set())
     try:
@@ -555,8 +610,10 @@ def run_from_args(a: argparse.Namespace) -> int:
     finally:
         emu.close()
     # the device's side of what the host did (commission's bring-up limits are checked against it)
-    print(f'received {emu.stats.commands_received} commands, largest |drive| {emu.stats.max_abs_command_V:g} V',
-          flush=True)
+    print(
+        f'received {emu.stats.commands_received} commands, largest |drive| {emu.stats.max_abs_command_V:g} V',
+        flush=True,
+    )
     return 0
 
 
@@ -566,8 +623,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     return run_from_args(ap.parse_args(argv))
 
 
-__all__ = ['EmulatorConfig', 'EmulatorStats', 'DeviceEmulator', 'add_arguments', 'config_from_args',
-           'run_from_args', 'main']
+__all__ = [
+    'EmulatorConfig',
+    'EmulatorStats',
+    'DeviceEmulator',
+    'add_arguments',
+    'config_from_args',
+    'run_from_args',
+    'main',
+]
 
 if __name__ == '__main__':
     raise SystemExit(main())

@@ -13,6 +13,7 @@ measurement noise is each window's own spread, so clean sensors pass unfiltered 
 are smoothed (the published measurements are not filtered). Velocity is a least-squares
 slope over the samples of one publish window, low-pass filtered.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -39,7 +40,7 @@ class InputFilter:
         d = np.asarray(drift, float)
         if d.shape != (3,) or not np.all(d > 0):  # NaN fails too
             raise ValueError(f'drift must be three numbers > 0 (degC, degC, rad per sqrt(s)), got {drift!r}')
-        self.q_c = d ** 2
+        self.q_c = d**2
 
     def update(self, z: np.ndarray, variance: np.ndarray, dt_s: float) -> np.ndarray:
         """The filtered (T1, T2, q) after measurement z with the given variances, dt_s [s] after the last."""
@@ -62,8 +63,12 @@ class StressEstimator:
     None: the measurements as they are.
     """
 
-    def __init__(self, params: PlantParams | None = None, payload_kg: float = 0.3,
-                 drift: tuple[float, float, float] | None = None) -> None:
+    def __init__(
+        self,
+        params: PlantParams | None = None,
+        payload_kg: float = 0.3,
+        drift: tuple[float, float, float] | None = None,
+    ) -> None:
         self.filter = None if drift is None else InputFilter(drift)
         self.params = params or PlantParams()
         plant = WristPlant(self.params, payload_kg=payload_kg)  # rest state: memory, loads
@@ -74,8 +79,14 @@ class StressEstimator:
         self.T_prev = s.T_prev.copy()
         self.load_kgf = s.load_kgf.copy()
 
-    def update(self, T1_C: float, T2_C: float, q_rad: float, dt_s: float = 0.01,
-               variance: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[float, float, float]:
+    def update(
+        self,
+        T1_C: float,
+        T2_C: float,
+        q_rad: float,
+        dt_s: float = 0.01,
+        variance: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> tuple[float, float, float]:
         """(stress 1 [Pa], stress 2 [Pa], net muscle torque [N m]); inputs must be finite, ``dt_s`` [s]
         is the time since the previous call, ``variance`` that of each input [degC^2, degC^2, rad^2]."""
         p = self.params

@@ -12,13 +12,15 @@ after a delay that doubles from ``backoff_initial_s`` up to ``backoff_max_s``; i
 once a connection delivers a valid frame. Times here are wall seconds of ``clock`` (``time.monotonic``; a test
 gives a clock it drives, and a link that reads the port when the bridge waits, through :meth:`SerialLink.next_event`).
 """
+
 from __future__ import annotations
 
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 from sma_wrist.hw import protocol as P
 
@@ -28,6 +30,7 @@ Event = tuple[str, float, Any]
 def open_serial(port: str, baud: int) -> Any:
     """Default opener: pyserial, 20 ms read timeout, 100 ms write timeout."""
     import serial
+
     return serial.serial_for_url(port, baudrate=baud, timeout=0.02, write_timeout=0.1)
 
 
@@ -48,10 +51,18 @@ class LinkStats:
 class SerialLink:
     """Reader thread + thread-safe writer for one serial port. ``start()``, ``events``, ``send()``, ``stop()``."""
 
-    def __init__(self, port: str, baud: int = 921600, *, backoff_initial_s: float = 0.05,
-                 backoff_max_s: float = 2.0, silence_s: float = 1.0, queue_size: int = 100000,
-                 opener: Callable[[str, int], Any] = open_serial,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        port: str,
+        baud: int = 921600,
+        *,
+        backoff_initial_s: float = 0.05,
+        backoff_max_s: float = 2.0,
+        silence_s: float = 1.0,
+        queue_size: int = 100000,
+        opener: Callable[[str, int], Any] = open_serial,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.port = port
         self.clock = clock  # wall seconds: the events' stamps, the silence limit, and the bridge's timeouts
         self.baud = baud

@@ -19,11 +19,11 @@ reference implementation:
 Device -> host: :class:`Sample` (``S``), :class:`Hello` (``H``), :class:`Reset` (``R``),
 :class:`Error` (``E``). Host -> device: :class:`Command` (``C``), :class:`Query` (``Q``).
 """
+
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import Union
 
 PROTOCOL_VERSION = 1
 MAX_LINE = 120  # bytes from '$' to '\n' inclusive
@@ -122,7 +122,7 @@ class Query:
     version: int = PROTOCOL_VERSION
 
 
-Frame = Union[Sample, Hello, Reset, Error, Command, Query]
+Frame = Sample | Hello | Reset | Error | Command | Query
 
 
 def _body(frame: Frame) -> str:
@@ -156,8 +156,11 @@ def check_frame(frame: Frame) -> None:
         if not (0 <= frame.seq < SEQ_MODULUS and abs(frame.u1_mV) <= MV_LIMIT and abs(frame.u2_mV) <= MV_LIMIT):
             raise ValueError(f'command out of range (|u| <= {MV_LIMIT} mV): {frame!r}')
     elif isinstance(frame, Hello):
-        if not (_TEXT.fullmatch(frame.device_id.encode()) and _TEXT.fullmatch(frame.firmware.encode())
-                and 0 < frame.rate_hz <= 100000):
+        if not (
+            _TEXT.fullmatch(frame.device_id.encode())
+            and _TEXT.fullmatch(frame.firmware.encode())
+            and 0 < frame.rate_hz <= 100000
+        ):
             raise ValueError(f'bad hello: {frame!r}')
     elif isinstance(frame, Reset):
         if not _TEXT.fullmatch(frame.reason.encode()):
@@ -285,7 +288,7 @@ class Parser:
                     continue
                 pos = start  # incomplete: keep for the next feed
                 break
-            line = bytes(buf[start + 1:nl])
+            line = bytes(buf[start + 1 : nl])
             pos = nl + 1
             frame = self._line(line)
             if frame is not None:
@@ -303,7 +306,7 @@ class Parser:
             st.malformed += 1
             return None
         body = line[:star]
-        if crc16(body) != int(line[star + 1:], 16):
+        if crc16(body) != int(line[star + 1 :], 16):
             st.bad_checksum += 1
             return None
         pattern = _PATTERNS.get(body[0]) if body else None
@@ -358,6 +361,28 @@ class SequenceTracker:
         self.last = None
 
 
-__all__ = ['PROTOCOL_VERSION', 'MAX_LINE', 'ADC_MAX', 'SEQ_MODULUS', 'MV_LIMIT', 'FLAG_WATCHDOG', 'FLAG_CLIPPED',
-           'FLAG_OVERTEMP', 'FLAG_BOOT', 'Sample', 'Hello', 'Reset', 'Error', 'Command', 'Query', 'Frame',
-           'crc16', 'encode', 'encode_unchecked', 'check_frame', 'Parser', 'ParserStats', 'SequenceTracker']
+__all__ = [
+    'PROTOCOL_VERSION',
+    'MAX_LINE',
+    'ADC_MAX',
+    'SEQ_MODULUS',
+    'MV_LIMIT',
+    'FLAG_WATCHDOG',
+    'FLAG_CLIPPED',
+    'FLAG_OVERTEMP',
+    'FLAG_BOOT',
+    'Sample',
+    'Hello',
+    'Reset',
+    'Error',
+    'Command',
+    'Query',
+    'Frame',
+    'crc16',
+    'encode',
+    'encode_unchecked',
+    'check_frame',
+    'Parser',
+    'ParserStats',
+    'SequenceTracker',
+]

@@ -11,10 +11,11 @@ swings between heating and cooling; but a TEM driven one way that hard, beyond t
 hold any temperature (identify thermal's hold limits, about +-13 V), moves a muscle by degrees.
 The flag stays until the reading changes: with the TEMs off the drive no longer says anything.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from collections.abc import Sequence
 
 
 class StuckSensor:

@@ -6,6 +6,7 @@ Sub-commands are modules of this package listed in :data:`SUBCOMMANDS`; each def
 ``register(subparsers)`` (adds its parser, with ``func`` set) and keeps its top-level imports
 light, so building the CLI parser stays cheap.
 """
+
 from __future__ import annotations
 
 import importlib
@@ -17,8 +18,9 @@ SUBCOMMANDS = ('hysteresis', 'thermal')
 
 def add_parser(sub: Any) -> Any:
     """Add ``identify`` and its sub-commands to the top-level sub-parsers ``sub``."""
-    p = sub.add_parser('identify', help='identify the hysteresis or thermal model from measured data '
-                                        '(doc/howto/identify_wire.md)')
+    p = sub.add_parser(
+        'identify', help='identify the hysteresis or thermal model from measured data (doc/howto/identify_wire.md)'
+    )
     isub = p.add_subparsers(dest='identify_command', required=True, metavar='WHAT')
     for name in SUBCOMMANDS:
         try:

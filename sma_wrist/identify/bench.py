@@ -17,6 +17,7 @@ what one core costs while other jobs share the machine; the load average at star
 is recorded). Quality is the residual in % of the stroke (and, on synthetic data, the error against the
 known loop); a faster fit that fits worse would show here.
 """
+
 from __future__ import annotations
 
 import json
@@ -47,8 +48,12 @@ def _real(stresses: tuple[int, ...]) -> tuple[list[Any], list[Any], Any, list[st
     from sma_wrist.identify.segment import loops_of
 
     loops = [loops_of(read_measurement(DATA / f'{s}MPa.txt'))[0] for s in stresses]
-    return ([lp.T_C for lp in loops], [lp.strain * REF_LENGTH_MM for lp in loops],
-            np.array([stress_to_load_kgf(lp.stress_MPa) for lp in loops]), [lp.init_branch for lp in loops])
+    return (
+        [lp.T_C for lp in loops],
+        [lp.strain * REF_LENGTH_MM for lp in loops],
+        np.array([stress_to_load_kgf(lp.stress_MPa) for lp in loops]),
+        [lp.init_branch for lp in loops],
+    )
 
 
 def _timed(fn: Any) -> tuple[Any, float, float]:

@@ -9,6 +9,7 @@ files and leave-one-load-out over the training stresses), write ``hysteresis.yam
 
 This module's top level imports only argparse: building the CLI parser must stay cheap.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,35 +32,73 @@ HELP = 'identify the SD-GPI hysteresis of a wire from measured isobaric loops (d
 def register(sub: Any) -> None:
     """Add the ``hysteresis`` sub-command to the ``identify`` sub-parsers."""
     p = sub.add_parser('hysteresis', help=HELP, description=HELP)
-    p.add_argument('files', nargs='+', metavar='FILE',
-                   help='isobaric test tables (CSV, TSV, ";" or whitespace text, .xlsx, MATLAB .mat), or folders of them')
-    p.add_argument('--holdout', nargs='+', action='extend', default=[], metavar='FILE',
-                   help='files predicted by the SD-GPI fitted without them')
-    p.add_argument('--out', default='runs/identify', metavar='DIR',
-                   help='hysteresis.yaml, report.md and PNG plots go here (default runs/identify)')
+    p.add_argument(
+        'files',
+        nargs='+',
+        metavar='FILE',
+        help='isobaric test tables (CSV, TSV, ";" or whitespace text, .xlsx, MATLAB .mat), or folders of them',
+    )
+    p.add_argument(
+        '--holdout',
+        nargs='+',
+        action='extend',
+        default=[],
+        metavar='FILE',
+        help='files predicted by the SD-GPI fitted without them',
+    )
+    p.add_argument(
+        '--out',
+        default='runs/identify',
+        metavar='DIR',
+        help='hysteresis.yaml, report.md and PNG plots go here (default runs/identify)',
+    )
     p.add_argument('--json', action='store_true', help='print one JSON object')
-    p.add_argument('--params', metavar='FILE', help='the "before" model: an earlier hysteresis.yaml (default: built-in set)')
-    p.add_argument('--columns', metavar='T,STRAIN[,STRESS[,TIME]]',
-                   help='column names or 0-based numbers (default: by header name, else 0,1,2)')
-    p.add_argument('--temperature-unit', choices=('degC', 'K', 'degF'),
-                   help='unit of the temperature column (default: its header unit, else degC with a warning)')  # = io.TEMPERATURE_UNITS (io imports numpy)
-    p.add_argument('--strain-unit', choices=('fraction', '%', 'mm'),
-                   help='unit of the strain column, mm with --length-mm (default: its header unit, else from the '
-                        'values, with a warning)')
-    p.add_argument('--stress-unit', choices=('MPa', 'psi', 'ksi', 'N', 'lbf', 'kg', 'kgf', 'g'), help='a stress (MPa, psi, ksi) or a load (N, lbf, kg, kgf, g)')
+    p.add_argument(
+        '--params', metavar='FILE', help='the "before" model: an earlier hysteresis.yaml (default: built-in set)'
+    )
+    p.add_argument(
+        '--columns',
+        metavar='T,STRAIN[,STRESS[,TIME]]',
+        help='column names or 0-based numbers (default: by header name, else 0,1,2)',
+    )
+    p.add_argument(
+        '--temperature-unit',
+        choices=('degC', 'K', 'degF'),
+        help='unit of the temperature column (default: its header unit, else degC with a warning)',
+    )  # = io.TEMPERATURE_UNITS (io imports numpy)
+    p.add_argument(
+        '--strain-unit',
+        choices=('fraction', '%', 'mm'),
+        help='unit of the strain column, mm with --length-mm (default: its header unit, else from the '
+        'values, with a warning)',
+    )
+    p.add_argument(
+        '--stress-unit',
+        choices=('MPa', 'psi', 'ksi', 'N', 'lbf', 'kg', 'kgf', 'g'),
+        help='a stress (MPa, psi, ksi) or a load (N, lbf, kg, kgf, g)',
+    )
     p.add_argument('--length-mm', type=float, help='gauge length, for elongation in mm')
     p.add_argument('--wire-diameter-mm', type=float, help='wire diameter, for a load column in N, lbf, kg, kgf or g')
     p.add_argument('--stress-mpa', type=float, help='stress of files without a stress column')
-    p.add_argument('--cycle', default='last', help="which complete cycle per stress: a number (1-based), 'last' or 'all'")
+    p.add_argument(
+        '--cycle', default='last', help="which complete cycle per stress: a number (1-based), 'last' or 'all'"
+    )
     p.add_argument('--no-loo', action='store_true', help='skip the leave-one-load-out validation')
-    p.add_argument('--model', choices=MODELS + ('auto',), default='auto',
-                   help="load law of the envelopes: the seed's quadratics per section, the Clausius-Clapeyron "
-                        'shift, that shift with a saturating stroke, or auto (default: the lowest leave-one-load-out '
-                        'error; without it quadratic)')
+    p.add_argument(
+        '--model',
+        choices=MODELS + ('auto',),
+        default='auto',
+        help="load law of the envelopes: the seed's quadratics per section, the Clausius-Clapeyron "
+        'shift, that shift with a saturating stroke, or auto (default: the lowest leave-one-load-out '
+        'error; without it quadratic)',
+    )
     p.add_argument('--no-plots', action='store_true', help='write no PNG plots')
-    p.add_argument('--thermal-file', metavar='FILE',
-                   help="the TEMs the wire will run with (sma-wrist identify thermal); default the seed's (0-80 degC): "
-                        'wrist_params.yaml says what they cannot reach')
+    p.add_argument(
+        '--thermal-file',
+        metavar='FILE',
+        help="the TEMs the wire will run with (sma-wrist identify thermal); default the seed's (0-80 degC): "
+        'wrist_params.yaml says what they cannot reach',
+    )
     p.set_defaults(func=run_cli)
 
 
@@ -108,15 +147,21 @@ def check_numbers(o: Options) -> None:
     import math
 
     from sma_wrist.identify.io import IdentifyInputError
-    for flag, v, positive in (('--length-mm', o.length_mm, True), ('--wire-diameter-mm', o.wire_diameter_mm, True),
-                              ('--stress-mpa', o.stress_mpa, False)):
+
+    for flag, v, positive in (
+        ('--length-mm', o.length_mm, True),
+        ('--wire-diameter-mm', o.wire_diameter_mm, True),
+        ('--stress-mpa', o.stress_mpa, False),
+    ):
         if v is not None and not (math.isfinite(v) and (v > 0 or not positive)):
             raise IdentifyInputError(f'{flag} {v!r} must be a finite number' + (' > 0' if positive else ''))
     if o.stress_mpa is not None and o.stress_mpa <= 0:  # a wire under test is in tension; -50 became a section
         raise IdentifyInputError(f'--stress-mpa {o.stress_mpa!r} must be > 0 (the tensile stress of the test)')
     if o.columns is not None and not (2 <= len(o.columns) <= 4 and all(o.columns)):  # '0' was an IndexError
-        raise IdentifyInputError(f'--columns {",".join(o.columns)!r}: give 2 to 4 columns T,STRAIN[,STRESS[,TIME]] '
-                                 '(names or 0-based numbers)')
+        raise IdentifyInputError(
+            f'--columns {",".join(o.columns)!r}: give 2 to 4 columns T,STRAIN[,STRESS[,TIME]] '
+            '(names or 0-based numbers)'
+        )
 
 
 def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
@@ -125,11 +170,25 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
 
     import numpy as np
 
-    from sma_wrist.core.hysteresis.identification import (fit_gpi, fit_sdgpi, fit_sdgpi_cc, gpi_vector,
-                                                          sdgpi_gpi_vectors, simulate_batch)
+    from sma_wrist.core.hysteresis.identification import (
+        fit_gpi,
+        fit_sdgpi,
+        fit_sdgpi_cc,
+        gpi_vector,
+        sdgpi_gpi_vectors,
+        simulate_batch,
+    )
     from sma_wrist.core.hysteresis.params_file import hysteresis_params, save_hysteresis
-    from sma_wrist.identify.io import (REF_LENGTH_MM, IdentifyInputError, Units, check_output_folder, expand_folders,
-                                       load_kgf_to_stress, read_measurement, stress_to_load_kgf)
+    from sma_wrist.identify.io import (
+        REF_LENGTH_MM,
+        IdentifyInputError,
+        Units,
+        check_output_folder,
+        expand_folders,
+        load_kgf_to_stress,
+        read_measurement,
+        stress_to_load_kgf,
+    )
     from sma_wrist.identify.loops import errors_pct, slope, transitions
     from sma_wrist.identify.segment import loops_of
 
@@ -138,6 +197,7 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     check_output_folder(o.out, inputs=[*o.files, *o.holdout])
     if o.thermal_file:  # read before the fit: a bad file found after it left a new hysteresis.yaml beside an old
         from sma_wrist.core.thermal.params_file import load_thermal_file  # wrist_params.yaml
+
         load_thermal_file(o.thermal_file)
     units = Units(o.temperature_unit, o.strain_unit, o.stress_unit, o.length_mm, o.wire_diameter_mm)
     warnings: list[str] = []
@@ -160,12 +220,17 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     if len(stresses) < 3:
         raise IdentifyInputError(
             f'{", ".join(o.files)}: {len(stresses)} stress level(s) ({", ".join(f"{s:g}" for s in stresses)} MPa); '
-            'the SD-GPI needs loops at >= 3 different stresses')
+            'the SD-GPI needs loops at >= 3 different stresses'
+        )
     progress(f'{len(train)} training loop(s) at {", ".join(f"{s:g}" for s in stresses)} MPa, {len(hold)} held out')
 
     def arrays(loops: list[Any]) -> tuple[list[Any], list[Any], Any, list[str]]:
-        return ([lp.T_C for lp in loops], [lp.strain * REF_LENGTH_MM for lp in loops],
-                np.array([stress_to_load_kgf(lp.stress_MPa) for lp in loops]), [lp.init_branch for lp in loops])
+        return (
+            [lp.T_C for lp in loops],
+            [lp.strain * REF_LENGTH_MM for lp in loops],
+            np.array([stress_to_load_kgf(lp.stress_MPa) for lp in loops]),
+            [lp.init_branch for lp in loops],
+        )
 
     def predict(theta: Any, edges: Any, loops: list[Any]) -> list[Any]:
         _, _, loads, br = arrays(loops)
@@ -194,25 +259,45 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     for lp, T, y, m, b in zip(train + hold, Ts, ys, loads, br):
         Tc = np.clip(T, lo_T, hi_T)
         mc = float(np.clip(m, lo_m, hi_m))
-        yb = simulate_batch(Tc, gpi_vector(before_model, mc)[None], n=before_model.n, k_f=before_model.k_f, branch=b)[:, 0]
+        yb = simulate_batch(Tc, gpi_vector(before_model, mc)[None], n=before_model.n, k_f=before_model.k_f, branch=b)[
+            :, 0
+        ]
         yb = yb + float(np.mean(y - yb))
         rms, mx = errors_pct(yb, y)
-        before.append({'file': lp.source, 'stress_MPa': lp.stress_MPa, 'rms_pct': rms, 'max_pct': mx,
-                       'clipped_temperature_pct': float(100 * np.mean((T < lo_T) | (T > hi_T))),
-                       'load_clipped': bool(m < lo_m or m > hi_m)})
+        before.append(
+            {
+                'file': lp.source,
+                'stress_MPa': lp.stress_MPa,
+                'rms_pct': rms,
+                'max_pct': mx,
+                'clipped_temperature_pct': float(100 * np.mean((T < lo_T) | (T > hi_T))),
+                'load_clipped': bool(m < lo_m or m > hi_m),
+            }
+        )
         meas_tr.append(transitions(T, y, lp.first_branch))
         before_tr.append(transitions(T, yb, lp.first_branch))
-    progress(f'before fit ({before_model.name}): RMS {min(b["rms_pct"] for b in before):.1f}-'
-             f'{max(b["rms_pct"] for b in before):.1f} % of stroke')
+    progress(
+        f'before fit ({before_model.name}): RMS {min(b["rms_pct"] for b in before):.1f}-'
+        f'{max(b["rms_pct"] for b in before):.1f} % of stroke'
+    )
 
     # ---- GPI per load (Sec. 4.1.1)
     Ts_tr, ys_tr, loads_tr, br_tr = arrays(train)
     per_load = []
     for i, lp in enumerate(train):
         g = fit_gpi(Ts_tr[i], ys_tr[i], branch=br_tr[i])
-        per_load.append({'file': lp.source, 'stress_MPa': lp.stress_MPa, 'load_kgf': float(loads_tr[i]),
-                         'samples': int(lp.T_C.size), 'cycle': lp.cycle_used, 'cycles_found': lp.n_cycles_found,
-                         'stroke_mm': float(np.ptp(ys_tr[i])), 'gpi_rms_pct': float(g.residual_std_pct)})
+        per_load.append(
+            {
+                'file': lp.source,
+                'stress_MPa': lp.stress_MPa,
+                'load_kgf': float(loads_tr[i]),
+                'samples': int(lp.T_C.size),
+                'cycle': lp.cycle_used,
+                'cycles_found': lp.n_cycles_found,
+                'stroke_mm': float(np.ptp(ys_tr[i])),
+                'gpi_rms_pct': float(g.residual_std_pct),
+            }
+        )
         progress(f'GPI at {lp.stress_MPa:g} MPa: {g.residual_std_pct:.2f} % of stroke')
 
     # ---- leave-one-load-out per load law: validation that cannot cheat, and the model choice
@@ -227,8 +312,15 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
                 r_s, e_s = fit(rest, model)
                 for lp, yp in zip(out, predict(r_s.theta, e_s, out)):
                     rms, mx = errors_pct(yp, lp.strain * REF_LENGTH_MM)
-                    loo_by[model].append({'file': lp.source, 'stress_MPa': lp.stress_MPa, 'rms_pct': rms, 'max_pct': mx,
-                                          'extrapolated': bool(s < stresses[1] or s > stresses[-2])})
+                    loo_by[model].append(
+                        {
+                            'file': lp.source,
+                            'stress_MPa': lp.stress_MPa,
+                            'rms_pct': rms,
+                            'max_pct': mx,
+                            'extrapolated': bool(s < stresses[1] or s > stresses[-2]),
+                        }
+                    )
                     progress(f'{model}: leave-one-load-out {s:g} MPa: RMS {rms:.2f} %, max {mx:.2f} % of stroke')
 
     def interior_mean(rows: list[dict[str, Any]]) -> float:
@@ -253,8 +345,10 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     y_fit = predict(res.theta, edges, train)
     for d, y, yf in zip(per_load, ys_tr, y_fit):
         d['sdgpi_rms_pct'], d['sdgpi_max_pct'] = errors_pct(yf, y)
-    progress(f'SD-GPI over {len(stresses)} stresses, sections {np.round(edges, 3).tolist()} kgf: '
-             f'{res.residual_std_pct:.2f} % residual')
+    progress(
+        f'SD-GPI over {len(stresses)} stresses, sections {np.round(edges, 3).tolist()} kgf: '
+        f'{res.residual_std_pct:.2f} % residual'
+    )
 
     # ---- validation on data the fit did not see
     holdout = []
@@ -274,38 +368,64 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
     transforming = strokes >= TRANSFORMING_STROKE_FRACTION * strokes.max()
     for lp, st, ok in zip(train + hold, strokes, transforming):
         if not ok:
-            warnings.append(f'{lp.label}: stroke {st:.3g} mm is under {100 * TRANSFORMING_STROKE_FRACTION:g} % of '
-                            f'the largest ({strokes.max():.3g} mm): hardly any transformation at {lp.stress_MPa:.4g} MPa; '
-                            'its transition temperatures are left out of the slopes over stress')
+            warnings.append(
+                f'{lp.label}: stroke {st:.3g} mm is under {100 * TRANSFORMING_STROKE_FRACTION:g} % of '
+                f'the largest ({strokes.max():.3g} mm): hardly any transformation at {lp.stress_MPa:.4g} MPa; '
+                'its transition temperatures are left out of the slopes over stress'
+            )
     s_all = np.where(transforming, s_all, np.nan)  # slope() skips non-finite points
-    s_tr = s_all[:len(train)]
+    s_tr = s_all[: len(train)]
     keys = ('A_s', 'A_50', 'A_f', 'M_s', 'M_50', 'M_f', 'stroke_mm')
-    trans = {'measured': meas_tr, 'before': before_tr, 'fitted': fit_tr, 'in_slopes': transforming.tolist(),
-             'slopes_per_MPa': {
-                 'measured': {k: slope(s_all, [t[k] for t in meas_tr]) for k in keys},
-                 'before': {k: slope(s_all, [t[k] for t in before_tr]) for k in keys},
-                 'fitted': {k: slope(s_tr, [t[k] for t in fit_tr]) for k in keys}}}
+    trans = {
+        'measured': meas_tr,
+        'before': before_tr,
+        'fitted': fit_tr,
+        'in_slopes': transforming.tolist(),
+        'slopes_per_MPa': {
+            'measured': {k: slope(s_all, [t[k] for t in meas_tr]) for k in keys},
+            'before': {k: slope(s_all, [t[k] for t in before_tr]) for k in keys},
+            'fitted': {k: slope(s_tr, [t[k] for t in fit_tr]) for k in keys},
+        },
+    }
 
     # ---- the identified wire
     T_all = np.concatenate([lp.T_C for lp in train])
-    params = dataclasses.replace(res.params, T_valid=(float(min(T_all.min(), 20.0) - 10.0), float(T_all.max() + 10.0)),
-                                 name='identified SD-GPI')
+    params = dataclasses.replace(
+        res.params, T_valid=(float(min(T_all.min(), 20.0) - 10.0), float(T_all.max() + 10.0)), name='identified SD-GPI'
+    )
     doc: dict[str, Any] = {
-        'fit': {'per_load': per_load, 'overall_rms_pct': float(res.residual_std_pct),
-                'sections_kgf': [float(v) for v in edges],
-                'sections_MPa': [float(load_kgf_to_stress(v)) for v in edges]},
-        'holdout': holdout, 'leave_one_load_out': loo,
-        'model': chosen, 'model_selection': {'reason': why, 'interior_loo_rms_pct': selection,
-                                             'leave_one_load_out': loo_by},
-        'before': {'model': before_model.name, 'per_load': before,
-                   'note': 'constant offset removed per loop; T and load clipped to the model range'},
-        'transitions': trans, 'params_file': None, 'report': None, 'wrist_params': None, 'warnings': warnings,
+        'fit': {
+            'per_load': per_load,
+            'overall_rms_pct': float(res.residual_std_pct),
+            'sections_kgf': [float(v) for v in edges],
+            'sections_MPa': [float(load_kgf_to_stress(v)) for v in edges],
+        },
+        'holdout': holdout,
+        'leave_one_load_out': loo,
+        'model': chosen,
+        'model_selection': {'reason': why, 'interior_loo_rms_pct': selection, 'leave_one_load_out': loo_by},
+        'before': {
+            'model': before_model.name,
+            'per_load': before,
+            'note': 'constant offset removed per loop; T and load clipped to the model range',
+        },
+        'transitions': trans,
+        'params_file': None,
+        'report': None,
+        'wrist_params': None,
+        'warnings': warnings,
         'cleaning': cleaning,
     }
-    ident = {'tool': 'sma-wrist identify hysteresis', 'files': list(o.files), 'holdout': list(o.holdout),
-             'stresses_MPa': stresses, 'model': chosen, 'fit_rms_pct': float(res.residual_std_pct),
-             'holdout_rms_pct': [h['rms_pct'] for h in holdout],
-             'leave_one_load_out_rms_pct': [d['rms_pct'] for d in loo]}
+    ident = {
+        'tool': 'sma-wrist identify hysteresis',
+        'files': list(o.files),
+        'holdout': list(o.holdout),
+        'stresses_MPa': stresses,
+        'model': chosen,
+        'fit_rms_pct': float(res.residual_std_pct),
+        'holdout_rms_pct': [h['rms_pct'] for h in holdout],
+        'leave_one_load_out_rms_pct': [d['rms_pct'] for d in loo],
+    }
     if o.out:
         from pathlib import Path
 
@@ -313,8 +433,9 @@ def run(o: Options, progress: Any = _progress) -> dict[str, Any]:
         doc['params_file'] = str(save_hysteresis(out / 'hysteresis.yaml', params, ident))
         from sma_wrist.identify.report import write_report
 
-        doc['report'] = str(write_report(out, doc, train, hold, y_fit, predict(res.theta, edges, hold),
-                                         before_model, plots=o.plots))
+        doc['report'] = str(
+            write_report(out, doc, train, hold, y_fit, predict(res.theta, edges, hold), before_model, plots=o.plots)
+        )
         progress(f'wrote {doc["params_file"]} and {doc["report"]}')
         doc['wrist_params'] = _wrist_params(out, params, o.thermal_file, progress)
     doc['wall_s'] = time.perf_counter() - t0
@@ -338,15 +459,34 @@ def _wrist_params(out: Any, params: Any, thermal_file: str | None, progress: Any
         return {'file': None, 'window_C': None, 'problems': [str(e)]}
     f = write_wrist_params(out / 'wrist_params.yaml', nodes, problems)
     progress(f'wrote {f} (sma-wrist run --params-file {f})' + ''.join(f'\nPROBLEM: {p}' for p in problems))
-    return {'file': str(f), 'window_C': list(operating_window(params)), 'problems': problems,
-            'preload_elongation_mm': nodes['plant_sim']['preload_elongation_mm']}
+    return {
+        'file': str(f),
+        'window_C': list(operating_window(params)),
+        'problems': problems,
+        'preload_elongation_mm': nodes['plant_sim']['preload_elongation_mm'],
+    }
 
 
 def options_from_args(a: argparse.Namespace) -> Options:
     cols = [c.strip() for c in a.columns.split(',')] if a.columns else None
-    return Options(list(a.files), list(a.holdout), a.out, a.params, cols, a.temperature_unit, a.strain_unit,
-                   a.stress_unit, a.length_mm, a.wire_diameter_mm, a.stress_mpa, a.cycle, not a.no_loo, not a.no_plots,
-                   a.model, a.thermal_file)
+    return Options(
+        list(a.files),
+        list(a.holdout),
+        a.out,
+        a.params,
+        cols,
+        a.temperature_unit,
+        a.strain_unit,
+        a.stress_unit,
+        a.length_mm,
+        a.wire_diameter_mm,
+        a.stress_mpa,
+        a.cycle,
+        not a.no_loo,
+        not a.no_plots,
+        a.model,
+        a.thermal_file,
+    )
 
 
 def run_cli(a: argparse.Namespace) -> int:
@@ -389,14 +529,20 @@ def summary(doc: dict[str, Any]) -> str:
     before = {(b['file'], b['stress_MPa']): b for b in doc['before']['per_load']}
     for d in doc['fit']['per_load']:
         b = before.get((d['file'], d['stress_MPa']), {})
-        lines.append(f'{d["stress_MPa"]:10.4g} {d["gpi_rms_pct"]:9.2f} {d["sdgpi_rms_pct"]:12.2f} {d["sdgpi_max_pct"]:6.2f}'
-                     f' {b.get("rms_pct", float("nan")):12.1f}')
+        lines.append(
+            f'{d["stress_MPa"]:10.4g} {d["gpi_rms_pct"]:9.2f} {d["sdgpi_rms_pct"]:12.2f} {d["sdgpi_max_pct"]:6.2f}'
+            f' {b.get("rms_pct", float("nan")):12.1f}'
+        )
     lines.append(f'load law: {doc["model"]} ({doc["model_selection"]["reason"]})')
     lines.append(f'SD-GPI overall residual {doc["fit"]["overall_rms_pct"]:.2f} % of stroke')
     for h in doc['holdout']:
-        lines.append(f'held out {h["file"]} ({h["stress_MPa"]:g} MPa): RMS {h["rms_pct"]:.2f} %, max {h["max_pct"]:.2f} %')
+        lines.append(
+            f'held out {h["file"]} ({h["stress_MPa"]:g} MPa): RMS {h["rms_pct"]:.2f} %, max {h["max_pct"]:.2f} %'
+        )
     for h in doc['leave_one_load_out']:
-        lines.append(f'leave-one-load-out {h["stress_MPa"]:g} MPa: RMS {h["rms_pct"]:.2f} %, max {h["max_pct"]:.2f} %'
-                     + (' (extrapolated)' if h['extrapolated'] else ''))
+        lines.append(
+            f'leave-one-load-out {h["stress_MPa"]:g} MPa: RMS {h["rms_pct"]:.2f} %, max {h["max_pct"]:.2f} %'
+            + (' (extrapolated)' if h['extrapolated'] else '')
+        )
     lines.append(f'params file: {doc["params_file"]}  report: {doc["report"]}  ({doc["wall_s"]:.1f} s)')
     return '\n'.join(lines)

@@ -14,13 +14,14 @@ test wire, elongation y in mm of an 80 mm wire (:data:`REF_LENGTH_MM`) and load 
 m = sigma * A(0.25 mm) / g, so a wire of another diameter or length is described by its
 stress and strain: the identified model is the same material law.
 """
+
 from __future__ import annotations
 
 import math
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -52,11 +53,12 @@ def check_output_folder(out: str | None, flag: str = '--out', inputs: Sequence[s
     """IdentifyInputError if ``out`` cannot be the output folder (sma_wrist.outputs): found before the fit, not
     after it (~15 s)."""
     from sma_wrist.outputs import check_output_folder as check
+
     check(out, flag, inputs, IdentifyInputError)
 
 
 def area_mm2(diameter_mm: float) -> float:
-    return math.pi * diameter_mm ** 2 / 4.0
+    return math.pi * diameter_mm**2 / 4.0
 
 
 def stress_to_load_kgf(stress_MPa: FloatArray | float) -> FloatArray | float:
@@ -118,8 +120,11 @@ def _is_number(c: str) -> bool:
 def _is_numeric(cells: list[str], text_columns: frozenset[int] = frozenset()) -> bool:
     """Every cell a number or "no value", at least two numbers; cells of ``text_columns`` are not looked at."""
     kept = [c for j, c in enumerate(cells) if j not in text_columns]
-    return (len(kept) >= 2 and all(_is_number(c) or c.lower() in _MISSING for c in kept)
-            and sum(_is_number(c) for c in kept) >= 2)
+    return (
+        len(kept) >= 2
+        and all(_is_number(c) or c.lower() in _MISSING for c in kept)
+        and sum(_is_number(c) for c in kept) >= 2
+    )
 
 
 def _text_columns(rows: list[list[str]]) -> frozenset[int]:
@@ -132,8 +137,9 @@ def _text_columns(rows: list[list[str]]) -> frozenset[int]:
     widths = [len(r) for r in wide]
     ncol = max(set(widths), key=widths.count)
     data = [r for r in wide if len(r) == ncol]
-    text = frozenset(j for j in range(ncol)
-                     if sum(not (_is_number(r[j]) or r[j].lower() in _MISSING) for r in data) > len(data) / 2)
+    text = frozenset(
+        j for j in range(ncol) if sum(not (_is_number(r[j]) or r[j].lower() in _MISSING) for r in data) > len(data) / 2
+    )
     return text if len(text) <= ncol - 2 else frozenset()
 
 
@@ -148,6 +154,7 @@ def _cell(c: str) -> float:
     t = int(h) * 3600.0 + int(mi) * 60.0 + float(sec or 0.0)
     if y is not None:
         import datetime
+
         t += (datetime.date(int(y), int(mo), int(d)) - datetime.date(1970, 1, 1)).days * 86400.0
     return t
 
@@ -186,8 +193,7 @@ def _xlsx_lines(p: Path, error: type) -> list[list[str]]:
         cells: dict[int, str] = {}
         for c in row.iter(ns + 'c'):
             ref = re.match(r'([A-Z]+)', c.get('r', ''))
-            col = (sum((ord(ch) - 64) * 26 ** k for k, ch in enumerate(reversed(ref.group(1)))) - 1 if ref
-                   else len(cells))
+            col = sum((ord(ch) - 64) * 26**k for k, ch in enumerate(reversed(ref.group(1)))) - 1 if ref else len(cells)
             v = c.find(ns + 'v')
             t = c.get('t')
             if t == 'inlineStr':
@@ -231,15 +237,20 @@ def _mat_table(p: Path, error: type) -> Table:
     except subprocess.TimeoutExpired:
         raise error(f'{p}: reading the .mat file took over 300 s; export a CSV') from None
     if proc.returncode != 0:
-        raise error(f'{p}: not a readable MATLAB .mat file (the reader stopped with exit code {proc.returncode}: '
-                    f'{proc.stderr.decode(errors="replace").strip()[-200:] or "a crash"})')
+        raise error(
+            f'{p}: not a readable MATLAB .mat file (the reader stopped with exit code {proc.returncode}: '
+            f'{proc.stderr.decode(errors="replace").strip()[-200:] or "a crash"})'
+        )
     items = pickle.loads(proc.stdout)  # our own child's answer (numpy arrays), not the file's bytes
     if items == 'v7.3':
         raise error(f'{p}: a MATLAB v7.3 (HDF5) .mat file; save it with save(..., "-v7") or export a CSV')
     if isinstance(items, str):
-        raise error(f'{p}: not a readable MATLAB .mat file ({items[len("error: "):]})')
-    num = {k: np.asarray(v, float) for k, v in items.items()
-           if isinstance(v, np.ndarray) and v.dtype.kind in 'fiu' and v.size > 1}
+        raise error(f'{p}: not a readable MATLAB .mat file ({items[len("error: ") :]})')
+    num = {
+        k: np.asarray(v, float)
+        for k, v in items.items()
+        if isinstance(v, np.ndarray) and v.dtype.kind in 'fiu' and v.size > 1
+    }
     vectors = {k: v for k, v in num.items() if v.ndim == 1}
     lengths = {v.size for v in vectors.values()}
     if len(vectors) >= 2 and len(lengths) == 1:
@@ -249,11 +260,18 @@ def _mat_table(p: Path, error: type) -> Table:
     if len(mats) == 1:
         (v,) = mats.values()
         return Table(str(p), v if v.shape[0] >= v.shape[1] else v.T, None, {'unreadable_rows': 0})
-    found = ', '.join(f'{k} ({type(v).__name__} {getattr(v, "shape", "")}, '
-                      f'{"cell array" if getattr(v, "dtype", None) is not None and v.dtype == object else "numeric"})'
-                      for k, v in items.items()) or 'nothing'
-    raise error(f'{p}: a .mat file needs one numeric matrix (a column per quantity) or equally long numeric '
-                f'vectors named by quantity; it holds {found}. Cell arrays of curves: save one stress per file')
+    found = (
+        ', '.join(
+            f'{k} ({type(v).__name__} {getattr(v, "shape", "")}, '
+            f'{"cell array" if getattr(v, "dtype", None) is not None and v.dtype == object else "numeric"})'
+            for k, v in items.items()
+        )
+        or 'nothing'
+    )
+    raise error(
+        f'{p}: a .mat file needs one numeric matrix (a column per quantity) or equally long numeric '
+        f'vectors named by quantity; it holds {found}. Cell arrays of curves: save one stress per file'
+    )
 
 
 #: the suffixes a folder given as input is searched for (:func:`expand_folders`); "" is a plain file name
@@ -272,17 +290,26 @@ def expand_folders(paths: Sequence[str], exclude: Sequence[str] = (), error: typ
         if not p.is_dir():
             out.append(a)
             continue
-        found = sorted(str(f) for f in p.iterdir()
-                       if f.is_file() and not f.name.startswith('.') and f.suffix.lower() in TABLE_SUFFIXES
-                       and f.resolve() not in held)
+        found = sorted(
+            str(f)
+            for f in p.iterdir()
+            if f.is_file()
+            and not f.name.startswith('.')
+            and f.suffix.lower() in TABLE_SUFFIXES
+            and f.resolve() not in held
+        )
         if not found:
-            raise error(f'{p}: a folder with no table in it to fit (looked for '
-                        f'{", ".join(TABLE_SUFFIXES)} files, held-out ones left out); give the tables or their folder')
+            raise error(
+                f'{p}: a folder with no table in it to fit (looked for '
+                f'{", ".join(TABLE_SUFFIXES)} files, held-out ones left out); give the tables or their folder'
+            )
         out.extend(found)
     return out
 
 
-def read_table(path: str | Path, need: str = 'temperature, strain and stress', error: type = IdentifyInputError) -> Table:
+def read_table(
+    path: str | Path, need: str = 'temperature, strain and stress', error: type = IdentifyInputError
+) -> Table:
     """Parse a CSV / TSV / semicolon / whitespace table, an .xlsx workbook or a MATLAB .mat file.
 
     The one table reader of ``sma-wrist identify`` (hysteresis and thermal inputs): ``need``
@@ -333,8 +360,9 @@ def read_table(path: str | Path, need: str = 'temperature, strain and stress', e
         above = _split(lines[first - 1].lstrip().lstrip('#%'), delim)
         if len(above) == ncol and not _is_numeric(above):
             header = above
-    body = [(n, r, ln) for (n, ln), r in zip(numbered[first:], rows[first:])
-            if not ln.lstrip().startswith(('#', '%'))]  # comments
+    body = [
+        (n, r, ln) for (n, ln), r in zip(numbered[first:], rows[first:]) if not ln.lstrip().startswith(('#', '%'))
+    ]  # comments
     data = np.full((len(body), ncol), np.nan)
     bad = 0
     first_bad = None
@@ -342,8 +370,11 @@ def read_table(path: str | Path, need: str = 'temperature, strain and stress', e
         if len(r) != ncol or not _is_numeric(r, text_cols):
             bad += 1
             if first_bad is None:
-                first_bad = (f'line {n}: {ln.strip()[:60]!r} ({len(r)} cells, {ncol} expected)' if len(r) != ncol
-                             else f'line {n}: {ln.strip()[:60]!r} (not a number in every column)')
+                first_bad = (
+                    f'line {n}: {ln.strip()[:60]!r} ({len(r)} cells, {ncol} expected)'
+                    if len(r) != ncol
+                    else f'line {n}: {ln.strip()[:60]!r} (not a number in every column)'
+                )
             continue
         data[i] = [np.nan if j in text_cols else _cell(c) for j, c in enumerate(r)]
     for j in range(ncol):  # times of day without a date: a run past midnight goes on counting
@@ -372,8 +403,9 @@ def _find(header: list[str], role: str) -> int | None:
                 return i
     if role == 'T':  # 'T (K)', or a thermocouple channel named by the logger ('_COM1 (C)'): its unit says it
         bare = [re.sub(r'[\[(].*?[\])]', '', c).strip().lower() for c in header]
-        return next((i for i, c in enumerate(header) if bare[i] in ('t', 'theta')
-                     or _bracket_unit(c) in _UNIT_WORDS['T']), None)
+        return next(
+            (i for i, c in enumerate(header) if bare[i] in ('t', 'theta') or _bracket_unit(c) in _UNIT_WORDS['T']), None
+        )
     return None
 
 
@@ -384,7 +416,9 @@ def _resolve(spec: str, header: list[str] | None, ncol: int, path: str) -> int:
             raise IdentifyInputError(f'{path}: column {i} does not exist (the table has {ncol} columns, 0-based)')
         return i
     if header is None:
-        raise IdentifyInputError(f'{path}: column {spec!r} given by name but the table has no header; give 0-based numbers')
+        raise IdentifyInputError(
+            f'{path}: column {spec!r} given by name but the table has no header; give 0-based numbers'
+        )
     for i, c in enumerate(header):
         if c.strip().lower() == spec.strip().lower():
             return i
@@ -393,12 +427,44 @@ def _resolve(spec: str, header: list[str] | None, ncol: int, path: str) -> int:
 
 #: unit words in a header's brackets, per role -> unit name (None: dimensionless, read by value)
 _UNIT_WORDS: dict[str, dict[str, str | None]] = {
-    'T': {'c': 'degC', '°c': 'degC', 'degc': 'degC', 'celsius': 'degC', 'k': 'K', 'kelvin': 'K',
-          'f': 'degF', '°f': 'degF', 'degf': 'degF', 'fahrenheit': 'degF'},
-    'strain': {'%': '%', 'pct': '%', 'percent': '%', 'mm': 'mm', 'mm/mm': 'fraction', 'm/m': 'fraction',
-               'in/in': 'fraction', '-': 'fraction', '1': 'fraction', '': None},
-    'stress': {'mpa': 'MPa', 'n/mm2': 'MPa', 'n/mm^2': 'MPa', 'n/mm²': 'MPa', 'psi': 'psi', 'ksi': 'ksi',
-               'n': 'N', 'newton': 'N', 'lbf': 'lbf', 'kg': 'kg', 'kgf': 'kgf', 'g': 'g'},
+    'T': {
+        'c': 'degC',
+        '°c': 'degC',
+        'degc': 'degC',
+        'celsius': 'degC',
+        'k': 'K',
+        'kelvin': 'K',
+        'f': 'degF',
+        '°f': 'degF',
+        'degf': 'degF',
+        'fahrenheit': 'degF',
+    },
+    'strain': {
+        '%': '%',
+        'pct': '%',
+        'percent': '%',
+        'mm': 'mm',
+        'mm/mm': 'fraction',
+        'm/m': 'fraction',
+        'in/in': 'fraction',
+        '-': 'fraction',
+        '1': 'fraction',
+        '': None,
+    },
+    'stress': {
+        'mpa': 'MPa',
+        'n/mm2': 'MPa',
+        'n/mm^2': 'MPa',
+        'n/mm²': 'MPa',
+        'psi': 'psi',
+        'ksi': 'ksi',
+        'n': 'N',
+        'newton': 'N',
+        'lbf': 'lbf',
+        'kg': 'kg',
+        'kgf': 'kgf',
+        'g': 'g',
+    },
     'time': {},
 }
 
@@ -421,7 +487,8 @@ def _unit_from_header(name: str, role: str, path: str = '') -> str | None:
             return _UNIT_WORDS[role][b]
         raise IdentifyInputError(
             f'{path}: column {name!r}: unit {b!r} is not one of {", ".join(k for k in _UNIT_WORDS[role] if k)}; '
-            f'give --{ {"T": "temperature", "strain": "strain", "stress": "stress"}[role]}-unit')
+            f'give --{ {"T": "temperature", "strain": "strain", "stress": "stress"}[role] }-unit'
+        )
     if role == 'T':
         if re.search(r'kelvin|\bk\b', n):
             return 'K'
@@ -462,8 +529,9 @@ def _stress_from_name(path: str) -> float | None:
     return float(m.group(1)) if m else None
 
 
-def temperature_spikes(T: FloatArray, half_window: int = 10, floor: float = 1.0, n_sigma: float = 3.5
-                       ) -> NDArray[np.bool_]:
+def temperature_spikes(
+    T: FloatArray, half_window: int = 10, floor: float = 1.0, n_sigma: float = 3.5
+) -> NDArray[np.bool_]:
     """Samples where a temperature channel jumps away from its neighbours and back (Hampel filter).
 
     Loggers drop out to 0 (or a rail) for a few samples: the chamber thermocouple of the NiTiPd
@@ -485,8 +553,9 @@ def temperature_spikes(T: FloatArray, half_window: int = 10, floor: float = 1.0,
     return np.abs(T - med) > np.maximum(floor, n_sigma * mad)
 
 
-def scale_switch(x: FloatArray, factor: float = 100.0, limit: float = 0.1,
-                 block: int = 25) -> tuple[int, float, float] | None:
+def scale_switch(
+    x: FloatArray, factor: float = 100.0, limit: float = 0.1, block: int = 25
+) -> tuple[int, float, float] | None:
     """(row, largest |x| before, after) where a column goes on in a unit ``factor`` times another (a logger
     switched its strain from fraction to %, or back, mid-file), else None.
 
@@ -506,17 +575,22 @@ def scale_switch(x: FloatArray, factor: float = 100.0, limit: float = 0.1,
         W = sliding_window_view(step, block)
         small_before = np.maximum.accumulate(a)[k] <= limit
         large_after = np.maximum.accumulate(a[::-1])[::-1][k + 1] > limit
-        hit = (small_before & large_after & (step[k] > 30.0 * W[k - block].max(axis=1))
-               & (np.abs(y[k + 1] - factor * y[k]) <= 3.0 * W[k + 1].max(axis=1)))
+        hit = (
+            small_before
+            & large_after
+            & (step[k] > 30.0 * W[k - block].max(axis=1))
+            & (np.abs(y[k + 1] - factor * y[k]) <= 3.0 * W[k + 1].max(axis=1))
+        )
         if hit.any():
             j = int(k[np.argmax(hit)])
-            before, after = float(a[:j + 1].max()), float(a[j + 1:].max())
+            before, after = float(a[: j + 1].max()), float(a[j + 1 :].max())
             return (n - 1 - j, after, before) if reverse else (j + 1, before, after)
     return None
 
 
-def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
-                   stress_MPa: float | None = None) -> Measurement:
+def to_measurement(
+    table: Table, units: Units, columns: list[str] | None = None, stress_MPa: float | None = None
+) -> Measurement:
     """Columns and units of one table -> a cleaned :class:`Measurement` (see the module docstring)."""
     path, hdr, data = table.path, table.header, table.data
     ncol = data.shape[1]
@@ -529,8 +603,10 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
     elif hdr is not None:
         iT, iS, iP, iTime = (_find(hdr, r) for r in ('T', 'strain', 'stress', 'time'))
         if iT is None or iS is None:
-            raise IdentifyInputError(f'{path}: no temperature and strain columns in the header {hdr}; '
-                                     'give them with --columns T,STRAIN[,STRESS[,TIME]] (names or 0-based numbers)')
+            raise IdentifyInputError(
+                f'{path}: no temperature and strain columns in the header {hdr}; '
+                'give them with --columns T,STRAIN[,STRESS[,TIME]] (names or 0-based numbers)'
+            )
         if iP is not None and 'load' in hdr[iP].lower():  # prefer a stress column over a load column
             alt = next((i for i, c in enumerate(hdr) if 'stress' in c.lower()), None)
             iP = alt if alt is not None else iP
@@ -539,20 +615,24 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
             raise IdentifyInputError(f'{path}: one column only; temperature and strain (and stress) are needed')
         iT, iS, iP, iTime = 0, 1, (2 if ncol > 2 else None), None
         warn.append(f'{path}: no header; assumed columns temperature, strain' + (', stress' if ncol > 2 else ''))
-    name = (lambda i: hdr[i] if hdr is not None and i is not None else '')  # noqa: E731
+    name = lambda i: hdr[i] if hdr is not None and i is not None else ''  # noqa: E731
 
     cols = [i for i in (iT, iS, iP, iTime) if i is not None]
     for role, i in (('temperature', iT), ('strain', iS), ('stress', iP), ('time', iTime)):
         if i is not None and data.shape[0] and not np.isfinite(data[:, i]).any():
-            raise IdentifyInputError(f'{path}: the {role} column ({name(i) or i}) has no number in any row; '
-                                     'give the right one with --columns T,STRAIN[,STRESS[,TIME]]')
+            raise IdentifyInputError(
+                f'{path}: the {role} column ({name(i) or i}) has no number in any row; '
+                'give the right one with --columns T,STRAIN[,STRESS[,TIME]]'
+            )
     counts = dict(table.counts)
     bad = counts.get('unreadable_rows', 0)
     if bad and table.first_bad:
         if bad > data.shape[0] // 2:
-            raise IdentifyInputError(f'{path}: {bad} of {data.shape[0]} rows are unreadable, the first at '
-                                     f'{table.first_bad}; a table of numbers with the same columns in every row '
-                                     'is needed')
+            raise IdentifyInputError(
+                f'{path}: {bad} of {data.shape[0]} rows are unreadable, the first at '
+                f'{table.first_bad}; a table of numbers with the same columns in every row '
+                'is needed'
+            )
         warn.append(f'{path}: {bad} unreadable row(s) dropped, the first at {table.first_bad}')
     ok = np.all(np.isfinite(data[:, cols]), axis=1)
     counts['nan_rows'] = int((~ok).sum()) - counts.get('unreadable_rows', 0)
@@ -578,24 +658,29 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
     spike = temperature_spikes(d[:, iT])
     counts['temperature_spikes'] = int(spike.sum())
     if spike.any():
-        warn.append(f'{path}: {int(spike.sum())} temperature sample(s) dropped as sensor spikes or dropouts '
-                    f'(e.g. row {int(np.argmax(spike)) + 1} of the cleaned table reads {d[np.argmax(spike), iT]:.4g} '
-                    'between its neighbours)')
+        warn.append(
+            f'{path}: {int(spike.sum())} temperature sample(s) dropped as sensor spikes or dropouts '
+            f'(e.g. row {int(np.argmax(spike)) + 1} of the cleaned table reads {d[np.argmax(spike), iT]:.4g} '
+            'between its neighbours)'
+        )
         d = d[~spike]
         time = d[:, iTime] if time is not None else None
     T = d[:, iT].astype(float)
     tu = units.temperature or _unit_from_header(name(iT), 'T', path)
     if tu is None:
         tu = 'K' if T.min() > 200.0 else 'degC'
-        warn.append(f'{path}: temperature unit not given; {T.min():.4g}..{T.max():.4g} read as {tu} '
-                    '(use --temperature-unit)')
+        warn.append(
+            f'{path}: temperature unit not given; {T.min():.4g}..{T.max():.4g} read as {tu} (use --temperature-unit)'
+        )
     if tu == 'K':
         T = T - 273.15
     elif tu == 'degF':
         T = (T - 32.0) * 5.0 / 9.0
     if T.min() < -150 or T.max() > 600:
-        raise IdentifyInputError(f'{path}: temperatures {T.min():.4g}..{T.max():.4g} degC fit no SMA test; '
-                                 'give --temperature-unit (degC or K) or the right --columns')
+        raise IdentifyInputError(
+            f'{path}: temperatures {T.min():.4g}..{T.max():.4g} degC fit no SMA test; '
+            'give --temperature-unit (degC or K) or the right --columns'
+        )
 
     raw = d[:, iS].astype(float)
     su = units.strain or _unit_from_header(name(iS), 'strain', path)
@@ -606,35 +691,44 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
             raise IdentifyInputError(
                 f'{path}: the strain column changes scale at row {row} of the cleaned table (up to {before:.3g} '
                 f'before, {after:.3g} after): a fraction and a % in one file? Split the file, or give --strain-unit '
-                'if the change is real')
+                'if the change is real'
+            )
         mx = float(np.max(np.abs(raw)))
         if mx <= 0.1:
             su = 'fraction'
         elif mx <= 15.0:
             su = '%'
         else:
-            raise IdentifyInputError(f'{path}: strain values up to {mx:.4g} fit neither a fraction nor %; '
-                                     'give --strain-unit (fraction, %, mm with --length-mm)')
+            raise IdentifyInputError(
+                f'{path}: strain values up to {mx:.4g} fit neither a fraction nor %; '
+                'give --strain-unit (fraction, %, mm with --length-mm)'
+            )
         warn.append(f'{path}: strain unit not given; values up to {mx:.4g} read as {su} (use --strain-unit)')
     if su == 'mm':
         if not units.length_mm:
-            raise IdentifyInputError(f'{path}: the strain column is an elongation in mm; give the gauge length with --length-mm')
+            raise IdentifyInputError(
+                f'{path}: the strain column is an elongation in mm; give the gauge length with --length-mm'
+            )
         strain = raw / units.length_mm
     elif su == '%':
         strain = raw / 100.0
     else:
         strain = raw
     if np.max(np.abs(strain)) > 0.2:
-        raise IdentifyInputError(f'{path}: strains up to {np.max(np.abs(strain)):.3g} (>20 %) fit no wire test; '
-                                 'check --strain-unit / --length-mm / --columns')
+        raise IdentifyInputError(
+            f'{path}: strains up to {np.max(np.abs(strain)):.3g} (>20 %) fit no wire test; '
+            'check --strain-unit / --length-mm / --columns'
+        )
 
     if iP is not None:
         sraw = d[:, iP].astype(float)
         pu = units.stress or _unit_from_header(name(iP), 'stress', path)
         if pu is None:
             pu = 'MPa'
-            warn.append(f'{path}: stress unit not given; values {sraw.min():.4g}..{sraw.max():.4g} read as MPa '
-                        '(use --stress-unit)')
+            warn.append(
+                f'{path}: stress unit not given; values {sraw.min():.4g}..{sraw.max():.4g} read as MPa '
+                '(use --stress-unit)'
+            )
         if pu in _TO_MPA:
             stress = sraw * _TO_MPA[pu]
         else:
@@ -644,18 +738,22 @@ def to_measurement(table: Table, units: Units, columns: list[str] | None = None,
     else:
         s = stress_MPa if stress_MPa is not None else _stress_from_name(path)
         if s is None:
-            raise IdentifyInputError(f'{path}: no stress column; give --stress-mpa or a file name with the stress '
-                                     '(e.g. "200MPa.txt")')
+            raise IdentifyInputError(
+                f'{path}: no stress column; give --stress-mpa or a file name with the stress (e.g. "200MPa.txt")'
+            )
         if stress_MPa is None:
             warn.append(f'{path}: stress {s:g} MPa taken from the file name')
         stress = np.full(T.size, float(s))
     if np.nanmax(stress) > 3000 or np.nanmin(stress) < -50:
-        raise IdentifyInputError(f'{path}: stresses {stress.min():.4g}..{stress.max():.4g} MPa fit no wire test; '
-                                 'check --stress-unit / --wire-diameter-mm / --columns')
+        raise IdentifyInputError(
+            f'{path}: stresses {stress.min():.4g}..{stress.max():.4g} MPa fit no wire test; '
+            'check --stress-unit / --wire-diameter-mm / --columns'
+        )
     return Measurement(path, T, strain, stress, time, counts, warn)
 
 
-def read_measurement(path: str | Path, units: Units = Units(), columns: list[str] | None = None,
-                     stress_MPa: float | None = None) -> Measurement:
+def read_measurement(
+    path: str | Path, units: Units = Units(), columns: list[str] | None = None, stress_MPa: float | None = None
+) -> Measurement:
     """:func:`read_table` then :func:`to_measurement`."""
     return to_measurement(read_table(path), units, columns, stress_MPa)

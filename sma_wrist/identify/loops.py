@@ -5,6 +5,7 @@ Transition temperatures of a branch are the temperatures where the branch has co
 cooling), found at the first crossing along the branch. Errors are in % of the measured
 loop's stroke (its elongation range) at that stress, as Eq. 4.3 normalises.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -54,7 +55,7 @@ def errors_pct(y_model: FloatArray, y: FloatArray) -> tuple[float, float]:
     """(RMS, max) |model - measured| in % of the measured stroke."""
     e = np.asarray(y_model) - np.asarray(y)
     stroke = max(float(np.ptp(y)), 1e-12)
-    return float(100 * np.sqrt(np.mean(e ** 2)) / stroke), float(100 * np.max(np.abs(e)) / stroke)
+    return float(100 * np.sqrt(np.mean(e**2)) / stroke), float(100 * np.max(np.abs(e)) / stroke)
 
 
 def slope(x: FloatArray, v: FloatArray) -> float:

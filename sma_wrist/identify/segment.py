@@ -11,6 +11,7 @@
   ``cycle`` picks one (1-based), 'last' (default: the first cycles of a wire often still
   train it) or 'all' (every complete cycle in order).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -150,12 +151,16 @@ def loops_of(m: Measurement, cycle: str = 'last') -> list[Loop]:
             span = abs(T[b] - T[a])
             if span >= 0.8 * rng:
                 branches.append((a, b, 'heating' if T[b] > T[a] else 'cooling'))
-        cycles = [(branches[i], branches[i + 1]) for i in range(len(branches) - 1)
-                  if branches[i][1] == branches[i + 1][0] and branches[i][2] != branches[i + 1][2]]
+        cycles = [
+            (branches[i], branches[i + 1])
+            for i in range(len(branches) - 1)
+            if branches[i][1] == branches[i + 1][0] and branches[i][2] != branches[i + 1][2]
+        ]
         if not cycles:
             raise IdentifyInputError(
                 f'{m.path}: at {lv:.4g} MPa no complete heating-cooling cycle (found {len(branches)} complete '
-                f'branch(es) over {T.min():.4g}..{T.max():.4g} degC); a full heating and cooling branch is needed')
+                f'branch(es) over {T.min():.4g}..{T.max():.4g} degC); a full heating and cooling branch is needed'
+            )
         # non-overlapping cycles: pairs (0,1), (2,3), ... of the complete branches
         cyc = cycles[::2] if len(cycles) > 1 else cycles
         if cycle == 'all':
@@ -171,14 +176,18 @@ def loops_of(m: Measurement, cycle: str = 'last') -> list[Loop]:
                 except ValueError:
                     raise IdentifyInputError(f"--cycle must be a number, 'last' or 'all', got {cycle!r}") from None
                 if not 0 <= i < len(cyc):
-                    raise IdentifyInputError(f'{m.path}: --cycle {cycle} asked, {len(cyc)} complete cycle(s) at {lv:.4g} MPa')
+                    raise IdentifyInputError(
+                        f'{m.path}: --cycle {cycle} asked, {len(cyc)} complete cycle(s) at {lv:.4g} MPa'
+                    )
             a, b = cyc[i][0][0], cyc[i][1][1]
             used = str(i + 1)
             first = cyc[i][0][2]
         sl = slice(a, b + 1)
         if b + 1 - a < MIN_LOOP_SAMPLES:
-            raise IdentifyInputError(f'{m.path}: the cycle at {lv:.4g} MPa has {b + 1 - a} samples; '
-                                     f'>= {MIN_LOOP_SAMPLES} are needed for a fit')
+            raise IdentifyInputError(
+                f'{m.path}: the cycle at {lv:.4g} MPa has {b + 1 - a} samples; '
+                f'>= {MIN_LOOP_SAMPLES} are needed for a fit'
+            )
         out.append(Loop(m.path, lv, T[sl].copy(), eps[sl].copy(), first, len(cyc), used, int(np.sum(label == -1))))
     if not out:
         raise IdentifyInputError(f'{m.path}: no stress level with a temperature cycle (>= 5 degC swing)')

@@ -15,10 +15,11 @@ different in parameters and in structure.
 bare K-type junction on a plate) and white noise, sampled by a DAQ. :func:`sine_runs`
 produces the seed's Sec. 4.3.1 experiment (12 V sines, 1/128-1 Hz) on either plant.
 """
+
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 
@@ -58,10 +59,20 @@ class PeltierPlant:
         cond = self.K_W_per_K * (T1 - T2)
         d1 = T1 - self.ambient1_C
         d2 = T2 - self.ambient2_C
-        q1 = self.alpha_V_per_K * I * (T1 + KELVIN) + joule - cond - self.h1_W_per_K * d1 \
+        q1 = (
+            self.alpha_V_per_K * I * (T1 + KELVIN)
+            + joule
+            - cond
+            - self.h1_W_per_K * d1
             - self.conv1_W_per_K125 * np.sign(d1) * np.abs(d1) ** 1.25
-        q2 = -self.alpha_V_per_K * I * (T2 + KELVIN) + joule + cond - self.h2_W_per_K * d2 \
+        )
+        q2 = (
+            -self.alpha_V_per_K * I * (T2 + KELVIN)
+            + joule
+            + cond
+            - self.h2_W_per_K * d2
             - self.conv2_W_per_K125 * np.sign(d2) * np.abs(d2) ** 1.25
+        )
         return np.stack([q1 / self.C1_J_per_K, q2 / self.C2_J_per_K], axis=-1)
 
     def simulate(self, u_of_t, t_end: float, dt: float, T0: np.ndarray) -> np.ndarray:
@@ -98,10 +109,18 @@ def sensor(T: np.ndarray, dt: float, lag_s: float, noise_C: float, rng: np.rando
     return out + noise_C * rng.standard_normal(T.shape) if noise_C > 0 else out
 
 
-def sine_runs(plant: str | PeltierPlant = 'peltier', frequencies_Hz: Sequence[float] = th.SEED_SINE_FREQUENCIES_HZ,
-              duration_s: float = 512.0, amplitude_V: float = 12.0, sample_dt: float = 0.1, fine_dt: float = 0.02,
-              lag_s: float = 0.15, noise_C: float = 0.2, seed: int = 0,
-              params: th.ThermalParams | None = None) -> list[ThermalRecord]:
+def sine_runs(
+    plant: str | PeltierPlant = 'peltier',
+    frequencies_Hz: Sequence[float] = th.SEED_SINE_FREQUENCIES_HZ,
+    duration_s: float = 512.0,
+    amplitude_V: float = 12.0,
+    sample_dt: float = 0.1,
+    fine_dt: float = 0.02,
+    lag_s: float = 0.15,
+    noise_C: float = 0.2,
+    seed: int = 0,
+    params: th.ThermalParams | None = None,
+) -> list[ThermalRecord]:
     """The Sec. 4.3.1 experiment: u = A sin(2 pi f t) from rest, both faces logged every sample_dt.
 
     ``plant``: 'own' (Eqs. 4.13/4.14 with ``params``, default Table 4.9) or 'peltier' (or a
@@ -110,7 +129,10 @@ def sine_runs(plant: str | PeltierPlant = 'peltier', frequencies_Hz: Sequence[fl
     """
     f = np.asarray(frequencies_Hz, dtype=float)
     rng = np.random.default_rng(seed)
-    u_of_t = (lambda t: amplitude_V * np.sin(2 * np.pi * f * t))
+
+    def u_of_t(t: float) -> float:
+        return amplitude_V * np.sin(2 * np.pi * f * t)
+
     stride = int(round(sample_dt / fine_dt))
     if plant == 'own':
         p = (params or th.ThermalParams()).with_limits(-2 * amplitude_V - 1, 2 * amplitude_V + 1)
@@ -149,10 +171,15 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
     import time as _time
 
     from sma_wrist.core.thermal.identification import identify_thermal
+
     freqs = (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ
     duration = 128.0 if quick else 512.0
-    sources = {'own, noise-free': ('own', 0.0, 0.0), 'own + sensor': ('own', 0.15, 0.2),
-               'peltier, noise-free': ('peltier', 0.0, 0.0), 'peltier + sensor': ('peltier', 0.15, 0.2)}
+    sources = {
+        'own, noise-free': ('own', 0.0, 0.0),
+        'own + sensor': ('own', 0.15, 0.2),
+        'peltier, noise-free': ('peltier', 0.0, 0.0),
+        'peltier + sensor': ('peltier', 0.15, 0.2),
+    }
     out: dict = {'frequencies_Hz': list(freqs), 'duration_s': duration, 'sources': {}}
     for label, (plant, lag, noise) in sources.items():
         recs = sine_runs(plant, freqs, duration_s=duration, lag_s=lag, noise_C=noise, seed=seed)
@@ -162,14 +189,21 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
         before = {e.record: e for e in res.before}
         rows = []
         for e in res.holdout:
-            rows.append({'frequency_Hz': e.frequency_Hz,
-                         **{f'{face}_rms_C': round(st['rms_C'], 4) for face, st in e.faces.items()},
-                         **{f'{face}_std_pct': round(st['std_pct'], 3) for face, st in e.faces.items()},
-                         **{f'{face}_max_abs_pct': round(st['max_abs_pct'], 3) for face, st in e.faces.items()},
-                         **{f'{face}_default_rms_C': round(before[e.record].faces[face]['rms_C'], 4)
-                            for face in e.faces}})
-        out['sources'][label] = {'in_sample_rms_C': round(res.fit.rms_C, 4), 'wall_s': round(wall, 2),
-                                 'fits': len(recs) + 1, 'holdout': rows}
+            rows.append(
+                {
+                    'frequency_Hz': e.frequency_Hz,
+                    **{f'{face}_rms_C': round(st['rms_C'], 4) for face, st in e.faces.items()},
+                    **{f'{face}_std_pct': round(st['std_pct'], 3) for face, st in e.faces.items()},
+                    **{f'{face}_max_abs_pct': round(st['max_abs_pct'], 3) for face, st in e.faces.items()},
+                    **{f'{face}_default_rms_C': round(before[e.record].faces[face]['rms_C'], 4) for face in e.faces},
+                }
+            )
+        out['sources'][label] = {
+            'in_sample_rms_C': round(res.fit.rms_C, 4),
+            'wall_s': round(wall, 2),
+            'fits': len(recs) + 1,
+            'holdout': rows,
+        }
     return out
 
 
@@ -183,8 +217,12 @@ def speed(quick: bool = False) -> dict:
     from scipy.optimize import least_squares
 
     from sma_wrist.core.thermal import identification as ti
-    recs = sine_runs('peltier', (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ,
-                     duration_s=128.0 if quick else 512.0)
+
+    recs = sine_runs(
+        'peltier',
+        (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ,
+        duration_s=128.0 if quick else 512.0,
+    )
     base = th.ThermalParams()
     prob = ti._Problem(recs, base, (0, 1), None, 30.0)
     x0 = ti._free_from_table(ti.table_of(base), (0, 1))
@@ -201,8 +239,11 @@ def speed(quick: bool = False) -> dict:
         x = x0.copy()
         if j:
             x[j - 1] += 1e-7 * max(abs(x[j - 1]), 1e-3)
-        p = dc.replace(ti.params_from_table(ti._table_from_free(x[None], prob.base_table, (0, 1))[0], wide),
-                       u_min_V=-30.0, u_max_V=30.0)
+        p = dc.replace(
+            ti.params_from_table(ti._table_from_free(x[None], prob.base_table, (0, 1))[0], wide),
+            u_min_V=-30.0,
+            u_max_V=30.0,
+        )
         th.simulate(p, u, recs[0].dt, T0, layers=1, validate=False)
     t_fd = _time.perf_counter() - t0
     t0 = _time.perf_counter()
@@ -214,9 +255,15 @@ def speed(quick: bool = False) -> dict:
     t0 = _time.perf_counter()
     sol = least_squares(prob.residuals, start, jac=prob.jacobian, bounds=(lo, hi), method='trf', x_scale='jac')
     t_trf = _time.perf_counter() - t0
-    return {'runs': len(recs), 'samples_per_run': recs[0].n,
-            'jacobian_complex_step_batched_s': round(t_cs, 3), 'jacobian_forward_diff_thermal_simulate_s': round(t_fd, 3),
-            'jacobian_speedup': round(t_fd / t_cs, 1),
-            'fit_lm_s': round(t_lm, 2), 'fit_lm_rms_C': round(fit.rms_C, 5),
-            'fit_scipy_trf_s': round(t_trf, 2), 'fit_scipy_trf_rms_C': round(float(np.sqrt(2 * sol.cost)), 5),
-            'fit_speedup': round(t_trf / t_lm, 1)}
+    return {
+        'runs': len(recs),
+        'samples_per_run': recs[0].n,
+        'jacobian_complex_step_batched_s': round(t_cs, 3),
+        'jacobian_forward_diff_thermal_simulate_s': round(t_fd, 3),
+        'jacobian_speedup': round(t_fd / t_cs, 1),
+        'fit_lm_s': round(t_lm, 2),
+        'fit_lm_rms_C': round(fit.rms_C, 5),
+        'fit_scipy_trf_s': round(t_trf, 2),
+        'fit_scipy_trf_rms_C': round(float(np.sqrt(2 * sol.cost)), 5),
+        'fit_speedup': round(t_trf / t_lm, 1),
+    }

@@ -13,6 +13,7 @@ leave the TEMs' operating window (``window_C`` of the thermal model; 0-80 degC f
 seed's TEMs, doc/explanation/model.md): a window beyond it is reported, with what the TEMs would
 need, never silently clipped.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -52,8 +53,14 @@ def shifted_wire(params: SDGPIParams, dT_C: float) -> SDGPIParams:
     c[2] -= dT_C * c[1]
     d[2] -= dT_C * d[1]
     lo, hi = params.T_valid
-    return dataclasses.replace(params, envelopes=EnvelopeSections(env.edges_kg, a, b), c=c, d=d,
-                               T_valid=(lo, hi + max(dT_C, 0.0)), name=f'{params.name}, {dT_C:+g} degC')
+    return dataclasses.replace(
+        params,
+        envelopes=EnvelopeSections(env.edges_kg, a, b),
+        c=c,
+        d=d,
+        T_valid=(lo, hi + max(dT_C, 0.0)),
+        name=f'{params.name}, {dT_C:+g} degC',
+    )
 
 
 def wire_transitions(params: SDGPIParams, load_kgf: float = WRIST_LOAD_KGF) -> dict[str, float]:
@@ -68,13 +75,16 @@ def wire_transitions(params: SDGPIParams, load_kgf: float = WRIST_LOAD_KGF) -> d
     y = simulate(params, T, m, branch='cooling')
     tr = transitions(T, y, 'heating')
     if not (np.isfinite(tr['A_f']) and np.isfinite(tr['M_f'])):
-        raise ParameterError(f'{params.name}: no complete transformation within its valid range {lo:g}-{hi:g} '
-                             f'degC at {m:g} kgf; the wire model cannot place a temperature window')
+        raise ParameterError(
+            f'{params.name}: no complete transformation within its valid range {lo:g}-{hi:g} '
+            f'degC at {m:g} kgf; the wire model cannot place a temperature window'
+        )
     return {'A_f': tr['A_f'], 'M_f': tr['M_f'], 'load_kgf': m}
 
 
 def _margins() -> tuple[float, float]:
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
+
     tr = wire_transitions(default_sdgpi())
     return tr['M_f'] - DEFAULT_WINDOW_C[0], DEFAULT_WINDOW_C[1] - tr['A_f']
 
@@ -91,9 +101,13 @@ def operating_window(params: SDGPIParams, load_kgf: float = WRIST_LOAD_KGF) -> t
     return float(max(tr['M_f'] - below, lo)), float(min(tr['A_f'] + above, hi))
 
 
-def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file: str | Path | None = None,
-                 tem_window_C: tuple[float, float] | None = None,
-                 preload_mm: float | None = None) -> tuple[dict[str, dict[str, Any]], list[str]]:
+def wrist_params(
+    hysteresis_file: str | Path,
+    params: SDGPIParams,
+    thermal_file: str | Path | None = None,
+    tem_window_C: tuple[float, float] | None = None,
+    preload_mm: float | None = None,
+) -> tuple[dict[str, dict[str, Any]], list[str]]:
     """(ROS parameters per node, problems) to run the wrist on this wire.
 
     ``tem_window_C``: the TEMs' operating window (the thermal file's ``window_C``; default
@@ -103,22 +117,28 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     """
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.core.thermal.heat_balance import ThermalParams
+
     lo, hi = operating_window(params)
     face = tem_window_C if tem_window_C is not None else ThermalParams().window_C
     problems = []
     if hi > face[1]:
-        problems.append(f'the wire needs its muscle at up to {hi:.0f} degC (A_f + margin) but the TEMs work only '
-                        f'up to {face[1]:g} degC (the muscle is a TEM face): use TEMs rated for >= {hi + 15:.0f} degC '
-                        'and give their heat balance as thermal_file (sma-wrist identify thermal, window_C)')
+        problems.append(
+            f'the wire needs its muscle at up to {hi:.0f} degC (A_f + margin) but the TEMs work only '
+            f'up to {face[1]:g} degC (the muscle is a TEM face): use TEMs rated for >= {hi + 15:.0f} degC '
+            'and give their heat balance as thermal_file (sma-wrist identify thermal, window_C)'
+        )
     if lo < face[0]:
         problems.append(f'the wire needs its muscle down to {lo:.0f} degC but the TEMs work only from {face[0]:g} degC')
     if hi > BRIDGE_MUSCLE_CUTOFF_C:  # not written: a safety limit is the device owner's to raise
-        problems.append(f'on hardware, hardware_bridge cuts the TEMs off above max_muscle_temperature_C '
-                        f'{BRIDGE_MUSCLE_CUTOFF_C:g} degC, below this wire\'s window top {hi:.0f} degC: raise it on '
-                        'your device only if the wire, its crimps and the TEMs are rated for that (not written here)')
+        problems.append(
+            f'on hardware, hardware_bridge cuts the TEMs off above max_muscle_temperature_C '
+            f"{BRIDGE_MUSCLE_CUTOFF_C:g} degC, below this wire's window top {hi:.0f} degC: raise it on "
+            'your device only if the wire, its crimps and the TEMs are rated for that (not written here)'
+        )
     if hi + TEM_MUSCLE_MARGIN_C > NODE_MAX_C:
-        problems.append(f'the window top {hi:.0f} degC + {TEM_MUSCLE_MARGIN_C:g} exceeds the nodes\' limit '
-                        f'{NODE_MAX_C:g} degC')
+        problems.append(
+            f"the window top {hi:.0f} degC + {TEM_MUSCLE_MARGIN_C:g} exceeds the nodes' limit {NODE_MAX_C:g} degC"
+        )
     if preload_mm is None:
         try:
             preload_mm = wire_preload(params, thermal_file, (lo, hi))
@@ -129,14 +149,23 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
     lo_a, hi_a = float(np.clip(lo, 0.0, NODE_MAX_C)), float(np.clip(hi, 0.0, NODE_MAX_C))  # the node's bounds
     out: dict[str, dict[str, Any]] = {
         # the plant only reports above its threshold: capped at the parameter's bound, not a problem
-        'plant_sim': {'hysteresis_file': f,
-                      'max_muscle_temperature_C': round(min(hi + PLANT_MUSCLE_MARGIN_C, NODE_MAX_C), 1),
-                      'preload_elongation_mm': preload_mm},
-        'hysteresis_compensator': {'hysteresis_file': f, 'temperature_min_C': round(lo, 1),
-                                   'temperature_max_C': round(hi, 1), 'preload_elongation_mm': preload_mm},
-        'adaptive_controller': {'temperature_min_C': round(lo_a, 1), 'temperature_max_C': round(hi_a, 1),
-                                'temperature_mid_C': round(0.5 * (lo_a + hi_a), 1),
-                                'preload_elongation_mm': preload_mm},
+        'plant_sim': {
+            'hysteresis_file': f,
+            'max_muscle_temperature_C': round(min(hi + PLANT_MUSCLE_MARGIN_C, NODE_MAX_C), 1),
+            'preload_elongation_mm': preload_mm,
+        },
+        'hysteresis_compensator': {
+            'hysteresis_file': f,
+            'temperature_min_C': round(lo, 1),
+            'temperature_max_C': round(hi, 1),
+            'preload_elongation_mm': preload_mm,
+        },
+        'adaptive_controller': {
+            'temperature_min_C': round(lo_a, 1),
+            'temperature_max_C': round(hi_a, 1),
+            'temperature_mid_C': round(0.5 * (lo_a + hi_a), 1),
+            'preload_elongation_mm': preload_mm,
+        },
         'tem_controller': {'max_muscle_temperature_C': round(min(hi + TEM_MUSCLE_MARGIN_C, NODE_MAX_C), 1)},
         # on a device: the wire behind hardware_bridge's stress estimate (the compensator's input there)
         'hardware_bridge': {'hysteresis_file': f, 'preload_elongation_mm': preload_mm},
@@ -145,8 +174,13 @@ def wrist_params(hysteresis_file: str | Path, params: SDGPIParams, thermal_file:
         out['plant_sim']['thermal_file'] = str(thermal_file)
         # the compensator's temperature observer runs the TEMs' heat balance too (temperature_source observer)
         out['hysteresis_compensator']['thermal_file'] = str(thermal_file)
-        out['tem_controller'].update({'thermal_file': str(thermal_file), 'face_min_C': float(face[0]),
-                                      'face_max_C': float(min(face[1], NODE_MAX_C))})
+        out['tem_controller'].update(
+            {
+                'thermal_file': str(thermal_file),
+                'face_min_C': float(face[0]),
+                'face_max_C': float(min(face[1], NODE_MAX_C)),
+            }
+        )
     return out, problems
 
 
@@ -158,6 +192,7 @@ def wire_preload(params: SDGPIParams, thermal_file: str | Path | None, window_C:
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.core.thermal.heat_balance import ThermalParams
     from sma_wrist.core.thermal.params_file import load_thermal_file
+
     thermal = load_thermal_file(thermal_file) if thermal_file else ThermalParams()
     return calibrate_preload(PlantParams(hysteresis=params), reachable_window(thermal, window_C))
 
@@ -165,9 +200,12 @@ def wire_preload(params: SDGPIParams, thermal_file: str | Path | None, window_C:
 def write_wrist_params(path: str | Path, nodes: dict[str, dict[str, Any]], problems: list[str]) -> Path:
     """The ROS params file (``sma-wrist run --params-file``, ``ros2 launch ... params_file:=``)."""
     import yaml
-    head = ['sma_wrist parameters for an identified wire (sma-wrist identify; doc/howto/identify_wire.md).',
-            'Temperature windows placed around the wire\'s transitions with the built-in wire\'s margins;',
-            'the chain pre-load (preload_elongation_mm) calibrated for the wire like the built-in 1.98 mm.']
+
+    head = [
+        'sma_wrist parameters for an identified wire (sma-wrist identify; doc/howto/identify_wire.md).',
+        "Temperature windows placed around the wire's transitions with the built-in wire's margins;",
+        'the chain pre-load (preload_elongation_mm) calibrated for the wire like the built-in 1.98 mm.',
+    ]
     head += [f'PROBLEM: {p}' for p in problems]
     doc = {node: {'ros__parameters': values} for node, values in nodes.items()}
     p = Path(path)
@@ -183,6 +221,7 @@ def rated_tems(top_C: float) -> Any:
     commands that keep every face inside the window (thermal.characterise_constant_commands).
     """
     from sma_wrist.core.thermal import heat_balance as th
+
     p = dataclasses.replace(th.ThermalParams(), window_C=(0.0, float(top_C)))
     ch = th.characterise_constant_commands(p, span_V=30.0, resolution_V=0.05, horizon_s=1500.0, dt=1.0)
     return p.with_limits(float(np.ceil(2 * ch.cooling_max_V) / 2), float(np.floor(2 * ch.heating_max_V) / 2))

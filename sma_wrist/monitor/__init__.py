@@ -17,15 +17,17 @@ the node's lock) cuts the window, :meth:`Monitor.diagnose` (seconds of CPU) diag
 (cheap) updates the verdict. ``sma-wrist monitor BAG`` (:mod:`.playback`) plays a bag through the same object.
 See doc/howto/monitor.md.
 """
+
 from __future__ import annotations
 
 import csv
 import io
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -58,13 +60,17 @@ class MonitorConfig:
     thermal_file: str = ''
     params_file: str = ''  # a diagnosis' extended_params.yaml
 
-    def check(self) -> 'MonitorConfig':
+    def check(self) -> MonitorConfig:
         """Raise MonitorInputError for values that cannot work."""
         from sma_wrist.diagnose.data import MIN_DURATION_S
-        if not (math.isfinite(self.window_s) and self.window_s >= MIN_DURATION_S - self.settle_s
-                and self.window_s >= 20.0):
-            raise MonitorInputError(f'window_s = {self.window_s:g} s: the diagnosis needs at least 20 s to score and '
-                                    f'{MIN_DURATION_S:g} s in all (window_s + settle_s)')
+
+        if not (
+            math.isfinite(self.window_s) and self.window_s >= MIN_DURATION_S - self.settle_s and self.window_s >= 20.0
+        ):
+            raise MonitorInputError(
+                f'window_s = {self.window_s:g} s: the diagnosis needs at least 20 s to score and '
+                f'{MIN_DURATION_S:g} s in all (window_s + settle_s)'
+            )
         if not (math.isfinite(self.settle_s) and self.settle_s >= 0):
             raise MonitorInputError(f'settle_s = {self.settle_s:g} s must be >= 0')
         if not (math.isfinite(self.check_period_s) and self.check_period_s > 0):
@@ -77,9 +83,12 @@ class MonitorConfig:
             raise MonitorInputError(f'sure_confidence = {self.sure_confidence:g} must be in [min_confidence, 1]')
         if self.candidates:
             from sma_wrist.diagnose import effects as fx
+
             unknown = [c for c in self.candidates if c not in fx.EFFECTS]
             if unknown:
-                raise MonitorInputError(f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}')
+                raise MonitorInputError(
+                    f'unknown candidate(s) {", ".join(unknown)}; catalogue: {", ".join(fx.EFFECTS)}'
+                )
         return self
 
 
@@ -105,6 +114,7 @@ class Verdict:
 
     def to_json(self) -> dict[str, Any]:
         from sma_wrist.diagnose import _plain
+
         return _plain(asdict(self))
 
 
@@ -224,8 +234,10 @@ class Monitor:
             series['payload'] = (np.array([lo]), np.array([self.payload_kg]))
         warnings: list[str] = []
         if 'u1' not in series or 'u2' not in series:
-            return (f'no TEM commands in the last {self.span_s:g} s: the twin runs on {TOPICS["u1"]} and '
-                    f'{TOPICS["u2"]} (std_msgs/Float64, V); is tem_controller (or the bridge) running?')
+            return (
+                f'no TEM commands in the last {self.span_s:g} s: the twin runs on {TOPICS["u1"]} and '
+                f'{TOPICS["u2"]} (std_msgs/Float64, V); is tem_controller (or the bridge) running?'
+            )
         try:
             run = run_from_series(series, f'window {lo:.1f}-{t_s:.1f} s', warnings)
         except DiagnoseInputError as exc:
@@ -288,14 +300,29 @@ class Monitor:
                     self.current = v
                 out = v
             else:  # not (yet) persistent: the raised verdict (or OK) stands; this check's view is attached
-                pending = (f'{v.level} {v.cause or ""} in this check ({len(self._streak)} of '
-                           f'{self.needed(v)} needed): ')
+                pending = f'{v.level} {v.cause or ""} in this check ({len(self._streak)} of {self.needed(v)} needed): '
                 if cur is None:
-                    out = Verdict(v.t_s, 'OK', None, None, v.confidence if v.level == 'OK' else 1.0 - v.confidence,
-                                  summary=pending + v.summary)
+                    out = Verdict(
+                        v.t_s,
+                        'OK',
+                        None,
+                        None,
+                        v.confidence if v.level == 'OK' else 1.0 - v.confidence,
+                        summary=pending + v.summary,
+                    )
                 else:
-                    out = Verdict(v.t_s, cur.level, cur.cause, cur.subsystem, cur.confidence, dict(cur.parameters),
-                                  cur.gain_pct, pending + v.summary, list(cur.correlates), since_s=cur.since_s)
+                    out = Verdict(
+                        v.t_s,
+                        cur.level,
+                        cur.cause,
+                        cur.subsystem,
+                        cur.confidence,
+                        dict(cur.parameters),
+                        cur.gain_pct,
+                        pending + v.summary,
+                        list(cur.correlates),
+                        since_s=cur.since_s,
+                    )
                 out.check_cause, out.check_subsystem = v.check_cause, v.check_subsystem
                 out.check_confidence, out.check_cpu_s = v.check_confidence, v.check_cpu_s
         self.history.append(out)
@@ -319,9 +346,19 @@ class Monitor:
             if v.level == 'OK':
                 continue
             if open_ is None:
-                out.append({'level': v.level, 'subsystem': v.subsystem, 'cause': v.cause, 'causes': [],
-                            'onset_s': v.since_s if v.since_s is not None else v.t_s, 'raised_s': v.t_s,
-                            'until_s': None, 'parameters': dict(v.parameters), 'confidence': v.confidence})
+                out.append(
+                    {
+                        'level': v.level,
+                        'subsystem': v.subsystem,
+                        'cause': v.cause,
+                        'causes': [],
+                        'onset_s': v.since_s if v.since_s is not None else v.t_s,
+                        'raised_s': v.t_s,
+                        'until_s': None,
+                        'parameters': dict(v.parameters),
+                        'confidence': v.confidence,
+                    }
+                )
                 open_ = out[-1]
             if v.cause is not None and v.cause not in open_['causes']:
                 open_['causes'].append(v.cause)
@@ -329,38 +366,74 @@ class Monitor:
         return out
 
 
-def diagnose_window(window: Run | str, t_s: float, config: MonitorConfig, hysteresis_file: str | None = None,
-                    thermal_file: str | None = None, extension: dict[str, float] | None = None) -> Verdict:
+def diagnose_window(
+    window: Run | str,
+    t_s: float,
+    config: MonitorConfig,
+    hysteresis_file: str | None = None,
+    thermal_file: str | None = None,
+    extension: dict[str, float] | None = None,
+) -> Verdict:
     """One check's verdict on a window (:meth:`Monitor.window`), before persistence; a plain function of picklable
     arguments, so that a node can run it in a worker process. ``extension``: the known model extension."""
     import time
+
     if isinstance(window, str):
         return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {window}')
     from sma_wrist.diagnose import diagnose_run
+
     c0 = time.process_time()
     c = config
     try:
-        res = diagnose_run(window, candidates=list(c.candidates) if c.candidates else None,
-                           hysteresis_file=hysteresis_file, thermal_file=thermal_file)
+        res = diagnose_run(
+            window,
+            candidates=list(c.candidates) if c.candidates else None,
+            hysteresis_file=hysteresis_file,
+            thermal_file=thermal_file,
+        )
     except DiagnoseInputError as exc:
-        return Verdict(t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {exc}', check_cpu_s=time.process_time() - c0)
+        return Verdict(
+            t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {exc}', check_cpu_s=time.process_time() - c0
+        )
     cpu = time.process_time() - c0
     params = {k: v['value'] for k, v in res.parameters.items()}
     if not res.discrepancy:
-        return Verdict(t_s, 'OK', None, None, res.confidence, summary=res.summary, check_confidence=res.confidence,
-                       check_cpu_s=cpu)
+        return Verdict(
+            t_s, 'OK', None, None, res.confidence, summary=res.summary, check_confidence=res.confidence, check_cpu_s=cpu
+        )
     cause = res.cause or 'unexplained'
-    seen = {'check_cause': cause, 'check_subsystem': res.subsystem, 'check_confidence': res.confidence,
-            'check_cpu_s': cpu}
+    seen = {
+        'check_cause': cause,
+        'check_subsystem': res.subsystem,
+        'check_confidence': res.confidence,
+        'check_cpu_s': cpu,
+    }
     if res.confidence < c.min_confidence:
-        return Verdict(t_s, 'OK', None, None, 1.0 - res.confidence,
-                       summary=f'not raised (confidence {res.confidence:.2f} < {c.min_confidence:g}): {res.summary}',
-                       **seen)
+        return Verdict(
+            t_s,
+            'OK',
+            None,
+            None,
+            1.0 - res.confidence,
+            summary=f'not raised (confidence {res.confidence:.2f} < {c.min_confidence:g}): {res.summary}',
+            **seen,
+        )
     if known(res.cause, params, extension or {}):
-        return Verdict(t_s, 'OK', None, None, res.confidence,
-                       summary=f'the known extension of the model: {res.summary}', **seen)
-    return Verdict(t_s, 'WARN', cause, res.subsystem, res.confidence, params, res.gain_pct, res.summary,
-                   res.correlates if cause == 'unexplained' else [], **seen)
+        return Verdict(
+            t_s, 'OK', None, None, res.confidence, summary=f'the known extension of the model: {res.summary}', **seen
+        )
+    return Verdict(
+        t_s,
+        'WARN',
+        cause,
+        res.subsystem,
+        res.confidence,
+        params,
+        res.gain_pct,
+        res.summary,
+        res.correlates if cause == 'unexplained' else [],
+        **seen,
+    )
 
 
 def known(cause: str | None, params: dict[str, float], extension: dict[str, float]) -> bool:
@@ -368,12 +441,27 @@ def known(cause: str | None, params: dict[str, float], extension: dict[str, floa
     if not cause or not extension or not params or any(k not in extension for k in params):
         return False
     from sma_wrist.diagnose import effects as fx
-    return all(abs(v - extension[k]) <= KNOWN_TOLERANCE * max(abs(extension[k]), float(fx.TYPICAL[fx.INDEX[k]]))
-               for k, v in params.items())
+
+    return all(
+        abs(v - extension[k]) <= KNOWN_TOLERANCE * max(abs(extension[k]), float(fx.TYPICAL[fx.INDEX[k]]))
+        for k, v in params.items()
+    )
 
 
-HISTORY_FIELDS = ('t_s', 'level', 'cause', 'subsystem', 'confidence', 'gain_pct', 'check_cause', 'check_subsystem',
-                  'check_confidence', 'since_s', 'parameters', 'summary')
+HISTORY_FIELDS = (
+    't_s',
+    'level',
+    'cause',
+    'subsystem',
+    'confidence',
+    'gain_pct',
+    'check_cause',
+    'check_subsystem',
+    'check_confidence',
+    'since_s',
+    'parameters',
+    'summary',
+)
 
 
 def history_text(history: Sequence[Verdict], fmt: str, episodes: list[dict[str, Any]] | None = None) -> str:
@@ -381,6 +469,7 @@ def history_text(history: Sequence[Verdict], fmt: str, episodes: list[dict[str, 
     rows = [v.to_json() for v in history]
     if fmt == 'json':
         return json.dumps({'verdicts': rows, 'episodes': episodes or []}, indent=1)
+
     def cell(r: dict[str, Any], k: str) -> str:
         x = r.get(k)
         if isinstance(x, dict):
@@ -388,6 +477,7 @@ def history_text(history: Sequence[Verdict], fmt: str, episodes: list[dict[str, 
         if isinstance(x, float):
             return f'{x:.4g}'
         return '' if x is None else str(x)
+
     if fmt == 'csv':
         buf = io.StringIO()
         w = csv.writer(buf)
@@ -408,8 +498,9 @@ def history_format(path: str | Path) -> str:
     ext = Path(path).suffix.lower().lstrip('.')
     fmt = {'csv': 'csv', 'json': 'json', 'md': 'md', 'markdown': 'md'}.get(ext)
     if fmt is None:
-        raise MonitorInputError(f'{path}: the verdict history is written as .csv, .json or .md (got {ext or "no"} '
-                                f'extension)')
+        raise MonitorInputError(
+            f'{path}: the verdict history is written as .csv, .json or .md (got {ext or "no"} extension)'
+        )
     return fmt
 
 

@@ -11,6 +11,7 @@ run does not start with its heat exchangers at rest.
 identified TEMs (``thermal_file``), or a diagnosis' ``extended_params.yaml`` (which may name both, plus the fitted
 ``model.*`` extension).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -48,12 +49,14 @@ def _readable(path: str, what: str, how: str) -> Path:
     return p
 
 
-def load_model(hysteresis_file: str | None = None, thermal_file: str | None = None,
-               params_file: str | None = None) -> Model:
+def load_model(
+    hysteresis_file: str | None = None, thermal_file: str | None = None, params_file: str | None = None
+) -> Model:
     """The twin's model; raises MonitorInputError naming the file that does not load and how to make one."""
     import yaml
 
     from sma_wrist.core.plant import extensions as mx
+
     ext: dict[str, float] = {}
     src = []
     if params_file:
@@ -65,19 +68,25 @@ def load_model(hysteresis_file: str | None = None, thermal_file: str | None = No
             if not isinstance(values, dict):
                 raise ValueError('no "<node>: ros__parameters:" mapping')
         except (yaml.YAMLError, ValueError, StopIteration, KeyError, TypeError) as exc:
-            raise MonitorInputError(f'params file {params_file}: not a ROS 2 params file ({exc}); expected what '
-                                    f'sma-wrist diagnose --params writes (doc/howto/diagnose.md)') from None
+            raise MonitorInputError(
+                f'params file {params_file}: not a ROS 2 params file ({exc}); expected what '
+                f'sma-wrist diagnose --params writes (doc/howto/diagnose.md)'
+            ) from None
         hysteresis_file = hysteresis_file or values.get('hysteresis_file') or None
         thermal_file = thermal_file or values.get('thermal_file') or None
         known = {e.name for e in mx.PARAMS}
         unknown = [k for k in values if k.startswith('model.') and k[6:] not in known]
         if unknown:
-            raise MonitorInputError(f'params file {params_file}: unknown model parameter(s) {", ".join(unknown)} '
-                                    f'(sma_wrist/core/plant/extensions.py lists them)')
+            raise MonitorInputError(
+                f'params file {params_file}: unknown model parameter(s) {", ".join(unknown)} '
+                f'(sma_wrist/core/plant/extensions.py lists them)'
+            )
         ext = {k[6:]: float(v) for k, v in values.items() if k.startswith('model.')}
         src.append(f'the extended model of {params_file}')
-    for f, what, how in ((hysteresis_file, 'hysteresis_file', 'sma-wrist identify hysteresis writes one'),
-                         (thermal_file, 'thermal_file', 'sma-wrist identify thermal writes one')):
+    for f, what, how in (
+        (hysteresis_file, 'hysteresis_file', 'sma-wrist identify hysteresis writes one'),
+        (thermal_file, 'thermal_file', 'sma-wrist identify thermal writes one'),
+    ):
         if f:
             _readable(f, what, how)
             src.append(f'{what} {f}')
@@ -86,8 +95,10 @@ def load_model(hysteresis_file: str | None = None, thermal_file: str | None = No
     except SmaWristError as exc:
         raise MonitorInputError(f'model files do not load: {exc}') from None
     except Exception as exc:  # noqa: BLE001 - a broken file is the user's problem to fix, said in one line
-        raise MonitorInputError(f'model files do not load ({type(exc).__name__}: {exc}); write them with sma-wrist '
-                                f'identify (hysteresis / thermal)') from None
+        raise MonitorInputError(
+            f'model files do not load ({type(exc).__name__}: {exc}); write them with sma-wrist '
+            f'identify (hysteresis / thermal)'
+        ) from None
     values_all = dict(mx.NOMINAL)
     values_all.update(ext)
     simulated = {k: (v if k not in mx.REPLAY_ONLY else mx.NOMINAL[k]) for k, v in values_all.items()}
@@ -95,8 +106,14 @@ def load_model(hysteresis_file: str | None = None, thermal_file: str | None = No
         params = mx.plant_params(simulated, base)
     except SmaWristError as exc:
         raise MonitorInputError(f'params file {params_file}: {exc}') from None
-    return Model(params, {k: v for k, v in ext.items() if v != mx.NOMINAL.get(k)}, hysteresis_file, thermal_file,
-                 float(values_all.get('payload_err_kg', 0.0)), ', '.join(src) or 'the built-in model')
+    return Model(
+        params,
+        {k: v for k, v in ext.items() if v != mx.NOMINAL.get(k)},
+        hysteresis_file,
+        thermal_file,
+        float(values_all.get('payload_err_kg', 0.0)),
+        ', '.join(src) or 'the built-in model',
+    )
 
 
 class Twin:

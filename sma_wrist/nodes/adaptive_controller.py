@@ -13,11 +13,13 @@ muscles for hysteresis_compensator; in ``direct_adaptive`` and ``pid`` it publis
 desired temperatures itself. A stale or missing reference or joint state stops the
 output (tem_controller then switches the TEMs off) and is reported on /diagnostics.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import typing
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -41,8 +43,11 @@ DEFAULTS = JointControllerParams()
 #: Ranges are what a user may try on this wrist (well beyond the tuned values); the core dataclasses
 #: still check what ranges cannot say (c1 > 0, force_min_N <= preload_N <= force_max_N, ...).
 FIELD_DOCS: dict[str, tuple[Any, ...]] = {
-    'mode': ('joint controller: inverse_adaptive (law + inverse SD-GPI compensator), direct_adaptive '
-             '(law, force mapped to temperature) or pid (Sec. 6.1); doc/explanation/controllers.md', ''),
+    'mode': (
+        'joint controller: inverse_adaptive (law + inverse SD-GPI compensator), direct_adaptive '
+        '(law, force mapped to temperature) or pid (Sec. 6.1); doc/explanation/controllers.md',
+        '',
+    ),
     'robust': ('robust term of Eq. 5.32: tanh boundary layer or sgn', ''),
     'p_mode': ('PID proportional term on the error, or error times its rate', ''),
     'derivative_on': ('PID derivative of the measurement (no kick on reference steps) or of the error', ''),
@@ -68,22 +73,41 @@ FIELD_DOCS: dict[str, tuple[Any, ...]] = {
     'output_min': ('lowest PID output (differential temperature)', 'degC', (-60.0, 0.0)),
     'output_max': ('highest PID output (differential temperature)', 'degC', (0.0, 60.0)),
     'tracking_time_s': ('back-calculation anti-windup time constant', 's', (0.0, 100.0)),
-    'temperature_mid_C': ('centre of the muscles\' working band (direct and PID modes)', 'degC', (0.0, 120.0)),
+    'temperature_mid_C': ("centre of the muscles' working band (direct and PID modes)", 'degC', (0.0, 120.0)),
     'temperature_min_C': ('lowest desired muscle temperature', 'degC', (0.0, 120.0)),
     'temperature_max_C': ('highest desired muscle temperature', 'degC', (0.0, 120.0)),
     'force_per_degC_N': ('direct mode: force request per degC of temperature request', 'N/degC', (0.0, 100.0)),
-    'reversal_lead_s': ('inverse mode: start crossing the hysteresis gap this long before the joint must '
-                        'reverse (doc/explanation/controllers.md; 0 = Eq. 5.5 as composed in the seed)', 's', (0.0, 30.0)),
-    'pid_reference_lead_s': ('pid mode: the PID acts on the reference this far ahead, the TEMs\' lag fed '
-                             'forward (doc/explanation/controllers.md; 0 = the seed\'s PID on q_d(t))', 's', (0.0, 10.0)),
-    'direct_reference_lead_s': ('direct_adaptive mode: the law acts on the reference this far ahead, the TEMs\' '
-                                'lag fed forward (doc/explanation/controllers.md; 0 = the seed\'s law on q_d(t))', 's', (0.0, 10.0)),
-    'pid_output_filter_s': ('pid mode: time constant of a first-order low-pass on the PID output, against the '
-                            'joint\'s stick-slip reaching the TEMs (doc/explanation/controllers.md; 0 = off)',
-                            's', (0.0, 10.0)),
-    'direct_output_filter_s': ('direct_adaptive mode: time constant of a first-order low-pass on the temperature '
-                               'request (F - F_pre) / k, against sensor noise reaching the TEMs (doc/explanation/controllers.md; '
-                               '0 = off)', 's', (0.0, 10.0)),
+    'reversal_lead_s': (
+        'inverse mode: start crossing the hysteresis gap this long before the joint must '
+        'reverse (doc/explanation/controllers.md; 0 = Eq. 5.5 as composed in the seed)',
+        's',
+        (0.0, 30.0),
+    ),
+    'pid_reference_lead_s': (
+        "pid mode: the PID acts on the reference this far ahead, the TEMs' lag fed "
+        "forward (doc/explanation/controllers.md; 0 = the seed's PID on q_d(t))",
+        's',
+        (0.0, 10.0),
+    ),
+    'direct_reference_lead_s': (
+        "direct_adaptive mode: the law acts on the reference this far ahead, the TEMs' "
+        "lag fed forward (doc/explanation/controllers.md; 0 = the seed's law on q_d(t))",
+        's',
+        (0.0, 10.0),
+    ),
+    'pid_output_filter_s': (
+        'pid mode: time constant of a first-order low-pass on the PID output, against the '
+        "joint's stick-slip reaching the TEMs (doc/explanation/controllers.md; 0 = off)",
+        's',
+        (0.0, 10.0),
+    ),
+    'direct_output_filter_s': (
+        'direct_adaptive mode: time constant of a first-order low-pass on the temperature '
+        'request (F - F_pre) / k, against sensor noise reaching the TEMs (doc/explanation/controllers.md; '
+        '0 = off)',
+        's',
+        (0.0, 10.0),
+    ),
 }
 
 
@@ -120,10 +144,14 @@ def _own_fields() -> tuple[Param, ...]:
 
 class AdaptiveController(WristNode):
     PARAMS = (
-        Param('stale_timeout_s', 0.25, 'reference/joint-state age that stops the output', 's', (0.01, 10.0)),
-        PRELOAD_PARAM,
-    ) + _own_fields() + _fields_as_params(AdaptiveParams, 'adaptive.', skip=('mode',), default=DEFAULTS.adaptive) \
+        (
+            Param('stale_timeout_s', 0.25, 'reference/joint-state age that stops the output', 's', (0.01, 10.0)),
+            PRELOAD_PARAM,
+        )
+        + _own_fields()
+        + _fields_as_params(AdaptiveParams, 'adaptive.', skip=('mode',), default=DEFAULTS.adaptive)
         + _fields_as_params(PIDParams, 'pid.', default=DEFAULTS.pid)
+    )
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('adaptive_controller', **kwargs)
@@ -151,20 +179,27 @@ class AdaptiveController(WristNode):
         self.get_logger().info(
             f'adaptive_controller: mode {p["mode"]}, temperatures {p["temperature_min_C"]:g}-'
             f'{p["temperature_max_C"]:g} degC, pre-load {p["preload_elongation_mm"]:g} mm; {waits} (no output until '
-            f'both are fresh, none after {p["stale_timeout_s"]:g} s without one)')
+            f'both are fresh, none after {p["stale_timeout_s"]:g} s without one)'
+        )
 
     # -- parameters ----------------------------------------------------------------
     @staticmethod
     def _core_params(p: Mapping[str, Any]) -> JointControllerParams:
         """Core parameter objects from the flat ROS parameters (raises ParameterError)."""
+
         def section(cls: type, prefix: str) -> dict[str, Any]:
             names = {f.name for f in dataclasses.fields(cls)}
-            return {k[len(prefix):]: v for k, v in p.items() if k.startswith(prefix) and k[len(prefix):] in names}
-        adaptive = AdaptiveParams(mode=p['mode'] if p['mode'] != 'pid' else 'inverse_adaptive',
-                                  **section(AdaptiveParams, 'adaptive.'))
+            return {k[len(prefix) :]: v for k, v in p.items() if k.startswith(prefix) and k[len(prefix) :] in names}
+
+        adaptive = AdaptiveParams(
+            mode=p['mode'] if p['mode'] != 'pid' else 'inverse_adaptive', **section(AdaptiveParams, 'adaptive.')
+        )
         pid = PIDParams(**section(PIDParams, 'pid.'))
-        own = {f.name: p[f.name] for f in dataclasses.fields(JointControllerParams)
-               if f.name not in ('adaptive', 'pid') and f.name in p}
+        own = {
+            f.name: p[f.name]
+            for f in dataclasses.fields(JointControllerParams)
+            if f.name not in ('adaptive', 'pid') and f.name in p
+        }
         return JointControllerParams(**{**own, 'adaptive': adaptive, 'pid': pid})
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
@@ -220,9 +255,15 @@ class AdaptiveController(WristNode):
             return
         if cmd.saturated != self._saturated:  # diagnose publishes on change only: skip building its values
             self._saturated = cmd.saturated
-            self.diagnose('saturation', DiagnosticStatus.WARN if cmd.saturated else DiagnosticStatus.OK,
-                          'command saturated: reference beyond what the muscles can reach' if cmd.saturated
-                          else 'command within limits', {k: f'{v:.4g}' for k, v in cmd.info.items()}, routine=True)
+            self.diagnose(
+                'saturation',
+                DiagnosticStatus.WARN if cmd.saturated else DiagnosticStatus.OK,
+                'command saturated: reference beyond what the muscles can reach'
+                if cmd.saturated
+                else 'command within limits',
+                {k: f'{v:.4g}' for k, v in cmd.info.items()},
+                routine=True,
+            )
         self._publish(cmd)
 
     def _publish(self, cmd: Any) -> None:
@@ -239,14 +280,18 @@ class AdaptiveController(WristNode):
             stamp = self.get_clock().now().to_msg()
             T = cmd.temperature_desired_C.tolist()
             for i in range(2):
-                self.pub_T[i].publish(Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]),
-                                                  temperature=T[i], variance=0.0))
+                self.pub_T[i].publish(
+                    Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=T[i], variance=0.0)
+                )
 
     def _check_stale(self) -> None:
         stale = self.fresh.stale(self.p['stale_timeout_s'])
         level = DiagnosticStatus.ERROR if stale and self.t_last is not None else DiagnosticStatus.OK
-        self.diagnose('watchdog', level, f'no fresh {", ".join(stale)}: output stopped' if level != DiagnosticStatus.OK
-                      else 'inputs fresh')
+        self.diagnose(
+            'watchdog',
+            level,
+            f'no fresh {", ".join(stale)}: output stopped' if level != DiagnosticStatus.OK else 'inputs fresh',
+        )
 
 
 def main(args: list[str] | None = None) -> int:

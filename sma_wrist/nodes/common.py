@@ -8,15 +8,17 @@ reason; the node's ``validate`` adds choice and cross-parameter checks in the on
 callback and ``apply`` changes state only after everything passed (ros2/demos'
 set_parameters_callback pattern).
 """
+
 from __future__ import annotations
 
 import importlib
 import math
 import signal
 import threading
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -73,32 +75,66 @@ def message_class(topic: Topic) -> Any:
 
 def qos_for(topic: Topic) -> QoSProfile:
     if topic.qos == 'transient_local':
-        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE,
-                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+        return QoSProfile(
+            history=HistoryPolicy.KEEP_LAST,
+            depth=1,
+            reliability=ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=10,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=DurabilityPolicy.VOLATILE,
+    )
 
 
 #: the chain's pre-load elongation e0 (Eq. 4.17): plant_sim, hysteresis_compensator and adaptive_controller
 #: must agree on it; `sma-wrist identify hysteresis` writes the one calibrated for the wire (core/plant/preload.py)
-HYSTERESIS_FILE_PARAM = Param('hysteresis_file', '', 'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify '
-                              'hysteresis (empty: the built-in set)', runtime=False)
-PRELOAD_PARAM = Param('preload_elongation_mm', PlantParams.preload_elongation_mm,
-                      "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; the same value in plant_sim, "
-                      'hysteresis_compensator, adaptive_controller and hardware_bridge; the identified wire\'s in its '
-                      'wrist_params.yaml, doc/howto/identify_wire.md)', 'mm', (0.1, 10.0), runtime=False)
+HYSTERESIS_FILE_PARAM = Param(
+    'hysteresis_file',
+    '',
+    'SD-GPI of the wire: hysteresis.yaml from sma-wrist identify hysteresis (empty: the built-in set)',
+    runtime=False,
+)
+PRELOAD_PARAM = Param(
+    'preload_elongation_mm',
+    PlantParams.preload_elongation_mm,
+    "bundle elongation at q_neutral (the chain's pre-load, Eq. 4.17; the same value in plant_sim, "
+    "hysteresis_compensator, adaptive_controller and hardware_bridge; the identified wire's in its "
+    'wrist_params.yaml, doc/howto/identify_wire.md)',
+    'mm',
+    (0.1, 10.0),
+    runtime=False,
+)
 
 #: the online heat-balance estimate (core.thermal.online): the same values in tem_controller and
 #: hysteresis_compensator, which each run one on the same samples (doc/explanation/controllers.md)
 THERMAL_ADAPTATION_PARAMS = (
-    Param('thermal_adaptation.enabled', True, "estimate the TEMs' drive gain, muscle-face losses and ambient online from the "
-          'commands and the thermocouples, and run the observer and law on the estimate (doc/explanation/'
-          'controllers.md)', runtime=False),
-    Param('thermal_adaptation.apply_after_s', OnlineThermalParams.apply_after_s,
-          'thermal_adaptation: the estimate is used from this long after the first sample on', 's', (0.0, 600.0),
-          runtime=False),
-    Param('thermal_adaptation.tc_lag_s', OnlineThermalParams.tc_lag_s,
-          "thermal_adaptation: the thermocouple's first-order lag the estimate assumes", 's', (0.0, 5.0), runtime=False),
+    Param(
+        'thermal_adaptation.enabled',
+        True,
+        "estimate the TEMs' drive gain, muscle-face losses and ambient online from the "
+        'commands and the thermocouples, and run the observer and law on the estimate (doc/explanation/'
+        'controllers.md)',
+        runtime=False,
+    ),
+    Param(
+        'thermal_adaptation.apply_after_s',
+        OnlineThermalParams.apply_after_s,
+        'thermal_adaptation: the estimate is used from this long after the first sample on',
+        's',
+        (0.0, 600.0),
+        runtime=False,
+    ),
+    Param(
+        'thermal_adaptation.tc_lag_s',
+        OnlineThermalParams.tc_lag_s,
+        "thermal_adaptation: the thermocouple's first-order lag the estimate assumes",
+        's',
+        (0.0, 5.0),
+        runtime=False,
+    ),
 )
 
 
@@ -106,8 +142,9 @@ def online_thermal(p: Mapping[str, Any]) -> OnlineThermalParams | None:
     """The estimator's settings from a node's THERMAL_ADAPTATION_PARAMS values; None when it is off."""
     if not p['thermal_adaptation.enabled']:
         return None
-    return OnlineThermalParams(apply_after_s=p['thermal_adaptation.apply_after_s'],
-                               tc_lag_s=p['thermal_adaptation.tc_lag_s'])
+    return OnlineThermalParams(
+        apply_after_s=p['thermal_adaptation.apply_after_s'], tc_lag_s=p['thermal_adaptation.tc_lag_s']
+    )
 
 
 class WristNode(Node):
@@ -160,8 +197,10 @@ class WristNode(Node):
 
     def _sim_time_problem(self, use_sim_time: Any) -> str | None:
         if self.OWNS_CLOCK and use_sim_time is True:
-            return (f'use_sim_time = true: {self.get_name()} publishes /clock itself and would wait '
-                    'for its own clock; it must run with use_sim_time false')
+            return (
+                f'use_sim_time = true: {self.get_name()} publishes /clock itself and would wait '
+                'for its own clock; it must run with use_sim_time false'
+            )
         return None
 
     def _on_set_parameters(self, params: list[Any]) -> SetParametersResult:
@@ -174,7 +213,9 @@ class WristNode(Node):
         changed = {p.name: p.value for p in params if p.name in self._specs}
         for name in changed:
             if not self._specs[name].runtime:
-                return SetParametersResult(successful=False, reason=f'{name} cannot change while running; restart the node')
+                return SetParametersResult(
+                    successful=False, reason=f'{name} cannot change while running; restart the node'
+                )
         candidate = {**self.p, **changed}
         try:
             problem = self.validate(candidate)
@@ -226,8 +267,9 @@ class WristNode(Node):
         """Stamp of /diagnostics: the node clock; a node that owns /clock overrides it with that time base."""
         return self.get_clock().now().to_msg()
 
-    def diagnose(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None, *,
-                 routine: bool = False) -> None:
+    def diagnose(
+        self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None, *, routine: bool = False
+    ) -> None:
         """Publish one DiagnosticStatus when ``key``'s level or message changes, and log it.
 
         Called every cycle with the current state; publishes on change only, so a
@@ -242,9 +284,13 @@ class WristNode(Node):
             self._diag_last[key] = (level, message)
             return
         self._diag_last[key] = (level, message)
-        status = DiagnosticStatus(level=level, name=f'{self.get_name()}: {key}', message=message,
-                                  hardware_id='sma_wrist',
-                                  values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()])
+        status = DiagnosticStatus(
+            level=level,
+            name=f'{self.get_name()}: {key}',
+            message=message,
+            hardware_id='sma_wrist',
+            values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()],
+        )
         arr = DiagnosticArray(status=[status])
         arr.header.stamp = stamp = self.diagnostics_stamp()
         self._diag_pub.publish(arr)
@@ -263,8 +309,9 @@ class WristNode(Node):
             self._diag_logged[key] = (t_last, quiet + 1, logged_level)
             return
         self._diag_logged[key] = (now, 0, level)
-        text = f'{key}: {message}' + (f' ({quiet} more changes in the last {LOG_THROTTLE_S:g} s, see /diagnostics)'
-                                      if quiet else '')
+        text = f'{key}: {message}' + (
+            f' ({quiet} more changes in the last {LOG_THROTTLE_S:g} s, see /diagnostics)' if quiet else ''
+        )
         log = self.get_logger()
         if routine:
             log.debug(text)
@@ -278,8 +325,12 @@ class WristNode(Node):
     def reject_input(self, topic: str, reason: str) -> None:
         """Count and report a malformed message; the last good value stays in use."""
         self.rejected_inputs += 1
-        self.diagnose(f'input {topic}', DiagnosticStatus.WARN, f'rejected message: {reason}',
-                      {'rejected_total': self.rejected_inputs})
+        self.diagnose(
+            f'input {topic}',
+            DiagnosticStatus.WARN,
+            f'rejected message: {reason}',
+            {'rejected_total': self.rejected_inputs},
+        )
 
 
 def finite(*values: float) -> bool:
@@ -324,7 +375,7 @@ class _ShutdownRequest:
         self._previous: Any = None
         self._installed = False
 
-    def install(self) -> '_ShutdownRequest':
+    def install(self) -> _ShutdownRequest:
         if threading.current_thread() is threading.main_thread():
             self._previous = signal.signal(signal.SIGINT, self._on_sigint)
             self._installed = True
@@ -401,6 +452,7 @@ def add_or_refuse(rt: Any, node_class: type) -> Any:
     rclpy's exceptions) also pickles, so it crosses experiment's process pool intact.
     """
     from sma_wrist.core.errors import ParameterError
+
     try:
         return rt.add(node_class)
     except ParameterError:
@@ -413,8 +465,15 @@ def add_or_refuse(rt: Any, node_class: type) -> Any:
 
 
 #: the package's nodes (setup.py's console scripts; test_config checks they agree)
-NODE_NAMES = ('plant_sim', 'hardware_bridge', 'trajectory_generator', 'adaptive_controller', 'hysteresis_compensator',
-              'tem_controller', 'twin_monitor')
+NODE_NAMES = (
+    'plant_sim',
+    'hardware_bridge',
+    'trajectory_generator',
+    'adaptive_controller',
+    'hysteresis_compensator',
+    'tem_controller',
+    'twin_monitor',
+)
 
 
 def undeclared_parameters(params_files: Sequence[str | Path], declared: Mapping[str, set[str]]) -> list[str]:
@@ -422,6 +481,7 @@ def undeclared_parameters(params_files: Sequence[str | Path], declared: Mapping[
     that no such node declares, and node names that are none of the package's (:data:`NODE_NAMES`): ROS ignores
     them, so a misspelt name runs the defaults in silence."""
     from sma_wrist.runtime.arguments import load_params_file
+
     everyone = set().union(*declared.values()) | {'use_sim_time'}
     out, strangers = [], []
     for f in params_files:
@@ -441,6 +501,7 @@ def refuse_undeclared(params_files: Sequence[str | Path], declared: Mapping[str,
     """ParameterError listing :func:`undeclared_parameters`, if any (the in-process tools' rule: ``run``,
     ``experiment``, ``sweep``)."""
     from sma_wrist.core.errors import ParameterError
+
     unknown = undeclared_parameters(params_files, declared)
     if unknown:
         raise ParameterError('not a parameter of the node graph (misspelt?): ' + '; '.join(unknown))
@@ -476,5 +537,15 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     return 0
 
 
-__all__ = ['NODE_NAMES', 'Param', 'WristNode', 'Freshness', 'add_or_refuse', 'finite', 'main_for', 'message_class', 'qos_for',
-           'start_up_refusal']
+__all__ = [
+    'NODE_NAMES',
+    'Param',
+    'WristNode',
+    'Freshness',
+    'add_or_refuse',
+    'finite',
+    'main_for',
+    'message_class',
+    'qos_for',
+    'start_up_refusal',
+]

@@ -50,11 +50,13 @@ TEM gets 0 V until a finite one arrives; a command older than ``command_timeout_
 time) is replaced by 0 V. Serial faults (garbage, bad checksums, cut lines, resets,
 unplug) never reach the topics: only CRC-checked, in-range, in-sequence samples do.
 """
+
 from __future__ import annotations
 
 import math
 import queue
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -69,10 +71,17 @@ from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration, Wiring
 from sma_wrist.hw.estimate import StressEstimator, slope
-from sma_wrist.hw.safety import StuckSensor
 from sma_wrist.hw.link import SerialLink
-from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, LOG_THROTTLE_S, PRELOAD_PARAM, Param, WristNode,
-                                   finite, main_for)
+from sma_wrist.hw.safety import StuckSensor
+from sma_wrist.nodes.common import (
+    HYSTERESIS_FILE_PARAM,
+    LOG_THROTTLE_S,
+    PRELOAD_PARAM,
+    Param,
+    WristNode,
+    finite,
+    main_for,
+)
 
 #: while the TEMs are off for a fault, a reminder is logged this often (wall time) [s]
 FAULT_REMINDER_S = LOG_THROTTLE_S
@@ -91,70 +100,162 @@ class HardwareBridge(WristNode):
     LINK: type[SerialLink] = SerialLink
     PARAMS = (
         Param('port', '/dev/ttyACM0', 'serial port (or pyserial URL) of the wrist controller', runtime=False),
-        Param('baud_rate', 921600, 'serial baud rate (1 kHz samples need >= 921600; ignored by USB CDC/pty)',
-              'bit/s', (9600, 4000000), runtime=False),
-        Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m, as mounted (published latched)', 'kg',
-              PAYLOAD_RANGE_KG),
-        Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in device time', 'Hz',
-              (1.0, 500.0), runtime=False),
+        Param(
+            'baud_rate',
+            921600,
+            'serial baud rate (1 kHz samples need >= 921600; ignored by USB CDC/pty)',
+            'bit/s',
+            (9600, 4000000),
+            runtime=False,
+        ),
+        Param(
+            'payload_kg',
+            0.3,
+            'payload mass M at the lever l = 0.09 m, as mounted (published latched)',
+            'kg',
+            PAYLOAD_RANGE_KG,
+        ),
+        Param(
+            'publish_rate_hz',
+            100.0,
+            'rate of /clock and of the measurements, in device time',
+            'Hz',
+            (1.0, 500.0),
+            runtime=False,
+        ),
         # the wire behind the stress estimate (hw/estimate.py): identify writes both into wrist_params.yaml
         HYSTERESIS_FILE_PARAM,
         PRELOAD_PARAM,
-        Param('sample_wait_s', 0.05, 'longest a tick waits for the device to complete a window (wall time)', 's',
-              (0.001, 1.0)),
-        Param('max_backlog_windows', 5, 'more queued data than this many windows: skip to the newest', '',
-              (1, 1000)),
-        Param('sensor_timeout_s', 0.1, 'no valid sample for this long (wall time): TEMs off, ERROR', 's',
-              (0.005, 10.0)),
-        Param('stuck_sensor_s', 5.0, 'a muscle thermocouple reading exactly the same this long (device time) while '
-              'its TEM is driven harder than stuck_sensor_drive_V: a stuck sensor, TEMs off, ERROR, not published '
-              '(0: off)', 's', (0.0, 600.0)),
-        Param('stuck_sensor_drive_V', 18.0, 'mean TEM drive (one way, over about stuck_sensor_s) beyond which an '
-              'unchanged reading is a stuck sensor: beyond the drive that holds any temperature (~13 V), it moves a '
-              'muscle by degrees in that time', 'V', (0.0, 30.0)),
-        Param('command_timeout_s', 0.5, 'a TEM command older than this (sim time) is replaced by 0 V', 's',
-              (0.01, 60.0)),
-        Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature: TEMs off above this', 'degC',
-              (30.0, 120.0)),
-        Param('max_tem_face_temperature_C', 85.0, 'TEM exchanger-face over-temperature: TEMs off above this',
-              'degC', (30.0, 150.0)),
-        Param('over_temperature_hysteresis_C', 5.0, 'an over-temperature clears this far below its limit', 'degC',
-              (0.0, 30.0)),
+        Param(
+            'sample_wait_s',
+            0.05,
+            'longest a tick waits for the device to complete a window (wall time)',
+            's',
+            (0.001, 1.0),
+        ),
+        Param('max_backlog_windows', 5, 'more queued data than this many windows: skip to the newest', '', (1, 1000)),
+        Param(
+            'sensor_timeout_s', 0.1, 'no valid sample for this long (wall time): TEMs off, ERROR', 's', (0.005, 10.0)
+        ),
+        Param(
+            'stuck_sensor_s',
+            5.0,
+            'a muscle thermocouple reading exactly the same this long (device time) while '
+            'its TEM is driven harder than stuck_sensor_drive_V: a stuck sensor, TEMs off, ERROR, not published '
+            '(0: off)',
+            's',
+            (0.0, 600.0),
+        ),
+        Param(
+            'stuck_sensor_drive_V',
+            18.0,
+            'mean TEM drive (one way, over about stuck_sensor_s) beyond which an '
+            'unchanged reading is a stuck sensor: beyond the drive that holds any temperature (~13 V), it moves a '
+            'muscle by degrees in that time',
+            'V',
+            (0.0, 30.0),
+        ),
+        Param(
+            'command_timeout_s', 0.5, 'a TEM command older than this (sim time) is replaced by 0 V', 's', (0.01, 60.0)
+        ),
+        Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature: TEMs off above this', 'degC', (30.0, 120.0)),
+        Param(
+            'max_tem_face_temperature_C',
+            85.0,
+            'TEM exchanger-face over-temperature: TEMs off above this',
+            'degC',
+            (30.0, 150.0),
+        ),
+        Param(
+            'over_temperature_hysteresis_C',
+            5.0,
+            'an over-temperature clears this far below its limit',
+            'degC',
+            (0.0, 30.0),
+        ),
         Param('angle_min_rad', -0.45, 'angle below this (past the -0.35 rad stop): TEMs off', 'rad', (-3.2, 3.2)),
         Param('angle_max_rad', 1.5, 'angle above this (past the 1.40 rad stop): TEMs off', 'rad', (-3.2, 3.2)),
         Param('u_min_V', -24.0, 'most negative TEM command sent (driver rating, cooling)', 'V', (-30.0, 0.0)),
         Param('u_max_V', 24.0, 'most positive TEM command sent (driver rating, heating)', 'V', (0.0, 30.0)),
         Param('velocity_filter_s', 0.02, 'time constant of the velocity low-pass', 's', (0.0, 1.0)),
         # the stress estimate's input filter (hw/estimate.py InputFilter): how far the true values may wander
-        Param('stress_filter.temperature_drift_C', 0.175, 'muscle temperature random walk per sqrt(s) the stress '
-              "estimate's Kalman filter assumes (larger: follows faster, smooths less)", 'degC', (1e-4, 100.0)),
-        Param('stress_filter.angle_drift_rad', 0.00275, 'joint angle random walk per sqrt(s) the stress '
-              "estimate's Kalman filter assumes (larger: follows faster, smooths less)", 'rad', (1e-6, 10.0)),
-        Param('reconnect_backoff_initial_s', 0.05, 'first reconnect delay; doubles per failure', 's', (0.001, 10.0),
-              runtime=False),
+        Param(
+            'stress_filter.temperature_drift_C',
+            0.175,
+            'muscle temperature random walk per sqrt(s) the stress '
+            "estimate's Kalman filter assumes (larger: follows faster, smooths less)",
+            'degC',
+            (1e-4, 100.0),
+        ),
+        Param(
+            'stress_filter.angle_drift_rad',
+            0.00275,
+            'joint angle random walk per sqrt(s) the stress '
+            "estimate's Kalman filter assumes (larger: follows faster, smooths less)",
+            'rad',
+            (1e-6, 10.0),
+        ),
+        Param(
+            'reconnect_backoff_initial_s',
+            0.05,
+            'first reconnect delay; doubles per failure',
+            's',
+            (0.001, 10.0),
+            runtime=False,
+        ),
         Param('reconnect_backoff_max_s', 2.0, 'longest reconnect delay', 's', (0.01, 60.0), runtime=False),
-        Param('silence_reconnect_s', 1.0, 'reopen the port after this long without a valid frame (wall)', 's',
-              (0.05, 60.0), runtime=False),
-        Param('adc.temperature_gain_C_per_count', 0.004, 'thermocouple channels: degC per ADC count', 'degC',
-              (1e-5, 1.0)),
-        Param('adc.temperature_zero_C', -50.0, 'thermocouple channels: temperature at count 0', 'degC',
-              (-300.0, 300.0)),
+        Param(
+            'silence_reconnect_s',
+            1.0,
+            'reopen the port after this long without a valid frame (wall)',
+            's',
+            (0.05, 60.0),
+            runtime=False,
+        ),
+        Param(
+            'adc.temperature_gain_C_per_count', 0.004, 'thermocouple channels: degC per ADC count', 'degC', (1e-5, 1.0)
+        ),
+        Param(
+            'adc.temperature_zero_C', -50.0, 'thermocouple channels: temperature at count 0', 'degC', (-300.0, 300.0)
+        ),
         Param('calibration.muscle_1_offset_C', 0.0, 'thermocouple offset added to muscle 1', 'degC', (-20.0, 20.0)),
         Param('calibration.muscle_2_offset_C', 0.0, 'thermocouple offset added to muscle 2', 'degC', (-20.0, 20.0)),
-        Param('calibration.tem_face_1_offset_C', 0.0, 'thermocouple offset added to TEM 1 exchanger face', 'degC',
-              (-20.0, 20.0)),
-        Param('calibration.tem_face_2_offset_C', 0.0, 'thermocouple offset added to TEM 2 exchanger face', 'degC',
-              (-20.0, 20.0)),
+        Param(
+            'calibration.tem_face_1_offset_C',
+            0.0,
+            'thermocouple offset added to TEM 1 exchanger face',
+            'degC',
+            (-20.0, 20.0),
+        ),
+        Param(
+            'calibration.tem_face_2_offset_C',
+            0.0,
+            'thermocouple offset added to TEM 2 exchanger face',
+            'degC',
+            (-20.0, 20.0),
+        ),
         Param('calibration.angle_gain_rad_per_count', 1e-4, 'potentiometer gain', 'rad', (-1e-2, 1e-2)),
         Param('calibration.angle_offset_rad', -3.2768, 'angle at count 0', 'rad', (-10.0, 10.0)),
         # the wiring (hw/calibration.py Wiring): a wrist wired otherwise than doc/explanation/protocol.md, corrected in software;
         # sma-wrist commission measures them and writes them into its wrist_params.yaml (doc/howto/commission.md)
-        Param('calibration.tem_sign', [1, 1], "per muscle, the sign of its TEM's drive: -1 where the TEM's two leads "
-              'are swapped (a positive drive of its driver output cools the muscle); each 1 or -1'),
-        Param('calibration.tem_channel_map', [1, 2], "per muscle, the driver output (the C frame's u1 = 1, u2 = 2) "
-              "wired to its TEM: [1, 2] as documented, [2, 1] with the TEMs' drive wires swapped"),
-        Param('calibration.thermocouple_map', [1, 2], "per muscle, the ADC channel (the S frame's adc_T1 = 1, "
-              'adc_T2 = 2) of its thermocouple: [1, 2] as documented, [2, 1] with the thermocouples swapped'),
+        Param(
+            'calibration.tem_sign',
+            [1, 1],
+            "per muscle, the sign of its TEM's drive: -1 where the TEM's two leads "
+            'are swapped (a positive drive of its driver output cools the muscle); each 1 or -1',
+        ),
+        Param(
+            'calibration.tem_channel_map',
+            [1, 2],
+            "per muscle, the driver output (the C frame's u1 = 1, u2 = 2) "
+            "wired to its TEM: [1, 2] as documented, [2, 1] with the TEMs' drive wires swapped",
+        ),
+        Param(
+            'calibration.thermocouple_map',
+            [1, 2],
+            "per muscle, the ADC channel (the S frame's adc_T1 = 1, "
+            'adc_T2 = 2) of its thermocouple: [1, 2] as documented, [2, 1] with the thermocouples swapped',
+        ),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -167,13 +268,25 @@ class HardwareBridge(WristNode):
         self._cmd_t: list[float | None] = [None, None]  # sim time [s] of the last good command per TEM
         self._ticks_since_pub = 1  # timer ticks since the last window went out (none went out yet)
         # the stresses are the wire model's (the device measures none): the identified wire's when given
-        self.estimator = StressEstimator(PlantParams.from_files(p['hysteresis_file'],
-                                                                preload_elongation_mm=p['preload_elongation_mm']),
-                                         payload_kg=p['payload_kg'], drift=self._drift())
+        self.estimator = StressEstimator(
+            PlantParams.from_files(p['hysteresis_file'], preload_elongation_mm=p['preload_elongation_mm']),
+            payload_kg=p['payload_kg'],
+            drift=self._drift(),
+        )
         self.seq = P.SequenceTracker()
-        self.counters = {'samples': 0, 'windows': 0, 'windows_skipped': 0, 'resets': 0, 'time_gaps': 0,
-                         'out_of_order': 0, 'stale_discarded': 0, 'invalid_samples': 0,
-                         'safe_ticks': 0, 'rejected_samples': 0, 'windows_withheld': 0}
+        self.counters = {
+            'samples': 0,
+            'windows': 0,
+            'windows_skipped': 0,
+            'resets': 0,
+            'time_gaps': 0,
+            'out_of_order': 0,
+            'stale_discarded': 0,
+            'invalid_samples': 0,
+            'safe_ticks': 0,
+            'rejected_samples': 0,
+            'windows_withheld': 0,
+        }
         # (sim t [s], temps (4,), q, usable): a sample rejected for safety keeps time but is no measurement
         self._window: list[tuple[float, tuple[float, ...], float, bool]] = []
         self._last_t_us: int | None = None
@@ -201,13 +314,20 @@ class HardwareBridge(WristNode):
         for i in (1, 2):
             self.subscription(f'/wrist/tem_{i}/command', lambda msg, i=i: self._on_command(i, msg))
         self._publish_payload()
-        self.link = self.LINK(p['port'], p['baud_rate'], backoff_initial_s=p['reconnect_backoff_initial_s'],
-                              backoff_max_s=p['reconnect_backoff_max_s'], silence_s=p['silence_reconnect_s'])
+        self.link = self.LINK(
+            p['port'],
+            p['baud_rate'],
+            backoff_initial_s=p['reconnect_backoff_initial_s'],
+            backoff_max_s=p['reconnect_backoff_max_s'],
+            silence_s=p['silence_reconnect_s'],
+        )
         self.wall = self.link.clock  # the time base of the link's events: every wall-time limit is read on it
         self.timer = self.create_timer(0.5 * self.period_s, self._tick)
         self.link.start()
-        self.get_logger().info(f'hardware_bridge: port {p["port"]} at {p["baud_rate"]} bit/s, publishing at '
-                               f'{p["publish_rate_hz"]:g} Hz of device time, payload {p["payload_kg"]} kg')
+        self.get_logger().info(
+            f'hardware_bridge: port {p["port"]} at {p["baud_rate"]} bit/s, publishing at '
+            f'{p["publish_rate_hz"]:g} Hz of device time, payload {p["payload_kg"]} kg'
+        )
 
     def destroy_node(self) -> None:
         link = getattr(self, 'link', None)
@@ -221,10 +341,18 @@ class HardwareBridge(WristNode):
     # -- parameters ------------------------------------------------------------
     @staticmethod
     def _calibration(p: Mapping[str, Any]) -> Calibration:
-        return Calibration(p['adc.temperature_gain_C_per_count'], p['adc.temperature_zero_C'],
-                           (p['calibration.muscle_1_offset_C'], p['calibration.muscle_2_offset_C'],
-                            p['calibration.tem_face_1_offset_C'], p['calibration.tem_face_2_offset_C']),
-                           p['calibration.angle_gain_rad_per_count'], p['calibration.angle_offset_rad'])
+        return Calibration(
+            p['adc.temperature_gain_C_per_count'],
+            p['adc.temperature_zero_C'],
+            (
+                p['calibration.muscle_1_offset_C'],
+                p['calibration.muscle_2_offset_C'],
+                p['calibration.tem_face_1_offset_C'],
+                p['calibration.tem_face_2_offset_C'],
+            ),
+            p['calibration.angle_gain_rad_per_count'],
+            p['calibration.angle_offset_rad'],
+        )
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
@@ -297,8 +425,11 @@ class HardwareBridge(WristNode):
             self._await_hello_until = 0.0
             self._device = f'{x.device_id} {x.firmware} at {x.rate_hz} Hz'
             slow = self._slow_device(x.rate_hz)
-            self.diagnose('device', WARN if slow else OK, f'device {self._device}, protocol v{x.version}' +
-                          (': ' + '; '.join(slow) if slow else ''))
+            self.diagnose(
+                'device',
+                WARN if slow else OK,
+                f'device {self._device}, protocol v{x.version}' + (': ' + '; '.join(slow) if slow else ''),
+            )
         elif isinstance(x, P.Error):
             self.diagnose('device', WARN, f'device error {x.code}: {x.text}')
 
@@ -307,11 +438,15 @@ class HardwareBridge(WristNode):
         p = self.p
         out = []
         if rate_hz < 2.0 * p['publish_rate_hz']:  # a one-sample window has no spread and no slope
-            out.append(f'under two samples per publish window: lower publish_rate_hz ({p["publish_rate_hz"]:g}) to '
-                       f'{rate_hz / 2.0:g} or less (velocity is taken between windows meanwhile)')
+            out.append(
+                f'under two samples per publish window: lower publish_rate_hz ({p["publish_rate_hz"]:g}) to '
+                f'{rate_hz / 2.0:g} or less (velocity is taken between windows meanwhile)'
+            )
         if 2.0 / rate_hz > p['sensor_timeout_s']:  # one late sample would turn the TEMs off
-            out.append(f'sensor_timeout_s ({p["sensor_timeout_s"]:g} s) is under two sample periods: raise it to '
-                       f'{2.0 / rate_hz:g} s or more')
+            out.append(
+                f'sensor_timeout_s ({p["sensor_timeout_s"]:g} s) is under two sample periods: raise it to '
+                f'{2.0 / rate_hz:g} s or more'
+            )
         return out
 
     def why_no_data(self) -> str:
@@ -325,13 +460,17 @@ class HardwareBridge(WristNode):
         st = self.link.parser.stats
         seen = self._line_at_sample
         if st.version_mismatch > seen[0]:
-            return (f'the device speaks protocol version {self.link.parser.foreign_version}, this bridge '
-                    f'{P.PROTOCOL_VERSION} '
-                    f'({st.version_mismatch - seen[0]} frames ignored): update the firmware or sma_wrist to match')
+            return (
+                f'the device speaks protocol version {self.link.parser.foreign_version}, this bridge '
+                f'{P.PROTOCOL_VERSION} '
+                f'({st.version_mismatch - seen[0]} frames ignored): update the firmware or sma_wrist to match'
+            )
         bad = st.rejected_lines + st.garbage_bytes - seen[1]
         if bad > 0:
-            return ('bytes arrive but no valid sample (bad checksums, cut or malformed lines, garbage): check the '
-                    'baud rate, the port and doc/explanation/protocol.md')
+            return (
+                'bytes arrive but no valid sample (bad checksums, cut or malformed lines, garbage): check the '
+                'baud rate, the port and doc/explanation/protocol.md'
+            )
         return ''
 
     def _device_restarted(self, why: str) -> None:
@@ -344,19 +483,27 @@ class HardwareBridge(WristNode):
             self.counters['stale_discarded'] += 1
             return
         last_t = self._last_t_us
-        if last_t is not None and s.seq != self.seq.last and \
-                (s.flags & P.FLAG_BOOT or last_t - s.t_us > REORDER_TOLERANCE_US):
+        if (
+            last_t is not None
+            and s.seq != self.seq.last
+            and (s.flags & P.FLAG_BOOT or last_t - s.t_us > REORDER_TOLERANCE_US)
+        ):
             # a boot sample, or device time far back: the device restarted and its reset line was lost (or its
             # clock wrapped). A late line or a coarse clock goes back a little, never this far.
-            self._device_restarted('no reset line; ' + ('a boot flag' if s.flags & P.FLAG_BOOT else
-                                                         f'device time went back {(last_t - s.t_us) * 1e-6:.3f} s'))
+            self._device_restarted(
+                'no reset line; '
+                + (
+                    'a boot flag'
+                    if s.flags & P.FLAG_BOOT
+                    else f'device time went back {(last_t - s.t_us) * 1e-6:.3f} s'
+                )
+            )
             last_t = None
         gap = self.seq.update(s.seq)
         if last_t is not None and gap < 0:  # a repeated or late (reordered) line: its window may be gone
             self.counters['out_of_order'] += 1
             return
-        if last_t is not None and \
-                s.t_us - last_t > 1e6 * self.p['max_backlog_windows'] * self.period_s:
+        if last_t is not None and s.t_us - last_t > 1e6 * self.p['max_backlog_windows'] * self.period_s:
             # device time jumped (samples lost in an overrun or a stall): splice, /clock stays continuous
             self.counters['time_gaps'] += 1
             self._resync()
@@ -394,9 +541,11 @@ class HardwareBridge(WristNode):
         reach the TEMs while it lasts, and nothing else said so. (Its watchdog flag is set at every start, before
         the first command arrives; the bridge's own timeouts cover a host that stops commanding.)"""
         cut = bool(flags & P.FLAG_OVERTEMP)
-        self.diagnose('device_drive', WARN if cut else OK,
-                      'the device cut the TEM drive on its own over-temperature check' if cut
-                      else 'the device drives the TEMs')
+        self.diagnose(
+            'device_drive',
+            WARN if cut else OK,
+            'the device cut the TEM drive on its own over-temperature check' if cut else 'the device drives the TEMs',
+        )
 
     # -- the tick ----------------------------------------------------------------
     def _window_ready(self) -> bool:
@@ -458,11 +607,17 @@ class HardwareBridge(WristNode):
         w = [x for x in w if x[3]]
         if not w:
             self.counters['windows_withheld'] += 1
-            self.diagnose('measurement', ERROR, 'every sample of the window was rejected for safety '
-                          '(ADC at 0 or full scale, angle outside the safe range, or a stuck thermocouple): nothing '
-                          'published',
-                          {'rejected_samples': self.counters['rejected_samples'],
-                           'windows_withheld': self.counters['windows_withheld']})
+            self.diagnose(
+                'measurement',
+                ERROR,
+                'every sample of the window was rejected for safety '
+                '(ADC at 0 or full scale, angle outside the safe range, or a stuck thermocouple): nothing '
+                'published',
+                {
+                    'rejected_samples': self.counters['rejected_samples'],
+                    'windows_withheld': self.counters['windows_withheld'],
+                },
+            )
             return
         t = np.array([x[0] for x in w])
         temps = np.array([x[1] for x in w])
@@ -479,9 +634,13 @@ class HardwareBridge(WristNode):
         estimate = None
         if all(math.isfinite(v) for v in (*T, *var, q, self._qd)):  # a NaN would stay in the estimate's filter
             t_est, self._est_t_s = self._est_t_s, t_end  # withheld windows leave a longer step
-            estimate = self.estimator.update(float(T[0]), float(T[1]), q,
-                                             dt_s=self.period_s if t_est is None else t_end - t_est,
-                                             variance=(var[0] / len(w), var[1] / len(w), q_var))
+            estimate = self.estimator.update(
+                float(T[0]),
+                float(T[1]),
+                q,
+                dt_s=self.period_s if t_est is None else t_end - t_est,
+                variance=(var[0] / len(w), var[1] / len(w), q_var),
+            )
         if estimate is None or not all(math.isfinite(v) for v in estimate):
             self.counters['invalid_samples'] += len(w)
             self.diagnose('estimate', ERROR, 'non-finite value in a window: not published')
@@ -496,8 +655,9 @@ class HardwareBridge(WristNode):
             self.pub_temp[i].publish(msg)
         for i, s in enumerate((s1, s2)):
             self.pub_stress[i].publish(Float64(data=float(s)))
-        js = JointState(name=[self.contract.joint_name], position=[float(q)], velocity=[float(self._qd)],
-                        effort=[float(torque)])
+        js = JointState(
+            name=[self.contract.joint_name], position=[float(q)], velocity=[float(self._qd)], effort=[float(torque)]
+        )
         js.header.stamp = stamp
         js.header.frame_id = self.contract.frame_id
         self.pub_joint.publish(js)
@@ -517,8 +677,10 @@ class HardwareBridge(WristNode):
         if self._last_valid_wall is None or now - self._last_valid_wall > p['sensor_timeout_s']:
             # a fixed text: the age is in the status values (a text changing every tick was one log line per tick)
             why = self.why_no_data()
-            out.append(f'sensor timeout (no valid sample for more than {p["sensor_timeout_s"]:g} s)' +
-                       (f': {why}' if why else ''))
+            out.append(
+                f'sensor timeout (no valid sample for more than {p["sensor_timeout_s"]:g} s)'
+                + (f': {why}' if why else '')
+            )
             return out
         assert self._latest is not None
         temps, q, rail = self._latest
@@ -529,16 +691,19 @@ class HardwareBridge(WristNode):
         if hot_m:
             out.append(f'muscle over-temperature ({max(temps[:2]):.1f} degC, limit {p["max_muscle_temperature_C"]})')
         if hot_f:
-            out.append(f'TEM face over-temperature ({max(temps[2:]):.1f} degC, limit '
-                       f'{p["max_tem_face_temperature_C"]})')
+            out.append(
+                f'TEM face over-temperature ({max(temps[2:]):.1f} degC, limit {p["max_tem_face_temperature_C"]})'
+            )
         if not p['angle_min_rad'] <= q <= p['angle_max_rad']:
             out.append(f'angle {q:.3f} rad outside [{p["angle_min_rad"]}, {p["angle_max_rad"]}]')
         if rail:
             out.append('ADC channel at 0 or full scale (open or shorted sensor)')
         for i, stuck in enumerate(self._stuck.stuck):
             if stuck:
-                out.append(f'muscle {i + 1} thermocouple stuck (the same reading for over {p["stuck_sensor_s"]:g} s '
-                           f'while its TEM was driven one way at over {p["stuck_sensor_drive_V"]:g} V on average)')
+                out.append(
+                    f'muscle {i + 1} thermocouple stuck (the same reading for over {p["stuck_sensor_s"]:g} s '
+                    f'while its TEM was driven one way at over {p["stuck_sensor_drive_V"]:g} V on average)'
+                )
         return out
 
     def _check_safety(self) -> None:
@@ -547,8 +712,11 @@ class HardwareBridge(WristNode):
             self.counters['safe_ticks'] += 1
             self.diagnose('safety', ERROR, 'TEMs off: ' + '; '.join(self._faults), self.status_values())
             # the onset and the recovery are logged by diagnose; while the fault lasts, a reminder
-            self.get_logger().error(f'TEMs still off: {"; ".join(self._faults)} (details on /diagnostics)',
-                                    throttle_duration_sec=FAULT_REMINDER_S, skip_first=True)
+            self.get_logger().error(
+                f'TEMs still off: {"; ".join(self._faults)} (details on /diagnostics)',
+                throttle_duration_sec=FAULT_REMINDER_S,
+                skip_first=True,
+            )
         else:
             self.diagnose('safety', OK, 'normal operation')
 
@@ -575,11 +743,20 @@ class HardwareBridge(WristNode):
     def status_values(self) -> dict[str, Any]:
         st = self.link.parser.stats
         age = None if self._last_valid_wall is None else round(self.wall() - self._last_valid_wall, 3)
-        return {**self.counters, 'last_valid_sample_age_s': age, 'lost_samples': self.seq.lost, 'bad_checksum': st.bad_checksum,
-                'partial_lines': st.partial_lines, 'malformed': st.malformed, 'garbage_bytes': st.garbage_bytes,
-                'version_mismatch': st.version_mismatch, 'connects': self.link.stats.connects,
-                'open_failures': self.link.stats.open_failures, 'device': self._device,
-                'stress': 'model estimate (SD-GPI load solve at measured T and angle)'}
+        return {
+            **self.counters,
+            'last_valid_sample_age_s': age,
+            'lost_samples': self.seq.lost,
+            'bad_checksum': st.bad_checksum,
+            'partial_lines': st.partial_lines,
+            'malformed': st.malformed,
+            'garbage_bytes': st.garbage_bytes,
+            'version_mismatch': st.version_mismatch,
+            'connects': self.link.stats.connects,
+            'open_failures': self.link.stats.open_failures,
+            'device': self._device,
+            'stress': 'model estimate (SD-GPI load solve at measured T and angle)',
+        }
 
     def _report(self) -> None:
         """Line statistics on /diagnostics about once per wall second (WARN while errors accrue)."""
@@ -591,8 +768,12 @@ class HardwareBridge(WristNode):
         bad = self.link.parser.stats.rejected_lines + self.seq.lost
         prev = getattr(self, '_bad_reported', 0)
         self._bad_reported = bad
-        self.diagnose('line', WARN if bad > prev else OK,
-                      f'{bad - prev} line errors / lost samples in the last second' if bad > prev else 'line clean', v)
+        self.diagnose(
+            'line',
+            WARN if bad > prev else OK,
+            f'{bad - prev} line errors / lost samples in the last second' if bad > prev else 'line clean',
+            v,
+        )
 
     def _publish_payload(self) -> None:
         self.pub_payload.publish(Float64(data=float(self.p['payload_kg'])))

@@ -23,11 +23,13 @@ computed from the previous tick. The node subscribes to the commands only while 
 (two deliveries per tick less otherwise). ``thermal_file`` gives the observer the identified heat
 balance tem_controller loads (the same file for both nodes, doc/howto/identify_tems.md).
 """
+
 from __future__ import annotations
 
 import math
 from collections import deque
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -40,13 +42,21 @@ from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_inf
 from sma_wrist.core.hysteresis.params_file import hysteresis_params
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.stamps import stamp_seconds
-from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.core.thermal import online as thermal_online
+from sma_wrist.core.thermal.heat_balance import ThermalParams
 from sma_wrist.core.thermal.kernel import thermal_constants
 from sma_wrist.core.thermal.online import ThermalScaleEstimator
 from sma_wrist.core.thermal.params_file import load_thermal_file
-from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, PRELOAD_PARAM, THERMAL_ADAPTATION_PARAMS, Param, WristNode,
-                                   finite, main_for, online_thermal)
+from sma_wrist.nodes.common import (
+    HYSTERESIS_FILE_PARAM,
+    PRELOAD_PARAM,
+    THERMAL_ADAPTATION_PARAMS,
+    Param,
+    WristNode,
+    finite,
+    main_for,
+    online_thermal,
+)
 
 INPUTS = ('strain_1', 'strain_2', 'stress_1', 'stress_2')
 #: targets of more cycles than this waiting on one topic: a message of another was lost, resynchronise
@@ -64,8 +74,9 @@ def observer_thermal(thermal_file: str = '') -> ThermalParams:
     saturating at the driver rating (the commands it replays are tem_controller's, which the driver clips
     there). Raises ParameterError (with the path) for a missing or malformed file."""
     drive = DriveLimits()
-    return (load_thermal_file(thermal_file) if thermal_file else ThermalParams()).with_limits(drive.boost_min_V,
-                                                                                               drive.boost_max_V)
+    return (load_thermal_file(thermal_file) if thermal_file else ThermalParams()).with_limits(
+        drive.boost_min_V, drive.boost_max_V
+    )
 
 
 #: the observer's heat balance without a thermal_file
@@ -74,46 +85,112 @@ OBSERVER_THERMAL = observer_thermal()
 
 class HysteresisCompensator(WristNode):
     PARAMS = (
-        Param('temperature_min_C', 20.0, 'lowest temperature the compensator asks for (inside the wire '
-              "model's valid range)", 'degC', (-60.0, 400.0)),
-        Param('temperature_max_C', 80.0, 'highest temperature the compensator asks for (inside the wire '
-              "model's valid range)", 'degC', (-60.0, 400.0)),
+        Param(
+            'temperature_min_C',
+            20.0,
+            "lowest temperature the compensator asks for (inside the wire model's valid range)",
+            'degC',
+            (-60.0, 400.0),
+        ),
+        Param(
+            'temperature_max_C',
+            80.0,
+            "highest temperature the compensator asks for (inside the wire model's valid range)",
+            'degC',
+            (-60.0, 400.0),
+        ),
         HYSTERESIS_FILE_PARAM,
         PRELOAD_PARAM,
-        Param('method', 'numerical', 'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
-              choices=('numerical', 'analytic', 'auto')),
-        Param('stress_source', 'measured', 'stress that selects the load-dependent envelopes: the measured one '
-              '(default, doc/explanation/controllers.md) or the desired stress from adaptive_controller (Eq. 5.5 as written)',
-              choices=('measured', 'desired')),
-        Param('memory_source', 'measured', "the inverse's hysteresis memory follows the measured temperatures "
-              '(default: the plant lags its command, doc/explanation/controllers.md) or the commanded ones (Eq. 5.5 as written)',
-              choices=('measured', 'commanded')),
-        Param('shift_gain_per_s', 2.0, "memory_source measured: rate at which each wire's temperature axis follows "
-              "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; doc/explanation/"
-              'controllers.md)', '1/s', (0.0, 20.0)),
-        Param('shift_limit_C', 15.0, "largest temperature-axis shift", 'degC', (0.0, 40.0)),
-        Param('hold_shift_on_stop', False, 'shift_gain_per_s > 0: each wire\'s shift (and stroke) holds while the '
-              'measured angle is on a mechanical stop, or the joint stands still with a wire slack: the angle then '
-              'says nothing about the wires (doc/explanation/controllers.md)'),
-        Param('hold_shift_outside_load_range', False, "shift_gain_per_s > 0: a wrist's shifts (and strokes) hold "
-              "while either wire's measured load lies outside the SD-GPI's calibrated range (a slack or "
-              'overloaded pair; doc/explanation/controllers.md; off by default: '
-              '"The load-range gate, after the slope fix")'),
-        Param('stroke_gain_per_s', 0.5, "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
-              "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
-              'ends (0 = the model\'s stroke; doc/explanation/controllers.md)', '1/s', (0.0, 20.0)),
-        Param('temperature_source', 'observer', 'temperature the memory and the axis follow: the muscle-temperature '
-              'observer driven by the TEM commands (default) or the thermocouple as measured (doc/explanation/'
-              'controllers.md)', choices=('thermocouple', 'observer')),
-        Param('window_follows_shift', True, "shift_gain_per_s > 0: the inverse searches the temperature window moved "
-              "by each wire's shift, so its answers span the whole window on the wire's axis (doc/explanation/"
-              'controllers.md)'),
-        Param('observer.correction_s', TemperatureObserverParams.correction_s, 'temperature_source observer: time '
-              'constant pulling the estimate toward the thermocouple', 's', (0.0, 10.0)),
-        Param('observer.tc_lag_s', TemperatureObserverParams.tc_lag_s, 'temperature_source observer: first-order lag '
-              'of the thermocouple the observer assumes (0: none)', 's', (0.0, 10.0)),
-        Param('thermal_file', '', 'temperature_source observer: identified TEM heat balance the observer runs '
-              "(sma-wrist identify thermal; the same file as tem_controller's; empty: Table 4.9)", runtime=False),
+        Param(
+            'method',
+            'numerical',
+            'inverse: numerical root, literal analytic Eq. 5.7-5.8, or auto',
+            choices=('numerical', 'analytic', 'auto'),
+        ),
+        Param(
+            'stress_source',
+            'measured',
+            'stress that selects the load-dependent envelopes: the measured one '
+            '(default, doc/explanation/controllers.md) or the desired stress from adaptive_controller (Eq. 5.5 as written)',
+            choices=('measured', 'desired'),
+        ),
+        Param(
+            'memory_source',
+            'measured',
+            "the inverse's hysteresis memory follows the measured temperatures "
+            '(default: the plant lags its command, doc/explanation/controllers.md) or the commanded ones (Eq. 5.5 as written)',
+            choices=('measured', 'commanded'),
+        ),
+        Param(
+            'shift_gain_per_s',
+            2.0,
+            "memory_source measured: rate at which each wire's temperature axis follows "
+            "the SD-GPI's strain prediction error at the measured angle (0 = the model's axis; doc/explanation/"
+            'controllers.md)',
+            '1/s',
+            (0.0, 20.0),
+        ),
+        Param('shift_limit_C', 15.0, 'largest temperature-axis shift', 'degC', (0.0, 40.0)),
+        Param(
+            'hold_shift_on_stop',
+            False,
+            "shift_gain_per_s > 0: each wire's shift (and stroke) holds while the "
+            'measured angle is on a mechanical stop, or the joint stands still with a wire slack: the angle then '
+            'says nothing about the wires (doc/explanation/controllers.md)',
+        ),
+        Param(
+            'hold_shift_outside_load_range',
+            False,
+            "shift_gain_per_s > 0: a wrist's shifts (and strokes) hold "
+            "while either wire's measured load lies outside the SD-GPI's calibrated range (a slack or "
+            'overloaded pair; doc/explanation/controllers.md; off by default: '
+            '"The load-range gate, after the slope fix")',
+        ),
+        Param(
+            'stroke_gain_per_s',
+            0.5,
+            "shift_gain_per_s > 0: rate at which each wire's stroke ratio (to the "
+            "SD-GPI's, about its mid-stroke elongation) follows the strain prediction error on the loop's flat "
+            "ends (0 = the model's stroke; doc/explanation/controllers.md)",
+            '1/s',
+            (0.0, 20.0),
+        ),
+        Param(
+            'temperature_source',
+            'observer',
+            'temperature the memory and the axis follow: the muscle-temperature '
+            'observer driven by the TEM commands (default) or the thermocouple as measured (doc/explanation/'
+            'controllers.md)',
+            choices=('thermocouple', 'observer'),
+        ),
+        Param(
+            'window_follows_shift',
+            True,
+            'shift_gain_per_s > 0: the inverse searches the temperature window moved '
+            "by each wire's shift, so its answers span the whole window on the wire's axis (doc/explanation/"
+            'controllers.md)',
+        ),
+        Param(
+            'observer.correction_s',
+            TemperatureObserverParams.correction_s,
+            'temperature_source observer: time constant pulling the estimate toward the thermocouple',
+            's',
+            (0.0, 10.0),
+        ),
+        Param(
+            'observer.tc_lag_s',
+            TemperatureObserverParams.tc_lag_s,
+            'temperature_source observer: first-order lag of the thermocouple the observer assumes (0: none)',
+            's',
+            (0.0, 10.0),
+        ),
+        Param(
+            'thermal_file',
+            '',
+            'temperature_source observer: identified TEM heat balance the observer runs '
+            "(sma-wrist identify thermal; the same file as tem_controller's; empty: Table 4.9)",
+            runtime=False,
+        ),
         *THERMAL_ADAPTATION_PARAMS,
     )
 
@@ -151,18 +228,25 @@ class HysteresisCompensator(WristNode):
         self.get_logger().info(
             f'hysteresis_compensator: method {p["method"]}, temperatures {p["temperature_min_C"]:g}-'
             f'{p["temperature_max_C"]:g} degC, memory from the {p["temperature_source"]} temperatures; '
-            + self.waiting_for('the desired strains and stresses (/wrist/muscle_{1,2}/strain_desired, '
-                               'stress_desired) of adaptive_controller, and the measured temperatures, stresses and '
-                               'joint state'))
+            + self.waiting_for(
+                'the desired strains and stresses (/wrist/muscle_{1,2}/strain_desired, '
+                'stress_desired) of adaptive_controller, and the measured temperatures, stresses and '
+                'joint state'
+            )
+        )
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
         problem = super().validate(values)
         if problem is None and not values['temperature_min_C'] < values['temperature_max_C']:
-            problem = (f'temperature_min_C = {values["temperature_min_C"]} must be below '
-                       f'temperature_max_C = {values["temperature_max_C"]}')
+            problem = (
+                f'temperature_min_C = {values["temperature_min_C"]} must be below '
+                f'temperature_max_C = {values["temperature_max_C"]}'
+            )
         if problem is None and values['temperature_source'] == 'observer' and values['memory_source'] != 'measured':
-            problem = ("temperature_source 'observer' feeds the measured memory: it needs memory_source 'measured' "
-                       f"(is {values['memory_source']!r})")
+            problem = (
+                "temperature_source 'observer' feeds the measured memory: it needs memory_source 'measured' "
+                f'(is {values["memory_source"]!r})'
+            )
         if problem is None:
             try:
                 lo, hi = hysteresis_params(values['hysteresis_file']).T_valid
@@ -171,31 +255,49 @@ class HysteresisCompensator(WristNode):
             except SmaWristError as e:
                 return str(e)
             if values['temperature_min_C'] < lo or values['temperature_max_C'] > hi:
-                problem = (f'temperature window {values["temperature_min_C"]:g}-{values["temperature_max_C"]:g} degC '
-                           f'leaves the wire model\'s valid range {lo:g}-{hi:g} degC')
+                problem = (
+                    f'temperature window {values["temperature_min_C"]:g}-{values["temperature_max_C"]:g} degC '
+                    f"leaves the wire model's valid range {lo:g}-{hi:g} degC"
+                )
         return problem
 
     def _build(self) -> None:
         window = (self.p['temperature_min_C'], self.p['temperature_max_C'])
         wire = hysteresis_params(self.p['hysteresis_file'])
-        self.comp = MuscleCompensator(wire, T_range_C=window, method=self.p['method'],
-                                      shift_gain_per_s=self.p['shift_gain_per_s'], shift_limit_C=self.p['shift_limit_C'],
-                                      window_follows_shift=self.p['window_follows_shift'],
-                                      stroke_gain_per_s=self.p['stroke_gain_per_s'],
-                                      hold_outside_load_range=self.p['hold_shift_outside_load_range'])
+        self.comp = MuscleCompensator(
+            wire,
+            T_range_C=window,
+            method=self.p['method'],
+            shift_gain_per_s=self.p['shift_gain_per_s'],
+            shift_limit_C=self.p['shift_limit_C'],
+            window_follows_shift=self.p['window_follows_shift'],
+            stroke_gain_per_s=self.p['stroke_gain_per_s'],
+            hold_outside_load_range=self.p['hold_shift_outside_load_range'],
+        )
         # one throwaway evaluation compiles the inverse's kernels (numba: seconds on a cold cache)
         # here rather than at the first sample of a running loop
-        warm = MuscleCompensator(wire, T_range_C=window, method=self.p['method'], shift_gain_per_s=1.0,
-                                 window_follows_shift=self.p['window_follows_shift'], stroke_gain_per_s=1.0,
-                                 hold_outside_load_range=False)  # adapts at any load: the adaptation compiles
+        warm = MuscleCompensator(
+            wire,
+            T_range_C=window,
+            method=self.p['method'],
+            shift_gain_per_s=1.0,
+            window_follows_shift=self.p['window_follows_shift'],
+            stroke_gain_per_s=1.0,
+            hold_outside_load_range=False,
+        )  # adapts at any load: the adaptation compiles
         T_mid = 0.5 * (window[0] + window[1])
         warm.reset(np.full(2, T_mid), np.full(2, 1.2e8))
         warm.track(np.full(2, T_mid + 1.0), np.full(2, 1.2e8), np.full(2, 0.03), 0.01)
         warm(np.full(2, 0.02), np.full(2, 1.2e8), commit=False)
         old_observer = getattr(self, 'observer', None)
-        self.observer = None if self.p['temperature_source'] != 'observer' else MuscleTemperatureObserver(
-            observer_thermal(self.p['thermal_file']),
-            TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']))
+        self.observer = (
+            None
+            if self.p['temperature_source'] != 'observer'
+            else MuscleTemperatureObserver(
+                observer_thermal(self.p['thermal_file']),
+                TemperatureObserverParams(self.p['observer.correction_s'], self.p['observer.tc_lag_s']),
+            )
+        )
         if self.observer is not None:  # its heat-balance step is compiled too: a throwaway observer's two samples
             warm_obs = MuscleTemperatureObserver(self.observer.thermal, self.observer.params)
             for _ in range(2):
@@ -225,8 +327,9 @@ class HysteresisCompensator(WristNode):
     def _subscribe_commands(self) -> None:
         """Take the TEM commands while the observer runs, and only then."""
         if self.observer is not None and not self.command_subs:
-            self.command_subs = [self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m))
-                                 for i in (1, 2)]
+            self.command_subs = [
+                self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m)) for i in (1, 2)
+            ]
         elif self.observer is None and self.command_subs:
             for sub in self.command_subs:
                 self.destroy_subscription(sub)
@@ -334,8 +437,13 @@ class HysteresisCompensator(WristNode):
                 adapt = None
                 if self.p['hold_shift_on_stop']:  # no earlier angle yet: taken as standing still
                     q_prev = self.q_prev if self.q_prev == self.q_prev else tick[ANGLE]
-                    adapt = strain_informative(tick[ANGLE], q_prev, dt, self.stress_meas,
-                                               (self.plant.joint.q_min_rad, self.plant.joint.q_max_rad))
+                    adapt = strain_informative(
+                        tick[ANGLE],
+                        q_prev,
+                        dt,
+                        self.stress_meas,
+                        (self.plant.joint.q_min_rad, self.plant.joint.q_max_rad),
+                    )
                 self.q_prev = tick[ANGLE]
                 self.comp.track(self.T_meas, self.stress_meas, bundle_strain(self.plant, tick[ANGLE]), dt, adapt)
                 self._report_shift()
@@ -355,11 +463,15 @@ class HysteresisCompensator(WristNode):
             return
         self._shift_at_limit = at
         wires = ' and '.join(f'muscle {i + 1}' for i, a in enumerate(at) if a)
-        self.diagnose('adaptation', DiagnosticStatus.WARN if wires else DiagnosticStatus.OK,
-                      f'learnt temperature shift of {wires} at the +-{lim:g} degC limit: the model does not explain '
-                      'the wire (another wire, or slack / on a stop); direct_adaptive or pid do not depend on it'
-                      if wires else 'learnt temperature shifts inside their limits',
-                      {'shift_C': np.round(self.comp.shift_C, 2).tolist()})
+        self.diagnose(
+            'adaptation',
+            DiagnosticStatus.WARN if wires else DiagnosticStatus.OK,
+            f'learnt temperature shift of {wires} at the +-{lim:g} degC limit: the model does not explain '
+            'the wire (another wire, or slack / on a stop); direct_adaptive or pid do not depend on it'
+            if wires
+            else 'learnt temperature shifts inside their limits',
+            {'shift_C': np.round(self.comp.shift_C, 2).tolist()},
+        )
 
     def _on_target(self, key: str, msg: Any) -> None:
         """Collect one cycle's four targets, paired by their order on each topic, not by arrival.
@@ -405,9 +517,13 @@ class HysteresisCompensator(WristNode):
         sat = any(res.saturated.tolist()) or any(res.load_clipped.tolist())
         if sat != self._saturated:  # diagnose publishes on change only: skip building its values (~10 us a tick)
             self._saturated = sat
-            self.diagnose('saturation', DiagnosticStatus.WARN if sat else DiagnosticStatus.OK,
-                          'target outside the reachable temperature/load window' if sat else 'targets reachable',
-                          {'load_kgf': np.round(res.load_kgf, 3).tolist()}, routine=True)
+            self.diagnose(
+                'saturation',
+                DiagnosticStatus.WARN if sat else DiagnosticStatus.OK,
+                'target outside the reachable temperature/load window' if sat else 'targets reachable',
+                {'load_kgf': np.round(res.load_kgf, 3).tolist()},
+                routine=True,
+            )
         stamp = self.get_clock().now().to_msg()
         for i, T in enumerate(res.temperature_C.tolist()):
             msg = Temperature(temperature=T, variance=0.0)

@@ -23,10 +23,12 @@ commands are rejected (last good command kept), a command older than
 ``command_timeout_s`` is replaced by 0 V (TEMs off), and a muscle above
 ``max_muscle_temperature_C`` is reported.
 """
+
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time as TimeMsg
@@ -39,8 +41,16 @@ from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
-from sma_wrist.nodes.common import (HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, PRELOAD_PARAM, Freshness, Param,
-                                   WristNode, finite, main_for)
+from sma_wrist.nodes.common import (
+    HYSTERESIS_FILE_PARAM,
+    MUSCLE_FRAMES,
+    PRELOAD_PARAM,
+    Freshness,
+    Param,
+    WristNode,
+    finite,
+    main_for,
+)
 from sma_wrist.plants import PLANTS
 from sma_wrist.plants.spread import VALIDITY as SCENARIO_AXES
 
@@ -77,42 +87,86 @@ class RealTimeMonitor:
 class PlantSim(WristNode):
     OWNS_CLOCK = True
     PARAMS = (
-        Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m', 'kg', PAYLOAD_RANGE_KG),
-        Param('dt_s', 1e-3, 'plant integration step', 's', (1e-4, 1e-2), runtime=False),
-        Param('publish_rate_hz', 100.0, 'rate of /clock and of the measurements, in simulated time', 'Hz',
-              (1.0, 1000.0), runtime=False),
-        Param('real_time_factor', 1.0, 'simulated seconds per second of the node clock (steady time)', '1',
-              (0.01, 1000.0), runtime=False),
-        Param('initial_angle_rad', -1.0, 'start angle; negative = static equilibrium at zero drive', 'rad',
-              (-1.0, 1.4), runtime=False),
-        Param('command_timeout_s', 0.5, 'a TEM command older than this is replaced by 0 V', 's', (0.01, 60.0)),
-        Param('max_muscle_temperature_C', 90.0, 'muscle over-temperature threshold (reported)', 'degC',
-              (30.0, 120.0)),
-        Param('thermal_file', '', 'identified TEM heat balance (sma-wrist identify thermal; empty: Table 4.9)',
-              runtime=False),
-        HYSTERESIS_FILE_PARAM,
-        PRELOAD_PARAM,
-    ) + tuple(
-        # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
-        Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
-        for e in mx.PARAMS) + (
-        # a plant that is not the controllers' model (sma_wrist.plants); 'model' = the one above
-        Param('plant', 'model', 'simulated plant: the model (with model.*) or a registered test plant '
-              '(sma_wrist.plants)', choices=('model',) + tuple(PLANTS), runtime=False),
-        Param('scenario_file', '', 'JSON {perturbation: value} for a registered plant (overrides scenario.*)',
-              runtime=False),
-        Param('scenario.noise_seed', 0, 'seed of the scenario\'s sensor noise', '', (0, 2 ** 31 - 1), runtime=False),
-    ) + tuple(
-        Param(f'scenario.{a.name}', float(a.nominal), a.description, a.unit, (a.lower, a.upper), runtime=False)
-        for a in SCENARIO_AXES if a.name != 'payload_kg')
+        (
+            Param('payload_kg', 0.3, 'payload mass M at the lever l = 0.09 m', 'kg', PAYLOAD_RANGE_KG),
+            Param('dt_s', 1e-3, 'plant integration step', 's', (1e-4, 1e-2), runtime=False),
+            Param(
+                'publish_rate_hz',
+                100.0,
+                'rate of /clock and of the measurements, in simulated time',
+                'Hz',
+                (1.0, 1000.0),
+                runtime=False,
+            ),
+            Param(
+                'real_time_factor',
+                1.0,
+                'simulated seconds per second of the node clock (steady time)',
+                '1',
+                (0.01, 1000.0),
+                runtime=False,
+            ),
+            Param(
+                'initial_angle_rad',
+                -1.0,
+                'start angle; negative = static equilibrium at zero drive',
+                'rad',
+                (-1.0, 1.4),
+                runtime=False,
+            ),
+            Param('command_timeout_s', 0.5, 'a TEM command older than this is replaced by 0 V', 's', (0.01, 60.0)),
+            Param(
+                'max_muscle_temperature_C', 90.0, 'muscle over-temperature threshold (reported)', 'degC', (30.0, 120.0)
+            ),
+            Param(
+                'thermal_file',
+                '',
+                'identified TEM heat balance (sma-wrist identify thermal; empty: Table 4.9)',
+                runtime=False,
+            ),
+            HYSTERESIS_FILE_PARAM,
+            PRELOAD_PARAM,
+        )
+        + tuple(
+            # the extended model of `sma-wrist diagnose` (its params file sets these); nominal = plain plant
+            Param(f'model.{e.name}', float(e.nominal), e.description, e.unit, (e.lower, e.upper), runtime=False)
+            for e in mx.PARAMS
+        )
+        + (
+            # a plant that is not the controllers' model (sma_wrist.plants); 'model' = the one above
+            Param(
+                'plant',
+                'model',
+                'simulated plant: the model (with model.*) or a registered test plant (sma_wrist.plants)',
+                choices=('model',) + tuple(PLANTS),
+                runtime=False,
+            ),
+            Param(
+                'scenario_file',
+                '',
+                'JSON {perturbation: value} for a registered plant (overrides scenario.*)',
+                runtime=False,
+            ),
+            Param('scenario.noise_seed', 0, "seed of the scenario's sensor noise", '', (0, 2**31 - 1), runtime=False),
+        )
+        + tuple(
+            Param(f'scenario.{a.name}', float(a.nominal), a.description, a.unit, (a.lower, a.upper), runtime=False)
+            for a in SCENARIO_AXES
+            if a.name != 'payload_kg'
+        )
+    )
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('plant_sim', **kwargs)
         p = self.p
         ext = {e.name: p[f'model.{e.name}'] for e in mx.PARAMS}
-        base = PlantParams.from_files(p['hysteresis_file'], p['thermal_file'], dt=p['dt_s'],
-                                      max_muscle_temperature_C=p['max_muscle_temperature_C'],
-                                      preload_elongation_mm=p['preload_elongation_mm'])
+        base = PlantParams.from_files(
+            p['hysteresis_file'],
+            p['thermal_file'],
+            dt=p['dt_s'],
+            max_muscle_temperature_C=p['max_muscle_temperature_C'],
+            preload_elongation_mm=p['preload_elongation_mm'],
+        )
         self.sim_params = mx.plant_params(ext, base)
         # /wrist/payload publishes payload_kg (what the user believes); the joint carries the true mass
         self.payload_err_kg = ext['payload_err_kg']
@@ -127,8 +181,9 @@ class PlantSim(WristNode):
             self.plant.state = self.plant.rest_state(np.array([true_payload]), q0=q0)
         self.sensors = mx.SensorChain(ext, 1.0 / p['publish_rate_hz'], self.sim_params.joint.q_neutral_rad)
         if ext != mx.NOMINAL:
-            self.get_logger().info('extended model: ' + ', '.join(
-                f'{k} = {v:g}' for k, v in ext.items() if v != mx.NOMINAL[k]))
+            self.get_logger().info(
+                'extended model: ' + ', '.join(f'{k} = {v:g}' for k, v in ext.items() if v != mx.NOMINAL[k])
+            )
         self.steps_per_tick = max(1, int(round(1.0 / (p['publish_rate_hz'] * p['dt_s']))))
         self.command_V = np.zeros((1, 2))
         self.fresh = Freshness(self, ('tem_1', 'tem_2'))
@@ -149,21 +204,29 @@ class PlantSim(WristNode):
         self._publish_measurements()
         self.get_logger().info(
             f'plant_sim: payload {p["payload_kg"]} kg, dt {p["dt_s"]} s, {self.steps_per_tick} steps per '
-            f'{1.0 / p["publish_rate_hz"]:g} s tick, start angle {float(self.plant.state.q[0]):.3f} rad')
+            f'{1.0 / p["publish_rate_hz"]:g} s tick, start angle {float(self.plant.state.q[0]):.3f} rad'
+        )
 
     def _test_plant(self, p: Mapping[str, Any], ext: Mapping[str, float], payload: float, q0: float | None) -> Any:
         """A registered plant (sma_wrist.plants) of the scenario given by scenario.* or scenario_file."""
         from sma_wrist.plants import make_plant
         from sma_wrist.plants.spread import Scenario, SensorBank
+
         if ext != mx.NOMINAL or q0 is not None:
-            raise SmaWristError(f'plant {p["plant"]!r} takes its perturbations from scenario.* / scenario_file: '
-                                'leave model.* nominal and initial_angle_rad negative')
+            raise SmaWristError(
+                f'plant {p["plant"]!r} takes its perturbations from scenario.* / scenario_file: '
+                'leave model.* nominal and initial_angle_rad negative'
+            )
         if p['scenario_file']:
             sc = Scenario.from_file(p['scenario_file'], {'payload_kg': payload})
         else:
-            sc = Scenario.from_mapping({'payload_kg': payload, 'noise_seed': int(p['scenario.noise_seed']),
-                                        **{a.name: p[f'scenario.{a.name}'] for a in SCENARIO_AXES
-                                           if a.name != 'payload_kg'}})
+            sc = Scenario.from_mapping(
+                {
+                    'payload_kg': payload,
+                    'noise_seed': int(p['scenario.noise_seed']),
+                    **{a.name: p[f'scenario.{a.name}'] for a in SCENARIO_AXES if a.name != 'payload_kg'},
+                }
+            )
         self.get_logger().info(f'plant {p["plant"]}: ' + ', '.join(f'{k} = {v:g}' for k, v in sc.to_dict().items()))
         return make_plant(p['plant'], [sc], self.sim_params), SensorBank([sc], 1.0 / p['publish_rate_hz'])
 
@@ -204,35 +267,59 @@ class PlantSim(WristNode):
         lo, hi = self.sim_params.thermal.window_C
         faces = s.thermal[0].ravel().tolist()
         outside = not all(lo <= f <= hi for f in faces)  # NaN counts as outside
-        clamped = s.flags.get('overload')  # a wire's load held at the wire model's bound (the phase-fraction wire has none)
-        status = (stale, bool(s.flags['command_saturated'][0]), bool(s.flags['over_temperature'][0]), outside,
-                  clamped is not None and bool(clamped[0]))
+        clamped = s.flags.get(
+            'overload'
+        )  # a wire's load held at the wire model's bound (the phase-fraction wire has none)
+        status = (
+            stale,
+            bool(s.flags['command_saturated'][0]),
+            bool(s.flags['over_temperature'][0]),
+            outside,
+            clamped is not None and bool(clamped[0]),
+        )
         if status != self._status:  # diagnose publishes on change only: skip building its arguments
             self._status = status
             self._diagnose_tick(*status, faces)
         self._publish_measurements()
         self._check_real_time(now_ns)
 
-    def _diagnose_tick(self, stale: tuple[str, ...], saturated: bool, hot: bool, outside: bool, overload: bool,
-                       faces: list[float]) -> None:
-        self.diagnose('command', DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
-                      f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh')
-        self.diagnose('saturation', DiagnosticStatus.WARN if saturated else DiagnosticStatus.OK,
-                      'TEM command clipped to the drive limits' if saturated else 'commands within limits',
-                      {'u_min_V': self.sim_params.thermal.u_min_V, 'u_max_V': self.sim_params.thermal.u_max_V})
-        self.diagnose('temperature', DiagnosticStatus.ERROR if hot else DiagnosticStatus.OK,
-                      f'muscle above {self.p["max_muscle_temperature_C"]} degC' if hot else 'temperatures normal')
+    def _diagnose_tick(
+        self, stale: tuple[str, ...], saturated: bool, hot: bool, outside: bool, overload: bool, faces: list[float]
+    ) -> None:
+        self.diagnose(
+            'command',
+            DiagnosticStatus.WARN if stale else DiagnosticStatus.OK,
+            f'no fresh command on {", ".join(stale)}: TEM off' if stale else 'commands fresh',
+        )
+        self.diagnose(
+            'saturation',
+            DiagnosticStatus.WARN if saturated else DiagnosticStatus.OK,
+            'TEM command clipped to the drive limits' if saturated else 'commands within limits',
+            {'u_min_V': self.sim_params.thermal.u_min_V, 'u_max_V': self.sim_params.thermal.u_max_V},
+        )
+        self.diagnose(
+            'temperature',
+            DiagnosticStatus.ERROR if hot else DiagnosticStatus.OK,
+            f'muscle above {self.p["max_muscle_temperature_C"]} degC' if hot else 'temperatures normal',
+        )
         lo, hi = self.sim_params.thermal.window_C
-        self.diagnose('tem_faces', DiagnosticStatus.ERROR if outside else DiagnosticStatus.OK,
-                      f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
-                      {'hottest_C': f'{max(faces):.2f}', 'coldest_C': f'{min(faces):.2f}'} if outside else None)
+        self.diagnose(
+            'tem_faces',
+            DiagnosticStatus.ERROR if outside else DiagnosticStatus.OK,
+            f'a TEM face outside its {lo:g}-{hi:g} degC window' if outside else 'TEM faces inside their window',
+            {'hottest_C': f'{max(faces):.2f}', 'coldest_C': f'{min(faces):.2f}'} if outside else None,
+        )
         # the SD-GPI load solve searches up to max_load_kgf; a wire that would carry more is held there, and the
         # wrist's motion from then on is the bound's, not the wire's (doc/explanation/controllers.md)
         m = self.sim_params.muscle
         bound = f'{m.max_load_kgf:g} kgf ({float(m.stress_Pa(m.max_load_kgf)) * 1e-6:.0f} MPa)'
-        self.diagnose('wire_load', DiagnosticStatus.ERROR if overload else DiagnosticStatus.OK,
-                      f'a wire\'s load reached the wire model\'s bound {bound}: the simulation has left the model'
-                      if overload else 'wire loads inside the wire model')
+        self.diagnose(
+            'wire_load',
+            DiagnosticStatus.ERROR if overload else DiagnosticStatus.OK,
+            f"a wire's load reached the wire model's bound {bound}: the simulation has left the model"
+            if overload
+            else 'wire loads inside the wire model',
+        )
 
     def _check_real_time(self, now_ns: int) -> None:
         achieved = self.real_time.update(self.plant.state.t, now_ns * 1e-9)
@@ -245,10 +332,16 @@ class PlantSim(WristNode):
             return
         # diagnose publishes and logs on a changed message: keep the first window's number while slow
         if self._slow_message is None:
-            self._slow_message = (f'simulating at {achieved:.2f}x instead of real_time_factor {wanted:g}x: the '
-                                  'machine cannot keep up (lower real_time_factor)')
-        self.diagnose('real_time', DiagnosticStatus.WARN, self._slow_message,
-                      {'achieved': f'{achieved:.3f}', 'real_time_factor': f'{wanted:g}'})
+            self._slow_message = (
+                f'simulating at {achieved:.2f}x instead of real_time_factor {wanted:g}x: the '
+                'machine cannot keep up (lower real_time_factor)'
+            )
+        self.diagnose(
+            'real_time',
+            DiagnosticStatus.WARN,
+            self._slow_message,
+            {'achieved': f'{achieved:.3f}', 'real_time_factor': f'{wanted:g}'},
+        )
 
     def diagnostics_stamp(self) -> Any:
         """Sim time, as the measurements and /clock (its own clock is the system clock)."""
@@ -275,12 +368,19 @@ class PlantSim(WristNode):
         T = T.tolist()
         stress = plant.wire_stress_Pa[0].tolist()
         for i in range(2):
-            self.pub_temp[i].publish(Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]),
-                                                 temperature=T[i], variance=0.0))
+            self.pub_temp[i].publish(
+                Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=T[i], variance=0.0)
+            )
             self.pub_stress[i].publish(Float64(data=stress[i]))
-        self.pub_joint.publish(JointState(header=Header(stamp=stamp, frame_id=self.contract.frame_id),
-                                          name=[self.contract.joint_name], position=[q_meas],
-                                          velocity=[qd_meas], effort=[float(plant.muscle_torque_Nm[0])]))
+        self.pub_joint.publish(
+            JointState(
+                header=Header(stamp=stamp, frame_id=self.contract.frame_id),
+                name=[self.contract.joint_name],
+                position=[q_meas],
+                velocity=[qd_meas],
+                effort=[float(plant.muscle_torque_Nm[0])],
+            )
+        )
 
     def _publish_payload(self) -> None:
         self.pub_payload.publish(Float64(data=float(self.p['payload_kg'])))

@@ -12,10 +12,12 @@ Output: ``/wrist/reference``
 (sensor_msgs/JointState: position q_d, velocity, effort = acceleration, documented in
 msg_defs/topics.yaml).
 """
+
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Mapping
+from collections.abc import Mapping
+from typing import Any
 
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -36,8 +38,15 @@ def _shape_params() -> tuple[Param, ...]:
         for f in dataclasses.fields(cls):
             suffix = next(k for k in _RANGES if f.name.endswith(k))
             rng, unit = _RANGES[suffix]
-            out.append(Param(f'{shape}.{f.name}', float(f.default), f'{shape}: {f.name} (sma_wrist.core.control.trajectory.'
-                             f'{cls.__name__})', unit, rng))
+            out.append(
+                Param(
+                    f'{shape}.{f.name}',
+                    float(f.default),
+                    f'{shape}: {f.name} (sma_wrist.core.control.trajectory.{cls.__name__})',
+                    unit,
+                    rng,
+                )
+            )
     return tuple(out)
 
 
@@ -47,9 +56,15 @@ class TrajectoryGenerator(WristNode):
         Param('rate_hz', 100.0, 'publishing rate', 'Hz', (1.0, 1000.0), runtime=False),
         Param('angle_min_rad', 0.0, 'lowest angle a reference may command', 'rad', (-0.35, 1.4)),
         Param('angle_max_rad', 1.05, 'highest angle a reference may command', 'rad', (-0.35, 1.4)),
-        Param('soft_start_s', 0.0, 'the reference starts at the wrist\'s measured angle and joins the shape '
-              'over this time (quintic blend, at rest at both ends); 0: the shape from its first value at once, '
-              'however far the wrist is from it', 's', (0.0, 120.0)),
+        Param(
+            'soft_start_s',
+            0.0,
+            "the reference starts at the wrist's measured angle and joins the shape "
+            'over this time (quintic blend, at rest at both ends); 0: the shape from its first value at once, '
+            'however far the wrist is from it',
+            's',
+            (0.0, 120.0),
+        ),
     ) + _shape_params()
 
     def __init__(self, **kwargs: Any) -> None:
@@ -66,16 +81,17 @@ class TrajectoryGenerator(WristNode):
         self.timer = self.create_timer(1.0 / self.p['rate_hz'], self._tick)
         p = self.p
         shape = ', '.join(f'{k.split(".", 1)[1]} {v:g}' for k, v in p.items() if k.startswith(p['shape'] + '.'))
-        self.get_logger().info(f'trajectory_generator: {p["shape"]} ({shape}) within [{p["angle_min_rad"]:g}, '
-                               f'{p["angle_max_rad"]:g}] rad on /wrist/reference at {p["rate_hz"]:g} Hz, t = 0 at its '
-                               'first tick' + ('; waiting for /clock (use_sim_time)'
-                                               if self.get_parameter('use_sim_time').value else ''))
+        self.get_logger().info(
+            f'trajectory_generator: {p["shape"]} ({shape}) within [{p["angle_min_rad"]:g}, '
+            f'{p["angle_max_rad"]:g}] rad on /wrist/reference at {p["rate_hz"]:g} Hz, t = 0 at its '
+            'first tick' + ('; waiting for /clock (use_sim_time)' if self.get_parameter('use_sim_time').value else '')
+        )
 
     def _build(self, p: Mapping[str, Any]) -> Trajectory:
         """The core generator for a parameter set; ParameterError names what is wrong."""
         shape = p['shape']
         prefix = shape + '.'
-        kwargs = {k[len(prefix):]: v for k, v in p.items() if k.startswith(prefix)}
+        kwargs = {k[len(prefix) :]: v for k, v in p.items() if k.startswith(prefix)}
         return make_trajectory(shape, (p['angle_min_rad'], p['angle_max_rad']), **kwargs)
 
     def validate(self, values: Mapping[str, Any]) -> str | None:
@@ -111,8 +127,10 @@ class TrajectoryGenerator(WristNode):
                     self.waiting_since_ns = now.nanoseconds
                 elif not self.told_waiting and now.nanoseconds - self.waiting_since_ns > 1e9:
                     self.told_waiting = True
-                    self.get_logger().info('no /wrist/joint_states yet: the reference starts at the measured angle '
-                                           '(soft_start_s; 0 publishes the shape without it)')
+                    self.get_logger().info(
+                        'no /wrist/joint_states yet: the reference starts at the measured angle '
+                        '(soft_start_s; 0 publishes the shape without it)'
+                    )
                 return
             self.t0_ns = now.nanoseconds
             if self.angle is not None:  # a reference never leaves the angle limits, its start neither
@@ -120,8 +138,15 @@ class TrajectoryGenerator(WristNode):
             self.trajectory = self._soft(self.start_rad)
         t = (now.nanoseconds - self.t0_ns) * 1e-9
         q, qd, qdd = (float(x) for x in self.trajectory(t))
-        self.pub.publish(JointState(header=Header(stamp=now.to_msg(), frame_id=self.contract.frame_id),
-                                    name=[self.contract.joint_name], position=[q], velocity=[qd], effort=[qdd]))
+        self.pub.publish(
+            JointState(
+                header=Header(stamp=now.to_msg(), frame_id=self.contract.frame_id),
+                name=[self.contract.joint_name],
+                position=[q],
+                velocity=[qd],
+                effort=[qdd],
+            )
+        )
 
 
 def main(args: list[str] | None = None) -> int:

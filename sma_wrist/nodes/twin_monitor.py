@@ -14,6 +14,7 @@ verdict history goes to ``history_file`` (.csv, .json or .md).
 
 Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monitor``.
 """
+
 from __future__ import annotations
 
 import threading
@@ -34,35 +35,97 @@ _DEFAULTS = MonitorConfig()
 
 class TwinMonitor(WristNode):
     PARAMS = (
-        Param('window_s', _DEFAULTS.window_s, 'scored part of the rolling window each check diagnoses', 's',
-              (20.0, 3600.0), runtime=False),
-        Param('settle_s', _DEFAULTS.settle_s, "lead-in before the window that only settles the replays' memory (wire "
-              'hysteresis, joint)', 's', (0.0, 600.0), runtime=False),
-        Param('check_period_s', _DEFAULTS.check_period_s, 'time between two checks (measurement time)', 's',
-              (1.0, 3600.0)),
-        Param('persist_checks', _DEFAULTS.persist_checks, 'consecutive agreeing checks before a verdict is raised or '
-              'cleared', 'checks', (1, 100)),
-        Param('min_confidence', _DEFAULTS.min_confidence, 'a discrepancy found with a lower confidence counts as OK',
-              '1', (0.0, 1.0)),
-        Param('sure_confidence', _DEFAULTS.sure_confidence, 'a cause named with at least this confidence is raised '
-              'by one check', '1', (0.0, 1.0)),
-        Param('candidates', '', 'comma-separated catalogue ids the checks try (doc/explanation/diagnosis.md; empty: all)',
-              runtime=False),
+        Param(
+            'window_s',
+            _DEFAULTS.window_s,
+            'scored part of the rolling window each check diagnoses',
+            's',
+            (20.0, 3600.0),
+            runtime=False,
+        ),
+        Param(
+            'settle_s',
+            _DEFAULTS.settle_s,
+            "lead-in before the window that only settles the replays' memory (wire hysteresis, joint)",
+            's',
+            (0.0, 600.0),
+            runtime=False,
+        ),
+        Param(
+            'check_period_s', _DEFAULTS.check_period_s, 'time between two checks (measurement time)', 's', (1.0, 3600.0)
+        ),
+        Param(
+            'persist_checks',
+            _DEFAULTS.persist_checks,
+            'consecutive agreeing checks before a verdict is raised or cleared',
+            'checks',
+            (1, 100),
+        ),
+        Param(
+            'min_confidence',
+            _DEFAULTS.min_confidence,
+            'a discrepancy found with a lower confidence counts as OK',
+            '1',
+            (0.0, 1.0),
+        ),
+        Param(
+            'sure_confidence',
+            _DEFAULTS.sure_confidence,
+            'a cause named with at least this confidence is raised by one check',
+            '1',
+            (0.0, 1.0),
+        ),
+        Param(
+            'candidates',
+            '',
+            'comma-separated catalogue ids the checks try (doc/explanation/diagnosis.md; empty: all)',
+            runtime=False,
+        ),
         HYSTERESIS_FILE_PARAM,
-        Param('thermal_file', '', "TEMs' heat balance: thermal.yaml from sma-wrist identify thermal (empty: Table "
-              '4.9)', runtime=False),
-        Param('params_file', '', "a diagnosis' extended_params.yaml (sma-wrist diagnose --params): the twin runs that "
-              'extended model, and the fitted extension is what the monitor expects', runtime=False),
-        Param('history_file', '', 'write the verdict history here after every check (.csv, .json or .md; empty: '
-              'not written)', runtime=False),
-        Param('worker', 'process', 'where the checks run: a worker process (never holds the node up), a worker '
-              'thread (no process start; shares the interpreter), or inline in the callback (holds the node up '
-              'for the check: only for offline simulation, where every check must be made)',
-              choices=('process', 'thread', 'inline'), runtime=False),
-        Param('payload_kg', 0.3, 'payload the twin carries until /wrist/payload says otherwise', 'kg', (0.0, 2.0),
-              runtime=False),
-        Param('twin_rate_hz', 10.0, 'rate of the twin predictions and residuals on /wrist/twin/* (0: not published)',
-              'Hz', (0.0, 1000.0), runtime=False),
+        Param(
+            'thermal_file',
+            '',
+            "TEMs' heat balance: thermal.yaml from sma-wrist identify thermal (empty: Table 4.9)",
+            runtime=False,
+        ),
+        Param(
+            'params_file',
+            '',
+            "a diagnosis' extended_params.yaml (sma-wrist diagnose --params): the twin runs that "
+            'extended model, and the fitted extension is what the monitor expects',
+            runtime=False,
+        ),
+        Param(
+            'history_file',
+            '',
+            'write the verdict history here after every check (.csv, .json or .md; empty: not written)',
+            runtime=False,
+        ),
+        Param(
+            'worker',
+            'process',
+            'where the checks run: a worker process (never holds the node up), a worker '
+            'thread (no process start; shares the interpreter), or inline in the callback (holds the node up '
+            'for the check: only for offline simulation, where every check must be made)',
+            choices=('process', 'thread', 'inline'),
+            runtime=False,
+        ),
+        Param(
+            'payload_kg',
+            0.3,
+            'payload the twin carries until /wrist/payload says otherwise',
+            'kg',
+            (0.0, 2.0),
+            runtime=False,
+        ),
+        Param(
+            'twin_rate_hz',
+            10.0,
+            'rate of the twin predictions and residuals on /wrist/twin/* (0: not published)',
+            'Hz',
+            (0.0, 1000.0),
+            runtime=False,
+        ),
     )
 
     def __init__(self, **kwargs: Any) -> None:
@@ -70,14 +133,21 @@ class TwinMonitor(WristNode):
         p = self.p
         cands = tuple(c.strip() for c in p['candidates'].split(',') if c.strip()) or None
         try:
-            self.config = MonitorConfig(window_s=p['window_s'], settle_s=p['settle_s'],
-                                        check_period_s=p['check_period_s'], persist_checks=p['persist_checks'],
-                                        min_confidence=p['min_confidence'], sure_confidence=p['sure_confidence'],
-                                        candidates=cands,
-                                        hysteresis_file=p['hysteresis_file'], thermal_file=p['thermal_file'],
-                                        params_file=p['params_file'])
+            self.config = MonitorConfig(
+                window_s=p['window_s'],
+                settle_s=p['settle_s'],
+                check_period_s=p['check_period_s'],
+                persist_checks=p['persist_checks'],
+                min_confidence=p['min_confidence'],
+                sure_confidence=p['sure_confidence'],
+                candidates=cands,
+                hysteresis_file=p['hysteresis_file'],
+                thermal_file=p['thermal_file'],
+                params_file=p['params_file'],
+            )
             if p['history_file']:
                 from sma_wrist.monitor import history_format
+
                 history_format(p['history_file'])
             self.monitor = Monitor(self.config)
         except MonitorInputError as exc:
@@ -95,14 +165,23 @@ class TwinMonitor(WristNode):
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
         self.subscription('/wrist/joint_states', self._on_joint)
         self.subscription('/wrist/payload', self._on_payload)
-        self.pub = {name: self.publisher(name) for name in (
-            '/wrist/twin/muscle_1/temperature', '/wrist/twin/muscle_2/temperature', '/wrist/twin/joint_states',
-            '/wrist/twin/residual/muscle_1/temperature', '/wrist/twin/residual/muscle_2/temperature',
-            '/wrist/twin/residual/angle')}
+        self.pub = {
+            name: self.publisher(name)
+            for name in (
+                '/wrist/twin/muscle_1/temperature',
+                '/wrist/twin/muscle_2/temperature',
+                '/wrist/twin/joint_states',
+                '/wrist/twin/residual/muscle_1/temperature',
+                '/wrist/twin/residual/muscle_2/temperature',
+                '/wrist/twin/residual/angle',
+            )
+        }
         # a result that arrives while the wrist publishes nothing is still published
         self.timer = self.create_timer(1.0, self._collect)
-        self.get_logger().info(f'twin_monitor: {self.monitor.model.description}; a check of {p["settle_s"]:g} + '
-                               f'{p["window_s"]:g} s every {p["check_period_s"]:g} s in a worker {p["worker"]}')
+        self.get_logger().info(
+            f'twin_monitor: {self.monitor.model.description}; a check of {p["settle_s"]:g} + '
+            f'{p["window_s"]:g} s every {p["check_period_s"]:g} s in a worker {p["worker"]}'
+        )
 
     def apply(self, changed: dict[str, Any]) -> None:
         c = self.config
@@ -164,10 +243,12 @@ class TwinMonitor(WristNode):
             if self.p['worker'] == 'process':
                 import multiprocessing
                 from concurrent.futures import ProcessPoolExecutor
+
                 # spawn: a fork of a process running rclpy's threads may inherit a held lock
                 self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context('spawn'))
             else:
                 from concurrent.futures import ThreadPoolExecutor
+
                 self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='twin_monitor_check')
         return self._pool
 
@@ -182,8 +263,9 @@ class TwinMonitor(WristNode):
                 job.set_exception(exc)
             self._job = job
             return
-        self._job = self._check_pool().submit(diagnose_window, window, t, self.config, m.hysteresis_file,
-                                            m.thermal_file, m.extension)
+        self._job = self._check_pool().submit(
+            diagnose_window, window, t, self.config, m.hysteresis_file, m.thermal_file, m.extension
+        )
 
     def _collect(self) -> None:
         job = self._job
@@ -193,7 +275,9 @@ class TwinMonitor(WristNode):
         try:
             raw = job.result()
         except Exception as exc:  # noqa: BLE001 - a check that failed is reported, the node goes on
-            raw = Verdict(self._job_t, 'ERROR', None, None, 1.0, summary=f'the check failed: {type(exc).__name__}: {exc}')
+            raw = Verdict(
+                self._job_t, 'ERROR', None, None, 1.0, summary=f'the check failed: {type(exc).__name__}: {exc}'
+            )
         with self._lock:
             v = self.monitor.decide(raw)
             history = list(self.monitor.history)
@@ -213,15 +297,24 @@ class TwinMonitor(WristNode):
             text = v.summary
         else:
             ps = ', '.join(f'{k} = {x:.4g}' for k, x in v.parameters.items())
-            text = (f'{v.cause} ({v.subsystem})' + (f': {ps}' if ps else '') + f'; held-out gain {v.gain_pct:.0f} %, '
-                    f'confidence {v.confidence:.2f}, since {v.since_s:.1f} s')
+            text = (
+                f'{v.cause} ({v.subsystem})' + (f': {ps}' if ps else '') + f'; held-out gain {v.gain_pct:.0f} %, '
+                f'confidence {v.confidence:.2f}, since {v.since_s:.1f} s'
+            )
             if v.cause == 'unexplained':
                 text += '; correlates: ' + ', '.join(f'{c["regressor"]} ({c["r"]:+.2f})' for c in v.correlates[:3])
-        values = {'t_s': f'{v.t_s:.2f}', 'cause': v.cause or '', 'subsystem': v.subsystem or '',
-                  'confidence': f'{v.confidence:.3f}', 'gain_pct': f'{v.gain_pct:.1f}',
-                  'since_s': '' if v.since_s is None else f'{v.since_s:.2f}', 'check': v.summary,
-                  'check_cpu_s': f'{v.check_cpu_s:.2f}', 'skipped_checks': self.skipped_checks,
-                  **{k: f'{x:.6g}' for k, x in v.parameters.items()}}
+        values = {
+            't_s': f'{v.t_s:.2f}',
+            'cause': v.cause or '',
+            'subsystem': v.subsystem or '',
+            'confidence': f'{v.confidence:.3f}',
+            'gain_pct': f'{v.gain_pct:.1f}',
+            'since_s': '' if v.since_s is None else f'{v.since_s:.2f}',
+            'check': v.summary,
+            'check_cpu_s': f'{v.check_cpu_s:.2f}',
+            'skipped_checks': self.skipped_checks,
+            **{k: f'{x:.6g}' for k, x in v.parameters.items()},
+        }
         self.diagnose('model', _LEVEL[v.level], text, values)
 
     def _publish_twin(self, header: Any) -> None:
@@ -231,14 +324,25 @@ class TwinMonitor(WristNode):
         T = tw.temperatures_C
         stamp = header.stamp
         for i in (0, 1):
-            m = Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=float(T[i]), variance=0.0)
+            m = Temperature(
+                header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=float(T[i]), variance=0.0
+            )
             self.pub[f'/wrist/twin/muscle_{i + 1}/temperature'].publish(m)
-        self.pub['/wrist/twin/joint_states'].publish(JointState(
-            header=Header(stamp=stamp, frame_id=self.contract.frame_id), name=[self.contract.joint_name],
-            position=[tw.angle_rad], velocity=[float(tw.plant.state.qd[0])], effort=[]))
+        self.pub['/wrist/twin/joint_states'].publish(
+            JointState(
+                header=Header(stamp=stamp, frame_id=self.contract.frame_id),
+                name=[self.contract.joint_name],
+                position=[tw.angle_rad],
+                velocity=[float(tw.plant.state.qd[0])],
+                effort=[],
+            )
+        )
         r = self.monitor.residuals()
-        for name, key in (('/wrist/twin/residual/muscle_1/temperature', 'T1'),
-                          ('/wrist/twin/residual/muscle_2/temperature', 'T2'), ('/wrist/twin/residual/angle', 'q')):
+        for name, key in (
+            ('/wrist/twin/residual/muscle_1/temperature', 'T1'),
+            ('/wrist/twin/residual/muscle_2/temperature', 'T2'),
+            ('/wrist/twin/residual/angle', 'q'),
+        ):
             self.pub[name].publish(Float64(data=r[key]))
 
     def destroy_node(self) -> Any:

@@ -16,10 +16,12 @@ the plant's: :class:`~sma_wrist.plants.spread.SensorBank` applies them to what i
 Wires identified from real data: ``hysteresis_file`` (:func:`load_hysteresis`) replaces the
 SD-GPI set the ``sdgpi`` plant perturbs.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams
@@ -30,11 +32,13 @@ PlantFactory = Callable[..., Any]
 
 def _sdgpi(scenarios: Sequence[Any], base: PlantParams | None = None, hysteresis_file: str | None = None) -> Any:
     from sma_wrist.plants.spread import build_plant
+
     return build_plant(scenarios, base, load_hysteresis(hysteresis_file) if hysteresis_file else None)
 
 
 def _phase_fraction(scenarios: Sequence[Any], base: PlantParams | None = None, **options: Any) -> Any:
     from sma_wrist.plants.phase_fraction import factory
+
     return factory(scenarios, base, **options)
 
 
@@ -53,6 +57,7 @@ def load_hysteresis(path: str | Path) -> SDGPIParams:
     """SD-GPI parameters identified from measured data (a ``hysteresis.yaml`` from ``sma-wrist identify
     hysteresis``); ParameterError names the file and what is wrong."""
     from sma_wrist.core.hysteresis.params_file import load_hysteresis as load
+
     return load(path)
 
 

@@ -20,10 +20,11 @@ around a hand-timed start, then around the best), all candidates as one vectoris
 figure of doc/explanation/controllers.md: an open-loop schedule, so not a
 strict bound, but one that a model-free controller reading thermocouples does not beat easily.
 """
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,9 +60,13 @@ class ReachResult:
     evaluated: int
 
 
-def run_schedules(schedules: FloatArray, payload_kg: float = 0.3, plant: str = 'phase_fraction',
-                  duration_s: float = 126.0, u_max_V: float = 24.0
-                  ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+def run_schedules(
+    schedules: FloatArray,
+    payload_kg: float = 0.3,
+    plant: str = 'phase_fraction',
+    duration_s: float = 126.0,
+    u_max_V: float = 24.0,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Each schedule (N, 9) (FIELDS) driving one wrist of an N-wrist plant for ``duration_s`` [s]:
     (t (K,) [s], q_d (K,) [rad], q (K, N) [rad], true muscle temperatures (K, N, 2) [degC]) every tick."""
     sch = np.atleast_2d(np.asarray(schedules, float))
@@ -72,7 +77,10 @@ def run_schedules(schedules: FloatArray, payload_kg: float = 0.3, plant: str = '
     n = sch.shape[0]
     wrists = make_plant(plant, [Scenario(payload_kg=payload_kg)] * n)
     # the true node temperature where the plant has its own thermocouple (phase fraction): an oracle
-    T_true: Callable[[], FloatArray] = lambda: getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
+
+    def T_true() -> FloatArray:
+        return getattr(wrists, 'node_temperature_C', wrists.muscle_temperature_C)
+
     steps = max(1, int(round(TICK_S / wrists.params.dt)))
     traj = make_trajectory('sine', (0.0, 1.05))
     lo, hi = Q_RANGE
@@ -94,8 +102,13 @@ def run_schedules(schedules: FloatArray, payload_kg: float = 0.3, plant: str = '
     return t, q_d, q, T
 
 
-def schedule_errors(schedules: FloatArray, payload_kg: float = 0.3, plant: str = 'phase_fraction',
-                    duration_s: float = 126.0, u_max_V: float = 24.0) -> tuple[FloatArray, FloatArray]:
+def schedule_errors(
+    schedules: FloatArray,
+    payload_kg: float = 0.3,
+    plant: str = 'phase_fraction',
+    duration_s: float = 126.0,
+    u_max_V: float = 24.0,
+) -> tuple[FloatArray, FloatArray]:
     """(max, RMS) error [% of the reference range] of each schedule (N, 9) over the last cycle: the true
     angle against q_d (:func:`sma_wrist.sweep.simulate.loop_metrics`, as every closed loop is measured)."""
     if not duration_s >= SEED_PERIOD_S:
@@ -105,9 +118,16 @@ def schedule_errors(schedules: FloatArray, payload_kg: float = 0.3, plant: str =
     return np.array([r['max_error_pct'] for r in rows]), np.array([r['rms_error_pct'] for r in rows])
 
 
-def search(payload_kg: float = 0.3, n: int = 48, rounds: int = 2, seed: int = 0, plant: str = 'phase_fraction',
-           duration_s: float = 126.0, start: FloatArray | None = None,
-           progress: Callable[[str], None] | None = None) -> ReachResult:
+def search(
+    payload_kg: float = 0.3,
+    n: int = 48,
+    rounds: int = 2,
+    seed: int = 0,
+    plant: str = 'phase_fraction',
+    duration_s: float = 126.0,
+    start: FloatArray | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> ReachResult:
     """Random search of the schedule (module docstring): ``rounds`` rounds of ``n`` candidates, each round
     around the best so far within a box that halves every round; the start is always evaluated."""
     if not (n >= 1 and rounds >= 1):
@@ -116,7 +136,7 @@ def search(payload_kg: float = 0.3, n: int = 48, rounds: int = 2, seed: int = 0,
     best = np.array(HAND_TIMED if start is None else start, float)
     best_max, best_rms, total = np.inf, np.inf, 0
     for r in range(rounds):
-        box = SPREAD / 2 ** r
+        box = SPREAD / 2**r
         cand = best + box * rng.uniform(-1.0, 1.0, (n, len(FIELDS)))
         cand[0] = best
         cand[:, 8] = np.maximum(cand[:, 8], 0.0)  # a lead, not a lag
@@ -130,15 +150,16 @@ def search(payload_kg: float = 0.3, n: int = 48, rounds: int = 2, seed: int = 0,
     return ReachResult(best, best_max, best_rms, total)
 
 
-def plot(results: dict[float, ReachResult], path: str, plant: str = 'phase_fraction',
-         mode: str | None = 'pid') -> None:
+def plot(results: dict[float, ReachResult], path: str, plant: str = 'phase_fraction', mode: str | None = 'pid') -> None:
     """PNG: per payload, the best schedule's angle and muscle temperatures over the last cycle, next to the
     reference and (``mode``) that controller's closed loop on the same plant (:func:`sma_wrist.plants.loop.run_loop`)."""
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
     from sma_wrist.plants.loop import CASES, OffModelCase, run_loop
+
     fig, axes = plt.subplots(2, len(results), figsize=(4.2 * len(results), 6), sharex=True, squeeze=False)
     for col, (m, r) in enumerate(sorted(results.items())):
         t, q_d, q, T = run_schedules(r.schedule[None], m, plant)
@@ -166,18 +187,25 @@ def plot(results: dict[float, ReachResult], path: str, plant: str = 'phase_fract
     plt.close(fig)
 
 
-def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the figure quoted in doc/explanation/controllers.md
+def _main(
+    argv: list[str] | None = None,
+) -> None:  # pragma: no cover - the figure quoted in doc/explanation/controllers.md
     import argparse
     import sys
     import time
+
     ap = argparse.ArgumentParser(description='dynamic reach of the Sec. 6.1 sine (module docstring)')
     ap.add_argument('--plant', default='phase_fraction')
     ap.add_argument('--payloads', default='0.1,0.3,0.6')
     ap.add_argument('--n', type=int, default=48, help='candidates per round')
     ap.add_argument('--rounds', type=int, default=3)
     ap.add_argument('--seed', type=int, default=0)
-    ap.add_argument('--start', default='', metavar='V1,...,V9',
-                    help=f'the schedule the search starts from ({",".join(FIELDS)}; default the hand-timed one)')
+    ap.add_argument(
+        '--start',
+        default='',
+        metavar='V1,...,V9',
+        help=f'the schedule the search starts from ({",".join(FIELDS)}; default the hand-timed one)',
+    )
     ap.add_argument('--plot', default='', metavar='PNG', help='draw the best schedules next to pid')
     a = ap.parse_args(argv)
     start = None
@@ -195,11 +223,22 @@ def _main(argv: list[str] | None = None) -> None:  # pragma: no cover - the figu
     results = {}
     for m in payloads:
         wall = time.perf_counter()
-        r = search(m, a.n, a.rounds, a.seed, a.plant, start=start,
-                   progress=lambda s: print(f'  {m:g} kg {s} ({time.perf_counter() - wall:.0f} s)', file=sys.stderr))
+        r = search(
+            m,
+            a.n,
+            a.rounds,
+            a.seed,
+            a.plant,
+            start=start,
+            progress=lambda s: print(f'  {m:g} kg {s} ({time.perf_counter() - wall:.0f} s)', file=sys.stderr),
+        )
         results[m] = r
-        print(f'| {a.plant} | {m:g} | {r.max_error_pct:.2f} | {r.rms_error_pct:.2f} | {r.evaluated} | '
-              + ', '.join(f'{k}={v:.2f}' for k, v in zip(FIELDS, r.schedule)) + ' |', flush=True)
+        print(
+            f'| {a.plant} | {m:g} | {r.max_error_pct:.2f} | {r.rms_error_pct:.2f} | {r.evaluated} | '
+            + ', '.join(f'{k}={v:.2f}' for k, v in zip(FIELDS, r.schedule))
+            + ' |',
+            flush=True,
+        )
     if a.plot:
         plot(results, a.plot, a.plant)
         print(f'plot: {a.plot}', file=sys.stderr)

@@ -46,12 +46,14 @@ seeded.
 Everything is vectorised over N scenarios, each with its own parameters (a list of
 :class:`PhaseFractionParams`), in one compiled loop (numba when installed, else plain Python).
 """
+
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -89,8 +91,10 @@ class WireParams:
 
     def __post_init__(self) -> None:
         if not (self.M_f_C < self.M_s_C <= self.A_s_C < self.A_f_C):
-            raise ParameterError(f'transformation temperatures need M_f < M_s <= A_s < A_f, got '
-                                 f'{self.M_f_C}, {self.M_s_C}, {self.A_s_C}, {self.A_f_C} degC')
+            raise ParameterError(
+                f'transformation temperatures need M_f < M_s <= A_s < A_f, got '
+                f'{self.M_f_C}, {self.M_s_C}, {self.A_s_C}, {self.A_f_C} degC'
+            )
         for name in ('C_M_MPa_per_C', 'C_A_MPa_per_C', 'E_A_GPa', 'E_M_GPa', 'eps_L', 'density_kg_m3'):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -117,8 +121,16 @@ class PeltierParams:
     u_limit_V: float = 24.0  # driver rating: commands are clipped here
 
     def __post_init__(self) -> None:
-        for name in ('seebeck_V_per_K', 'resistance_ohm', 'conductance_W_per_K', 'muscle_capacity_J_per_K',
-                     'muscle_loss_W_per_K', 'exchanger_capacity_J_per_K', 'exchanger_loss_W_per_K', 'u_limit_V'):
+        for name in (
+            'seebeck_V_per_K',
+            'resistance_ohm',
+            'conductance_W_per_K',
+            'muscle_capacity_J_per_K',
+            'muscle_loss_W_per_K',
+            'exchanger_capacity_J_per_K',
+            'exchanger_loss_W_per_K',
+            'u_limit_V',
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ParameterError(f'{name} = {v!r} must be > 0')
@@ -156,8 +168,25 @@ class PhaseFractionParams:
 
 
 #: column indices of the per-scenario constant table (pack)
-_WIRE = ('M_f', 'M_s', 'A_s', 'A_f', 'sig_ref', 'C_M', 'C_A', 'E_A', 'E_M', 'eps_L', 'sig_s', 'sig_f', 'alpha',
-         'T_ref', 'latent_J', 'L_mm', 'area_MPa_N')
+_WIRE = (
+    'M_f',
+    'M_s',
+    'A_s',
+    'A_f',
+    'sig_ref',
+    'C_M',
+    'C_A',
+    'E_A',
+    'E_M',
+    'eps_L',
+    'sig_s',
+    'sig_f',
+    'alpha',
+    'T_ref',
+    'latent_J',
+    'L_mm',
+    'area_MPa_N',
+)
 _TEM = ('S', 'R', 'K', 'C_m', 'h_m', 'C_x', 'h_x', 'T_amb', 'T_cool', 'u_lim', 'e0_mm', 'r_eff', 'n_wires', 'dt')
 
 
@@ -168,14 +197,59 @@ def pack(params: Sequence[PhaseFractionParams]) -> tuple[FloatArray, FloatArray,
         w, t, g, j = p.wire, p.tem, p.muscle, p.joint
         area = g.wire_area_m2
         mass = g.n_wires * area * g.wire_length_mm * 1e-3 * w.density_kg_m3
-        wires.append([w.M_f_C, w.M_s_C, w.A_s_C, w.A_f_C, w.sigma_ref_MPa, w.C_M_MPa_per_C, w.C_A_MPa_per_C,
-                      w.E_A_GPa * 1e3, w.E_M_GPa * 1e3, w.eps_L, w.sigma_s_MPa, w.sigma_f_MPa, w.alpha_per_C,
-                      w.T_ref_C, w.latent_J_per_kg * mass, g.wire_length_mm, area * 1e6])
-        tems.append([t.seebeck_V_per_K, t.resistance_ohm, t.conductance_W_per_K, t.muscle_capacity_J_per_K,
-                     t.muscle_loss_W_per_K, t.exchanger_capacity_J_per_K, t.exchanger_loss_W_per_K, t.ambient_C,
-                     t.coolant_C, t.u_limit_V, p.preload_elongation_mm, j.r_eff_m, float(g.n_wires), p.dt])
-        joints.append([j.joint_inertia_kgm2, j.lever_m, j.coulomb_Nm, j.viscous_Nms, j.static_Nm,
-                       j.stick_velocity_rad_s, j.q_neutral_rad, j.q_min_rad, j.q_max_rad, G])
+        wires.append(
+            [
+                w.M_f_C,
+                w.M_s_C,
+                w.A_s_C,
+                w.A_f_C,
+                w.sigma_ref_MPa,
+                w.C_M_MPa_per_C,
+                w.C_A_MPa_per_C,
+                w.E_A_GPa * 1e3,
+                w.E_M_GPa * 1e3,
+                w.eps_L,
+                w.sigma_s_MPa,
+                w.sigma_f_MPa,
+                w.alpha_per_C,
+                w.T_ref_C,
+                w.latent_J_per_kg * mass,
+                g.wire_length_mm,
+                area * 1e6,
+            ]
+        )
+        tems.append(
+            [
+                t.seebeck_V_per_K,
+                t.resistance_ohm,
+                t.conductance_W_per_K,
+                t.muscle_capacity_J_per_K,
+                t.muscle_loss_W_per_K,
+                t.exchanger_capacity_J_per_K,
+                t.exchanger_loss_W_per_K,
+                t.ambient_C,
+                t.coolant_C,
+                t.u_limit_V,
+                p.preload_elongation_mm,
+                j.r_eff_m,
+                float(g.n_wires),
+                p.dt,
+            ]
+        )
+        joints.append(
+            [
+                j.joint_inertia_kgm2,
+                j.lever_m,
+                j.coulomb_Nm,
+                j.viscous_Nms,
+                j.static_Nm,
+                j.stick_velocity_rad_s,
+                j.q_neutral_rad,
+                j.q_min_rad,
+                j.q_max_rad,
+                G,
+            ]
+        )
     return np.array(wires), np.array(tems), np.array(joints)
 
 
@@ -296,9 +370,16 @@ def fraction_path(T_C: ArrayLike, sigma_MPa: ArrayLike, wire: WireParams | None 
     return out
 
 
-def isobaric_loops(stresses_MPa: Sequence[float], wire: WireParams | None = None, *, T_range_C: tuple[float, float] =
-                   (20.0, 110.0), step_C: float = 0.1, cycles: int = 2, noise: tuple[float, float, float] =
-                   (0.1, 2e-5, 1.0), seed: int = 7) -> dict[float, FloatArray]:
+def isobaric_loops(
+    stresses_MPa: Sequence[float],
+    wire: WireParams | None = None,
+    *,
+    T_range_C: tuple[float, float] = (20.0, 110.0),
+    step_C: float = 0.1,
+    cycles: int = 2,
+    noise: tuple[float, float, float] = (0.1, 2e-5, 1.0),
+    seed: int = 7,
+) -> dict[float, FloatArray]:
     """What a test rig measures on this wire: isobaric loops (temperature cycled between T_range_C in steps of
     step_C [degC], ``cycles`` times, at each constant stress), as SMA-REACT's and maestrolab's data were measured.
 
@@ -317,8 +398,13 @@ def isobaric_loops(stresses_MPa: Sequence[float], wire: WireParams | None = None
     for s in stresses_MPa:
         xi = fraction_path(T, float(s), wire)
         eps = np.array([strain(Tk, float(s), xk, wc) for Tk, xk in zip(T, xi)])
-        out[float(s)] = np.column_stack([T + rng.normal(0.0, noise[0], T.size), eps + rng.normal(0.0, noise[1], T.size),
-                                         float(s) + rng.normal(0.0, noise[2], T.size)])
+        out[float(s)] = np.column_stack(
+            [
+                T + rng.normal(0.0, noise[0], T.size),
+                eps + rng.normal(0.0, noise[1], T.size),
+                float(s) + rng.normal(0.0, noise[2], T.size),
+            ]
+        )
     return out
 
 
@@ -347,8 +433,9 @@ def _tem_rates(Tm, Tx, u, tc):  # pragma: no cover - compiled
 
 
 @_jit
-def step_many(n_steps, u, Tn, Ttc, xi, xi_h, x_h, xi_c, x_c, sig, q, qd, payload, flags, wire, tem, joint,
-              tc_gain):  # pragma: no cover - compiled
+def step_many(
+    n_steps, u, Tn, Ttc, xi, xi_h, x_h, xi_c, x_c, sig, q, qd, payload, flags, wire, tem, joint, tc_gain
+):  # pragma: no cover - compiled
     """Advance N wrists by n_steps under held commands u (N, 2) [V], in place.
 
     Tn (N, 2 layers, 2 nodes: muscle, exchanger) [degC]; Ttc (N, 2) thermocouple states; per
@@ -446,8 +533,12 @@ class PhaseFractionPlant:
     ``params``: one :class:`PhaseFractionParams` for all wrists, or one per wrist.
     """
 
-    def __init__(self, params: PhaseFractionParams | Sequence[PhaseFractionParams] | None = None,
-                 payload_kg: ArrayLike = 0.3, n: int | None = None) -> None:
+    def __init__(
+        self,
+        params: PhaseFractionParams | Sequence[PhaseFractionParams] | None = None,
+        payload_kg: ArrayLike = 0.3,
+        n: int | None = None,
+    ) -> None:
         payload = np.atleast_1d(np.asarray(payload_kg, dtype=float))
         if n is not None:
             payload = np.broadcast_to(payload, (n,)).copy()
@@ -465,8 +556,9 @@ class PhaseFractionPlant:
         if len(dts) != 1:
             raise ParameterError(f'all wrists must share one step dt, got {sorted(dts)}')
         self.dt = dts.pop()
-        self.tc_gain = np.array([1.0 if p.sensor.tc_lag_s == 0 else -math.expm1(-self.dt / p.sensor.tc_lag_s)
-                                 for p in plist])
+        self.tc_gain = np.array(
+            [1.0 if p.sensor.tc_lag_s == 0 else -math.expm1(-self.dt / p.sensor.tc_lag_s) for p in plist]
+        )
         self.tc_noise = np.array([p.sensor.tc_noise_C for p in plist])
         self.pot_noise = np.array([p.sensor.pot_noise_rad for p in plist])
         self.rng = np.random.default_rng([p.sensor.seed for p in plist])
@@ -481,16 +573,28 @@ class PhaseFractionPlant:
         Tn[:, :, 1] = self.tem[:, 8:9]
         thermal_rest(Tn, self.tem, 1500.0, 0.05)
         big = 1e3
-        s = PhaseFractionState(0.0, Tn, Tn[:, :, 0].copy(), np.zeros(2 * n), np.ones(2 * n), np.full(2 * n, -big),
-                               np.zeros(2 * n), np.full(2 * n, big), np.zeros(2 * n), np.zeros(n), np.zeros(n),
-                               payload_kg.astype(float).copy())
+        s = PhaseFractionState(
+            0.0,
+            Tn,
+            Tn[:, :, 0].copy(),
+            np.zeros(2 * n),
+            np.ones(2 * n),
+            np.full(2 * n, -big),
+            np.zeros(2 * n),
+            np.full(2 * n, big),
+            np.zeros(2 * n),
+            np.zeros(n),
+            np.zeros(n),
+            payload_kg.astype(float).copy(),
+        )
         jp = self.joint
         lo, hi = jp[:, 7].copy(), jp[:, 8].copy()
         for _ in range(40):
             mid = 0.5 * (lo + hi)
             for j in range(n):
-                tau = torque_at(j, n, mid[j], s.thermal, s.xi, s.xi_h, s.x_h, s.xi_c, s.x_c, self.wire, self.tem,
-                                self.joint) - payload_kg[j] * G * jp[j, 1] * math.cos(mid[j])
+                tau = torque_at(
+                    j, n, mid[j], s.thermal, s.xi, s.xi_h, s.x_h, s.xi_c, s.x_c, self.wire, self.tem, self.joint
+                ) - payload_kg[j] * G * jp[j, 1] * math.cos(mid[j])
                 if tau > 0:
                     lo[j] = mid[j]
                 else:
@@ -500,8 +604,26 @@ class PhaseFractionPlant:
         self.state = s
         flags = np.zeros((n, 3), bool)
         t0 = s.t
-        step_many(1, np.zeros((n, 2)), s.thermal, s.thermocouple, s.xi, s.xi_h, s.x_h, s.xi_c, s.x_c,
-                  s.stress_MPa, s.q, s.qd, s.payload_kg, flags, self.wire, self.tem, self.joint, self.tc_gain)
+        step_many(
+            1,
+            np.zeros((n, 2)),
+            s.thermal,
+            s.thermocouple,
+            s.xi,
+            s.xi_h,
+            s.x_h,
+            s.xi_c,
+            s.x_c,
+            s.stress_MPa,
+            s.q,
+            s.qd,
+            s.payload_kg,
+            flags,
+            self.wire,
+            self.tem,
+            self.joint,
+            self.tc_gain,
+        )
         s.t, s.qd[:] = t0, 0.0
         s.flags = self._flags(flags)
         return s
@@ -517,8 +639,26 @@ class PhaseFractionPlant:
         check_finite('TEM command', u, 'V')
         s = self.state
         flags = np.zeros((self.n, 3), bool)
-        step_many(int(n_steps), u, s.thermal, s.thermocouple, s.xi, s.xi_h, s.x_h, s.xi_c, s.x_c, s.stress_MPa,
-                  s.q, s.qd, s.payload_kg, flags, self.wire, self.tem, self.joint, self.tc_gain)
+        step_many(
+            int(n_steps),
+            u,
+            s.thermal,
+            s.thermocouple,
+            s.xi,
+            s.xi_h,
+            s.x_h,
+            s.xi_c,
+            s.x_c,
+            s.stress_MPa,
+            s.q,
+            s.qd,
+            s.payload_kg,
+            flags,
+            self.wire,
+            self.tem,
+            self.joint,
+            self.tc_gain,
+        )
         s.t += n_steps * self.dt
         s.flags = self._flags(flags)
         if not np.isfinite(s.q).all():
@@ -582,6 +722,7 @@ class ScenarioPhaseFraction(PhaseFractionPlant):
         from dataclasses import replace
 
         from sma_wrist.core.plant.wrist import PlantParams
+
         base = base or PlantParams()
         one = PhaseFractionParams(dt=base.dt)
         lag = one.sensor.tc_lag_s if tc_lag_s is None else float(tc_lag_s)
@@ -589,13 +730,24 @@ class ScenarioPhaseFraction(PhaseFractionPlant):
         for sc in scenarios:
             w, t = one.wire, one.tem
             d = sc.transition_shift_C
-            wire = replace(w, M_f_C=w.M_f_C + d, M_s_C=w.M_s_C + d, A_s_C=w.A_s_C + d, A_f_C=w.A_f_C + d,
-                           eps_L=w.eps_L * sc.stroke_scale)
-            tem = replace(t, seebeck_V_per_K=t.seebeck_V_per_K * sc.tem_gain_scale,
-                          muscle_loss_W_per_K=t.muscle_loss_W_per_K * sc.heat_loss_scale,
-                          ambient_C=t.ambient_C + sc.ambient_offset_C, coolant_C=t.coolant_C + sc.ambient_offset_C)
-            plist.append(replace(one, wire=wire, tem=tem, sensor=SensorParams(tc_lag_s=lag, tc_noise_C=0.0,
-                                                                                pot_noise_rad=0.0)))
+            wire = replace(
+                w,
+                M_f_C=w.M_f_C + d,
+                M_s_C=w.M_s_C + d,
+                A_s_C=w.A_s_C + d,
+                A_f_C=w.A_f_C + d,
+                eps_L=w.eps_L * sc.stroke_scale,
+            )
+            tem = replace(
+                t,
+                seebeck_V_per_K=t.seebeck_V_per_K * sc.tem_gain_scale,
+                muscle_loss_W_per_K=t.muscle_loss_W_per_K * sc.heat_loss_scale,
+                ambient_C=t.ambient_C + sc.ambient_offset_C,
+                coolant_C=t.coolant_C + sc.ambient_offset_C,
+            )
+            plist.append(
+                replace(one, wire=wire, tem=tem, sensor=SensorParams(tc_lag_s=lag, tc_noise_C=0.0, pot_noise_rad=0.0))
+            )
         if not plist:
             raise ParameterError('no scenarios: the phase-fraction plant needs at least one wrist')
         self.base = base
@@ -642,6 +794,21 @@ def factory(scenarios: Sequence[Any], base: Any = None, **options: Any) -> Scena
     return ScenarioPhaseFraction(scenarios, base, **options)
 
 
-__all__ = ['WireParams', 'PeltierParams', 'SensorParams', 'PhaseFractionParams', 'PhaseFractionPlant',
-           'ScenarioPhaseFraction', 'factory', 'PhaseFractionState', 'fraction_path', 'major_heating', 'major_cooling',
-           'fraction', 'strain', 'solve_stress', 'isobaric_loops', 'write_isobaric_loops']
+__all__ = [
+    'WireParams',
+    'PeltierParams',
+    'SensorParams',
+    'PhaseFractionParams',
+    'PhaseFractionPlant',
+    'ScenarioPhaseFraction',
+    'factory',
+    'PhaseFractionState',
+    'fraction_path',
+    'major_heating',
+    'major_cooling',
+    'fraction',
+    'strain',
+    'solve_stress',
+    'isobaric_loops',
+    'write_isobaric_loops',
+]

@@ -23,14 +23,16 @@ Where each perturbation acts:
 The plant of N scenarios with their own parameters is :class:`VariedPlant`: the compiled
 plant step (:func:`sma_wrist.core.plant.kernel.step_many`) per scenario with its own constants.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import json
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -67,9 +69,9 @@ class Perturbation:
 VALIDITY: tuple[Perturbation, ...] = (
     Perturbation('payload_kg', 'kg', 0.3, 0.0, 0.7, 'payload at the 0.09 m lever, unknown to the controllers'),
     Perturbation('transition_shift_C', 'degC', 0.0, -15.0, 15.0, 'shift of the wire transformation temperatures'),
-    Perturbation('stroke_scale', '1', 1.0, 0.5, 1.5, 'transformation stroke / the model\'s'),
-    Perturbation('tem_gain_scale', '1', 1.0, 0.5, 1.5, 'TEM drive gain (input_per_volt) / the model\'s'),
-    Perturbation('heat_loss_scale', '1', 1.0, 0.5, 1.5, 'muscle-face heat losses (K_Tinf, K_T, K_inf) / the model\'s'),
+    Perturbation('stroke_scale', '1', 1.0, 0.5, 1.5, "transformation stroke / the model's"),
+    Perturbation('tem_gain_scale', '1', 1.0, 0.5, 1.5, "TEM drive gain (input_per_volt) / the model's"),
+    Perturbation('heat_loss_scale', '1', 1.0, 0.5, 1.5, "muscle-face heat losses (K_Tinf, K_T, K_inf) / the model's"),
     Perturbation('ambient_offset_C', 'degC', 0.0, -10.0, 10.0, 'coolant/ambient temperature offset'),
     Perturbation('temp_noise_C', 'degC', 0.0, 0.0, 1.0, 'thermocouple noise, standard deviation'),
     Perturbation('temp_lag_s', 's', 0.0, 0.0, 1.0, 'thermocouple first-order time constant'),
@@ -113,11 +115,13 @@ class Scenario:
         for p in VALIDITY:
             v = getattr(self, p.name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and p.lower <= v <= p.upper):
-                raise ParameterError(f'{p.name} = {v!r} {p.unit} is outside the model\'s validity '
-                                     f'[{p.lower:g}, {p.upper:g}] ({p.description})')
+                raise ParameterError(
+                    f"{p.name} = {v!r} {p.unit} is outside the model's validity "
+                    f'[{p.lower:g}, {p.upper:g}] ({p.description})'
+                )
 
     @classmethod
-    def from_mapping(cls, values: Mapping[str, Any]) -> 'Scenario':
+    def from_mapping(cls, values: Mapping[str, Any]) -> Scenario:
         """A scenario from {name: value}; unknown names raise ParameterError naming the known ones."""
         known = {f.name for f in dataclasses.fields(cls)}
         bad = [k for k in values if k not in known]
@@ -126,7 +130,7 @@ class Scenario:
         return cls(**{k: (int(v) if k == 'noise_seed' else float(v)) for k, v in values.items()})
 
     @classmethod
-    def from_file(cls, path: str | Path, defaults: Mapping[str, Any] | None = None) -> 'Scenario':
+    def from_file(cls, path: str | Path, defaults: Mapping[str, Any] | None = None) -> Scenario:
         """A scenario from a JSON file {name: value} (a row of ``sma-wrist sweep``'s results.jsonl has them);
         axes the file does not name come from ``defaults``, then the nominal values."""
         try:
@@ -136,8 +140,17 @@ class Scenario:
         if not isinstance(data, dict):
             raise ParameterError(f'scenario file {path}: expected a JSON object {{name: value}}')
         known = {f.name for f in dataclasses.fields(cls)}
-        extra = {'index', 'group', 'controller', 'plant', 'max_error_pct', 'rms_error_pct', 'max_error_measured_pct',
-                 'sign_changes_per_s', 'window'}  # a results.jsonl row carries its metrics too
+        extra = {
+            'index',
+            'group',
+            'controller',
+            'plant',
+            'max_error_pct',
+            'rms_error_pct',
+            'max_error_measured_pct',
+            'sign_changes_per_s',
+            'window',
+        }  # a results.jsonl row carries its metrics too
         data = {k: v for k, v in data.items() if k in known or k not in extra}
         return cls.from_mapping({**(defaults or {}), **data})
 
@@ -163,8 +176,10 @@ def check_ranges(ranges: Mapping[str, tuple[float, float]]) -> dict[str, tuple[f
         if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
             raise ParameterError(f'perturbation {name}: range ({lo:g}, {hi:g}) needs finite lo <= hi')
         if lo < p.lower or hi > p.upper:
-            raise ParameterError(f'perturbation {name}: range ({lo:g}, {hi:g}) {p.unit} is outside the model\'s '
-                                 f'validity [{p.lower:g}, {p.upper:g}] ({p.description})')
+            raise ParameterError(
+                f"perturbation {name}: range ({lo:g}, {hi:g}) {p.unit} is outside the model's "
+                f'validity [{p.lower:g}, {p.upper:g}] ({p.description})'
+            )
         out[name] = (lo, hi)
     return out
 
@@ -180,13 +195,21 @@ def sample(n: int, seed: int = 0, ranges: Mapping[str, tuple[float, float]] | No
     rngs = check_ranges(FAMILY if ranges is None else ranges)
     gen = np.random.default_rng(seed)
     cols = {name: gen.uniform(lo, hi, n) if hi > lo else np.full(n, lo) for name, (lo, hi) in rngs.items()}
-    return [Scenario(**{k: float(v[i]) for k, v in cols.items()}, noise_seed=int(seed) * 1_000_003 + i)
-            for i in range(int(n))]
+    return [
+        Scenario(**{k: float(v[i]) for k, v in cols.items()}, noise_seed=int(seed) * 1_000_003 + i)
+        for i in range(int(n))
+    ]
 
 
 # ------------------------------------------------------------------------------- the wire
-def perturbed_hysteresis(base: SDGPIParams, shift_C: float = 0.0, stroke_scale: float = 1.0,
-                         load_kgf: float = 0.775, T_cold_C: float = 20.0, T_hot_C: float = 80.0) -> SDGPIParams:
+def perturbed_hysteresis(
+    base: SDGPIParams,
+    shift_C: float = 0.0,
+    stroke_scale: float = 1.0,
+    load_kgf: float = 0.775,
+    T_cold_C: float = 20.0,
+    T_hot_C: float = 80.0,
+) -> SDGPIParams:
     """The SD-GPI with transition temperatures shifted by ``shift_C`` [degC] and stroke scaled.
 
     See the module docstring; y_ref is the mirrored output's mean of the cold (cooled) and
@@ -210,35 +233,94 @@ def perturbed_hysteresis(base: SDGPIParams, shift_C: float = 0.0, stroke_scale: 
     cold = initial_state(base, T_cold_C, load_kgf, branch='cooling')
     hot = initial_state(base, T_hot_C, load_kgf, branch='heating')
     y_ref = 0.5 * float(mirrored_output(base, cold, T_cold_C)[0] + mirrored_output(base, hot, T_hot_C)[0])
-    return SDGPIParams(EnvelopeSections(env.edges_kg, env_set(env.a), env_set(env.b)), mem_set(base.c),
-                       mem_set(base.d), base.rho, base.tau / s, base.c_thr * s, n=base.n, p0=base.p0,
-                       k_f=base.k_f - (1.0 - s) * y_ref, T_valid=base.T_valid,
-                       name=f'{base.name} shifted {shift_C:+.2f} degC, stroke x{s:.3f}')
+    return SDGPIParams(
+        EnvelopeSections(env.edges_kg, env_set(env.a), env_set(env.b)),
+        mem_set(base.c),
+        mem_set(base.d),
+        base.rho,
+        base.tau / s,
+        base.c_thr * s,
+        n=base.n,
+        p0=base.p0,
+        k_f=base.k_f - (1.0 - s) * y_ref,
+        T_valid=base.T_valid,
+        name=f'{base.name} shifted {shift_C:+.2f} degC, stroke x{s:.3f}',
+    )
 
 
-def scenario_params(sc: Scenario, base: PlantParams | None = None,
-                    hysteresis: SDGPIParams | None = None) -> PlantParams:
+def scenario_params(
+    sc: Scenario, base: PlantParams | None = None, hysteresis: SDGPIParams | None = None
+) -> PlantParams:
     """PlantParams of one scenario (payload and sensors are not plant parameters)."""
     base = base or PlantParams()
     hp = perturbed_hysteresis(hysteresis or base.hysteresis, sc.transition_shift_C, sc.stroke_scale)
-    p = mx.plant_params({'tem_gain_err': sc.tem_gain_scale - 1.0, 'loss_scale_err': sc.heat_loss_scale - 1.0,
-                         'ambient_offset_C': sc.ambient_offset_C}, base)
+    p = mx.plant_params(
+        {
+            'tem_gain_err': sc.tem_gain_scale - 1.0,
+            'loss_scale_err': sc.heat_loss_scale - 1.0,
+            'ambient_offset_C': sc.ambient_offset_C,
+        },
+        base,
+    )
     return p if hp is p.hysteresis else dataclasses.replace(p, hysteresis=hp)
 
 
 # ------------------------------------------------------------------------------ the plant
 @_jit
-def _step_each(n_steps, u, thermal, q, qd, w3, heat2, T2, load2, comp2, payload, flags, th_coef, mech, stacked, edges,
-               r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
+def _step_each(
+    n_steps,
+    u,
+    thermal,
+    q,
+    qd,
+    w3,
+    heat2,
+    T2,
+    load2,
+    comp2,
+    payload,
+    flags,
+    th_coef,
+    mech,
+    stacked,
+    edges,
+    r,
+    p,
+    mem_c,
+    mem_d,
+    joint,
+):  # pragma: no cover - compiled
     """plant_kernel.step_many for each scenario j with its own constants (row j of every constant);
     wire arrays scenario-major: w3 (N, 2, n), heat2, T2, load2, comp2 (N, 2)."""
     w_now, rk, env = plant_kernel.scratch(w3.shape[2])  # once, not per wrist
     for j in range(q.size):
         # reshape of a row keeps numba's C layout (a j:j+1 slice would be 'A': ~2x slower loops)
-        plant_kernel.step_many_into(n_steps, u[j].reshape(1, 2), thermal[j].reshape(1, 2, 2), q[j:j + 1],
-                                    qd[j:j + 1], w3[j], heat2[j], T2[j], load2[j], comp2[j], payload[j:j + 1],
-                                    flags[j].reshape(1, 4), th_coef[j], mech[j], stacked[j], edges[j], r[j], p[j],
-                                    mem_c[j], mem_d[j], joint[j], w_now, rk, env)
+        plant_kernel.step_many_into(
+            n_steps,
+            u[j].reshape(1, 2),
+            thermal[j].reshape(1, 2, 2),
+            q[j : j + 1],
+            qd[j : j + 1],
+            w3[j],
+            heat2[j],
+            T2[j],
+            load2[j],
+            comp2[j],
+            payload[j : j + 1],
+            flags[j].reshape(1, 4),
+            th_coef[j],
+            mech[j],
+            stacked[j],
+            edges[j],
+            r[j],
+            p[j],
+            mem_c[j],
+            mem_d[j],
+            joint[j],
+            w_now,
+            rk,
+            env,
+        )
 
 
 @_jit
@@ -247,8 +329,15 @@ def _rest_each(q, w3, T2, load2, comp2, payload, mech, stacked, edges, r, p, mem
     solved against the frozen cooled memory from 0.8 kgf), then the loads committed, per scenario."""
     w_now = np.empty(w3.shape[2])
     for j in range(q.size):
-        scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[j, 1], mech[j, 2], mech[j, 3], mech[j, 4], mech[j, 5], \
-            mech[j, 6], mech[j, 7]
+        scale, c_el, k_f, m_lo, m_hi, m_max, tol = (
+            mech[j, 1],
+            mech[j, 2],
+            mech[j, 3],
+            mech[j, 4],
+            mech[j, 5],
+            mech[j, 6],
+            mech[j, 7],
+        )
         max_it = int(mech[j, 8])
         p0, e0, n_g_r, r_eff = mech[j, 9], mech[j, 13], mech[j, 14], mech[j, 15]
         lever, q_neutral, q_lo, q_hi, g = joint[j, 1], joint[j, 6], joint[j, 7], joint[j, 8], joint[j, 9]
@@ -261,9 +350,26 @@ def _rest_each(q, w3, T2, load2, comp2, payload, mech, stacked, edges, r, p, mem
                 T = T2[j, side]
                 y_mem = p0 * (mem_d[j, 0] * math.tanh(mem_d[j, 1] * T + mem_d[j, 2]) + mem_d[j, 3])
                 y_geo = e0 - x_mm if side == 0 else e0 + x_mm
-                m, dy, res = _solve_load(T, y_geo, w3[j, side], w_now, y_mem, load2[j, side], stacked[j],
-                                                      edges[j], r[j], p[j], m_lo, m_hi, scale, c_el, k_f, m_max, tol,
-                                                      max_it)
+                m, dy, res = _solve_load(
+                    T,
+                    y_geo,
+                    w3[j, side],
+                    w_now,
+                    y_mem,
+                    load2[j, side],
+                    stacked[j],
+                    edges[j],
+                    r[j],
+                    p[j],
+                    m_lo,
+                    m_hi,
+                    scale,
+                    c_el,
+                    k_f,
+                    m_max,
+                    tol,
+                    max_it,
+                )
                 if it == 40:  # commit at the equilibrium
                     w3[j, side, :] = w_now
                     load2[j, side] = m
@@ -290,8 +396,10 @@ class VariedPlant(WristPlant):
 
     def __init__(self, params: Sequence[PlantParams], payload_kg: Sequence[float]) -> None:
         if len(params) != len(payload_kg) or not params:
-            raise ParameterError(f'VariedPlant needs one payload per parameter set, got {len(params)} and '
-                                 f'{len(payload_kg)} (and at least one)')
+            raise ParameterError(
+                f'VariedPlant needs one payload per parameter set, got {len(params)} and '
+                f'{len(payload_kg)} (and at least one)'
+            )
         dts = {p.dt for p in params}
         if len(dts) != 1:
             raise ParameterError(f'every scenario needs the same plant step, got {sorted(dts)} s')
@@ -301,21 +409,45 @@ class VariedPlant(WristPlant):
         self.muscles = MuscleModel(self.params.hysteresis, self.params.muscle)
         packed = [plant_kernel.pack_constants(p) for p in params]
         try:
-            self._constants = tuple(np.ascontiguousarray(np.stack([c[i] for c in packed])) for i in range(len(packed[0])))
+            self._constants = tuple(
+                np.ascontiguousarray(np.stack([c[i] for c in packed])) for i in range(len(packed[0]))
+            )
         except ValueError:
-            raise ParameterError('scenarios differ in play operators or load sections: they cannot share one '
-                                 'VariedPlant') from None
+            raise ParameterError(
+                'scenarios differ in play operators or load sections: they cannot share one VariedPlant'
+            ) from None
         payload = np.array(payload_kg, float)
         thermal = np.concatenate([th.rest_state(p.thermal, 1) for p in params])
         T2 = np.ascontiguousarray(thermal[:, :, th.MUSCLE_FACE])  # (N, 2)
-        w3 = np.ascontiguousarray(np.stack([play_bounds(p.hysteresis, T2[j], np.full(2, 0.8))[1]
-                                            for j, p in enumerate(params)]))
+        w3 = np.ascontiguousarray(
+            np.stack([play_bounds(p.hysteresis, T2[j], np.full(2, 0.8))[1] for j, p in enumerate(params)])
+        )
         load2, comp2, q = np.full((n, 2), 0.8), np.ones((n, 2)), np.zeros(n)
-        _rest_each(q, w3, T2, load2, comp2, payload, self._constants[1], *self._constants[2:6], self._constants[7],
-                   self._constants[8])
-        self.state = PlantState(0.0, thermal, q, np.zeros(n), w3.reshape(2 * n, -1), np.zeros(2 * n, bool),
-                                T2.reshape(-1).copy(), load2.reshape(-1), comp2.reshape(-1), payload,
-                                self._no_flags(n))
+        _rest_each(
+            q,
+            w3,
+            T2,
+            load2,
+            comp2,
+            payload,
+            self._constants[1],
+            *self._constants[2:6],
+            self._constants[7],
+            self._constants[8],
+        )
+        self.state = PlantState(
+            0.0,
+            thermal,
+            q,
+            np.zeros(n),
+            w3.reshape(2 * n, -1),
+            np.zeros(2 * n, bool),
+            T2.reshape(-1).copy(),
+            load2.reshape(-1),
+            comp2.reshape(-1),
+            payload,
+            self._no_flags(n),
+        )
         self._kernel_constants = None
         self._kernel_arrays = None
 
@@ -348,17 +480,35 @@ class VariedPlant(WristPlant):
             clipped = (uc != u).any(axis=1)
         n, k = self.n, s.w.shape[1]
         flags = np.zeros((n, 4), bool)
-        _step_each(int(n_steps), uc, s.thermal, s.q, s.qd, s.w.reshape(n, 2, k), s.heating.reshape(n, 2),
-                   s.T_prev.reshape(n, 2), s.load_kgf.reshape(n, 2), s.compliance.reshape(n, 2), s.payload_kg, flags,
-                   *self._constants)
+        _step_each(
+            int(n_steps),
+            uc,
+            s.thermal,
+            s.q,
+            s.qd,
+            s.w.reshape(n, 2, k),
+            s.heating.reshape(n, 2),
+            s.T_prev.reshape(n, 2),
+            s.load_kgf.reshape(n, 2),
+            s.compliance.reshape(n, 2),
+            s.payload_kg,
+            flags,
+            *self._constants,
+        )
         s.t += n_steps * self.params.dt
-        s.flags = {'command_saturated': clipped, 'over_temperature': flags[:, 0], 'slack': flags[:, 1],
-                   'overload': flags[:, 2], 'at_stop': flags[:, 3]}
+        s.flags = {
+            'command_saturated': clipped,
+            'over_temperature': flags[:, 0],
+            'slack': flags[:, 1],
+            'overload': flags[:, 2],
+            'at_stop': flags[:, 3],
+        }
         return s
 
 
-def build_plant(scenarios: Sequence[Scenario], base: PlantParams | None = None,
-                hysteresis: SDGPIParams | None = None) -> VariedPlant:
+def build_plant(
+    scenarios: Sequence[Scenario], base: PlantParams | None = None, hysteresis: SDGPIParams | None = None
+) -> VariedPlant:
     """The registry's factory for this family: one VariedPlant for the scenarios' wrists."""
     return VariedPlant([scenario_params(sc, base, hysteresis) for sc in scenarios], [sc.payload_kg for sc in scenarios])
 
@@ -402,8 +552,9 @@ class SensorBank:
         self._k += 1
         return e
 
-    def measure(self, T_true: FloatArray, q_true: FloatArray, qd_true: FloatArray
-                ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def measure(
+        self, T_true: FloatArray, q_true: FloatArray, qd_true: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(T_measured (N, 2), q_measured (N,), qdot reported (N,)) for one tick."""
         if self.ideal:
             return T_true, q_true, qd_true

@@ -12,6 +12,7 @@ Usage::
 real rclpy is not importable (or when forced before the real one is imported).  Node
 modules never branch on the runtime; they import rclpy as usual.  See doc/explanation/runtime.md.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -60,17 +61,19 @@ def activate(force: bool = False) -> bool:
             raise ActivationError(
                 'cannot activate the embedded rclpy: the real rclpy '
                 f'({getattr(sys.modules["rclpy"], "__file__", "?")}) is already imported in this '
-                'process; call sma_wrist.runtime.activate(force=True) before anything imports rclpy')
+                'process; call sma_wrist.runtime.activate(force=True) before anything imports rclpy'
+            )
         return False
     if not force and _real_rclpy_importable():
         return False
     from .finder import EmbeddedFinder
+
     finder = EmbeddedFinder()
     stale = [m for m in sys.modules if finder.handles(m)]
     if stale:
         raise ActivationError(
-            f'cannot activate the embedded runtime: modules {sorted(stale)[:5]} are already '
-            'imported from elsewhere')
+            f'cannot activate the embedded runtime: modules {sorted(stale)[:5]} are already imported from elsewhere'
+        )
     sys.meta_path.insert(0, finder)
     _finder = finder
     return True
@@ -91,4 +94,5 @@ def deactivate() -> None:
 def bench_messages(n: int = 20000, *, record: bool = False) -> dict[str, float]:
     """Measure publish->callback throughput of the embedded middleware (see bench.py)."""
     from .bench import bench_messages as _bench
+
     return _bench(n, record=record)

@@ -16,13 +16,15 @@ within a key).  rclpy
 turning ``/*`` into ``(/\\w+)`` and testing the node's fully-qualified name, after
 prefixing keys that lack a leading ``/``.
 """
+
 from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 import yaml
 
@@ -32,9 +34,17 @@ _TRUE = {'Y', 'y', 'yes', 'Yes', 'YES', 'true', 'True', 'TRUE', 'on', 'On', 'ON'
 _FALSE = {'N', 'n', 'no', 'No', 'NO', 'false', 'False', 'FALSE', 'off', 'Off', 'OFF'}
 _INT = re.compile(r'[-+]?\d+')
 _FLOAT = re.compile(r'[-+]?(\d+\.?\d*([eE][-+]?\d+)?|\.\d+([eE][-+]?\d+)?)')
-_SPECIAL_FLOAT = {'.nan': math.nan, '.NaN': math.nan, '.NAN': math.nan,
-                  '.inf': math.inf, '.Inf': math.inf, '.INF': math.inf,
-                  '-.inf': -math.inf, '-.Inf': -math.inf, '-.INF': -math.inf}
+_SPECIAL_FLOAT = {
+    '.nan': math.nan,
+    '.NaN': math.nan,
+    '.NAN': math.nan,
+    '.inf': math.inf,
+    '.Inf': math.inf,
+    '.INF': math.inf,
+    '-.inf': -math.inf,
+    '-.Inf': -math.inf,
+    '-.INF': -math.inf,
+}
 
 
 def parse_scalar(text: str) -> Any:
@@ -88,8 +98,9 @@ def _check_value(value: Any, name: str, where: str) -> Any:
         kinds = {type(v) for v in value}
         if len(kinds) > 1:
             raise ArgumentError(
-                f'parameter {name!r}: sequence items must all have one type, got '
-                f'{sorted(k.__name__ for k in kinds)}', where)
+                f'parameter {name!r}: sequence items must all have one type, got {sorted(k.__name__ for k in kinds)}',
+                where,
+            )
         if kinds and next(iter(kinds)) not in (bool, int, float, str):
             raise ArgumentError(f'parameter {name!r}: unsupported sequence item type', where)
         return value
@@ -140,8 +151,9 @@ def load_params_file(path: str | Path) -> list[ParamRule]:
     except OSError as exc:
         raise ArgumentError(f'cannot read params file: {exc.strerror}', where) from None
     except UnicodeDecodeError as exc:  # a binary file or another encoding: rcl reads UTF-8 YAML only
-        raise ArgumentError(f'not a UTF-8 text file (byte {exc.start}: {exc.reason}); '
-                            'a params file is YAML text', where) from None
+        raise ArgumentError(
+            f'not a UTF-8 text file (byte {exc.start}: {exc.reason}); a params file is YAML text', where
+        ) from None
     try:
         doc = load_yaml(text)
     except yaml.YAMLError as exc:
@@ -187,8 +199,14 @@ def _split_rule(text: str, flag: str) -> tuple[str | None, str, str]:
     return node, lhs, rhs
 
 
-_IGNORED_FLAGS = {'--disable-rosout-logs', '--enable-rosout-logs', '--disable-stdout-logs',
-                  '--enable-stdout-logs', '--disable-external-lib-logs', '--enable-external-lib-logs'}
+_IGNORED_FLAGS = {
+    '--disable-rosout-logs',
+    '--enable-rosout-logs',
+    '--disable-stdout-logs',
+    '--enable-stdout-logs',
+    '--disable-external-lib-logs',
+    '--enable-external-lib-logs',
+}
 
 
 def parse_ros_args(argv: Iterable[str] | None) -> RosArguments:

@@ -5,6 +5,7 @@ republishes every message on a second topic; a sink counts.  Each source tick th
 costs one timer callback and two message deliveries.  Optionally a BagRecorder records
 both topics (CDR serialisation + MCAP writing).
 """
+
 from __future__ import annotations
 
 import tempfile
@@ -15,6 +16,7 @@ from typing import Any
 
 def bench_messages(n: int = 20000, *, record: bool = False) -> dict[str, Any]:
     from . import activate
+
     if not activate():
         raise RuntimeError('bench_messages needs the embedded runtime (real rclpy is importable)')
     from .launch import Runtime
@@ -92,6 +94,7 @@ def bench_contract_floor(duration_s: float = 20.0, rate_hz: float = 100.0) -> di
     runtime: messages, deliveries, timers and sim time only, no numerics, no checks.
     """
     from . import activate
+
     if not activate():
         raise RuntimeError('bench_contract_floor needs the embedded runtime (real rclpy is importable)')
     from sma_wrist.contract import load_contract
@@ -110,8 +113,11 @@ def bench_contract_floor(duration_s: float = 20.0, rate_hz: float = 100.0) -> di
 
         def __init__(self, name: str) -> None:
             super().__init__(name, parameter_overrides=[Parameter('use_sim_time', value=name != 'plant_sim')])
-            self.outputs = [(self.create_publisher(message_class(t), t.name, qos_for(t)), message_class(t), t)
-                            for t in periodic if t.publisher == name]
+            self.outputs = [
+                (self.create_publisher(message_class(t), t.name, qos_for(t)), message_class(t), t)
+                for t in periodic
+                if t.publisher == name
+            ]
             trigger = FLOOR_TRIGGERS[name]
             for t in periodic:
                 if name in t.subscribers and t.name != '/clock':

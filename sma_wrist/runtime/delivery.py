@@ -10,11 +10,13 @@ generator (the same seed gives the same run); messages of one publisher to one s
 keep their order, as a RELIABLE DDS writer/reader pair does. Only the timing changes: no
 message is dropped here (a subscription's KEEP_LAST depth still applies when it is taken).
 """
+
 from __future__ import annotations
 
 import heapq
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 

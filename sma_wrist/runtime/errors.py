@@ -2,6 +2,7 @@
 
 Each error says what was wrong and where, so a CLI can print it verbatim.
 """
+
 from __future__ import annotations
 
 from sma_wrist.core.errors import SmaWristError

@@ -12,10 +12,12 @@ alignment counted from after the header, no alignment before the elements of an 
 sequence); test_bag checks them byte for byte against ``TYPESTORE.serialize_cdr`` and the
 decoders against ``TYPESTORE.deserialize_cdr``.
 """
+
 from __future__ import annotations
 
 import struct
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .messages import TYPESTORE, get_message_class
 
@@ -58,7 +60,7 @@ def _clock(msg: Any) -> bytes:
 def _temperature(msg: Any) -> bytes:
     parts = [_HEADER]
     pos = _header_parts(msg.header, parts)
-    parts.append(_ZEROS[:_pad(pos, 8)])
+    parts.append(_ZEROS[: _pad(pos, 8)])
     parts.append(_DD.pack(msg.temperature, msg.variance))
     return b''.join(parts)
 
@@ -111,7 +113,7 @@ def _read_header(data: bytes, pos: int, Header: Any, Time: Any) -> tuple[Any, in
     stamp = _new(Time)
     stamp.sec, stamp.nanosec = sec, nanosec
     h = _new(Header)
-    h.stamp, h.frame_id = stamp, data[pos + 12:end - 1].decode()
+    h.stamp, h.frame_id = stamp, data[pos + 12 : end - 1].decode()
     return h, end
 
 
@@ -169,7 +171,7 @@ def _decoders() -> dict[str, Decoder]:
             (n,) = _U32.unpack_from(data, pos)
             if n < 1 or pos + 4 + n > len(data):
                 raise ValueError('name runs past the end of the message')
-            names.append(data[pos + 4:pos + 3 + n].decode())
+            names.append(data[pos + 4 : pos + 3 + n].decode())
             pos += 4 + n
         position, pos = floats(data, pos)
         velocity, pos = floats(data, pos)
@@ -178,13 +180,19 @@ def _decoders() -> dict[str, Decoder]:
         o.header, o.name, o.position, o.velocity, o.effort = header, names, position, velocity, effort
         return o
 
-    return {'std_msgs/msg/Float64': float64, 'rosgraph_msgs/msg/Clock': clock,
-            'sensor_msgs/msg/Temperature': temperature, 'sensor_msgs/msg/JointState': joint_state}
+    return {
+        'std_msgs/msg/Float64': float64,
+        'rosgraph_msgs/msg/Clock': clock,
+        'sensor_msgs/msg/Temperature': temperature,
+        'sensor_msgs/msg/JointState': joint_state,
+    }
 
 
 _ENCODERS: dict[str, Encoder] = {
-    'std_msgs/msg/Float64': _float64, 'rosgraph_msgs/msg/Clock': _clock,
-    'sensor_msgs/msg/Temperature': _temperature, 'sensor_msgs/msg/JointState': _joint_state,
+    'std_msgs/msg/Float64': _float64,
+    'rosgraph_msgs/msg/Clock': _clock,
+    'sensor_msgs/msg/Temperature': _temperature,
+    'sensor_msgs/msg/JointState': _joint_state,
 }
 _DECODERS: dict[str, Decoder] = {}
 
@@ -198,6 +206,7 @@ def encoder_for(typename: str) -> Encoder:
 
     def generic(msg: Any) -> bytes:
         return TYPESTORE.serialize_cdr(msg._to_rb(), typename)
+
     return generic
 
 
@@ -207,16 +216,19 @@ def decoder_for(typename: str) -> Decoder:
         _DECODERS.update(_decoders())
     fast = _DECODERS.get(typename)
     if fast is not None:
+
         def checked(data: bytes, _fast: Decoder = fast) -> Any:
             if data[:4] != _HEADER:
                 # big-endian or unusual encapsulation (another recorder): the typestore handles it
                 return get_message_class(typename)._from_rb(TYPESTORE.deserialize_cdr(data, typename))
             return _fast(data)
+
         return checked
     cls = get_message_class(typename)
 
     def generic(data: bytes) -> Any:
         return cls._from_rb(TYPESTORE.deserialize_cdr(data, typename))
+
     return generic
 
 

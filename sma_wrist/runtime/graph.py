@@ -5,9 +5,11 @@ subscription (as a serialising middleware would give each reader its own object)
 that subscription's bounded queue; taps (bag recorders) see the original message and the
 ROS time of the publishing node's clock.
 """
+
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable, Optional
+from collections.abc import Callable, Iterable
+from typing import Any
 
 from .errors import GraphError
 
@@ -28,7 +30,7 @@ class Topic:
 class _TapEntry:
     __slots__ = ('fn', 'topics')
 
-    def __init__(self, fn: Tap, topics: Optional[frozenset[str]]) -> None:
+    def __init__(self, fn: Tap, topics: frozenset[str] | None) -> None:
         self.fn = fn
         self.topics = topics
 
@@ -50,14 +52,15 @@ class Graph:
         elif t.msg_type is not msg_type:
             raise GraphError(
                 f'topic {name!r} is used with two message types: '
-                f'{getattr(t.msg_type, "_TYPE", t.msg_type)} and {getattr(msg_type, "_TYPE", msg_type)}')
+                f'{getattr(t.msg_type, "_TYPE", t.msg_type)} and {getattr(msg_type, "_TYPE", msg_type)}'
+            )
         return t
 
     def _rematch(self, topic: Topic) -> None:
         from .rclpy.qos import _compatible
+
         for pub in topic.publishers:
-            pub._matched = [s for s in topic.subscriptions
-                            if _compatible(pub.qos_profile, s.qos_profile)]
+            pub._matched = [s for s in topic.subscriptions if _compatible(pub.qos_profile, s.qos_profile)]
         self.version += 1
 
     def add_publisher(self, pub: Any) -> None:
@@ -67,6 +70,7 @@ class Graph:
 
     def add_subscription(self, sub: Any) -> None:
         from .rclpy.qos import _compatible
+
         topic = sub._topic
         topic.subscriptions.append(sub)
         self._rematch(topic)
@@ -90,7 +94,7 @@ class Graph:
             topic.subscriptions.remove(sub)
         self._rematch(topic)
 
-    def add_tap(self, fn: Tap, topics: Optional[Iterable[str]] = None) -> Callable[[], None]:
+    def add_tap(self, fn: Tap, topics: Iterable[str] | None = None) -> Callable[[], None]:
         """Call fn(topic, msg, ros_time_ns) for every publication (on the given topics).
 
         Returns a function that removes the tap.
@@ -107,4 +111,5 @@ class Graph:
                 for t in self.topics.values():
                     if fn in t.taps:
                         t.taps.remove(fn)
+
         return remove

@@ -14,12 +14,14 @@ This is the embedded counterpart of a launch file + ``ros2 bag record``::
 ``duration`` is measured in sim time (the last /clock message) when any node uses sim
 time, otherwise in virtual steady time (``until='auto'``).
 """
+
 from __future__ import annotations
 
 import time as _wall
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
+from typing import Any
 
 from .arguments import params_from_tree
 from .errors import ActivationError, GraphError
@@ -30,10 +32,10 @@ from .vclock import VCLOCK
 class RunResult:
     reason: str  # 'time', 'condition', 'idle', 'shutdown', 'max_callbacks'
     steady_ns: int  # virtual steady time at the end
-    sim_ns: Optional[int]  # last /clock time seen (None if no /clock)
+    sim_ns: int | None  # last /clock time seen (None if no /clock)
     callbacks: int
     wall_s: float
-    bag: Optional[str] = None
+    bag: str | None = None
     recorded: int = 0
 
     @property
@@ -44,10 +46,14 @@ class RunResult:
 
 def _rclpy() -> Any:
     from . import using_embedded
+
     if not using_embedded():
-        raise ActivationError('the embedded runtime is not active: call '
-                              'sma_wrist.runtime.activate() first (ROS 2 sourced? use ros2 launch)')
+        raise ActivationError(
+            'the embedded runtime is not active: call '
+            'sma_wrist.runtime.activate() first (ROS 2 sourced? use ros2 launch)'
+        )
     from . import rclpy
+
     return rclpy
 
 
@@ -68,12 +74,18 @@ class Runtime:
         as DDS shows); None (default) delivers every message at once, deterministically.
     """
 
-    def __init__(self, args: Optional[Sequence[str]] = None, *,
-                 params: Optional[Mapping[str, Mapping[str, Any]]] = None,
-                 system_epoch_ns: int = 0, delivery: Any = None) -> None:
+    def __init__(
+        self,
+        args: Sequence[str] | None = None,
+        *,
+        params: Mapping[str, Mapping[str, Any]] | None = None,
+        system_epoch_ns: int = 0,
+        delivery: Any = None,
+    ) -> None:
         rclpy = _rclpy()
         from .rclpy.context import Context
         from .rclpy.executors import SingleThreadedExecutor
+
         if rclpy.ok():
             raise GraphError('rclpy is already initialised; shut it down before creating a Runtime')
         VCLOCK.system_epoch_ns = int(system_epoch_ns)
@@ -87,9 +99,10 @@ class Runtime:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list[Any] = []
         self.recorders: list[Any] = []
-        self._sim_ns: Optional[int] = None
+        self._sim_ns: int | None = None
         self.context.graph.add_tap(self._on_clock, ['/clock'])
         from .rclpy import logging as rlog
+
         rlog.set_stamp_source(self._log_time_ns)  # the log on the bag's time base, not the virtual steady clock
 
     def _on_clock(self, topic: Any, msg: Any, t_ns: int) -> None:
@@ -99,6 +112,7 @@ class Runtime:
     def add(self, node_or_factory: Any, *args: Any, **kwargs: Any) -> Any:
         """Add a Node instance, or construct one from a class/factory and add it."""
         from .rclpy.node import Node
+
         node = node_or_factory if isinstance(node_or_factory, Node) else node_or_factory(*args, **kwargs)
         if not isinstance(node, Node):
             raise GraphError(f'{node_or_factory!r} did not produce an rclpy Node')
@@ -115,9 +129,10 @@ class Runtime:
     def add_nodes(self, factories: Iterable[Any]) -> list[Any]:
         return [self.add(f) for f in factories]
 
-    def record(self, path: str | Path, topics: Optional[Iterable[str]] = None, **kwargs: Any) -> Any:
+    def record(self, path: str | Path, topics: Iterable[str] | None = None, **kwargs: Any) -> Any:
         """Start a BagRecorder on this context; it is closed by close()/the with block."""
         from sma_wrist.bag import BagRecorder
+
         # one clock for every message's log time, as ros2 bag record with --use-sim-time: the
         # publishers' own clocks differ (hardware_bridge polls its steady clock twice per window)
         kwargs.setdefault('clock_ns', self._record_time_ns)
@@ -131,14 +146,13 @@ class Runtime:
         return VCLOCK.steady_ns
 
     @property
-    def sim_ns(self) -> Optional[int]:
+    def sim_ns(self) -> int | None:
         return self._sim_ns
 
     def uses_sim_time(self) -> bool:
         return any(n.get_clock().ros_time_is_active for n in self.nodes)
 
-    def run_until(self, t_end: float, *, until: str = 'auto',
-                  stop_when: Optional[Callable[[], bool]] = None) -> RunResult:
+    def run_until(self, t_end: float, *, until: str = 'auto', stop_when: Callable[[], bool] | None = None) -> RunResult:
         """Run until ``t_end`` seconds of virtual steady time (``until='steady'``) or of sim
         time (``until='sim'``: the last /clock message); ``'auto'`` picks sim time when
         any node has ``use_sim_time`` active.  Work due at the end instant is completed."""
@@ -150,23 +164,31 @@ class Runtime:
         if mode == 'steady':
             reason = ex.run_until(end_ns, stop_when=stop_when)
         elif mode == 'sim':
+
             def done() -> bool:
-                return (self._sim_ns is not None and self._sim_ns >= end_ns) or \
-                    (stop_when is not None and stop_when())
+                return (self._sim_ns is not None and self._sim_ns >= end_ns) or (stop_when is not None and stop_when())
+
             reason = ex.run_until(None, stop_when=done)
             if reason == 'condition':
                 if stop_when is None or not stop_when():
                     reason = 'time'
                 ex.run_until(VCLOCK.steady_ns)  # finish the cascade of this instant
             elif reason == 'idle':
-                raise GraphError(f'sim time stopped at {self._sim_ns} ns before {end_ns} ns: '
-                                 'no node publishes /clock (or its timers stopped)')
+                raise GraphError(
+                    f'sim time stopped at {self._sim_ns} ns before {end_ns} ns: '
+                    'no node publishes /clock (or its timers stopped)'
+                )
         else:
             raise ValueError(f"until must be 'auto', 'steady' or 'sim', not {until!r}")
-        return RunResult(reason, VCLOCK.steady_ns, self._sim_ns, ex.callbacks_run - cb0,
-                         _wall.perf_counter() - wall0,
-                         str(self.recorders[0].path) if self.recorders else None,
-                         sum(r.count for r in self.recorders))
+        return RunResult(
+            reason,
+            VCLOCK.steady_ns,
+            self._sim_ns,
+            ex.callbacks_run - cb0,
+            _wall.perf_counter() - wall0,
+            str(self.recorders[0].path) if self.recorders else None,
+            sum(r.count for r in self.recorders),
+        )
 
     def spin_for(self, duration: float, **kwargs: Any) -> RunResult:
         """Run for ``duration`` seconds from the current (steady or sim) time."""
@@ -190,22 +212,29 @@ class Runtime:
         self.nodes = []
         rclpy.try_shutdown()
         from .rclpy import logging as rlog
+
         rlog.set_stamp_source(None)
         if errors:
             raise errors[0]
 
-    def __enter__(self) -> 'Runtime':
+    def __enter__(self) -> Runtime:
         return self
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
 
-def run_nodes(node_classes: Iterable[Any], duration: float, *,
-              args: Optional[Sequence[str]] = None,
-              params: Optional[Mapping[str, Mapping[str, Any]]] = None,
-              bag: Optional[str | Path] = None, topics: Optional[Iterable[str]] = None,
-              until: str = 'auto', stop_when: Optional[Callable[[], bool]] = None) -> RunResult:
+def run_nodes(
+    node_classes: Iterable[Any],
+    duration: float,
+    *,
+    args: Sequence[str] | None = None,
+    params: Mapping[str, Mapping[str, Any]] | None = None,
+    bag: str | Path | None = None,
+    topics: Iterable[str] | None = None,
+    until: str = 'auto',
+    stop_when: Callable[[], bool] | None = None,
+) -> RunResult:
     """Construct the node classes (in order), run for ``duration`` s, record ``bag``.
 
     The bag is closed even on Ctrl-C or an exception in a callback, so everything up to

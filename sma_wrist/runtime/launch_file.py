@@ -15,6 +15,7 @@ launch with its reason, as ros2 launch does (launch ``ExecuteProcess(on_exit=...
 ``actions/shutdown_action.py``); an action that raises ends it with ``return_code`` 1, as
 ``LaunchService.run`` does. A node that fails while running raises out of the run (one process here).
 """
+
 from __future__ import annotations
 
 import importlib
@@ -23,9 +24,10 @@ import inspect
 import os
 import sys
 import types
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any
 
 from .errors import GraphError
 from .launch import RunResult, Runtime
@@ -56,20 +58,28 @@ def _perform(value: Any, context: LaunchContext) -> str:
 
 
 class LaunchDescription:
-    def __init__(self, initial_entities: Optional[Sequence[Any]] = None) -> None:
+    def __init__(self, initial_entities: Sequence[Any] | None = None) -> None:
         self.entities = list(initial_entities or [])
 
 
 class DeclareLaunchArgument:
-    def __init__(self, name: str, *, default_value: Any = None, description: str = '',
-                 choices: Optional[Sequence[str]] = None, **_: Any) -> None:
+    def __init__(
+        self,
+        name: str,
+        *,
+        default_value: Any = None,
+        description: str = '',
+        choices: Sequence[str] | None = None,
+        **_: Any,
+    ) -> None:
         self.name, self.default_value, self.description = name, default_value, description
         self.choices = list(choices) if choices is not None else None
 
 
 class OpaqueFunction:
-    def __init__(self, *, function: Callable[..., Any], args: Sequence[Any] = (),
-                 kwargs: Optional[Mapping[str, Any]] = None) -> None:
+    def __init__(
+        self, *, function: Callable[..., Any], args: Sequence[Any] = (), kwargs: Mapping[str, Any] | None = None
+    ) -> None:
         self.function, self.args, self.kwargs = function, list(args), dict(kwargs or {})
 
 
@@ -109,25 +119,37 @@ class FindPackageShare:
 
     def perform(self, context: LaunchContext) -> str:
         from sma_wrist.share import PACKAGE, share_path
+
         if self.package != PACKAGE:
             raise LaunchFileError(f'package {self.package!r} is not available on the embedded runtime')
         return str(share_path('config/wrist.yaml').parent.parent)
 
 
 class Node:
-    def __init__(self, *, executable: str, package: Optional[str] = None, name: Optional[str] = None,
-                 parameters: Sequence[Any] = (), on_exit: Optional[Sequence[Any]] = None,
-                 output: Any = None, **_: Any) -> None:
+    def __init__(
+        self,
+        *,
+        executable: str,
+        package: str | None = None,
+        name: str | None = None,
+        parameters: Sequence[Any] = (),
+        on_exit: Sequence[Any] | None = None,
+        output: Any = None,
+        **_: Any,
+    ) -> None:
         self.package, self.executable, self.name = package, executable, name or executable
         self.parameters, self.on_exit = list(parameters), list(on_exit or [])
 
 
 _MODULES = {
     'launch': {'LaunchDescription': LaunchDescription, 'LaunchContext': LaunchContext},
-    'launch.actions': {'DeclareLaunchArgument': DeclareLaunchArgument, 'OpaqueFunction': OpaqueFunction,
-                       'LogInfo': LogInfo, 'Shutdown': Shutdown},
-    'launch.substitutions': {'LaunchConfiguration': LaunchConfiguration,
-                             'PathJoinSubstitution': PathJoinSubstitution},
+    'launch.actions': {
+        'DeclareLaunchArgument': DeclareLaunchArgument,
+        'OpaqueFunction': OpaqueFunction,
+        'LogInfo': LogInfo,
+        'Shutdown': Shutdown,
+    },
+    'launch.substitutions': {'LaunchConfiguration': LaunchConfiguration, 'PathJoinSubstitution': PathJoinSubstitution},
     'launch_ros': {},
     'launch_ros.actions': {'Node': Node},
     'launch_ros.substitutions': {'FindPackageShare': FindPackageShare},
@@ -137,7 +159,7 @@ _MODULES = {
 class _LaunchModules:
     """``launch`` / ``launch_ros`` in sys.modules while a launch file is loaded and evaluated."""
 
-    def __enter__(self) -> '_LaunchModules':
+    def __enter__(self) -> _LaunchModules:
         self._saved = {name: sys.modules.get(name) for name in _MODULES}
         for name, attrs in _MODULES.items():
             mod = types.ModuleType(name, 'embedded stand-in (sma_wrist.runtime.launch_file)')
@@ -159,23 +181,27 @@ class _LaunchModules:
 @dataclass
 class LaunchResult:
     reason: str  # 'time' (ran for the duration) or 'shutdown' (a Shutdown action, or an action that raised)
-    shutdown_reason: Optional[str] = None
+    shutdown_reason: str | None = None
     return_code: int = 0  # what ros2 launch returns: 1 when an action raised (LaunchService.run), else 0
     exits: dict[str, int] = field(default_factory=dict)  # node name -> exit code of nodes that ended
     started: list[str] = field(default_factory=list)  # node names running when the launch ended
     log: list[str] = field(default_factory=list)  # LogInfo messages
-    run: Optional[RunResult] = None
+    run: RunResult | None = None
 
 
 def node_class(executable: str) -> type:
     """The node class behind a console script of this package (``sma_wrist.nodes.<executable>``)."""
     from sma_wrist.nodes.common import WristNode
+
     try:
         mod = importlib.import_module(f'sma_wrist.nodes.{executable}')
     except ModuleNotFoundError:
         raise LaunchFileError(f'executable {executable!r} not found in package sma_wrist') from None
-    found = [c for c in vars(mod).values() if inspect.isclass(c) and issubclass(c, WristNode)
-             and c.__module__ == mod.__name__]
+    found = [
+        c
+        for c in vars(mod).values()
+        if inspect.isclass(c) and issubclass(c, WristNode) and c.__module__ == mod.__name__
+    ]
     if len(found) != 1:
         raise LaunchFileError(f'sma_wrist.nodes.{executable} defines {len(found)} node classes, expected 1')
     return found[0]
@@ -203,8 +229,10 @@ def _configure(desc: LaunchDescription, arguments: Mapping[str, str]) -> tuple[L
                 raise LaunchFileError(f"Included launch description missing required argument '{entity.name}'")
             if entity.choices is not None and value not in entity.choices:
                 # launch's own wording (actions/declare_launch_argument.py)
-                raise LaunchFileError(f"Argument '{entity.name}' provided value '{value}' is not valid. "
-                                      f'Valid options are: {entity.choices}')
+                raise LaunchFileError(
+                    f"Argument '{entity.name}' provided value '{value}' is not valid. "
+                    f'Valid options are: {entity.choices}'
+                )
             context.launch_configurations[entity.name] = value
         elif isinstance(entity, OpaqueFunction):
             nodes += entity.function(context, *entity.args, **entity.kwargs) or []
@@ -215,8 +243,13 @@ def _configure(desc: LaunchDescription, arguments: Mapping[str, str]) -> tuple[L
     return context, nodes
 
 
-def _on_exit(actions: Sequence[Any], context: LaunchContext, result: LaunchResult,
-             print_fn: Callable[[str], None], event: Optional[ProcessExited] = None) -> None:
+def _on_exit(
+    actions: Sequence[Any],
+    context: LaunchContext,
+    result: LaunchResult,
+    print_fn: Callable[[str], None],
+    event: ProcessExited | None = None,
+) -> None:
     """A node's ``on_exit`` actions, ``event`` in ``context.locals``: LogInfo, Shutdown (the first one's reason ends the
     launch), OpaqueFunction (its actions in turn, given the context). An action that raises ends the launch with
     return code 1 and launch's message, as ``LaunchService.run`` does (launch_service.py, Humble and Jazzy)."""
@@ -236,8 +269,9 @@ def _on_exit(actions: Sequence[Any], context: LaunchContext, result: LaunchResul
         context.locals = saved
 
 
-def _run_actions(actions: Sequence[Any], context: LaunchContext, result: LaunchResult,
-                 print_fn: Callable[[str], None]) -> None:
+def _run_actions(
+    actions: Sequence[Any], context: LaunchContext, result: LaunchResult, print_fn: Callable[[str], None]
+) -> None:
     for a in actions:
         if isinstance(a, LogInfo):
             text = _perform(a.msg, context)
@@ -253,10 +287,17 @@ def _run_actions(actions: Sequence[Any], context: LaunchContext, result: LaunchR
             raise LaunchFileError(f'{type(a).__name__} in on_exit is not supported')
 
 
-def run_launch_file(path: str | Path, arguments: Optional[Mapping[str, Any]] = None, duration: float = 1.0, *,
-                    bag: Optional[str | Path] = None, print_fn: Callable[[str], None] = print) -> LaunchResult:
+def run_launch_file(
+    path: str | Path,
+    arguments: Mapping[str, Any] | None = None,
+    duration: float = 1.0,
+    *,
+    bag: str | Path | None = None,
+    print_fn: Callable[[str], None] = print,
+) -> LaunchResult:
     """``ros2 launch <path> name:=value...`` for ``duration`` s of sim time, on the embedded runtime."""
     from sma_wrist.nodes.common import start_up_refusal
+
     path = Path(path)
     with _LaunchModules():
         context, nodes = _configure(_load(path), {k: str(v) for k, v in (arguments or {}).items()})

@@ -16,10 +16,12 @@ serialisation through ``TYPESTORE.serialize_cdr``; the converters, a fast ``_cop
 to give each subscription its own message, as a middleware round trip would) and
 ``__init__`` are generated once per type and cached.
 """
+
 from __future__ import annotations
 
 import types
-from typing import Any, Callable, ClassVar
+from collections.abc import Callable
+from typing import Any, ClassVar
 
 import numpy as np
 from rosbags.typesys import Stores, get_typestore
@@ -32,17 +34,31 @@ TYPESTORE: Typestore = get_typestore(Stores.ROS2_HUMBLE)
 BASE, NAME, ARRAY, SEQUENCE = 1, 2, 3, 4
 
 _NUMPY_DTYPES: dict[str, Any] = {
-    'bool': np.bool_, 'byte': np.uint8, 'char': np.uint8,
-    'int8': np.int8, 'uint8': np.uint8, 'int16': np.int16, 'uint16': np.uint16,
-    'int32': np.int32, 'uint32': np.uint32, 'int64': np.int64, 'uint64': np.uint64,
-    'float32': np.float32, 'float64': np.float64,
+    'bool': np.bool_,
+    'byte': np.uint8,
+    'char': np.uint8,
+    'int8': np.int8,
+    'uint8': np.uint8,
+    'int16': np.int16,
+    'uint16': np.uint16,
+    'int32': np.int32,
+    'uint32': np.uint32,
+    'int64': np.int64,
+    'uint64': np.uint64,
+    'float32': np.float32,
+    'float64': np.float64,
 }
 _DEFAULTS: dict[str, Any] = {
-    'bool': False, 'byte': b'\x00', 'char': 0, 'string': '', 'wstring': '',
-    'float32': 0.0, 'float64': 0.0,
+    'bool': False,
+    'byte': b'\x00',
+    'char': 0,
+    'string': '',
+    'wstring': '',
+    'float32': 0.0,
+    'float64': 0.0,
 }
 
-_CLASSES: dict[str, type['Message']] = {}
+_CLASSES: dict[str, type[Message]] = {}
 _MODULES: dict[str, types.ModuleType] = {}
 
 
@@ -53,9 +69,9 @@ class Message:
     _TYPE: ClassVar[str] = ''
     _FIELDS: ClassVar[tuple[str, ...]] = ()
     _FIELD_TYPES: ClassVar[dict[str, str]] = {}
-    _copy: Callable[['Message'], 'Message']
-    _to_rb: Callable[['Message'], Any]
-    _from_rb: ClassVar[Callable[[Any], 'Message']]
+    _copy: Callable[[Message], Message]
+    _to_rb: Callable[[Message], Any]
+    _from_rb: ClassVar[Callable[[Any], Message]]
 
     @classmethod
     def get_fields_and_field_types(cls) -> dict[str, str]:
@@ -121,17 +137,18 @@ def _build_class(typename: str) -> type[Message]:
     try:
         consts, fields = TYPESTORE.fielddefs[typename]
     except KeyError:
-        raise MessageTypeError(
-            f'message type {typename!r} is not in the ROS 2 Humble typestore') from None
+        raise MessageTypeError(f'message type {typename!r} is not in the ROS 2 Humble typestore') from None
     rbcls = TYPESTORE.types[typename]
     pkg, _, name = typename.split('/')
     names = tuple(f for f, _ in fields)
     ns: dict[str, Any] = {'np': np, '_RB': rbcls, '_valid': frozenset(names)}
 
-    init = ['def __init__(self, **kw):',
-            '    if kw and not _valid.issuperset(kw):',
-            "        raise AssertionError('Invalid arguments passed to constructor: %s' % "
-            "', '.join(sorted(set(kw) - _valid)))"]
+    init = [
+        'def __init__(self, **kw):',
+        '    if kw and not _valid.issuperset(kw):',
+        "        raise AssertionError('Invalid arguments passed to constructor: %s' % "
+        "', '.join(sorted(set(kw) - _valid)))",
+    ]
     copy = ['def _copy(self):', '    o = _new(_cls)']
     to_rb = ['def _to_rb(self):', '    return _RB(']
     from_rb = ['def _from_rb(m):', '    o = _new(_cls)']
@@ -156,8 +173,10 @@ def _build_class(typename: str) -> type[Message]:
                 ns[f'_dt_{fname}'] = _NUMPY_DTYPES[base]
                 copy.append(f'    o.{fname} = list(self.{fname})')
                 if base == 'byte':
-                    to_rb.append(f'        {fname}=np.frombuffer(b"".join(x if isinstance(x, bytes) '
-                                 f'else bytes((x,)) for x in self.{fname}), dtype=np.uint8),')
+                    to_rb.append(
+                        f'        {fname}=np.frombuffer(b"".join(x if isinstance(x, bytes) '
+                        f'else bytes((x,)) for x in self.{fname}), dtype=np.uint8),'
+                    )
                     from_rb.append(f'    o.{fname} = [bytes((x,)) for x in m.{fname}.tolist()]')
                 else:
                     to_rb.append(f'        {fname}=np.asarray(self.{fname}, dtype=_dt_{fname}),')
@@ -172,8 +191,9 @@ def _build_class(typename: str) -> type[Message]:
             init.append(f"    self.{fname} = kw.get('{fname}', {default})")
             copy.append(f'    o.{fname} = self.{fname}')
             if arg[0] == 'byte':
-                to_rb.append(f'        {fname}=self.{fname}[0] if isinstance(self.{fname}, bytes) '
-                             f'else int(self.{fname}),')
+                to_rb.append(
+                    f'        {fname}=self.{fname}[0] if isinstance(self.{fname}, bytes) else int(self.{fname}),'
+                )
                 from_rb.append(f'    o.{fname} = bytes((m.{fname},))')
             elif arg[0] in ('float32', 'float64'):
                 to_rb.append(f'        {fname}=float(self.{fname}),')
@@ -310,7 +330,16 @@ def msg(typename: str) -> type[Message]:
 
 
 __all__ = [
-    'Message', 'TYPESTORE', 'deserialize', 'from_rosbags', 'get_message_class',
-    'is_message_class', 'message_type_name', 'msg_module', 'package_module', 'packages',
-    'serialize', 'to_rosbags',
+    'Message',
+    'TYPESTORE',
+    'deserialize',
+    'from_rosbags',
+    'get_message_class',
+    'is_message_class',
+    'message_type_name',
+    'msg_module',
+    'package_module',
+    'packages',
+    'serialize',
+    'to_rosbags',
 ]

@@ -6,6 +6,7 @@ it), so runs are as fast as the CPU allows and bit-for-bit repeatable.  SYSTEM t
 ``system_epoch_ns + steady_ns`` (epoch 0 by default, so a graph whose /clock starts at 0
 has sim time == virtual time).
 """
+
 from __future__ import annotations
 
 

@@ -6,6 +6,7 @@ computations for N wrists in lockstep (same reference, same sample times), check
 one-wrist objects by test_sweep (``JointControllerBank`` == ``JointController``,
 ``TemLoopBank`` == ``TemLoop``, sample by sample).
 """
+
 from __future__ import annotations
 
 import math
@@ -16,12 +17,25 @@ from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.control.adaptive import AdaptiveController
-from sma_wrist.core.control.joint_controller import (REVERSAL_STEP_RAD, JointControllerParams, output_filter_step,
-                                                     reference_ahead, time_to_meet)
+from sma_wrist.core.control.joint_controller import (
+    REVERSAL_STEP_RAD,
+    JointControllerParams,
+    output_filter_step,
+    reference_ahead,
+    time_to_meet,
+)
 from sma_wrist.core.control.pid import PID
-from sma_wrist.core.control.tem import (CHATTER_LIMIT_PER_S, CHATTER_RATE_FILTER_S, CHATTER_WINDOW_S,
-                                       RANGE_REFRESH_S, ChatterGuard, DriveLimits, TemControlParams, TemLoop,
-                                       target_prefilter)
+from sma_wrist.core.control.tem import (
+    CHATTER_LIMIT_PER_S,
+    CHATTER_RATE_FILTER_S,
+    CHATTER_WINDOW_S,
+    RANGE_REFRESH_S,
+    ChatterGuard,
+    DriveLimits,
+    TemControlParams,
+    TemLoop,
+    target_prefilter,
+)
 from sma_wrist.core.errors import ModelInputError
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant.wrist import PlantParams
@@ -30,9 +44,11 @@ from sma_wrist.core.thermal.online import OnlineThermalParams, ThermalScaleEstim
 
 FloatArray = NDArray[np.float64]
 
+
 @_jit
-def _reversal_lead_many(q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, hold_after,
-                        target):  # pragma: no cover - compiled
+def _reversal_lead_many(
+    q, q_d, qdot_d, qddot_d, lead_s, step, hold_on, hold_q, hold_after, target
+):  # pragma: no cover - compiled
     """JointController._reversal_lead for each wrist j, compiled (q and its reference q_d, qdot_d, qddot_d (n,)
     [rad, rad/s, rad/s^2]): target[j] = the angle whose strain is asked for; hold_on, hold_q, hold_after (n,) the
     latch per wrist, in place."""
@@ -114,8 +130,9 @@ class JointControllerBank:
         out[:, 1] = (self._e0 + x) / self._wire_mm
         return out
 
-    def update(self, q: FloatArray, qdot: FloatArray, q_d: ArrayLike, qdot_d: ArrayLike, qddot_d: ArrayLike,
-               dt: float) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
+    def update(
+        self, q: FloatArray, qdot: FloatArray, q_d: ArrayLike, qdot_d: ArrayLike, qddot_d: ArrayLike, dt: float
+    ) -> tuple[FloatArray | None, FloatArray, FloatArray | None, NDArray[np.bool_]]:
         """One control step of every wrist; the reference (q_d, qdot_d, qddot_d) is one for all or (n,), one per
         wrist (each starts from its own angle: trajectory_generator's soft start)."""
         p = self.params
@@ -136,28 +153,68 @@ class JointControllerBank:
         out = self.adaptive.update_stacked(x, dt)
         force, saturated = out[:, :2], out[:, 7] != 0.0  # ControlOutput's force_1_N, force_2_N and saturated
         if p.mode == 'inverse_adaptive':
-            _reversal_lead_many(np.ascontiguousarray(q, float), np.ascontiguousarray(q_d), np.ascontiguousarray(qdot_d),
-                                np.ascontiguousarray(qddot_d),
-                                float(p.reversal_lead_s), REVERSAL_STEP_RAD, self.hold_on, self.hold_q,
-                                self.hold_after, self._target)
+            _reversal_lead_many(
+                np.ascontiguousarray(q, float),
+                np.ascontiguousarray(q_d),
+                np.ascontiguousarray(qdot_d),
+                np.ascontiguousarray(qddot_d),
+                float(p.reversal_lead_s),
+                REVERSAL_STEP_RAD,
+                self.hold_on,
+                self.hold_q,
+                self.hold_after,
+                self._target,
+            )
             return force, self.strain_at(self._target), None, saturated
         Tc, sat_T = np.empty((self.n, 2)), np.empty(self.n, np.bool_)
-        self.u_filtered = output_filter_step(self.u_filtered, (force - p.adaptive.preload_N) / p.force_per_degC_N, dt,
-                                             p.output_filter_s)
+        self.u_filtered = output_filter_step(
+            self.u_filtered, (force - p.adaptive.preload_N) / p.force_per_degC_N, dt, p.output_filter_s
+        )
         _temperature_map(self.u_filtered, p.temperature_mid_C, lo, hi, saturated, Tc, sat_T)
         return force, self._strain_rows(q_now), Tc, sat_T
 
 
 @_jit
-def _control_many(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef,
-                  cfg, candidates, status):  # pragma: no cover - compiled
+def _control_many(
+    x,
+    rate,
+    T_d_prev,
+    rng,
+    command,
+    flags,
+    T_meas,
+    T_d,
+    dt_obs,
+    dt_law,
+    has_prev,
+    refresh,
+    th_coef,
+    cfg,
+    candidates,
+    status,
+):  # pragma: no cover - compiled
     """tem_kernel.control_sample for each wrist j (row j of every state array, of th_coef and of cfg: the chatter
     guard sets a wrist's rate filter), its work arrays allocated once."""
     scratch = tem_kernel.sample_scratch()
     for j in range(x.shape[0]):
-        status[j] = tem_kernel.control_sample_into(x[j], rate[j], T_d_prev[j], rng[j], command[j], flags[j],
-                                                   T_meas[j], T_d[j], dt_obs, dt_law, has_prev, refresh, th_coef[j],
-                                                   cfg[j], candidates, scratch)
+        status[j] = tem_kernel.control_sample_into(
+            x[j],
+            rate[j],
+            T_d_prev[j],
+            rng[j],
+            command[j],
+            flags[j],
+            T_meas[j],
+            T_d[j],
+            dt_obs,
+            dt_law,
+            has_prev,
+            refresh,
+            th_coef[j],
+            cfg[j],
+            candidates,
+            scratch,
+        )
 
 
 @dataclass(frozen=True)
@@ -177,8 +234,16 @@ class TemLoopBank:
     """:class:`sma_wrist.core.control.tem.TemLoop` (tem_controller's per-sample work) for n wrists
     sampled together. The constants are a one-wrist TemLoop's, built as the node builds them."""
 
-    def __init__(self, n: int, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
-                 hold: th.ThermalParams, max_muscle_C: float, online: OnlineThermalParams | None = None) -> None:
+    def __init__(
+        self,
+        n: int,
+        thermal: th.ThermalParams,
+        params: TemControlParams,
+        drive: DriveLimits,
+        hold: th.ThermalParams,
+        max_muscle_C: float,
+        online: OnlineThermalParams | None = None,
+    ) -> None:
         one = TemLoop(thermal, params, drive, hold, max_muscle_C, compiled=True)
         self.n, self.thermal, self.drive, self.params, self.hold = n, thermal, drive, params, hold
         self.max_muscle_C = float(max_muscle_C)  # a bank on another heat balance (plants.oracle) keeps it
@@ -201,8 +266,13 @@ class TemLoopBank:
         self.range_t: float | None = None
 
     @classmethod
-    def like_node(cls, n: int, params: TemControlParams | None = None, online: OnlineThermalParams | None = None,
-                  spec: TemLoopSpec | None = None) -> 'TemLoopBank':
+    def like_node(
+        cls,
+        n: int,
+        params: TemControlParams | None = None,
+        online: OnlineThermalParams | None = None,
+        spec: TemLoopSpec | None = None,
+    ) -> TemLoopBank:
         """With tem_controller's defaults and config/wrist.yaml (nodes/tem_controller.py: gain 1/s, rate filter
         0.05 s, target prefilter 0.5 s, driver rating, hold limits, 85 degC); test_plants' graph agreement
         checks they still are. ``spec``: the node's loop as its parameters built it instead
@@ -225,15 +295,31 @@ class TemLoopBank:
             self.T_d_filtered = None
             self._after(t, T_meas)
             return self.command_V
-        self.T_d_filtered, self.T_d_slope = target_prefilter(self.params.target_filter_s, self.T_d_filtered,
-                                                             self.T_d_slope, T_d, dt)
+        self.T_d_filtered, self.T_d_slope = target_prefilter(
+            self.params.target_filter_s, self.T_d_filtered, self.T_d_slope, T_d, dt
+        )
         T_d = self.T_d_filtered
         refresh = self.drive.predictive and (self.range_t is None or not 0 <= t - self.range_t < RANGE_REFRESH_S)
         has_prev = self.t_law is not None
         dt_law = t - self.t_law if has_prev else 0.0
-        _control_many(self.observer, self.rate, self.T_d_prev, self.rng, self.command_V, self.flags,
-                      np.ascontiguousarray(T_meas, float), np.ascontiguousarray(T_d, float), dt_obs, dt_law, has_prev,
-                      refresh, self.coef_rows, self.cfg_rows, self._candidates, self.status)
+        _control_many(
+            self.observer,
+            self.rate,
+            self.T_d_prev,
+            self.rng,
+            self.command_V,
+            self.flags,
+            np.ascontiguousarray(T_meas, float),
+            np.ascontiguousarray(T_d, float),
+            dt_obs,
+            dt_law,
+            has_prev,
+            refresh,
+            self.coef_rows,
+            self.cfg_rows,
+            self._candidates,
+            self.status,
+        )
         if self.status.any():
             raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
         self.t_law = t
@@ -261,10 +347,20 @@ def default_tem_spec() -> TemLoopSpec:
     """tem_controller's loop with its defaults (config/wrist.yaml)."""
     hold = th.ThermalParams()
     drive = DriveLimits()
-    return TemLoopSpec(replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
-                       TemControlParams(gain_per_s=1.0, rate_filter_s=0.05, target_filter_s=0.5,
-                                        chatter_limit_per_s=CHATTER_LIMIT_PER_S, chatter_window_s=CHATTER_WINDOW_S,
-                                        chatter_rate_filter_s=CHATTER_RATE_FILTER_S), drive, hold, 85.0)
+    return TemLoopSpec(
+        replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V),
+        TemControlParams(
+            gain_per_s=1.0,
+            rate_filter_s=0.05,
+            target_filter_s=0.5,
+            chatter_limit_per_s=CHATTER_LIMIT_PER_S,
+            chatter_window_s=CHATTER_WINDOW_S,
+            chatter_rate_filter_s=CHATTER_RATE_FILTER_S,
+        ),
+        drive,
+        hold,
+        85.0,
+    )
 
 
 __all__ = ['JointControllerBank', 'TemLoopBank', 'TemLoopSpec', 'default_tem_spec']

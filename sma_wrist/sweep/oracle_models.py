@@ -1,10 +1,12 @@
 """The closed loop given the plant's own models (a diagnosis, not a controller): what ``simulate(..., oracle=...)``
 swaps in, and what ``python -m sma_wrist.plants.oracle`` measures with it (doc/explanation/controllers.md). Here, below both the sweep engine and that study, so neither imports the other's module to reach them.
 """
+
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from sma_wrist.core.control.joint_controller import JointControllerParams
 from sma_wrist.core.errors import ParameterError
@@ -16,6 +18,7 @@ from sma_wrist.sweep.laws import TemLoopBank
 #: the models the loop can be given the plant's own of (:func:`check`)
 SWITCHES = ('hysteresis', 'thermal', 'payload', 'sensors')
 
+
 def check(switches: Sequence[str], plant: str = 'sdgpi', scenarios: Sequence[Scenario] = ()) -> None:
     """ParameterError unless ``switches`` are known names of :data:`SWITCHES`, the plant is the project's
     (``sdgpi``: the only one whose models are the controllers' kind) and ``scenarios`` are one plant."""
@@ -25,14 +28,15 @@ def check(switches: Sequence[str], plant: str = 'sdgpi', scenarios: Sequence[Sce
     if bad:
         raise ParameterError(f'oracle: unknown switch(es) {", ".join(map(repr, bad))}; known: {", ".join(SWITCHES)}')
     if plant != 'sdgpi':
-        raise ParameterError(f'oracle: the plant\'s own models exist for the project\'s plant (sdgpi), not {plant!r}')
+        raise ParameterError(f"oracle: the plant's own models exist for the project's plant (sdgpi), not {plant!r}")
     if len({dataclasses.replace(s, noise_seed=0) for s in scenarios}) > 1:
-        raise ParameterError('oracle: the loops need one model per plant; run one plant (scenario) at a time '
-                             '(sma_wrist.plants.loop.run_cases does)')
+        raise ParameterError(
+            'oracle: the loops need one model per plant; run one plant (scenario) at a time '
+            '(sma_wrist.plants.loop.run_cases does)'
+        )
 
 
-def own_compensator(built: MuscleCompensator, scenario: Scenario, base: PlantParams | None = None
-                    ) -> MuscleCompensator:
+def own_compensator(built: MuscleCompensator, scenario: Scenario, base: PlantParams | None = None) -> MuscleCompensator:
     """The compensator ``built`` (window, geometry) on the plant's own SD-GPI, adaptation off."""
     own = scenario_params(scenario, base).hysteresis
     return MuscleCompensator(own, built.geometry, T_range_C=built.T_range_C)
@@ -51,9 +55,15 @@ def knows_payload(params: JointControllerParams, payload_kg: float) -> JointCont
     """``params`` whose adaptive law knows the payload [kg]: theta_hat starts at it and holds (Gamma_a = 0),
     its inertia in I (ControlGeometry.known_payload_kg)."""
     a = params.adaptive
-    return dataclasses.replace(params, adaptive=dataclasses.replace(
-        a, theta0_kg=float(payload_kg), gamma_a=0.0,
-        geometry=dataclasses.replace(a.geometry, known_payload_kg=float(payload_kg))))
+    return dataclasses.replace(
+        params,
+        adaptive=dataclasses.replace(
+            a,
+            theta0_kg=float(payload_kg),
+            gamma_a=0.0,
+            geometry=dataclasses.replace(a.geometry, known_payload_kg=float(payload_kg)),
+        ),
+    )
 
 
 __all__ = ['SWITCHES', 'check', 'own_compensator', 'own_tem_bank', 'knows_payload']

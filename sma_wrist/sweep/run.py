@@ -8,6 +8,7 @@ Results are appended to ``results.jsonl`` as each chunk finishes, so Ctrl-C keep
 summary (``sweep.json``, ``table.txt``, ``cdf.png``, ``heatmap.png``) is written from whatever
 finished.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -17,9 +18,10 @@ import multiprocessing
 import os
 import sys
 import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -62,8 +64,11 @@ class SweepConfig:
     def __post_init__(self) -> None:
         if not (isinstance(self.n_plants, int) and self.n_plants >= 1):
             raise ParameterError(f'number of plants N = {self.n_plants!r} must be an integer >= 1')
-        bad = list(dict.fromkeys(repr(c) if c else '(an empty name: a stray comma?)'
-                                 for c in self.controllers if c not in MODES))
+        bad = list(
+            dict.fromkeys(
+                repr(c) if c else '(an empty name: a stray comma?)' for c in self.controllers if c not in MODES
+            )
+        )
         if bad or not self.controllers:
             raise ParameterError(f'controllers {", ".join(bad) or "(none)"}: choose from {", ".join(MODES)}')
         if len(set(self.controllers)) != len(self.controllers):  # each loop would run twice under one name
@@ -78,12 +83,12 @@ class SweepConfig:
         lo, hi = BY_NAME['payload_kg'].lower, BY_NAME['payload_kg'].upper
         for m in self.payloads or ():
             if not (math.isfinite(m) and lo <= m <= hi):
-                raise ParameterError(f'payload {m!r} kg is outside the model\'s validity [{lo:g}, {hi:g}] kg')
+                raise ParameterError(f"payload {m!r} kg is outside the model's validity [{lo:g}, {hi:g}] kg")
         for a in self.heatmap_axes:
             if a not in BY_NAME:
                 raise ParameterError(f'heat-map axis {a!r} is not a perturbation; known: {", ".join(BY_NAME)}')
         if self.reach and self.plant != 'sdgpi':
-            raise ParameterError(f'the reach floor is computed on the project\'s plant (sdgpi), not {self.plant!r}')
+            raise ParameterError(f"the reach floor is computed on the project's plant (sdgpi), not {self.plant!r}")
 
 
 def parse_perturbations(items: Sequence[str]) -> dict[str, tuple[float, float]]:
@@ -108,18 +113,19 @@ def make_cases(cfg: SweepConfig) -> list[Case]:
     """The sweep's closed loops, in a fixed order: sampled plants x payloads x controllers, then nominal ones."""
     cases: list[Case] = []
     for sc in sample(cfg.n_plants, cfg.seed, cfg.ranges):
-        for m in (cfg.payloads or (sc.payload_kg,)):
+        for m in cfg.payloads or (sc.payload_kg,):
             for c in cfg.controllers:
                 cases.append(Case(len(cases), c, replace(sc, payload_kg=float(m))))
     if cfg.nominal:
-        for m in (cfg.payloads or NOMINAL_PAYLOADS):
+        for m in cfg.payloads or NOMINAL_PAYLOADS:
             for c in cfg.controllers:
                 cases.append(Case(len(cases), c, Scenario(payload_kg=float(m)), 'nominal'))
     return cases
 
 
-def run_chunk(cases: Sequence[Case], duration_s: float, plant: str,
-              settings: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+def run_chunk(
+    cases: Sequence[Case], duration_s: float, plant: str, settings: dict[str, Any] | None = None
+) -> list[dict[str, Any]]:
     """One chunk: what a local loop or a Dask worker runs (``settings``: the graph's parameters,
     :func:`sma_wrist.sweep.graph_params.loop_settings`)."""
     return simulate(cases, duration_s, plant, **(settings or {}))[0]
@@ -158,9 +164,16 @@ class SweepResult:
 
     def to_json(self) -> dict[str, Any]:
         cfg = asdict(self.config)
-        return {'config': cfg, 'parameters_changed': self.parameters_changed, 'interrupted': self.interrupted,
-                'wall_s': self.wall_s,
-                'loops': len(self.rows), 'summary': self.summary, 'files': self.files, 'rows': self.rows}
+        return {
+            'config': cfg,
+            'parameters_changed': self.parameters_changed,
+            'interrupted': self.interrupted,
+            'wall_s': self.wall_s,
+            'loops': len(self.rows),
+            'summary': self.summary,
+            'files': self.files,
+            'rows': self.rows,
+        }
 
 
 def available_cores() -> int:
@@ -185,12 +198,17 @@ def split_chunks(cases: Sequence[Case], chunk: int, workers: int = 1) -> list[li
     n_chunks = -(-len(cases) // chunk)
     n_chunks = -(-n_chunks // workers) * workers
     size = -(-len(cases) // min(n_chunks, len(cases)))
-    return [list(cases[i:i + size]) for i in range(0, len(cases), size)]
+    return [list(cases[i : i + size]) for i in range(0, len(cases), size)]
 
 
-def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: str | None = None,
-              progress: Callable[[float], None] | None = None, workers: int = 1,
-              settings: LoopSettings | None = None) -> SweepResult:
+def run_sweep(
+    cfg: SweepConfig,
+    out_dir: str | Path | None = None,
+    scheduler: str | None = None,
+    progress: Callable[[float], None] | None = None,
+    workers: int = 1,
+    settings: LoopSettings | None = None,
+) -> SweepResult:
     """Run the sweep (locally, or on the Dask cluster at ``scheduler``); Ctrl-C keeps finished chunks.
 
     ``workers`` > 1: the chunks run in that many local processes (0: one per available core), as
@@ -204,6 +222,7 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
         settings = None
     elif settings is None:  # before any loop runs: a parameter the sweep cannot honour stops it here
         from sma_wrist.sweep.graph_params import loop_settings
+
         settings = loop_settings(cfg.params_files, cfg.plant)
     kwargs: dict[str, Any] = {} if settings is None else settings.kwargs  # simulate's: the graph's parameters
     cases = make_cases(cfg)
@@ -232,8 +251,11 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
         else:
             done = 0
             for chunk in chunks:
-                tick = None if progress is None else (
-                    lambda t, d=done, n=len(chunk): progress(d + n * min(t / cfg.duration_s, 1.0)))
+                tick = (
+                    None
+                    if progress is None
+                    else (lambda t, d=done, n=len(chunk): progress(d + n * min(t / cfg.duration_s, 1.0)))
+                )
                 keep(simulate(chunk, cfg.duration_s, cfg.plant, on_tick=tick, **kwargs)[0])
                 done += len(chunk)
                 if progress is not None:
@@ -246,20 +268,27 @@ def run_sweep(cfg: SweepConfig, out_dir: str | Path | None = None, scheduler: st
     rows.sort(key=lambda r: r['index'])
     if cfg.reach and not interrupted:
         try:
-            add_reach_floors(rows, workers if not scheduler else 1, None if progress is None else _reach_progress,
-                             kwargs)
+            add_reach_floors(
+                rows, workers if not scheduler else 1, None if progress is None else _reach_progress, kwargs
+            )
         except KeyboardInterrupt:  # the loops' rows stay, with the floors computed so far
             interrupted = True
-    res = SweepResult(cfg, rows, interrupted, time.perf_counter() - t0,
-                      parameters_changed={} if settings is None else _json_values(settings.changed))
+    res = SweepResult(
+        cfg,
+        rows,
+        interrupted,
+        time.perf_counter() - t0,
+        parameters_changed={} if settings is None else _json_values(settings.changed),
+    )
     res.summary = summarise(rows)
     if out is not None:
         res.files = write_outputs(res, out)
     return res
 
 
-def _collect(completed: Iterable[Any], keep: Callable[[list[dict[str, Any]]], None],
-             progress: Callable[[float], None] | None) -> None:
+def _collect(
+    completed: Iterable[Any], keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None
+) -> None:
     """Keep each chunk's rows as its future completes (local processes or Dask), progress in loops done."""
     done = 0
     for fut in completed:
@@ -275,6 +304,7 @@ def _process_pool(workers: int) -> Iterator[Any]:
     """A pool of ``workers`` local processes, forked where the OS can (the compiled kernels come along).
     Ctrl-C or a failed task inside the block drops the queued tasks; what finished was kept by the block."""
     from concurrent.futures import ProcessPoolExecutor
+
     ctx = multiprocessing.get_context('fork' if 'fork' in multiprocessing.get_all_start_methods() else 'spawn')
     pool = ProcessPoolExecutor(workers, mp_context=ctx)
     try:
@@ -287,23 +317,40 @@ def _process_pool(workers: int) -> Iterator[Any]:
 
 def _json_values(changed: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Parameter values as JSON has them (a ROS array parameter may be a tuple or an array)."""
+
     def plain(v: Any) -> Any:
         return v.tolist() if isinstance(v, np.ndarray) else list(v) if isinstance(v, tuple) else v
+
     return {node: {k: plain(v) for k, v in values.items()} for node, values in changed.items()}
 
 
-def _run_processes(workers: int, chunks: list[list[Case]], cfg: SweepConfig,
-                   keep: Callable[[list[dict[str, Any]]], None], progress: Callable[[float], None] | None,
-                   settings: dict[str, Any] | None = None) -> None:
+def _run_processes(
+    workers: int,
+    chunks: list[list[Case]],
+    cfg: SweepConfig,
+    keep: Callable[[list[dict[str, Any]]], None],
+    progress: Callable[[float], None] | None,
+    settings: dict[str, Any] | None = None,
+) -> None:
     """The chunks in ``workers`` local processes (:func:`_process_pool`)."""
     from concurrent.futures import as_completed
+
     with _process_pool(workers) as pool:
-        _collect(as_completed([pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant, settings) for ch in chunks]),
-                 keep, progress)
+        _collect(
+            as_completed([pool.submit(run_chunk, ch, cfg.duration_s, cfg.plant, settings) for ch in chunks]),
+            keep,
+            progress,
+        )
 
 
-def _run_dask(address: str, chunks: list[list[Case]], cfg: SweepConfig, keep: Callable[[list[dict[str, Any]]], None],
-              progress: Callable[[float], None] | None, settings: dict[str, Any] | None = None) -> None:
+def _run_dask(
+    address: str,
+    chunks: list[list[Case]],
+    cfg: SweepConfig,
+    keep: Callable[[list[dict[str, Any]]], None],
+    progress: Callable[[float], None] | None,
+    settings: dict[str, Any] | None = None,
+) -> None:
     try:
         from dask.distributed import Client, as_completed
     except ImportError:
@@ -334,13 +381,18 @@ SENSOR_AXES = ('temp_noise_C', 'temp_lag_s', 'angle_noise_rad')
 
 def _reach_floor(scenario: Scenario, settings: dict[str, Any] | None = None) -> float:
     from sma_wrist.plants.loop import OffModelCase, reach_floor_pct
+
     over = (settings or {}).get('controller_overrides') or {}
     window = (over.get('temperature_min_C', 20.0), over.get('temperature_max_C', 80.0))  # adaptive_controller's
     return reach_floor_pct(OffModelCase('sdgpi', scenario), T_window_C=window, base=(settings or {}).get('base'))
 
 
-def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
-                     progress: Callable[[int, int], None] | None = None, settings: dict[str, Any] | None = None) -> None:
+def add_reach_floors(
+    rows: list[dict[str, Any]],
+    workers: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+    settings: dict[str, Any] | None = None,
+) -> None:
     """``reach_floor_pct`` into each row, computed once per plant (its scenario: payload and plant axes),
     in ``workers`` local processes; a floor does not depend on the controller or the sensors. Each plant's
     rows get their floor as it finishes, so Ctrl-C keeps the floors computed; ``progress(done, total)``
@@ -367,6 +419,7 @@ def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
             put(k, _reach_floor(scen[k], settings))
         return
     from concurrent.futures import as_completed
+
     with _process_pool(min(workers, len(plants))) as pool:
         futures = {pool.submit(_reach_floor, scen[k], settings): k for k in plants}
         for fut in as_completed(futures):
@@ -376,8 +429,12 @@ def add_reach_floors(rows: list[dict[str, Any]], workers: int = 1,
 def error_stats(max_error_pct: Sequence[float]) -> dict[str, float]:
     """Median / 95th percentile / worst of a set of loops' max errors [%] and the share under 15 %."""
     e = np.asarray(max_error_pct, dtype=float)
-    return {'median_max_error_pct': float(np.median(e)), 'p95_max_error_pct': float(np.percentile(e, 95)),
-            'worst_max_error_pct': float(e.max()), 'share_under_15_pct': float(np.mean(e < LIMIT_PCT))}
+    return {
+        'median_max_error_pct': float(np.median(e)),
+        'p95_max_error_pct': float(np.percentile(e, 95)),
+        'worst_max_error_pct': float(e.max()),
+        'share_under_15_pct': float(np.mean(e < LIMIT_PCT)),
+    }
 
 
 def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -390,9 +447,15 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             if not sel:
                 continue
             ch = np.array([r['sign_changes_per_s'] for r in sel])
-            row = {'group': group, 'controller': c, 'loops': len(sel), **error_stats([r['max_error_pct'] for r in sel]),
-                   'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
-                   'median_sign_changes_per_s': float(np.median(ch)), 'worst_sign_changes_per_s': float(ch.max())}
+            row = {
+                'group': group,
+                'controller': c,
+                'loops': len(sel),
+                **error_stats([r['max_error_pct'] for r in sel]),
+                'median_rms_error_pct': float(np.median([r['rms_error_pct'] for r in sel])),
+                'median_sign_changes_per_s': float(np.median(ch)),
+                'worst_sign_changes_per_s': float(ch.max()),
+            }
             if all('wire_stress_max_MPa' in r for r in sel):  # rows of an older sweep may not have it
                 st = np.array([r['wire_stress_max_MPa'] for r in sel])
                 row.update(median_wire_stress_max_MPa=float(np.median(st)), worst_wire_stress_max_MPa=float(st.max()))
@@ -407,33 +470,48 @@ def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def format_table(summary: Sequence[dict[str, Any]]) -> str:
-    head = (f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"worst":>7} {"<15%":>6} '
-            f'{"flips/s":>8} {"MPa":>5}')
+    head = (
+        f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"worst":>7} {"<15%":>6} '
+        f'{"flips/s":>8} {"MPa":>5}'
+    )
     lines = [head, '-' * len(head)]
     for s in summary:
         mpa = s.get('worst_wire_stress_max_MPa')
-        lines.append(f'{s["group"]:8} {s["controller"]:17} {s["loops"]:5d} {s["median_max_error_pct"]:6.2f}% '
-                     f'{s["p95_max_error_pct"]:6.2f}% {s["worst_max_error_pct"]:6.2f}% '
-                     f'{100 * s["share_under_15_pct"]:5.0f}% {s["median_sign_changes_per_s"]:8.2f} '
-                     + ('    -' if mpa is None else f'{mpa:5.0f}'))
-    lines.append('max error over the last reference cycle, % of the reference range (true angle); '
-                 'flips/s: median TEM command sign changes per second; MPa: the highest wire stress of any loop '
-                 '(doc/explanation/controllers.md)')
+        lines.append(
+            f'{s["group"]:8} {s["controller"]:17} {s["loops"]:5d} {s["median_max_error_pct"]:6.2f}% '
+            f'{s["p95_max_error_pct"]:6.2f}% {s["worst_max_error_pct"]:6.2f}% '
+            f'{100 * s["share_under_15_pct"]:5.0f}% {s["median_sign_changes_per_s"]:8.2f} '
+            + ('    -' if mpa is None else f'{mpa:5.0f}')
+        )
+    lines.append(
+        'max error over the last reference cycle, % of the reference range (true angle); '
+        'flips/s: median TEM command sign changes per second; MPa: the highest wire stress of any loop '
+        '(doc/explanation/controllers.md)'
+    )
     over = [s for s in summary if s.get('overloaded_loops')]
     if over:
         which = ', '.join(f'{s["overloaded_loops"]} {s["group"]} {s["controller"]}' for s in over)
-        lines.append(f'not physics: {which} loop(s) held a wire at the wire model\'s load bound '
-                     '(overload_s in results.jsonl)')
+        lines.append(
+            f"not physics: {which} loop(s) held a wire at the wire model's load bound (overload_s in results.jsonl)"
+        )
     reach = [s for s in summary if 'reachable_loops' in s]
     if reach:
-        lines += ['', 'plants whose reach floor is under 15 % (the rest: no controller can track the sine on them '
-                  'inside the controllers\' temperature window):',
-                  f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"<15%":>6}']
+        lines += [
+            '',
+            'plants whose reach floor is under 15 % (the rest: no controller can track the sine on them '
+            "inside the controllers' temperature window):",
+            f'{"plants":8} {"controller":17} {"loops":>5} {"median":>7} {"p95":>7} {"<15%":>6}',
+        ]
         for s in reach:
             r = s['reachable']
-            lines.append(f'{s["group"]:8} {s["controller"]:17} {s["reachable_loops"]:5d} ' + (
-                f'{r["median_max_error_pct"]:6.2f}% {r["p95_max_error_pct"]:6.2f}% {100 * r["share_under_15_pct"]:5.0f}%'
-                if r else '      -       -      -'))
+            lines.append(
+                f'{s["group"]:8} {s["controller"]:17} {s["reachable_loops"]:5d} '
+                + (
+                    f'{r["median_max_error_pct"]:6.2f}% {r["p95_max_error_pct"]:6.2f}% {100 * r["share_under_15_pct"]:5.0f}%'
+                    if r
+                    else '      -       -      -'
+                )
+            )
     return '\n'.join(lines)
 
 
@@ -452,8 +530,10 @@ def plot(res: SweepResult, out: Path) -> dict[str, str]:
     """cdf.png (CDF of max error per controller, spread vs nominal) and heatmap.png (median max error
     over the two heat-map axes, one panel per controller)."""
     import matplotlib
+
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
+
     rows = res.rows
     ctrls = [c for c in MODES if any(r['controller'] == c for r in rows)]
     if not rows:
@@ -508,5 +588,18 @@ def plot(res: SweepResult, out: Path) -> dict[str, str]:
     return {'cdf': str(out / 'cdf.png'), 'heatmap': str(out / 'heatmap.png')}
 
 
-__all__ = ['SweepConfig', 'SweepResult', 'make_cases', 'run_sweep', 'run_chunk', 'available_cores', 'parse_perturbations',
-           'split_chunks', 'error_stats', 'summarise', 'format_table', 'Progress', 'add_reach_floors']
+__all__ = [
+    'SweepConfig',
+    'SweepResult',
+    'make_cases',
+    'run_sweep',
+    'run_chunk',
+    'available_cores',
+    'parse_perturbations',
+    'split_chunks',
+    'error_stats',
+    'summarise',
+    'format_table',
+    'Progress',
+    'add_reach_floors',
+]

@@ -26,19 +26,25 @@ Metrics per loop as ``sma-wrist run`` reports them (sma_wrist.runs.run_metrics):
 angle error over the last full reference cycle in % of the reference range, on the true angle
 and on the measured one (what a bag holds), and the TEM commands' sign changes per second.
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from sma_wrist.core.control.joint_controller import MODES, JointControllerParams
-from sma_wrist.core.control.tem import (CHATTER_DEADBAND_V, MuscleTemperatureObserver, TemControlParams,
-                                       TemperatureObserverParams)
+from sma_wrist.core.control.tem import (
+    CHATTER_DEADBAND_V,
+    MuscleTemperatureObserver,
+    TemControlParams,
+    TemperatureObserverParams,
+)
 from sma_wrist.core.control.trajectory import make_trajectory, soft_start
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.compensation import MuscleCompensator, strain_informative
@@ -110,8 +116,9 @@ def sign_changes_per_s(u: FloatArray, dt: float, deadband: float = CHATTER_DEADB
     return changes / (dt * max(s.shape[0] - 1, 1))
 
 
-def loop_metrics(t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArray, u: FloatArray,
-                 period_s: float = SEED_PERIOD_S) -> list[dict[str, float]]:
+def loop_metrics(
+    t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArray, u: FloatArray, period_s: float = SEED_PERIOD_S
+) -> list[dict[str, float]]:
     """Per loop: run_metrics' figures over the last full cycle (whole run if shorter), in % of each loop's reference
     range over the run, as a bag's. ``q_d``: (K,) one reference for every loop, or (K, n) one per loop."""
     ref = q_d.reshape(q_d.shape[0], -1)  # (K, 1) or (K, n): broadcasts against (K, n)
@@ -124,10 +131,15 @@ def loop_metrics(t: FloatArray, q_d: FloatArray, q: FloatArray, q_meas: FloatArr
     chat = sign_changes_per_s(u[last], t[1] - t[0])  # (n, 2)
     out = []
     for j in range(q.shape[1]):
-        out.append({'max_error_pct': float(e[:, j].max()), 'rms_error_pct': float(np.sqrt(np.mean(e[:, j] ** 2))),
-                    'max_error_measured_pct': float(em[:, j].max()),
-                    'sign_changes_per_s': float(chat[j].max()),
-                    'window': 'last_cycle' if last.sum() < t.size else 'whole_run'})
+        out.append(
+            {
+                'max_error_pct': float(e[:, j].max()),
+                'rms_error_pct': float(np.sqrt(np.mean(e[:, j] ** 2))),
+                'max_error_measured_pct': float(em[:, j].max()),
+                'sign_changes_per_s': float(chat[j].max()),
+                'window': 'last_cycle' if last.sum() < t.size else 'whole_run',
+            }
+        )
     return out
 
 
@@ -141,25 +153,37 @@ def check_true_temperature(consumers: Sequence[str]) -> None:
     """ParameterError naming any of ``consumers`` that is not in :data:`TRUE_TEMPERATURE_CONSUMERS`."""
     bad = sorted(set(consumers) - set(TRUE_TEMPERATURE_CONSUMERS))
     if bad:
-        raise ParameterError(f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: '
-                             f'{", ".join(TRUE_TEMPERATURE_CONSUMERS)}')
+        raise ParameterError(
+            f'true_temperature: unknown consumer(s) {", ".join(bad)}; known: {", ".join(TRUE_TEMPERATURE_CONSUMERS)}'
+        )
 
 
-def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdgpi',
-             base: PlantParams | None = None, record: bool = False,
-             on_tick: Callable[[float], None] | None = None, window_s: float = SEED_PERIOD_S,
-             tem_params: TemControlParams | None = None, shift_gain_per_s: float = SHIFT_GAIN_PER_S,
-             true_temperature: Sequence[str] = (),
-             compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
-             window_follows_shift: bool = True, stroke_gain_per_s: float = STROKE_GAIN_PER_S,
-             hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
-             hold_shift_outside_load_range: bool = HOLD_SHIFT_OUTSIDE_LOAD_RANGE,
-             controller_overrides: Mapping[str, Any] | None = None, oracle: Sequence[str] = (),
-             online_thermal: OnlineThermalParams | None = OnlineThermalParams(),
-             compensator_wire: SDGPIParams | None = None, compensator_window_C: tuple[float, float] = (20.0, 80.0),
-             shift_limit_C: float = SHIFT_LIMIT_C, tem_loop: TemLoopSpec | None = None,
-             observer_thermal: ThermalParams | None = None, soft_start_s: float = 0.0
-             ) -> tuple[list[dict[str, Any]], Trace | None]:
+def simulate(
+    cases: Sequence[Case],
+    duration_s: float = 126.0,
+    plant: str = 'sdgpi',
+    base: PlantParams | None = None,
+    record: bool = False,
+    on_tick: Callable[[float], None] | None = None,
+    window_s: float = SEED_PERIOD_S,
+    tem_params: TemControlParams | None = None,
+    shift_gain_per_s: float = SHIFT_GAIN_PER_S,
+    true_temperature: Sequence[str] = (),
+    compensator_observer: TemperatureObserverParams | None = TemperatureObserverParams(),
+    window_follows_shift: bool = True,
+    stroke_gain_per_s: float = STROKE_GAIN_PER_S,
+    hold_shift_on_stop: bool = HOLD_SHIFT_ON_STOP,
+    hold_shift_outside_load_range: bool = HOLD_SHIFT_OUTSIDE_LOAD_RANGE,
+    controller_overrides: Mapping[str, Any] | None = None,
+    oracle: Sequence[str] = (),
+    online_thermal: OnlineThermalParams | None = OnlineThermalParams(),
+    compensator_wire: SDGPIParams | None = None,
+    compensator_window_C: tuple[float, float] = (20.0, 80.0),
+    shift_limit_C: float = SHIFT_LIMIT_C,
+    tem_loop: TemLoopSpec | None = None,
+    observer_thermal: ThermalParams | None = None,
+    soft_start_s: float = 0.0,
+) -> tuple[list[dict[str, Any]], Trace | None]:
     """Run the closed loops of ``cases`` together; returns one result row per case (and the traces).
 
     Metrics over the last ``window_s`` [s]; over the whole run, the plant's TEM faces: ``tem_face_max_C`` the
@@ -212,6 +236,7 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     orc: Any = None
     if oracle:  # lazily: plants.oracle runs this engine
         from sma_wrist.sweep import oracle_models
+
         orc = oracle_models
         orc.check(oracle, plant, [c.scenario for c in cases])
         if 'sensors' in oracle:
@@ -231,8 +256,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         if idx.size:
             over = dict(controller_overrides or {})
             if 'adaptive' in over:  # the adaptive law's mode follows the group's, as adaptive_controller sets it
-                over['adaptive'] = dataclasses.replace(over['adaptive'],
-                                                       mode=mode if mode != 'pid' else 'inverse_adaptive')
+                over['adaptive'] = dataclasses.replace(
+                    over['adaptive'], mode=mode if mode != 'pid' else 'inverse_adaptive'
+                )
             jp = JointControllerParams(mode=mode, **over)
             if orc is not None and 'payload' in oracle:
                 jp = orc.knows_payload(jp, scen[0].payload_kg)
@@ -240,11 +266,15 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     comp = None
     if 'inverse_adaptive' in groups:
         # hysteresis_compensator's defaults (config/wrist.yaml): the measured angle adapts each wire's axis
-        comp = MuscleCompensator(compensator_wire or default_sdgpi(), T_range_C=compensator_window_C,
-                                 shift_gain_per_s=shift_gain_per_s, shift_limit_C=shift_limit_C,
-                                 window_follows_shift=window_follows_shift,
-                                 stroke_gain_per_s=stroke_gain_per_s,
-                                 hold_outside_load_range=hold_shift_outside_load_range)
+        comp = MuscleCompensator(
+            compensator_wire or default_sdgpi(),
+            T_range_C=compensator_window_C,
+            shift_gain_per_s=shift_gain_per_s,
+            shift_limit_C=shift_limit_C,
+            window_follows_shift=window_follows_shift,
+            stroke_gain_per_s=stroke_gain_per_s,
+            hold_outside_load_range=hold_shift_outside_load_range,
+        )
         if orc is not None and 'hysteresis' in oracle:
             comp = orc.own_compensator(comp, scen[0], base)
     comp_started = False
@@ -255,8 +285,11 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     if orc is not None and 'thermal' in oracle:
         tem = orc.own_tem_bank(tem, scen[0], base)
     # the TEM loops' heat-balance model, the one tem_controller's observer integrates
-    observer = None if compensator_observer is None else MuscleTemperatureObserver(observer_thermal or tem.thermal,
-                                                                                    compensator_observer)
+    observer = (
+        None
+        if compensator_observer is None
+        else MuscleTemperatureObserver(observer_thermal or tem.thermal, compensator_observer)
+    )
     k_total = int(round(duration_s / TICK_S)) + 1
     t_rec = np.empty(k_total)
     q_rec, qm_rec, u_rec = np.empty((k_total, n)), np.empty((k_total, n)), np.empty((k_total, n, 2))
@@ -306,8 +339,9 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
         t_ref, t_law = (now_ns - tick_ns) * 1e-9, (now_ns - 2 * tick_ns) * 1e-9
         qd_rec[k] = traj(t_ref)[0] if q_start is None else soft_start(traj(t_ref), t_ref, q_start, soft_start_s)[0]
         if k >= 2:  # (n,) each: one reference per loop
-            q_d, qdot_d, qddot_d = (np.broadcast_to(x, (n,))
-                                    for x in soft_start(traj(t_law), t_law, q_start, soft_start_s))
+            q_d, qdot_d, qddot_d = (
+                np.broadcast_to(x, (n,)) for x in soft_start(traj(t_law), t_law, q_start, soft_start_s)
+            )
         if comp is not None and k >= 1:
             # hysteresis_compensator's memory and axis take every measured tick (its first, t_1, starts
             # them), dt from the stamps, before the cycle's targets arrive
@@ -318,13 +352,18 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
                 comp_started = True
             else:
                 dt_track = (now_ns - t_track_ns) * 1e-9
-                adapt = None if not hold_shift_on_stop else strain_informative(
-                    q_m[idx], q_track, dt_track, stress[idx], (base.joint.q_min_rad, base.joint.q_max_rad)).ravel()
+                adapt = (
+                    None
+                    if not hold_shift_on_stop
+                    else strain_informative(
+                        q_m[idx], q_track, dt_track, stress[idx], (base.joint.q_min_rad, base.joint.q_max_rad)
+                    ).ravel()
+                )
                 comp.track(T_g, stress_g, bank.strain_at(q_m[idx]).ravel(), dt_track, adapt)
             t_track_ns, q_track = now_ns, q_m[idx]
         if k >= 2:  # the controller's first joint state is t_1 (t_0 is published before it subscribes); dt needs two
             T_new = np.empty((n, 2))
-            for mode, (idx, bank) in groups.items():
+            for idx, bank in groups.values():
                 force, strain, T_g, _ = bank.update(q_m[idx], qdot_m[idx], q_d[idx], qdot_d[idx], qddot_d[idx], dt_law)
                 if T_g is not None:
                     T_new[idx] = T_g
@@ -346,14 +385,35 @@ def simulate(cases: Sequence[Case], duration_s: float = 126.0, plant: str = 'sdg
     # as a bag is measured (runs.run_metrics): joint states from the first reference (t_1) on
     rows = loop_metrics(t_rec[1:], qd_rec[1:], q_rec[1:], qm_rec[1:], u_rec[1:], window_s)
     step_max = np.abs(np.diff(q_rec, axis=0)).max(axis=0)  # the largest true-angle step of a tick [rad]: snaps
-    out = [{'index': c.index, 'group': c.group, 'controller': c.controller, 'plant': plant, **c.scenario.to_dict(), **m,
-            'tem_face_max_C': float(face_max[j]), 'tem_face_outside_s': float(face_outside[j]),
-            'wire_stress_max_MPa': float(stress_max[j]) * 1e-6, 'overload_s': float(overload[j]),
-            'angle_step_max_rad': float(step_max[j])}
-           for j, (c, m) in enumerate(zip(cases, rows))]
+    out = [
+        {
+            'index': c.index,
+            'group': c.group,
+            'controller': c.controller,
+            'plant': plant,
+            **c.scenario.to_dict(),
+            **m,
+            'tem_face_max_C': float(face_max[j]),
+            'tem_face_outside_s': float(face_outside[j]),
+            'wire_stress_max_MPa': float(stress_max[j]) * 1e-6,
+            'overload_s': float(overload[j]),
+            'angle_step_max_rad': float(step_max[j]),
+        }
+        for j, (c, m) in enumerate(zip(cases, rows))
+    ]
     trace = Trace(t_rec, qd_rec, q_rec, qm_rec, u_rec) if record else None
     return out, trace
 
 
-__all__ = ['Case', 'Trace', 'simulate', 'loop_metrics', 'sign_changes_per_s', 'TICK_S', 'CHATTER_DEADBAND_V',
-           'SHIFT_GAIN_PER_S', 'TRUE_TEMPERATURE_CONSUMERS', 'check_true_temperature']
+__all__ = [
+    'Case',
+    'Trace',
+    'simulate',
+    'loop_metrics',
+    'sign_changes_per_s',
+    'TICK_S',
+    'CHATTER_DEADBAND_V',
+    'SHIFT_GAIN_PER_S',
+    'TRUE_TEMPERATURE_CONSUMERS',
+    'check_true_temperature',
+]

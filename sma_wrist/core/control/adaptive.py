@@ -28,6 +28,7 @@ onto boxes (parameters), adaptation is frozen where the forces saturate (anti-wi
 the estimates are integrated with the controller's own dt by semi-implicit Euler: the laws
 use this sample's errors, the output uses the updated estimates.
 """
+
 from __future__ import annotations
 
 import math
@@ -76,7 +77,7 @@ class ControlGeometry:
     @property
     def inertia_kgm2(self) -> float:
         """I = I_w + M_known l^2 used in phi and in v_i."""
-        return self.joint_inertia_kgm2 + self.known_payload_kg * self.lever_m ** 2
+        return self.joint_inertia_kgm2 + self.known_payload_kg * self.lever_m**2
 
 
 def _positive(name: str, v: float) -> None:
@@ -93,7 +94,9 @@ def _interval(name: str, b: tuple[float, float], lo_min: float = -math.inf, stri
     ok = len(b) == 2 and all(math.isfinite(x) for x in b) and b[0] <= b[1]
     ok = ok and (b[0] > lo_min if strict_lo else b[0] >= lo_min)
     if not ok:
-        raise ParameterError(f'{name} = {b!r} must be (lo, hi), finite, lo <= hi, lo {">" if strict_lo else ">="} {lo_min:g}')
+        raise ParameterError(
+            f'{name} = {b!r} must be (lo, hi), finite, lo <= hi, lo {">" if strict_lo else ">="} {lo_min:g}'
+        )
 
 
 @dataclass(frozen=True)
@@ -143,33 +146,43 @@ class AdaptiveParams:
         _interval('theta_bounds_kg', self.theta_bounds_kg)
         _interval('beta_bounds', self.beta_bounds, 0.0, strict_lo=True)  # beta_hat divides v_i
         _interval('d_bounds_rad_s2', self.d_bounds_rad_s2, 0.0)
-        for name, v, b in (('theta0_kg', self.theta0_kg, self.theta_bounds_kg), ('beta0', self.beta0, self.beta_bounds),
-                           ('d0_rad_s2', self.d0_rad_s2, self.d_bounds_rad_s2)):
+        for name, v, b in (
+            ('theta0_kg', self.theta0_kg, self.theta_bounds_kg),
+            ('beta0', self.beta0, self.beta_bounds),
+            ('d0_rad_s2', self.d0_rad_s2, self.d_bounds_rad_s2),
+        ):
             if not (math.isfinite(v) and b[0] <= v <= b[1]):
                 raise ParameterError(f'{name} = {v!r} is outside its bounds [{b[0]:g}, {b[1]:g}]')
-        if not (math.isfinite(self.force_min_N) and math.isfinite(self.force_max_N)
-                and self.force_min_N <= self.preload_N <= self.force_max_N and self.force_min_N < self.force_max_N):
-            raise ParameterError(f'force limits must satisfy force_min_N <= preload_N <= force_max_N, min < max; got '
-                                 f'({self.force_min_N!r}, {self.preload_N!r}, {self.force_max_N!r}) N')
+        if not (
+            math.isfinite(self.force_min_N)
+            and math.isfinite(self.force_max_N)
+            and self.force_min_N <= self.preload_N <= self.force_max_N
+            and self.force_min_N < self.force_max_N
+        ):
+            raise ParameterError(
+                f'force limits must satisfy force_min_N <= preload_N <= force_max_N, min < max; got '
+                f'({self.force_min_N!r}, {self.preload_N!r}, {self.force_max_N!r}) N'
+            )
 
     @classmethod
-    def paper_table_6_1(cls, mode: Mode = 'inverse_adaptive', **overrides: object) -> 'AdaptiveParams':
+    def paper_table_6_1(cls, mode: Mode = 'inverse_adaptive', **overrides: object) -> AdaptiveParams:
         """Experiment gains, Table 6.1: inverse adaptive (col. 1) or direct adaptive (col. 2)."""
         if mode == 'inverse_adaptive':
-            base = cls(mode=mode, c1=3.0, c2=6.5, gamma_a=0.01, gamma_b1=0.05, gamma_b2=0.05,
-                       gamma_d1=0.01, gamma_d2=0.01)
+            base = cls(
+                mode=mode, c1=3.0, c2=6.5, gamma_a=0.01, gamma_b1=0.05, gamma_b2=0.05, gamma_d1=0.01, gamma_d2=0.01
+            )
         elif mode == 'direct_adaptive':
-            base = cls(mode=mode, c1=3.0, c2=5.5, gamma_a=0.05, gamma_b1=0.0, gamma_b2=0.0,
-                       gamma_d1=0.0, gamma_d2=0.0)
+            base = cls(mode=mode, c1=3.0, c2=5.5, gamma_a=0.05, gamma_b1=0.0, gamma_b2=0.0, gamma_d1=0.0, gamma_d2=0.0)
         else:
             raise ParameterError(f'mode = {mode!r} is not one of {format_choices(MODES)}')
         return replace(base, **overrides)  # type: ignore[arg-type]
 
     @classmethod
-    def paper_table_5_5(cls, **overrides: object) -> 'AdaptiveParams':
+    def paper_table_5_5(cls, **overrides: object) -> AdaptiveParams:
         """Simulation gains, Table 5.5: C1 = C2 = 2, Gamma_a = 1, theta adapted only."""
-        base = cls(mode='direct_adaptive', c1=2.0, c2=2.0, gamma_a=1.0, gamma_b1=0.0, gamma_b2=0.0,
-                   gamma_d1=0.0, gamma_d2=0.0)
+        base = cls(
+            mode='direct_adaptive', c1=2.0, c2=2.0, gamma_a=1.0, gamma_b1=0.0, gamma_b2=0.0, gamma_d1=0.0, gamma_d2=0.0
+        )
         return replace(base, **overrides)  # type: ignore[arg-type]
 
 
@@ -181,7 +194,7 @@ class AdaptiveState:
     beta_hat: FloatArray
     d_hat: FloatArray
 
-    def copy(self) -> 'AdaptiveState':
+    def copy(self) -> AdaptiveState:
         return AdaptiveState(self.theta_hat.copy(), self.beta_hat.copy(), self.d_hat.copy())
 
 
@@ -211,14 +224,14 @@ class ControlOutput:
 #: the law's inputs in the order of its stacked rows, with their units (error messages)
 INPUTS = (('q', 'rad'), ('qdot', 'rad/s'), ('q_d', 'rad'), ('qdot_d', 'rad/s'), ('qddot_d', 'rad/s^2'))
 
+
 class AdaptiveController:
     """Back-stepping adaptive controller for n independent scenarios (vectorised).
 
     ``update`` takes arrays broadcastable to (n,) and returns :class:`ControlOutput`.
     """
 
-    def __init__(self, params: AdaptiveParams | None = None, n: int = 1,
-                 theta0_kg: ArrayLike | None = None) -> None:
+    def __init__(self, params: AdaptiveParams | None = None, n: int = 1, theta0_kg: ArrayLike | None = None) -> None:
         self.params = params if params is not None else AdaptiveParams()
         if not (isinstance(n, (int, np.integer)) and n >= 1):
             raise ParameterError(f'n = {n!r} is outside the valid range [1, inf)')
@@ -230,15 +243,17 @@ class AdaptiveController:
     def reset(self) -> None:
         """Estimates back to their initial values."""
         p = self.params
-        th0 = np.broadcast_to(np.asarray(p.theta0_kg if self._theta0 is None else self._theta0, float),
-                              (self.n,)).copy()
+        th0 = np.broadcast_to(
+            np.asarray(p.theta0_kg if self._theta0 is None else self._theta0, float), (self.n,)
+        ).copy()
         lo, hi = p.theta_bounds_kg
         if np.any(~np.isfinite(th0)) or np.any(th0 < lo) or np.any(th0 > hi):
             raise ParameterError(f'theta0_kg = {th0!r} is outside its bounds [{lo:g}, {hi:g}]')
         self.state = AdaptiveState(th0, np.full((self.n, 2), p.beta0), np.full((self.n, 2), p.d0_rad_s2))
 
-    def update(self, q: ArrayLike, qdot: ArrayLike, q_d: ArrayLike, qdot_d: ArrayLike, qddot_d: ArrayLike,
-               dt: float) -> ControlOutput:
+    def update(
+        self, q: ArrayLike, qdot: ArrayLike, q_d: ArrayLike, qdot_d: ArrayLike, qddot_d: ArrayLike, dt: float
+    ) -> ControlOutput:
         """Advance the estimates by dt (s) with this sample and return the desired forces.
 
         q, qdot: measured angle (rad) and rate (rad/s); q_d, qdot_d, qddot_d: reference
@@ -256,17 +271,27 @@ class AdaptiveController:
                     stacked[i] = x  # broadcasts scalars and (n,) arrays alike
             except (ValueError, TypeError):
                 shapes = [np.shape(x) for x in raw]
-                raise ModelInputError('shapes of (q, qdot, q_d, qdot_d, qddot_d)', shapes,
-                                      f'broadcastable to ({self.n},)') from None
+                raise ModelInputError(
+                    'shapes of (q, qdot, q_d, qdot_d, qddot_d)', shapes, f'broadcastable to ({self.n},)'
+                ) from None
             if not np.isfinite(stacked).all():
                 for (name, unit), x in zip(INPUTS, raw):
                     check_finite(name, x, unit)  # raises, naming the first non-finite input
         out = self._kernel_step(stacked, dt)
         st = self.state
-        return ControlOutput(force_1_N=out[:, 0], force_2_N=out[:, 1], delta_force_N=out[:, 0] - out[:, 1],
-                             delta_force_request_N=out[:, 2], saturated=out[:, 7] != 0.0, z1=out[:, 3],
-                             z2=out[:, 4], v_c=out[:, 5:7], theta_hat=st.theta_hat.copy(),
-                             beta_hat=st.beta_hat.copy(), d_hat=st.d_hat.copy())
+        return ControlOutput(
+            force_1_N=out[:, 0],
+            force_2_N=out[:, 1],
+            delta_force_N=out[:, 0] - out[:, 1],
+            delta_force_request_N=out[:, 2],
+            saturated=out[:, 7] != 0.0,
+            z1=out[:, 3],
+            z2=out[:, 4],
+            v_c=out[:, 5:7],
+            theta_hat=st.theta_hat.copy(),
+            beta_hat=st.beta_hat.copy(),
+            d_hat=st.d_hat.copy(),
+        )
 
     def update_stacked(self, x: FloatArray, dt: float) -> FloatArray:
         """:meth:`update` on inputs already stacked as (5, n) rows q, qdot, q_d, qdot_d, qddot_d (units as

@@ -7,6 +7,7 @@ scenarios it costs ~2 us compiled (the plant kernel's numba set-up,
 :mod:`sma_wrist.core.plant.kernel`), and stays correct, if slower, as plain Python without
 numba. The equations and their order are those documented in sma_wrist.core.control.adaptive.
 """
+
 from __future__ import annotations
 
 import math
@@ -27,11 +28,33 @@ def pack(p) -> np.ndarray:  # type: ignore[no-untyped-def]
     g = p.geometry
     adapt = 1.0 if p.mode == 'inverse_adaptive' else 0.0
     eps = p.boundary_layer_rad_s if p.robust == 'tanh' else 0.0  # 0 selects sgn(z2)
-    return np.array([p.c1, p.c2, p.gamma_a, p.gamma_b1, p.gamma_b2, p.gamma_d1, p.gamma_d2, eps,
-                     p.theta_bounds_kg[0], p.theta_bounds_kg[1], p.beta_bounds[0], p.beta_bounds[1],
-                     p.d_bounds_rad_s2[0], p.d_bounds_rad_s2[1], p.preload_N, p.force_min_N, p.force_max_N,
-                     g.g_m_s2 * g.lever_m, g.inertia_kgm2 / (2.0 * g.r_eff_m), adapt, g.inertia_kgm2, 0.0],
-                    dtype=float)
+    return np.array(
+        [
+            p.c1,
+            p.c2,
+            p.gamma_a,
+            p.gamma_b1,
+            p.gamma_b2,
+            p.gamma_d1,
+            p.gamma_d2,
+            eps,
+            p.theta_bounds_kg[0],
+            p.theta_bounds_kg[1],
+            p.beta_bounds[0],
+            p.beta_bounds[1],
+            p.d_bounds_rad_s2[0],
+            p.d_bounds_rad_s2[1],
+            p.preload_N,
+            p.force_min_N,
+            p.force_max_N,
+            g.g_m_s2 * g.lever_m,
+            g.inertia_kgm2 / (2.0 * g.r_eff_m),
+            adapt,
+            g.inertia_kgm2,
+            0.0,
+        ],
+        dtype=float,
+    )
 
 
 @_jit
@@ -99,5 +122,13 @@ def warm_up() -> None:
     if not AVAILABLE:
         return
     from sma_wrist.core.control.adaptive import AdaptiveParams
-    update(np.zeros((5, 1)), 0.01, np.zeros(1), np.ones((1, 2)), np.zeros((1, 2)), pack(AdaptiveParams()),
-           np.empty((1, OUT_LEN)))
+
+    update(
+        np.zeros((5, 1)),
+        0.01,
+        np.zeros(1),
+        np.ones((1, 2)),
+        np.zeros((1, 2)),
+        pack(AdaptiveParams()),
+        np.empty((1, OUT_LEN)),
+    )

@@ -21,6 +21,7 @@ temperatures outside [temperature_min_C, temperature_max_C] (reported as saturat
 ``pid_reference_lead_s`` ahead (:func:`reference_ahead`): the TEMs' lag fed forward, which holds
 their tracking on plants that are not the model (doc/explanation/controllers.md).
 """
+
 from __future__ import annotations
 
 import math
@@ -51,9 +52,18 @@ def tuned_adaptive() -> AdaptiveParams:
     (Gamma_a = 1e-4: Table 6.1's 0.01-0.05 drive theta_hat to its bounds within a second on
     this plant's phi = g l cos q / I ~ 350 /s^2/kg), forces 0.3-1.0 kgf per wire.
     """
-    return AdaptiveParams(c1=400.0, c2=400.0, gamma_a=1e-4, gamma_b1=1e-4, gamma_b2=1e-4, gamma_d1=0.0,
-                          gamma_d2=0.0, preload_N=N_WIRES * 0.65 * KGF_N, force_min_N=N_WIRES * 0.3 * KGF_N,
-                          force_max_N=N_WIRES * 1.0 * KGF_N)
+    return AdaptiveParams(
+        c1=400.0,
+        c2=400.0,
+        gamma_a=1e-4,
+        gamma_b1=1e-4,
+        gamma_b2=1e-4,
+        gamma_d1=0.0,
+        gamma_d2=0.0,
+        preload_N=N_WIRES * 0.65 * KGF_N,
+        force_min_N=N_WIRES * 0.3 * KGF_N,
+        force_max_N=N_WIRES * 1.0 * KGF_N,
+    )
 
 
 #: how far past the measured angle the held target lies during a reversal lead [rad]; larger
@@ -138,8 +148,9 @@ class JointControllerParams:
     adaptive: AdaptiveParams = field(default_factory=tuned_adaptive)
     #: PID on the angle error, output in degC of differential temperature (doc/explanation/controllers.md; Kp / Ki
     #: 300 / 60 until the output filter below, doc/explanation/controllers.md)
-    pid: PIDParams = field(default_factory=lambda: PIDParams(kp=400.0, ki=30.0, kd=0.0, output_min=-30.0,
-                                                              output_max=30.0))
+    pid: PIDParams = field(
+        default_factory=lambda: PIDParams(kp=400.0, ki=30.0, kd=0.0, output_min=-30.0, output_max=30.0)
+    )
     temperature_mid_C: float = 50.0  # centre of the muscles' working band [degC]
     temperature_min_C: float = 20.0
     temperature_max_C: float = 80.0
@@ -179,18 +190,33 @@ class JointControllerParams:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ParameterError(f'mode = {self.mode!r} is not one of {", ".join(MODES)}')
-        for name in ('temperature_mid_C', 'temperature_min_C', 'temperature_max_C', 'force_per_degC_N',
-                     'reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s',
-                     'direct_output_filter_s'):
+        for name in (
+            'temperature_mid_C',
+            'temperature_min_C',
+            'temperature_max_C',
+            'force_per_degC_N',
+            'reversal_lead_s',
+            'pid_reference_lead_s',
+            'direct_reference_lead_s',
+            'pid_output_filter_s',
+            'direct_output_filter_s',
+        ):
             if not math.isfinite(getattr(self, name)):
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.temperature_min_C < self.temperature_mid_C < self.temperature_max_C:
-            raise ParameterError(f'need temperature_min_C < temperature_mid_C < temperature_max_C, got '
-                                 f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}')
+            raise ParameterError(
+                f'need temperature_min_C < temperature_mid_C < temperature_max_C, got '
+                f'{self.temperature_min_C}, {self.temperature_mid_C}, {self.temperature_max_C}'
+            )
         if not self.force_per_degC_N > 0:
             raise ParameterError(f'force_per_degC_N = {self.force_per_degC_N!r} must be > 0')
-        for name in ('reversal_lead_s', 'pid_reference_lead_s', 'direct_reference_lead_s', 'pid_output_filter_s',
-                     'direct_output_filter_s'):
+        for name in (
+            'reversal_lead_s',
+            'pid_reference_lead_s',
+            'direct_reference_lead_s',
+            'pid_output_filter_s',
+            'direct_output_filter_s',
+        ):
             if not getattr(self, name) >= 0:
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be >= 0')
 
@@ -224,8 +250,9 @@ class JointController:
         """Bundle strains (elongation / wire length) at angle q (:func:`bundle_strain`)."""
         return bundle_strain(self.plant, q)
 
-    def _reversal_lead(self, strain: FloatArray, q: float, q_d: float, qdot_d: float, qddot_d: float,
-                       info: dict[str, float]) -> FloatArray:
+    def _reversal_lead(
+        self, strain: FloatArray, q: float, q_d: float, qdot_d: float, qddot_d: float, info: dict[str, float]
+    ) -> FloatArray:
         """Inverse mode: cross the hysteresis gap around the joint's reversal instead of after it.
 
         Reversing a wire's strain first needs a temperature change across the gap between its
@@ -267,8 +294,16 @@ class JointController:
         c1, c2 = min(max(T1, lo), hi), min(max(T2, lo), hi)
         return np.array([c1, c2]), c1 != T1 or c2 != T2
 
-    def update(self, q: float, qdot: float, q_d: float, qdot_d: float, qddot_d: float, dt: float,
-               muscle_temperature_C: FloatArray | None = None) -> JointCommand:
+    def update(
+        self,
+        q: float,
+        qdot: float,
+        q_d: float,
+        qdot_d: float,
+        qddot_d: float,
+        dt: float,
+        muscle_temperature_C: FloatArray | None = None,
+    ) -> JointCommand:
         """One sample: measured q [rad], q' [rad/s]; reference q_d, q_d', q_d''; step dt [s]."""
         p = self.params
         strain = self.strain_at(q_d)
@@ -279,22 +314,40 @@ class JointController:
             self.u_filtered = output_filter_step(self.u_filtered, o.u, dt, p.output_filter_s)
             u = float(self.u_filtered[0])
             T, clipped = self._clip_T(np.array([p.temperature_mid_C + u, p.temperature_mid_C - u]))
-            return JointCommand(None, strain, T, bool(o.saturated[0]) or clipped,
-                                {'error_rad': float(o.error[0]), 'u_degC': u, 'integral': float(o.i_term[0])})
+            return JointCommand(
+                None,
+                strain,
+                T,
+                bool(o.saturated[0]) or clipped,
+                {'error_rad': float(o.error[0]), 'u_degC': u, 'integral': float(o.i_term[0])},
+            )
         assert self.adaptive is not None
         o = self.adaptive.update(q, qdot, q_d, qdot_d, qddot_d, dt)
         force = np.array([o.force_1_N[0], o.force_2_N[0]])
-        info = {'z1_rad': float(o.z1[0]), 'z2_rad_s': float(o.z2[0]), 'theta_hat_kg': float(o.theta_hat[0]),
-                'beta_hat_1': float(o.beta_hat[0, 0]), 'beta_hat_2': float(o.beta_hat[0, 1]),
-                'delta_force_N': float(o.delta_force_N[0])}
+        info = {
+            'z1_rad': float(o.z1[0]),
+            'z2_rad_s': float(o.z2[0]),
+            'theta_hat_kg': float(o.theta_hat[0]),
+            'beta_hat_1': float(o.beta_hat[0, 0]),
+            'beta_hat_2': float(o.beta_hat[0, 1]),
+            'delta_force_N': float(o.delta_force_N[0]),
+        }
         if p.mode == 'inverse_adaptive':
             strain = self._reversal_lead(strain, q, q_d, qdot_d, qddot_d, info)
             return JointCommand(force, strain, None, bool(o.saturated[0]), info)
-        self.u_filtered = output_filter_step(self.u_filtered, (force - p.adaptive.preload_N) / p.force_per_degC_N, dt,
-                                             p.output_filter_s)
+        self.u_filtered = output_filter_step(
+            self.u_filtered, (force - p.adaptive.preload_N) / p.force_per_degC_N, dt, p.output_filter_s
+        )
         T, clipped = self._clip_T(p.temperature_mid_C + self.u_filtered)
         return JointCommand(force, strain, T, bool(o.saturated[0]) or clipped, info)
 
 
-__all__ = ['JointController', 'JointControllerParams', 'JointCommand', 'MODES', 'bundle_strain', 'reference_ahead',
-           'output_filter_step']
+__all__ = [
+    'JointController',
+    'JointControllerParams',
+    'JointCommand',
+    'MODES',
+    'bundle_strain',
+    'reference_ahead',
+    'output_filter_step',
+]

@@ -25,6 +25,7 @@ constant tau (s/(tau s + 1), backward Euler): d_k = (tau d_{k-1} + x_k - x_{k-1}
 the first sample gives 0. Anti-windup: 'conditional' (integration stops while the output is
 saturated and e would drive it further), 'back_calculation' (tracking time T_t) or 'none'.
 """
+
 from __future__ import annotations
 
 import math
@@ -66,19 +67,26 @@ class PIDParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
                 raise ParameterError(f'{name} = {v!r} is outside the valid range [0, inf)')
-        for name, v, choices in (('p_mode', self.p_mode, P_MODES), ('derivative_on', self.derivative_on, D_ON),
-                                 ('anti_windup', self.anti_windup, ANTI_WINDUP)):
+        for name, v, choices in (
+            ('p_mode', self.p_mode, P_MODES),
+            ('derivative_on', self.derivative_on, D_ON),
+            ('anti_windup', self.anti_windup, ANTI_WINDUP),
+        ):
             if v not in choices:
                 raise ParameterError(f'{name} = {v!r} is not one of {format_choices(choices)}')
         if not (math.isfinite(self.derivative_filter_s) and self.derivative_filter_s >= 0):
-            raise ParameterError(f'derivative_filter_s = {self.derivative_filter_s!r} is outside the valid range [0, inf)')
+            raise ParameterError(
+                f'derivative_filter_s = {self.derivative_filter_s!r} is outside the valid range [0, inf)'
+            )
         if not (math.isfinite(self.tracking_time_s) and self.tracking_time_s > 0):
             raise ParameterError(f'tracking_time_s = {self.tracking_time_s!r} is outside the valid range (0, inf)')
         if not (self.output_min < self.output_max) or math.isnan(self.output_min) or math.isnan(self.output_max):
-            raise ParameterError(f'output limits ({self.output_min!r}, {self.output_max!r}) need output_min < output_max')
+            raise ParameterError(
+                f'output limits ({self.output_min!r}, {self.output_max!r}) need output_min < output_max'
+            )
 
     @classmethod
-    def paper_table_6_1(cls, p_mode: PMode = 'p_times_rate', **overrides: object) -> 'PIDParams':
+    def paper_table_6_1(cls, p_mode: PMode = 'p_times_rate', **overrides: object) -> PIDParams:
         """Table 6.1 PID column (Kp 9, Ki 56, Kd 5) with the Sec. 6.1 P x error-rate modification."""
         return replace(cls(kp=9.0, ki=56.0, kd=5.0, p_mode=p_mode), **overrides)  # type: ignore[arg-type]
 
@@ -130,16 +138,35 @@ class PID:
             y = np.ascontiguousarray(np.broadcast_to(np.asarray(q, float), (self.n,)))
             r = np.ascontiguousarray(np.broadcast_to(np.asarray(q_d, float), (self.n,)))
         except ValueError:
-            raise ModelInputError('q.shape, q_d.shape', (np.shape(q), np.shape(q_d)),
-                                  f'broadcastable to ({self.n},)') from None
+            raise ModelInputError(
+                'q.shape, q_d.shape', (np.shape(q), np.shape(q_d)), f'broadcastable to ({self.n},)'
+            ) from None
         if self._k is None or self._k[0] is not p:
             self._k = (p, pid_kernel.pack(p))
         out = np.empty((self.n, len(pid_kernel.OUT_FIELDS)))
-        pid_kernel.update(y, r, float(dt), self._has_prev, self.integral, self._e_prev, self._y_prev, self._edot,
-                          self._ydot, self._k[1], out)
+        pid_kernel.update(
+            y,
+            r,
+            float(dt),
+            self._has_prev,
+            self.integral,
+            self._e_prev,
+            self._y_prev,
+            self._edot,
+            self._ydot,
+            self._k[1],
+            out,
+        )
         self._has_prev = True
-        return PIDOutput(u=out[:, 0], u_unsat=out[:, 1], saturated=out[:, 2] != 0.0, error=out[:, 3],
-                         p_term=out[:, 4], i_term=out[:, 5], d_term=out[:, 6])
+        return PIDOutput(
+            u=out[:, 0],
+            u_unsat=out[:, 1],
+            saturated=out[:, 2] != 0.0,
+            error=out[:, 3],
+            p_term=out[:, 4],
+            i_term=out[:, 5],
+            d_term=out[:, 6],
+        )
 
 
 __all__ = ['PIDParams', 'PIDOutput', 'PID']

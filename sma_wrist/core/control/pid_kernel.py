@@ -6,6 +6,7 @@ loop over the scenarios it costs ~1 us compiled (the plant kernel's numba set-up
 :mod:`sma_wrist.core.plant.kernel`) and stays correct, if slower for large n, as plain Python
 without numba. The equations and their order are those documented in :mod:`sma_wrist.core.control.pid`.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -22,9 +23,21 @@ ANTI_WINDUP_CODES = {'conditional': 0, 'back_calculation': 1, 'none': 2}
 
 def pack(p) -> np.ndarray:  # type: ignore[no-untyped-def]
     """Constants of :func:`update` from a PIDParams."""
-    return np.array([p.kp, p.ki, p.kd, P_MODE_CODES[p.p_mode], 1.0 if p.derivative_on == 'measurement' else 0.0,
-                     p.derivative_filter_s, p.output_min, p.output_max, ANTI_WINDUP_CODES[p.anti_windup],
-                     p.tracking_time_s], dtype=float)
+    return np.array(
+        [
+            p.kp,
+            p.ki,
+            p.kd,
+            P_MODE_CODES[p.p_mode],
+            1.0 if p.derivative_on == 'measurement' else 0.0,
+            p.derivative_filter_s,
+            p.output_min,
+            p.output_max,
+            ANTI_WINDUP_CODES[p.anti_windup],
+            p.tracking_time_s,
+        ],
+        dtype=float,
+    )
 
 
 @_jit
@@ -79,4 +92,5 @@ def warm_up() -> None:
     update(z, z + 0.1, 0.01, True, z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), k, np.empty((1, 7)))
     # PID.update passes the angles as read-only broadcast views, another signature: compiled in the loop before
     from sma_wrist.core.control.pid import PID
+
     PID().update(0.0, 0.1, 0.01)

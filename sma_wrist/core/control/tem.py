@@ -32,6 +32,7 @@ or two layers, one controller per layer with h = (1, 0) acting on the muscle fac
 (Figs. 5.26-5.28). Commands come out in volts, u = -I / input_per_volt, positive heats the
 muscle (T1) face (doc/explanation/model.md).
 """
+
 from __future__ import annotations
 
 import math
@@ -189,8 +190,9 @@ class TemControlResult:
         return self.saturated | self.no_root.any(axis=-1)
 
 
-def quadratic_coefficients(thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike, T_d_rate: ArrayLike,
-                           gain_per_s: float = 1.0) -> tuple[FloatArray, FloatArray, FloatArray]:
+def quadratic_coefficients(
+    thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike, T_d_rate: ArrayLike, gain_per_s: float = 1.0
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(a, b, c) of a I^2 + b I + c = 0 per face (Eqs. 5.44-5.45, sign of e as in Eq. 5.42).
 
     state, T_d, T_d_rate: (N, L, 2) degC, degC, degC/s (broadcastable to the state).
@@ -240,9 +242,15 @@ def _kernel_constants(thermal: th.ThermalParams) -> FloatArray:
 _KERNEL_CONSTANTS: dict[int, tuple[th.ThermalParams, FloatArray]] = {}
 
 
-def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_d: ArrayLike,
-                                 T_d_rate: ArrayLike, params: TemControlParams = TemControlParams(),
-                                 *, compiled: bool | None = None) -> TemControlResult:
+def feedback_linearising_command(
+    thermal: th.ThermalParams,
+    state: ArrayLike,
+    T_d: ArrayLike,
+    T_d_rate: ArrayLike,
+    params: TemControlParams = TemControlParams(),
+    *,
+    compiled: bool | None = None,
+) -> TemControlResult:
     """Eqs. 5.44-5.47 for N scenarios of L modules: per-face roots, weighted sum, saturation.
 
     state (N, L, 2) degC; T_d and T_d_rate broadcastable to it (degC, degC/s), one target per
@@ -259,9 +267,19 @@ def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_
         command, face = np.empty((1, 2)), np.empty((1, 2, 2))
         no_root, saturated = np.empty((1, 2, 2), bool), np.empty((1, 2), bool)
         if not tem_kernel.linearising_command(
-                np.ascontiguousarray(T[0]), np.ascontiguousarray(T_d[0]), np.ascontiguousarray(rate[0]),
-                _kernel_constants(thermal), float(params.gain_per_s), np.asarray(params.weights, dtype=float),
-                thermal.u_min_V, thermal.u_max_V, command[0], face[0], no_root[0], saturated[0]):
+            np.ascontiguousarray(T[0]),
+            np.ascontiguousarray(T_d[0]),
+            np.ascontiguousarray(rate[0]),
+            _kernel_constants(thermal),
+            float(params.gain_per_s),
+            np.asarray(params.weights, dtype=float),
+            thermal.u_min_V,
+            thermal.u_max_V,
+            command[0],
+            face[0],
+            no_root[0],
+            saturated[0],
+        ):
             raise ModelInputError('TEM command', float('nan'), '(finite numbers)', 'V')
         return TemControlResult(command, th.model_input(thermal, command), face, no_root, saturated)
     a, b, c = quadratic_coefficients(thermal, T, T_d, rate, params.gain_per_s)
@@ -272,8 +290,9 @@ def feedback_linearising_command(thermal: th.ThermalParams, state: ArrayLike, T_
     return TemControlResult(command, th.model_input(thermal, command), face_current, ~real & (h != 0), saturated)
 
 
-def observer_step(thermal: th.ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: float,
-                  *, compiled: bool | None = None) -> FloatArray:
+def observer_step(
+    thermal: th.ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: float, *, compiled: bool | None = None
+) -> FloatArray:
     """The controller's observer between samples: faces (N, L, 2) [degC] after the commands
     (N, L) [V] in force were held for dt [s] (thermal.step, RK4 of Eqs. 4.13-4.14; inputs are
     the controller's own, already checked). One wrist runs in :func:`~sma_wrist.core.control.tem_kernel.observer_step`
@@ -281,8 +300,12 @@ def observer_step(thermal: th.ThermalParams, state: ArrayLike, command_V: ArrayL
     T = np.asarray(state, dtype=float)
     if _one_wrist(T, compiled):
         x = np.array(T[0])
-        tem_kernel.observer_step(x, np.ascontiguousarray(np.asarray(command_V, dtype=float).reshape(2)), float(dt),
-                                 _kernel_constants(thermal))
+        tem_kernel.observer_step(
+            x,
+            np.ascontiguousarray(np.asarray(command_V, dtype=float).reshape(2)),
+            float(dt),
+            _kernel_constants(thermal),
+        )
         return x[None]
     return th.step(thermal, T, command_V, dt, validate=False)
 
@@ -325,8 +348,9 @@ class MuscleTemperatureObserver:
     The first sample initialises it at the measurement (exchanger faces at rest).
     """
 
-    def __init__(self, thermal: th.ThermalParams, params: TemperatureObserverParams = TemperatureObserverParams()
-                 ) -> None:
+    def __init__(
+        self, thermal: th.ThermalParams, params: TemperatureObserverParams = TemperatureObserverParams()
+    ) -> None:
         self.thermal = thermal
         self.params = params
         self.faces: FloatArray | None = None  # (N, 2, 2) degC
@@ -353,8 +377,9 @@ class MuscleTemperatureObserver:
             faces = observer_step(self.thermal, self.faces, u, min(dt, self.thermal.dt_max_s), compiled=False)
         else:  # row by row: a wrist's numbers do not depend on how many are observed together
             faces = self.faces.copy()
-            tem_kernel.observer_step_rows(faces, np.ascontiguousarray(u), min(dt, self.thermal.dt_max_s),
-                                          np.ascontiguousarray(self.coef_rows))
+            tem_kernel.observer_step_rows(
+                faces, np.ascontiguousarray(u), min(dt, self.thermal.dt_max_s), np.ascontiguousarray(self.coef_rows)
+            )
         muscle = faces[:, :, th.MUSCLE_FACE]
         p = self.params
         z = self.junction + dt / (p.tc_lag_s + dt) * (muscle - self.junction)
@@ -365,8 +390,9 @@ class MuscleTemperatureObserver:
         return muscle.copy()
 
 
-def two_layer_command(thermal: th.ThermalParams, state: ArrayLike, T_d_muscle: ArrayLike, T_d_rate: ArrayLike,
-                      gain_per_s: float = 1.0) -> TemControlResult:
+def two_layer_command(
+    thermal: th.ThermalParams, state: ArrayLike, T_d_muscle: ArrayLike, T_d_rate: ArrayLike, gain_per_s: float = 1.0
+) -> TemControlResult:
     """Two layers (Fig. 5.26): one controller per layer on its muscle face, h = (1, 0).
 
     state (N, L, 2); T_d_muscle and T_d_rate (N, L) desired muscle temperatures and rates.
@@ -379,9 +405,14 @@ def two_layer_command(thermal: th.ThermalParams, state: ArrayLike, T_d_muscle: A
     return feedback_linearising_command(thermal, T, T_d, rate, TemControlParams(gain_per_s, TWO_LAYER_WEIGHTS))
 
 
-def one_module_command(thermal: th.ThermalParams, state: ArrayLike, T_d_faces: ArrayLike, T_d_rate: ArrayLike,
-                       weights: tuple[float, float] = SEED_ONE_MODULE_WEIGHTS, gain_per_s: float = 1.0
-                       ) -> TemControlResult:
+def one_module_command(
+    thermal: th.ThermalParams,
+    state: ArrayLike,
+    T_d_faces: ArrayLike,
+    T_d_rate: ArrayLike,
+    weights: tuple[float, float] = SEED_ONE_MODULE_WEIGHTS,
+    gain_per_s: float = 1.0,
+) -> TemControlResult:
     """The seed's first plan (Fig. 5.23): one module, targets on both faces, I = h1 I_1 + h2 I_2.
 
     state (N, 1, 2) or (N, 2); T_d_faces and T_d_rate (N, 2) targets of the (T1, T2) faces.
@@ -391,9 +422,13 @@ def one_module_command(thermal: th.ThermalParams, state: ArrayLike, T_d_faces: A
         T = T[:, None, :]
     T_d = np.asarray(T_d_faces, dtype=float)
     rate = np.asarray(T_d_rate, dtype=float)
-    return feedback_linearising_command(thermal, T, T_d.reshape(T_d.shape[:-1] + (1, 2)) if T_d.ndim == 2 else T_d,
-                                        rate.reshape(rate.shape[:-1] + (1, 2)) if rate.ndim == 2 else rate,
-                                        TemControlParams(gain_per_s, tuple(weights)))
+    return feedback_linearising_command(
+        thermal,
+        T,
+        T_d.reshape(T_d.shape[:-1] + (1, 2)) if T_d.ndim == 2 else T_d,
+        rate.reshape(rate.shape[:-1] + (1, 2)) if rate.ndim == 2 else rate,
+        TemControlParams(gain_per_s, tuple(weights)),
+    )
 
 
 class TemController:
@@ -430,8 +465,7 @@ class TemController:
         self._T_d_prev = T_d.copy()
         return self._rate
 
-    def update(self, t: float, state: ArrayLike, T_d: ArrayLike, T_d_rate: ArrayLike | None = None
-               ) -> TemControlResult:
+    def update(self, t: float, state: ArrayLike, T_d: ArrayLike, T_d_rate: ArrayLike | None = None) -> TemControlResult:
         """Command for state (N, L, 2) and per-face targets T_d (N, L, 2) at time t [s].
 
         With weights (1, 0) the exchanger-face targets are ignored; pass anything finite.
@@ -443,8 +477,14 @@ class TemController:
         return feedback_linearising_command(self.thermal, T, T_d_arr, rate, self.params)
 
 
-def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: float = 400.0,
-           dt: float = 0.05, trace: bool = False) -> dict[str, Any]:
+def _story(
+    thermal: th.ThermalParams,
+    mode: str,
+    reference: str,
+    duration_s: float = 400.0,
+    dt: float = 0.05,
+    trace: bool = False,
+) -> dict[str, Any]:
     """Closed loop from rest as in Sec. 5.2; returns error and command statistics after 200 s.
 
     With ``trace`` also the time series: 't' (K,), 'T' and 'T_d' (K, 2) muscle temperatures.
@@ -482,8 +522,16 @@ def _story(thermal: th.ThermalParams, mode: str, reference: str, duration_s: flo
             flagged += int(r.any_flag.any())
     n = int(round(duration_s / dt)) - k_tail
     rms = np.sqrt(e_sq / n)
-    out: dict[str, Any] = {'max_e1': e_max[0], 'max_e2': e_max[1], 'rms_e1': rms[0], 'rms_e2': rms[1],
-                           'u_min': u_lo, 'u_max': u_hi, 'T_max': T_hi, 'flagged_fraction': flagged / n}
+    out: dict[str, Any] = {
+        'max_e1': e_max[0],
+        'max_e2': e_max[1],
+        'rms_e1': rms[0],
+        'rms_e2': rms[1],
+        'u_min': u_lo,
+        'u_max': u_hi,
+        'T_max': T_hi,
+        'flagged_fraction': flagged / n,
+    }
     if trace:
         out.update(t=np.arange(K) * dt, T=tr_T, T_d=tr_Td)
     return out
@@ -493,15 +541,19 @@ def _main() -> None:  # pragma: no cover - the report quoted in doc/explanation/
     default = th.ThermalParams()
     wide = default.with_limits(-30.0, 30.0)
     print('Closed loop from rest, k = 1 /s, dt = 0.05 s, statistics over 200-400 s')
-    print(f'{"limits":>10} {"mode":>11} {"reference":>29} | max|e1| max|e2| rms e1 rms e2 [degC]'
-          ' | u range [V] | max face T | flagged')
+    print(
+        f'{"limits":>10} {"mode":>11} {"reference":>29} | max|e1| max|e2| rms e1 rms e2 [degC]'
+        ' | u range [V] | max face T | flagged'
+    )
     for name, p in (('+-30 V', wide), ('default', default)):
         for mode in ('one module', 'two layers'):
             for ref in ('step 60/40', 'seed sine 50+-30, 0.1 rad/s', 'slow sine 45+-20, 0.02 rad/s'):
                 s = _story(p, mode, ref)
-                print(f'{name:>10} {mode:>11} {ref:>29} | {s["max_e1"]:7.3f} {s["max_e2"]:7.3f} {s["rms_e1"]:6.3f}'
-                      f' {s["rms_e2"]:6.3f} | {s["u_min"]:+6.2f} {s["u_max"]:+6.2f} | {s["T_max"]:7.2f}'
-                      f' | {s["flagged_fraction"]:.2f}')
+                print(
+                    f'{name:>10} {mode:>11} {ref:>29} | {s["max_e1"]:7.3f} {s["max_e2"]:7.3f} {s["rms_e1"]:6.3f}'
+                    f' {s["rms_e2"]:6.3f} | {s["u_min"]:+6.2f} {s["u_max"]:+6.2f} | {s["T_max"]:7.2f}'
+                    f' | {s["flagged_fraction"]:.2f}'
+                )
 
 
 if __name__ == '__main__':  # pragma: no cover
@@ -536,12 +588,16 @@ class DriveLimits:
     horizon_s: float = 3.0
 
     def __post_init__(self) -> None:
-        if not (np.isfinite(self.boost_min_V) and np.isfinite(self.boost_max_V) and self.boost_min_V < 0 < self.boost_max_V):
+        if not (
+            np.isfinite(self.boost_min_V) and np.isfinite(self.boost_max_V) and self.boost_min_V < 0 < self.boost_max_V
+        ):
             raise ParameterError(f'boost limits ({self.boost_min_V!r}, {self.boost_max_V!r}) V must bracket 0')
         if not np.isfinite(self.protect_above_C):
             raise ParameterError(f'protect_above_C = {self.protect_above_C!r} must be finite')
         if not (np.isfinite(self.face_min_C) and np.isfinite(self.face_max_C) and self.face_min_C < self.face_max_C):
-            raise ParameterError(f'face window ({self.face_min_C!r}, {self.face_max_C!r}) degC must be finite, min < max')
+            raise ParameterError(
+                f'face window ({self.face_min_C!r}, {self.face_max_C!r}) degC must be finite, min < max'
+            )
         if not (np.isfinite(self.horizon_s) and 0 < self.horizon_s <= 30.0):
             raise ParameterError(f'horizon_s = {self.horizon_s!r} must be in (0, 30] s')
 
@@ -550,8 +606,9 @@ class DriveLimits:
 _CANDIDATES = np.linspace(0.0, 1.0, 49)  # includes 0 V
 
 
-def _held_faces_inside(thermal: th.ThermalParams, limits: DriveLimits, T: FloatArray, U: FloatArray
-                       ) -> tuple[BoolArray, FloatArray]:
+def _held_faces_inside(
+    thermal: th.ThermalParams, limits: DriveLimits, T: FloatArray, U: FloatArray
+) -> tuple[BoolArray, FloatArray]:
     """Hold each command of U (K, N, L) for the horizon from faces T (N, L, 2): (inside (K, N, L),
     how far the faces leave the window [degC])."""
     K = U.shape[0]
@@ -566,8 +623,9 @@ def _held_faces_inside(thermal: th.ThermalParams, limits: DriveLimits, T: FloatA
     return excess == 0.0, excess
 
 
-def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike,
-                       *, compiled: bool | None = None) -> tuple[FloatArray, FloatArray]:
+def safe_command_range(
+    thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike, *, compiled: bool | None = None
+) -> tuple[FloatArray, FloatArray]:
     """(lo, hi) [V], shape (N, L): the commands that, held for the horizon from the faces in
     ``state`` (N, L, 2), keep every face of their layer inside the window (1 V grid over the boost
     range). Where none does, both are the command that leaves the window least. One wrist of two
@@ -578,9 +636,17 @@ def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: Ar
     if _one_wrist(T, compiled):
         lo, hi = np.empty((1, 2)), np.empty((1, 2))
         n = max(1, int(np.ceil(limits.horizon_s / thermal.dt_max_s)))
-        tem_kernel.held_command_range(np.ascontiguousarray(T[0]), cand, float(limits.horizon_s), n,
-                                      float(limits.face_min_C), float(limits.face_max_C),
-                                      _kernel_constants(thermal), lo[0], hi[0])
+        tem_kernel.held_command_range(
+            np.ascontiguousarray(T[0]),
+            cand,
+            float(limits.horizon_s),
+            n,
+            float(limits.face_min_C),
+            float(limits.face_max_C),
+            _kernel_constants(thermal),
+            lo[0],
+            hi[0],
+        )
         return lo, hi
     wide = replace(thermal, u_min_V=limits.boost_min_V, u_max_V=limits.boost_max_V)
     U = np.broadcast_to(cand[:, None, None], (cand.size,) + T.shape[:-1])
@@ -592,8 +658,13 @@ def safe_command_range(thermal: th.ThermalParams, limits: DriveLimits, state: Ar
     return np.where(none, least, lo), np.where(none, least, hi)
 
 
-def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: ArrayLike, command_V: ArrayLike,
-                      command_range: tuple[FloatArray, FloatArray] | None = None) -> tuple[FloatArray, BoolArray]:
+def protected_command(
+    thermal: th.ThermalParams,
+    limits: DriveLimits,
+    state: ArrayLike,
+    command_V: ArrayLike,
+    command_range: tuple[FloatArray, FloatArray] | None = None,
+) -> tuple[FloatArray, BoolArray]:
     """Clip (N, L) commands so the faces of each layer stay in the TEM's window (DriveLimits).
 
     state: (N, L, 2) face temperatures [degC]. ``command_range``: a recent
@@ -613,8 +684,11 @@ def protected_command(thermal: th.ThermalParams, limits: DriveLimits, state: Arr
     out = np.minimum(np.maximum(u, lo), hi)
     # backstop: a face already outside the window -> hold limits for that layer
     outside = ((T > limits.face_max_C) | (T < limits.face_min_C)).any(axis=-1)
-    out = np.where(outside, np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)),
-                                       min(thermal.u_max_V, limits.boost_max_V)), out)
+    out = np.where(
+        outside,
+        np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)), min(thermal.u_max_V, limits.boost_max_V)),
+        out,
+    )
     return out, out != u
 
 
@@ -631,8 +705,9 @@ class TemSample:
     hot: BoolArray  # (2,) the muscle is above max_muscle_C: heating blocked
 
 
-def target_prefilter(tau: float, y: FloatArray | None, v: FloatArray, T_d: ArrayLike, dt: float | None
-                     ) -> tuple[FloatArray, FloatArray]:
+def target_prefilter(
+    tau: float, y: FloatArray | None, v: FloatArray, T_d: ArrayLike, dt: float | None
+) -> tuple[FloatArray, FloatArray]:
     """One sample of the desired temperatures' tracking prefilter (TemControlParams.target_filter_s
     = tau [s]): e = T_d - y, y' = v + 2 omega e, v' = omega^2 e, explicit Euler over the sample's
     dt [s]; its first sample (y None) passes unchanged. Returns (y [degC], v [degC/s]), any shape
@@ -667,9 +742,17 @@ class TemLoop:
     which stay the reference (test_tem_control compares the two over closed-loop sequences).
     """
 
-    def __init__(self, thermal: th.ThermalParams, params: TemControlParams, drive: DriveLimits,
-                 hold: th.ThermalParams, max_muscle_C: float, *, compiled: bool | None = None,
-                 online: OnlineThermalParams | None = None) -> None:
+    def __init__(
+        self,
+        thermal: th.ThermalParams,
+        params: TemControlParams,
+        drive: DriveLimits,
+        hold: th.ThermalParams,
+        max_muscle_C: float,
+        *,
+        compiled: bool | None = None,
+        online: OnlineThermalParams | None = None,
+    ) -> None:
         if tuple(params.weights) != TWO_LAYER_WEIGHTS:
             raise ParameterError(f'TemLoop runs two layers, weights {TWO_LAYER_WEIGHTS}; got {params.weights!r}')
         self.thermal, self.params, self.drive, self.hold = thermal, params, drive, hold
@@ -696,13 +779,32 @@ class TemLoop:
         self._candidates = drive.boost_min_V + _CANDIDATES * (drive.boost_max_V - drive.boost_min_V)
         #: the chatter guard (TemControlParams.chatter_*; None: off); engaged, the law's rate filter is
         #: params.chatter_rate_filter_s
-        self.guard = ChatterGuard(1, params.chatter_limit_per_s, params.chatter_window_s) \
-            if params.chatter_limit_per_s > 0 else None
-        self._cfg = np.array([params.gain_per_s, params.rate_filter_s, *params.weights, thermal.u_min_V,
-                              thermal.u_max_V, float(drive.predictive), drive.horizon_s,
-                              max(1, int(np.ceil(drive.horizon_s / thermal.dt_max_s))), drive.face_min_C,
-                              drive.face_max_C, drive.protect_above_C, drive.boost_min_V, drive.boost_max_V,
-                              hold.u_min_V, hold.u_max_V, self.max_muscle_C], dtype=float)
+        self.guard = (
+            ChatterGuard(1, params.chatter_limit_per_s, params.chatter_window_s)
+            if params.chatter_limit_per_s > 0
+            else None
+        )
+        self._cfg = np.array(
+            [
+                params.gain_per_s,
+                params.rate_filter_s,
+                *params.weights,
+                thermal.u_min_V,
+                thermal.u_max_V,
+                float(drive.predictive),
+                drive.horizon_s,
+                max(1, int(np.ceil(drive.horizon_s / thermal.dt_max_s))),
+                drive.face_min_C,
+                drive.face_max_C,
+                drive.protect_above_C,
+                drive.boost_min_V,
+                drive.boost_max_V,
+                hold.u_min_V,
+                hold.u_max_V,
+                self.max_muscle_C,
+            ],
+            dtype=float,
+        )
 
     def off(self) -> FloatArray:
         """Switch the TEMs off: 0 V is the command in force from now on (the online estimate's window in
@@ -760,7 +862,7 @@ class TemLoop:
         self._cfg[1] = rf
         self.law.params = replace(self.law.params, rate_filter_s=rf)
 
-    def take_guard_state(self, old: 'TemLoop') -> None:
+    def take_guard_state(self, old: TemLoop) -> None:
         """Continue ``old``'s chatter guard's count (a loop rebuilt for new parameters), judged under this loop's
         limits at old's last sample (a zero-length step: nothing decays, no sign change)."""
         if self.guard is None or old.guard is None:
@@ -779,8 +881,11 @@ class TemLoop:
         """The online estimate takes the sample and the command now in force; once it is ready and has
         moved, the loop's models are its (:mod:`sma_wrist.core.thermal.online`)."""
         est = self.estimator
-        if est is None or not est.sample(t, np.asarray(T_meas, dtype=float)[None], self.command_V[None]) \
-                or not est.ready:
+        if (
+            est is None
+            or not est.sample(t, np.asarray(T_meas, dtype=float)[None], self.command_V[None])
+            or not est.ready
+        ):
             return
         self.use_estimate(est.theta[0])
 
@@ -796,30 +901,46 @@ class TemLoop:
     def _prefilter(self, T_d: ArrayLike, dt: float | None) -> FloatArray:
         """The desired temperatures through the tracking prefilter (:func:`target_prefilter`);
         both paths get the filtered target."""
-        self.T_d_filtered, self.T_d_slope = target_prefilter(self.params.target_filter_s, self.T_d_filtered,
-                                                             self.T_d_slope, T_d, dt)
+        self.T_d_filtered, self.T_d_slope = target_prefilter(
+            self.params.target_filter_s, self.T_d_filtered, self.T_d_slope, T_d, dt
+        )
         return self.T_d_filtered
 
     def _observe(self, T_meas: ArrayLike, dt_obs: float) -> None:
         if dt_obs > 0 and self.compiled:  # the kernel's constants: the estimate's once used
-            tem_kernel.observer_step(self.observer[0], np.ascontiguousarray(self.command_V, dtype=float), dt_obs,
-                                     self._coef)
+            tem_kernel.observer_step(
+                self.observer[0], np.ascontiguousarray(self.command_V, dtype=float), dt_obs, self._coef
+            )
         elif dt_obs > 0:
-            self.observer = observer_step(self.thermal, self.observer, self.command_V[None, :], dt_obs,
-                                          compiled=self.compiled)
+            self.observer = observer_step(
+                self.thermal, self.observer, self.command_V[None, :], dt_obs, compiled=self.compiled
+            )
         self.observer[0, :, 0] = T_meas
 
-    def _sample_compiled(self, t: float, T_meas: ArrayLike, T_d: ArrayLike, dt_obs: float, refresh: bool
-                         ) -> TemSample:
+    def _sample_compiled(self, t: float, T_meas: ArrayLike, T_d: ArrayLike, dt_obs: float, refresh: bool) -> TemSample:
         law = self.law
         has_prev = law._t_prev is not None
         dt_law = t - law._t_prev if has_prev else 0.0
         self._T_meas[:] = T_meas
         self._T_d[:] = T_d
         command = self.command_V.copy()
-        status = tem_kernel.control_sample(self.observer[0], self._rate, self._T_d_prev, self._rng, command,
-                                           self._flags, self._T_meas, self._T_d, dt_obs, dt_law, has_prev, refresh,
-                                           self._coef, self._cfg, self._candidates)
+        status = tem_kernel.control_sample(
+            self.observer[0],
+            self._rate,
+            self._T_d_prev,
+            self._rng,
+            command,
+            self._flags,
+            self._T_meas,
+            self._T_d,
+            dt_obs,
+            dt_law,
+            has_prev,
+            refresh,
+            self._coef,
+            self._cfg,
+            self._candidates,
+        )
         if status != tem_kernel.OK:
             if status == tem_kernel.BAD_STATE:
                 check_finite('thermal state', self.observer, 'degC')

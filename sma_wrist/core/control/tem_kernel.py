@@ -9,6 +9,7 @@ scalar loops, compiled by numba when it is installed (the plant kernel's set-up,
 the path for N scenarios; :mod:`sma_wrist.core.control.tem` dispatches here for one wrist,
 and test_tem_control checks both paths agree.
 """
+
 from __future__ import annotations
 
 import math
@@ -18,8 +19,16 @@ import numpy as np
 from sma_wrist.core.jit import AVAILABLE, _jit, _jit_inline
 from sma_wrist.core.thermal.kernel import thermal_rk4
 
-__all__ = ['AVAILABLE', 'linearising_command', 'observer_step', 'observer_step_rows', 'held_command_range',
-           'control_sample', 'CONFIG_FIELDS', 'warm_up']
+__all__ = [
+    'AVAILABLE',
+    'linearising_command',
+    'observer_step',
+    'observer_step_rows',
+    'held_command_range',
+    'control_sample',
+    'CONFIG_FIELDS',
+    'warm_up',
+]
 
 
 @_jit
@@ -39,8 +48,9 @@ def observer_step_rows(x, u, dt, th_coef):  # pragma: no cover - compiled
 
 
 @_jit
-def linearising_command(x, T_d, rate, th_coef, gain, h, u_min, u_max, command, face_current, no_root,
-                        saturated):  # pragma: no cover - compiled
+def linearising_command(
+    x, T_d, rate, th_coef, gain, h, u_min, u_max, command, face_current, no_root, saturated
+):  # pragma: no cover - compiled
     """Eqs. 5.44-5.47 per layer of faces x (2, 2): the smaller root of A I^2 + B I + c = 0 per face
     (the vertex where there is none), weighted by h (2,), as a command [V] clipped to
     [u_min, u_max]. Outputs (written in place): command (2,), face_current (2, 2),
@@ -122,9 +132,25 @@ def held_command_range(x, candidates, horizon_s, n_sub, face_min, face_max, th_c
 
 
 #: layout of control_sample's ``cfg`` (tem_control.TemLoop packs it once per parameter set)
-CONFIG_FIELDS = ('gain_per_s', 'rate_filter_s', 'h1', 'h2', 'law_u_min_V', 'law_u_max_V', 'predictive',
-                 'horizon_s', 'n_sub', 'face_min_C', 'face_max_C', 'protect_above_C', 'boost_min_V', 'boost_max_V',
-                 'hold_min_V', 'hold_max_V', 'max_muscle_C')
+CONFIG_FIELDS = (
+    'gain_per_s',
+    'rate_filter_s',
+    'h1',
+    'h2',
+    'law_u_min_V',
+    'law_u_max_V',
+    'predictive',
+    'horizon_s',
+    'n_sub',
+    'face_min_C',
+    'face_max_C',
+    'protect_above_C',
+    'boost_min_V',
+    'boost_max_V',
+    'hold_min_V',
+    'hold_max_V',
+    'max_muscle_C',
+)
 
 #: control_sample's return codes; flags bits per layer
 OK, BAD_STATE, BAD_TARGET, BAD_COMMAND = 0, 1, 2, 3
@@ -132,24 +158,63 @@ SATURATED, LIMITED, HOT = 1, 2, 4
 
 
 @_jit
-def control_sample(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh,
-                   th_coef, cfg, candidates):  # pragma: no cover - compiled
+def control_sample(
+    x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh, th_coef, cfg, candidates
+):  # pragma: no cover - compiled
     """:func:`control_sample_into` with its work arrays allocated here (the node's one call per sample)."""
-    return control_sample_into(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev,
-                               refresh, th_coef, cfg, candidates, sample_scratch())
+    return control_sample_into(
+        x,
+        rate,
+        T_d_prev,
+        rng,
+        command,
+        flags,
+        T_meas,
+        T_d,
+        dt_obs,
+        dt_law,
+        has_prev,
+        refresh,
+        th_coef,
+        cfg,
+        candidates,
+        sample_scratch(),
+    )
 
 
 @_jit_inline
 def sample_scratch():  # pragma: no cover - compiled
     """Work arrays of :func:`control_sample_into`: RK4 stages (4, 2, 2), targets (2, 2), law command (2,),
     face currents (2, 2), no-root flags (2, 2), saturation flags (2,)."""
-    return (np.empty((4, 2, 2)), np.empty((2, 2)), np.empty(2), np.empty((2, 2)), np.empty((2, 2), np.bool_),
-            np.empty(2, np.bool_))
+    return (
+        np.empty((4, 2, 2)),
+        np.empty((2, 2)),
+        np.empty(2),
+        np.empty((2, 2)),
+        np.empty((2, 2), np.bool_),
+        np.empty(2, np.bool_),
+    )
 
 
 @_jit_inline
-def control_sample_into(x, rate, T_d_prev, rng, command, flags, T_meas, T_d, dt_obs, dt_law, has_prev, refresh,
-                        th_coef, cfg, candidates, scratch):  # pragma: no cover - compiled
+def control_sample_into(
+    x,
+    rate,
+    T_d_prev,
+    rng,
+    command,
+    flags,
+    T_meas,
+    T_d,
+    dt_obs,
+    dt_law,
+    has_prev,
+    refresh,
+    th_coef,
+    cfg,
+    candidates,
+    scratch,
+):  # pragma: no cover - compiled
     """One tem_controller sample (tem_control.TemLoop.sample) in one call, state in place.
 
     x (2, 2) observer faces [degC]: stepped dt_obs [s] (if > 0) under ``command`` (2,) [V], the
@@ -219,13 +284,41 @@ def warm_up() -> None:
         return
     from sma_wrist.core.thermal.heat_balance import ThermalParams
     from sma_wrist.core.thermal.kernel import thermal_constants
+
     coef = thermal_constants(ThermalParams())
     x, two = np.full((2, 2), 30.0), np.zeros(2)
     observer_step(x, two, 0.01, coef)
-    linearising_command(x, x, np.zeros((2, 2)), coef, 1.0, np.array([1.0, 0.0]), -1.0, 1.0, two.copy(),
-                        np.empty((2, 2)), np.empty((2, 2), np.bool_), np.empty(2, np.bool_))
+    linearising_command(
+        x,
+        x,
+        np.zeros((2, 2)),
+        coef,
+        1.0,
+        np.array([1.0, 0.0]),
+        -1.0,
+        1.0,
+        two.copy(),
+        np.empty((2, 2)),
+        np.empty((2, 2), np.bool_),
+        np.empty(2, np.bool_),
+    )
     held_command_range(x, np.linspace(-1.0, 1.0, 3), 1.0, 1, 0.0, 80.0, coef, two.copy(), two.copy())
     cfg = np.zeros(len(CONFIG_FIELDS))
     cfg[[0, 2, 5, 7, 8, 10]] = 1.0
-    control_sample(x, np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)), two.copy(), np.zeros(2, np.int64),
-                   two + 30.0, two + 30.0, 0.01, 0.01, True, True, coef, cfg, np.linspace(-1.0, 1.0, 3))
+    control_sample(
+        x,
+        np.zeros((2, 2)),
+        np.zeros((2, 2)),
+        np.zeros((2, 2)),
+        two.copy(),
+        np.zeros(2, np.int64),
+        two + 30.0,
+        two + 30.0,
+        0.01,
+        0.01,
+        True,
+        True,
+        coef,
+        cfg,
+        np.linspace(-1.0, 1.0, 3),
+    )

@@ -16,6 +16,7 @@ angle over a few seconds (trajectory_generator's ``soft_start_s``).
 Use :func:`make_trajectory` to build one from a name and keyword arguments (node
 parameters); it raises :class:`~sma_wrist.core.errors.ParameterError` naming the bad value and the valid range.
 """
+
 from __future__ import annotations
 
 import math
@@ -51,7 +52,7 @@ def smoothstep(t: FloatArray, duration_s: float) -> Sample:
     T = duration_s
     x = np.clip(t / T, 0.0, 1.0)
     inside = (t > 0.0) & (t < T)
-    s = x ** 3 * (10 - 15 * x + 6 * x * x)
+    s = x**3 * (10 - 15 * x + 6 * x * x)
     ds = np.where(inside, 30 * x * x * (1 - x) ** 2, 0.0)
     dds = np.where(inside, 60 * x * (1 - x) * (1 - 2 * x), 0.0)
     return s, ds / T, dds / (T * T)
@@ -73,8 +74,11 @@ def soft_start(reference: Sample, t: ArrayLike, start_rad: ArrayLike, duration_s
     s, ds, dds = smoothstep(tt, duration_s)
     gap = r - q0
     done = tt >= duration_s
-    return (np.where(done, r, q0 + s * gap), np.where(done, rd, ds * gap + s * rd),
-            np.where(done, rdd, dds * gap + 2.0 * ds * rd + s * rdd))
+    return (
+        np.where(done, r, q0 + s * gap),
+        np.where(done, rd, ds * gap + s * rd),
+        np.where(done, rdd, dds * gap + 2.0 * ds * rd + s * rdd),
+    )
 
 
 class Trajectory(Protocol):
@@ -93,8 +97,9 @@ def _time(t: ArrayLike) -> FloatArray:
     return arr
 
 
-def _finite(name: str, value: float, lo: float = -math.inf, hi: float = math.inf, unit: str = '',
-            lo_open: bool = False) -> None:
+def _finite(
+    name: str, value: float, lo: float = -math.inf, hi: float = math.inf, unit: str = '', lo_open: bool = False
+) -> None:
     ok = isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(value)
     ok = ok and (value > lo if lo_open else value >= lo) and value <= hi
     if not ok:
@@ -283,12 +288,17 @@ class SoftStart:
 
 
 GENERATORS: dict[str, type] = {
-    'sine': Sine, 'step': Step, 'ramp': Ramp, 'sine_sweep': SineSweep, 'constant': Constant,
+    'sine': Sine,
+    'step': Step,
+    'ramp': Ramp,
+    'sine_sweep': SineSweep,
+    'constant': Constant,
 }
 
 
-def make_trajectory(name: str = 'sine', angle_limits_rad: tuple[float, float] = DEFAULT_ANGLE_LIMITS_RAD,
-                    **kwargs: Any) -> Trajectory:
+def make_trajectory(
+    name: str = 'sine', angle_limits_rad: tuple[float, float] = DEFAULT_ANGLE_LIMITS_RAD, **kwargs: Any
+) -> Trajectory:
     """Build a generator by name and check its whole range lies inside angle_limits_rad.
 
     Raises ParameterError for an unknown name or keyword, a bad value, or a trajectory that
@@ -312,5 +322,18 @@ def make_trajectory(name: str = 'sine', angle_limits_rad: tuple[float, float] = 
     return traj
 
 
-__all__ = ['Sine', 'Step', 'Ramp', 'SineSweep', 'Constant', 'SoftStart', 'Trajectory', 'make_trajectory', 'soft_start',
-           'smoothstep', 'GENERATORS', 'DEFAULT_ANGLE_LIMITS_RAD', 'RUN_SOFT_START_S']
+__all__ = [
+    'Sine',
+    'Step',
+    'Ramp',
+    'SineSweep',
+    'Constant',
+    'SoftStart',
+    'Trajectory',
+    'make_trajectory',
+    'soft_start',
+    'smoothstep',
+    'GENERATORS',
+    'DEFAULT_ANGLE_LIMITS_RAD',
+    'RUN_SOFT_START_S',
+]

@@ -29,6 +29,7 @@ y = y_mid + k (y_SDGPI(T - shift) - y_mid); k follows the same prediction error 
 cannot (on the loop's flat ends, where a stroke error shows whole), and the inverse is asked for
 y_mid + (y_target - y_mid) / k.
 """
+
 from __future__ import annotations
 
 import math
@@ -59,11 +60,19 @@ class CompensationResult:
 class MuscleCompensator:
     """Desired temperature of each muscle from its desired strain and wire stress (Eqs. 5.5-5.8)."""
 
-    def __init__(self, params: SDGPIParams, geometry: MuscleGeometry | None = None,
-                 T_range_C: tuple[float, float] = (20.0, 80.0), method: str = 'numerical',
-                 shift_gain_per_s: float = 0.0, shift_limit_C: float = 15.0, window_follows_shift: bool = False,
-                 stroke_gain_per_s: float = 0.0, stroke_limits: tuple[float, float] = (0.5, 2.0),
-                 hold_outside_load_range: bool = False) -> None:
+    def __init__(
+        self,
+        params: SDGPIParams,
+        geometry: MuscleGeometry | None = None,
+        T_range_C: tuple[float, float] = (20.0, 80.0),
+        method: str = 'numerical',
+        shift_gain_per_s: float = 0.0,
+        shift_limit_C: float = 15.0,
+        window_follows_shift: bool = False,
+        stroke_gain_per_s: float = 0.0,
+        stroke_limits: tuple[float, float] = (0.5, 2.0),
+        hold_outside_load_range: bool = False,
+    ) -> None:
         self.params = params
         self.T_range_C = T_range_C
         if not (math.isfinite(shift_gain_per_s) and shift_gain_per_s >= 0):
@@ -94,8 +103,9 @@ class MuscleCompensator:
         lo, hi = T_range_C
         cold = initial_state(params, lo, MID_LOAD_KGF, branch='cooling')
         hot = initial_state(params, hi, MID_LOAD_KGF, branch='heating')
-        self.y_mid_mm = params.k_f - 0.5 * float(mirrored_output(params, cold, lo)[0]
-                                                  + mirrored_output(params, hot, hi)[0])
+        self.y_mid_mm = params.k_f - 0.5 * float(
+            mirrored_output(params, cold, lo)[0] + mirrored_output(params, hot, hi)[0]
+        )
         #: the inverse searches [lo, hi] - shift on the model's axis, so its answer on the wire's axis
         #: spans the whole window [lo, hi] (else a wire colder than the model never gets above hi - |shift|)
         self.window_follows_shift = bool(window_follows_shift)
@@ -141,7 +151,8 @@ class MuscleCompensator:
         if stress_Pa.size > FLOAT_BY_FLOAT_MAX:  # min(max(x, lo), hi) and the range test on the array
             m_a = np.asarray(m)
             return np.minimum(np.maximum(m_a, lo), hi).reshape(stress_Pa.shape), ((m_a < lo) | (m_a > hi)).reshape(
-                stress_Pa.shape)
+                stress_Pa.shape
+            )
         m_c, out = np.array([min(max(x, lo), hi) for x in m]), np.array([x < lo or x > hi for x in m], np.bool_)
         if stress_Pa.ndim != 1:
             m_c, out = m_c.reshape(stress_Pa.shape), out.reshape(stress_Pa.shape)
@@ -174,18 +185,28 @@ class MuscleCompensator:
             # float by float (see _load): numpy's per-call cost on the node's (2,) arrays tripled this call's
             if y.size > FLOAT_BY_FLOAT_MAX:  # the same on the sweep's bank of wires, as arrays
                 shift_a = np.broadcast_to(self.shift_C, y.shape)
-                window = (np.minimum(np.maximum(lo - shift_a, v_lo), v_hi - 1.0),
-                          np.minimum(np.maximum(hi - shift_a, v_lo + 1.0), v_hi))
+                window = (
+                    np.minimum(np.maximum(lo - shift_a, v_lo), v_hi - 1.0),
+                    np.minimum(np.maximum(hi - shift_a, v_lo + 1.0), v_hi),
+                )
             else:
                 shift = np.broadcast_to(self.shift_C, y.shape).ravel().tolist()
-                window = (np.array([min(max(lo - x, v_lo), v_hi - 1.0) for x in shift]).reshape(y.shape),
-                          np.array([min(max(hi - x, v_lo + 1.0), v_hi) for x in shift]).reshape(y.shape))
+                window = (
+                    np.array([min(max(lo - x, v_lo), v_hi - 1.0) for x in shift]).reshape(y.shape),
+                    np.array([min(max(hi - x, v_lo + 1.0), v_hi) for x in shift]).reshape(y.shape),
+                )
         res = self.inverse.solve(y, m, commit=commit, window=window)
         T = res.T if not self.shift_gain_per_s else self.clip_T(res.T + self.shift_C)
         return CompensationResult(T, res.saturated, clipped, m, y)
 
-    def track(self, T_C: ArrayLike, stress_Pa: ArrayLike, strain_measured: ArrayLike, dt: float,
-              adapt: ArrayLike | None = None) -> None:
+    def track(
+        self,
+        T_C: ArrayLike,
+        stress_Pa: ArrayLike,
+        strain_measured: ArrayLike,
+        dt: float,
+        adapt: ArrayLike | None = None,
+    ) -> None:
         """:meth:`observe` on the adapted temperature axis, then one adaptation step of the shift
         (module docstring) from the bundles' strains at the measured angle (2,) over dt [s]. Without
         adaptation (``shift_gain_per_s`` 0) the same as observe. ``adapt`` (bool, shaped like the
@@ -255,23 +276,44 @@ class MuscleCompensator:
             shift = self.shift_C.astype(float)  # a copy: the kernel writes it
             # without stroke adaptation the kernel neither reads the flags nor writes the stroke: no copies
             stroke, on = (self.stroke.astype(float), self._seen.all(axis=0)) if k_dt else (self.stroke, self._seen[0])
-            _track_step(st.T_prev, st.heating, st.w, m, y_meas, shift, self.shift_gain_per_s * dt, SLOPE_STEP_C,
-                        SLOPE_FLOOR_MM_PER_C ** 2, self.shift_limit_C, stroke, on, k_dt,
-                        self.y_mid_mm, STROKE_FLOOR_MM ** 2, *self.stroke_limits, *inv._kernel_params)
+            _track_step(
+                st.T_prev,
+                st.heating,
+                st.w,
+                m,
+                y_meas,
+                shift,
+                self.shift_gain_per_s * dt,
+                SLOPE_STEP_C,
+                SLOPE_FLOOR_MM_PER_C**2,
+                self.shift_limit_C,
+                stroke,
+                on,
+                k_dt,
+                self.y_mid_mm,
+                STROKE_FLOOR_MM**2,
+                *self.stroke_limits,
+                *inv._kernel_params,
+            )
             self.shift_C, self.stroke = shift, stroke
             return
         h = SLOPE_STEP_C
         up, down = np.ones_like(st.heating), np.zeros_like(st.heating)
-        y = _output_frozen(self.params, st.w, st.T_prev + np.array([0.0, h, -h]).reshape((3,) + (1,) * st.T_prev.ndim),
-                           m, np.stack([st.heating, up, down]))
+        y = _output_frozen(
+            self.params,
+            st.w,
+            st.T_prev + np.array([0.0, h, -h]).reshape((3,) + (1,) * st.T_prev.ndim),
+            m,
+            np.stack([st.heating, up, down]),
+        )
         # mm/degC of the loop the wire is on, ~0 inside the gap; never > 0 (track's docstring)
         slope = np.minimum((y[1] - y[2]) / (2.0 * h), 0.0)
-        f2 = SLOPE_FLOOR_MM_PER_C ** 2
+        f2 = SLOPE_FLOOR_MM_PER_C**2
         err = y[0] - y_meas
         if k_dt:
             k, d = self.stroke, y[0] - self.y_mid_mm
             err, slope = self.y_mid_mm + k * d - y_meas, k * slope
-            dk = k_dt * err * d / (d * d + STROKE_FLOOR_MM ** 2) * f2 / (slope * slope + f2)
+            dk = k_dt * err * d / (d * d + STROKE_FLOOR_MM**2) * f2 / (slope * slope + f2)
             self.stroke = np.clip(k - np.where(self._seen.all(axis=0), dk, 0.0), *self.stroke_limits)
         step = self.shift_gain_per_s * dt * err * slope / (slope * slope + f2)
         self.shift_C = np.clip(self.shift_C + step, -self.shift_limit_C, self.shift_limit_C)
@@ -288,9 +330,15 @@ def _pair_taut(outside: NDArray[np.bool_]) -> NDArray[np.bool_]:
     return np.repeat(~out, 2).reshape(outside.shape)
 
 
-def strain_informative(q_rad: ArrayLike, q_prev_rad: ArrayLike, dt: float, stress_Pa: ArrayLike,
-                       q_stops_rad: tuple[float, float], slack_Pa: float = 1e6,
-                       still_rad_s: float = 0.05) -> NDArray[np.bool_]:
+def strain_informative(
+    q_rad: ArrayLike,
+    q_prev_rad: ArrayLike,
+    dt: float,
+    stress_Pa: ArrayLike,
+    q_stops_rad: tuple[float, float],
+    slack_Pa: float = 1e6,
+    still_rad_s: float = 0.05,
+) -> NDArray[np.bool_]:
     """(N, 2) whether the bundles' strains at the measured angle (Eq. 4.17) say something about the wires
     (doc/explanation/controllers.md): not while the joint rests on a mechanical stop
     (measured angle q_rad (N,) at or over ``q_stops_rad``), nor while it stands still (|q - q_prev| / dt
@@ -318,8 +366,33 @@ MID_LOAD_KGF = 0.775
 
 
 @_jm._jit
-def _track_step(T_prev, heating, w, m, y_meas, shift, gain_dt, h, floor2, limit, stroke, stroke_on, gain_k_dt, y_mid,
-                floor_k2, k_lo, k_hi, stacked, edges, r, wts, c, d, p0, k_f):  # pragma: no cover - compiled
+def _track_step(
+    T_prev,
+    heating,
+    w,
+    m,
+    y_meas,
+    shift,
+    gain_dt,
+    h,
+    floor2,
+    limit,
+    stroke,
+    stroke_on,
+    gain_k_dt,
+    y_mid,
+    floor_k2,
+    k_lo,
+    k_hi,
+    stacked,
+    edges,
+    r,
+    wts,
+    c,
+    d,
+    p0,
+    k_f,
+):  # pragma: no cover - compiled
     """Compiled adaptation step of :meth:`MuscleCompensator.track`, wire by wire, on shift (S,) and stroke (S,)
     in place: the SD-GPI output (Eqs. 3.19, 3.22, 4.1-4.5, :func:`~sma_wrist.core.hysteresis.inverse._residual`
     against the frozen memory) at T_prev in the memory's direction and at T_prev +- h heating / cooling, then

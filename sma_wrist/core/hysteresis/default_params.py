@@ -22,6 +22,7 @@ The transition temperatures rise with load everywhere above the critical load
 (Clausius-Clapeyron), which makes elongation increase with load at fixed temperature:
 the property the muscle/joint coupling relies on (doc/explanation/model.md).
 """
+
 from __future__ import annotations
 
 from functools import lru_cache
@@ -34,8 +35,35 @@ from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
 FloatArray = NDArray[np.float64]
 
 #: Load knots [kgf] of the default set's sections (quadratic per section, Eqs. 4.4-4.5).
-KNOTS_KG = np.array([0.20, 0.30, 0.40, 0.50, 0.55, 0.60, 0.625, 0.65, 0.675, 0.70, 0.725, 0.75,
-                     0.775, 0.80, 0.85, 0.90, 0.925, 0.95, 0.975, 1.00, 1.05, 1.10, 1.20, 1.35, 1.50])
+KNOTS_KG = np.array(
+    [
+        0.20,
+        0.30,
+        0.40,
+        0.50,
+        0.55,
+        0.60,
+        0.625,
+        0.65,
+        0.675,
+        0.70,
+        0.725,
+        0.75,
+        0.775,
+        0.80,
+        0.85,
+        0.90,
+        0.925,
+        0.95,
+        0.975,
+        1.00,
+        1.05,
+        1.10,
+        1.20,
+        1.35,
+        1.50,
+    ]
+)
 
 N_OPERATORS = 15  # Sec. 4.1.1: little gain beyond n = 15
 C_THRESHOLD_MM = 0.02  # threshold spacing c (Eq. 3.24): gradual reversals over ~0.3 mm
@@ -116,6 +144,15 @@ def default_sdgpi() -> SDGPIParams:
     weights = rho * raw
     a = _quadratic_sections(KNOTS_KG, lambda m: _envelope_coefficients(m, weights, thresholds)[0])
     b = _quadratic_sections(KNOTS_KG, lambda m: _envelope_coefficients(m, weights, thresholds)[1])
-    return SDGPIParams(EnvelopeSections(KNOTS_KG.copy(), a, b), MEMORYLESS.copy(), MEMORYLESS.copy(),
-                       rho=float(rho), tau=TAU_PER_MM, c_thr=C_THRESHOLD_MM, n=N_OPERATORS, p0=1.0,
-                       k_f=K_F_MM, name='sma_wrist default (Sec. 3.2 behaviour)')
+    return SDGPIParams(
+        EnvelopeSections(KNOTS_KG.copy(), a, b),
+        MEMORYLESS.copy(),
+        MEMORYLESS.copy(),
+        rho=float(rho),
+        tau=TAU_PER_MM,
+        c_thr=C_THRESHOLD_MM,
+        n=N_OPERATORS,
+        p0=1.0,
+        k_f=K_F_MM,
+        name='sma_wrist default (Sec. 3.2 behaviour)',
+    )

@@ -17,6 +17,7 @@ side-by-side benchmark (``sma-wrist bench --section identify``).
 Conventions are those of :mod:`sma_wrist.core.hysteresis.sdgpi` (b set = gamma_l followed while
 heating; elongation y = k_f - y_m).
 """
+
 from __future__ import annotations
 
 import math
@@ -45,8 +46,9 @@ def _tanh(k: FloatArray, T: FloatArray) -> FloatArray:
     return k[..., 0] * np.tanh(k[..., 1] * T + k[..., 2]) + k[..., 3]
 
 
-def simulate_batch(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.0,
-                   branch: str = 'cooling') -> FloatArray:
+def simulate_batch(
+    T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.0, branch: str = 'cooling'
+) -> FloatArray:
     """Elongation (N, B) for B GPI parameter vectors ``theta`` (B, 20) (layout IDX_*).
 
     Same recursion as :func:`sma_wrist.core.hysteresis.sdgpi.simulate` (Eqs. 3.19-3.24, 4.1, 4.2):
@@ -91,8 +93,16 @@ def _tanh_and_grad(k: FloatArray, T: FloatArray) -> tuple[FloatArray, FloatArray
     return k[0] * t + k[3], np.stack([t, s * T, s, np.ones_like(T)], axis=1)
 
 
-def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.0, branch: str = 'cooling',
-                 heat: NDArray[np.bool_] | None = None, compiled: bool = True) -> tuple[FloatArray, FloatArray]:
+def simulate_jac(
+    T: ArrayLike,
+    theta: ArrayLike,
+    *,
+    n: int = 15,
+    k_f: float = 6.0,
+    branch: str = 'cooling',
+    heat: NDArray[np.bool_] | None = None,
+    compiled: bool = True,
+) -> tuple[FloatArray, FloatArray]:
     """Elongation y (N,) [mm] of one GPI vector (layout IDX_*) and its exact Jacobian (N, 20).
 
     Same model as :func:`simulate_batch` (Eqs. 3.19-3.24, 4.1, 4.2). Each play state w_j is the
@@ -133,7 +143,11 @@ def simulate_jac(T: ArrayLike, theta: ArrayLike, *, n: int = 15, k_f: float = 6.
     J[:, IDX_B] = -dS_db
     J[:, IDX_C] = -p0 * h[:, None] * Gc
     J[:, IDX_D] = -p0 * (~h)[:, None] * Gd
-    J[:, IDX_RHO] = -S / th[IDX_RHO] if th[IDX_RHO] != 0 else -play_jacobian_numpy(lower, upper, w0, s0, e, jj, th[IDX_TAU], Ga, Gb)[0]
+    J[:, IDX_RHO] = (
+        -S / th[IDX_RHO]
+        if th[IDX_RHO] != 0
+        else -play_jacobian_numpy(lower, upper, w0, s0, e, jj, th[IDX_TAU], Ga, Gb)[0]
+    )
     J[:, IDX_TAU] = th[IDX_CTHR] * Wjp
     J[:, IDX_CTHR] = -dS_dc
     J[:, IDX_P0] = -mem
@@ -148,8 +162,19 @@ def gpi_vector(params: SDGPIParams, load_kgf: float) -> FloatArray:
 
 def vector_to_params(theta: ArrayLike, *, n: int = 15, k_f: float = 6.0, name: str = 'fitted GPI') -> SDGPIParams:
     th = np.asarray(theta, dtype=float)
-    return SDGPIParams.from_gpi(th[IDX_A], th[IDX_B], th[IDX_C], th[IDX_D], th[IDX_RHO], th[IDX_TAU], th[IDX_CTHR],
-                                n=n, p0=float(th[IDX_P0]), k_f=k_f, name=name)
+    return SDGPIParams.from_gpi(
+        th[IDX_A],
+        th[IDX_B],
+        th[IDX_C],
+        th[IDX_D],
+        th[IDX_RHO],
+        th[IDX_TAU],
+        th[IDX_CTHR],
+        n=n,
+        p0=float(th[IDX_P0]),
+        k_f=k_f,
+        name=name,
+    )
 
 
 @dataclass(frozen=True)
@@ -166,6 +191,7 @@ class FitResult:
 
 
 # ----------------------------------------------------------------------------- single load
+
 
 def _bounds(y_range: float) -> tuple[FloatArray, FloatArray]:
     big = 1e3 * max(y_range, 1.0)
@@ -197,8 +223,9 @@ def _crossing_T(T: FloatArray, y: FloatArray, rising: bool) -> float:
     return _mean(Ts[idx]) if idx.size else float(np.median(Ts))
 
 
-def initial_guesses(T: FloatArray, y: FloatArray, *, n: int, k_f: float, p0: float, n_starts: int,
-                    seed: int = 0) -> list[FloatArray]:
+def initial_guesses(
+    T: FloatArray, y: FloatArray, *, n: int, k_f: float, p0: float, n_starts: int, seed: int = 0
+) -> list[FloatArray]:
     """Starts from the data's tanh saturation levels (Sec. 4.1.1) and 50 % temperatures.
 
     The mirrored output y_m = k_f - y spans [lo, hi]; with all operators saturated the
@@ -238,8 +265,9 @@ def _jac_fd(fun_batch, x: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi
     return (R[:, 1:] - R[:, :1]) / h
 
 
-def _solve(fun_batch, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,
-           max_nfev: int) -> tuple[FloatArray, float, bool]:
+def _solve(
+    fun_batch, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray, max_nfev: int
+) -> tuple[FloatArray, float, bool]:
     x = np.clip(x0, lo, hi)
 
     def f(z: FloatArray) -> FloatArray:
@@ -253,8 +281,9 @@ def _solve(fun_batch, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi
         return _jac_fd(fun_batch, xx, free, lo, hi)
 
     z0 = np.clip(x[free], lo[free] + 1e-12, hi[free] - 1e-12)
-    res = least_squares(f, z0, jac=j, bounds=(lo[free], hi[free]), x_scale='jac', max_nfev=max_nfev,
-                        xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    res = least_squares(
+        f, z0, jac=j, bounds=(lo[free], hi[free]), x_scale='jac', max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10
+    )
     x[free] = res.x
     return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
@@ -265,8 +294,9 @@ def _cost(r: FloatArray) -> float:
     return 0.5 * math.fsum(r * r)
 
 
-def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,
-                 max_nfev: int) -> tuple[FloatArray, float, bool]:
+def _solve_exact(
+    fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray, hi: FloatArray, max_nfev: int
+) -> tuple[FloatArray, float, bool]:
     """As :func:`_solve` with the exact Jacobian: ``fun_jac(x) -> (residual, J over all of x)``.
 
     The same trust-region-reflective algorithm and tolerances as the finite-difference path (a
@@ -279,11 +309,13 @@ def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray
     """
     x = quantize(np.clip(x0, lo, hi))  # starts from np.exp / LAPACK carry CPU-dependent last bits
     if TRF_AVAILABLE:
+
         def fj(z: FloatArray) -> tuple[FloatArray, FloatArray]:
             xx = x.copy()
             xx[free] = z
             r, J = fun_jac(xx)
             return r, J[:, free]
+
         x[free], _, status, _ = trf_solve(fj, x[free], lo[free], hi[free], max_nfev)
         cost = _cost(fun_jac(x)[0])
         return x, cost, bool(status >= 0 and np.isfinite(cost))  # 0: budget used, still a valid fit
@@ -298,14 +330,30 @@ def _solve_exact(fun_jac, x0: FloatArray, free: NDArray[np.intp], lo: FloatArray
         return cache['rj']  # type: ignore[return-value]
 
     z0 = np.clip(x[free], lo[free] + 1e-12, hi[free] - 1e-12)
-    res = least_squares(lambda z: both(z)[0], z0, jac=lambda z: both(z)[1][:, free], bounds=(lo[free], hi[free]),
-                        x_scale='jac', max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    res = least_squares(
+        lambda z: both(z)[0],
+        z0,
+        jac=lambda z: both(z)[1][:, free],
+        bounds=(lo[free], hi[free]),
+        x_scale='jac',
+        max_nfev=max_nfev,
+        xtol=1e-10,
+        ftol=1e-10,
+        gtol=1e-10,
+    )
     x[free] = res.x
     return x, float(res.cost), bool(res.status >= 0 and np.isfinite(res.cost))  # 0: budget used, still a valid fit
 
 
-def _solve_best(fun_jac, starts: list[FloatArray], free: NDArray[np.intp], lo: FloatArray, hi: FloatArray,  # type: ignore[no-untyped-def]
-                max_nfev: int, probe: float = 0.2) -> tuple[FloatArray, float, bool]:
+def _solve_best(
+    fun_jac,
+    starts: list[FloatArray],
+    free: NDArray[np.intp],
+    lo: FloatArray,
+    hi: FloatArray,  # type: ignore[no-untyped-def]
+    max_nfev: int,
+    probe: float = 0.2,
+) -> tuple[FloatArray, float, bool]:
     """:func:`_solve_exact` from the best of several starts: each probed with ``probe`` of the budget,
     then each continued with the rest; the lowest final cost wins (the first start on a tie).
 
@@ -323,10 +371,14 @@ def _solve_best(fun_jac, starts: list[FloatArray], free: NDArray[np.intp], lo: F
 def _solver(method: str, T: FloatArray, y: FloatArray, n: int, k_f: float, branch: str):  # type: ignore[no-untyped-def]
     """(solve(x0, free, lo, hi, nfev), residual(x)) for one loop with the Jacobian ``method``."""
     if method == 'fd':
+
         def fun_batch(X: FloatArray) -> FloatArray:
             return simulate_batch(T, X, n=n, k_f=k_f, branch=branch) - y[:, None]
-        return (lambda x0, free, lo, hi, nfev: _solve(fun_batch, x0, free, lo, hi, nfev),
-                lambda x: fun_batch(x[None])[:, 0])
+
+        return (
+            lambda x0, free, lo, hi, nfev: _solve(fun_batch, x0, free, lo, hi, nfev),
+            lambda x: fun_batch(x[None])[:, 0],
+        )
     if method != 'exact':
         raise ParameterError(f"identification method must be 'exact' or 'fd', got {method!r}")
     heat = heating_mask(T, branch)
@@ -334,8 +386,8 @@ def _solver(method: str, T: FloatArray, y: FloatArray, n: int, k_f: float, branc
     def fun_jac(x: FloatArray) -> tuple[FloatArray, FloatArray]:
         ys, J = simulate_jac(T, x, n=n, k_f=k_f, branch=branch, heat=heat)
         return ys - y, J
-    return (lambda x0, free, lo, hi, nfev: _solve_exact(fun_jac, x0, free, lo, hi, nfev),
-            lambda x: fun_jac(x)[0])
+
+    return (lambda x0, free, lo, hi, nfev: _solve_exact(fun_jac, x0, free, lo, hi, nfev), lambda x: fun_jac(x)[0])
 
 
 #: Samples per load above which the fits run on a thinned copy (the play model is rate
@@ -359,9 +411,19 @@ def thin_indices(T: ArrayLike, max_n: int = MAX_FIT_SAMPLES) -> NDArray[np.intp]
     return keep
 
 
-def fit_gpi(T: ArrayLike, y: ArrayLike, *, n: int = 15, k_f: float = 6.0, p0: float | None = 1.0,
-            n_starts: int = 4, max_nfev: int = 60, seed: int = 0, branch: str = 'cooling',
-            method: str = 'exact') -> FitResult:
+def fit_gpi(
+    T: ArrayLike,
+    y: ArrayLike,
+    *,
+    n: int = 15,
+    k_f: float = 6.0,
+    p0: float | None = 1.0,
+    n_starts: int = 4,
+    max_nfev: int = 60,
+    seed: int = 0,
+    branch: str = 'cooling',
+    method: str = 'exact',
+) -> FitResult:
     """Fit a GPI at one load to a measured loop (T [degC], elongation y [mm]), Sec. 4.1.1.
 
     ``p0=None`` fits p0 too (it trades off against the c, d amplitudes; the seed never prints
@@ -404,6 +466,7 @@ def fit_gpi(T: ArrayLike, y: ArrayLike, *, n: int = 15, k_f: float = 6.0, p0: fl
 
 # ----------------------------------------------------------------------------- SD-GPI across loads
 
+
 def _sd_layout(n_sec: int) -> tuple[slice, slice, slice]:
     """Vector = [s_a (n_sec,4,3) | s_b (n_sec,4,3) | c(4) d(4) rho tau c_thr p0]."""
     k = n_sec * 12
@@ -435,19 +498,34 @@ def _columns(T: ArrayLike, y: ArrayLike, n_loads: int) -> tuple[list[FloatArray]
     Ts = [np.asarray(t, dtype=float) for t in T]  # type: ignore[union-attr]
     ys = [np.asarray(v, dtype=float) for v in y]  # type: ignore[union-attr]
     if len(Ts) != n_loads or len(ys) != n_loads or any(a.shape != b.shape or a.ndim != 1 for a, b in zip(Ts, ys)):
-        raise ModelInputError('SD-GPI identification samples', [a.shape for a in Ts], f'{n_loads} pairs of equal 1-D arrays')
+        raise ModelInputError(
+            'SD-GPI identification samples', [a.shape for a in Ts], f'{n_loads} pairs of equal 1-D arrays'
+        )
     return Ts, ys
 
 
 def sdgpi_gpi_vectors(x: FloatArray, edges: FloatArray, loads: FloatArray) -> FloatArray:
     """(L, 20) GPI vectors of one SD-GPI vector (layout of ``_sd_layout``) at each load."""
-    return _sd_to_gpi(np.asarray(x, dtype=float)[None], np.asarray(edges, dtype=float),
-                      np.asarray(loads, dtype=float))[0]
+    return _sd_to_gpi(np.asarray(x, dtype=float)[None], np.asarray(edges, dtype=float), np.asarray(loads, dtype=float))[
+        0
+    ]
 
 
-def _per_load_envelopes(Ts: list[FloatArray], ys: list[FloatArray], br: list[str], base: FloatArray,
-                        order: NDArray[np.intp], mid: int, continuation: bool, n: int, k_f: float,
-                        lo: FloatArray, hi: FloatArray, max_nfev: int, method: str) -> FloatArray:
+def _per_load_envelopes(
+    Ts: list[FloatArray],
+    ys: list[FloatArray],
+    br: list[str],
+    base: FloatArray,
+    order: NDArray[np.intp],
+    mid: int,
+    continuation: bool,
+    n: int,
+    k_f: float,
+    lo: FloatArray,
+    hi: FloatArray,
+    max_nfev: int,
+    method: str,
+) -> FloatArray:
     """(L, 20) GPI vectors: only the a, b envelopes fitted per load, the rest held at ``base``.
 
     From the middle load's fit, or each from its neighbour's (continuation keeps neighbouring
@@ -463,10 +541,21 @@ def _per_load_envelopes(Ts: list[FloatArray], ys: list[FloatArray], br: list[str
     return G
 
 
-def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: ArrayLike, *, n: int = 15,
-              k_f: float = 6.0, p0: float = 1.0, max_nfev: int = 200, per_load_starts: int = 1,
-              method: str = 'exact', branches: list[str] | None = None,
-              degrees: ArrayLike = (2, 2, 2, 2)) -> FitResult:
+def fit_sdgpi(
+    T: ArrayLike,
+    y: ArrayLike,
+    loads_kgf: ArrayLike,
+    edges_kgf: ArrayLike,
+    *,
+    n: int = 15,
+    k_f: float = 6.0,
+    p0: float = 1.0,
+    max_nfev: int = 200,
+    per_load_starts: int = 1,
+    method: str = 'exact',
+    branches: list[str] | None = None,
+    degrees: ArrayLike = (2, 2, 2, 2),
+) -> FitResult:
     """Fit an SD-GPI (Eqs. 4.4-4.6) to loops at several loads, Sec. 4.2.2.
 
     ``T``, ``y``: (N, L) samples, one column per load, or L 1-D arrays (loads measured with
@@ -496,8 +585,17 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     # Shared c, d, rho, tau, c from a full GPI fit at the middle load, then only the envelopes per
     # load (so a_i, b_i of different loads are comparable: the rho-amplitude trade-off is fixed).
     i_mid = int(np.argsort(loads, kind='stable')[loads.size // 2])
-    base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=per_load_starts, max_nfev=max_nfev,
-                   method=method, branch=br[i_mid]).theta
+    base = fit_gpi(
+        Ts[i_mid],
+        ys[i_mid],
+        n=n,
+        k_f=k_f,
+        p0=p0,
+        n_starts=per_load_starts,
+        max_nfev=max_nfev,
+        method=method,
+        branch=br[i_mid],
+    ).theta
     lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
     order = np.argsort(loads, kind='stable')  # repeated loads: the same order on every CPU
     mid = int(np.nonzero(order == i_mid)[0][0])
@@ -511,8 +609,8 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         for k in range(n_sec):
             sel = sec == k
             for q in range(4):  # polynomial of degree deg[q] in the load; higher terms stay zero
-                sa[k, q, 2 - deg[q]:] = polyfit(loads[sel], G[sel, q], deg[q])
-                sb[k, q, 2 - deg[q]:] = polyfit(loads[sel], G[sel, 4 + q], deg[q])
+                sa[k, q, 2 - deg[q] :] = polyfit(loads[sel], G[sel, q], deg[q])
+                sb[k, q, 2 - deg[q] :] = polyfit(loads[sel], G[sel, 4 + q], deg[q])
         return np.concatenate([sa.ravel(), sb.ravel(), base[8:20]])
 
     # the earlier code ('fd') starts from the middle load's fit only; 'exact' also tries continuation
@@ -530,8 +628,8 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     hi = np.full(P, big)
     sa_sl, sb_sl, rest = _sd_layout(n_sec)
     r0 = rest.start
-    lo[r0 + 8:r0 + 11] = [1e-4, 0.0, 1e-4]
-    hi[r0 + 8:r0 + 11] = [1e2, 2e2, 5.0]
+    lo[r0 + 8 : r0 + 11] = [1e-4, 0.0, 1e-4]
+    hi[r0 + 8 : r0 + 11] = [1e2, 2e2, 5.0]
     free = np.nonzero(mask_free)[0]
     offsets = np.cumsum([0] + [t.size for t in Ts])
 
@@ -539,7 +637,9 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
         th = _sd_to_gpi(X, edges, loads)  # (B, L, 20)
         out = np.empty((offsets[-1], X.shape[0]))
         for i in range(loads.size):
-            out[offsets[i]:offsets[i + 1]] = simulate_batch(Ts[i], th[:, i], n=n, k_f=k_f, branch=br[i]) - ys[i][:, None]
+            out[offsets[i] : offsets[i + 1]] = (
+                simulate_batch(Ts[i], th[:, i], n=n, k_f=k_f, branch=br[i]) - ys[i][:, None]
+            )
         return out
 
     heats = [heating_mask(t, b) for t, b in zip(Ts, br)]
@@ -555,7 +655,7 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
             powers = np.array([loads[i] ** 2, loads[i], 1.0])  # d a_q / d s_aq (Eqs. 4.4-4.5)
             for sl, cols in ((sa_sl, IDX_A), (sb_sl, IDX_B)):
                 base_col = sl.start + sec[i] * 12
-                J[rows, base_col:base_col + 12] = (Ji[:, cols, None] * powers).reshape(-1, 12)
+                J[rows, base_col : base_col + 12] = (Ji[:, cols, None] * powers).reshape(-1, 12)
             J[rows, rest] = Ji[:, 8:20]
         return res, J
 
@@ -565,14 +665,28 @@ def fit_sdgpi(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, edges_kgf: Array
     else:  # the joint stage gets twice the budget, as fit_gpi's last stage (cheap with the exact Jacobian)
         x, cost, ok = _solve_best(fun_jac, starts, free, lo, hi, 2 * max_nfev)
         th = _sd_to_gpi(x[None], edges, loads)[0]
-        resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
-                                for i, (t, v) in enumerate(zip(Ts_all, ys_all))])
+        resid = np.concatenate(
+            [
+                simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
+                for i, (t, v) in enumerate(zip(Ts_all, ys_all))
+            ]
+        )
     sd = float(np.std(resid))
     mean_range = float(np.mean([np.ptp(v) for v in ys_all]))
     env = EnvelopeSections(edges, x[sa_sl].reshape(n_sec, 4, 3), x[sb_sl].reshape(n_sec, 4, 3))
     tail = x[rest]
-    params = SDGPIParams(env, tail[0:4], tail[4:8], float(tail[8]), float(tail[9]), float(tail[10]), n=n,
-                         p0=float(tail[11]), k_f=k_f, name='fitted SD-GPI')
+    params = SDGPIParams(
+        env,
+        tail[0:4],
+        tail[4:8],
+        float(tail[8]),
+        float(tail[9]),
+        float(tail[10]),
+        n=n,
+        p0=float(tail[11]),
+        k_f=k_f,
+        name='fitted SD-GPI',
+    )
     return FitResult(params, sd, 100 * sd / max(mean_range, 1e-12), cost, per_load_starts, ok, x)
 
 
@@ -638,9 +752,11 @@ def _chain(Jk: FloatArray, dk: FloatArray) -> FloatArray:
 
 def _cc_from_per_load(G: FloatArray, u: FloatArray, w: FloatArray, amp_deg: int) -> FloatArray:
     """Start of one envelope set's CC law: weighted polynomials through per-load fits (L, 4)."""
+
     def poly(v: FloatArray, deg: int, n_terms: int) -> list[float]:
         c = list(polyfit(u, v, deg, w=w)[::-1])
         return c + [0.0] * (n_terms - len(c))
+
     centre = -G[:, 2] / G[:, 1]
     return np.array(poly(G[:, 0], amp_deg, 3) + poly(G[:, 1], 1, 2) + poly(centre, 1, 2) + poly(G[:, 3], amp_deg, 3))
 
@@ -685,8 +801,12 @@ def _sat_from_per_load(G: FloatArray, m: FloatArray, u: FloatArray, w: FloatArra
         A = np.stack([np.ones_like(m), 1.0 - np.array([math.exp(-kappa * v) for v in m])], axis=1) * w[:, None]
         c0 = lstsq(A, G[:, 0] * w)
         c3 = lstsq(A, G[:, 3] * w)
-        sse = math.fsum(np.r_[(A[:, 0] * c0[0] + A[:, 1] * c0[1] - G[:, 0] * w) ** 2,
-                              (A[:, 0] * c3[0] + A[:, 1] * c3[1] - G[:, 3] * w) ** 2])
+        sse = math.fsum(
+            np.r_[
+                (A[:, 0] * c0[0] + A[:, 1] * c0[1] - G[:, 0] * w) ** 2,
+                (A[:, 0] * c3[0] + A[:, 1] * c3[1] - G[:, 3] * w) ** 2,
+            ]
+        )
         if best is None or sse < best[0]:
             best = (sse, np.r_[c0, kappa, 0.0, 0.0, 0.0, 0.0, c3, 0.0])
     assert best is not None
@@ -704,9 +824,19 @@ def sat_to_sections(z: ArrayLike, m_ref: float, edges: FloatArray) -> FloatArray
     return out
 
 
-def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 15, k_f: float = 6.0,
-                 p0: float = 1.0, max_nfev: int = 200, branches: list[str] | None = None,
-                 amplitude_degree: int = 1, amplitude_law: str = 'polynomial') -> FitResult:
+def fit_sdgpi_cc(
+    T: ArrayLike,
+    y: ArrayLike,
+    loads_kgf: ArrayLike,
+    *,
+    n: int = 15,
+    k_f: float = 6.0,
+    p0: float = 1.0,
+    max_nfev: int = 200,
+    branches: list[str] | None = None,
+    amplitude_degree: int = 1,
+    amplitude_law: str = 'polynomial',
+) -> FitResult:
     """SD-GPI whose load dependence is the Clausius-Clapeyron law of :func:`cc_coefficients`.
 
     Against the seed's free quadratics per section (Eqs. 4.4-4.5, :func:`fit_sdgpi`): the tanh
@@ -740,16 +870,18 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
     mid = loads.size // 2
     m_ref = float(np.mean(loads))
     u = loads - m_ref
-    base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=1, max_nfev=max_nfev,
-                   branch=br[i_mid]).theta
+    base = fit_gpi(Ts[i_mid], ys[i_mid], n=n, k_f=k_f, p0=p0, n_starts=1, max_nfev=max_nfev, branch=br[i_mid]).theta
     lo1, hi1 = _bounds(float(np.ptp(np.concatenate(ys))))
     stroke = np.array([np.ptp(v) for v in ys])
     # Per-load amplitudes and offsets trade off (a tanh seen on one tail only: a0 ~ a3 ~ 80 at
     # one load, 0.3 at the next), their centres do not: start from the per-load fits' polynomials
     # and from the middle load's envelopes moved along the per-load centres' straight line.
     G = _per_load_envelopes(Ts, ys, br, base, order, mid, True, n, k_f, lo1, hi1, max_nfev, 'exact')
-    law_start = ((lambda Gs: _sat_from_per_load(Gs, loads, u, stroke)) if sat
-                 else (lambda Gs: _cc_from_per_load(Gs, u, stroke, amplitude_degree)))
+    law_start = (
+        (lambda Gs: _sat_from_per_load(Gs, loads, u, stroke))
+        if sat
+        else (lambda Gs: _cc_from_per_load(Gs, u, stroke, amplitude_degree))
+    )
     starts = [np.concatenate([law_start(G[:, IDX_A]), law_start(G[:, IDX_B]), base[8:20]])]
     shifted = []
     for sl in (IDX_A, IDX_B):
@@ -762,8 +894,8 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
     starts.append(np.concatenate(shifted + [base[8:20]]))
     P = 2 * N_CC + 12
     lo, hi = np.full(P, -1e6), np.full(P, 1e6)
-    lo[2 * N_CC + 8:2 * N_CC + 11] = [1e-4, 0.0, 1e-4]
-    hi[2 * N_CC + 8:2 * N_CC + 11] = [1e2, 2e2, 5.0]
+    lo[2 * N_CC + 8 : 2 * N_CC + 11] = [1e-4, 0.0, 1e-4]
+    hi[2 * N_CC + 8 : 2 * N_CC + 11] = [1e2, 2e2, 5.0]
     fixed = [P - 1]  # p0
     if sat:
         lo[[2, N_CC + 2]], hi[[2, N_CC + 2]] = 1e-3, 1e3  # kappa > 0 [1/kgf]
@@ -801,12 +933,25 @@ def fit_sdgpi_cc(T: ArrayLike, y: ArrayLike, loads_kgf: ArrayLike, *, n: int = 1
         sa, sb = cc_to_quadratic(x[za], m_ref)[None], cc_to_quadratic(x[zb], m_ref)[None]
     theta = np.concatenate([sa.ravel(), sb.ravel(), x[rest]])
     th = _sd_to_gpi(theta[None], edges, loads)[0]
-    resid = np.concatenate([simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
-                            for i, (t, v) in enumerate(zip(Ts_all, ys_all))])
+    resid = np.concatenate(
+        [
+            simulate_batch(t, th[i][None], n=n, k_f=k_f, branch=br[i])[:, 0] - v
+            for i, (t, v) in enumerate(zip(Ts_all, ys_all))
+        ]
+    )
     sd = float(np.std(resid))
     tail = x[rest]
-    params = SDGPIParams(EnvelopeSections(edges, sa, sb), tail[0:4], tail[4:8], float(tail[8]),
-                         float(tail[9]), float(tail[10]), n=n, p0=float(tail[11]), k_f=k_f,
-                         name='fitted SD-GPI (Clausius-Clapeyron load law' + (', saturating stroke)' if sat else ')'))
+    params = SDGPIParams(
+        EnvelopeSections(edges, sa, sb),
+        tail[0:4],
+        tail[4:8],
+        float(tail[8]),
+        float(tail[9]),
+        float(tail[10]),
+        n=n,
+        p0=float(tail[11]),
+        k_f=k_f,
+        name='fitted SD-GPI (Clausius-Clapeyron load law' + (', saturating stroke)' if sat else ')'),
+    )
     mean_range = float(np.mean([np.ptp(v) for v in ys_all]))
     return FitResult(params, sd, 100 * sd / max(mean_range, 1e-12), cost, 1, ok, theta)

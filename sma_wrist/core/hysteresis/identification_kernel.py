@@ -9,6 +9,7 @@ pass when numba is installed (extra ``fast``); otherwise the numpy loop (vectori
 operators) of :func:`play_sources_numpy` and numpy gathers (:func:`play_jacobian_numpy`) give
 the same numbers.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -17,8 +18,9 @@ from numpy.typing import NDArray
 from sma_wrist.core.jit import AVAILABLE, _jit  # the project's one optional-numba switch
 
 
-def play_sources_numpy(lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64],
-                       s0: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def play_sources_numpy(
+    lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64], s0: NDArray[np.int64]
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """States (N, n) and sources (N, n) of the play recursion; numpy loop over samples."""
     N = lower.shape[0]
     W = np.empty(lower.shape)
@@ -111,8 +113,9 @@ def _gpi_jac_compiled(T, th, n, k_f, heating_start, heat):  # pragma: no cover -
     return y, J
 
 
-def gpi_jacobian(T: NDArray[np.float64], theta: NDArray[np.float64], n: int, k_f: float, heating_start: bool,
-                 heat: NDArray[np.bool_]) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+def gpi_jacobian(
+    T: NDArray[np.float64], theta: NDArray[np.float64], n: int, k_f: float, heating_start: bool, heat: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
     """Compiled elongation y (N,) [mm] and exact Jacobian (N, 20) of one GPI vector, or None without numba.
 
     One pass: envelopes and memoryless part (Eqs. 3.21-3.22, 4.1) with their gradients, then
@@ -122,13 +125,27 @@ def gpi_jacobian(T: NDArray[np.float64], theta: NDArray[np.float64], n: int, k_f
     """
     if not AVAILABLE:
         return None
-    return _gpi_jac_compiled(np.ascontiguousarray(T, dtype=np.float64), np.ascontiguousarray(theta, dtype=np.float64),
-                             int(n), float(k_f), bool(heating_start), np.ascontiguousarray(heat, dtype=np.bool_))
+    return _gpi_jac_compiled(
+        np.ascontiguousarray(T, dtype=np.float64),
+        np.ascontiguousarray(theta, dtype=np.float64),
+        int(n),
+        float(k_f),
+        bool(heating_start),
+        np.ascontiguousarray(heat, dtype=np.bool_),
+    )
 
 
-def play_jacobian_numpy(lower: NDArray[np.float64], upper: NDArray[np.float64], w0: NDArray[np.float64],
-                        s0: NDArray[np.int64], p: NDArray[np.float64], jj: NDArray[np.float64], tau: float,
-                        Ga: NDArray[np.float64], Gb: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
+def play_jacobian_numpy(
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+    w0: NDArray[np.float64],
+    s0: NDArray[np.int64],
+    p: NDArray[np.float64],
+    jj: NDArray[np.float64],
+    tau: float,
+    Ga: NDArray[np.float64],
+    Gb: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], ...]:
     """S = sum_j p_j w_j (N,) and its derivatives through the play states (Eqs. 3.19, 3.23, 3.24).
 
     Returns (S, dS/da (N, 4), dS/db (N, 4), dS/dc (N,), sum_j w_j j p_j (N,)); ``Ga``/``Gb`` are

@@ -17,6 +17,7 @@
   giving what the printed numbers do.
 * :func:`composition_error`: |v - y(y^-1(v))| along a decaying triangle at several loads.
 """
+
 from __future__ import annotations
 
 import math
@@ -29,8 +30,16 @@ from sma_wrist.core import jit as _jm
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
 from sma_wrist.core.hysteresis import kernel as _hk
 from sma_wrist.core.hysteresis.play import play_update
-from sma_wrist.core.hysteresis.sdgpi import (HysteresisState, SDGPIParams, initial_state, memoryless, play_bounds,
-                                             simulate, step, tanh_envelope)
+from sma_wrist.core.hysteresis.sdgpi import (
+    HysteresisState,
+    SDGPIParams,
+    initial_state,
+    memoryless,
+    play_bounds,
+    simulate,
+    step,
+    tanh_envelope,
+)
 from sma_wrist.data import seed_tables as st
 
 FloatArray = NDArray[np.float64]
@@ -40,6 +49,7 @@ WIRE_LENGTH_MM = 80.0
 
 
 # ----------------------------------------------------------------------------- classical PI and its inverse
+
 
 def pi_inverse_params(q: float, thresholds: ArrayLike, weights: ArrayLike) -> tuple[float, FloatArray, FloatArray]:
     """Inverse PI parameters (q_hat, r_hat, p_hat), Eqs. 5.9-5.11.
@@ -62,8 +72,9 @@ def pi_inverse_params(q: float, thresholds: ArrayLike, weights: ArrayLike) -> tu
     return 1.0 / q, r_hat, p_hat
 
 
-def pi_series(v: ArrayLike, q: float, thresholds: ArrayLike, weights: ArrayLike,
-              w0: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
+def pi_series(
+    v: ArrayLike, q: float, thresholds: ArrayLike, weights: ArrayLike, w0: ArrayLike | None = None
+) -> tuple[FloatArray, FloatArray]:
     """Classical PI output y = q v + sum_j p_j F_{r_j}[v] (Eqs. 5.1-5.4) and the play states (N, n).
 
     ``w0`` are the play states before v[0] (default: f_r(v(0), 0), Eq. 5.1).
@@ -96,6 +107,7 @@ def pi_inverse_state(v: float, q: float, w: ArrayLike, weights: ArrayLike) -> Fl
 
 # ----------------------------------------------------------------------------- SD-GPI inverse
 
+
 def _inverse_tanh(k: FloatArray, u: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
     """T with k0 tanh(k1 T + k2) + k3 = u; (T clipped to the envelope's open range, in_range flag)."""
     z = (u - k[..., 3]) / k[..., 0]
@@ -104,8 +116,14 @@ def _inverse_tanh(k: FloatArray, u: FloatArray) -> tuple[FloatArray, NDArray[np.
     return (np.arctanh(z) - k[..., 2]) / k[..., 1], ok
 
 
-def _output_frozen(params: SDGPIParams, w: FloatArray, T: FloatArray, m: FloatArray, heating: FloatArray,
-                   coefficients: tuple[FloatArray, FloatArray] | None = None) -> FloatArray:
+def _output_frozen(
+    params: SDGPIParams,
+    w: FloatArray,
+    T: FloatArray,
+    m: FloatArray,
+    heating: FloatArray,
+    coefficients: tuple[FloatArray, FloatArray] | None = None,
+) -> FloatArray:
     """Elongation k_f - y_m at trial temperatures T from frozen play states w (Eqs. 3.19, 4.1, 4.2).
 
     Broadcasts T (..., S) against w (S, n), m (S,), heating (..., S). ``coefficients``: the
@@ -254,8 +272,9 @@ def _interval_bounds(side, a, b, y, k_f, P, A):  # pragma: no cover - compiled
 
 
 @_jm._jit
-def _side_free(side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P, A, known, stack
-               ):  # pragma: no cover - compiled
+def _side_free(
+    side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P, A, known, stack
+):  # pragma: no cover - compiled
     """True when no two neighbouring grid points g-1, g >= 1 of a side change sign (what the walk would
     find), shown from a few points: an interval whose bounds (:func:`_interval_bounds`) keep one sign
     needs no point inside; others are halved. False on a sign change between two evaluated points
@@ -292,8 +311,9 @@ def _side_free(side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, 
 
 
 @_jm._jit
-def _side_argmin(side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P, A, known, stack
-                 ):  # pragma: no cover - compiled
+def _side_argmin(
+    side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P, A, known, stack
+):  # pragma: no cover - compiled
     """_argmin_abs over a side shown free of sign changes (:func:`_side_free`: one strict sign on g >= 1),
     evaluating only the points that can hold the first smallest |f|: an interval whose bound on |f|
     exceeds the smallest |f| evaluated so far holds none."""
@@ -314,8 +334,9 @@ def _side_argmin(side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f
         if low - BOUND_MARGIN_MM > best:
             continue
         mid = (a + b) // 2
-        best = min(best, abs(_grid_f(side, mid, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P, A,
-                                     known)))
+        best = min(
+            best, abs(_grid_f(side, mid, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P, A, known))
+        )
         stack[n, 0], stack[n, 1] = a, mid
         stack[n + 1, 0], stack[n + 1, 1] = mid, b
         n += 2
@@ -327,8 +348,9 @@ def _side_argmin(side, T0, end, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f
 
 
 @_jm._jit
-def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg, f, P, A, known, stack
-                  ):  # pragma: no cover - compiled
+def _nearest_root(
+    T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg, f, P, A, known, stack
+):  # pragma: no cover - compiled
     """(T, saturated) of one wire as :meth:`InverseCompensator._numerical` and ``_pick`` give them.
 
     Side 0 walks a G-point grid Tg[0] from T0 to hi (heating), side 1 Tg[1] to lo (cooling), in
@@ -366,13 +388,49 @@ def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg
                 f[side, g] = k_f - (pm + acc) - y
                 known[side, g] = True
             if g > 0 and f[side, g - 1] * f[side, g] <= 0:
-                root[side] = _refine(Tg[side, g - 1], Tg[side, g], f[side, g - 1], f[side, g], T0, h_prev, side == 0,
-                                     coef, w, y, r, wts, c, d, p0, k_f, tol)
+                root[side] = _refine(
+                    Tg[side, g - 1],
+                    Tg[side, g],
+                    f[side, g - 1],
+                    f[side, g],
+                    T0,
+                    h_prev,
+                    side == 0,
+                    coef,
+                    w,
+                    y,
+                    r,
+                    wts,
+                    c,
+                    d,
+                    p0,
+                    k_f,
+                    tol,
+                )
                 live[side] = False
         if g == 1 and G > 2 and live[0] and live[1]:  # no root next to T0: is the target out of reach?
             for side in range(2):
-                if _side_free(side, T0, hi if side == 0 else lo, h_prev, coef, w, y, r, wts, c, d, p0, k_f, Tg, f, P,
-                              A, known, stack):
+                if _side_free(
+                    side,
+                    T0,
+                    hi if side == 0 else lo,
+                    h_prev,
+                    coef,
+                    w,
+                    y,
+                    r,
+                    wts,
+                    c,
+                    d,
+                    p0,
+                    k_f,
+                    Tg,
+                    f,
+                    P,
+                    A,
+                    known,
+                    stack,
+                ):
                     free[side] = True
                     live[side] = False
         if not (live[0] or live[1]):
@@ -394,8 +452,9 @@ def _nearest_root(T0, h_prev, coef, w, y, r, wts, c, d, p0, k_f, lo, hi, tol, Tg
 
 
 @_jm._jit
-def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0, k_f, lo, hi, m_lo, m_hi, G, tol,
-                   T, sat, y):  # pragma: no cover - compiled
+def _invert_frozen(
+    T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0, k_f, lo, hi, m_lo, m_hi, G, tol, T, sat, y
+):  # pragma: no cover - compiled
     """Compiled :meth:`InverseCompensator._numerical` and :func:`_output_frozen` at the answer,
     wire by wire (Eqs. 3.19-3.22, 4.1-4.5), each in its own window [lo[s], hi[s]] [degC].
 
@@ -411,8 +470,28 @@ def _invert_frozen(T_prev, heating, w, y_d, m, stacked, edges, r, wts, c, d, p0,
         if not (math.isfinite(y_d[s]) and m_lo <= m[s] <= m_hi):
             ok = False
         _hk._envelopes_into(stacked, edges, m[s], coef, slope)
-        T[s], sat[s] = _nearest_root(min(max(T_prev[s], lo[s]), hi[s]), heating[s], coef, w[s], y_d[s], r, wts, c, d,
-                                     p0, k_f, lo[s], hi[s], tol, Tg, f, P, A, known, stack)
+        T[s], sat[s] = _nearest_root(
+            min(max(T_prev[s], lo[s]), hi[s]),
+            heating[s],
+            coef,
+            w[s],
+            y_d[s],
+            r,
+            wts,
+            c,
+            d,
+            p0,
+            k_f,
+            lo[s],
+            hi[s],
+            tol,
+            Tg,
+            f,
+            P,
+            A,
+            known,
+            stack,
+        )
         # elongation at the answer against the frozen memory (the residual of target 0), the
         # memoryless part's direction from T_prev (Eq. 3.22)
         Ts = T[s]
@@ -455,8 +534,15 @@ class InverseCompensator:
     plant's memory as long as the plant follows the commanded temperature).
     """
 
-    def __init__(self, params: SDGPIParams, *, T_range: tuple[float, float] | None = None, method: str = 'numerical',
-                 grid: int = 33, tol_mm: float = 1e-9) -> None:
+    def __init__(
+        self,
+        params: SDGPIParams,
+        *,
+        T_range: tuple[float, float] | None = None,
+        method: str = 'numerical',
+        grid: int = 33,
+        tol_mm: float = 1e-9,
+    ) -> None:
         if method not in ('numerical', 'analytic', 'auto'):
             raise ModelInputError('inverse method', method, "{'analytic', 'auto', 'numerical'}")
         lo, hi = T_range if T_range is not None else params.T_valid
@@ -476,10 +562,16 @@ class InverseCompensator:
         f64 = np.float64
         env = params.envelopes
         # the compiled paths' parameter arguments, converted once
-        self._kernel_params = (np.ascontiguousarray(env._stacked, f64), np.ascontiguousarray(env.edges_kg, f64),
-                               np.ascontiguousarray(params.thresholds, f64), np.ascontiguousarray(params.weights, f64),
-                               np.ascontiguousarray(params.c, f64), np.ascontiguousarray(params.d, f64),
-                               float(params.p0), float(params.k_f))
+        self._kernel_params = (
+            np.ascontiguousarray(env._stacked, f64),
+            np.ascontiguousarray(env.edges_kg, f64),
+            np.ascontiguousarray(params.thresholds, f64),
+            np.ascontiguousarray(params.weights, f64),
+            np.ascontiguousarray(params.c, f64),
+            np.ascontiguousarray(params.d, f64),
+            float(params.p0),
+            float(params.k_f),
+        )
         self._observe_params = (*params.T_valid, *params.load_range, *self._kernel_params[:3])  # _observe_step's
 
     # -- memory
@@ -544,8 +636,14 @@ class InverseCompensator:
         """Same as calling with elongation = strain x 80 mm (Sec. 3.2.1 effective length)."""
         return self(np.asarray(desired_strain, float) * WIRE_LENGTH_MM, load_kgf)
 
-    def solve(self, desired_elongation_mm: ArrayLike, load_kgf: ArrayLike, *, commit: bool = True,
-              window: tuple[ArrayLike, ArrayLike] | None = None) -> InverseResult:
+    def solve(
+        self,
+        desired_elongation_mm: ArrayLike,
+        load_kgf: ArrayLike,
+        *,
+        commit: bool = True,
+        window: tuple[ArrayLike, ArrayLike] | None = None,
+    ) -> InverseResult:
         """Temperatures reaching the desired elongation from the current memory.
 
         commit: advance the memory to the answer (Eq. 5.5, memory of the commands); False leaves
@@ -594,8 +692,7 @@ class InverseCompensator:
             bad = float(m.min() if m.min() < lo_m else m.max())
             raise ModelInputError('wire load m', bad, f'[{lo_m:g}, {hi_m:g}]', 'kgf')
 
-    def _window(self, window: tuple[ArrayLike, ArrayLike] | None,
-                S: tuple[int, ...]) -> tuple[FloatArray, FloatArray]:
+    def _window(self, window: tuple[ArrayLike, ArrayLike] | None, S: tuple[int, ...]) -> tuple[FloatArray, FloatArray]:
         """Per-wire search window (lo, hi), each of the memory's shape [degC], checked inside the model's validity."""
         if window is None:
             return np.full(S, self.T_range[0]), np.full(S, self.T_range[1])
@@ -608,23 +705,40 @@ class InverseCompensator:
         else:  # the node's two wires: float by float, a fraction of numpy's per-call cost
             inside = all(v_lo <= a < b <= v_hi for a, b in zip(lo.ravel().tolist(), hi.ravel().tolist()))
         if not inside:  # NaN fails too
-            raise ModelInputError('compensator window', (lo.tolist(), hi.tolist()), f'inside {self.params.T_valid}',
-                                  'degC')
+            raise ModelInputError(
+                'compensator window', (lo.tolist(), hi.tolist()), f'inside {self.params.T_valid}', 'degC'
+            )
         return lo, hi
 
-    def _invert_compiled(self, y_d: FloatArray, m: FloatArray, window: tuple[FloatArray, FloatArray]
-                         ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, bool]:
+    def _invert_compiled(
+        self, y_d: FloatArray, m: FloatArray, window: tuple[FloatArray, FloatArray]
+    ) -> tuple[FloatArray, NDArray[np.bool_], FloatArray, bool]:
         """(T, saturated, elongation at T against the frozen memory, inputs valid) from :func:`_invert_frozen`."""
         st_ = self._require_state()
         S = st_.T_prev.shape
         T, sat, y = np.empty(S), np.empty(S, np.bool_), np.empty(S)
         lo_m, hi_m = self.params.load_range
-        ok = _invert_frozen(st_.T_prev, st_.heating, st_.w, y_d, m, *self._kernel_params, *window, lo_m, hi_m,
-                            self.grid, self.tol_mm, T, sat, y)
+        ok = _invert_frozen(
+            st_.T_prev,
+            st_.heating,
+            st_.w,
+            y_d,
+            m,
+            *self._kernel_params,
+            *window,
+            lo_m,
+            hi_m,
+            self.grid,
+            self.tol_mm,
+            T,
+            sat,
+            y,
+        )
         return T, sat, y, ok
 
-    def _numerical(self, y_d: FloatArray, m: FloatArray,
-                   window: tuple[FloatArray, FloatArray]) -> tuple[FloatArray, NDArray[np.bool_]]:
+    def _numerical(
+        self, y_d: FloatArray, m: FloatArray, window: tuple[FloatArray, FloatArray]
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Bracketed root of y(T) = y_d on each side of T_prev against frozen memory; nearest root wins.
 
         Both sides are searched at once: a grid walking away from T_prev finds the first sign
@@ -646,7 +760,12 @@ class InverseCompensator:
         T0s = np.concatenate([T0, T0])
         ends = np.concatenate([hi, lo])
         side_heat = np.concatenate([np.ones(S, bool), np.zeros(S, bool)])
-        a2, b2, w2, y2 = np.concatenate([a, a]), np.concatenate([b, b]), np.concatenate([w, w]), np.concatenate([y_d, y_d])
+        a2, b2, w2, y2 = (
+            np.concatenate([a, a]),
+            np.concatenate([b, b]),
+            np.concatenate([w, w]),
+            np.concatenate([y_d, y_d]),
+        )
         h_prev = np.concatenate([st_.heating, st_.heating])
 
         def resid(T: FloatArray) -> FloatArray:  # T (..., 2S)
@@ -672,7 +791,9 @@ class InverseCompensator:
         side = np.zeros(2 * S, np.int8)
         for _ in range(60):
             denom = f_hi - f_lo
-            sec = np.where(denom != 0, hi_T - f_hi * (hi_T - lo_T) / np.where(denom != 0, denom, 1.0), 0.5 * (lo_T + hi_T))
+            sec = np.where(
+                denom != 0, hi_T - f_hi * (hi_T - lo_T) / np.where(denom != 0, denom, 1.0), 0.5 * (lo_T + hi_T)
+            )
             x = np.where((sec > np.minimum(lo_T, hi_T)) & (sec < np.maximum(lo_T, hi_T)), sec, 0.5 * (lo_T + hi_T))
             fx = resid(x)
             left = f_lo * fx <= 0  # root in [lo, x]
@@ -689,8 +810,15 @@ class InverseCompensator:
         return self._pick(root, has, Tg, f, T0s, cols, S)
 
     @staticmethod
-    def _pick(root: FloatArray, has: NDArray[np.bool_], Tg: FloatArray, f: FloatArray, T0s: FloatArray,
-              cols: NDArray[np.int_], S: int) -> tuple[FloatArray, NDArray[np.bool_]]:
+    def _pick(
+        root: FloatArray,
+        has: NDArray[np.bool_],
+        Tg: FloatArray,
+        f: FloatArray,
+        T0s: FloatArray,
+        cols: NDArray[np.int_],
+        S: int,
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Nearest root of the two sides, else the grid point closest to the target (saturated)."""
         dist = np.where(has, np.abs(root - T0s), np.inf).reshape(2, S)
         pick = np.argmin(dist, axis=0)  # nearest root: the smallest move that reaches the target
@@ -727,8 +855,10 @@ class InverseCompensator:
 
 # ----------------------------------------------------------------------------- composition error
 
-def decaying_triangle(y_lo: float, y_hi: float, n_cycles: int = 4, samples_per_half: int = 40,
-                      decay: float = 0.6) -> FloatArray:
+
+def decaying_triangle(
+    y_lo: float, y_hi: float, n_cycles: int = 4, samples_per_half: int = 40, decay: float = 0.6
+) -> FloatArray:
     """Desired elongation: triangles between y_hi and a trough rising towards the middle (minor loops)."""
     mid = 0.5 * (y_lo + y_hi)
     pts = [y_hi]
@@ -753,8 +883,9 @@ class CompositionError:
     saturated_fraction: FloatArray
 
 
-def reachable_range(params: SDGPIParams, loads_kgf: ArrayLike, T_range: tuple[float, float],
-                    n: int = 400) -> tuple[FloatArray, FloatArray]:
+def reachable_range(
+    params: SDGPIParams, loads_kgf: ArrayLike, T_range: tuple[float, float], n: int = 400
+) -> tuple[FloatArray, FloatArray]:
     """(min, max) elongation along the major loop T_lo -> T_hi -> T_lo, per load."""
     m = np.atleast_1d(np.asarray(loads_kgf, float))
     lo, hi = T_range
@@ -763,9 +894,15 @@ def reachable_range(params: SDGPIParams, loads_kgf: ArrayLike, T_range: tuple[fl
     return y.min(axis=0), y.max(axis=0)
 
 
-def composition_error(params: SDGPIParams, loads: ArrayLike = np.linspace(0.65, 1.05, 9), *,
-                      T_range: tuple[float, float] = (15.0, 85.0), method: str = 'numerical',
-                      margin: float = 0.05, n_cycles: int = 4) -> CompositionError:
+def composition_error(
+    params: SDGPIParams,
+    loads: ArrayLike = np.linspace(0.65, 1.05, 9),
+    *,
+    T_range: tuple[float, float] = (15.0, 85.0),
+    method: str = 'numerical',
+    margin: float = 0.05,
+    n_cycles: int = 4,
+) -> CompositionError:
     """Drive a decaying triangle v (inside margin of the reachable range) through y(y^-1(v)) per load.
 
     The compensator starts on the cooling branch at T_range[0]; the plant (``simulate``) is
@@ -774,7 +911,9 @@ def composition_error(params: SDGPIParams, loads: ArrayLike = np.linspace(0.65, 
     m = np.atleast_1d(np.asarray(loads, float))
     y_lo, y_hi = reachable_range(params, m, T_range)
     span = y_hi - y_lo
-    V = np.stack([decaying_triangle(a + margin * s, b - margin * s, n_cycles) for a, b, s in zip(y_lo, y_hi, span)], axis=1)
+    V = np.stack(
+        [decaying_triangle(a + margin * s, b - margin * s, n_cycles) for a, b, s in zip(y_lo, y_hi, span)], axis=1
+    )
     comp = InverseCompensator(params, T_range=T_range, method=method)
     comp.reset(np.full(m.size, T_range[0]), m, branch='cooling')
     T = np.empty_like(V)
@@ -784,12 +923,14 @@ def composition_error(params: SDGPIParams, loads: ArrayLike = np.linspace(0.65, 
     y = simulate(params, T, np.broadcast_to(m, T.shape), state=initial_state(params, np.full(m.size, T_range[0]), m))
     err = np.abs(V - y)
     rng = V.max(axis=0) - V.min(axis=0)
-    rms = np.sqrt(np.mean(err ** 2, axis=0))
-    return CompositionError(m, err.max(axis=0), rms, 100 * err.max(axis=0) / rng, 100 * rms / rng, rng,
-                            sat.mean(axis=0))
+    rms = np.sqrt(np.mean(err**2, axis=0))
+    return CompositionError(
+        m, err.max(axis=0), rms, 100 * err.max(axis=0) / rng, 100 * rms / rng, rng, sat.mean(axis=0)
+    )
 
 
 # ----------------------------------------------------------------------------- seed corrections (Eqs. 5.12-5.15)
+
 
 @dataclass(frozen=True)
 class LinearCorrection:
@@ -814,7 +955,7 @@ class LinearCorrection:
         return (np.asarray(v, float) - c) / a
 
     @classmethod
-    def fit(cls, loads_kgf: ArrayLike, u_ext: ArrayLike, v_ext: ArrayLike) -> 'LinearCorrection':
+    def fit(cls, loads_kgf: ArrayLike, u_ext: ArrayLike, v_ext: ArrayLike) -> LinearCorrection:
         """Fit Eqs. 5.12-5.14: per load a line through the (u, v) max/min points, then quadratics in load.
 
         ``u_ext``, ``v_ext``: (L, 2) compensated outputs and desired inputs at the min and max points.

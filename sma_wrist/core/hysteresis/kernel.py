@@ -4,6 +4,7 @@ Scalar per-wire loops, compiled by numba when present (see :mod:`sma_wrist.core.
 reference is :meth:`sma_wrist.core.hysteresis.muscle.MuscleModel.solve_load`. The plant kernel
 (:mod:`sma_wrist.core.plant.kernel`) calls ``_solve_load_into`` once per muscle and step.
 """
+
 from __future__ import annotations
 
 import math
@@ -72,16 +73,38 @@ def _elongation(T, m, w, w_now, y_mem, stacked, edges, r, p, m_lo, m_hi, scale, 
 
 
 @_jit
-def _solve_load(T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f,
-                m_max, tol, max_it):  # pragma: no cover - compiled
+def _solve_load(
+    T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f, m_max, tol, max_it
+):  # pragma: no cover - compiled
     """rtsafe of muscle.MuscleModel.solve_load for one bundle: (m, dy, residual)."""
-    return _solve_load_into(T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f,
-                            m_max, tol, max_it, np.empty(8), np.empty(8))
+    return _solve_load_into(
+        T,
+        y_geo,
+        w,
+        w_now,
+        y_mem,
+        m_guess,
+        stacked,
+        edges,
+        r,
+        p,
+        m_lo,
+        m_hi,
+        scale,
+        c_el,
+        k_f,
+        m_max,
+        tol,
+        max_it,
+        np.empty(8),
+        np.empty(8),
+    )
 
 
 @_jit_inline
-def _solve_load_into(T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f,
-                     m_max, tol, max_it, c, s):  # pragma: no cover - compiled
+def _solve_load_into(
+    T, y_geo, w, w_now, y_mem, m_guess, stacked, edges, r, p, m_lo, m_hi, scale, c_el, k_f, m_max, tol, max_it, c, s
+):  # pragma: no cover - compiled
     """:func:`_solve_load` with caller-owned (8,) envelope scratch c, s (the plant step's, reused)."""
     m = min(max(m_guess, 0.0), m_max)
     lo = 0.0

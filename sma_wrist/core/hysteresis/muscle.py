@@ -16,6 +16,7 @@ The root is found against frozen operator memory by a safeguarded Newton iterati
 previous load, then the memory update is committed at the root. All functions are
 vectorised over any number of wires-bundles (scenarios x muscles flattened on axis 0).
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -42,7 +43,7 @@ class MuscleGeometry:
 
     @property
     def wire_area_m2(self) -> float:
-        return float(np.pi * 0.25 * self.wire_diameter_m ** 2)
+        return float(np.pi * 0.25 * self.wire_diameter_m**2)
 
     @property
     def length_scale(self) -> float:
@@ -85,12 +86,15 @@ class MuscleModel:
         self._r = params.thresholds
         self._p = params.weights
 
-    def elongation(self, T: FloatArray, m: FloatArray, w: FloatArray, heating: NDArray[np.bool_]) -> tuple[FloatArray, FloatArray]:
+    def elongation(
+        self, T: FloatArray, m: FloatArray, w: FloatArray, heating: NDArray[np.bool_]
+    ) -> tuple[FloatArray, FloatArray]:
         """(elongation [mm], d elongation / d m [mm/kgf]) of (1) with memory w frozen; 1-D arrays over bundles."""
         return self._elongation(T, m, w, memoryless(self.params, T, heating))[:2]
 
-    def _elongation(self, T: FloatArray, m: FloatArray, w: FloatArray, y_memoryless: FloatArray
-                    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    def _elongation(
+        self, T: FloatArray, m: FloatArray, w: FloatArray, y_memoryless: FloatArray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(y, dy/dm, memory committed at m) of (1) for frozen memory ``w``."""
         geo = self.geometry
         mc = np.minimum(np.maximum(m, self.m_lo), self.m_hi)
@@ -112,8 +116,16 @@ class MuscleModel:
         dy = geo.elastic_mm_per_kgf - geo.length_scale * (dym_dm * inside)
         return y, dy, w_now
 
-    def solve_load(self, T: FloatArray, y_geo_mm: FloatArray, w: FloatArray, heating: NDArray[np.bool_],
-                   m_guess: FloatArray, tol_mm: float = 1e-7, max_iterations: int = 60) -> LoadSolution:
+    def solve_load(
+        self,
+        T: FloatArray,
+        y_geo_mm: FloatArray,
+        w: FloatArray,
+        heating: NDArray[np.bool_],
+        m_guess: FloatArray,
+        tol_mm: float = 1e-7,
+        max_iterations: int = 60,
+    ) -> LoadSolution:
         """Per-wire load making (1) hold, against frozen memory ``w`` (not modified).
 
         Newton from ``m_guess`` safeguarded by a bracket that every evaluation narrows

@@ -24,6 +24,7 @@ Written by ``sma-wrist identify hysteresis``; read by plant_sim, hysteresis_comp
 Unknown keys are ignored; a missing or malformed one raises ParameterError naming the file
 and the key.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -47,15 +48,26 @@ def params_to_dict(params: SDGPIParams, identification: dict[str, Any] | None = 
     """The YAML document (plain lists and floats) of a parameter set."""
     env = params.envelopes
     model = {
-        'n': int(params.n), 'p0': float(params.p0), 'k_f_mm': float(params.k_f),
-        'rho': float(params.rho), 'tau_per_mm': float(params.tau), 'c_thr_mm': float(params.c_thr),
-        'c': [float(v) for v in params.c], 'd': [float(v) for v in params.d],
+        'n': int(params.n),
+        'p0': float(params.p0),
+        'k_f_mm': float(params.k_f),
+        'rho': float(params.rho),
+        'tau_per_mm': float(params.tau),
+        'c_thr_mm': float(params.c_thr),
+        'c': [float(v) for v in params.c],
+        'd': [float(v) for v in params.d],
         'load_edges_kgf': [float(v) for v in env.edges_kg],
-        'a': np.asarray(env.a, dtype=float).tolist(), 'b': np.asarray(env.b, dtype=float).tolist(),
+        'a': np.asarray(env.a, dtype=float).tolist(),
+        'b': np.asarray(env.b, dtype=float).tolist(),
         'T_valid_C': [float(params.T_valid[0]), float(params.T_valid[1])],
     }
-    doc: dict[str, Any] = {'format': FORMAT, 'version': VERSION, 'name': params.name, 'units': dict(UNITS),
-                           'model': model}
+    doc: dict[str, Any] = {
+        'format': FORMAT,
+        'version': VERSION,
+        'name': params.name,
+        'units': dict(UNITS),
+        'model': model,
+    }
     if identification:
         doc['identification'] = identification
     return doc
@@ -67,8 +79,10 @@ def save_hysteresis(path: str | Path, params: SDGPIParams, identification: dict[
 
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
-    head = ('# SD-GPI hysteresis of one wire (sma_wrist hysteresis file, format version 1; '
-            'see sma_wrist/core/hysteresis/params_file.py)\n')
+    head = (
+        '# SD-GPI hysteresis of one wire (sma_wrist hysteresis file, format version 1; '
+        'see sma_wrist/core/hysteresis/params_file.py)\n'
+    )
     p.write_text(head + yaml.safe_dump(params_to_dict(params, identification), sort_keys=False))
     return p
 
@@ -78,7 +92,9 @@ def params_from_dict(doc: Any, where: str = 'hysteresis file') -> SDGPIParams:
     if not isinstance(doc, dict) or doc.get('format') != FORMAT:
         raise ParameterError(f'{where}: not a sma_wrist hysteresis file (needs "format: {FORMAT}")')
     if doc.get('version') != VERSION:
-        raise ParameterError(f'{where}: format version {doc.get("version")!r} is not supported (this sma_wrist reads {VERSION})')
+        raise ParameterError(
+            f'{where}: format version {doc.get("version")!r} is not supported (this sma_wrist reads {VERSION})'
+        )
     m = doc.get('model')
     if not isinstance(m, dict):
         raise ParameterError(f'{where}: the "model" section is missing')
@@ -113,12 +129,24 @@ def params_from_dict(doc: Any, where: str = 'hysteresis file') -> SDGPIParams:
         raise ParameterError(f'{where}: model.T_valid_C must be [low, high] with low < high')
     n_raw = num('n')
     if n_raw != int(n_raw) or not 1 <= n_raw <= MAX_OPERATORS:  # n: 1e8 ran for minutes at 4 GB; 15.5 was cut to 15
-        raise ParameterError(f'{where}: model.n = {n_raw:g} must be a whole number of play operators in '
-                             f'[1, {MAX_OPERATORS}] (the seed uses 15, Sec. 4.1.1)')
+        raise ParameterError(
+            f'{where}: model.n = {n_raw:g} must be a whole number of play operators in '
+            f'[1, {MAX_OPERATORS}] (the seed uses 15, Sec. 4.1.1)'
+        )
     n = int(n_raw)
-    return SDGPIParams(env, arr('c', (4,)), arr('d', (4,)), num('rho'), num('tau_per_mm'), num('c_thr_mm'), n=n,
-                       p0=num('p0'), k_f=num('k_f_mm'), T_valid=(float(T_valid[0]), float(T_valid[1])),
-                       name=str(doc.get('name', Path(where).stem)))
+    return SDGPIParams(
+        env,
+        arr('c', (4,)),
+        arr('d', (4,)),
+        num('rho'),
+        num('tau_per_mm'),
+        num('c_thr_mm'),
+        n=n,
+        p0=num('p0'),
+        k_f=num('k_f_mm'),
+        T_valid=(float(T_valid[0]), float(T_valid[1])),
+        name=str(doc.get('name', Path(where).stem)),
+    )
 
 
 def load_hysteresis(path: str | Path) -> SDGPIParams:
@@ -131,8 +159,10 @@ def load_hysteresis(path: str | Path) -> SDGPIParams:
     except OSError as e:
         raise ParameterError(f'hysteresis_file {p}: cannot read it ({e.strerror or e})') from None
     except UnicodeDecodeError as e:  # a binary file given by mistake (a bag, a .mat)
-        raise ParameterError(f'hysteresis_file {p}: not a UTF-8 text file (byte {e.start}: {e.reason}); '
-                             'write one with `sma-wrist identify hysteresis ... --out DIR`') from None
+        raise ParameterError(
+            f'hysteresis_file {p}: not a UTF-8 text file (byte {e.start}: {e.reason}); '
+            'write one with `sma-wrist identify hysteresis ... --out DIR`'
+        ) from None
     except yaml.YAMLError as e:
         raise ParameterError(f'hysteresis_file {p}: not valid YAML ({str(e).splitlines()[0]})') from None
     return params_from_dict(doc, str(p))
@@ -143,4 +173,5 @@ def hysteresis_params(path: str | Path | None = None) -> SDGPIParams:
     if path:
         return load_hysteresis(path)
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
+
     return default_sdgpi()

@@ -10,6 +10,7 @@ leading axes are free (scenarios). Time is handled by the ``*_series`` helpers,
 which loop over samples (the operator recursion is inherently sequential) but are
 vectorised over thresholds and scenarios.
 """
+
 from __future__ import annotations
 
 import numpy as np

@@ -23,6 +23,7 @@ A plain GPI at one load is the special case of one section with constant quadrat
 
 Units: T in degC, m in kgf (= kg of hanging mass per wire), y and y_m in mm.
 """
+
 from __future__ import annotations
 
 import functools
@@ -144,20 +145,34 @@ class SDGPIParams:
         d = np.asarray(self.d, dtype=float)
         if c.shape != (4,) or d.shape != (4,):
             raise ParameterError('memoryless sets c and d must have 4 entries each (Eq. 3.22)')
-        if not (self.n >= 1 and self.c_thr >= 0 and np.isfinite([self.rho, self.tau, self.c_thr, self.p0, self.k_f]).all()):
+        if not (
+            self.n >= 1 and self.c_thr >= 0 and np.isfinite([self.rho, self.tau, self.c_thr, self.p0, self.k_f]).all()
+        ):
             raise ParameterError(f'need n >= 1, c >= 0 and finite rho, tau, p0, k_f; got n={self.n}, c={self.c_thr}')
         object.__setattr__(self, 'c', c)
         object.__setattr__(self, 'd', d)
 
     @classmethod
-    def from_gpi(cls, a: ArrayLike, b: ArrayLike, c: ArrayLike, d: ArrayLike, rho: float, tau: float,
-                 c_thr: float, *, load_kg: float = 0.0, **kw: object) -> 'SDGPIParams':
+    def from_gpi(
+        cls,
+        a: ArrayLike,
+        b: ArrayLike,
+        c: ArrayLike,
+        d: ArrayLike,
+        rho: float,
+        tau: float,
+        c_thr: float,
+        *,
+        load_kg: float = 0.0,
+        **kw: object,
+    ) -> SDGPIParams:
         """A fixed-load GPI (Tables 4.1-4.3 form) as a one-section SD-GPI valid at any load."""
         a = np.asarray(a, dtype=float)
         b = np.asarray(b, dtype=float)
         const = lambda v: np.stack([np.zeros(4), np.zeros(4), v], axis=-1)[None]  # noqa: E731
-        env = EnvelopeSections(np.array([-1e6, 1e6]) if load_kg == 0.0 else np.array([load_kg - 1e6, load_kg + 1e6]),
-                               const(a), const(b))
+        env = EnvelopeSections(
+            np.array([-1e6, 1e6]) if load_kg == 0.0 else np.array([load_kg - 1e6, load_kg + 1e6]), const(a), const(b)
+        )
         return cls(env, np.asarray(c, float), np.asarray(d, float), float(rho), float(tau), float(c_thr), **kw)  # type: ignore[arg-type]
 
     @functools.cached_property
@@ -211,7 +226,7 @@ class HysteresisState:
     heating: NDArray[np.bool_]
     T_prev: FloatArray
 
-    def copy(self) -> 'HysteresisState':
+    def copy(self) -> HysteresisState:
         return HysteresisState(self.w.copy(), self.heating.copy(), self.T_prev.copy())
 
 
@@ -254,8 +269,9 @@ def step(params: SDGPIParams, state: HysteresisState, T: ArrayLike, m: ArrayLike
     return params.k_f - mirrored_output(params, state, T)
 
 
-def simulate(params: SDGPIParams, T: ArrayLike, m: ArrayLike, state: HysteresisState | None = None,
-             *, branch: str = 'cooling') -> FloatArray:
+def simulate(
+    params: SDGPIParams, T: ArrayLike, m: ArrayLike, state: HysteresisState | None = None, *, branch: str = 'cooling'
+) -> FloatArray:
     """Elongation [mm] for temperature and load series T[t], m[t] (scalars broadcast).
 
     Series may carry trailing scenario axes: T of shape (N,) or (N, S). The initial memory

@@ -28,10 +28,12 @@ Input (Sec. 3.2): a decaying sawtooth of 4e-3 Hz whose amplitude starts at 78 de
 decays as exp(-1e-3 t) towards the 20 degC floor, preceded by one heating ramp from 20 degC
 (the wire starts on its cooling branch), so the first rise and fall form the major loop.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Iterable, Literal, Sequence
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -60,6 +62,7 @@ STROKE_RANGE_MM = (0.1, 6.0)
 
 # ----------------------------------------------------------------------------- parameter builders
 
+
 def _check_envelope(envelope: str) -> None:
     if envelope not in ('literal', 'swapped'):
         raise ModelInputError('envelope convention', envelope, "{'literal', 'swapped'}")
@@ -70,12 +73,27 @@ def gpi_params(load_g: int, *, envelope: EnvelopeConvention = 'literal', p0: flo
     _check_envelope(envelope)
     row = st.gpi_row(load_g)
     a, b = (row['a'], row['b']) if envelope == 'literal' else (row['b'], row['a'])
-    return SDGPIParams.from_gpi(a, b, row['c'], row['d'], row['rho'], row['tau'], row['c_thr'],  # type: ignore[arg-type]
-                                p0=p0, name=f'Table 4.1-4.3 {load_g} g, {envelope}, p0={p0:g}')
+    return SDGPIParams.from_gpi(
+        a,
+        b,
+        row['c'],
+        row['d'],
+        row['rho'],
+        row['tau'],
+        row['c_thr'],  # type: ignore[arg-type]
+        p0=p0,
+        name=f'Table 4.1-4.3 {load_g} g, {envelope}, p0={p0:g}',
+    )
 
 
-def sdgpi_section_params(section: int, *, envelope: EnvelopeConvention = 'literal', p0: float = 1.0,
-                         load_unit: str = 'kg', reversed_order: bool = False) -> SDGPIParams:
+def sdgpi_section_params(
+    section: int,
+    *,
+    envelope: EnvelopeConvention = 'literal',
+    p0: float = 1.0,
+    load_unit: str = 'kg',
+    reversed_order: bool = False,
+) -> SDGPIParams:
     """Tables 4.5-4.6, section 0 (650-800 g) or 1 (800-1050 g), as an SD-GPI (Eqs. 4.4-4.6).
 
     Each section has its own c, d, rho, tau, c (Table 4.6), so the seed's SD-GPI is two
@@ -95,8 +113,16 @@ def sdgpi_section_params(section: int, *, envelope: EnvelopeConvention = 'litera
     t6 = {k: v[section] for k, v in st.TABLE_4_6.items()}
     cset = np.array([t6[f'c{i}'] for i in range(4)])
     dset = np.array([t6[f'd{i}'] for i in range(4)])
-    return SDGPIParams(EnvelopeSections(edges, qa[None], qb[None]), cset, dset, t6['rho'], t6['tau'], t6['c'],
-                       p0=p0, name=f'Tables 4.5-4.6 section {section}, {envelope}, m in {load_unit}, p0={p0:g}')
+    return SDGPIParams(
+        EnvelopeSections(edges, qa[None], qb[None]),
+        cset,
+        dset,
+        t6['rho'],
+        t6['tau'],
+        t6['c'],
+        p0=p0,
+        name=f'Tables 4.5-4.6 section {section}, {envelope}, m in {load_unit}, p0={p0:g}',
+    )
 
 
 def sdgpi_section_for(load_g: float) -> int:
@@ -104,14 +130,18 @@ def sdgpi_section_for(load_g: float) -> int:
     return 0 if load_g <= st.SDGPI_SECTIONS_G[0][1] else 1
 
 
-def sdgpi_coefficients(load_g: float, *, load_unit: str = 'kg', reversed_order: bool = False) -> tuple[FloatArray, FloatArray]:
+def sdgpi_coefficients(
+    load_g: float, *, load_unit: str = 'kg', reversed_order: bool = False
+) -> tuple[FloatArray, FloatArray]:
     """(a_i(m), b_i(m)) from Table 4.5 at a load [g] under a unit reading (Eqs. 4.4-4.5, literal sets)."""
     p = sdgpi_section_params(sdgpi_section_for(load_g), load_unit=load_unit, reversed_order=reversed_order)
     a, b = p.envelopes.coefficients(np.array(load_g * LOAD_UNITS[load_unit]))
     return a, b
 
 
-def load_unit_test(units: Iterable[str] = LOAD_UNITS, orders: Sequence[bool] = (False, True)) -> list[dict[str, object]]:
+def load_unit_test(
+    units: Iterable[str] = LOAD_UNITS, orders: Sequence[bool] = (False, True)
+) -> list[dict[str, object]]:
     """How far Table 4.5's a_i(m), b_i(m) lie from Table 4.1's rows, per unit reading.
 
     Returns one dict per (unit, order): the median over loads and coefficients of
@@ -129,17 +159,24 @@ def load_unit_test(units: Iterable[str] = LOAD_UNITS, orders: Sequence[bool] = (
                 logs.append(np.abs(np.log10(np.abs(got) / np.abs(want))))
                 signs.append(np.sign(got) == np.sign(want))
                 rels.append(np.abs(got - want) / np.abs(want))
-            out.append({'unit': unit, 'reversed_order': rev,
-                        'median_log10_ratio': float(np.median(np.concatenate(logs))),
-                        'same_sign_fraction': float(np.mean(np.concatenate(signs))),
-                        'median_rel_error': float(np.median(np.concatenate(rels)))})
+            out.append(
+                {
+                    'unit': unit,
+                    'reversed_order': rev,
+                    'median_log10_ratio': float(np.median(np.concatenate(logs))),
+                    'same_sign_fraction': float(np.mean(np.concatenate(signs))),
+                    'median_rel_error': float(np.median(np.concatenate(rels))),
+                }
+            )
     return out
 
 
 # ----------------------------------------------------------------------------- input and simulation
 
-def sawtooth_input(dt: float = 0.5, n_periods: int = 5, *, T_min: float = SAWTOOTH_T_MIN_C,
-                   T_max: float = SAWTOOTH_T_MAX_C) -> tuple[FloatArray, FloatArray, int, int]:
+
+def sawtooth_input(
+    dt: float = 0.5, n_periods: int = 5, *, T_min: float = SAWTOOTH_T_MIN_C, T_max: float = SAWTOOTH_T_MAX_C
+) -> tuple[FloatArray, FloatArray, int, int]:
     """Sec. 3.2 decaying sawtooth: (t [s], T [degC], index of the first peak, index of the first trough).
 
     One heating ramp T_min -> T_max (half a period), then triangles whose peak decays as
@@ -156,7 +193,9 @@ def sawtooth_input(dt: float = 0.5, n_periods: int = 5, *, T_min: float = SAWTOO
     return t, T, n_half, 2 * n_half
 
 
-def split_output(params: SDGPIParams, T: ArrayLike, m: float, *, branch: str = 'cooling') -> tuple[FloatArray, FloatArray]:
+def split_output(
+    params: SDGPIParams, T: ArrayLike, m: float, *, branch: str = 'cooling'
+) -> tuple[FloatArray, FloatArray]:
     """(sum_j p_j w_j, memoryless part with p0 = 1) along a temperature series at fixed load.
 
     Same recursion as :func:`sma_wrist.core.hysteresis.sdgpi.simulate` (Eqs. 3.19, 3.22, 4.1), with
@@ -187,6 +226,7 @@ def elongation(params: SDGPIParams, T: ArrayLike, m: float, *, mirror: bool = Tr
 
 
 # ----------------------------------------------------------------------------- loop metrics
+
 
 @dataclass(frozen=True)
 class LoopMetrics:
@@ -220,9 +260,9 @@ def _crossing(T: FloatArray, y: FloatArray, level: float) -> float:
 
 def loop_metrics(T: FloatArray, y: FloatArray, i_peak: int, i_trough: int) -> LoopMetrics:
     """Metrics of the major loop T[0:i_peak] (heating), T[i_peak:i_trough] (cooling)."""
-    Th, yh = T[:i_peak + 1], y[:i_peak + 1]
-    Tc, yc = T[i_peak:i_trough + 1], y[i_peak:i_trough + 1]
-    major = y[:i_trough + 1]
+    Th, yh = T[: i_peak + 1], y[: i_peak + 1]
+    Tc, yc = T[i_peak : i_trough + 1], y[i_peak : i_trough + 1]
+    major = y[: i_trough + 1]
     lo, hi = float(major.min()), float(major.max())
     stroke = hi - lo
     T_h = _crossing(Th, yh, 0.5 * (yh[0] + yh[-1]))
@@ -230,12 +270,17 @@ def loop_metrics(T: FloatArray, y: FloatArray, i_peak: int, i_trough: int) -> Lo
     area = abs(float(np.trapezoid(yh, Th) + np.trapezoid(yc, Tc)))
     contracts = bool(yh[-1] < yh[0])
     width = T_h - T_c
-    sma = bool(contracts and np.isfinite(width) and width > MIN_HYSTERESIS_WIDTH_C
-               and STROKE_RANGE_MM[0] <= stroke <= STROKE_RANGE_MM[1])
+    sma = bool(
+        contracts
+        and np.isfinite(width)
+        and width > MIN_HYSTERESIS_WIDTH_C
+        and STROKE_RANGE_MM[0] <= stroke <= STROKE_RANGE_MM[1]
+    )
     return LoopMetrics(float(y.min()), float(y.max()), stroke, T_h, T_c, area, contracts, sma)
 
 
 # ----------------------------------------------------------------------------- the survey
+
 
 @dataclass(frozen=True)
 class ConventionResult:
@@ -253,6 +298,7 @@ class ConventionResult:
 
 def _reference_loop(load_g: int, T: FloatArray) -> FloatArray:
     from sma_wrist.core.hysteresis.default_params import default_sdgpi  # the built-in set: Sec. 3.2 behaviour
+
     p = default_sdgpi()
     return elongation(p, T, load_g * 1e-3)
 
@@ -265,10 +311,15 @@ def _fit_p0(s: FloatArray, g: FloatArray, ref: FloatArray, k_f: float, mirror: b
     return 0.0 if den == 0.0 else float(gc @ (sign * rc - sc)) / den
 
 
-def evaluate_conventions(loads_g: Sequence[int] = st.GPI_LOADS_G, *, sources: Sequence[str] = ('GPI', 'SD-GPI'),
-                         envelopes: Sequence[str] = ('literal', 'swapped'),
-                         p0s: Sequence[float | str] = (1.0, 0.0, 'fitted'), mirrors: Sequence[bool] = (True, False),
-                         dt: float = 0.5) -> list[ConventionResult]:
+def evaluate_conventions(
+    loads_g: Sequence[int] = st.GPI_LOADS_G,
+    *,
+    sources: Sequence[str] = ('GPI', 'SD-GPI'),
+    envelopes: Sequence[str] = ('literal', 'swapped'),
+    p0s: Sequence[float | str] = (1.0, 0.0, 'fitted'),
+    mirrors: Sequence[bool] = (True, False),
+    dt: float = 0.5,
+) -> list[ConventionResult]:
     """Run the Sec. 3.2 sawtooth through every (source, load, convention) and measure the loop."""
     t, T, i_peak, i_trough = sawtooth_input(dt)
     out: list[ConventionResult] = []
@@ -292,9 +343,12 @@ def evaluate_conventions(loads_g: Sequence[int] = st.GPI_LOADS_G, *, sources: Se
                         extra = {}
                         if ref is not None:
                             e = (y - y.mean()) - (ref - ref.mean())
-                            extra['shape_rms_vs_default_mm'] = float(np.sqrt(np.mean(e ** 2)))
-                        out.append(ConventionResult(source, load, env, 'fitted' if p0 == 'fitted' else f'{p0:g}',
-                                                    p0v, mirror, met, extra))
+                            extra['shape_rms_vs_default_mm'] = float(np.sqrt(np.mean(e**2)))
+                        out.append(
+                            ConventionResult(
+                                source, load, env, 'fitted' if p0 == 'fitted' else f'{p0:g}', p0v, mirror, met, extra
+                            )
+                        )
     return out
 
 
@@ -317,8 +371,9 @@ def envelope_order_fraction(params: SDGPIParams, m: float = 0.0, T_range: tuple[
     return float(np.mean((lower[:, 0] + r) <= (upper[:, 0] - r)))
 
 
-def sdgpi_vs_gpi(loads_g: Sequence[int] = st.GPI_LOADS_G, envelope: EnvelopeConvention = 'swapped',
-                 dt: float = 0.5) -> list[dict[str, float]]:
+def sdgpi_vs_gpi(
+    loads_g: Sequence[int] = st.GPI_LOADS_G, envelope: EnvelopeConvention = 'swapped', dt: float = 0.5
+) -> list[dict[str, float]]:
     """Does the SD-GPI (Tables 4.5-4.6, m in kg) reproduce the GPI rows (Tables 4.1-4.3)?
 
     Per load: RMS difference of the mirrored elongations (p0 = 1) on the Sec. 3.2 input, in mm
@@ -332,27 +387,39 @@ def sdgpi_vs_gpi(loads_g: Sequence[int] = st.GPI_LOADS_G, envelope: EnvelopeConv
         rms = float(np.sqrt(np.mean((y1 - y2) ** 2)))
         a, b = sdgpi_coefficients(load)
         rel = np.abs(np.concatenate([a, b]) - np.array(st.TABLE_4_1[load])) / np.abs(np.array(st.TABLE_4_1[load]))
-        rows.append({'load_g': load, 'rms_mm': rms, 'rms_pct_of_gpi_range': 100 * rms / max(np.ptp(y1), 1e-12),
-                     'median_coef_rel_err': float(np.median(rel))})
+        rows.append(
+            {
+                'load_g': load,
+                'rms_mm': rms,
+                'rms_pct_of_gpi_range': 100 * rms / max(np.ptp(y1), 1e-12),
+                'median_coef_rel_err': float(np.median(rel)),
+            }
+        )
     return rows
 
 
 def format_table(results: Sequence[ConventionResult]) -> str:
-    head = (f"{'source':7s} {'load':>5s} {'envelope':8s} {'p0':>7s} {'mirror':6s} {'y_min':>9s} {'y_max':>9s} "
-            f"{'stroke':>8s} {'T_h50':>6s} {'T_c50':>6s} {'width':>6s} {'area':>9s} {'shape_rms':>9s} SMA-like")
+    head = (
+        f'{"source":7s} {"load":>5s} {"envelope":8s} {"p0":>7s} {"mirror":6s} {"y_min":>9s} {"y_max":>9s} '
+        f'{"stroke":>8s} {"T_h50":>6s} {"T_c50":>6s} {"width":>6s} {"area":>9s} {"shape_rms":>9s} SMA-like'
+    )
     lines = [head]
     for r in results:
         m = r.metrics
-        lines.append(f'{r.source:7s} {r.load_g:5d} {r.envelope:8s} {r.p0:7.3f} {str(r.mirror):6s} {m.y_min:9.3f} '
-                     f'{m.y_max:9.3f} {m.stroke_mm:8.3f} {m.T_heat50:6.1f} {m.T_cool50:6.1f} {m.width_C:6.1f} '
-                     f'{m.area:9.2f} {r.extra.get("shape_rms_vs_default_mm", float("nan")):9.3f} '
-                     f'{"yes" if m.sma_like else "no"}')
+        lines.append(
+            f'{r.source:7s} {r.load_g:5d} {r.envelope:8s} {r.p0:7.3f} {str(r.mirror):6s} {m.y_min:9.3f} '
+            f'{m.y_max:9.3f} {m.stroke_mm:8.3f} {m.T_heat50:6.1f} {m.T_cool50:6.1f} {m.width_C:6.1f} '
+            f'{m.area:9.2f} {r.extra.get("shape_rms_vs_default_mm", float("nan")):9.3f} '
+            f'{"yes" if m.sma_like else "no"}'
+        )
     return '\n'.join(lines)
 
 
 def main() -> None:
-    print('Sec. 3.2 input: decaying sawtooth 4e-3 Hz, 20 degC floor, peak 78 degC decaying exp(-1e-3 t); '
-          'major loop = first heating ramp + first cooling ramp.\n')
+    print(
+        'Sec. 3.2 input: decaying sawtooth 4e-3 Hz, 20 degC floor, peak 78 degC decaying exp(-1e-3 t); '
+        'major loop = first heating ramp + first cooling ramp.\n'
+    )
     res = evaluate_conventions()
     print(format_table(res))
     n_sma = sum(r.metrics.sma_like for r in res)
@@ -365,17 +432,23 @@ def main() -> None:
         for load in st.GPI_LOADS_G:
             m = play_part_metrics(load, env)  # type: ignore[arg-type]
             order = envelope_order_fraction(gpi_params(load, envelope=env))  # type: ignore[arg-type]
-            print(f'  {env:8s} {load:5d} g  stroke {m.stroke_mm:7.3f} mm  T_h50 {m.T_heat50:6.1f}  '
-                  f'T_c50 {m.T_cool50:6.1f}  contracts {m.contracts_on_heating}  gamma_l<=gamma_r {100 * order:5.1f} %')
+            print(
+                f'  {env:8s} {load:5d} g  stroke {m.stroke_mm:7.3f} mm  T_h50 {m.T_heat50:6.1f}  '
+                f'T_c50 {m.T_cool50:6.1f}  contracts {m.contracts_on_heating}  gamma_l<=gamma_r {100 * order:5.1f} %'
+            )
     print('\nTable 4.5 load unit vs Table 4.1 rows:')
     for u in load_unit_test():
-        print(f"  m in {u['unit']:3s} order {'reversed' if u['reversed_order'] else 'printed '}: median |log10 ratio| "
-              f"{u['median_log10_ratio']:.2f}, same sign {100 * u['same_sign_fraction']:.0f} %, "
-              f"median rel. error {u['median_rel_error']:.3g}")
+        print(
+            f'  m in {u["unit"]:3s} order {"reversed" if u["reversed_order"] else "printed "}: median |log10 ratio| '
+            f'{u["median_log10_ratio"]:.2f}, same sign {100 * u["same_sign_fraction"]:.0f} %, '
+            f'median rel. error {u["median_rel_error"]:.3g}'
+        )
     print('\nSD-GPI (Tables 4.5-4.6, kg, swapped, p0=1) vs GPI rows (Tables 4.1-4.3):')
     for row in sdgpi_vs_gpi():
-        print(f"  {row['load_g']:5d} g  RMS {row['rms_mm']:9.3f} mm = {row['rms_pct_of_gpi_range']:8.1f} % of GPI range; "
-              f"median coef rel. error {row['median_coef_rel_err']:.2f}")
+        print(
+            f'  {row["load_g"]:5d} g  RMS {row["rms_mm"]:9.3f} mm = {row["rms_pct_of_gpi_range"]:8.1f} % of GPI range; '
+            f'median coef rel. error {row["median_coef_rel_err"]:.2f}'
+        )
 
 
 if __name__ == '__main__':

@@ -23,6 +23,7 @@ Without numba the caller falls back to scipy's ``least_squares`` (same algorithm
 The loop follows SciPy's ``scipy/optimize/_lsq/trf.py`` (BSD-3-Clause; Copyright (c) 2001-2002 Enthought, Inc.
 and 2003- SciPy Developers), and uses its helpers from ``scipy.optimize._lsq.common``.
 """
+
 from __future__ import annotations
 
 import math
@@ -30,10 +31,18 @@ from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import NDArray
+
 try:  # scipy's own helpers of the algorithm (a private module): should a release move them, the callers
     # fall back to least_squares (the same algorithm, CPU-dependent bits) instead of failing to import
-    from scipy.optimize._lsq.common import (EPS, CL_scaling_vector, make_strictly_feasible, minimize_quadratic_1d,
-                                            step_size_to_bound, update_tr_radius)
+    from scipy.optimize._lsq.common import (
+        EPS,
+        CL_scaling_vector,
+        make_strictly_feasible,
+        minimize_quadratic_1d,
+        step_size_to_bound,
+        update_tr_radius,
+    )
+
     _SCIPY_HELPERS = True
 except ImportError:  # pragma: no cover - depends on the scipy release
     _SCIPY_HELPERS = False
@@ -156,7 +165,7 @@ def _svd_solve_data(Jh, diag_sqrt, f):  # pragma: no cover - compiled
     V = np.zeros((n, n))  # V[j] = column j of V
     for j in range(n):
         V[j, j] = 1.0
-    for sweep in range(100):
+    for _sweep in range(100):
         rotated = False
         for p in range(n - 1):
             for q in range(p + 1, n):
@@ -219,8 +228,9 @@ def _quadratic(J: _DetJ, g: FloatArray, s: FloatArray, diag: FloatArray) -> floa
     return 0.5 * (_dot(Js, Js) + _dot(s * diag, s)) + _dot(s, g)
 
 
-def _quadratic_1d(J: _DetJ, g: FloatArray, s: FloatArray, diag: FloatArray,
-                  s0: FloatArray | None = None) -> tuple[float, ...]:
+def _quadratic_1d(
+    J: _DetJ, g: FloatArray, s: FloatArray, diag: FloatArray, s0: FloatArray | None = None
+) -> tuple[float, ...]:
     """scipy's build_quadratic_1d, reductions in a fixed order."""
     v = J.dot(s)
     a = 0.5 * (_dot(v, v) + _dot(s * diag, s))
@@ -243,7 +253,7 @@ def _intersect_trust_region(x: FloatArray, s: FloatArray, Delta: float) -> tuple
     if a == 0:
         raise ValueError('`s` is zero.')
     b = _dot(x, s)
-    c = _dot(x, x) - Delta ** 2
+    c = _dot(x, x) - Delta**2
     if c > 0:
         raise ValueError('`x` is not within the trust region.')
     d = math.sqrt(b * b - a * c)
@@ -252,9 +262,19 @@ def _intersect_trust_region(x: FloatArray, s: FloatArray, Delta: float) -> tuple
     return (t1, t2) if t1 < t2 else (t2, t1)
 
 
-def _solve_lsq_trust_region(n: int, m: int, uf: FloatArray, s: FloatArray, V: FloatArray, Delta: float,
-                            initial_alpha: float, rtol: float = 0.01, max_iter: int = 10) -> tuple[FloatArray, float]:
+def _solve_lsq_trust_region(
+    n: int,
+    m: int,
+    uf: FloatArray,
+    s: FloatArray,
+    V: FloatArray,
+    Delta: float,
+    initial_alpha: float,
+    rtol: float = 0.01,
+    max_iter: int = 10,
+) -> tuple[FloatArray, float]:
     """scipy's solve_lsq_trust_region (More's regularised step on the SVD), norms and products in a fixed order."""
+
     def phi_and_derivative(alpha: float) -> tuple[float, float]:
         denom = s * s + alpha
         p_norm = _norm(suf / denom)
@@ -290,9 +310,19 @@ def _solve_lsq_trust_region(n: int, m: int, uf: FloatArray, s: FloatArray, V: Fl
     return p, alpha
 
 
-def _select_step(x: FloatArray, J_h: _DetJ, diag_h: FloatArray, g_h: FloatArray, p: FloatArray,
-                 p_h: FloatArray, d: FloatArray, Delta: float, lb: FloatArray, ub: FloatArray,
-                 theta: float) -> tuple[FloatArray, FloatArray, float]:
+def _select_step(
+    x: FloatArray,
+    J_h: _DetJ,
+    diag_h: FloatArray,
+    g_h: FloatArray,
+    p: FloatArray,
+    p_h: FloatArray,
+    d: FloatArray,
+    Delta: float,
+    lb: FloatArray,
+    ub: FloatArray,
+    theta: float,
+) -> tuple[FloatArray, FloatArray, float]:
     """scipy's trf.select_step (reflective step), its quadratics in a fixed order."""
     if np.all((x + p >= lb) & (x + p <= ub)):
         return p, p_h, -_quadratic(J_h, g_h, p_h, diag_h)
@@ -343,9 +373,16 @@ def _onto_grid(x: FloatArray, lb: FloatArray, ub: FloatArray) -> FloatArray:
     return np.where((q > lb) & (q < ub), q, x)
 
 
-def trf_solve(fun_jac: Callable[[FloatArray], tuple[FloatArray, FloatArray]], x0: FloatArray, lb: FloatArray,
-              ub: FloatArray, max_nfev: int, ftol: float = 1e-10, xtol: float = 1e-10,
-              gtol: float = 1e-10) -> tuple[FloatArray, float, int, int]:
+def trf_solve(
+    fun_jac: Callable[[FloatArray], tuple[FloatArray, FloatArray]],
+    x0: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    max_nfev: int,
+    ftol: float = 1e-10,
+    xtol: float = 1e-10,
+    gtol: float = 1e-10,
+) -> tuple[FloatArray, float, int, int]:
     """Minimise 0.5 |r(x)|^2 over lb < x < ub from x0: (x, cost, status, nfev), scipy's status codes.
 
     ``fun_jac(x) -> (r (m,), J (m, n))``; the Jacobian is only used at accepted points, as in
@@ -399,8 +436,9 @@ def trf_solve(fun_jac: Callable[[FloatArray], tuple[FloatArray, FloatArray]], x0
                 continue
             cost_new = 0.5 * _dot(f_new, f_new)
             actual_reduction = cost - cost_new
-            Delta_new, ratio = update_tr_radius(Delta, actual_reduction, predicted_reduction, step_h_norm,
-                                                step_h_norm > 0.95 * Delta)
+            Delta_new, ratio = update_tr_radius(
+                Delta, actual_reduction, predicted_reduction, step_h_norm, step_h_norm > 0.95 * Delta
+            )
             ftol_ok = actual_reduction < ftol * cost and ratio > 0.25
             xtol_ok = _norm(step) < xtol * (xtol + _norm(x))
             status = 4 if ftol_ok and xtol_ok else 2 if ftol_ok else 3 if xtol_ok else None

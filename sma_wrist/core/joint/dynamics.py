@@ -18,6 +18,7 @@ Dynamics, Eq. 4.18 with payload inertia added (the seed's I_w is the bare joint)
 Friction, Eq. 4.16's text: Coulomb + viscous while sliding, static friction holding the
 joint while |tau_drive| <= tau_sf at rest.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -53,7 +54,7 @@ class JointParams:
 
     def inertia(self, payload_kg: FloatArray | float | None = None) -> FloatArray:
         m = self.payload_kg if payload_kg is None else payload_kg
-        return self.joint_inertia_kgm2 + np.asarray(m) * self.lever_m ** 2
+        return self.joint_inertia_kgm2 + np.asarray(m) * self.lever_m**2
 
     def chain_displacement_mm(self, q: FloatArray) -> FloatArray:
         """Chain travel from the neutral position, positive when muscle 1 shortens [mm]."""
@@ -64,8 +65,15 @@ class JointParams:
         return np.asarray(m) * G * self.lever_m * np.cos(q)
 
 
-def joint_step(p: JointParams, q: FloatArray, qd: FloatArray, tau_muscle: FloatArray, stiffness: FloatArray,
-               payload_kg: FloatArray, dt: float) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+def joint_step(
+    p: JointParams,
+    q: FloatArray,
+    qd: FloatArray,
+    tau_muscle: FloatArray,
+    stiffness: FloatArray,
+    payload_kg: FloatArray,
+    dt: float,
+) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
     """One linearly implicit Euler step of Eq. 4.18; returns (q, q', stuck).
 
     The muscle torque is a stiff spring of the angle (stiffness = -d tau_muscle / dq > 0,
@@ -79,7 +87,9 @@ def joint_step(p: JointParams, q: FloatArray, qd: FloatArray, tau_muscle: FloatA
     stuck = at_rest & (np.abs(tau_drive) <= p.static_Nm)
     direction = np.where(at_rest, np.sign(tau_drive), np.sign(qd))
     h_over_i = dt / inertia
-    qd_new = (qd + h_over_i * (tau_drive - direction * p.coulomb_Nm)) / (1.0 + h_over_i * (p.viscous_Nms + dt * stiffness))
+    qd_new = (qd + h_over_i * (tau_drive - direction * p.coulomb_Nm)) / (
+        1.0 + h_over_i * (p.viscous_Nms + dt * stiffness)
+    )
     # Coulomb friction may stop the joint but never reverse it within a step.
     reversed_ = (~at_rest) & (np.sign(qd_new) != np.sign(qd)) & (np.abs(tau_drive) <= p.static_Nm + p.coulomb_Nm)
     qd_new = np.where(stuck | reversed_, 0.0, qd_new)

@@ -3,6 +3,7 @@
 The numpy reference is :func:`sma_wrist.core.joint.dynamics.joint_step`; every plant whose muscles
 drive this joint (the SD-GPI wrist, the phase-fraction benchmark plant, diagnose's replay) calls this.
 """
+
 from __future__ import annotations
 
 import math

@@ -20,11 +20,12 @@ The command delay, TEM driver dead zone and saturation, wire lag, cycle drift an
 drift are not simulated by the plant
 (:data:`REPLAY_ONLY`): the diagnosis' replay models them, plant_sim refuses them.
 """
+
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 
@@ -46,20 +47,40 @@ class ExtensionParam:
 #: every extension parameter: name, unit, nominal value, bounds, typical effect size, meaning
 PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('tem_gain_err', '1', 0.0, -0.6, 1.0, 0.1, 'relative error of the TEM drive gain input_per_volt'),
-    ExtensionParam('loss_scale_err', '1', 0.0, -0.6, 1.5, 0.1,
-                   'relative error of the muscle-face heat loss (K_Tinf, K_T, K_inf)'),
+    ExtensionParam(
+        'loss_scale_err', '1', 0.0, -0.6, 1.5, 0.1, 'relative error of the muscle-face heat loss (K_Tinf, K_T, K_inf)'
+    ),
     ExtensionParam('joule_scale_err', '1', 0.0, -0.9, 2.0, 0.2, 'relative error of the Joule term K_R'),
     ExtensionParam('ambient_offset_C', 'degC', 0.0, -15.0, 15.0, 1.0, 'constant ambient/coolant temperature offset'),
-    ExtensionParam('ambient_drift_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'linear ambient/coolant temperature drift'),
-    ExtensionParam('coupling_per_s', '1/s', 0.0, 0.0, 0.2, 0.01,
-                   'heat conductance between the muscle faces / heat capacity'),
-    ExtensionParam('command_delay_s', 's', 0.0, 0.0, 1.0, 0.02,
-                   'the TEM drive applies a command this long after it was sent (link, driver, host latency)'),
+    ExtensionParam(
+        'ambient_drift_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'linear ambient/coolant temperature drift'
+    ),
+    ExtensionParam(
+        'coupling_per_s', '1/s', 0.0, 0.0, 0.2, 0.01, 'heat conductance between the muscle faces / heat capacity'
+    ),
+    ExtensionParam(
+        'command_delay_s',
+        's',
+        0.0,
+        0.0,
+        1.0,
+        0.02,
+        'the TEM drive applies a command this long after it was sent (link, driver, host latency)',
+    ),
     ExtensionParam('temp_offset_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple offset (both channels)'),
     ExtensionParam('temp_lag_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple first-order time constant'),
-    ExtensionParam('hyst_lag_s', 's', 0.0, 0.0, 60.0, 3.0, 'wire temperature lags the measured one (rate-dependent loops)'),
-    ExtensionParam('hyst_drift_C_per_cycle', 'degC/cycle', 0.0, -10.0, 10.0, 1.0,
-                   'transition temperatures move with the cycle count (functional fatigue)'),
+    ExtensionParam(
+        'hyst_lag_s', 's', 0.0, 0.0, 60.0, 3.0, 'wire temperature lags the measured one (rate-dependent loops)'
+    ),
+    ExtensionParam(
+        'hyst_drift_C_per_cycle',
+        'degC/cycle',
+        0.0,
+        -10.0,
+        10.0,
+        1.0,
+        'transition temperatures move with the cycle count (functional fatigue)',
+    ),
     ExtensionParam('payload_err_kg', 'kg', 0.0, -0.5, 1.0, 0.1, 'true payload minus the recorded /wrist/payload'),
     ExtensionParam('coulomb_Nm', 'N m', 0.004, 0.0, 0.3, 0.02, 'Coulomb friction moment (static = 1.5 x Coulomb)'),
     ExtensionParam('viscous_Nms', 'N m s', 0.15, 0.0, 20.0, 1.0, 'viscous damping of the joint'),
@@ -73,8 +94,12 @@ PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('temp_offset_2_C', 'degC', 0.0, -10.0, 10.0, 0.5, 'thermocouple 2 offset (muscle 2 only)'),
     ExtensionParam('temp_gain_err_1', '1', 0.0, -0.3, 0.3, 0.02, 'thermocouple 1 gain error about TEMP_GAIN_REF_C'),
     ExtensionParam('temp_gain_err_2', '1', 0.0, -0.3, 0.3, 0.02, 'thermocouple 2 gain error about TEMP_GAIN_REF_C'),
-    ExtensionParam('temp_delay_1_s', 's', 0.0, 0.0, 3.0, 0.2, 'thermocouple 1 reading is the temperature this long ago'),
-    ExtensionParam('temp_delay_2_s', 's', 0.0, 0.0, 3.0, 0.2, 'thermocouple 2 reading is the temperature this long ago'),
+    ExtensionParam(
+        'temp_delay_1_s', 's', 0.0, 0.0, 3.0, 0.2, 'thermocouple 1 reading is the temperature this long ago'
+    ),
+    ExtensionParam(
+        'temp_delay_2_s', 's', 0.0, 0.0, 3.0, 0.2, 'thermocouple 2 reading is the temperature this long ago'
+    ),
     ExtensionParam('temp_lag_1_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple 1 first-order time constant'),
     ExtensionParam('temp_lag_2_s', 's', 0.0, 0.0, 20.0, 1.0, 'thermocouple 2 first-order time constant'),
     ExtensionParam('temp_drift_1_C_per_h', 'degC/h', 0.0, -60.0, 60.0, 5.0, 'thermocouple 1 reading drifts linearly'),
@@ -82,25 +107,53 @@ PARAMS: tuple[ExtensionParam, ...] = (
     ExtensionParam('angle_lag_s', 's', 0.0, 0.0, 3.0, 0.2, 'potentiometer first-order time constant (RC filter)'),
     ExtensionParam('angle_drift_rad_per_h', 'rad/h', 0.0, -1.0, 1.0, 0.05, 'potentiometer reading drifts linearly'),
     # actuator: what the TEM driver makes of a command
-    ExtensionParam('tem_dead_zone_V', 'V', 0.0, 0.0, 10.0, 0.5,
-                   'TEM driver dead zone: |command| below it gives 0 V, above it the output is |command| - dead zone'),
-    ExtensionParam('tem_headroom_V', 'V', 0.0, 0.0, 20.0, 2.0,
-                   'the TEM driver saturates this far below the nominal drive limit'),
+    ExtensionParam(
+        'tem_dead_zone_V',
+        'V',
+        0.0,
+        0.0,
+        10.0,
+        0.5,
+        'TEM driver dead zone: |command| below it gives 0 V, above it the output is |command| - dead zone',
+    ),
+    ExtensionParam(
+        'tem_headroom_V', 'V', 0.0, 0.0, 20.0, 2.0, 'the TEM driver saturates this far below the nominal drive limit'
+    ),
 )
 BY_NAME = {p.name: p for p in PARAMS}
 NOMINAL = {p.name: p.nominal for p in PARAMS}
 #: the nominal joint's static / Coulomb friction ratio (0.006 / 0.004 N m)
 STATIC_PER_COULOMB = 1.5
 #: effects the diagnosis replays but the plant does not simulate
-REPLAY_ONLY = ('hyst_lag_s', 'hyst_drift_C_per_cycle', 'ambient_drift_C_per_h', 'command_delay_s', 'tem_dead_zone_V',
-               'tem_headroom_V')
+REPLAY_ONLY = (
+    'hyst_lag_s',
+    'hyst_drift_C_per_cycle',
+    'ambient_drift_C_per_h',
+    'command_delay_s',
+    'tem_dead_zone_V',
+    'tem_headroom_V',
+)
 #: thermocouple gain errors scale the reading about this temperature [degC] (the cold junction, room)
 TEMP_GAIN_REF_C = 25.0
 #: the per-channel sensor parameters of thermocouple i: offset, gain error, delay, lag, drift
-TEMP_CHANNEL_KEYS = {i: (f'temp_offset_{i}_C', f'temp_gain_err_{i}', f'temp_delay_{i}_s', f'temp_lag_{i}_s',
-                         f'temp_drift_{i}_C_per_h') for i in (1, 2)}
-SENSOR_KEYS = ('temp_lag_s', 'temp_offset_C', 'backlash_rad', 'angle_delay_s', 'angle_offset_rad', 'angle_gain_err',
-               'angle_lag_s', 'angle_drift_rad_per_h') + TEMP_CHANNEL_KEYS[1] + TEMP_CHANNEL_KEYS[2]
+TEMP_CHANNEL_KEYS = {
+    i: (f'temp_offset_{i}_C', f'temp_gain_err_{i}', f'temp_delay_{i}_s', f'temp_lag_{i}_s', f'temp_drift_{i}_C_per_h')
+    for i in (1, 2)
+}
+SENSOR_KEYS = (
+    (
+        'temp_lag_s',
+        'temp_offset_C',
+        'backlash_rad',
+        'angle_delay_s',
+        'angle_offset_rad',
+        'angle_gain_err',
+        'angle_lag_s',
+        'angle_drift_rad_per_h',
+    )
+    + TEMP_CHANNEL_KEYS[1]
+    + TEMP_CHANNEL_KEYS[2]
+)
 
 
 def drive(u: np.ndarray, dead_zone_V: float, headroom_V: float, u_max_V: float) -> np.ndarray:
@@ -140,14 +193,25 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
         return p  # bit-identical to the plain plant
     off = [k for k in REPLAY_ONLY if v[k] != NOMINAL[k]]
     if off:
-        raise ParameterError(f'model extension(s) {", ".join(f"{k} = {v[k]:g}" for k in off)} are replayed by '
-                             f'sma-wrist diagnose but not simulated by the plant (doc/explanation/diagnosis.md)')
-    tp = dataclasses.replace(p.thermal.scaled(1.0 + v['tem_gain_err'], 1.0 + v['loss_scale_err'],
-                                              1.0 + v['joule_scale_err'], v['ambient_offset_C']),
-                             coupling_per_s=v['coupling_per_s'])
-    jp = dataclasses.replace(p.joint, coulomb_Nm=v['coulomb_Nm'], static_Nm=STATIC_PER_COULOMB * v['coulomb_Nm'],
-                             viscous_Nms=v['viscous_Nms'])
-    return dataclasses.replace(p, thermal=tp, joint=jp, preload_elongation_mm=p.preload_elongation_mm + v['preload_err_mm'])
+        raise ParameterError(
+            f'model extension(s) {", ".join(f"{k} = {v[k]:g}" for k in off)} are replayed by '
+            f'sma-wrist diagnose but not simulated by the plant (doc/explanation/diagnosis.md)'
+        )
+    tp = dataclasses.replace(
+        p.thermal.scaled(
+            1.0 + v['tem_gain_err'], 1.0 + v['loss_scale_err'], 1.0 + v['joule_scale_err'], v['ambient_offset_C']
+        ),
+        coupling_per_s=v['coupling_per_s'],
+    )
+    jp = dataclasses.replace(
+        p.joint,
+        coulomb_Nm=v['coulomb_Nm'],
+        static_Nm=STATIC_PER_COULOMB * v['coulomb_Nm'],
+        viscous_Nms=v['viscous_Nms'],
+    )
+    return dataclasses.replace(
+        p, thermal=tp, joint=jp, preload_elongation_mm=p.preload_elongation_mm + v['preload_err_mm']
+    )
 
 
 class SensorChain:
@@ -203,8 +267,12 @@ class SensorChain:
         y = self._q_lag
         t = self._n_q * self.dt
         self._n_q += 1
-        return float(y + self.v['angle_offset_rad'] + self.v['angle_gain_err'] * (y - self.q_neutral)
-                     + self.v['angle_drift_rad_per_h'] / 3600.0 * t)
+        return float(
+            y
+            + self.v['angle_offset_rad']
+            + self.v['angle_gain_err'] * (y - self.q_neutral)
+            + self.v['angle_drift_rad_per_h'] / 3600.0 * t
+        )
 
 
 def _lag_factor(tau: float, dt: float) -> float:

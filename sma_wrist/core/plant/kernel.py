@@ -11,6 +11,7 @@ The uncompiled Python of the same functions (``step_many_into.py_func``) is the 
 per-sample Python reference loop" of the benchmark. test_plant_kernel checks the kernel
 against the numpy path step by step.
 """
+
 from __future__ import annotations
 
 import math
@@ -24,8 +25,29 @@ from sma_wrist.core.thermal.kernel import thermal_constants, thermal_rk4
 
 
 @_jit
-def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags,
-              th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint):  # pragma: no cover - compiled
+def step_many(
+    n_steps,
+    u,
+    thermal,
+    q,
+    qd,
+    w,
+    heating,
+    T_prev,
+    load,
+    compliance,
+    payload,
+    flags,
+    th_coef,
+    mech,
+    stacked,
+    edges,
+    r,
+    p,
+    mem_c,
+    mem_d,
+    joint,
+):  # pragma: no cover - compiled
     """Advance N wrists by n_steps plant steps under held commands u (N, 2) [V], in place.
 
     Arrays: thermal (N, 2, 2); q, qd, payload (N,); w (2N, n) and heating, T_prev, load,
@@ -38,8 +60,32 @@ def step_many(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, 
     q_neutral, q_min, q_max, g.
     """
     w_now, rk, env = scratch(w.shape[1])
-    step_many_into(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags, th_coef, mech,
-                   stacked, edges, r, p, mem_c, mem_d, joint, w_now, rk, env)
+    step_many_into(
+        n_steps,
+        u,
+        thermal,
+        q,
+        qd,
+        w,
+        heating,
+        T_prev,
+        load,
+        compliance,
+        payload,
+        flags,
+        th_coef,
+        mech,
+        stacked,
+        edges,
+        r,
+        p,
+        mem_c,
+        mem_d,
+        joint,
+        w_now,
+        rk,
+        env,
+    )
 
 
 @_jit_inline
@@ -49,8 +95,32 @@ def scratch(n_play):  # pragma: no cover - compiled
 
 
 @_jit_inline
-def step_many_into(n_steps, u, thermal, q, qd, w, heating, T_prev, load, compliance, payload, flags, th_coef, mech,
-                   stacked, edges, r, p, mem_c, mem_d, joint, w_now, rk, env):  # pragma: no cover - compiled
+def step_many_into(
+    n_steps,
+    u,
+    thermal,
+    q,
+    qd,
+    w,
+    heating,
+    T_prev,
+    load,
+    compliance,
+    payload,
+    flags,
+    th_coef,
+    mech,
+    stacked,
+    edges,
+    r,
+    p,
+    mem_c,
+    mem_d,
+    joint,
+    w_now,
+    rk,
+    env,
+):  # pragma: no cover - compiled
     """:func:`step_many` with caller-owned work arrays (:func:`scratch`): a caller stepping wrists one
     call at a time (VariedPlant, per scenario) allocates them once, not per wrist and tick."""
     n = q.size
@@ -84,8 +154,28 @@ def step_many_into(n_steps, u, thermal, q, qd, w, heating, T_prev, load, complia
                 else:
                     y_mem = p0 * (mem_d[0] * math.tanh(mem_d[1] * T + mem_d[2]) + mem_d[3])
                 y_geo = e0 - x_mm if side == 0 else e0 + x_mm
-                m, dy, res = _solve_load_into(T, y_geo, w[i], w_now, y_mem, load[i], stacked, edges, r, p, m_lo,
-                                              m_hi, scale, c_el, k_f, m_max, tol, max_it, env_c, env_s)
+                m, dy, res = _solve_load_into(
+                    T,
+                    y_geo,
+                    w[i],
+                    w_now,
+                    y_mem,
+                    load[i],
+                    stacked,
+                    edges,
+                    r,
+                    p,
+                    m_lo,
+                    m_hi,
+                    scale,
+                    c_el,
+                    k_f,
+                    m_max,
+                    tol,
+                    max_it,
+                    env_c,
+                    env_s,
+                )
                 w[i, :] = w_now
                 load[i] = m
                 compliance[i] = dy
@@ -100,20 +190,60 @@ def step_many_into(n_steps, u, thermal, q, qd, w, heating, T_prev, load, complia
             if q[j] <= q_min or q[j] >= q_max:
                 flags[j, 3] = True
 
+
 def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
     """The kernel's constant arrays from a plant.PlantParams (see :func:`step_many`)."""
     from sma_wrist.core.joint.dynamics import G
+
     tp, hp, mg, jp = params.thermal, params.hysteresis, params.muscle, params.joint
     th_coef = thermal_constants(tp)
     m_lo, m_hi = hp.load_range
-    mech = np.array([params.dt, mg.length_scale, mg.elastic_mm_per_kgf, hp.k_f, m_lo, m_hi, mg.max_load_kgf,
-                     params.load_tolerance_mm, 60.0, hp.p0, hp.T_valid[0], hp.T_valid[1],
-                     params.max_muscle_temperature_C, params.preload_elongation_mm,
-                     mg.n_wires * G * jp.r_eff_m, jp.r_eff_m], dtype=float)
-    joint = np.array([jp.joint_inertia_kgm2, jp.lever_m, jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm,
-                      jp.stick_velocity_rad_s, jp.q_neutral_rad, jp.q_min_rad, jp.q_max_rad, G], dtype=float)
+    mech = np.array(
+        [
+            params.dt,
+            mg.length_scale,
+            mg.elastic_mm_per_kgf,
+            hp.k_f,
+            m_lo,
+            m_hi,
+            mg.max_load_kgf,
+            params.load_tolerance_mm,
+            60.0,
+            hp.p0,
+            hp.T_valid[0],
+            hp.T_valid[1],
+            params.max_muscle_temperature_C,
+            params.preload_elongation_mm,
+            mg.n_wires * G * jp.r_eff_m,
+            jp.r_eff_m,
+        ],
+        dtype=float,
+    )
+    joint = np.array(
+        [
+            jp.joint_inertia_kgm2,
+            jp.lever_m,
+            jp.coulomb_Nm,
+            jp.viscous_Nms,
+            jp.static_Nm,
+            jp.stick_velocity_rad_s,
+            jp.q_neutral_rad,
+            jp.q_min_rad,
+            jp.q_max_rad,
+            G,
+        ],
+        dtype=float,
+    )
     env = hp.envelopes
     stacked = np.ascontiguousarray(np.concatenate([env.a, env.b], axis=1).transpose(0, 2, 1))
-    return (th_coef, mech, np.ascontiguousarray(stacked), np.ascontiguousarray(env.edges_kg, dtype=float),
-            np.ascontiguousarray(hp.thresholds, dtype=float), np.ascontiguousarray(hp.weights, dtype=float),
-            np.ascontiguousarray(hp.c, dtype=float), np.ascontiguousarray(hp.d, dtype=float), joint)
+    return (
+        th_coef,
+        mech,
+        np.ascontiguousarray(stacked),
+        np.ascontiguousarray(env.edges_kg, dtype=float),
+        np.ascontiguousarray(hp.thresholds, dtype=float),
+        np.ascontiguousarray(hp.weights, dtype=float),
+        np.ascontiguousarray(hp.c, dtype=float),
+        np.ascontiguousarray(hp.d, dtype=float),
+        joint,
+    )

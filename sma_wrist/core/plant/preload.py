@@ -9,6 +9,7 @@ set: the smallest e0 with which slow antagonistic swings between the window's en
 target range at every payload of the given range (the lightest reaches least far down, the heaviest
 least far up), found by scans of the plant itself (all candidates of a scan in one batched run).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -29,7 +30,9 @@ TARGET_HALF_RANGE_RAD = math.radians(30.0)
 CALIBRATION_PAYLOAD_KG = (0.0, 0.7)
 
 
-def reachable_window(thermal: th.ThermalParams, controllers_C: tuple[float, float] | None = None) -> tuple[float, float]:
+def reachable_window(
+    thermal: th.ThermalParams, controllers_C: tuple[float, float] | None = None
+) -> tuple[float, float]:
     """(coldest, hottest) muscle temperature [degC] the TEMs hold at their command limits (steady states of
     Eqs. 4.13-4.14 at u_min_V / u_max_V), inside ``controllers_C`` (the window the controllers may ask for)."""
     ss, _ = th.steady_state(thermal, np.array([[thermal.u_min_V, thermal.u_min_V], [thermal.u_max_V, thermal.u_max_V]]))
@@ -39,8 +42,15 @@ def reachable_window(thermal: th.ThermalParams, controllers_C: tuple[float, floa
     return cold, hot
 
 
-def swing_range(params: PlantParams, payload_kg: np.ndarray, T_lo_C: float, T_hi_C: float,
-                period_s: float = 60.0, dt: float = 1e-2, cycles: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
+def swing_range(
+    params: PlantParams,
+    payload_kg: np.ndarray,
+    T_lo_C: float,
+    T_hi_C: float,
+    period_s: float = 60.0,
+    dt: float = 1e-2,
+    cycles: float = 1.5,
+) -> tuple[np.ndarray, np.ndarray]:
     """(q_min, q_max) [rad] per payload after the first half cycle of slow antagonistic temperature swings.
 
     Muscle temperatures prescribed (no thermal model): T_1 from T_lo_C to T_hi_C and back as a raised
@@ -62,8 +72,9 @@ def swing_range(params: PlantParams, payload_kg: np.ndarray, T_lo_C: float, T_hi
     return q_min, q_max
 
 
-def reach_margins(params: PlantParams, preload_mm: np.ndarray, window_C: tuple[float, float],
-                  payload_kg: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+def reach_margins(
+    params: PlantParams, preload_mm: np.ndarray, window_C: tuple[float, float], payload_kg: tuple[float, float]
+) -> tuple[np.ndarray, np.ndarray]:
     """(down, up) [rad] per pre-load in ``preload_mm``: how far the lightest payload swings below
     q_neutral - 30 deg and the heaviest above q_neutral + 30 deg (:func:`swing_range`; >= 0: reached).
 
@@ -79,10 +90,14 @@ def reach_margins(params: PlantParams, preload_mm: np.ndarray, window_C: tuple[f
     return (q_n - TARGET_HALF_RANGE_RAD) - q_min[0::2], q_max[1::2] - (q_n + TARGET_HALF_RANGE_RAD)
 
 
-def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
-                      payload_kg: tuple[float, float] = CALIBRATION_PAYLOAD_KG,
-                      bracket_mm: tuple[float, float] = (0.5, 4.0),
-                      step_mm: float = 0.25, tolerance_mm: float = 0.01) -> float:
+def calibrate_preload(
+    params: PlantParams,
+    window_C: tuple[float, float],
+    payload_kg: tuple[float, float] = CALIBRATION_PAYLOAD_KG,
+    bracket_mm: tuple[float, float] = (0.5, 4.0),
+    step_mm: float = 0.25,
+    tolerance_mm: float = 0.01,
+) -> float:
     """Pre-load elongation e0 [mm] (Eq. 4.17) for ``params.hysteresis`` in the temperature window ``window_C`` [degC].
 
     The smallest e0 in ``bracket_mm`` with which q_neutral +- 30 deg is reachable quasi-statically
@@ -93,21 +108,30 @@ def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
     lo_C, hi_C = (float(v) for v in window_C)
     m_lo, m_hi = (float(v) for v in payload_kg)
     a, b = (float(v) for v in bracket_mm)
-    if not (np.isfinite([lo_C, hi_C, m_lo, m_hi, a, b, step_mm, tolerance_mm]).all() and lo_C < hi_C
-            and 0.0 <= m_lo <= m_hi <= 2.0 and 0.0 < a < b and 0.0 < tolerance_mm <= step_mm):
-        raise ParameterError('pre-load calibration needs a window lo < hi [degC], payloads 0 <= lo <= hi <= 2 kg, '
-                             f'a bracket 0 < lo < hi [mm] and 0 < tolerance <= step; got {window_C!r}, {payload_kg!r}, '
-                             f'{bracket_mm!r}, {tolerance_mm!r}, {step_mm!r}')
+    if not (
+        np.isfinite([lo_C, hi_C, m_lo, m_hi, a, b, step_mm, tolerance_mm]).all()
+        and lo_C < hi_C
+        and 0.0 <= m_lo <= m_hi <= 2.0
+        and 0.0 < a < b
+        and 0.0 < tolerance_mm <= step_mm
+    ):
+        raise ParameterError(
+            'pre-load calibration needs a window lo < hi [degC], payloads 0 <= lo <= hi <= 2 kg, '
+            f'a bracket 0 < lo < hi [mm] and 0 < tolerance <= step; got {window_C!r}, {payload_kg!r}, '
+            f'{bracket_mm!r}, {tolerance_mm!r}, {step_mm!r}'
+        )
     q_n = params.joint.q_neutral_rad
     q_low, q_high = q_n - TARGET_HALF_RANGE_RAD, q_n + TARGET_HALF_RANGE_RAD
     coarse = np.arange(a, b + 0.5 * step_mm, step_mm)
     down, up = reach_margins(params, coarse, (lo_C, hi_C), (m_lo, m_hi))
     hit = np.flatnonzero(up >= 0.0)
     if hit.size == 0:
-        raise ParameterError(f'{params.hysteresis.name}: no pre-load of {a:g}-{b:g} mm lifts {m_hi:g} kg to '
-                             f'{q_high:.3f} rad with the muscles at {lo_C:.1f}-{hi_C:.1f} degC (best '
-                             f'{q_high + up.max():.3f} rad at {coarse[up.argmax()]:.2f} mm): a lighter payload or a '
-                             'hotter window is needed')
+        raise ParameterError(
+            f'{params.hysteresis.name}: no pre-load of {a:g}-{b:g} mm lifts {m_hi:g} kg to '
+            f'{q_high:.3f} rad with the muscles at {lo_C:.1f}-{hi_C:.1f} degC (best '
+            f'{q_high + up.max():.3f} rad at {coarse[up.argmax()]:.2f} mm): a lighter payload or a '
+            'hotter window is needed'
+        )
     e0, down_e0 = float(coarse[hit[0]]), float(down[hit[0]])
     step = step_mm
     while hit[0] > 0 and step > tolerance_mm * 1.001:
@@ -120,7 +144,9 @@ def calibrate_preload(params: PlantParams, window_C: tuple[float, float],
         if ok.size:
             e0, down_e0 = float(fine[ok[0]]), float(down[ok[0]])
     if down_e0 < 0.0:
-        raise ParameterError(f'{params.hysteresis.name}: with the {e0:.2f} mm pre-load that lifts {m_hi:g} kg to '
-                             f'{q_high:.3f} rad, {m_lo:g} kg reaches down only to {q_low - down_e0:.3f} rad '
-                             f'(target {q_low:.3f}) in {lo_C:.1f}-{hi_C:.1f} degC: no pre-load reaches the whole range')
+        raise ParameterError(
+            f'{params.hysteresis.name}: with the {e0:.2f} mm pre-load that lifts {m_hi:g} kg to '
+            f'{q_high:.3f} rad, {m_lo:g} kg reaches down only to {q_low - down_e0:.3f} rad '
+            f'(target {q_low:.3f}) in {lo_C:.1f}-{hi_C:.1f} degC: no pre-load reaches the whole range'
+        )
     return round(e0, 3)

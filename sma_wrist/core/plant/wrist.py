@@ -14,6 +14,7 @@ One step of length dt (doc/explanation/model.md):
 Everything is vectorised over N scenarios (payloads, commands, initial states); both
 muscles of all scenarios are stacked on one axis (2N) so each numpy call serves all.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
@@ -66,15 +67,18 @@ class PlantParams:
             raise ModelInputError('load_tolerance_mm', self.load_tolerance_mm, '(0, 1e-3]', 'mm')
 
     @classmethod
-    def from_files(cls, hysteresis_file: str | Path | None = None, thermal_file: str | Path | None = None,
-                   **fields: Any) -> 'PlantParams':
+    def from_files(
+        cls, hysteresis_file: str | Path | None = None, thermal_file: str | Path | None = None, **fields: Any
+    ) -> PlantParams:
         """The wrist with the wire of ``hysteresis_file`` (``sma-wrist identify hysteresis``; empty: the built-in set)
         and the TEMs of ``thermal_file`` (``identify thermal``; empty: Table 4.9), still clipped at the driver rating;
         ``fields``: the other fields. What plant_sim, hardware_bridge and diagnose build from their parameters."""
         from sma_wrist.core.hysteresis.params_file import hysteresis_params
+
         p = cls(hysteresis=hysteresis_params(hysteresis_file or None), **fields)
         if thermal_file:  # identified TEMs; the plant still clips at the driver rating
             from sma_wrist.core.thermal.params_file import load_thermal_file
+
             lim = p.thermal
             p = replace(p, thermal=load_thermal_file(thermal_file).with_limits(lim.u_min_V, lim.u_max_V))
         return p
@@ -96,10 +100,20 @@ class PlantState:
     payload_kg: FloatArray  # (N,)
     flags: dict[str, BoolArray] = field(default_factory=dict)
 
-    def copy(self) -> 'PlantState':
-        return PlantState(self.t, self.thermal.copy(), self.q.copy(), self.qd.copy(), self.w.copy(),
-                          self.heating.copy(), self.T_prev.copy(), self.load_kgf.copy(), self.compliance.copy(),
-                          self.payload_kg.copy(), {k: v.copy() for k, v in self.flags.items()})
+    def copy(self) -> PlantState:
+        return PlantState(
+            self.t,
+            self.thermal.copy(),
+            self.q.copy(),
+            self.qd.copy(),
+            self.w.copy(),
+            self.heating.copy(),
+            self.T_prev.copy(),
+            self.load_kgf.copy(),
+            self.compliance.copy(),
+            self.payload_kg.copy(),
+            {k: v.copy() for k, v in self.flags.items()},
+        )
 
 
 def _within(u: FloatArray, lo: float, hi: float) -> bool:
@@ -145,8 +159,18 @@ class WristPlant:
         T = th.muscle_temperature(p.thermal, thermal).T.reshape(-1)  # (2N,)
         m0 = np.full(2 * n, 0.8)
         lower, upper = play_bounds(p.hysteresis, T, m0)
-        state = PlantState(0.0, thermal, np.full(n, p.joint.q_neutral_rad), np.zeros(n), upper.copy(),
-                           np.zeros(2 * n, bool), T.copy(), m0, np.ones(2 * n), payload_kg.copy())
+        state = PlantState(
+            0.0,
+            thermal,
+            np.full(n, p.joint.q_neutral_rad),
+            np.zeros(n),
+            upper.copy(),
+            np.zeros(2 * n, bool),
+            T.copy(),
+            m0,
+            np.ones(2 * n),
+            payload_kg.copy(),
+        )
         if q0 is None:
             state.q = self._static_equilibrium(state)
         else:
@@ -173,7 +197,9 @@ class WristPlant:
         return 0.5 * (lo + hi)
 
     # ------------------------------------------------------------------ step
-    def _update_loads(self, state: PlantState, T: FloatArray, commit: bool) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
+    def _update_loads(
+        self, state: PlantState, T: FloatArray, commit: bool
+    ) -> tuple[FloatArray, FloatArray, BoolArray, BoolArray]:
         """Solve the wire loads at the current angle; returns (torque, stiffness, slack, overload)."""
         p = self.params
         x = p.joint.chain_displacement_mm(state.q)
@@ -184,17 +210,19 @@ class WristPlant:
             state.load_kgf = sol.load_kgf
             state.compliance = sol.compliance_mm_per_kgf
         return self._torque_and_stiffness(sol.load_kgf, sol.compliance_mm_per_kgf) + (
-            sol.slack[: self.n] | sol.slack[self.n:], sol.overload[: self.n] | sol.overload[self.n:])
+            sol.slack[: self.n] | sol.slack[self.n :],
+            sol.overload[: self.n] | sol.overload[self.n :],
+        )
 
     def _torque(self, load: FloatArray) -> FloatArray:
         """(N,) net muscle torque [N m] of the stacked (2N,) wire loads [kgf]: N g R_eff (m1 - m2)."""
         p = self.params
-        return p.muscle.n_wires * G * p.joint.r_eff_m * (load[: self.n] - load[self.n:])
+        return p.muscle.n_wires * G * p.joint.r_eff_m * (load[: self.n] - load[self.n :])
 
     def _torque_and_stiffness(self, load: FloatArray, compliance: FloatArray) -> tuple[FloatArray, FloatArray]:
         p = self.params
         n_g_r = p.muscle.n_wires * G * p.joint.r_eff_m
-        c1, c2 = compliance[: self.n], compliance[self.n:]
+        c1, c2 = compliance[: self.n], compliance[self.n :]
         torque = self._torque(load)
         # d tau/dq = -N g R_eff (R_mm / c1 + R_mm / c2) with R_mm = dx/dq in mm/rad
         stiffness = n_g_r * 1e3 * p.joint.r_eff_m * (1.0 / c1 + 1.0 / c2)
@@ -263,8 +291,13 @@ class WristPlant:
         flags = np.zeros((self.n, 4), bool)
         plant_kernel.step_many(int(n_steps), uc, *arrays, flags, *self._kernel_constants[1])
         s.t += n_steps * p.dt
-        s.flags = {'command_saturated': clipped, 'over_temperature': flags[:, 0], 'slack': flags[:, 1],
-                   'overload': flags[:, 2], 'at_stop': flags[:, 3]}
+        s.flags = {
+            'command_saturated': clipped,
+            'over_temperature': flags[:, 0],
+            'slack': flags[:, 1],
+            'overload': flags[:, 2],
+            'at_stop': flags[:, 3],
+        }
         return s
 
     def step_mechanics(self, muscle_temperature_C: ArrayLike) -> PlantState:
@@ -332,8 +365,16 @@ class WristPlant:
             u = u[:, None, :]
         k_total = u.shape[0]
         rows = range(0, k_total, record_every)
-        out = {k: np.empty((len(rows),) + shape) for k, shape in
-               (('t', ()), ('q', (self.n,)), ('qd', (self.n,)), ('T', (self.n, 2)), ('stress', (self.n, 2)))}
+        out = {
+            k: np.empty((len(rows),) + shape)
+            for k, shape in (
+                ('t', ()),
+                ('q', (self.n,)),
+                ('qd', (self.n,)),
+                ('T', (self.n, 2)),
+                ('stress', (self.n, 2)),
+            )
+        }
         j = 0
         for k in range(k_total):
             self.step(u[k])

@@ -34,6 +34,7 @@ Layout: a state is an array of shape (N, L, 2): N scenarios, L layers (2 for the
 for the seed's one-module experiment), faces [muscle (T1), exchanger (T2)], degC. A command
 is (N, L) volts. Everything is vectorised over scenarios.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -171,40 +172,53 @@ class ThermalParams:
     @property
     def effective_ambient_C(self) -> tuple[float, float]:
         """(muscle-face, exchanger-face) ambient temperatures the model uses [degC]."""
-        return (float(self._k_inf[0] / self.muscle_face.loss_per_s),
-                float(self._k_inf[1] / self.exchanger_face.loss_per_s))
+        return (
+            float(self._k_inf[0] / self.muscle_face.loss_per_s),
+            float(self._k_inf[1] / self.exchanger_face.loss_per_s),
+        )
 
     @property
     def K_inf(self) -> FloatArray:
         """Effective K_inf of both faces (Eq. 4.15) [degC/s]."""
         return self._k_inf.copy()
 
-    def with_ambient_shift(self, shift_C: float, exchanger_shift_C: float | None = None) -> 'ThermalParams':
+    def with_ambient_shift(self, shift_C: float, exchanger_shift_C: float | None = None) -> ThermalParams:
         """Copy with the ambients moved by shift_C (exchanger face by exchanger_shift_C, default same)."""
         a0, a1 = self.effective_ambient_C
         s1 = shift_C if exchanger_shift_C is None else exchanger_shift_C
         return dataclasses.replace(self, ambient_C=(a0 + shift_C, a1 + s1))
 
-    def scaled(self, gain: float = 1.0, losses: float = 1.0, joule: float = 1.0,
-               ambient_shift_C: float = 0.0) -> 'ThermalParams':
+    def scaled(
+        self, gain: float = 1.0, losses: float = 1.0, joule: float = 1.0, ambient_shift_C: float = 0.0
+    ) -> ThermalParams:
         """Copy as another module of this kind: drive gain input_per_volt x ``gain``; the muscle face's K_Tinf,
         K_T and K_inf x ``losses`` (its ambient unchanged, Eq. 4.15); both faces' K_R x ``joule``; both faces'
         ambients + ``ambient_shift_C`` [degC]. The plant's thermal extensions (core.plant.extensions.plant_params)
         and the online estimate's scales (core.thermal.online.with_scales) are these."""
         amb = self.effective_ambient_C
-        mf = dataclasses.replace(self.muscle_face, K_T_inf=self.muscle_face.K_T_inf * losses,
-                                 K_T=self.muscle_face.K_T * losses, K_inf=self.muscle_face.K_inf * losses,
-                                 K_R=self.muscle_face.K_R * joule)
+        mf = dataclasses.replace(
+            self.muscle_face,
+            K_T_inf=self.muscle_face.K_T_inf * losses,
+            K_T=self.muscle_face.K_T * losses,
+            K_inf=self.muscle_face.K_inf * losses,
+            K_R=self.muscle_face.K_R * joule,
+        )
         xf = dataclasses.replace(self.exchanger_face, K_R=self.exchanger_face.K_R * joule)
-        return dataclasses.replace(self, muscle_face=mf, exchanger_face=xf, input_per_volt=self.input_per_volt * gain,
-                                   ambient_C=(amb[0] + ambient_shift_C, amb[1] + ambient_shift_C))
+        return dataclasses.replace(
+            self,
+            muscle_face=mf,
+            exchanger_face=xf,
+            input_per_volt=self.input_per_volt * gain,
+            ambient_C=(amb[0] + ambient_shift_C, amb[1] + ambient_shift_C),
+        )
 
-    def with_limits(self, u_min_V: float, u_max_V: float) -> 'ThermalParams':
+    def with_limits(self, u_min_V: float, u_max_V: float) -> ThermalParams:
         """Copy with other command limits (e.g. for characterisation beyond the defaults)."""
         return dataclasses.replace(self, u_min_V=u_min_V, u_max_V=u_max_V)
 
 
 # ----------------------------------------------------------------------- commands
+
 
 def model_input(params: ThermalParams, command_V: ArrayLike) -> FloatArray:
     """Eq. 4.13/4.14 input I from the drive voltage u: I = -input_per_volt * u (u > 0 heats T1)."""
@@ -238,6 +252,7 @@ def saturate_command(params: ThermalParams, command_V: ArrayLike) -> tuple[Float
 
 
 # --------------------------------------------------------------------- dynamics
+
 
 def rate_terms(params: ThermalParams, state: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """(A, B, D) with dT/dt = A I^2 + B I + D per face (Eqs. 4.13/4.14, the form of Eq. 5.44).
@@ -284,13 +299,13 @@ def check_state(state: ArrayLike) -> FloatArray:
 
 def check_dt(params: ThermalParams, dt: float) -> None:
     """Raise ModelInputError unless 0 < dt <= dt_max_s."""
-    if not (isinstance(dt, (int, float, np.floating, np.integer)) and np.isfinite(dt)
-            and 0 < dt <= params.dt_max_s):
+    if not (isinstance(dt, (int, float, np.floating, np.integer)) and np.isfinite(dt) and 0 < dt <= params.dt_max_s):
         raise ModelInputError('thermal step dt', dt, f'(0, {params.dt_max_s:g}]', 's')
 
 
-def _apply_M(out: FloatArray, tmp: FloatArray, v: FloatArray, cs: FloatArray, cc: FloatArray,
-             coupling: float, n_layers: int) -> None:
+def _apply_M(
+    out: FloatArray, tmp: FloatArray, v: FloatArray, cs: FloatArray, cc: FloatArray, coupling: float, n_layers: int
+) -> None:
     """out[0:2] = M v for the face-major layout: v is (3, M) with v[2] = v[0] (so v[1:3] is v swapped)."""
     np.multiply(cs, v[0:2], out=out[0:2])
     np.multiply(cc, v[1:3], out=tmp)
@@ -300,8 +315,9 @@ def _apply_M(out: FloatArray, tmp: FloatArray, v: FloatArray, cs: FloatArray, cc
         out[0].reshape(-1, n_layers)[...] += coupling * m[:, ::-1]
 
 
-def step(params: ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: float,
-         *, validate: bool = True) -> FloatArray:
+def step(
+    params: ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: float, *, validate: bool = True
+) -> FloatArray:
     """One classical RK4 step (the seed's integrator, Sec. 4.3.2) of Eqs. 4.13/4.14.
 
     The command is held over the step (zero-order hold, as a DAC does), so over one step the
@@ -326,9 +342,20 @@ def step(params: ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: floa
     if u.shape + (2,) == T.shape:  # fast path: no broadcasting needed
         if _jm.AVAILABLE and u.ndim == 2:  # the same operations compiled, wrist by wrist (kernel.step_horner)
             out = np.empty(T.shape)
-            _tk.step_horner(np.ascontiguousarray(T), np.ascontiguousarray(u), float(dt), float(params.input_per_volt),
-                            params._k_at, params._k_t, params._col_neg_tinf[:, 0], params._k_tc, params._k_r,
-                            params._k_inf, float(params.coupling_per_s), out)
+            _tk.step_horner(
+                np.ascontiguousarray(T),
+                np.ascontiguousarray(u),
+                float(dt),
+                float(params.input_per_volt),
+                params._k_at,
+                params._k_t,
+                params._col_neg_tinf[:, 0],
+                params._k_tc,
+                params._k_r,
+                params._k_inf,
+                float(params.coupling_per_s),
+                out,
+            )
             return out
         shape = T.shape
     else:
@@ -370,8 +397,15 @@ def step(params: ThermalParams, state: ArrayLike, command_V: ArrayLike, dt: floa
     return out
 
 
-def simulate(params: ThermalParams, commands_V: ArrayLike, dt: float, state0: ArrayLike | None = None,
-             *, layers: int = 2, validate: bool = True) -> FloatArray:
+def simulate(
+    params: ThermalParams,
+    commands_V: ArrayLike,
+    dt: float,
+    state0: ArrayLike | None = None,
+    *,
+    layers: int = 2,
+    validate: bool = True,
+) -> FloatArray:
     """Integrate a command history (K, N, L) or (K, L) [V]; returns temperatures (K + 1, N, L, 2).
 
     state0 defaults to :func:`rest_state`. Row k + 1 is the state after command k was held dt.
@@ -395,6 +429,7 @@ def simulate(params: ThermalParams, commands_V: ArrayLike, dt: float, state0: Ar
 
 
 # ------------------------------------------------------------ analytic results
+
 
 def system_matrix(params: ThermalParams, command_V: ArrayLike) -> tuple[FloatArray, FloatArray]:
     """(M, b) with dT/dt = M T + b for held commands (N, L): M (N, 2L, 2L), b (N, 2L).
@@ -454,6 +489,7 @@ def out_of_window(params: ThermalParams, state: ArrayLike) -> BoolArray:
 
 # --------------------------------------------------------------- characterisation
 
+
 @dataclass(frozen=True)
 class ConstantCommandCharacterisation:
     """Result of :func:`characterise_constant_commands` (volts, degC)."""
@@ -466,9 +502,14 @@ class ConstantCommandCharacterisation:
     steady_at_cooling_max_C: tuple[float, float]
 
 
-def characterise_constant_commands(params: ThermalParams, span_V: float = 40.0, resolution_V: float = 0.01,
-                                   horizon_s: float = 3000.0, dt: float = 0.5,
-                                   converged_rate: float = 1e-3) -> ConstantCommandCharacterisation:
+def characterise_constant_commands(
+    params: ThermalParams,
+    span_V: float = 40.0,
+    resolution_V: float = 0.01,
+    horizon_s: float = 3000.0,
+    dt: float = 0.5,
+    converged_rate: float = 1e-3,
+) -> ConstantCommandCharacterisation:
     """Find the largest constant |u| per direction that stays physical (the runaway of Eqs. 4.13/4.14).
 
     One module (L = 1) starts at the zero-drive rest state; every u on a grid over
@@ -498,18 +539,26 @@ def characterise_constant_commands(params: ThermalParams, span_V: float = 40.0, 
     _, stable = steady_state(p, cmd)
     ss, _ = steady_state(p, np.array([[heat], [cool]]))
     return ConstantCommandCharacterisation(
-        heat, cool, (float(u[stable].min()), float(u[stable].max())),
+        heat,
+        cool,
+        (float(u[stable].min()), float(u[stable].max())),
         (float(u[converged].min()), float(u[converged].max())),
-        (float(ss[0, 0, 0]), float(ss[0, 0, 1])), (float(ss[1, 0, 0]), float(ss[1, 0, 1])))
+        (float(ss[0, 0, 0]), float(ss[0, 0, 1])),
+        (float(ss[1, 0, 0]), float(ss[1, 0, 1])),
+    )
 
 
 #: Frequencies of the seed's identification sines (Sec. 4.3.1) [Hz].
 SEED_SINE_FREQUENCIES_HZ = (1 / 128, 1 / 64, 1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0)
 
 
-def sine_response(params: ThermalParams, amplitude_V: float = 12.0,
-                  frequencies_Hz: tuple[float, ...] = SEED_SINE_FREQUENCIES_HZ, duration_s: float = 1024.0,
-                  dt: float = 0.01) -> dict[str, FloatArray]:
+def sine_response(
+    params: ThermalParams,
+    amplitude_V: float = 12.0,
+    frequencies_Hz: tuple[float, ...] = SEED_SINE_FREQUENCIES_HZ,
+    duration_s: float = 1024.0,
+    dt: float = 0.01,
+) -> dict[str, FloatArray]:
     """One module (L = 1) from rest under u = A sin(2 pi f t), the seed's Sec. 4.3.1 experiment.
 
     Returns per frequency the (min, max) of each face over the last 128 s (periodic steady
@@ -537,38 +586,59 @@ def sine_response(params: ThermalParams, amplitude_V: float = 12.0,
             if k >= k_tail:
                 np.minimum(lo, faces, out=lo)
                 np.maximum(hi, faces, out=hi)
-    return {'frequency_Hz': f, 'tail_min_C': lo, 'tail_max_C': hi, 'run_min_C': lo_all, 'run_max_C': hi_all,
-            'left_window': left}
+    return {
+        'frequency_Hz': f,
+        'tail_min_C': lo,
+        'tail_max_C': hi,
+        'run_min_C': lo_all,
+        'run_max_C': hi_all,
+        'left_window': left,
+    }
 
 
 def _main() -> None:  # pragma: no cover - a report, exercised by doc/explanation/model.md
     import dataclasses as dc
+
     p = ThermalParams()
-    print('Table 4.9 implied ambients (Eq. 4.15): T1 %.3f degC, T2 %.3f degC' % (
-        p.muscle_face.implied_ambient_C, p.exchanger_face.implied_ambient_C))
-    print('zero-drive rest state: muscle face %.3f, exchanger face %.3f degC' % tuple(rest_state(p, 1, 1)[0, 0]))
+    print(
+        f'Table 4.9 implied ambients (Eq. 4.15): T1 {p.muscle_face.implied_ambient_C:.3f} degC, T2 {p.exchanger_face.implied_ambient_C:.3f} degC'
+    )
+    print(
+        'zero-drive rest state: muscle face {:.3f}, exchanger face {:.3f} degC'.format(
+            *tuple(rest_state(p, 1, 1)[0, 0])
+        )
+    )
     for scale in (p.input_per_volt, 1.0):
         q = dc.replace(p, input_per_volt=scale)
         c = characterise_constant_commands(q)
         print(f'\ninput_per_volt = {scale:g} (I = -{scale:g} u); window {p.window_C} degC on every face')
-        print(f'  largest held heating command  u = {c.heating_max_V:+.2f} V (I = {-scale * c.heating_max_V:+.3f}),'
-              f' steady faces {c.steady_at_heating_max_C[0]:.2f} / {c.steady_at_heating_max_C[1]:.2f} degC')
-        print(f'  largest held cooling command  u = {c.cooling_max_V:+.2f} V (I = {-scale * c.cooling_max_V:+.3f}),'
-              f' steady faces {c.steady_at_cooling_max_C[0]:.2f} / {c.steady_at_cooling_max_C[1]:.2f} degC')
-        print(f'  linearly stable for u in [{c.stable_range_V[0]:+.2f}, {c.stable_range_V[1]:+.2f}] V;'
-              f' converged within 3000 s for u in [{c.converged_range_V[0]:+.2f}, {c.converged_range_V[1]:+.2f}] V')
+        print(
+            f'  largest held heating command  u = {c.heating_max_V:+.2f} V (I = {-scale * c.heating_max_V:+.3f}),'
+            f' steady faces {c.steady_at_heating_max_C[0]:.2f} / {c.steady_at_heating_max_C[1]:.2f} degC'
+        )
+        print(
+            f'  largest held cooling command  u = {c.cooling_max_V:+.2f} V (I = {-scale * c.cooling_max_V:+.3f}),'
+            f' steady faces {c.steady_at_cooling_max_C[0]:.2f} / {c.steady_at_cooling_max_C[1]:.2f} degC'
+        )
+        print(
+            f'  linearly stable for u in [{c.stable_range_V[0]:+.2f}, {c.stable_range_V[1]:+.2f}] V;'
+            f' converged within 3000 s for u in [{c.converged_range_V[0]:+.2f}, {c.converged_range_V[1]:+.2f}] V'
+        )
         r = sine_response(q)
         print('  12 V sine from rest, 1024 s (min/max over the run; last 128 s), muscle face T1 | exchanger face T2:')
         for i, f in enumerate(r['frequency_Hz']):
-            print(f'    f = 1/{1 / f:<5g} Hz  T1 {r["run_min_C"][i, 0]:9.4g} .. {r["run_max_C"][i, 0]:<9.4g}'
-                  f' ({r["tail_min_C"][i, 0]:7.4g} .. {r["tail_max_C"][i, 0]:<7.4g})'
-                  f' | T2 {r["run_min_C"][i, 1]:9.4g} .. {r["run_max_C"][i, 1]:<9.4g}'
-                  f' ({r["tail_min_C"][i, 1]:7.4g} .. {r["tail_max_C"][i, 1]:<7.4g})'
-                  f'  left window: {bool(r["left_window"][i])}')
+            print(
+                f'    f = 1/{1 / f:<5g} Hz  T1 {r["run_min_C"][i, 0]:9.4g} .. {r["run_max_C"][i, 0]:<9.4g}'
+                f' ({r["tail_min_C"][i, 0]:7.4g} .. {r["tail_max_C"][i, 0]:<7.4g})'
+                f' | T2 {r["run_min_C"][i, 1]:9.4g} .. {r["run_max_C"][i, 1]:<9.4g}'
+                f' ({r["tail_min_C"][i, 1]:7.4g} .. {r["tail_max_C"][i, 1]:<7.4g})'
+                f'  left window: {bool(r["left_window"][i])}'
+            )
     print(f'\ndefault limits: u in [{p.u_min_V:+g}, {p.u_max_V:+g}] V at input_per_volt = {p.input_per_volt:g}')
     ss, _ = steady_state(p, np.array([[p.u_max_V], [p.u_min_V]]))
-    print('  steady faces at u_max: %.2f / %.2f degC; at u_min: %.2f / %.2f degC' % (
-        ss[0, 0, 0], ss[0, 0, 1], ss[1, 0, 0], ss[1, 0, 1]))
+    print(
+        f'  steady faces at u_max: {ss[0, 0, 0]:.2f} / {ss[0, 0, 1]:.2f} degC; at u_min: {ss[1, 0, 0]:.2f} / {ss[1, 0, 1]:.2f} degC'
+    )
 
 
 if __name__ == '__main__':  # pragma: no cover

@@ -37,13 +37,14 @@ a power of I); it stays fixed (doc/explanation/model.md).
 Error statistics (Table 4.10): e = measured - simulated on the evaluated samples, in degC and
 in % of the measured range of that face in that run (the form of Eq. 4.3).
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -106,13 +107,15 @@ class ThermalRecord:
             raise ThermalIdentificationError(f'{self.name}: the drive voltage must be finite at every sample')
         faces = [f for f in range(2) if np.isfinite(T[:, f]).all()]
         if MUSCLE not in faces:
-            raise ThermalIdentificationError(f'{self.name}: the T1 (muscle face) temperature must be finite at '
-                                             'every sample of the grid')
+            raise ThermalIdentificationError(
+                f'{self.name}: the T1 (muscle face) temperature must be finite at every sample of the grid'
+            )
         object.__setattr__(self, 'u', u)
         u2 = u * u if self.u2 is None else np.asarray(self.u2, dtype=float)
         if u2.shape != u.shape or not np.isfinite(u2).all() or (u2 < u * u - 1e-9 * (1 + u * u)).any():
-            raise ThermalIdentificationError(f'{self.name}: u2 must be the finite mean square of u over each interval '
-                                             '(>= u^2)')
+            raise ThermalIdentificationError(
+                f'{self.name}: u2 must be the finite mean square of u over each interval (>= u^2)'
+            )
         object.__setattr__(self, 'u2', u2)
         object.__setattr__(self, 'T', T)
         v = np.ones(u.size, bool) if self.valid is None else np.asarray(self.valid, bool)
@@ -136,6 +139,7 @@ MUSCLE, EXCHANGER = th.MUSCLE_FACE, th.EXCHANGER_FACE
 
 
 # ------------------------------------------------------------------------------ parameters
+
 
 def table_of(params: th.ThermalParams) -> FloatArray:
     """(2, 6) Table 4.9 layout [face, FACE_KEYS] of a ThermalParams; K_inf as the model uses it."""
@@ -179,8 +183,10 @@ def _table_from_free(x: NDArray, base_table: FloatArray, faces: Sequence[int]) -
 
 # ------------------------------------------------------------------------------ simulation
 
-def interval_means(t: FloatArray, u: FloatArray, grid: FloatArray, dt: float, hold: str = 'zoh',
-                   sub: int = 8) -> tuple[FloatArray, FloatArray]:
+
+def interval_means(
+    t: FloatArray, u: FloatArray, grid: FloatArray, dt: float, hold: str = 'zoh', sub: int = 8
+) -> tuple[FloatArray, FloatArray]:
     """(mean u, mean u^2) [V, V^2] over each grid interval [g_k, g_k + dt) of a logged drive (t, u).
 
     ``hold``: 'zoh' when the logged value was held until the next sample (a DAC command, a
@@ -209,23 +215,25 @@ def _pad(records: Sequence[ThermalRecord]) -> tuple[FloatArray, FloatArray, Floa
     """u, u2 (K, R), measured T (K, R, 2) with NaN where unmeasured or padded, mask (K, R, 2)."""
     dts = {round(r.dt, 12) for r in records}
     if len(dts) != 1:
-        raise ThermalIdentificationError(f'runs have different sample periods {sorted(dts)} s; resample them to '
-                                         'one grid first')
+        raise ThermalIdentificationError(
+            f'runs have different sample periods {sorted(dts)} s; resample them to one grid first'
+        )
     K = max(r.n for r in records)
     R = len(records)
     u = np.zeros((K, R))
     u2 = np.zeros((K, R))
     T = np.full((K, R, 2), np.nan)
     for j, r in enumerate(records):
-        u[:r.n, j] = r.u
-        u2[:r.n, j] = r.u2
-        T[:r.n, j] = r.T
-        T[:r.n, j][~r.valid] = np.nan
+        u[: r.n, j] = r.u
+        u2[: r.n, j] = r.u2
+        T[: r.n, j] = r.T
+        T[: r.n, j][~r.valid] = np.nan
     return u, u2, T, np.isfinite(T)
 
 
-def simulate_tables(tables: NDArray, input_per_volt: float, u: FloatArray, T0: NDArray, dt: float,
-                    u2: FloatArray | None = None) -> NDArray:
+def simulate_tables(
+    tables: NDArray, input_per_volt: float, u: FloatArray, T0: NDArray, dt: float, u2: FloatArray | None = None
+) -> NDArray:
     """RK4 of Eqs. 4.13/4.14 for parameter tables (N, 2, 6) and runs u (K, R) [V] from T0 (N|1, R, 2).
 
     ``u2`` (K, R) [V^2] is the interval mean of u^2 for the Joule term (default u^2).
@@ -253,16 +261,24 @@ def simulate_tables(tables: NDArray, input_per_volt: float, u: FloatArray, T0: N
         b = kt0 * cur + ktc0
         cc = kt1 * cur + ktc1
         d = kat1 * cur - ktinf1
-        i2 = (cur * cur if u2 is None else (input_per_volt ** 2 * u2[k0:k1])[:, None, :])
+        i2 = cur * cur if u2 is None else (input_per_volt**2 * u2[k0:k1])[:, None, :]
         e0 = kr0 * i2 + kinf0
         e1 = kr1 * i2 + kinf1
         ha, hb, hc, hd = h * a, h * b, h * cc, h * d
         # P = 1 + hM/2 + (hM)^2/6 + (hM)^3/24 by Horner: P = 1 + hM (1/2 + hM (1/6 + hM/24))
         q_a, q_b, q_c, q_d = 1 / 6 + ha / 24, hb / 24, hc / 24, 1 / 6 + hd / 24
-        q_a, q_b, q_c, q_d = (0.5 + ha * q_a + hb * q_c, ha * q_b + hb * q_d,
-                              hc * q_a + hd * q_c, 0.5 + hc * q_b + hd * q_d)
-        p_a, p_b, p_c, p_d = (1 + ha * q_a + hb * q_c, ha * q_b + hb * q_d,
-                              hc * q_a + hd * q_c, 1 + hc * q_b + hd * q_d)
+        q_a, q_b, q_c, q_d = (
+            0.5 + ha * q_a + hb * q_c,
+            ha * q_b + hb * q_d,
+            hc * q_a + hd * q_c,
+            0.5 + hc * q_b + hd * q_d,
+        )
+        p_a, p_b, p_c, p_d = (
+            1 + ha * q_a + hb * q_c,
+            ha * q_b + hb * q_d,
+            hc * q_a + hd * q_c,
+            1 + hc * q_b + hd * q_d,
+        )
         # A = 1 + h P M, c = h P e
         A00 = 1 + h * (p_a * a + p_b * cc)
         A01 = h * (p_a * b + p_b * d)
@@ -277,15 +293,19 @@ def simulate_tables(tables: NDArray, input_per_volt: float, u: FloatArray, T0: N
     return out
 
 
-def simulate_records(params: th.ThermalParams, records: Sequence[ThermalRecord],
-                     base: th.ThermalParams | None = None, sensor_lag_s: float = 0.0) -> list[FloatArray]:
+def simulate_records(
+    params: th.ThermalParams,
+    records: Sequence[ThermalRecord],
+    base: th.ThermalParams | None = None,
+    sensor_lag_s: float = 0.0,
+) -> list[FloatArray]:
     """Free-run simulation of each record (K_r, 2) [degC] from its measured start (see :func:`start_states`), as
     sensors of first-order lag ``sensor_lag_s`` [s] read it (0: the faces themselves)."""
     u, u2, _, _ = _pad(records)
     T0 = start_states(records, base or params)
     sim = simulate_tables(table_of(params)[None], params.input_per_volt, u, T0[None], records[0].dt, u2)
     sim = first_order(sim, sensor_lag_s, records[0].dt)
-    return [sim[:r.n, 0, j] for j, r in enumerate(records)]
+    return [sim[: r.n, 0, j] for j, r in enumerate(records)]
 
 
 def start_states(records: Sequence[ThermalRecord], base: th.ThermalParams) -> FloatArray:
@@ -301,8 +321,10 @@ def start_states(records: Sequence[ThermalRecord], base: th.ThermalParams) -> Fl
 
 # ------------------------------------------------------------------------------ statistics
 
-def error_statistics(measured: FloatArray, simulated: FloatArray, mask: FloatArray | None = None,
-                     span_C: float | None = None) -> dict[str, float]:
+
+def error_statistics(
+    measured: FloatArray, simulated: FloatArray, mask: FloatArray | None = None, span_C: float | None = None
+) -> dict[str, float]:
     """Table 4.10 statistics of e = measured - simulated [degC] and in % of the measured range (Eq. 4.3).
 
     ``span_C`` defaults to the range of ``measured`` over the masked samples.
@@ -313,15 +335,26 @@ def error_statistics(measured: FloatArray, simulated: FloatArray, mask: FloatArr
         raise ThermalIdentificationError('no samples to evaluate')
     span = float(np.ptp(measured[m])) if span_C is None else float(span_C)
     pct = 100.0 * e / max(span, 1e-9)
-    return {'n': int(e.size), 'span_C': span,
-            'mean_C': float(e.mean()), 'std_C': float(e.std()), 'max_C': float(e.max()), 'min_C': float(e.min()),
-            'rms_C': float(np.sqrt(np.mean(e * e))), 'max_abs_C': float(np.abs(e).max()),
-            'mean_pct': float(pct.mean()), 'std_pct': float(pct.std()), 'max_pct': float(pct.max()),
-            'min_pct': float(pct.min()), 'rms_pct': float(np.sqrt(np.mean(pct * pct))),
-            'max_abs_pct': float(np.abs(pct).max())}
+    return {
+        'n': int(e.size),
+        'span_C': span,
+        'mean_C': float(e.mean()),
+        'std_C': float(e.std()),
+        'max_C': float(e.max()),
+        'min_C': float(e.min()),
+        'rms_C': float(np.sqrt(np.mean(e * e))),
+        'max_abs_C': float(np.abs(e).max()),
+        'mean_pct': float(pct.mean()),
+        'std_pct': float(pct.std()),
+        'max_pct': float(pct.max()),
+        'min_pct': float(pct.min()),
+        'rms_pct': float(np.sqrt(np.mean(pct * pct))),
+        'max_abs_pct': float(np.abs(pct).max()),
+    }
 
 
 # ------------------------------------------------------------------------------ fitting
+
 
 @dataclass
 class ThermalFit:
@@ -349,8 +382,9 @@ def _weights(mask: FloatArray) -> FloatArray:
     return w
 
 
-def equation_error_table(records: Sequence[ThermalRecord], input_per_volt: float,
-                         masks: Sequence[FloatArray] | None = None) -> FloatArray | None:
+def equation_error_table(
+    records: Sequence[ThermalRecord], input_per_volt: float, masks: Sequence[FloatArray] | None = None
+) -> FloatArray | None:
     """Linear least-squares Table 4.9 (2, 6) from smoothed dT/dt when both faces are measured.
 
     Eq. 4.13/4.14 are linear in the parameters given T and I: dT_f/dt =
@@ -358,6 +392,7 @@ def equation_error_table(records: Sequence[ThermalRecord], input_per_volt: float
     and sensor lag (that is why it is only a start). None when a run lacks the T2 face.
     """
     from scipy.signal import savgol_filter
+
     rows: list[list[FloatArray]] = [[], []]
     rhs: list[list[FloatArray]] = [[], []]
     for j, r in enumerate(records):
@@ -377,8 +412,9 @@ def equation_error_table(records: Sequence[ThermalRecord], input_per_volt: float
         wt = 1.0 / math.sqrt(max(int(keep.sum()), 1))
         for f in range(2):
             o = 1 - f
-            X = np.stack([Ts[:, f] * cur, Ts[:, o] * cur, -Ts[:, f], Ts[:, o], input_per_volt ** 2 * u2c,
-                          np.ones(r.n)], axis=1)
+            X = np.stack(
+                [Ts[:, f] * cur, Ts[:, o] * cur, -Ts[:, f], Ts[:, o], input_per_volt**2 * u2c, np.ones(r.n)], axis=1
+            )
             rows[f].append(wt * X[keep])
             rhs[f].append(wt * dT[keep, f])
     if not rows[0]:
@@ -395,8 +431,15 @@ def equation_error_table(records: Sequence[ThermalRecord], input_per_volt: float
 class _Problem:
     """Residuals and complex-step Jacobian of the simulation error over a set of runs."""
 
-    def __init__(self, records: Sequence[ThermalRecord], base: th.ThermalParams, faces: tuple[int, ...],
-                 masks: Sequence[FloatArray] | None, settle_s: float, sensor_lag: bool = False) -> None:
+    def __init__(
+        self,
+        records: Sequence[ThermalRecord],
+        base: th.ThermalParams,
+        faces: tuple[int, ...],
+        masks: Sequence[FloatArray] | None,
+        settle_s: float,
+        sensor_lag: bool = False,
+    ) -> None:
         self.records = records
         self.lag = sensor_lag  # x's last entry is then the sensors' lag [s]
         self.base = base
@@ -407,10 +450,10 @@ class _Problem:
         self.u, self.u2, self.T, mask = _pad(records)
         if masks is not None:  # training masks (K_r,) per record
             for j, (r, m) in enumerate(zip(records, masks)):
-                mask[:r.n, j] &= np.asarray(m, bool)[:, None]
+                mask[: r.n, j] &= np.asarray(m, bool)[:, None]
         for j, r in enumerate(records):
             if EXCHANGER not in r.faces:  # guessed start state of the unmeasured face: let it settle
-                mask[:int(round(settle_s / r.dt)), j] = False
+                mask[: int(round(settle_s / r.dt)), j] = False
         mask[0] = False  # the start is measured, not predicted
         if not mask.any():
             raise ThermalIdentificationError('no training samples left (runs too short for the settle time?)')
@@ -458,8 +501,9 @@ class _Problem:
         return c if math.isfinite(c) else math.inf
 
 
-def _levenberg_marquardt(prob: _Problem, x: FloatArray, lo: FloatArray, hi: FloatArray, max_iter: int
-                         ) -> tuple[FloatArray, float, int, str]:
+def _levenberg_marquardt(
+    prob: _Problem, x: FloatArray, lo: FloatArray, hi: FloatArray, max_iter: int
+) -> tuple[FloatArray, float, int, str]:
     """Levenberg-Marquardt on the normal equations with Marquardt scaling, steps projected on the bounds.
 
     The residual vector is long (samples x run-faces) and the parameters few (<= 12), so the
@@ -495,9 +539,16 @@ def _levenberg_marquardt(prob: _Problem, x: FloatArray, lo: FloatArray, hi: Floa
     return x, cost, nfev, f'stopped after {max_iter} iterations'
 
 
-def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None = None, *,
-                faces: str = 'auto', masks: Sequence[FloatArray] | None = None, settle_s: float = 30.0,
-                max_iter: int = 60, sensor_lag: bool = False) -> ThermalFit:
+def fit_thermal(
+    records: Sequence[ThermalRecord],
+    base: th.ThermalParams | None = None,
+    *,
+    faces: str = 'auto',
+    masks: Sequence[FloatArray] | None = None,
+    settle_s: float = 30.0,
+    max_iter: int = 60,
+    sensor_lag: bool = False,
+) -> ThermalFit:
     """Fit Table 4.9 columns to runs by simulation-error least squares (module docstring).
 
     ``faces``: 'auto' (both columns when every run measured T2, else the T1 column), 'both',
@@ -516,8 +567,9 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
     elif faces == 'both':
         if not both:
             missing = [r.name for r in records if EXCHANGER not in r.faces]
-            raise ThermalIdentificationError(f'--faces both needs the T2 (exchanger face) temperature in every run; '
-                                             f'missing in {", ".join(missing)}')
+            raise ThermalIdentificationError(
+                f'--faces both needs the T2 (exchanger face) temperature in every run; missing in {", ".join(missing)}'
+            )
         fitted = (MUSCLE, EXCHANGER)
     elif faces == 'muscle':
         fitted = (MUSCLE,)
@@ -525,8 +577,10 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
         raise ThermalIdentificationError(f'faces = {faces!r} is not one of auto, both, muscle')
     for r in records:
         if float(np.ptp(r.u)) < 0.5:
-            raise ThermalIdentificationError(f'{r.name}: the drive voltage hardly changes (range {np.ptp(r.u):.3g} V); '
-                                             'identification needs an exciting input, e.g. the seed\'s 12 V sines')
+            raise ThermalIdentificationError(
+                f'{r.name}: the drive voltage hardly changes (range {np.ptp(r.u):.3g} V); '
+                "identification needs an exciting input, e.g. the seed's 12 V sines"
+            )
     prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag)
     lo, hi = np.tile(_LOWER, len(fitted)), np.tile(_UPPER, len(fitted))
     if sensor_lag:  # the table fitted without a lag (from the starts below), read through the lag that suits it best
@@ -544,8 +598,10 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
     costs = {k: prob.cost(np.clip(v, lo, hi)) for k, v in starts.items()}
     start = min(costs, key=lambda k: costs[k])
     if not math.isfinite(costs[start]):
-        raise ThermalIdentificationError('the simulation diverges from every start (base parameters and equation '
-                                         'error); check the voltage unit and the sign convention (u > 0 heats T1)')
+        raise ThermalIdentificationError(
+            'the simulation diverges from every start (base parameters and equation '
+            'error); check the voltage unit and the sign convention (u > 0 heats T1)'
+        )
     x, cost, nfev, message = _levenberg_marquardt(prob, np.clip(starts[start], lo, hi), lo, hi, max_iter)
     nfev += len(costs) + (plain.nfev if sensor_lag else 0)
     table = _table_from_free((x[:-1] if sensor_lag else x)[None], prob.base_table, fitted)[0].real
@@ -554,13 +610,28 @@ def fit_thermal(records: Sequence[ThermalRecord], base: th.ThermalParams | None 
     # not determine it, which the fit's RMS alone does not show
     names = [f'{FACE_NAMES[f]} {k}' for f in fitted for k in FREE_KEYS] + (['sensor lag [s]'] if sensor_lag else [])
     tol = 1e-9 * (hi - lo)
-    at_bounds = tuple(f'{n} = {v:.4g} ({"lower" if v <= a + e else "upper"} bound)'
-                      for n, v, a, b, e in zip(names, x, lo, hi, tol) if v <= a + e or v >= b - e)
-    return ThermalFit(params, fitted, start, cost, math.sqrt(cost), nfev, time.perf_counter() - t_wall, message,
-                      not message.startswith('stopped'), at_bounds, float(x[-1]) if sensor_lag else 0.0)
+    at_bounds = tuple(
+        f'{n} = {v:.4g} ({"lower" if v <= a + e else "upper"} bound)'
+        for n, v, a, b, e in zip(names, x, lo, hi, tol)
+        if v <= a + e or v >= b - e
+    )
+    return ThermalFit(
+        params,
+        fitted,
+        start,
+        cost,
+        math.sqrt(cost),
+        nfev,
+        time.perf_counter() - t_wall,
+        message,
+        not message.startswith('stopped'),
+        at_bounds,
+        float(x[-1]) if sensor_lag else 0.0,
+    )
 
 
 # ------------------------------------------------------------------------------ validation
+
 
 @dataclass
 class RecordEvaluation:
@@ -577,9 +648,15 @@ class RecordEvaluation:
         return {'record': self.record, 'frequency_Hz': self.frequency_Hz, 'mode': self.mode, 'faces': self.faces}
 
 
-def evaluate(params: th.ThermalParams, records: Sequence[ThermalRecord], mode: str,
-             masks: Sequence[FloatArray] | None = None, settle_s: float = 30.0,
-             base: th.ThermalParams | None = None, sensor_lag_s: float = 0.0) -> list[RecordEvaluation]:
+def evaluate(
+    params: th.ThermalParams,
+    records: Sequence[ThermalRecord],
+    mode: str,
+    masks: Sequence[FloatArray] | None = None,
+    settle_s: float = 30.0,
+    base: th.ThermalParams | None = None,
+    sensor_lag_s: float = 0.0,
+) -> list[RecordEvaluation]:
     """Free-run each record under ``params`` and return Table 4.10 statistics per measured face.
 
     ``masks``: per-record samples to evaluate (default all valid samples after the start,
@@ -592,15 +669,14 @@ def evaluate(params: th.ThermalParams, records: Sequence[ThermalRecord], mode: s
         ev = r.valid.copy()
         ev[0] = False
         if EXCHANGER not in r.faces:
-            ev[:int(round(settle_s / r.dt))] = False
+            ev[: int(round(settle_s / r.dt))] = False
         if masks is not None:
             ev &= np.asarray(masks[j], bool)
         if not ev.any():
             raise ThermalIdentificationError(f'{r.name}: no samples left to evaluate')
         faces = {}
         for f in r.faces:
-            faces[FACE_NAMES[f]] = error_statistics(r.T[:, f], sims[j][:, f], ev,
-                                                    span_C=float(np.ptp(r.T[r.valid, f])))
+            faces[FACE_NAMES[f]] = error_statistics(r.T[:, f], sims[j][:, f], ev, span_C=float(np.ptp(r.T[r.valid, f])))
         out.append(RecordEvaluation(r.name, r.frequency_Hz, mode, faces, sims[j], ev))
     return out
 
@@ -618,10 +694,18 @@ class ThermalIdentification:
     wall_s: float
 
 
-def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[ThermalRecord] = (),
-                     base: th.ThermalParams | None = None, *, faces: str = 'auto', validation: str = 'auto',
-                     train_fraction: float = 0.6, settle_s: float = 30.0, sensor_lag: bool = False,
-                     progress: Callable[[str], None] | None = None) -> ThermalIdentification:
+def identify_thermal(
+    records: Sequence[ThermalRecord],
+    holdout: Sequence[ThermalRecord] = (),
+    base: th.ThermalParams | None = None,
+    *,
+    faces: str = 'auto',
+    validation: str = 'auto',
+    train_fraction: float = 0.6,
+    settle_s: float = 30.0,
+    sensor_lag: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> ThermalIdentification:
     """Fit on ``records`` and validate on data the fit never saw (``sensor_lag``: :func:`fit_thermal`'s, in every
     fit; each prediction is read through the lag its fit found).
 
@@ -636,10 +720,14 @@ def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[Thermal
     if validation == 'auto':
         validation = 'leave-one-out' if len(records) >= 2 else 'time-split'
     if validation not in ('leave-one-out', 'time-split', 'none'):
-        raise ThermalIdentificationError(f'validation {validation!r} is not one of auto, leave-one-out, time-split, none')
+        raise ThermalIdentificationError(
+            f'validation {validation!r} is not one of auto, leave-one-out, time-split, none'
+        )
     if validation == 'leave-one-out' and len(records) < 2:
-        raise ThermalIdentificationError('leave-one-out validation needs at least two runs (files, frequencies or '
-                                         'muscles); use --validation time-split for one run')
+        raise ThermalIdentificationError(
+            'leave-one-out validation needs at least two runs (files, frequencies or '
+            'muscles); use --validation time-split for one run'
+        )
     if not 0.2 <= train_fraction <= 0.9:
         raise ThermalIdentificationError(f'train fraction {train_fraction} must be in [0.2, 0.9]')
     all_records = list(records) + list(holdout)
@@ -659,8 +747,15 @@ def identify_thermal(records: Sequence[ThermalRecord], holdout: Sequence[Thermal
         say(f'time split: fit on the first {train_fraction:.0%} of every run')
         train = [np.arange(r.n) < int(train_fraction * r.n) for r in records]
         f = fit_thermal(records, base, faces=fitted_faces, masks=train, settle_s=settle_s, sensor_lag=sensor_lag)
-        held += evaluate(f.params, records, 'time-split', masks=[~m for m in train], settle_s=settle_s, base=base,
-                         sensor_lag_s=f.sensor_lag_s)
+        held += evaluate(
+            f.params,
+            records,
+            'time-split',
+            masks=[~m for m in train],
+            settle_s=settle_s,
+            base=base,
+            sensor_lag_s=f.sensor_lag_s,
+        )
     lag = final.sensor_lag_s
     if holdout:
         say(f'predicting {len(holdout)} hold-out run(s)')
@@ -682,5 +777,6 @@ def hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[f
     if hi < 1 or lo > -1:
         raise ThermalIdentificationError(
             f'the identified model holds only {c.cooling_max_V:+.2f}..{c.heating_max_V:+.2f} V with every face in '
-            f'{params.window_C} degC; it is not usable for the wrist (check the data and the voltage unit)')
+            f'{params.window_C} degC; it is not usable for the wrist (check the data and the voltage unit)'
+        )
     return float(lo), float(hi)

@@ -4,6 +4,7 @@ Scalar loops compiled by numba when present (:mod:`sma_wrist.core.jit`); the num
 :mod:`sma_wrist.core.thermal.heat_balance` (``rate_terms``). Shared by the plant kernel and the TEM
 control kernel, so the plant and the TEM law's model integrate the same numbers.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,8 +22,12 @@ def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
         for f in range(2):
             o = 1 - f
             b = 2 + 6 * f  # K_at, K_t, K_Tinf, K_T, K_R, K_inf of this face
-            d = (th_coef[b + 4] * cur + th_coef[b] * x[l, f] + th_coef[b + 1] * x[l, o]) * cur \
-                - th_coef[b + 2] * x[l, f] + th_coef[b + 3] * x[l, o] + th_coef[b + 5]
+            d = (
+                (th_coef[b + 4] * cur + th_coef[b] * x[l, f] + th_coef[b + 1] * x[l, o]) * cur
+                - th_coef[b + 2] * x[l, f]
+                + th_coef[b + 3] * x[l, o]
+                + th_coef[b + 5]
+            )
             if f == 0 and coupling != 0.0:
                 d += coupling * (x[1 - l, 0] - x[l, 0])
             out[l, f] = d

@@ -22,6 +22,7 @@ process noise lets it follow a drift; every scale stays in :data:`BOUNDS`.
 
 Units: temperatures degC, commands V, times s. Vectorised over wrists (N); one wrist in a node.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -123,9 +124,13 @@ def _rates(x: FloatArray, u: FloatArray, c: FloatArray) -> FloatArray:
     for f in range(2):
         b = 2 + 6 * f
         o = 1 - f
-        k = c[:, b:b + 6, None]  # (M, 6, 1): K_at, K_t, K_Tinf, K_T, K_R, K_inf
-        out[:, :, f] = ((k[:, 4] * cur + k[:, 0] * x[:, :, f] + k[:, 1] * x[:, :, o]) * cur
-                        - k[:, 2] * x[:, :, f] + k[:, 3] * x[:, :, o] + k[:, 5])
+        k = c[:, b : b + 6, None]  # (M, 6, 1): K_at, K_t, K_Tinf, K_T, K_R, K_inf
+        out[:, :, f] = (
+            (k[:, 4] * cur + k[:, 0] * x[:, :, f] + k[:, 1] * x[:, :, o]) * cur
+            - k[:, 2] * x[:, :, f]
+            + k[:, 3] * x[:, :, o]
+            + k[:, 5]
+        )
     coupling = c[:, 1, None]
     out[:, :, 0] += coupling * (x[:, ::-1, 0] - x[:, :, 0])
     return out
@@ -228,9 +233,17 @@ class ThermalScaleEstimator:
         c = scaled_constants(self.base, theta)
         if AVAILABLE if compiled is None else compiled:
             out, x_end = np.empty((len(self._t), m, 2)), np.empty((m, 2, 2))
-            thermal_kernel.predict_junction(np.ascontiguousarray(self._x0), np.ascontiguousarray(self._T[0]),
-                                            np.ascontiguousarray(np.stack(self._u)), np.asarray(self._t, dtype=float),
-                                            c, reps, float(self.params.tc_lag_s), out, x_end)
+            thermal_kernel.predict_junction(
+                np.ascontiguousarray(self._x0),
+                np.ascontiguousarray(self._T[0]),
+                np.ascontiguousarray(np.stack(self._u)),
+                np.asarray(self._t, dtype=float),
+                c,
+                reps,
+                float(self.params.tc_lag_s),
+                out,
+                x_end,
+            )
             return out, x_end
         x = np.repeat(self._x0, reps, axis=0)
         z = np.repeat(self._T[0], reps, axis=0)
@@ -255,18 +268,23 @@ class ThermalScaleEstimator:
         # theta and one finite-difference step per scale, wrist-major: rows [w0 theta, w0 +g, w0 +s, w0 +a, w1 ...]
         var = np.repeat(self.theta, 4, axis=0)
         for j in range(3):
-            var[j + 1::4, j] += STEPS[j]
+            var[j + 1 :: 4, j] += STEPS[j]
         pred, x_end = self._predict(var)
         pred = pred.reshape(len(t), self.n, 4, 2)
         r = np.stack([T[m].mean(axis=0) - pred[m, :, 0].mean(axis=0) for m in masks], axis=1)  # (N, points, 2)
-        J = np.stack([np.stack([(pred[m, :, j + 1] - pred[m, :, 0]).mean(axis=0) / STEPS[j] for m in masks], axis=1)
-                      for j in range(3)], axis=-1)  # (N, points, 2, 3)
+        J = np.stack(
+            [
+                np.stack([(pred[m, :, j + 1] - pred[m, :, 0]).mean(axis=0) / STEPS[j] for m in masks], axis=1)
+                for j in range(3)
+            ],
+            axis=-1,
+        )  # (N, points, 2, 3)
         r = r.reshape(self.n, -1)
         J = J.reshape(self.n, -1, 3)
         if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J)) and np.all(np.isfinite(x_end))):
             self._x_end = None
             return False
-        R = p.noise_sd_C ** 2 * np.eye(r.shape[1])
+        R = p.noise_sd_C**2 * np.eye(r.shape[1])
         S = J @ self.P @ J.transpose(0, 2, 1) + R
         K = self.P @ J.transpose(0, 2, 1) @ np.linalg.inv(S)
         step = np.clip((K @ r[:, :, None])[:, :, 0], -np.asarray(p.max_step), np.asarray(p.max_step))
@@ -297,5 +315,12 @@ def warm_up() -> None:
         est.sample(0.01 * k, T + 0.01 * k, u)
 
 
-__all__ = ['OnlineThermalParams', 'ThermalScaleEstimator', 'scaled_constants', 'theta_of', 'with_scales', 'warm_up',
-           'BOUNDS']
+__all__ = [
+    'OnlineThermalParams',
+    'ThermalScaleEstimator',
+    'scaled_constants',
+    'theta_of',
+    'with_scales',
+    'warm_up',
+    'BOUNDS',
+]

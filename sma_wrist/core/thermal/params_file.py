@@ -22,12 +22,14 @@ its face protection all use the same identified model. Format (YAML, version 1):
 
 Unknown top-level keys are rejected (a typo must not silently fall back to a default).
 """
+
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any
 
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.thermal import heat_balance as th
@@ -35,8 +37,16 @@ from sma_wrist.core.thermal import heat_balance as th
 FORMAT = 'sma_wrist/thermal'
 VERSION = 1
 FACE_KEYS = tuple(f.name for f in dataclasses.fields(th.FaceCoefficients))
-_KEYS = {'format', 'version', 'input_per_volt', 'muscle_face', 'exchanger_face', 'hold_limits_V', 'window_C',
-         'identification'}
+_KEYS = {
+    'format',
+    'version',
+    'input_per_volt',
+    'muscle_face',
+    'exchanger_face',
+    'hold_limits_V',
+    'window_C',
+    'identification',
+}
 
 
 def thermal_file_dict(params: th.ThermalParams, identification: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -47,16 +57,23 @@ def thermal_file_dict(params: th.ThermalParams, identification: Mapping[str, Any
         row = {k: float(getattr(face, k)) for k in FACE_KEYS}
         row['K_inf'] = float(k_inf[i])
         faces[key] = row
-    return {'format': FORMAT, 'version': VERSION, 'input_per_volt': float(params.input_per_volt), **faces,
-            'hold_limits_V': [float(params.u_min_V), float(params.u_max_V)],
-            'window_C': [float(params.window_C[0]), float(params.window_C[1])],
-            'identification': dict(identification or {})}
+    return {
+        'format': FORMAT,
+        'version': VERSION,
+        'input_per_volt': float(params.input_per_volt),
+        **faces,
+        'hold_limits_V': [float(params.u_min_V), float(params.u_max_V)],
+        'window_C': [float(params.window_C[0]), float(params.window_C[1])],
+        'identification': dict(identification or {}),
+    }
 
 
-def write_thermal_file(path: str | Path, params: th.ThermalParams,
-                       identification: Mapping[str, Any] | None = None, header: str = '') -> Path:
+def write_thermal_file(
+    path: str | Path, params: th.ThermalParams, identification: Mapping[str, Any] | None = None, header: str = ''
+) -> Path:
     """Write ``params`` as a version-1 thermal file (YAML) with an optional comment header."""
     import yaml
+
     p = Path(path)
     text = ''.join(f'# {line}\n' if line else '#\n' for line in header.splitlines())
     text += yaml.safe_dump(thermal_file_dict(params, identification), sort_keys=False, default_flow_style=False)
@@ -78,15 +95,20 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
     non-finite key, an inconsistent heat balance).
     """
     import yaml
+
     p = Path(path)
     try:
         data = yaml.safe_load(p.read_text(encoding='utf-8'))
     except OSError as e:
-        raise ParameterError(f'{p}: cannot read the thermal file ({e.strerror or e}); write one with '
-                             '`sma-wrist identify thermal ... --out DIR`') from None
+        raise ParameterError(
+            f'{p}: cannot read the thermal file ({e.strerror or e}); write one with '
+            '`sma-wrist identify thermal ... --out DIR`'
+        ) from None
     except UnicodeDecodeError as e:  # a binary file given by mistake
-        raise ParameterError(f'{p}: not a UTF-8 text thermal file (byte {e.start}: {e.reason}); write one with '
-                             '`sma-wrist identify thermal ... --out DIR`') from None
+        raise ParameterError(
+            f'{p}: not a UTF-8 text thermal file (byte {e.start}: {e.reason}); write one with '
+            '`sma-wrist identify thermal ... --out DIR`'
+        ) from None
     except yaml.YAMLError as e:
         raise ParameterError(f'{p}: not a YAML thermal file ({str(e).splitlines()[0]})') from None
     if not isinstance(data, dict) or data.get('format') != FORMAT:
@@ -109,9 +131,14 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
     base = base or th.ThermalParams()
     try:
         return dataclasses.replace(
-            base, muscle_face=faces[0], exchanger_face=faces[1], ambient_C=None,
+            base,
+            muscle_face=faces[0],
+            exchanger_face=faces[1],
+            ambient_C=None,
             input_per_volt=_number(p, 'input_per_volt', data.get('input_per_volt')),
-            u_min_V=_number(p, 'hold_limits_V[0]', limits[0]), u_max_V=_number(p, 'hold_limits_V[1]', limits[1]),
-            window_C=(_number(p, 'window_C[0]', window[0]), _number(p, 'window_C[1]', window[1])))
+            u_min_V=_number(p, 'hold_limits_V[0]', limits[0]),
+            u_max_V=_number(p, 'hold_limits_V[1]', limits[1]),
+            window_C=(_number(p, 'window_C[0]', window[0]), _number(p, 'window_C[1]', window[1])),
+        )
     except ParameterError as e:
         raise ParameterError(f'{p}: {e}') from None

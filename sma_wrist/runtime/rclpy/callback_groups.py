@@ -1,5 +1,6 @@
 """Callback groups; the single-threaded virtual-time executor never runs callbacks
 concurrently, so groups only record membership."""
+
 from __future__ import annotations
 
 from typing import Any

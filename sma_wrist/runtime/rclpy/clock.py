@@ -7,9 +7,11 @@ override value (set from /clock).  Jump callbacks follow rcl: on override change
 active, callbacks whose threshold is exceeded get pre/post calls; activating or
 deactivating the override is a clock change.
 """
+
 from __future__ import annotations
 
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 from sma_wrist.runtime.vclock import VCLOCK
 
@@ -22,8 +24,9 @@ __all__ = ['Clock', 'ClockChange', 'ClockType', 'JumpHandle', 'JumpThreshold', '
 
 
 class JumpThreshold:
-    def __init__(self, *, min_forward: Optional[Duration], min_backward: Optional[Duration],
-                 on_clock_change: bool = True) -> None:
+    def __init__(
+        self, *, min_forward: Duration | None, min_backward: Duration | None, on_clock_change: bool = True
+    ) -> None:
         if min_forward is not None and min_forward.nanoseconds <= 0:
             raise ValueError('min_forward must be a positive non-zero duration')
         if min_backward is not None and min_backward.nanoseconds >= 0:
@@ -56,10 +59,15 @@ class _JumpEntry:
 
     __slots__ = ('on_clock_change', 'min_forward', 'min_backward', 'pre', 'post', 'owner')
 
-    def __init__(self, on_clock_change: bool, min_forward: int, min_backward: int,
-                 pre: Optional[Callable[[ClockChange, int], None]],
-                 post: Optional[Callable[[ClockChange, int], None]],
-                 owner: object) -> None:
+    def __init__(
+        self,
+        on_clock_change: bool,
+        min_forward: int,
+        min_backward: int,
+        pre: Callable[[ClockChange, int], None] | None,
+        post: Callable[[ClockChange, int], None] | None,
+        owner: object,
+    ) -> None:
         self.on_clock_change = on_clock_change
         self.min_forward = min_forward
         self.min_backward = min_backward
@@ -69,35 +77,49 @@ class _JumpEntry:
 
     def triggers(self, change: ClockChange, delta: int) -> bool:
         is_change = change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED)
-        return ((is_change and self.on_clock_change)
-                or (self.min_forward > 0 and delta >= self.min_forward)
-                or (self.min_backward < 0 and delta <= self.min_backward))
+        return (
+            (is_change and self.on_clock_change)
+            or (self.min_forward > 0 and delta >= self.min_forward)
+            or (self.min_backward < 0 and delta <= self.min_backward)
+        )
 
 
 class JumpHandle:
-    def __init__(self, *, clock: 'Clock', threshold: JumpThreshold,
-                 pre_callback: Optional[Callable[[], None]],
-                 post_callback: Optional[Callable[[TimeJump], None]]) -> None:
+    def __init__(
+        self,
+        *,
+        clock: Clock,
+        threshold: JumpThreshold,
+        pre_callback: Callable[[], None] | None,
+        post_callback: Callable[[TimeJump], None] | None,
+    ) -> None:
         if pre_callback is None and post_callback is None:
             raise ValueError('One of pre_callback or post_callback must be callable')
         if pre_callback is not None and not callable(pre_callback):
             raise ValueError('pre_callback must be callable if given')
         if post_callback is not None and not callable(post_callback):
             raise ValueError('post_callback must be callable if given')
-        self._clock: Optional[Clock] = clock
+        self._clock: Clock | None = clock
         pre = None
         if pre_callback is not None:
+
             def pre(change: ClockChange, delta: int) -> None:
                 pre_callback()
+
         post = None
         if post_callback is not None:
+
             def post(change: ClockChange, delta: int) -> None:
                 post_callback(TimeJump(change, Duration(nanoseconds=delta)))
+
         self._entry = _JumpEntry(
             threshold.on_clock_change,
             threshold.min_forward.nanoseconds if threshold.min_forward is not None else 0,
             threshold.min_backward.nanoseconds if threshold.min_backward is not None else 0,
-            pre, post, self)
+            pre,
+            post,
+            self,
+        )
         clock._jump_entries.append(self._entry)
 
     def unregister(self) -> None:
@@ -105,7 +127,7 @@ class JumpHandle:
             self._clock._jump_entries.remove(self._entry)
             self._clock = None
 
-    def __enter__(self) -> 'JumpHandle':
+    def __enter__(self) -> JumpHandle:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -115,7 +137,7 @@ class JumpHandle:
 class Clock:
     __slots__ = ('_clock_type', '_jump_entries', '_ros_active', '_override_ns', '__weakref__')
 
-    def __new__(cls, *, clock_type: ClockType = ClockType.SYSTEM_TIME) -> 'Clock':
+    def __new__(cls, *, clock_type: ClockType = ClockType.SYSTEM_TIME) -> Clock:
         if not isinstance(clock_type, ClockType):
             raise TypeError('Clock type must be a ClockType enum')
         self = super().__new__(ROSClock if clock_type is ClockType.ROS_TIME else cls)
@@ -130,7 +152,7 @@ class Clock:
         return self._clock_type
 
     @property
-    def handle(self) -> 'Clock':
+    def handle(self) -> Clock:
         return self
 
     def __repr__(self) -> str:
@@ -154,11 +176,14 @@ class Clock:
     def now(self) -> Time:
         return Time._from_ns(self._now_ns(), self._clock_type)
 
-    def create_jump_callback(self, threshold: JumpThreshold, *,
-                             pre_callback: Optional[Callable[[], None]] = None,
-                             post_callback: Optional[Callable[[TimeJump], None]] = None) -> JumpHandle:
-        return JumpHandle(clock=self, threshold=threshold,
-                          pre_callback=pre_callback, post_callback=post_callback)
+    def create_jump_callback(
+        self,
+        threshold: JumpThreshold,
+        *,
+        pre_callback: Callable[[], None] | None = None,
+        post_callback: Callable[[TimeJump], None] | None = None,
+    ) -> JumpHandle:
+        return JumpHandle(clock=self, threshold=threshold, pre_callback=pre_callback, post_callback=post_callback)
 
     def _call_jump(self, change: ClockChange, delta: int, before: bool) -> None:
         for entry in list(self._jump_entries):
@@ -176,6 +201,7 @@ class Clock:
         overridden ROS clock cannot make /clock advance and raises RuntimeError.
         """
         from .utilities import get_default_context
+
         ctx = context if context is not None else get_default_context()
         if not ctx.ok():
             raise NotInitializedException()
@@ -184,8 +210,9 @@ class Clock:
         if not self._follows_virtual_clock():
             if self._now_ns() >= until.nanoseconds:
                 return True
-            raise RuntimeError('sleep on a ROS clock driven by /clock would never return in the '
-                               'single-threaded embedded runtime')
+            raise RuntimeError(
+                'sleep on a ROS clock driven by /clock would never return in the single-threaded embedded runtime'
+            )
         VCLOCK.advance_to(until.nanoseconds - self._virtual_offset_ns())
         return True
 
@@ -196,7 +223,7 @@ class Clock:
 class ROSClock(Clock):
     __slots__ = ()
 
-    def __new__(cls) -> 'ROSClock':
+    def __new__(cls) -> ROSClock:
         return super().__new__(Clock, clock_type=ClockType.ROS_TIME)  # type: ignore[return-value]
 
     @property
@@ -214,8 +241,7 @@ class ROSClock(Clock):
 
     def set_ros_time_override(self, time: Time) -> None:
         if not isinstance(time, Time):
-            raise TypeError(
-                f'Time must be specified as rclpy.time.Time. Received type: {type(time)}')
+            raise TypeError(f'Time must be specified as rclpy.time.Time. Received type: {type(time)}')
         self._set_override_ns(time.nanoseconds)
 
     def _set_override_ns(self, ns: int) -> None:

@@ -1,4 +1,5 @@
 """ClockType / ClockChange with the values of rcl's rcl_clock_type_t / rcl_clock_change_t."""
+
 from enum import IntEnum
 
 

@@ -1,8 +1,10 @@
 """rclpy.context.Context for the embedded runtime: holds the parsed global arguments and
 the in-process Graph of every node created in it."""
+
 from __future__ import annotations
 
-from typing import Any, Callable, Iterable, Optional
+from collections.abc import Callable, Iterable
+from typing import Any
 
 from sma_wrist.runtime.arguments import RosArguments, parse_ros_args
 from sma_wrist.runtime.graph import Graph
@@ -19,11 +21,12 @@ class Context:
         self._domain_id = 0
 
     @property
-    def handle(self) -> 'Context':
+    def handle(self) -> Context:
         return self
 
-    def init(self, args: Optional[Iterable[str]] = None, *, initialize_logging: bool = True,
-             domain_id: Optional[int] = None) -> None:
+    def init(
+        self, args: Iterable[str] | None = None, *, initialize_logging: bool = True, domain_id: int | None = None
+    ) -> None:
         if self._initialized:
             raise RuntimeError('Context.init() must only be called once')
         self._args = parse_ros_args(args)
@@ -31,6 +34,7 @@ class Context:
         self._domain_id = domain_id or 0
         VCLOCK.reset(VCLOCK.system_epoch_ns)
         from . import logging as _logging
+
         for name, level in self._args.log_levels.items():
             _logging.set_logger_level(name, level)
         self._initialized = True
@@ -70,7 +74,7 @@ class Context:
     def graph(self) -> Graph:
         return self._graph
 
-    def __enter__(self) -> 'Context':
+    def __enter__(self) -> Context:
         return self
 
     def __exit__(self, *exc: Any) -> None:

@@ -1,4 +1,5 @@
 """rclpy.duration.Duration (semantics of rclpy/duration.py, Humble), pure Python."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -15,7 +16,7 @@ class Duration:
 
     def __init__(self, *, seconds: float = 0, nanoseconds: int = 0) -> None:
         total = int(seconds * S_TO_NS) + int(nanoseconds)
-        if total >= 2**63 or total < -2**63:
+        if total >= 2**63 or total < -(2**63):
             raise OverflowError('Total nanoseconds value is too large to store in C duration.')
         self._ns = total
 
@@ -67,7 +68,7 @@ class Duration:
         return get_message_class('builtin_interfaces/msg/Duration')(sec=sec, nanosec=nsec)
 
     @classmethod
-    def from_msg(cls, msg: Any) -> 'Duration':
+    def from_msg(cls, msg: Any) -> Duration:
         if type(msg) is not get_message_class('builtin_interfaces/msg/Duration'):
             raise TypeError('Must pass a builtin_interfaces.msg.Duration object')
         return cls(seconds=msg.sec, nanoseconds=msg.nanosec)

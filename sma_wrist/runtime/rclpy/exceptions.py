@@ -1,4 +1,5 @@
 """Exceptions with the names, bases and messages of rclpy/exceptions.py (Humble)."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -72,14 +73,13 @@ class InvalidParameterTypeException(ParameterException):
             self,
             f"Trying to set parameter '{desired_parameter._name}' to '{desired_parameter._value}'"
             f" of type '{desired_parameter._type_.name}', expecting type '{expected_type}'",
-            *args)  # Humble: the message alone (no parameter name appended)
+            *args,
+        )  # Humble: the message alone (no parameter name appended)
 
 
 class InvalidParameterValueException(ParameterException):
     def __init__(self, parameter: Any, value: Any, reason: str, *args: Any) -> None:
-        Exception.__init__(
-            self, 'Invalid parameter value ({value}) for parameter. Reason: {reason}'.format(
-                value=value, reason=reason), parameter, *args)
+        Exception.__init__(self, f'Invalid parameter value ({value}) for parameter. Reason: {reason}', parameter, *args)
 
 
 class ParameterImmutableException(ParameterException):
@@ -89,8 +89,7 @@ class ParameterImmutableException(ParameterException):
 
 class ParameterUninitializedException(ParameterException):
     def __init__(self, parameter_name: str, *args: Any) -> None:
-        Exception.__init__(
-            self, f"The parameter '{parameter_name}' is not initialized", *args)
+        Exception.__init__(self, f"The parameter '{parameter_name}' is not initialized", *args)
 
 
 class ROSInterruptException(Exception):

@@ -9,9 +9,11 @@ whose clock follows virtual time (STEADY, SYSTEM, and ROS clocks without an acti
 ``use_sim_time`` override); timers on an overridden ROS clock become ready only when a
 /clock message moves that node's ROS time, exactly as rcl's jump callback wakes them.
 """
+
 from __future__ import annotations
 
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 from sma_wrist.runtime.vclock import VCLOCK
 
@@ -77,7 +79,7 @@ class Executor:
     def wake(self) -> None:
         pass
 
-    def shutdown(self, timeout_sec: Optional[float] = None) -> bool:
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
         self._is_shutdown = True
         for node in list(self._nodes):
             self.remove_node(node)
@@ -148,7 +150,7 @@ class Executor:
             raise ExternalShutdownException()
 
     # -- rclpy API ---------------------------------------------------------
-    def spin_once(self, timeout_sec: Optional[float] = None) -> None:
+    def spin_once(self, timeout_sec: float | None = None) -> None:
         """Run one ready callback, first jumping virtual time by at most timeout_sec."""
         self._check_shutdown()
         if self._pending_idx < len(self._pending):
@@ -184,12 +186,16 @@ class Executor:
     def _pending_rest(self) -> bool:
         return self._pending_idx < len(self._pending)
 
-    def spin_until_future_complete(self, future: Any, timeout_sec: Optional[float] = None) -> None:
+    def spin_until_future_complete(self, future: Any, timeout_sec: float | None = None) -> None:
         raise NotImplementedError('futures are not part of the embedded runtime subset')
 
-    def run_until(self, t_end_ns: Optional[int] = None, *,
-                  stop_when: Optional[Callable[[], bool]] = None,
-                  max_callbacks: Optional[int] = None) -> str:
+    def run_until(
+        self,
+        t_end_ns: int | None = None,
+        *,
+        stop_when: Callable[[], bool] | None = None,
+        max_callbacks: int | None = None,
+    ) -> str:
         """Run every event with virtual steady time <= t_end_ns.
 
         Stops early, after the callback that made it true, when ``stop_when()`` returns
@@ -241,5 +247,5 @@ class SingleThreadedExecutor(Executor):
 class MultiThreadedExecutor(Executor):
     """Accepted for compatibility; runs single-threaded (deterministic)."""
 
-    def __init__(self, num_threads: Optional[int] = None, *, context: Any = None) -> None:
+    def __init__(self, num_threads: int | None = None, *, context: Any = None) -> None:
         super().__init__(context=context)

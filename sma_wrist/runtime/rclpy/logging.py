@@ -9,17 +9,26 @@ sinks registered with :func:`add_sink` (tests, diagnostics); inside a ``Runtime`
 a throttled call site always logs its first call (rclpy compares against a last-logged
 time of 0, which on a virtual clock starting at 0 would swallow the first message).
 """
+
 from __future__ import annotations
 
 import contextlib
 import sys
+from collections.abc import Callable, Iterator
 from enum import IntEnum
-from typing import Any, Callable, Iterator, Optional
+from typing import Any
 
 from .clock import Clock
 
-__all__ = ['LoggingSeverity', 'RcutilsLogger', 'add_sink', 'get_logger',
-           'get_logger_effective_level', 'set_logger_level', 'set_stamp_source']
+__all__ = [
+    'LoggingSeverity',
+    'RcutilsLogger',
+    'add_sink',
+    'get_logger',
+    'get_logger_effective_level',
+    'set_logger_level',
+    'set_stamp_source',
+]
 
 
 class LoggingSeverity(IntEnum):
@@ -36,10 +45,10 @@ _default_level = LoggingSeverity.INFO
 Sink = Callable[[LoggingSeverity, str, str, int], None]
 _sinks: list[Sink] = []
 stream_output = True  # print to stderr; tests/CLI may turn it off
-_stamp_source: Optional[Callable[[], int]] = None  # ns of a record; None: the virtual system time
+_stamp_source: Callable[[], int] | None = None  # ns of a record; None: the virtual system time
 
 
-def set_stamp_source(source: Optional[Callable[[], int]]) -> None:
+def set_stamp_source(source: Callable[[], int] | None) -> None:
     """What the records are stamped with [ns] (None: the virtual system time). Under ROS a record carries the wall
     clock; the virtual steady clock is none, and on the hardware path it lags the device: hardware_bridge's timer
     ticks every half window and each tick waits for the device, so a 140 s run's log ended at 68 s while its bag
@@ -93,8 +102,11 @@ def get_logger_effective_level(name: str) -> LoggingSeverity:
     return _default_level
 
 
-_FILTER_PARAMS = {'throttle': ('throttle_duration_sec', 'throttle_time_source_type'),
-                  'skip_first': ('skip_first',), 'once': ('once',)}
+_FILTER_PARAMS = {
+    'throttle': ('throttle_duration_sec', 'throttle_time_source_type'),
+    'skip_first': ('skip_first',),
+    'once': ('once',),
+}
 _ALL_PARAMS = [p for ps in _FILTER_PARAMS.values() for p in ps]
 
 
@@ -103,26 +115,26 @@ def _detect_filters(kwargs: dict[str, Any]) -> list[str]:
     for f in found:
         if f == 'throttle':
             if 'throttle_duration_sec' not in kwargs:
-                raise TypeError('required parameter "throttle_duration_sec" not specified '
-                                'but is required for the the logging filter "throttle"')
+                raise TypeError(
+                    'required parameter "throttle_duration_sec" not specified '
+                    'but is required for the the logging filter "throttle"'
+                )
             kwargs.setdefault('throttle_time_source_type', _DEFAULT_THROTTLE_CLOCK)
     for k in kwargs:
         if k not in _ALL_PARAMS:
-            raise TypeError(f'parameter "{k}" is not one of the recognized logging options '
-                            f'"{_ALL_PARAMS}"')
+            raise TypeError(f'parameter "{k}" is not one of the recognized logging options "{_ALL_PARAMS}"')
     return found
 
 
 class _Site:
     __slots__ = ('name', 'severity', 'filters', 'params', 'last', 'once_done', 'skipped')
 
-    def __init__(self, name: str, severity: LoggingSeverity, filters: list[str],
-                 params: dict[str, Any]) -> None:
+    def __init__(self, name: str, severity: LoggingSeverity, filters: list[str], params: dict[str, Any]) -> None:
         self.name = name
         self.severity = severity
         self.filters = filters
         self.params = params
-        self.last: Optional[int] = None
+        self.last: int | None = None
         self.once_done = False
         self.skipped = False
 
@@ -132,7 +144,7 @@ class RcutilsLogger:
         self.name = name
         self.contexts: dict[tuple[str, int, int], _Site] = {}
 
-    def get_child(self, name: str) -> 'RcutilsLogger':
+    def get_child(self, name: str) -> RcutilsLogger:
         if not name:
             raise ValueError('Child logger name must not be empty.')
         return RcutilsLogger(f'{self.name}.{name}' if self.name else name)
@@ -160,8 +172,11 @@ class RcutilsLogger:
         if site is None:
             site = _Site(name, severity, filters, {p: kwargs.get(p) for p in _ALL_PARAMS})
             if 'throttle' in filters and not isinstance(kwargs['throttle_time_source_type'], Clock):
-                raise ValueError('Received throttle_time_source_type of "{0}" is not a clock '
-                                 'instance'.format(kwargs['throttle_time_source_type']))
+                raise ValueError(
+                    'Received throttle_time_source_type of "{}" is not a clock instance'.format(
+                        kwargs['throttle_time_source_type']
+                    )
+                )
             self.contexts[key] = site
         else:
             if severity != site.severity:

@@ -10,12 +10,14 @@ ParameterEvent is published on /parameter_events.  Reason strings are rclpy's.
 One deliberate choice: overrides are looked up by the *full* (namespace-prefixed) name in
 ``declare_parameters(namespace, ...)``, as Jazzy does; Humble looks up the bare name.
 """
+
 from __future__ import annotations
 
 import math
 import re
 import warnings
-from typing import Any, Callable, Iterator, List, Optional, Tuple, Union
+from collections.abc import Callable, Iterator
+from typing import Any
 
 from sma_wrist.runtime.arguments import RosArguments, overrides_for, parse_ros_args
 from sma_wrist.runtime.messages import get_message_class, is_message_class
@@ -25,10 +27,17 @@ from .clock import Clock, ROSClock
 from .constants import S_TO_NS
 from .context import Context
 from .exceptions import (
-    InvalidNamespaceException, InvalidNodeNameException, InvalidParameterException,
-    InvalidParameterTypeException, InvalidParameterValueException, InvalidTopicNameException,
-    NotInitializedException, ParameterAlreadyDeclaredException, ParameterImmutableException,
-    ParameterNotDeclaredException, ParameterUninitializedException,
+    InvalidNamespaceException,
+    InvalidNodeNameException,
+    InvalidParameterException,
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    InvalidTopicNameException,
+    NotInitializedException,
+    ParameterAlreadyDeclaredException,
+    ParameterImmutableException,
+    ParameterNotDeclaredException,
+    ParameterUninitializedException,
 )
 from .logging import RcutilsLogger, get_logger
 from .parameter import PARAMETER_SEPARATOR_STRING, Parameter
@@ -61,7 +70,8 @@ def validate_node_name(name: str) -> None:
         if name[0].isdigit():
             raise InvalidNodeNameException(name, 'node name must not start with a number', 0)
         raise InvalidNodeNameException(
-            name, 'node name must not contain characters other than alphanumerics or \'_\'', bad)
+            name, "node name must not contain characters other than alphanumerics or '_'", bad
+        )
 
 
 def validate_namespace(namespace: str) -> None:
@@ -70,13 +80,14 @@ def validate_namespace(namespace: str) -> None:
     if namespace == '/':
         return
     if namespace.endswith('/'):
-        raise InvalidNamespaceException(namespace, "namespace must not end with a '/'",
-                                        len(namespace) - 1)
+        raise InvalidNamespaceException(namespace, "namespace must not end with a '/'", len(namespace) - 1)
     for token in namespace[1:].split('/'):
         if not _NS_TOKEN.fullmatch(token):
             raise InvalidNamespaceException(
-                namespace, 'namespace tokens must be non-empty alphanumerics/underscore '
-                'not starting with a number', namespace.find(token))
+                namespace,
+                'namespace tokens must be non-empty alphanumerics/underscore not starting with a number',
+                namespace.find(token),
+            )
 
 
 def validate_parameter_name(name: str) -> None:
@@ -88,20 +99,25 @@ def expand_topic_name(topic: str, node_name: str, namespace: str) -> str:
     """rcl_expand_topic_name: ~ and {node}/{ns} substitution, relative names get the ns."""
     if not topic:
         raise InvalidTopicNameException(topic, 'topic name must not be empty', 0)
-    fqn = (namespace.rstrip('/') + '/' + node_name)
+    fqn = namespace.rstrip('/') + '/' + node_name
     name = topic.replace('{node}', node_name).replace('{ns}', namespace.rstrip('/') or '/')
     if name.startswith('~'):
         name = fqn + name[1:]
     elif not name.startswith('/'):
         name = namespace.rstrip('/') + '/' + name
-    if not _TOPIC_CHARS.fullmatch(name) or '//' in name or (name.endswith('/') and name != '/') \
-            or '~' in name or '{' in name or '}' in name:
+    if (
+        not _TOPIC_CHARS.fullmatch(name)
+        or '//' in name
+        or (name.endswith('/') and name != '/')
+        or '~' in name
+        or '{' in name
+        or '}' in name
+    ):
         bad = next((i for i, c in enumerate(name) if not (c.isalnum() or c in '_/')), 0)
         raise InvalidTopicNameException(topic, 'topic name is invalid', bad)
     for token in name[1:].split('/'):
         if token and token[0].isdigit():
-            raise InvalidTopicNameException(topic, 'topic tokens must not start with a number',
-                                            name.find(token))
+            raise InvalidTopicNameException(topic, 'topic tokens must not start with a number', name.find(token))
     return name
 
 
@@ -114,13 +130,13 @@ class Node:
         self,
         node_name: str,
         *,
-        context: Optional[Context] = None,
-        cli_args: Optional[List[str]] = None,
-        namespace: Optional[str] = None,
+        context: Context | None = None,
+        cli_args: list[str] | None = None,
+        namespace: str | None = None,
         use_global_arguments: bool = True,
         enable_rosout: bool = True,
         start_parameter_services: bool = True,
-        parameter_overrides: Optional[List[Parameter]] = None,
+        parameter_overrides: list[Parameter] | None = None,
         allow_undeclared_parameters: bool = False,
         automatically_declare_parameters_from_overrides: bool = False,
     ) -> None:
@@ -134,7 +150,7 @@ class Node:
         self._guards: list[Any] = []
         self._default_callback_group = MutuallyExclusiveCallbackGroup()
         self._rate_group = ReentrantCallbackGroup()
-        self._parameters_callbacks: list[Callable[[List[Parameter]], Any]] = []
+        self._parameters_callbacks: list[Callable[[list[Parameter]], Any]] = []
         self._allow_undeclared_parameters = allow_undeclared_parameters
         self._parameter_overrides: dict[str, Parameter] = {}
         self._descriptors: dict[str, Any] = {}
@@ -144,8 +160,9 @@ class Node:
         if not self._context.ok():
             raise NotInitializedException('cannot create node')
         self._local_args: RosArguments = parse_ros_args(cli_args)
-        self._arg_sources: list[RosArguments] = (
-            [self._context.args] if use_global_arguments else []) + [self._local_args]
+        self._arg_sources: list[RosArguments] = ([self._context.args] if use_global_arguments else []) + [
+            self._local_args
+        ]
 
         namespace = namespace or ''
         # __node / __ns remaps: local rules before global ones (rcl_remap_node_name)
@@ -171,7 +188,8 @@ class Node:
         self._namespace = namespace
         self._fqn = namespace.rstrip('/') + '/' + node_name
         self._logger = get_logger(
-            (namespace.strip('/').replace('/', '.') + '.' if namespace != '/' else '') + node_name)
+            (namespace.strip('/').replace('/', '.') + '.' if namespace != '/' else '') + node_name
+        )
 
         graph = self._context.graph
         graph.nodes.append(self)
@@ -179,7 +197,8 @@ class Node:
         self._clock = ROSClock()
 
         self._parameter_event_publisher = self.create_publisher(
-            ParameterEvent, '/parameter_events', qos_profile_parameter_events)
+            ParameterEvent, '/parameter_events', qos_profile_parameter_events
+        )
 
         for name, value in overrides_for(self._fqn, self._arg_sources).items():
             self._parameter_overrides[name] = Parameter(name, value=value)
@@ -188,9 +207,10 @@ class Node:
 
         if automatically_declare_parameters_from_overrides:
             self.declare_parameters(
-                '', [(name, param.value, ParameterDescriptor())
-                     for name, param in self._parameter_overrides.items()],
-                ignore_override=True)
+                '',
+                [(name, param.value, ParameterDescriptor()) for name, param in self._parameter_overrides.items()],
+                ignore_override=True,
+            )
 
         self._time_source = TimeSource(node=self)
         self._time_source.attach_clock(self._clock)
@@ -248,7 +268,7 @@ class Node:
         return self._default_callback_group
 
     @property
-    def handle(self) -> 'Node':
+    def handle(self) -> Node:
         return self
 
     def _wake_executor(self) -> None:
@@ -270,8 +290,9 @@ class Node:
         return self._logger
 
     # -- parameters --------------------------------------------------------
-    def declare_parameter(self, name: str, value: Any = None, descriptor: Any = None,
-                          ignore_override: bool = False) -> Parameter:
+    def declare_parameter(
+        self, name: str, value: Any = None, descriptor: Any = None, ignore_override: bool = False
+    ) -> Parameter:
         if value is None and descriptor is None:
             args: tuple[Any, ...] = (name,)
         else:
@@ -282,53 +303,59 @@ class Node:
     def declare_parameters(
         self,
         namespace: str,
-        parameters: List[Union[Tuple[str], Tuple[str, Parameter.Type], Tuple[str, Any, Any]]],
+        parameters: list[tuple[str] | tuple[str, Parameter.Type] | tuple[str, Any, Any]],
         ignore_override: bool = False,
-    ) -> List[Parameter]:
+    ) -> list[Parameter]:
         parameter_list: list[Parameter] = []
         descriptors: dict[str, Any] = {}
         for index, parameter_tuple in enumerate(parameters):
             if len(parameter_tuple) < 1 or len(parameter_tuple) > 3:
                 raise TypeError(
                     f'Invalid parameter tuple length at index {index} in parameters list: '
-                    f'{parameter_tuple}; expecting length between 1 and 3')
+                    f'{parameter_tuple}; expecting length between 1 and 3'
+                )
             value = None
             name = parameter_tuple[0]
             second_arg = parameter_tuple[1] if 1 < len(parameter_tuple) else None
             descriptor = parameter_tuple[2] if 2 < len(parameter_tuple) else ParameterDescriptor()
             if not isinstance(name, str):
-                raise TypeError(f'First element {name} at index {index} in parameters list '
-                                'is not a str.')
+                raise TypeError(f'First element {name} at index {index} in parameters list is not a str.')
             if not isinstance(descriptor, ParameterDescriptor):
-                raise TypeError(f'Third element {descriptor} at index {index} in parameters list '
-                                'is not a ParameterDescriptor.')
+                raise TypeError(
+                    f'Third element {descriptor} at index {index} in parameters list is not a ParameterDescriptor.'
+                )
             if len(parameter_tuple) == 1:
                 warnings.warn(
                     f"when declaring parameter named '{name}', declaring a parameter only "
-                    'providing its name is deprecated.', stacklevel=3)
+                    'providing its name is deprecated.',
+                    stacklevel=3,
+                )
                 descriptor.dynamic_typing = True
 
             if isinstance(second_arg, Parameter.Type):
                 if second_arg == Parameter.Type.NOT_SET:
-                    raise ValueError(
-                        f'Cannot declare parameter {{{name}}} as statically typed of type NOT_SET')
+                    raise ValueError(f'Cannot declare parameter {{{name}}} as statically typed of type NOT_SET')
                 if descriptor.dynamic_typing is True:
                     raise ValueError(
                         f'When declaring parameter {{{name}}} passing a descriptor with'
-                        '`dynamic_typing=True` is not allowed when the parameter type is provided')
+                        '`dynamic_typing=True` is not allowed when the parameter type is provided'
+                    )
                 descriptor.type = second_arg.value
             else:
                 value = second_arg
                 if not descriptor.dynamic_typing and value is not None:
                     if isinstance(value, ParameterValue):
                         if value.type == ParameterType.PARAMETER_NOT_SET:
-                            raise ValueError('Cannot declare a statically typed parameter with '
-                                             'default value of type PARAMETER_NOT_SET')
+                            raise ValueError(
+                                'Cannot declare a statically typed parameter with '
+                                'default value of type PARAMETER_NOT_SET'
+                            )
                         descriptor.type = value.type
                     else:
                         descriptor.type = Parameter.Type.from_parameter_value(value).value
             if isinstance(value, ParameterValue):
                 from .parameter import parameter_value_to_python
+
                 value = parameter_value_to_python(value)
 
             if namespace:
@@ -342,8 +369,7 @@ class Node:
         already = [p.name for p in parameter_list if p.name in self._parameters]
         if already:
             raise ParameterAlreadyDeclaredException(already)
-        self._set_parameters(parameter_list, descriptors, raise_on_failure=True,
-                             allow_undeclared_parameters=True)
+        self._set_parameters(parameter_list, descriptors, raise_on_failure=True, allow_undeclared_parameters=True)
         return [self._parameters[p.name] for p in parameter_list]
 
     def undeclare_parameter(self, name: str) -> None:
@@ -358,7 +384,7 @@ class Node:
     def has_parameter(self, name: str) -> bool:
         return name in self._parameters
 
-    def get_parameter_types(self, names: List[str]) -> List[Any]:
+    def get_parameter_types(self, names: list[str]) -> list[Any]:
         if not all(isinstance(n, str) for n in names):
             raise TypeError('All names must be instances of type str')
         return [self.get_parameter_type(n) for n in names]
@@ -370,7 +396,7 @@ class Node:
             return Parameter.Type.NOT_SET
         raise ParameterNotDeclaredException(name)
 
-    def get_parameters(self, names: List[str]) -> List[Parameter]:
+    def get_parameters(self, names: list[str]) -> list[Parameter]:
         if not all(isinstance(n, str) for n in names):
             raise TypeError('All names must be instances of type str')
         return [self.get_parameter(n) for n in names]
@@ -385,7 +411,7 @@ class Node:
             return Parameter(name, Parameter.Type.NOT_SET, None)
         raise ParameterNotDeclaredException(name)
 
-    def get_parameter_or(self, name: str, alternative_value: Optional[Parameter] = None) -> Parameter:
+    def get_parameter_or(self, name: str, alternative_value: Parameter | None = None) -> Parameter:
         if alternative_value is None:
             alternative_value = Parameter(name, Parameter.Type.NOT_SET)
         if not self.has_parameter(name):
@@ -400,41 +426,48 @@ class Node:
         n = len(prefix)
         return {k[n:]: v for k, v in self._parameters.items() if k.startswith(prefix)}
 
-    def set_parameters(self, parameter_list: List[Parameter]) -> List[Any]:
+    def set_parameters(self, parameter_list: list[Parameter]) -> list[Any]:
         return self._set_parameters(parameter_list)
 
-    def _set_parameters(self, parameter_list: List[Parameter], descriptors: Optional[dict[str, Any]] = None,
-                        raise_on_failure: bool = False,
-                        allow_undeclared_parameters: bool = False) -> List[Any]:
+    def _set_parameters(
+        self,
+        parameter_list: list[Parameter],
+        descriptors: dict[str, Any] | None = None,
+        raise_on_failure: bool = False,
+        allow_undeclared_parameters: bool = False,
+    ) -> list[Any]:
         results = []
         for param in parameter_list:
             if not allow_undeclared_parameters:
                 self._check_undeclared_parameters([param])
             result = self._set_parameters_atomically(
-                [param], descriptors, allow_not_set_type=allow_undeclared_parameters)
+                [param], descriptors, allow_not_set_type=allow_undeclared_parameters
+            )
             if raise_on_failure and not result.successful:
                 if result.reason.startswith('Wrong parameter type'):
                     assert descriptors is not None
-                    raise InvalidParameterTypeException(
-                        param, Parameter.Type(descriptors[param._name].type).name)
+                    raise InvalidParameterTypeException(param, Parameter.Type(descriptors[param._name].type).name)
                 raise InvalidParameterValueException(param.name, param.value, result.reason)
             results.append(result)
         return results
 
-    def set_parameters_atomically(self, parameter_list: List[Parameter]) -> Any:
+    def set_parameters_atomically(self, parameter_list: list[Parameter]) -> Any:
         self._check_undeclared_parameters(parameter_list)
         return self._set_parameters_atomically(parameter_list)
 
-    def _check_undeclared_parameters(self, parameter_list: List[Parameter]) -> None:
+    def _check_undeclared_parameters(self, parameter_list: list[Parameter]) -> None:
         if not all(isinstance(p, Parameter) for p in parameter_list):
             raise TypeError(f"parameter must be instance of type '{Parameter!r}'")
         undeclared = [p.name for p in parameter_list if p.name not in self._parameters]
         if not self._allow_undeclared_parameters and undeclared:
             raise ParameterNotDeclaredException(undeclared)
 
-    def _set_parameters_atomically(self, parameter_list: List[Parameter],
-                                   descriptors: Optional[dict[str, Any]] = None,
-                                   allow_not_set_type: bool = False) -> Any:
+    def _set_parameters_atomically(
+        self,
+        parameter_list: list[Parameter],
+        descriptors: dict[str, Any] | None = None,
+        allow_not_set_type: bool = False,
+    ) -> Any:
         if descriptors is not None:
             result = self._apply_descriptors(parameter_list, descriptors, False)
         else:
@@ -470,14 +503,15 @@ class Node:
         self._parameter_event_publisher.publish(event)
         return result
 
-    def add_on_set_parameters_callback(self, callback: Callable[[List[Parameter]], Any]) -> None:
+    def add_on_set_parameters_callback(self, callback: Callable[[list[Parameter]], Any]) -> None:
         self._parameters_callbacks.insert(0, callback)
 
-    def remove_on_set_parameters_callback(self, callback: Callable[[List[Parameter]], Any]) -> None:
+    def remove_on_set_parameters_callback(self, callback: Callable[[list[Parameter]], Any]) -> None:
         self._parameters_callbacks.remove(callback)
 
-    def _apply_descriptors(self, parameter_list: List[Parameter], descriptors: dict[str, Any],
-                           check_read_only: bool = True) -> Any:
+    def _apply_descriptors(
+        self, parameter_list: list[Parameter], descriptors: dict[str, Any], check_read_only: bool = True
+    ) -> Any:
         for param in parameter_list:
             if param.name in descriptors:
                 result = self._apply_descriptor(param, descriptors[param.name], check_read_only)
@@ -485,27 +519,24 @@ class Node:
                     return result
         return SetParametersResult(successful=True)
 
-    def _apply_descriptor(self, parameter: Parameter, descriptor: Any = None,
-                          check_read_only: bool = True) -> Any:
+    def _apply_descriptor(self, parameter: Parameter, descriptor: Any = None, check_read_only: bool = True) -> Any:
         if descriptor is None:
             descriptor = self.describe_parameter(parameter.name)
         else:
             descriptor.name = parameter.name
         if check_read_only and descriptor.read_only:
             return SetParametersResult(
-                successful=False,
-                reason=f'Trying to set a read-only parameter: {parameter.name}.')
+                successful=False, reason=f'Trying to set a read-only parameter: {parameter.name}.'
+            )
         if descriptor.dynamic_typing:
             descriptor.type = parameter.type_.value
         elif self.has_parameter(parameter.name) and parameter.type_ == Parameter.Type.NOT_SET:
-            return SetParametersResult(successful=False,
-                                       reason='Static parameter cannot be undeclared')
+            return SetParametersResult(successful=False, reason='Static parameter cannot be undeclared')
         elif parameter.type_ != Parameter.Type.NOT_SET and parameter.type_.value != descriptor.type:
             return SetParametersResult(
                 successful=False,
-                reason=('Wrong parameter type, expected '
-                        f"'{Parameter.Type(descriptor.type)}'"
-                        f" got '{parameter.type_}'"))
+                reason=(f"Wrong parameter type, expected '{Parameter.Type(descriptor.type)}' got '{parameter.type_}'"),
+            )
         if parameter.type_ == Parameter.Type.INTEGER and descriptor.integer_range:
             return self._apply_integer_range(parameter, descriptor.integer_range[0])
         if parameter.type_ == Parameter.Type.DOUBLE and descriptor.floating_point_range:
@@ -520,13 +551,14 @@ class Node:
             return SetParametersResult(successful=True)
         if not lo < v < hi:
             return SetParametersResult(
-                successful=False,
-                reason=f'Parameter {parameter.name} out of range. Min: {lo}, Max: {hi}, value: {v}')
+                successful=False, reason=f'Parameter {parameter.name} out of range. Min: {lo}, Max: {hi}, value: {v}'
+            )
         if integer_range.step != 0 and (v - lo) % integer_range.step != 0:
             return SetParametersResult(
                 successful=False,
                 reason=f'The parameter value for {parameter.name} is not a valid step. '
-                       f'Min: {lo}, max: {hi}, value: {v}, step: {integer_range.step}')
+                f'Min: {lo}, max: {hi}, value: {v}, step: {integer_range.step}',
+            )
         return SetParametersResult(successful=True)
 
     def _apply_floating_point_range(self, parameter: Parameter, fp_range: Any) -> Any:
@@ -538,15 +570,16 @@ class Node:
             return SetParametersResult(successful=True)
         if not lo < v < hi:
             return SetParametersResult(
-                successful=False,
-                reason=f'Parameter {parameter.name} out of range Min: {lo}, Max: {hi}, value: {v}')
+                successful=False, reason=f'Parameter {parameter.name} out of range Min: {lo}, Max: {hi}, value: {v}'
+            )
         if fp_range.step != 0.0:
             steps = round((v - lo) / fp_range.step)
             if not math.isclose(lo + steps * fp_range.step, v, rel_tol=tol):
                 return SetParametersResult(
                     successful=False,
                     reason=f'The parameter value for {parameter.name} is not close enough to a '
-                           f'valid step. Min: {lo}, max: {hi}, value: {v}, step: {fp_range.step}')
+                    f'valid step. Min: {lo}, max: {hi}, value: {v}, step: {fp_range.step}',
+                )
         return SetParametersResult(successful=True)
 
     def describe_parameter(self, name: str) -> Any:
@@ -557,7 +590,7 @@ class Node:
                 return ParameterDescriptor()
             raise ParameterNotDeclaredException(name) from None
 
-    def describe_parameters(self, names: List[str]) -> List[Any]:
+    def describe_parameters(self, names: list[str]) -> list[Any]:
         return [self.describe_parameter(n) for n in names]
 
     def set_descriptor(self, name: str, descriptor: Any, alternative_value: Any = None) -> Any:
@@ -568,8 +601,11 @@ class Node:
         if self.describe_parameter(name).read_only:
             raise ParameterImmutableException(name)
         current = self.get_parameter(name)
-        alternative = current if alternative_value is None else Parameter.from_parameter_msg(
-            ParameterMsg(name=name, value=alternative_value))
+        alternative = (
+            current
+            if alternative_value is None
+            else Parameter.from_parameter_msg(ParameterMsg(name=name, value=alternative_value))
+        )
         if not self._apply_descriptor(current, descriptor, False).successful:
             res = self._apply_descriptor(alternative, descriptor, False)
             if not res.successful:
@@ -595,7 +631,7 @@ class Node:
         return self.resolve_topic_name(service, only_expand=only_expand)
 
     @staticmethod
-    def _validate_qos_or_depth_parameter(qos_or_depth: Union[QoSProfile, int]) -> QoSProfile:
+    def _validate_qos_or_depth_parameter(qos_or_depth: QoSProfile | int) -> QoSProfile:
         if isinstance(qos_or_depth, QoSProfile):
             return qos_or_depth
         if isinstance(qos_or_depth, int) and not isinstance(qos_or_depth, bool):
@@ -607,13 +643,23 @@ class Node:
     @staticmethod
     def _check_msg_type(msg_type: Any) -> None:
         if not is_message_class(msg_type):
-            raise TypeError(f'{msg_type!r} is not a message type of the embedded runtime '
-                            '(import it from <pkg>.msg after sma_wrist.runtime.activate())')
+            raise TypeError(
+                f'{msg_type!r} is not a message type of the embedded runtime '
+                '(import it from <pkg>.msg after sma_wrist.runtime.activate())'
+            )
 
     # -- entities ----------------------------------------------------------
-    def create_publisher(self, msg_type: Any, topic: str, qos_profile: Union[QoSProfile, int], *,
-                         callback_group: Optional[CallbackGroup] = None, event_callbacks: Any = None,
-                         qos_overriding_options: Any = None, publisher_class: Any = None) -> Publisher:
+    def create_publisher(
+        self,
+        msg_type: Any,
+        topic: str,
+        qos_profile: QoSProfile | int,
+        *,
+        callback_group: CallbackGroup | None = None,
+        event_callbacks: Any = None,
+        qos_overriding_options: Any = None,
+        publisher_class: Any = None,
+    ) -> Publisher:
         qos = self._validate_qos_or_depth_parameter(qos_profile)
         self._check_msg_type(msg_type)
         name = self.resolve_topic_name(topic)
@@ -624,10 +670,18 @@ class Node:
         self._wake_executor()
         return pub
 
-    def create_subscription(self, msg_type: Any, topic: str, callback: Callable[[Any], None],
-                            qos_profile: Union[QoSProfile, int], *,
-                            callback_group: Optional[CallbackGroup] = None, event_callbacks: Any = None,
-                            qos_overriding_options: Any = None, raw: bool = False) -> Subscription:
+    def create_subscription(
+        self,
+        msg_type: Any,
+        topic: str,
+        callback: Callable[[Any], None],
+        qos_profile: QoSProfile | int,
+        *,
+        callback_group: CallbackGroup | None = None,
+        event_callbacks: Any = None,
+        qos_overriding_options: Any = None,
+        raw: bool = False,
+    ) -> Subscription:
         qos = self._validate_qos_or_depth_parameter(qos_profile)
         self._check_msg_type(msg_type)
         if raw:
@@ -642,13 +696,16 @@ class Node:
         self._wake_executor()
         return sub
 
-    def create_timer(self, timer_period_sec: float, callback: Callable[[], Any],
-                     callback_group: Optional[CallbackGroup] = None,
-                     clock: Optional[Clock] = None) -> Timer:
+    def create_timer(
+        self,
+        timer_period_sec: float,
+        callback: Callable[[], Any],
+        callback_group: CallbackGroup | None = None,
+        clock: Clock | None = None,
+    ) -> Timer:
         period_ns = int(float(timer_period_sec) * S_TO_NS)
         group = callback_group or self._default_callback_group
-        timer = Timer(callback, group, period_ns, clock if clock is not None else self._clock,
-                      context=self._context)
+        timer = Timer(callback, group, period_ns, clock if clock is not None else self._clock, context=self._context)
         group.add_entity(timer)
         self._timers.append(timer)
         self._wake_executor()
@@ -713,18 +770,16 @@ class Node:
         t = self._context.graph.topics.get(name)
         return len(t.subscriptions) if t else 0
 
-    def get_topic_names_and_types(self, no_demangle: bool = False) -> List[Tuple[str, List[str]]]:
-        return sorted((t.name, [t.msg_type._TYPE]) for t in self._context.graph.topics.values()
-                      if t.publishers or t.subscriptions)
+    def get_topic_names_and_types(self, no_demangle: bool = False) -> list[tuple[str, list[str]]]:
+        return sorted(
+            (t.name, [t.msg_type._TYPE]) for t in self._context.graph.topics.values() if t.publishers or t.subscriptions
+        )
 
-    def get_node_names(self) -> List[str]:
+    def get_node_names(self) -> list[str]:
         return [n.get_name() for n in self._context.graph.nodes]
 
-    def get_node_names_and_namespaces(self) -> List[Tuple[str, str]]:
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
         return [(n.get_name(), n.get_namespace()) for n in self._context.graph.nodes]
 
     def __repr__(self) -> str:
         return f'<embedded Node {self._fqn}>'
-
-
-

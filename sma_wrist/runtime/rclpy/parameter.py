@@ -1,9 +1,10 @@
 """rclpy.parameter.Parameter (behaviour of rclpy/parameter.py, Humble)."""
+
 from __future__ import annotations
 
 import array
 from enum import Enum
-from typing import Any, Optional
+from typing import Any
 
 from sma_wrist.runtime.messages import get_message_class
 
@@ -14,9 +15,15 @@ _PT = get_message_class('rcl_interfaces/msg/ParameterType')
 PARAMETER_SEPARATOR_STRING = '.'
 
 _VALUE_FIELDS = {
-    1: 'bool_value', 2: 'integer_value', 3: 'double_value', 4: 'string_value',
-    5: 'byte_array_value', 6: 'bool_array_value', 7: 'integer_array_value',
-    8: 'double_array_value', 9: 'string_array_value',
+    1: 'bool_value',
+    2: 'integer_value',
+    3: 'double_value',
+    4: 'string_value',
+    5: 'byte_array_value',
+    6: 'bool_array_value',
+    7: 'integer_array_value',
+    8: 'double_array_value',
+    9: 'string_array_value',
 }
 
 
@@ -36,7 +43,7 @@ class Parameter:
         STRING_ARRAY = _PT.PARAMETER_STRING_ARRAY
 
         @classmethod
-        def from_parameter_value(cls, parameter_value: Any) -> 'Parameter.Type':
+        def from_parameter_value(cls, parameter_value: Any) -> Parameter.Type:
             """Parameter.Type of a Python value; TypeError if there is none."""
             v = parameter_value
             if v is None:
@@ -60,8 +67,7 @@ class Parameter:
                     return cls.DOUBLE_ARRAY
                 if all(isinstance(x, str) for x in v):
                     return cls.STRING_ARRAY
-                raise TypeError(
-                    f"The given value is not a list of one of the allowed types '{v}'.")
+                raise TypeError(f"The given value is not a list of one of the allowed types '{v}'.")
             raise TypeError(f"The given value is not one of the allowed types '{v}'.")
 
         def check(self, parameter_value: Any) -> bool:
@@ -78,8 +84,7 @@ class Parameter:
             if self is T.STRING:
                 return isinstance(v, str)
             if self is T.BYTE_ARRAY:
-                return isinstance(v, (list, tuple)) and all(
-                    isinstance(x, bytes) and len(x) == 1 for x in v)
+                return isinstance(v, (list, tuple)) and all(isinstance(x, bytes) and len(x) == 1 for x in v)
             if self is T.BOOL_ARRAY:
                 return isinstance(v, (list, tuple)) and all(isinstance(x, bool) for x in v)
             if self is T.INTEGER_ARRAY:
@@ -91,13 +96,13 @@ class Parameter:
             return False
 
     @classmethod
-    def from_parameter_msg(cls, param_msg: Any) -> 'Parameter':
+    def from_parameter_msg(cls, param_msg: Any) -> Parameter:
         type_ = Parameter.Type(param_msg.value.type)
         field = _VALUE_FIELDS.get(type_.value)
         value = getattr(param_msg.value, field) if field else None
         return cls(param_msg.name, type_, value)
 
-    def __init__(self, name: str, type_: Optional['Parameter.Type'] = None, value: Any = None) -> None:
+    def __init__(self, name: str, type_: Parameter.Type | None = None, value: Any = None) -> None:
         if type_ is None:
             type_ = Parameter.Type.from_parameter_value(value)
         if not isinstance(type_, Parameter.Type):
@@ -113,7 +118,7 @@ class Parameter:
         return self._name
 
     @property
-    def type_(self) -> 'Parameter.Type':
+    def type_(self) -> Parameter.Type:
         return self._type_
 
     @property
@@ -124,8 +129,9 @@ class Parameter:
         pv = _ParameterValue(type=self._type_.value)
         field = _VALUE_FIELDS.get(self._type_.value)
         if field:
-            setattr(pv, field, list(self._value) if isinstance(self._value, (list, tuple, array.array))
-                    else self._value)
+            setattr(
+                pv, field, list(self._value) if isinstance(self._value, (list, tuple, array.array)) else self._value
+            )
         return pv
 
     def to_parameter_msg(self) -> Any:

@@ -1,16 +1,16 @@
 """rclpy.publisher.Publisher on the in-process graph."""
+
 from __future__ import annotations
 
 from collections import deque
-from typing import Any, Optional
+from typing import Any
 
 from ..vclock import VCLOCK
 from .qos import QoSProfile
 
 
 class Publisher:
-    def __init__(self, node: Any, msg_type: type, topic: str, qos_profile: QoSProfile,
-                 graph_topic: Any) -> None:
+    def __init__(self, node: Any, msg_type: type, topic: str, qos_profile: QoSProfile, graph_topic: Any) -> None:
         self._node = node
         self.msg_type = msg_type
         self.topic = topic
@@ -18,14 +18,15 @@ class Publisher:
         self._topic = graph_topic
         self._matched: list[Any] = []
         # TRANSIENT_LOCAL publishers keep their last `depth` messages for late joiners.
-        self._history: Optional[deque[Any]] = (
-            deque(maxlen=qos_profile._queue_len()) if qos_profile._is_transient_local() else None)
+        self._history: deque[Any] | None = (
+            deque(maxlen=qos_profile._queue_len()) if qos_profile._is_transient_local() else None
+        )
         self._clock = node._clock
         self._graph = node._context.graph
         self._destroyed = False
 
     @property
-    def handle(self) -> 'Publisher':
+    def handle(self) -> Publisher:
         return self
 
     @property

@@ -6,6 +6,7 @@ RELIABLE subscription; a VOLATILE publisher does not match a TRANSIENT_LOCAL
 subscription), and TRANSIENT_LOCAL late-joiner delivery of the publisher's last ``depth``
 messages.  Deadline, lifespan and liveliness are stored but not enforced.
 """
+
 from __future__ import annotations
 
 from enum import Enum, IntEnum
@@ -14,11 +15,23 @@ from typing import Any
 from .duration import Duration
 
 __all__ = [
-    'DurabilityPolicy', 'HistoryPolicy', 'InvalidQoSProfileException', 'LivelinessPolicy',
-    'QoSDurabilityPolicy', 'QoSHistoryPolicy', 'QoSLivelinessPolicy', 'QoSPresetProfiles',
-    'QoSProfile', 'QoSReliabilityPolicy', 'ReliabilityPolicy', 'qos_profile_parameter_events',
-    'qos_profile_parameters', 'qos_profile_sensor_data', 'qos_profile_services_default',
-    'qos_profile_system_default', 'qos_profile_unknown',
+    'DurabilityPolicy',
+    'HistoryPolicy',
+    'InvalidQoSProfileException',
+    'LivelinessPolicy',
+    'QoSDurabilityPolicy',
+    'QoSHistoryPolicy',
+    'QoSLivelinessPolicy',
+    'QoSPresetProfiles',
+    'QoSProfile',
+    'QoSReliabilityPolicy',
+    'ReliabilityPolicy',
+    'qos_profile_parameter_events',
+    'qos_profile_parameters',
+    'qos_profile_sensor_data',
+    'qos_profile_services_default',
+    'qos_profile_system_default',
+    'qos_profile_unknown',
 ]
 
 
@@ -33,7 +46,7 @@ class QoSPolicyEnum(IntEnum):
         return self.name.lower()
 
     @classmethod
-    def get_from_short_key(cls, name: str) -> 'QoSPolicyEnum':
+    def get_from_short_key(cls, name: str) -> QoSPolicyEnum:
         return cls[name.upper()]
 
 
@@ -72,9 +85,13 @@ QoSLivelinessPolicy = LivelinessPolicy
 
 _ZERO = Duration()
 _DEFAULT = {  # rmw_qos_profile_default
-    'depth': 10, 'reliability': ReliabilityPolicy.RELIABLE,
-    'durability': DurabilityPolicy.VOLATILE, 'lifespan': _ZERO, 'deadline': _ZERO,
-    'liveliness': LivelinessPolicy.SYSTEM_DEFAULT, 'liveliness_lease_duration': _ZERO,
+    'depth': 10,
+    'reliability': ReliabilityPolicy.RELIABLE,
+    'durability': DurabilityPolicy.VOLATILE,
+    'lifespan': _ZERO,
+    'deadline': _ZERO,
+    'liveliness': LivelinessPolicy.SYSTEM_DEFAULT,
+    'liveliness_lease_duration': _ZERO,
     'avoid_ros_namespace_conventions': False,
 }
 
@@ -82,8 +99,17 @@ _DEFAULT = {  # rmw_qos_profile_default
 class QoSProfile:
     """Define Quality of Service policies."""
 
-    __slots__ = ['_history', '_depth', '_reliability', '_durability', '_lifespan', '_deadline',
-                 '_liveliness', '_liveliness_lease_duration', '_avoid_ros_namespace_conventions']
+    __slots__ = [
+        '_history',
+        '_depth',
+        '_reliability',
+        '_durability',
+        '_lifespan',
+        '_deadline',
+        '_liveliness',
+        '_liveliness_lease_duration',
+        '_avoid_ros_namespace_conventions',
+    ]
 
     def __init__(self, **kwargs: Any) -> None:
         if not all('_' + key in self.__slots__ for key in kwargs):
@@ -96,8 +122,15 @@ class QoSProfile:
         if HistoryPolicy.KEEP_LAST == self.history and 'depth' not in kwargs:
             raise InvalidQoSProfileException('History set to KEEP_LAST without a depth setting.')
         self.depth = kwargs.get('depth', _DEFAULT['depth'])
-        for key in ('reliability', 'durability', 'lifespan', 'deadline', 'liveliness',
-                    'liveliness_lease_duration', 'avoid_ros_namespace_conventions'):
+        for key in (
+            'reliability',
+            'durability',
+            'lifespan',
+            'deadline',
+            'liveliness',
+            'liveliness_lease_duration',
+            'avoid_ros_namespace_conventions',
+        ):
             setattr(self, key, kwargs.get(key, _DEFAULT[key]))
 
     @property
@@ -180,8 +213,7 @@ class QoSProfile:
         return all(getattr(self, s) == getattr(other, s) for s in self.__slots__)
 
     def __repr__(self) -> str:
-        return ('QoSProfile(history={}, depth={}, reliability={}, durability={})'.format(
-            self.history.name, self.depth, self.reliability.name, self.durability.name))
+        return f'QoSProfile(history={self.history.name}, depth={self.depth}, reliability={self.reliability.name}, durability={self.durability.name})'
 
     # -- embedded middleware view -----------------------------------------
     def _queue_len(self) -> int | None:
@@ -206,25 +238,43 @@ def _compatible(pub: QoSProfile, sub: QoSProfile) -> bool:
     return True
 
 
-qos_profile_unknown = QoSProfile(history=HistoryPolicy.UNKNOWN, depth=0,
-                                 reliability=ReliabilityPolicy.UNKNOWN,
-                                 durability=DurabilityPolicy.UNKNOWN,
-                                 liveliness=LivelinessPolicy.UNKNOWN)
-qos_profile_system_default = QoSProfile(history=HistoryPolicy.SYSTEM_DEFAULT, depth=0,
-                                        reliability=ReliabilityPolicy.SYSTEM_DEFAULT,
-                                        durability=DurabilityPolicy.SYSTEM_DEFAULT)
-qos_profile_sensor_data = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
-                                     reliability=ReliabilityPolicy.BEST_EFFORT,
-                                     durability=DurabilityPolicy.VOLATILE)
-qos_profile_services_default = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
-                                          reliability=ReliabilityPolicy.RELIABLE,
-                                          durability=DurabilityPolicy.VOLATILE)
-qos_profile_parameters = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                                    reliability=ReliabilityPolicy.RELIABLE,
-                                    durability=DurabilityPolicy.VOLATILE)
-qos_profile_parameter_events = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
-                                          reliability=ReliabilityPolicy.RELIABLE,
-                                          durability=DurabilityPolicy.VOLATILE)
+qos_profile_unknown = QoSProfile(
+    history=HistoryPolicy.UNKNOWN,
+    depth=0,
+    reliability=ReliabilityPolicy.UNKNOWN,
+    durability=DurabilityPolicy.UNKNOWN,
+    liveliness=LivelinessPolicy.UNKNOWN,
+)
+qos_profile_system_default = QoSProfile(
+    history=HistoryPolicy.SYSTEM_DEFAULT,
+    depth=0,
+    reliability=ReliabilityPolicy.SYSTEM_DEFAULT,
+    durability=DurabilityPolicy.SYSTEM_DEFAULT,
+)
+qos_profile_sensor_data = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)
+qos_profile_services_default = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+qos_profile_parameters = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+qos_profile_parameter_events = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
 
 
 class QoSPresetProfiles(Enum):

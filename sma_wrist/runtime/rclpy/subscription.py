@@ -1,15 +1,26 @@
 """rclpy.subscription.Subscription with a KEEP_LAST/KEEP_ALL queue of its own."""
+
 from __future__ import annotations
 
 from collections import deque
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from .qos import QoSProfile
 
 
 class Subscription:
-    def __init__(self, node: Any, msg_type: type, topic: str, callback: Callable[[Any], None],
-                 callback_group: Any, qos_profile: QoSProfile, raw: bool, graph_topic: Any) -> None:
+    def __init__(
+        self,
+        node: Any,
+        msg_type: type,
+        topic: str,
+        callback: Callable[[Any], None],
+        callback_group: Any,
+        qos_profile: QoSProfile,
+        raw: bool,
+        graph_topic: Any,
+    ) -> None:
         self._node = node
         self.msg_type = msg_type
         self.topic = topic
@@ -21,7 +32,7 @@ class Subscription:
         self._queue: deque[Any] = deque(maxlen=qos_profile._queue_len())
 
     @property
-    def handle(self) -> 'Subscription':
+    def handle(self) -> Subscription:
         return self
 
     @property

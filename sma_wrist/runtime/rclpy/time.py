@@ -1,4 +1,5 @@
 """rclpy.time.Time (semantics of rclpy/time.py, Humble), pure Python."""
+
 from __future__ import annotations
 
 from typing import Any
@@ -8,14 +9,15 @@ from sma_wrist.runtime.messages import get_message_class
 from .clock_type import ClockType
 from .duration import Duration
 
-CONVERSION_CONSTANT = 10 ** 9
+CONVERSION_CONSTANT = 10**9
 
 
 class Time:
     __slots__ = ('_ns', '_clock_type')
 
-    def __init__(self, *, seconds: float = 0, nanoseconds: int = 0,
-                 clock_type: ClockType = ClockType.SYSTEM_TIME) -> None:
+    def __init__(
+        self, *, seconds: float = 0, nanoseconds: int = 0, clock_type: ClockType = ClockType.SYSTEM_TIME
+    ) -> None:
         if not isinstance(clock_type, ClockType):
             raise TypeError('Clock type must be a ClockType enum')
         if seconds < 0:
@@ -29,7 +31,7 @@ class Time:
         self._clock_type = clock_type
 
     @classmethod
-    def _from_ns(cls, ns: int, clock_type: ClockType) -> 'Time':
+    def _from_ns(cls, ns: int, clock_type: ClockType) -> Time:
         t = object.__new__(cls)
         t._ns = ns
         t._clock_type = clock_type
@@ -49,7 +51,7 @@ class Time:
     def __repr__(self) -> str:
         return f'Time(nanoseconds={self._ns}, clock_type={self._clock_type.name})'
 
-    def __add__(self, other: Any) -> 'Time':
+    def __add__(self, other: Any) -> Time:
         if isinstance(other, Duration):
             try:
                 return Time(nanoseconds=self._ns + other.nanoseconds, clock_type=self._clock_type)
@@ -57,7 +59,7 @@ class Time:
                 raise OverflowError('Addition leads to overflow in C storage.') from e
         return NotImplemented
 
-    def __radd__(self, other: Any) -> 'Time':
+    def __radd__(self, other: Any) -> Time:
         return self.__add__(other)
 
     def __sub__(self, other: Any) -> Any:
@@ -72,7 +74,7 @@ class Time:
                 raise ValueError('Subtraction leads to negative time.') from e
         return NotImplemented
 
-    def _check(self, other: 'Time') -> None:
+    def _check(self, other: Time) -> None:
         if self._clock_type != other._clock_type:
             raise TypeError("Can't compare times with different clock types")
 
@@ -117,7 +119,7 @@ class Time:
         return get_message_class('builtin_interfaces/msg/Time')(sec=sec, nanosec=nsec)
 
     @classmethod
-    def from_msg(cls, msg: Any, clock_type: ClockType = ClockType.ROS_TIME) -> 'Time':
+    def from_msg(cls, msg: Any, clock_type: ClockType = ClockType.ROS_TIME) -> Time:
         if type(msg) is not get_message_class('builtin_interfaces/msg/Time'):
             raise TypeError('Must pass a builtin_interfaces.msg.Time object')
         return cls(seconds=msg.sec, nanoseconds=msg.nanosec, clock_type=clock_type)

@@ -4,10 +4,11 @@ Declares ``use_sim_time`` (False) if the node has not, activates the ROS time ov
 attached clocks when it is true, and then subscribes to /clock with
 ``QoSProfile(depth=1, reliability=BEST_EFFORT)``; each Clock message sets the override.
 """
+
 from __future__ import annotations
 
 import weakref
-from typing import Any, Optional
+from typing import Any
 
 from sma_wrist.runtime.messages import get_message_class
 
@@ -24,7 +25,7 @@ USE_SIM_TIME_NAME = 'use_sim_time'
 class TimeSource:
     def __init__(self, *, node: Any = None) -> None:
         self._clock_sub: Any = None
-        self._node_weak_ref: Optional[weakref.ref[Any]] = None
+        self._node_weak_ref: weakref.ref[Any] | None = None
         self._associated_clocks: list[ROSClock] = []
         self._last_time_set = Time(clock_type=ClockType.ROS_TIME)
         self._ros_time_is_active = False
@@ -55,11 +56,15 @@ class TimeSource:
             node = self._get_node()
             if node is not None:
                 self._clock_sub = node.create_subscription(
-                    get_message_class('rosgraph_msgs/msg/Clock'), CLOCK_TOPIC, self.clock_callback,
-                    QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT))
+                    get_message_class('rosgraph_msgs/msg/Clock'),
+                    CLOCK_TOPIC,
+                    self.clock_callback,
+                    QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT),
+                )
 
     def attach_node(self, node: Any) -> None:
         from .node import Node
+
         if not isinstance(node, Node):
             raise TypeError('Node must be of type rclpy.node.Node')
         if self._node_weak_ref is not None:
@@ -73,8 +78,8 @@ class TimeSource:
                 self.ros_time_is_active = param.value
             else:
                 node.get_logger().error(
-                    "Invalid type for parameter '{}' {!r} should be bool".format(
-                        USE_SIM_TIME_NAME, param.type_))
+                    f"Invalid type for parameter '{USE_SIM_TIME_NAME}' {param.type_!r} should be bool"
+                )
         node.add_on_set_parameters_callback(self._on_parameter_event)
 
     def detach_node(self) -> None:
@@ -107,8 +112,7 @@ class TimeSource:
                 else:
                     node = self._get_node()
                     if node:
-                        node.get_logger().error(
-                            f'{USE_SIM_TIME_NAME} parameter set to something besides a bool')
+                        node.get_logger().error(f'{USE_SIM_TIME_NAME} parameter set to something besides a bool')
                 break
         return get_message_class('rcl_interfaces/msg/SetParametersResult')(successful=True)
 

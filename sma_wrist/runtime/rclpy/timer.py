@@ -7,16 +7,25 @@ needed to pass ``now`` when calls were missed.  Timers on a ROS clock register r
 callback: a backward jump of more than one period restarts the period, and activating
 ``use_sim_time`` carries the elapsed part of the period into the new epoch.
 """
+
 from __future__ import annotations
 
-from typing import Any, Callable, Optional
+from collections.abc import Callable
+from typing import Any
 
 from .clock import Clock, ClockChange, ClockType, _JumpEntry
 
 
 class Timer:
-    def __init__(self, callback: Optional[Callable[[], Any]], callback_group: Any,
-                 timer_period_ns: int, clock: Clock, *, context: Any = None) -> None:
+    def __init__(
+        self,
+        callback: Callable[[], Any] | None,
+        callback_group: Any,
+        timer_period_ns: int,
+        clock: Clock,
+        *,
+        context: Any = None,
+    ) -> None:
         period = int(timer_period_ns)
         if period < 0:
             raise ValueError('timer period must be non-negative')
@@ -31,7 +40,7 @@ class Timer:
         self._credit = 0
         self._canceled = False
         self._destroyed = False
-        self._jump: Optional[_JumpEntry] = None
+        self._jump: _JumpEntry | None = None
         if clock._clock_type is ClockType.ROS_TIME:
             self._jump = _JumpEntry(True, 1, -1, self._pre_jump, self._post_jump, self)
             clock._jump_entries.append(self._jump)
@@ -60,7 +69,7 @@ class Timer:
 
     # -- public rclpy API --------------------------------------------------
     @property
-    def handle(self) -> 'Timer':
+    def handle(self) -> Timer:
         return self
 
     @property
@@ -92,7 +101,7 @@ class Timer:
     def time_since_last_call(self) -> int:
         return self._clock._now_ns() - self._last_call
 
-    def time_until_next_call(self) -> Optional[int]:
+    def time_until_next_call(self) -> int | None:
         if self._canceled:
             return None
         return self._next_call - self._clock._now_ns()

@@ -1,13 +1,14 @@
 """Default context handling (as rclpy/utilities.py, Humble)."""
+
 from __future__ import annotations
 
-from typing import Iterable, Optional
+from collections.abc import Iterable
 
 from sma_wrist.runtime.arguments import remove_ros_args as _remove_ros_args
 
 from .context import Context
 
-g_default_context: Optional[Context] = None
+g_default_context: Context | None = None
 
 
 def get_default_context(*, shutting_down: bool = False) -> Context:
@@ -21,17 +22,17 @@ def get_default_context(*, shutting_down: bool = False) -> Context:
     return g_default_context
 
 
-def ok(*, context: Optional[Context] = None) -> bool:
+def ok(*, context: Context | None = None) -> bool:
     return (context or get_default_context()).ok()
 
 
-def shutdown(*, context: Optional[Context] = None) -> None:
+def shutdown(*, context: Context | None = None) -> None:
     if context is None:
         context = get_default_context(shutting_down=True)
     context.shutdown()
 
 
-def try_shutdown(*, context: Optional[Context] = None) -> None:
+def try_shutdown(*, context: Context | None = None) -> None:
     global g_default_context
     if context is None:
         context = get_default_context()
@@ -42,8 +43,9 @@ def try_shutdown(*, context: Optional[Context] = None) -> None:
         context.try_shutdown()
 
 
-def remove_ros_args(args: Optional[Iterable[str]] = None) -> list[str]:
+def remove_ros_args(args: Iterable[str] | None = None) -> list[str]:
     import sys
+
     return _remove_ros_args(sys.argv if args is None else args)
 
 
@@ -51,7 +53,7 @@ def get_rmw_implementation_identifier() -> str:
     return 'sma_wrist_embedded'
 
 
-def timeout_sec_to_nsec(timeout_sec: Optional[float]) -> int:
+def timeout_sec_to_nsec(timeout_sec: float | None) -> int:
     if timeout_sec is None or timeout_sec < 0:
         return -1
     return int(float(timeout_sec) * 1e9)
