@@ -255,7 +255,7 @@ def _main(
         'the compensator on the thermocouples',
     )
     ap.add_argument(
-        '--before-item-2',
+        '--without-observer',
         action='store_true',
         help='the compensator before its observer (doc/explanation/controllers.md): on the thermocouples, its '
         'window not following the shift, the axis adapting at 1 /s',
@@ -325,7 +325,7 @@ def _main(
     kw: dict[str, Any] = {}
     if a.legacy:
         kw = {'tem_params': TemControlParams(rate_filter_s=0.05), 'shift_gain_per_s': 0.0}
-    if a.legacy or a.before_item_2:
+    if a.legacy or a.without_observer:
         kw.update(compensator_observer=None, window_follows_shift=False, stroke_gain_per_s=0.0, online_thermal=None)
     if a.thermal_adaptation is not None:
         kw['online_thermal'] = OnlineThermalParams() if a.thermal_adaptation == 'on' else None
@@ -335,7 +335,7 @@ def _main(
         kw['hold_shift_on_stop'] = a.hold_shift_on_stop == 'on'
     if a.hold_shift_outside_load_range is not None:
         kw['hold_shift_outside_load_range'] = a.hold_shift_outside_load_range == 'on'
-    if a.before_item_2:
+    if a.without_observer:
         kw['shift_gain_per_s'] = 1.0
     if a.thermocouple:
         kw['compensator_observer'] = None
