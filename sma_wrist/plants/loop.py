@@ -257,7 +257,7 @@ def _main(
     ap.add_argument(
         '--without-observer',
         action='store_true',
-        help='the compensator before its observer (doc/explanation/controllers.md): on the thermocouples, its '
+        help='the compensator without its observer (doc/explanation/controllers.md): on the thermocouples, its '
         'window not following the shift, the axis adapting at 1 /s',
     )
     ap.add_argument(
