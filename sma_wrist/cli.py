@@ -499,10 +499,6 @@ def build_parser() -> argparse.ArgumentParser:
     )
     m.set_defaults(func=cmd_commission)
 
-    d = sub.add_parser(
-        'emulate-device', help='emulated wrist controller on a pseudo-terminal (doc/explanation/protocol.md)'
-    )
-
     d = monitor_arguments(
         sub.add_parser(
             'monitor', help='the live model monitor on a recorded bag: which cause from when (doc/howto/monitor.md)'
