@@ -327,6 +327,9 @@ def test_ctrl_c_on_the_command_line_over_a_serial_port(tmp_path, pty_device):
         stdout=subprocess.PIPE,
         text=True,
         env=env,
+        # as a terminal's foreground job: a test run started in the background inherits SIGINT ignored, and Python
+        # then keeps ignoring it, so the interrupt under test would never arrive
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     try:
         for line in proc.stderr:

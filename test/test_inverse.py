@@ -163,7 +163,7 @@ def test_compiled_observe_and_solve_agree_with_the_numpy_path(seed: int, S: int)
     T0, m0 = rng.uniform(*T_range, S), rng.uniform(m_lo, m_hi, S)
     branch = str(rng.choice(['cooling', 'heating']))
     comps = []
-    for _numpy_path in (True, False):
+    for _ in (True, False):
         comps.append(InverseCompensator(P, T_range=T_range))
         comps[-1].reset(T0, m0, branch=branch)
     T, m = T0.copy(), m0.copy()

@@ -15,14 +15,14 @@ import numpy as np
 
 def closed_loops() -> None:
     """The sweep engine on the project's plant in every mode, the node laws' own kernels."""
-    from sma_wrist.core.control import adaptive_kernel, pid_kernel, tem_kernel
+    from sma_wrist.core.control import adaptive_kernel, pid, tem_kernel
     from sma_wrist.core.control.joint_controller import JointController
     from sma_wrist.sweep.simulate import simulate
 
     simulate(_cases(), 0.05)
     tem_kernel.warm_up()
     adaptive_kernel.warm_up()
-    pid_kernel.warm_up()
+    pid.warm_up()
     c = JointController()
     for k in range(3):
         c.update(0.5, 0.0, 0.5 + 0.01 * k, 0.01, 0.0, 0.01)

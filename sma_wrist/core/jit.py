@@ -43,7 +43,7 @@ from pathlib import Path
 STAMP_NAME = 'numba-sources.sha256'
 #: the package folders whose code the kernels compile or read constants from (an edit elsewhere,
 #: e.g. the CLI or the nodes, keeps the compiled kernels)
-KERNEL_FOLDERS = ('core', 'plants', 'sweep', 'diagnose', 'data')
+KERNEL_FOLDERS = ('core', 'plants', 'sweep', 'diagnose', 'data', 'monitor')
 PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 #: written into each cache sub-folder the package's locator uses: the source folder it caches
 SOURCE_MARKER = 'sma_wrist-source.txt'

@@ -26,11 +26,12 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from sensor_msgs.msg import Temperature
 from std_msgs.msg import Float64, Header
 
-from sma_wrist.core.control import adaptive_kernel, pid_kernel
+from sma_wrist.core.control import adaptive_kernel
 from sma_wrist.core.control.adaptive import AdaptiveParams
 from sma_wrist.core.control.joint_controller import JointController as JointLaw
 from sma_wrist.core.control.joint_controller import JointControllerParams, time_to_meet
 from sma_wrist.core.control.pid import PIDParams
+from sma_wrist.core.control.pid import warm_up as warm_up_pid
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry
 from sma_wrist.core.plant.wrist import PlantParams
@@ -156,7 +157,7 @@ class AdaptiveController(WristNode):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('adaptive_controller', **kwargs)
         adaptive_kernel.warm_up()  # compile before the first sample, not inside the loop
-        pid_kernel.warm_up()
+        warm_up_pid()
         time_to_meet(0.0, 0.1, -0.1)  # the reversal lead's, compiled as well
         self.chain = PlantParams(preload_elongation_mm=self.p['preload_elongation_mm'])  # the strains it asks for
         self.law = JointLaw(self._core_params(self.p), self.chain)

@@ -169,4 +169,12 @@ class PID:
         )
 
 
-__all__ = ['PIDParams', 'PIDOutput', 'PID']
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the kernel in both signatures a node calls, before it spins: the
+    kernel's own on dummy arrays, and :meth:`PID.update`'s, which passes the angles as read-only broadcast views
+    (compiled inside the loop before). Here, beside the class, so the kernel module need not import it."""
+    pid_kernel.warm_up()
+    PID().update(0.0, 0.1, 0.01)
+
+
+__all__ = ['PIDParams', 'PIDOutput', 'PID', 'warm_up']

@@ -90,7 +90,3 @@ def warm_up() -> None:
     z = np.zeros(1)
     k = np.array([1.0, 1.0, 1.0, 0.0, 1.0, 0.02, -1.0, 1.0, 0.0, 0.1])
     update(z, z + 0.1, 0.01, True, z.copy(), z.copy(), z.copy(), z.copy(), z.copy(), k, np.empty((1, 7)))
-    # PID.update passes the angles as read-only broadcast views, another signature: compiled in the loop before
-    from sma_wrist.core.control.pid import PID
-
-    PID().update(0.0, 0.1, 0.01)
