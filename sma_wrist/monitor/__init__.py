@@ -24,6 +24,7 @@ import csv
 import io
 import json
 import math
+import signal
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -34,7 +35,14 @@ import numpy as np
 from sma_wrist.diagnose.data import TOPICS, DiagnoseInputError, Run, run_from_series
 from sma_wrist.monitor.twin import Model, MonitorInputError, Twin, load_model
 
-__all__ = ['MonitorConfig', 'Monitor', 'Verdict', 'MonitorInputError', 'LEVELS']
+__all__ = ['MonitorConfig', 'Monitor', 'Verdict', 'MonitorInputError', 'LEVELS', 'ignore_interrupts']
+
+
+def ignore_interrupts() -> None:
+    """A check worker's initializer: the terminal's Ctrl-C reaches the whole process group, and the node that owns
+    the worker shuts it down; a worker that took the SIGINT itself printed a KeyboardInterrupt on every Ctrl-C."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
 
 #: DiagnosticStatus levels (diagnostic_msgs): OK 0, WARN 1, ERROR 2
 LEVELS = {'OK': 0, 'WARN': 1, 'ERROR': 2}

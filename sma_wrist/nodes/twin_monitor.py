@@ -26,7 +26,15 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64, Header
 
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.monitor import Monitor, MonitorConfig, MonitorInputError, Verdict, diagnose_window, write_history
+from sma_wrist.monitor import (
+    Monitor,
+    MonitorConfig,
+    MonitorInputError,
+    Verdict,
+    diagnose_window,
+    ignore_interrupts,
+    write_history,
+)
 from sma_wrist.nodes.common import HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, Param, WristNode, finite, main_for
 
 _LEVEL = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN, 'ERROR': DiagnosticStatus.ERROR}
@@ -245,7 +253,9 @@ class TwinMonitor(WristNode):
                 from concurrent.futures import ProcessPoolExecutor
 
                 # spawn: a fork of a process running rclpy's threads may inherit a held lock
-                self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context('spawn'))
+                self._pool = ProcessPoolExecutor(
+                    max_workers=1, mp_context=multiprocessing.get_context('spawn'), initializer=ignore_interrupts
+                )
             else:
                 from concurrent.futures import ThreadPoolExecutor
 
