@@ -254,11 +254,35 @@ def test_cli_a_port_that_does_not_open_is_bad_input_with_a_report(tmp_path, caps
 def test_cli_sim_commissions_and_prints_json(tmp_path, capsys):
     from sma_wrist.cli import main
 
-    code = main(['commission', '--sim', '--out', str(tmp_path / 'c'), '--payload-kg', '0.4', '--json'])
+    out = str(tmp_path / 'c')
+    # a short verification (4 s runs of pid): its shape; the full one is sma-wrist bench --section commission's
+    code = main(
+        [
+            'commission',
+            '--sim',
+            '--out',
+            out,
+            '--payload-kg',
+            '0.4',
+            '--verify-s',
+            '4',
+            '--controllers',
+            'pid',
+            '--json',
+        ]
+    )
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc['status'] == 'commissioned' and doc['faults'] == []
-    assert {'faults', 'params_file', 'device_time_s', 'steps', 'report'} <= set(doc)
-    assert 0 < doc['device_time_s'] < 120.0 and doc['max_drive_V'] <= LIM.max_drive_V
+    assert {'faults', 'identified', 'verification', 'params_file', 'device_time_s', 'steps', 'report'} <= set(doc)
+    assert isinstance(doc['identified'], dict)
+    v = doc['verification']
+    assert set(v['default']) == set(v['commissioned']) == {'pid'} and set(v['commissioned']['pid']) == {
+        'max_pct',
+        'rms_pct',
+    }
+    assert all(0 < v[w]['pid']['rms_pct'] <= v[w]['pid']['max_pct'] for w in ('default', 'commissioned'))
+    # the bring-up's device time (about 65 s) and the verification's (two runs of 4 s, with the graph's start-up)
+    assert 8.0 <= v['device_time_s'] < doc['device_time_s'] < 120.0 and doc['max_drive_V'] <= LIM.max_drive_V
     assert 'payload_kg: 0.4' in open(doc['params_file']).read()
 
 

@@ -1,7 +1,7 @@
 """The ``sma-wrist commission`` command: bring-up on a port (or the simulated plant), report, params file, JSON.
 
-Exit codes: 0 commissioned (for now: the bring-up passed and the params file is written), 3 a fault found on the
-device stopped it (wiring, sensor, link; the JSON is printed all the same), 2 bad input (options, params files, a
+Exit codes: 0 commissioned (the bring-up passed, the params file is written and verified in closed loop), 3 a
+fault found on the device stopped it (wiring, sensor, link; the JSON is printed all the same), 2 bad input (options, params files, a
 port that does not open), 130 interrupted (Ctrl-C). In every case the TEMs are left at 0 V and the report holds
 what was learnt.
 """
@@ -97,10 +97,12 @@ def commission(
     limits: BringUpLimits | None = None,
     progress: Callable[[str], None] | None = None,
     port: str | None = None,
+    verification: Any = None,
 ) -> dict[str, Any]:
     """Bring the wrist on ``device`` (SerialDevice or SimDevice) up; write the report (and, when it passes, the
     params file) into ``out``; return the result (JSON-ready). KeyboardInterrupt is caught: status 'interrupted'.
-    PortError (bad input) propagates after the report is written."""
+    PortError (bad input) propagates after the report is written. ``verification``
+    (:class:`sma_wrist.commission.verify.VerifyOptions`): then verify the params file in closed loop."""
     from sma_wrist.commission.report import write_report
 
     out = Path(out)
@@ -139,6 +141,14 @@ def commission(
             result['bridge_params'] = bridge
             result['params_file'] = str(write_params(out / PARAMS_FILE, params_files, bridge))
         result['report'] = str(write_report(out, result, bring))
+    # ---- verification: the closed loop with the params file handed over (sma_wrist/commission/verify.py)
+    result.setdefault('identified', {})
+    result['verification'] = None
+    if verification is not None and result['status'] == 'commissioned':
+        from sma_wrist.commission.verify import run_verification
+
+        run_verification(result, out, device, verification, progress)
+    # ---- end of verification
     return result
 
 
@@ -210,6 +220,18 @@ def _print_text(result: dict[str, Any]) -> None:
     print(f'report: {result["report"]}')
 
 
+def verify_options(a: argparse.Namespace) -> Any:
+    """The verification the command line asks for (None: ``--verify-s 0``); ValueError naming a bad option."""
+    from sma_wrist.commission.verify import VerifyOptions, controllers_of
+
+    if not (math.isfinite(a.verify_s) and a.verify_s >= 0):
+        raise ValueError(f'--verify-s {a.verify_s!r} must be a finite number >= 0 (0: no verification)')
+    if a.verify_s == 0:
+        return None
+    ctrls = None if a.controllers is None else tuple(controllers_of(a.controllers))
+    return VerifyOptions(controllers=ctrls, duration_s=a.verify_s)
+
+
 def run_cli(a: argparse.Namespace) -> int:
     """``sma-wrist commission``; errors of the user's input are 'error: ...' with exit 2."""
     from sma_wrist.contract import PAYLOAD_RANGE_KG
@@ -235,6 +257,7 @@ def run_cli(a: argparse.Namespace) -> int:
             else SerialDevice(a.hardware, a.baud_rate, stall_s=a.stall_s)
         )
         progress = None if a.json else (lambda step: print(f'step: {step}', file=sys.stderr, flush=True))
+        verification = verify_options(a)
         result = commission(
             a.out,
             device,
@@ -244,6 +267,7 @@ def run_cli(a: argparse.Namespace) -> int:
             limits=lim,
             progress=progress,
             port=a.hardware,
+            verification=verification,
         )
     except PortError as e:
         print(f'error: {e} (report: {Path(a.out) / "commission.md"})', file=sys.stderr)
@@ -255,6 +279,10 @@ def run_cli(a: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
     else:
         _print_text(result)
+        if result['verification']:
+            from sma_wrist.commission.verify import text_lines
+
+            print('\n'.join(text_lines(result['verification'])))
     if result['status'] == 'interrupted':
         print(f'interrupted: TEMs off; report so far: {result["report"]}', file=sys.stderr)
     return exit_code(result)
