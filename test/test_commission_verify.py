@@ -8,6 +8,7 @@ full verification are `sma-wrist bench --section commission`'s."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import threading
@@ -58,7 +59,8 @@ def handed_over(out, payload_kg=0.4) -> dict:
 
 def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp_path):
     dev, res = device(), handed_over(tmp_path / 'c')
-    run_verification(res, tmp_path / 'c', dev, SHORT)
+    (tmp_path / 'c' / 'verification' / 'pid_commissioned').mkdir(parents=True)  # an earlier commissioning's bag
+    run_verification(res, tmp_path / 'c', dev, dataclasses.replace(SHORT, diagnose=True))
     assert res['status'] == 'commissioned', (res['message'], res['faults'])
     v = res['verification']
     for which in ('default', 'commissioned'):
@@ -76,6 +78,10 @@ def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp
     assert '## Verification' in report and '| pid |' in report and '](verification/pid.png)' in report
     assert os.path.getsize(v['plots'][0]) > 10_000
     assert np.all(dev.emulator._u == 0.0)  # TEMs off at the end
+    # the commissioned run recorded and diagnosed (5 s: too short for a verdict, said so; the bench has full ones)
+    d = v['diagnosis']
+    assert d['bag'].endswith('pid_commissioned') and ('error' in d or d['discrepancy'] in (True, False)), d
+    assert os.path.isfile(os.path.join(d['bag'], 'metadata.yaml'))  # recorded afresh over the earlier folder
 
 
 def test_on_a_serial_port_the_verification_runs_the_graph_on_that_port(tmp_path):

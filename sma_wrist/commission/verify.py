@@ -22,6 +22,7 @@ pseudo-terminal for this, the same wrist, as warm as the bring-up left it (:meth
 from __future__ import annotations
 
 import contextlib
+import shutil
 import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -29,7 +30,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from sma_wrist.core.errors import SmaWristError
+from sma_wrist.core.errors import ParameterError, SmaWristError
 
 #: device seconds per run: run's 30 s soft start and one full 62.8 s cycle of the sine, with a margin
 DURATION_S = 100.0
@@ -172,6 +173,8 @@ def verify(
         for which, files in (('commissioned', [params_file]), ('default', [defaults])):
             progress(f'verification: {ctrl}, {which} parameters')
             bag = folder / f'{ctrl}_{which}' if (diagnose and k == 0 and which == 'commissioned') else None
+            if bag is not None and bag.is_dir():
+                shutil.rmtree(bag)  # an earlier commissioning into this folder: its report and params are replaced too
             _, payload = file_choices(files, hardware=True)
             try:
                 s = run_closed_loop(
@@ -184,6 +187,8 @@ def verify(
                     hardware=True,
                     measure=True,
                 )
+            except ParameterError:
+                raise  # a value of the params file a node refuses: bad input, before the graph started
             except SmaWristError as e:
                 account()
                 raise VerificationStopped(f'{ctrl} with the {which} parameters: {e}') from None
