@@ -320,7 +320,7 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
         f'{v["duration_s"]:g} s of device time per run (30 s soft start, then the sine); max and RMS error over '
         "the last full cycle in % of the reference's range (as `sma-wrist run` reports them). Defaults: "
         f"config/wrist.yaml with only the bring-up's calibration (`{Path(v['defaults_file']).name}`); "
-        f'commissioned: `{Path(v["params_file"]).name}`. Device time of the verification: '
+        f'commissioned: `{Path(v["params_file"]).name}` (run first of each pair). Device time of the verification: '
         f'{v.get("device_time_s", 0):.0f} s.',
         '',
         '| controller | defaults max % | defaults RMS % | commissioned max % | commissioned RMS % |',
@@ -345,10 +345,8 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             if not d['discrepancy']
             else f'discrepancy: {d["summary"]}'
         )
-        lines += [
-            f'Diagnosis of the commissioned run against the commissioned model ({d.get("against", {})}): {verdict}.',
-            '',
-        ]
+        against = ', '.join(f'{k.split("_")[0]}: `{f}`' for k, f in d.get('against', {}).items())
+        lines += [f'Diagnosis of the commissioned run against the commissioned model ({against}): {verdict}.', '']
     if v.get('stopped'):
         lines += [f'Stopped: {v["stopped"]}', '']
     return lines
