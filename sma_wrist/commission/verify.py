@@ -168,8 +168,8 @@ def verify(
     for k, ctrl in enumerate(controllers):
         runs = {}
         # the commissioned run first: the second run of a pair starts from the wrist the first left warm (the same
-        # parameters twice on the nominal wrist: 7.9 % max first, 6.1 % second), so any such advantage goes to the
-        # defaults
+        # parameters twice on the nominal wrist, inverse_adaptive: 7.9 then 6.1 % max, 9.0 then 6.6 %, once 12.1 then
+        # 21.1 %), so any advantage of that goes to the defaults
         for which, files in (('commissioned', [params_file]), ('default', [defaults])):
             progress(f'verification: {ctrl}, {which} parameters')
             bag = folder / f'{ctrl}_{which}' if (diagnose and k == 0 and which == 'commissioned') else None
