@@ -307,6 +307,11 @@ def machine() -> dict[str, Any]:
     }
 
 
+def row_stamp() -> dict[str, Any]:
+    """When a row's command started (UTC, to the minute) and the machine with its load at that moment."""
+    return {'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'), 'machine': machine()}
+
+
 def run_one(name: str) -> dict[str, Any]:
     what, argv, extract, prepare = RUNS[name]
     if prepare:
@@ -344,14 +349,13 @@ def run_one(name: str) -> dict[str, Any]:
 def measure(names: list[str]) -> dict[str, Any]:
     old = json.loads(refgen.RESULTS.read_text()) if refgen.RESULTS.exists() else {}
     runs = dict(old.get('runs', {})) if len(names) < len(RUNS) else {}
-    meta = {
-        'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+    code = {
         'commit': _git('rev-parse', '--short=12', 'HEAD'),
         'dirty': bool(_git('status', '--porcelain', '--untracked-files=no')),
-        'machine': machine(),
     }
     for n in names:
-        runs[n] = {**run_one(n), **meta}
+        started = row_stamp()  # this row's start and load, not the whole run's (~10 min)
+        runs[n] = {**run_one(n), 'date': started['date'], **code, 'machine': started['machine']}
     return {'about': 'written by doc/validation/measure.py; rendered by doc/refgen.py', 'runs': runs}
 
 
