@@ -4,7 +4,8 @@ probe node that publishes inputs and collects outputs of a node under test."""
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from typing import Any
 
 import pytest
@@ -82,12 +83,18 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split('::')[0]))
 
 
+#: the open (turnstile, lock) files of the running test under pytest-xdist, for :func:`alone`
+_LOCK_FILES = pytest.StashKey[tuple]()
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> Iterator[None]:
     """Under pytest-xdist: every test holds a shared lock from setup to teardown, an ``exclusive``
     one the exclusive lock. A real-time loop (the emulated device on its own wall clock) starved
     by the other worker falls behind and stalls, which is no fault of the code under test. The
-    turnstile lets a waiting exclusive test in before the next shared one. Serial runs: no-op."""
+    turnstile lets a waiting exclusive test in before the next shared one. A test whose real-time
+    part is only a section of it takes the exclusive lock for that section (:func:`alone`), so the
+    other worker is not held up by the rest of it. Serial runs: no-op."""
     if 'PYTEST_XDIST_WORKER' not in os.environ:
         yield
         return
@@ -103,11 +110,42 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
         else:
             fcntl.flock(gate, fcntl.LOCK_UN)
             fcntl.flock(lock, fcntl.LOCK_SH)
+            item.stash[_LOCK_FILES] = (gate, lock)
         try:
             yield
         finally:
+            if _LOCK_FILES in item.stash:
+                del item.stash[_LOCK_FILES]
             fcntl.flock(lock, fcntl.LOCK_UN)
             fcntl.flock(gate, fcntl.LOCK_UN)
+
+
+@pytest.fixture
+def alone(request: pytest.FixtureRequest) -> Callable[[], AbstractContextManager[None]]:
+    """``with alone():`` runs a test's wall-clock section as an ``exclusive`` test runs whole: under
+    pytest-xdist the other workers finish their current test and wait at the turnstile until the section
+    ends. The test's work before and after it (a simulated reference run, the analysis of a bag) runs
+    beside the other workers as usual. Serial runs: no-op."""
+    import fcntl
+    from contextlib import contextmanager
+
+    @contextmanager
+    def section() -> Iterator[None]:
+        files = request.node.stash.get(_LOCK_FILES, None)
+        if files is None:  # a serial run, or a test marked exclusive: already alone
+            yield
+            return
+        gate, lock = files
+        fcntl.flock(lock, fcntl.LOCK_UN)  # queue at the turnstile as an exclusive test does
+        fcntl.flock(gate, fcntl.LOCK_EX)
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_SH)  # still holding the gate: no exclusive holder gets in between
+            fcntl.flock(gate, fcntl.LOCK_UN)
+
+    return section
 
 
 @pytest.fixture
