@@ -14,6 +14,15 @@ from sma_wrist import runtime
 
 runtime.activate()
 
+try:  # the property tests guard results, not speed: hypothesis's 200 ms deadline per example failed them on a loaded
+    # machine (DeadlineExceeded in the codec's round trip with ~10 processes per core); tests may still set their own
+    from hypothesis import settings as _hypothesis
+
+    _hypothesis.register_profile('sma_wrist', deadline=None)
+    _hypothesis.load_profile('sma_wrist')
+except ImportError:
+    pass
+
 
 def pytest_configure(config: pytest.Config) -> None:
     # registered here too, so the marks below are known when pytest-xdist is not installed
