@@ -30,6 +30,17 @@ def tables(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     }
 
 
+def test_the_logged_pwm_duty_becomes_the_mean_drive_voltage(tmp_path: Path) -> None:
+    """duty / 255 x 5 V, the chamber and room temperatures as logged; rtempco_run1.csv's missing header changes nothing."""
+    from sma_wrist.identify.thermal import tec_chamber_volts
+
+    rows = '25.000,23.756,205.00,20.675\n25.000,23.754,0,20.664\n26.000,25.1,255,20.7\n'
+    want = 'u_V,oven_c,ambient_c\n4.019608,23.756,20.675\n0.000000,23.754,20.664\n5.000000,25.1,20.7\n'
+    for name, text in (('headed', 'set_c,oven_c,output,ambient_c\n' + rows), ('bare', rows)):
+        (tmp_path / f'{name}.csv').write_text(text)
+        assert tec_chamber_volts(tmp_path / f'{name}.csv', tmp_path / f'{name}_V.csv').read_text() == want, name
+
+
 def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict]:
     from sma_wrist.cli import main
 
