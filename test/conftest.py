@@ -80,16 +80,35 @@ def _warm_kernels(config: pytest.Config) -> None:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under ``pytest -n 2 --dist loadgroup`` keep a module on one worker when its tests share a
-    module- or class-scoped fixture, so the fixture (the diagnosis cases, the experiment runs:
-    tens of seconds each) is built once, not once per worker. Tests with only function-scoped
-    fixtures stay free to balance the load. Serial runs ignore the mark; tryfirst: before
-    xdist's own hook reads it."""
+    """Under ``pytest -n 2 --dist loadgroup`` keep the tests that share a module- or class-scoped
+    fixture on one worker, so the fixture (the diagnosis cases, the experiment runs: tens of seconds
+    each) is built once, not once per worker. One group per set of such fixtures that tests tie
+    together, not per module: test_diagnose's open-loop cases (~130 s) and its closed-loop runs
+    (~35 s) share nothing and may run on both workers at once. Tests with only function-scoped
+    fixtures stay free to balance the load. Serial runs ignore the mark; tryfirst: before xdist's
+    own hook reads it."""
+    parent: dict[str, str] = {}
+
+    def root(k: str) -> str:
+        while parent.setdefault(k, k) != k:
+            k = parent[k]
+        return k
+
+    shared: list[tuple[pytest.Item, list[str]]] = []
     for item in items:
         defs = getattr(item, '_fixtureinfo', None)
-        scopes = {fd.scope for fds in (defs.name2fixturedefs.values() if defs else ()) for fd in fds}
-        if scopes & {'module', 'class', 'package'}:
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split('::')[0]))
+        module = item.nodeid.split('::')[0]
+        names = sorted(
+            f'{module}::{name}'
+            for name, fds in (defs.name2fixturedefs.items() if defs else ())
+            if any(fd.scope in ('module', 'class', 'package') for fd in fds)
+        )
+        if names:
+            shared.append((item, names))
+            for n in names[1:]:  # a test using two such fixtures ties their groups together
+                parent[root(n)] = root(names[0])
+    for item, names in shared:
+        item.add_marker(pytest.mark.xdist_group(root(names[0])))
 
 
 #: the open (turnstile, lock) files of the running test under pytest-xdist, for :func:`alone`
