@@ -83,8 +83,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     """Under ``pytest -n 2 --dist loadgroup`` keep the tests that share a module- or class-scoped
     fixture on one worker, so the fixture (the diagnosis cases, the experiment runs: tens of seconds
     each) is built once, not once per worker. One group per set of such fixtures that tests tie
-    together, not per module: test_diagnose's open-loop cases (~130 s) and its closed-loop runs
-    (~35 s) share nothing and may run on both workers at once. Tests with only function-scoped
+    together, not per module: test_diagnose's open-loop cases (~130 s) and its closed-loop runs (3 x ~10 s)
+    share nothing and may run on both workers at once. Tests with only function-scoped
     fixtures stay free to balance the load. Serial runs ignore the mark; tryfirst: before xdist's
     own hook reads it."""
     parent: dict[str, str] = {}
