@@ -25,6 +25,7 @@ from sma_wrist.cli_options import (
 )
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.outputs import BENCH_OUT_HELP
 
 
 def _positive_float(text: str) -> float:
@@ -245,7 +246,7 @@ def cmd_info(a: argparse.Namespace) -> int:
 def cmd_bench(a: argparse.Namespace) -> int:
     from sma_wrist import bench
 
-    result = bench.run(a.section or None, quick=a.quick)
+    result = bench.run(a.section or None, quick=a.quick, out=a.out)
     print(json.dumps(result, indent=2) if a.json else bench.format_text(result))
     return 0
 
@@ -529,6 +530,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument('--json', action='store_true', help='print JSON instead of section.key = value lines')
     b.add_argument('--quick', action='store_true', help='short runs (smoke test of the benchmark itself)')
     b.add_argument('--section', action='append', help='only these sections')
+    b.add_argument('--out', metavar='DIR', help=BENCH_OUT_HELP)
     b.set_defaults(func=cmd_bench)
     return ap
 
