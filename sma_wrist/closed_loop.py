@@ -180,12 +180,16 @@ def run_closed_loop(
     delivery: Any = None,
     measure: bool = False,
     monitor: dict[str, Any] | None = None,
+    live: Any = None,
+    real_time_factor: float | None = None,
 ) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
 
     ``measure`` without a ``bag``: record to a temporary bag, removed afterwards, for the metrics (``sma-wrist run``
     without --bag printed none). ``monitor``: also run twin_monitor with these parameter overrides ({} for its
     defaults); its last verdict and how many checks it made and skipped are in ``RunSummary.monitor``.
+    ``live``: a :class:`sma_wrist.runtime.live.LiveServer` that serves the graph's topics (attached before the
+    nodes, started once they are built, stopped at the end); ``real_time_factor``: hold simulated time to this multiple of real time (None: as fast as possible).
     ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops the run; the bag is
     closed with everything up to the interrupt and the summary says so (and ``metrics_missing`` why there are
     none, when it holds no reference yet).
@@ -212,6 +216,8 @@ def run_closed_loop(
             delivery,
             kept,
             monitor,
+            live,
+            real_time_factor,
         )
     if not kept:
         summary.bag = None
@@ -231,6 +237,8 @@ def _run(
     delivery: Any,
     kept: bool,
     monitor: dict[str, Any] | None,
+    live: Any = None,
+    real_time_factor: float | None = None,
 ) -> RunSummary:
     """:func:`run_closed_loop` with its bag (or none); ``kept``: the bag is the user's, not a temporary one."""
     source = 'hardware_bridge' if hardware else 'plant_sim'
@@ -256,10 +264,16 @@ def _run(
     ) as rt:
         if bag is not None:
             rec = rt.record(bag, topics)
+        if live is not None:  # before the nodes, as the recorder: the latched payload is published at start-up
+            rt.serve_live(live)
+        if real_time_factor is not None:
+            rt.pace(real_time_factor)
         from sma_wrist.nodes.common import add_or_refuse
 
         # a value a node refuses (a params file's): its reason, not rclpy's traceback
         built = [add_or_refuse(rt, cls) for cls in nodes]
+        if live is not None:  # the nodes' topics advertised, then the server opened
+            live.start()
         source_node = built[0]
         monitor_node = built[-1] if monitor is not None else None
         chunk = max(duration_s / 100.0, 0.01)
@@ -396,4 +410,148 @@ def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:
         ]
         out[f'{controller}_messages_per_sim_s'] = r.messages_recorded / duration
         out[f'{controller}_recording_cost_us_per_message'] = 1e6 * (r.wall_s - s.wall_s) / max(r.messages_recorded, 1)
+    return out
+
+
+def _stalled_client(url: str, topics: set[str], stack: Any, done: Any) -> None:
+    """A WebSocket client (``websockets``) that subscribes to ``topics`` as they are advertised, then reads nothing
+    more: its receive queue holds 4 messages and its socket buffer 4 KiB, so the server's queue for it fills and
+    the server drops its oldest messages. ``done`` is set once it has subscribed."""
+    import json
+    import socket
+
+    from websockets.sync.client import connect
+
+    host, port = url.removeprefix('ws://').rsplit(':', 1)
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect((host, int(port)))
+    ws = stack.enter_context(connect(url, subprotocols=['foxglove.sdk.v1'], sock=sock, max_queue=4))
+    seen: set[str] = set()
+    n = 0
+    while not topics <= seen:
+        frame = ws.recv(timeout=60)
+        msg = json.loads(frame) if isinstance(frame, str) else {}
+        if msg.get('op') == 'advertise':
+            subs = [{'id': n + i + 1, 'channelId': c['id']} for i, c in enumerate(msg['channels'])]
+            n += len(subs)
+            seen |= {c['topic'] for c in msg['channels']}
+            ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subs}))
+    done.set()
+
+
+def _serve(topics: set[str], stack: Any, client: bool) -> Any:
+    """A LiveServer on a free port in ``stack``; with ``client``, a stalled client connects once it listens."""
+    import threading
+
+    from sma_wrist.runtime.live import LiveServer
+
+    done = threading.Event()
+
+    def connect_client(server: Any) -> None:
+        thread = threading.Thread(target=_stalled_client, args=(server.url, topics, stack, done), daemon=True)
+        thread.start()
+        stack.callback(thread.join, 5.0)
+
+    live = stack.enter_context(LiveServer('127.0.0.1', 0, announce=connect_client if client else None))
+    live.subscribed = done
+    return live
+
+
+def bench_live(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+    """What the live view (``run --foxglove``) costs an unpaced run, with a live server and no client, and with a
+    client that subscribed to every topic and then stopped reading (:func:`_stalled_client`).
+
+    ``*_cost_pct``: the graph's own messages (2 s of a run after its start-up, captured by a tap) replayed through the live server's
+    tap, timed by the CPU time of the thread that runs them [us per message]; times the messages per simulated
+    second, over the graph thread's CPU time per simulated second without a server (the ``plain`` runs below):
+    the share of the run's CPU time the live view adds. CPU time, because on a shared machine the load moves
+    the wall time of one run by a factor of several. The server drops a client that has not read 1024 of its
+    control messages (the time, broadcast with every /clock: 100 per simulated second), so a client that stops
+    reading costs this for ~10 s of simulated time and nothing after.
+
+    ``*_wall_ratio``, ``*_cpu_ratio``: interleaved unpaced runs of the closed loop, with the server (and the
+    client) and without, best of ``repeats`` (the least disturbed); the end-to-end check of the above, as exact
+    as the machine's load allows (``*_ranges``: worst and best)."""
+    try:
+        import foxglove  # noqa: F401
+        import websockets.sync.client  # noqa: F401
+    except ImportError as exc:
+        return {'skipped': f"needs foxglove-sdk and websockets ({exc}): pip install 'sma_wrist[test]'"}
+    import contextlib
+
+    from sma_wrist import runtime
+
+    runtime.activate()
+    duration = 10.0 if quick else 30.0
+    controller = 'inverse_adaptive'
+
+    # 1. per message: the graph's messages through the tap
+    captured: list[tuple[Any, Any]] = []
+    with Runtime(ros_args(), params=overrides(controller, 0.3)) as rt:
+        rt.add_nodes(graph_nodes(controller))
+        rt.run_until(1.0, until='sim')  # past the start-up (the nodes' parameter events)
+        rt.context.graph.add_tap(lambda topic, msg, t_ns: captured.append((topic, msg)))
+        rt.run_until(3.0, until='sim')
+    per_sim_s = len(captured) / 2.0
+    names = {topic.name for topic, _ in captured}
+    us: dict[str, float] = {}
+    for case, client in (('served_no_client', False), ('stalled_client', True)):
+        with contextlib.ExitStack() as stack:
+            live = _serve(names, stack, client)
+            for topic in {topic.name: topic for topic, _ in captured}.values():  # before it listens, as in a run
+                live._channel(topic)
+            live.start()
+            if client and not live.subscribed.wait(30.0):
+                raise RuntimeError('the benchmark client did not subscribe to every topic')
+            t_end = time.monotonic() + 10.0  # the server takes the subscriptions on its own threads
+            while client and not all(c.has_sinks() for c, _, _ in live._channels.values()):
+                if time.monotonic() > t_end:
+                    raise RuntimeError('the server did not take the subscriptions of the benchmark client')
+                time.sleep(0.01)
+            n = 0
+            cpu0 = time.thread_time()
+            for _ in range(4):  # 800 /clock, 800 time messages: a stalled client is dropped after 1024 of them
+                for topic, msg in captured:
+                    live._tap(topic, msg, 0)
+                n += len(captured)
+            us[case] = 1e6 * (time.thread_time() - cpu0) / n
+            if client and not live._channels['/clock'][0].has_sinks():
+                raise RuntimeError('the stalled benchmark client was dropped before the end of the measurement')
+
+    # 2. end to end: interleaved runs
+    def timed(live: Any = None) -> tuple[float, float]:
+        cpu0 = time.thread_time()
+        wall = run_closed_loop(controller, 0.3, duration, live=live).wall_s
+        return wall, time.thread_time() - cpu0
+
+    run_closed_loop(controller, 0.3, 0.5)  # imports, numba cache load
+    runs: dict[str, list[tuple[float, float]]] = {'plain': [], 'served_no_client': [], 'stalled_client': []}
+    for _ in range(repeats):
+        runs['plain'].append(timed())
+        for case, client in (('served_no_client', False), ('stalled_client', True)):
+            with contextlib.ExitStack() as stack:
+                live = _serve(names, stack, client)
+                runs[case].append(timed(live))
+                if client and not live.subscribed.wait(5.0):
+                    raise RuntimeError('the benchmark client did not subscribe to every topic')
+    wall = {k: min(w for w, _ in v) for k, v in runs.items()}
+    cpu = {k: min(c for _, c in v) for k, v in runs.items()}
+    graph_us_per_sim_s = 1e6 * cpu['plain'] / duration
+    out: dict[str, Any] = {
+        'controller': controller,
+        'messages_per_sim_s': per_sim_s,
+        'graph_cpu_us_per_sim_s': graph_us_per_sim_s,
+        'sim_time_s': duration,
+        'repeats': repeats,
+        'plain_wall_s': wall['plain'],
+        'plain_real_time_factor': duration / wall['plain'],
+    }
+    for case in ('served_no_client', 'stalled_client'):
+        out[f'{case}_tap_us_per_message'] = us[case]
+        out[f'{case}_cost_pct'] = 100.0 * us[case] * per_sim_s / graph_us_per_sim_s
+        out[f'{case}_wall_ratio'] = wall[case] / wall['plain']
+        out[f'{case}_cpu_ratio'] = cpu[case] / cpu['plain']
+    out['wall_s_ranges'] = {k: [min(w for w, _ in v), max(w for w, _ in v)] for k, v in runs.items()}
+    out['cpu_s_ranges'] = {k: [min(c for _, c in v), max(c for _, c in v)] for k, v in runs.items()}
     return out
