@@ -440,8 +440,28 @@ def _stalled_client(url: str, topics: set[str], stack: Any, done: Any) -> None:
     done.set()
 
 
-def _serve(topics: set[str], stack: Any, client: bool) -> Any:
-    """A LiveServer on a free port in ``stack``; with ``client``, a stalled client connects once it listens."""
+#: a client in its own process that subscribes to every channel and reads until the server closes (bench_live)
+_READER = """
+import json, sys
+from websockets.sync.client import connect
+with connect(sys.argv[1], subprotocols=['foxglove.sdk.v1'], max_size=None) as ws:
+    n = 0
+    try:
+        for frame in ws:
+            msg = json.loads(frame) if isinstance(frame, str) else {}
+            if msg.get('op') == 'advertise':
+                subs = [{'id': n + i + 1, 'channelId': c['id']} for i, c in enumerate(msg['channels'])]
+                n += len(subs)
+                ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subs}))
+    except Exception:
+        pass
+"""
+
+
+def _serve(topics: set[str], stack: Any, client: str | None) -> Any:
+    """A LiveServer on a free port in ``stack``; once it listens, ``client`` connects: None, ``'reading'`` (a
+    process of its own that reads everything) or ``'stalled'`` (:func:`_stalled_client`, a thread)."""
+    import subprocess
     import threading
 
     from sma_wrist.runtime.live import LiveServer
@@ -449,30 +469,32 @@ def _serve(topics: set[str], stack: Any, client: bool) -> Any:
     done = threading.Event()
 
     def connect_client(server: Any) -> None:
-        thread = threading.Thread(target=_stalled_client, args=(server.url, topics, stack, done), daemon=True)
-        thread.start()
-        stack.callback(thread.join, 5.0)
+        if client == 'reading':
+            proc = subprocess.Popen([sys.executable, '-c', _READER, server.url])
+            stack.callback(proc.wait, 10.0)
+            stack.callback(proc.terminate)
+            done.set()
+        elif client == 'stalled':
+            thread = threading.Thread(target=_stalled_client, args=(server.url, topics, stack, done), daemon=True)
+            thread.start()
+            stack.callback(thread.join, 5.0)
 
-    live = stack.enter_context(LiveServer('127.0.0.1', 0, announce=connect_client if client else None))
+    live = stack.enter_context(LiveServer('127.0.0.1', 0, announce=connect_client))
     live.subscribed = done
     return live
 
 
 def bench_live(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
-    """What the live view (``run --foxglove``) costs an unpaced run, with a live server and no client, and with a
-    client that subscribed to every topic and then stopped reading (:func:`_stalled_client`).
+    """What the live view (``run --foxglove``) costs an unpaced run: interleaved runs of the closed loop without a
+    server (``plain``), with a server and no client, with a client that reads everything (its own process), and
+    with a client that subscribed to every topic and then stopped reading (:func:`_stalled_client`).
 
-    ``*_cost_pct``: the graph's own messages (2 s of a run after its start-up, captured by a tap) replayed through the live server's
-    tap, timed by the CPU time of the thread that runs them [us per message]; times the messages per simulated
-    second, over the graph thread's CPU time per simulated second without a server (the ``plain`` runs below):
-    the share of the run's CPU time the live view adds. CPU time, because on a shared machine the load moves
-    the wall time of one run by a factor of several. The server drops a client that has not read 1024 of its
-    control messages (the time, broadcast with every /clock: 100 per simulated second), so a client that stops
-    reading costs this for ~10 s of simulated time and nothing after.
-
-    ``*_wall_ratio``, ``*_cpu_ratio``: interleaved unpaced runs of the closed loop, with the server (and the
-    client) and without, best of ``repeats`` (the least disturbed); the end-to-end check of the above, as exact
-    as the machine's load allows (``*_ranges``: worst and best)."""
+    Two measures per run, each the best of ``repeats`` (the least disturbed run) over ``plain``'s: the wall time,
+    and the CPU time of the thread that runs the graph (the taps, the encoding, the hand-over to the server's
+    queues). On a shared machine the load moves one run's wall time by a factor of several; the CPU time much
+    less. ``stalled_over_reading_*``: what a client that stops reading costs over one that reads: the server
+    drops its oldest messages instead of waiting for it. (foxglove-sdk also drops a client that has left 1024 of
+    its control messages unread, the time broadcast with each /clock among them.)"""
     try:
         import foxglove  # noqa: F401
         import websockets.sync.client  # noqa: F401
@@ -481,77 +503,44 @@ def bench_live(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
     import contextlib
 
     from sma_wrist import runtime
+    from sma_wrist.contract import load_contract
 
     runtime.activate()
     duration = 10.0 if quick else 30.0
     controller = 'inverse_adaptive'
+    topics = {t for t in load_contract().topics if not t.startswith('/wrist/twin/')}  # the graph without the monitor
 
-    # 1. per message: the graph's messages through the tap
-    captured: list[tuple[Any, Any]] = []
-    with Runtime(ros_args(), params=overrides(controller, 0.3)) as rt:
-        rt.add_nodes(graph_nodes(controller))
-        rt.run_until(1.0, until='sim')  # past the start-up (the nodes' parameter events)
-        rt.context.graph.add_tap(lambda topic, msg, t_ns: captured.append((topic, msg)))
-        rt.run_until(3.0, until='sim')
-    per_sim_s = len(captured) / 2.0
-    names = {topic.name for topic, _ in captured}
-    us: dict[str, float] = {}
-    for case, client in (('served_no_client', False), ('stalled_client', True)):
+    def timed(client: str | None = None, serve: bool = True) -> tuple[float, float]:
         with contextlib.ExitStack() as stack:
-            live = _serve(names, stack, client)
-            for topic in {topic.name: topic for topic, _ in captured}.values():  # before it listens, as in a run
-                live._channel(topic)
-            live.start()
-            if client and not live.subscribed.wait(30.0):
-                raise RuntimeError('the benchmark client did not subscribe to every topic')
-            t_end = time.monotonic() + 10.0  # the server takes the subscriptions on its own threads
-            while client and not all(c.has_sinks() for c, _, _ in live._channels.values()):
-                if time.monotonic() > t_end:
-                    raise RuntimeError('the server did not take the subscriptions of the benchmark client')
-                time.sleep(0.01)
-            n = 0
+            live = _serve(topics, stack, client) if serve else None
             cpu0 = time.thread_time()
-            for _ in range(4):  # 800 /clock, 800 time messages: a stalled client is dropped after 1024 of them
-                for topic, msg in captured:
-                    live._tap(topic, msg, 0)
-                n += len(captured)
-            us[case] = 1e6 * (time.thread_time() - cpu0) / n
-            if client and not live._channels['/clock'][0].has_sinks():
-                raise RuntimeError('the stalled benchmark client was dropped before the end of the measurement')
-
-    # 2. end to end: interleaved runs
-    def timed(live: Any = None) -> tuple[float, float]:
-        cpu0 = time.thread_time()
-        wall = run_closed_loop(controller, 0.3, duration, live=live).wall_s
-        return wall, time.thread_time() - cpu0
+            summary = run_closed_loop(controller, 0.3, duration, live=live)
+            cpu = time.thread_time() - cpu0
+            if client is not None and not live.subscribed.wait(5.0):
+                raise RuntimeError(f'the {client} benchmark client did not subscribe')
+        return summary.wall_s, cpu
 
     run_closed_loop(controller, 0.3, 0.5)  # imports, numba cache load
-    runs: dict[str, list[tuple[float, float]]] = {'plain': [], 'served_no_client': [], 'stalled_client': []}
+    cases = {'plain': (None, False), 'no_client': (None, True), 'reading': ('reading', True)}
+    cases['stalled'] = ('stalled', True)
+    runs: dict[str, list[tuple[float, float]]] = {k: [] for k in cases}
     for _ in range(repeats):
-        runs['plain'].append(timed())
-        for case, client in (('served_no_client', False), ('stalled_client', True)):
-            with contextlib.ExitStack() as stack:
-                live = _serve(names, stack, client)
-                runs[case].append(timed(live))
-                if client and not live.subscribed.wait(5.0):
-                    raise RuntimeError('the benchmark client did not subscribe to every topic')
+        for case, (client, serve) in cases.items():
+            runs[case].append(timed(client, serve))
     wall = {k: min(w for w, _ in v) for k, v in runs.items()}
     cpu = {k: min(c for _, c in v) for k, v in runs.items()}
-    graph_us_per_sim_s = 1e6 * cpu['plain'] / duration
     out: dict[str, Any] = {
         'controller': controller,
-        'messages_per_sim_s': per_sim_s,
-        'graph_cpu_us_per_sim_s': graph_us_per_sim_s,
         'sim_time_s': duration,
         'repeats': repeats,
         'plain_wall_s': wall['plain'],
         'plain_real_time_factor': duration / wall['plain'],
     }
-    for case in ('served_no_client', 'stalled_client'):
-        out[f'{case}_tap_us_per_message'] = us[case]
-        out[f'{case}_cost_pct'] = 100.0 * us[case] * per_sim_s / graph_us_per_sim_s
+    for case in ('no_client', 'reading', 'stalled'):
         out[f'{case}_wall_ratio'] = wall[case] / wall['plain']
         out[f'{case}_cpu_ratio'] = cpu[case] / cpu['plain']
+    out['stalled_over_reading_wall_ratio'] = wall['stalled'] / wall['reading']
+    out['stalled_over_reading_cpu_ratio'] = cpu['stalled'] / cpu['reading']
     out['wall_s_ranges'] = {k: [min(w for w, _ in v), max(w for w, _ in v)] for k, v in runs.items()}
     out['cpu_s_ranges'] = {k: [min(c for _, c in v), max(c for _, c in v)] for k, v in runs.items()}
     return out
