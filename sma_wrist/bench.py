@@ -257,6 +257,15 @@ def bench_monitor(quick: bool = False) -> dict:
     return run_monitor(quick)
 
 
+@section('live')
+def bench_live(quick: bool = False) -> dict:
+    """The live view's cost to a run: with a server, and with a client that stopped reading, over none
+    (doc/howto/live_view.md)."""
+    from sma_wrist.closed_loop import bench_live as run_live
+
+    return run_live(quick)
+
+
 @section('bridge')
 def bench_bridge(quick: bool = False) -> dict:
     """1 kHz sample streaming emulator -> pty -> bridge link: loss, reordering, latency percentiles."""
