@@ -65,9 +65,10 @@ class Phase:
 
 
 def schedule(budget_s: float = 600.0, max_V: float = 20.0, hot_C: float = 77.0) -> list[Phase]:
-    """The excitation's phases, at most 480 s of device time (the relay half-cycles end early once the heated muscle
-    reaches ``hot_C``); a smaller ``budget_s`` shortens every phase by the same factor (periods too: the frequencies
-    rise). Amplitudes are capped at ``max_V`` (the bring-up's largest drive).
+    """The excitation's phases, at most 516 s of device time (the relay half-cycles end early once the heated muscle
+    reaches ``hot_C``: 240-320 s on the emulated wrists); a smaller ``budget_s`` shortens the sines and rests (periods
+    too: their frequencies rise), below 380 s drops them and shortens the relays' caps. Amplitudes are capped at
+    ``max_V`` (the bring-up's largest drive).
 
     Fit: a relay cycle at ``max_V`` (each muscle heated towards ``hot_C`` while the other cools: both wires through
     their transformation both ways, the joint across its range and held at each end), a rest at 0 V, sines of 30 s
@@ -85,10 +86,18 @@ def schedule(budget_s: float = 600.0, max_V: float = 20.0, hot_C: float = 77.0) 
         Phase('relay: muscle 2 heated', 'heldout', hold_V=-0.8 * v, hold_s=90.0, until_C=hot_C),
         Phase('rest at 0 V', 'heldout', hold_s=20.0),
     ]
-    total = sum(p.duration_s for p in phases)
-    k = min(1.0, budget_s / total)
-    if k < 1.0:
-        phases = [dataclasses.replace(p, period_s=p.period_s * k, hold_s=p.hold_s * k) for p in phases]
+    # a smaller budget shortens the sines and rests first (the relay half-cycles end on temperature: their length is
+    # a cap the wrist's TEMs decide, and cutting it would leave the wire short of its transformation)
+    relay = sum(p.duration_s for p in phases if p.until_C is not None)
+    other = sum(p.duration_s for p in phases) - relay
+    k_other = float(np.clip((budget_s - relay) / other, 0.0, 1.0))
+    k_relay = min(1.0, budget_s / relay)
+    phases = [
+        dataclasses.replace(p, period_s=p.period_s * k, hold_s=p.hold_s * k)
+        for p in phases
+        for k in [k_relay if p.until_C is not None else k_other]
+        if k > 0
+    ]
     return phases
 
 

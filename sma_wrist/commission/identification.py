@@ -37,7 +37,7 @@ from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal import identification as ti
 
-THERMAL_DT_S = 0.1  # grid of the heat-balance records [s] (the seed's runs: 10 Hz)
+THERMAL_DT_S = 0.25  # grid of the heat-balance records [s]: 48 samples a period of the fastest sine (12 s)
 MECH_DT_S = 0.05  # grid of the angle replay [s]
 MECH_STEP_S = 0.01  # the replay's plant step [s]
 SHIFT_BOUND_C = 10.0  # the diagnosis' temperature-offset bound: a larger shift is re-centred once
@@ -148,8 +148,17 @@ def identify_thermal_part(
         'builtin_heldout_muscle_rms_C': round(rms['builtin'], 4),
         'tem1_gain_relative_to_tem2': round(gain_1_to_2, 4),
     }
+    better = rms['commissioned'] < rms['builtin']
+    if not better:
+        warnings.append(
+            f'thermal: the identified heat balance predicts the held-out cycle no better than the built-in one '
+            f'({rms["commissioned"]:.3g} against {rms["builtin"]:.3g} degC RMS): the built-in is handed over'
+        )
     path = write_thermal_file(
-        out / 'thermal.yaml', params, prov, header='TEM heat balance identified by sma-wrist commission'
+        out / 'thermal.yaml',
+        params if better else builtin,
+        prov if better else {'source': 'built-in (the identified heat balance was not better)', **prov},
+        header='TEM heat balance identified by sma-wrist commission',
     )
     for m, f in enumerate(layers):
         write_thermal_file(out / f'thermal_tem{m + 1}.yaml', f.params, {'source': f'TEM {m + 1} alone'})
@@ -170,8 +179,9 @@ def identify_thermal_part(
             'builtin': round(rms['builtin'], 4),
         },
         'file': str(path),
+        'handed_over': better,
     }
-    return part, params, warnings
+    return part, params if better else builtin, warnings
 
 
 # ------------------------------------------------------------------------------------------------ wire, joint
@@ -183,7 +193,7 @@ def identify_mechanics(
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.diagnose import effects as fx
-    from sma_wrist.diagnose.data import Run
+    from sma_wrist.diagnose.data import DEFAULT_PAYLOAD_KG, Run
     from sma_wrist.diagnose.fit import Evaluator
     from sma_wrist.plants.spread import perturbed_hysteresis
 
@@ -193,7 +203,8 @@ def identify_mechanics(
     grid = np.arange(t_fit, t_end - dt, dt)
     T = np.column_stack([np.interp(grid, t, temps[:, m]) for m in (0, 1)])
     qg = np.interp(grid, t, q)
-    run = Run(t=grid - grid[0], dt=dt, u=None, T=T, q=qg, payload_kg=payload_kg if payload_kg is not None else 0.3)
+    prior_kg = payload_kg if payload_kg is not None else DEFAULT_PAYLOAD_KG
+    run = Run(t=grid - grid[0], dt=dt, u=None, T=T, q=qg, payload_kg=prior_kg)
     i_held = int(round((t_held - t_fit) / dt))
     base = default_sdgpi()
     builtin_model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=base))
@@ -213,7 +224,7 @@ def identify_mechanics(
         if abs(off) < 0.8 * SHIFT_BOUND_C:
             break
         shift0 += off
-    shift = shift0 + off
+    shift = round(shift0 + off, 1)  # finer than the thermocouples' accuracy is noise
     wire = perturbed_hysteresis(base, shift, stroke)
     model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=wire))
     row = fitted.row.copy()
@@ -271,7 +282,29 @@ def identify_mechanics(
     for k, (lo, hi) in {n: (fx.LOWER[fx.INDEX[n]], fx.UPPER[fx.INDEX[n]]) for n in params}.items():
         if fitted.row[fx.INDEX[k]] <= lo + 1e-9 * (hi - lo) or fitted.row[fx.INDEX[k]] >= hi - 1e-9 * (hi - lo):
             warnings.append(f'joint: {k} ended on its bound {fitted.row[fx.INDEX[k]]:g}: the data do not determine it')
-    values = {'payload_kg': payload, 'coulomb_Nm': v['coulomb_Nm'], 'preload_mm': preload_mm, 'wire': wire}
+    # handed over only where it predicts the held-out cycle better than the built-in model (else, on a wrist the
+    # SD-GPI and joint model cannot describe, a fit could make the controllers' model worse)
+    better = joint['heldout']['commissioned'] < joint['heldout']['builtin']
+    hyst['handed_over'] = joint['handed_over'] = better
+    if better:
+        values = {'payload_kg': payload, 'coulomb_Nm': v['coulomb_Nm'], 'preload_mm': preload_mm, 'wire': wire}
+    else:
+        warnings.append(
+            'wire and joint: the recalibrated model predicts the held-out cycle no better than the built-in one '
+            f'({joint["heldout"]["commissioned"]:.3g} against {joint["heldout"]["builtin"]:.3g} mrad RMS): the '
+            'built-in wire, pre-load and friction are handed over'
+            + ('' if payload_kg is not None else f', with the payload {prior_kg:g} kg (give --payload-kg)')
+        )
+        values = {
+            'payload_kg': prior_kg,
+            'coulomb_Nm': float(fx.NOMINAL[fx.INDEX['coulomb_Nm']]),
+            'preload_mm': PlantParams().preload_elongation_mm,
+            'wire': base,
+        }
+        hpath = save_hysteresis(
+            out / 'hysteresis.yaml', base, {'source': 'built-in (the recalibration was not better)'}
+        )
+        hyst['file'] = str(hpath)
     return hyst, joint, values, warnings
 
 

@@ -40,7 +40,7 @@ def _one(cfg: dict[str, Any], out: str) -> dict[str, Any]:
     from sma_wrist.hw.emulator import EmulatorConfig
 
     dev = SimDevice(EmulatorConfig(**cfg))
-    res = commission(out, dev)
+    res = commission(out, dev, bring_up_only=True)
     return {
         'named': [(f['kind'], f['channel']) for f in res['faults']],
         'status': res['status'],
