@@ -85,20 +85,25 @@ def test_the_commissioned_model_beats_the_built_in_one_on_held_out_data(off_mode
     assert nodes['tem_controller']['thermal_file'].endswith('thermal.yaml')
 
 
-def test_on_the_phase_fraction_wrist_the_weaker_tem_is_found_and_no_worse_model_handed_over(tmp_path):
+def test_on_the_phase_fraction_wrist_the_weaker_tem_is_found_and_no_misfit_handed_over(tmp_path):
     bring, _ = brought_up(plant='phase_fraction', tem_drive_scale=(0.8, 1.0), payload_kg=0.5)
     excite(bring, BUDGET_S)
     ident = identify_wrist(bring, tmp_path)
     th = ident.identified['thermal']
     # 0.8 of the voltage pumps a little more than 0.8 of the heat through this wrist's Peltier model (its Seebeck
-    # back-voltage is not scaled with the drive): measured 0.85 at the full excitation
+    # back-voltage is not scaled with the drive): measured 0.85 after a bring-up, 0.88 here
     assert 0.75 < th['parameters']['tem1_gain_relative_to_tem2'] < 0.9
     assert th['heldout']['commissioned'] < 0.5 * th['heldout']['builtin']
+    # the SD-GPI and joint model do not describe this wire: whatever the fit found is handed over only if it predicts
+    # the held-out cycle better with every value inside its range; else the built-in wire and joint stand, said so
     joint = ident.identified['joint']
-    assert joint['handed_over'] == (joint['heldout']['commissioned'] < joint['heldout']['builtin'])
-    if not joint['handed_over']:  # the built-in wire and joint stand, and the user is told
+    if joint['handed_over']:
+        assert joint['heldout']['commissioned'] < joint['heldout']['builtin']
+        assert not any('at the end of the range' in w for w in ident.warnings)
+    else:
         assert ident.node_params['plant_sim']['preload_elongation_mm'] == pytest.approx(1.98)
-        assert any('no better than the built-in' in w for w in ident.warnings)
+        assert ident.node_params['plant_sim']['payload_kg'] == pytest.approx(0.3)
+        assert any('the built-in wire, pre-load and friction are handed over' in w for w in ident.warnings)
 
 
 def test_commission_on_the_nominal_device_identifies_values_near_the_defaults(tmp_path):

@@ -120,11 +120,12 @@ def identify_thermal_part(
     builtin = th.ThermalParams()
     both = ti.fit_thermal(fit, builtin, faces='both')
     params = both.params
+    usable = ''
     try:
         lo, hi = ti.hold_limits(params)
         params = params.with_limits(lo, hi)
     except ti.ThermalIdentificationError as e:
-        warnings.append(f'thermal: {e}; kept the built-in hold limits')
+        usable = str(e)
     layers = [ti.fit_thermal([r], builtin, faces='both') for r in fit]
     g1 = relative_gain(layers[1].params, fit[0])
     g2 = relative_gain(layers[0].params, fit[1])
@@ -148,12 +149,17 @@ def identify_thermal_part(
         'builtin_heldout_muscle_rms_C': round(rms['builtin'], 4),
         'tem1_gain_relative_to_tem2': round(gain_1_to_2, 4),
     }
-    better = rms['commissioned'] < rms['builtin']
+    # handed over where it predicts the held-out cycle better and holds the TEMs in their window at some drive
+    # (tem_controller's hold limits come from it)
+    better = rms['commissioned'] < rms['builtin'] and not usable
     if not better:
-        warnings.append(
-            f'thermal: the identified heat balance predicts the held-out cycle no better than the built-in one '
-            f'({rms["commissioned"]:.3g} against {rms["builtin"]:.3g} degC RMS): the built-in is handed over'
+        why = (
+            usable
+            if usable
+            else f'it predicts the held-out cycle no better than the built-in one ({rms["commissioned"]:.3g} '
+            f'against {rms["builtin"]:.3g} degC RMS)'
         )
+        warnings.append(f'thermal: the built-in heat balance is handed over: {why}')
     path = write_thermal_file(
         out / 'thermal.yaml',
         params if better else builtin,
@@ -279,20 +285,32 @@ def identify_mechanics(
         },
         'file': None,
     }
-    for k, (lo, hi) in {n: (fx.LOWER[fx.INDEX[n]], fx.UPPER[fx.INDEX[n]]) for n in params}.items():
-        if fitted.row[fx.INDEX[k]] <= lo + 1e-9 * (hi - lo) or fitted.row[fx.INDEX[k]] >= hi - 1e-9 * (hi - lo):
-            warnings.append(f'joint: {k} ended on its bound {fitted.row[fx.INDEX[k]]:g}: the data do not determine it')
-    # handed over only where it predicts the held-out cycle better than the built-in model (else, on a wrist the
-    # SD-GPI and joint model cannot describe, a fit could make the controllers' model worse)
-    better = joint['heldout']['commissioned'] < joint['heldout']['builtin']
+    on_bound = [
+        f'{k} = {fitted.row[fx.INDEX[k]]:.3g}'
+        for k in params
+        if k != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
+        and (
+            fitted.row[fx.INDEX[k]] <= fx.LOWER[fx.INDEX[k]] + 1e-6
+            or fitted.row[fx.INDEX[k]] >= fx.UPPER[fx.INDEX[k]] - 1e-6
+        )
+    ]
+    # handed over only where it predicts the held-out cycle better than the built-in model with every fitted value
+    # inside its range: a parameter at its bound is the fit compensating what the model cannot describe (on a wrist
+    # the SD-GPI and joint model do not fit), not a measurement, and would mislead the controllers
+    better = joint['heldout']['commissioned'] < joint['heldout']['builtin'] and not on_bound
     hyst['handed_over'] = joint['handed_over'] = better
     if better:
         values = {'payload_kg': payload, 'coulomb_Nm': v['coulomb_Nm'], 'preload_mm': preload_mm, 'wire': wire}
     else:
+        why = (
+            f'{", ".join(on_bound)} at the end of the range the fit allows: the built-in wire and joint model '
+            'do not describe this wrist'
+            if on_bound
+            else 'the recalibrated model predicts the held-out cycle no better than the built-in one '
+            f'({joint["heldout"]["commissioned"]:.3g} against {joint["heldout"]["builtin"]:.3g} mrad RMS)'
+        )
         warnings.append(
-            'wire and joint: the recalibrated model predicts the held-out cycle no better than the built-in one '
-            f'({joint["heldout"]["commissioned"]:.3g} against {joint["heldout"]["builtin"]:.3g} mrad RMS): the '
-            'built-in wire, pre-load and friction are handed over'
+            f'wire and joint: {why}; the built-in wire, pre-load and friction are handed over'
             + ('' if payload_kg is not None else f', with the payload {prior_kg:g} kg (give --payload-kg)')
         )
         values = {
