@@ -40,6 +40,7 @@ from sma_wrist.core.thermal import identification as ti
 THERMAL_DT_S = 0.25  # grid of the heat-balance records [s]: 48 samples a period of the fastest sine (12 s)
 MECH_DT_S = 0.05  # grid of the angle replay [s]
 MECH_STEP_S = 0.01  # the replay's plant step [s]
+MIN_SWEEP_RAD = 0.05  # the joint must move at least this much in the excitation for the wire and joint [rad]
 SHIFT_BOUND_C = 10.0  # the diagnosis' temperature-offset bound: a larger shift is re-centred once
 #: the layers' drive gains differ by more than this: the one heat balance of thermal.yaml averages two TEMs
 LAYER_GAIN_TOLERANCE = 0.1
@@ -209,6 +210,12 @@ def identify_mechanics(
     grid = np.arange(t_fit, t_end - dt, dt)
     T = np.column_stack([np.interp(grid, t, temps[:, m]) for m in (0, 1)])
     qg = np.interp(grid, t, q)
+    if np.ptp(qg) < MIN_SWEEP_RAD:
+        raise IdentificationError(
+            f'the joint moved only {np.ptp(qg):.3f} rad during the excitation (muscles '
+            f'{T.min():.0f}-{T.max():.0f} degC): the wire and joint cannot be identified; check that the wires pull '
+            'the joint, or a wire transforming beyond the TEMs window'
+        )
     prior_kg = payload_kg if payload_kg is not None else DEFAULT_PAYLOAD_KG
     run = Run(t=grid - grid[0], dt=dt, u=None, T=T, q=qg, payload_kg=prior_kg)
     i_held = int(round((t_held - t_fit) / dt))

@@ -183,7 +183,7 @@ def _identify(bring: BringUp, out: Path, payload_kg: float | None, budget_s: flo
     bring.progress('identify')
     try:
         return 'commissioned', identify_wrist(bring, out, payload_kg)
-    except IdentificationError as e:
+    except (IdentificationError, SmaWristError) as e:  # the data cannot identify a part (e.g. a thermal fit refused)
         bring.faults.append(Fault('not_identified', None, str(e), 'see the excitation plot in the report'))
         return 'fault', None
     finally:
