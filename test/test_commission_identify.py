@@ -129,3 +129,19 @@ def test_a_muscle_over_the_window_stops_the_excitation_with_the_tems_off(tmp_pat
         excite(bring, BUDGET_S)
     dev.frames()  # the device takes the last command (0 V) after its latency
     assert np.all(dev.emulator._u == 0.0) and bring.lim.max_muscle_C == 75.0  # the bring-up's limit restored
+
+
+def test_ctrl_c_during_the_excitation_turns_the_tems_off_and_names_the_step(tmp_path):
+    dev = SimDevice(EmulatorConfig(rate_hz=RATE_HZ))
+    frames = dev.frames
+
+    def interrupted():
+        if dev.emulator.device_time_s > 80.0:  # the bring-up takes 66 s on this device
+            raise KeyboardInterrupt
+        return frames()
+
+    dev.frames = interrupted
+    res = commission(tmp_path / 'c', dev)
+    assert res['status'] == 'interrupted' and 'excite' in res['message']
+    assert np.all(dev.emulator._u == 0.0) and res['params_file'] is None
+    assert 'excite' in open(res['report']).read()

@@ -164,12 +164,12 @@ def excite(bring: BringUp, budget_s: float = 600.0, limits: ExcitationLimits | N
                 }
             )
         bring.set_drive(0.0, 0.0)
+        bring.step = ''  # (kept on a stop or Ctrl-C: the message names the step)
     except BaseException:
         bring.off()
         raise
     finally:
         bring.lim = lim0
-        bring.step = ''
     t, adc, u = bring.rec.arrays(t_begin)
     temps, q = bring.physical(adc)
     summary = {
