@@ -164,7 +164,7 @@ def identify_thermal_part(
     path = write_thermal_file(
         out / 'thermal.yaml',
         params if better else builtin,
-        prov if better else {'source': 'built-in (the identified heat balance was not better)', **prov},
+        prov if better else {**prov, 'source': 'built-in (the identified heat balance was not handed over)'},
         header='TEM heat balance identified by sma-wrist commission',
     )
     for m, f in enumerate(layers):
@@ -327,7 +327,7 @@ def identify_mechanics(
             'wire': base,
         }
         hpath = save_hysteresis(
-            out / 'hysteresis.yaml', base, {'source': 'built-in (the recalibration was not better)'}
+            out / 'hysteresis.yaml', base, {'source': 'built-in (the recalibration was not handed over)'}
         )
         hyst['file'] = str(hpath)
     return hyst, joint, values, warnings
