@@ -30,6 +30,8 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        # the Foxglove layout of the live view (doc/howto/live_view.md)
+        ('share/' + package_name + '/config/foxglove', glob('config/foxglove/*.json')),
         ('share/' + package_name + '/msg_defs', glob('msg_defs/*')),
     ],
     python_requires='>=3.10',
@@ -50,7 +52,16 @@ setup(
         # (`-n 2 --dist loadgroup` in .ci/run; test/conftest.py groups module fixtures)
         # ruff: test_lint.py checks the code against ruff.toml; pinned to a minor release because the formatter's
         # style may change between them
-        'test': ['pytest>=7', 'hypothesis>=6', 'dask[distributed]>=2023.1', 'pytest-xdist>=3.0', 'ruff>=0.17,<0.18'],
+        # foxglove-sdk + websockets: test_live.py serves a run and reads it with a real WebSocket client in CI
+        'test': [
+            'pytest>=7',
+            'hypothesis>=6',
+            'dask[distributed]>=2023.1',
+            'pytest-xdist>=3.0',
+            'ruff>=0.17,<0.18',
+            'foxglove-sdk>=0.30.3,<0.31',
+            'websockets>=13',
+        ],
         # Reports write PNG plots; optional so a headless robot install stays small.
         'plot': ['matplotlib>=3.5'],
         # Compiles the per-sample plant step (sma_wrist/core/plant/kernel.py): ~1 us instead of
@@ -63,6 +74,10 @@ setup(
         # on 3.11 / Jazzy's 3.12; the -W build was run clean with each (8.1.3 + 4.0.1, 9.0.4 + 5.2.0, 9.1.1 +
         # 5.2.0), the bounds keep to them (warnings and MyST's Markdown change between majors).
         # sphinx_rtd_theme is the theme rosdoc2 uses.
+        # sma-wrist run --foxglove: the live view over the Foxglove WebSocket protocol (sma_wrist/runtime/live.py).
+        # 0.30 is the release it was written and measured against; the SDK was still changing its API
+        # between minor releases (0.x), hence the bound.
+        'live': ['foxglove-sdk>=0.30.3,<0.31'],
         'docs': ['sphinx>=8.1,<10', 'myst-parser>=4.0,<6', 'sphinx_rtd_theme>=3.0,<4'],
     },
     zip_safe=True,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sma_wrist.outputs import bench_png
+from sma_wrist.outputs import BENCH_OUT_HELP, bench_png
 
 SectionFn = Callable[[bool], dict]
 #: name -> callable(quick) returning a JSON-serialisable dict
@@ -257,6 +257,15 @@ def bench_monitor(quick: bool = False) -> dict:
     return run_monitor(quick)
 
 
+@section('live')
+def bench_live(quick: bool = False) -> dict:
+    """The live view's cost to a run: with a server, and with a client that stopped reading, over none
+    (doc/howto/live_view.md)."""
+    from sma_wrist.closed_loop import bench_live as run_live
+
+    return run_live(quick)
+
+
 @section('bridge')
 def bench_bridge(quick: bool = False) -> dict:
     """1 kHz sample streaming emulator -> pty -> bridge link: loss, reordering, latency percentiles."""
@@ -332,14 +341,35 @@ def bench_commission(quick: bool = False) -> dict:
 # -------------------------------------------------------------------------------- driver
 
 
-def run(sections: list[str] | None = None, quick: bool = False) -> dict:
-    """Run the named sections (all registered ones by default) and return their results."""
+def run(sections: list[str] | None = None, quick: bool = False, out: str | Path | None = None) -> dict:
+    """Run the named sections (all registered ones by default) and return their results.
+
+    ``out``: the folder for the sections' figures and files (``$SMA_WRIST_BENCH_DIR`` while they run, which
+    :func:`sma_wrist.outputs.bench_png` reads); None keeps ``$SMA_WRIST_BENCH_DIR``, else ``runs/bench``.
+    Checked before any section runs, not after minutes of work."""
     names = list(SECTIONS) if not sections else list(sections)
     unknown = [n for n in names if n not in SECTIONS]
     if unknown:
         from sma_wrist.core.errors import ParameterError
 
         raise ParameterError(f'unknown benchmark section(s) {unknown}; known: {sorted(SECTIONS)}')
+    if out is None:
+        return _run(names, quick)
+    from sma_wrist.outputs import check_output_folder
+
+    check_output_folder(out)
+    saved = os.environ.get('SMA_WRIST_BENCH_DIR')
+    os.environ['SMA_WRIST_BENCH_DIR'] = str(out)
+    try:
+        return _run(names, quick)
+    finally:
+        if saved is None:
+            del os.environ['SMA_WRIST_BENCH_DIR']
+        else:
+            os.environ['SMA_WRIST_BENCH_DIR'] = saved
+
+
+def _run(names: list[str], quick: bool) -> dict:
     out: dict = {
         'meta': {
             'python': platform.python_version(),
@@ -375,8 +405,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--section', action='append', choices=sorted(SECTIONS), help='run only these sections')
     ap.add_argument('--quick', action='store_true', help='short runs')
     ap.add_argument('--json', action='store_true', help='print JSON (default)')
+    ap.add_argument('--out', metavar='DIR', help=BENCH_OUT_HELP)
     a = ap.parse_args(argv)
-    json.dump(run(a.section, quick=a.quick), sys.stdout, indent=2)
+    json.dump(run(a.section, quick=a.quick, out=a.out), sys.stdout, indent=2)
     sys.stdout.write('\n')
     return 0
 

@@ -25,6 +25,7 @@ from sma_wrist.cli_options import (
 )
 from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
+from sma_wrist.outputs import BENCH_OUT_HELP
 
 
 def _positive_float(text: str) -> float:
@@ -56,6 +57,51 @@ def _payload(text: str) -> float:
     if not (math.isfinite(v) and lo <= v <= hi):
         raise argparse.ArgumentTypeError(f'payload {text!r} kg is outside [{lo:g}, {hi:g}] kg')
     return v
+
+
+def _live_address(text: str) -> tuple[str, int]:
+    from sma_wrist.runtime.live import parse_address
+
+    try:
+        return parse_address(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def _real_time_factor(text: str) -> float:
+    """A positive multiple of real time, or 'max' (inf: as fast as the machine allows)."""
+    return math.inf if text.strip().lower() == 'max' else _positive_float(text)
+
+
+def _start_live(a: argparse.Namespace) -> tuple[Any, float | None]:
+    """The live server of ``run --foxglove`` (its address checked, so a port in use stops the run before anything is
+    written; it listens once the graph is built) and the run's real-time factor: 1 with --foxglove, as fast as
+    possible without, --real-time-factor's where given; a hardware run is paced by its device."""
+    given = a.real_time_factor is not None
+    if a.hardware and given:
+        raise SmaWristError(
+            '--real-time-factor applies to simulated runs: the device paces a hardware run (an emulated one with '
+            'emulate-device --time-scale)'
+        )
+    factor = a.real_time_factor if given else (1.0 if a.foxglove and not a.hardware else None)
+    factor = None if factor == math.inf else factor
+    if a.foxglove is None:
+        return None, factor
+    from sma_wrist.runtime.live import LiveServer
+
+    host, port = a.foxglove
+    pace = 'paced by the device' if a.hardware else (f'{factor:g}x real time' if factor else 'unpaced')
+
+    def announce(server: LiveServer) -> None:  # once the graph is built and the server listens
+        print(
+            f'live view: {server.url} ({pace}); in Foxglove: Open connection > Foxglove WebSocket > {server.url}, '
+            'layout config/foxglove/wrist.json (doc/howto/live_view.md)',
+            file=sys.stderr,
+            flush=True,
+        )
+
+    server = LiveServer(host, port, announce=announce)
+    return server, factor
 
 
 def _activate() -> None:
@@ -142,6 +188,16 @@ def cmd_run(a: argparse.Namespace) -> int:
         from sma_wrist.runs import check_plot_file
 
         check_plot_file(a.plot, [a.bag] if a.bag else [], 'run.png')
+    live, factor = _start_live(a)
+    try:
+        return _run(a, live, factor)
+    finally:
+        if live is not None:
+            live.close()
+
+
+def _run(a: argparse.Namespace, live: Any, real_time_factor: float | None) -> int:
+    """:func:`cmd_run` once its live server (or none) is up."""
     _prepare_bag(a.bag, a.overwrite)
     _activate()
     from sma_wrist.closed_loop import print_progress, run_closed_loop
@@ -172,6 +228,8 @@ def cmd_run(a: argparse.Namespace) -> int:
         extra_params=extra,
         measure=True,
         monitor=None if a.monitor is None else {'history_file': a.monitor},
+        live=live,
+        real_time_factor=real_time_factor,
     )
     if a.json:
         print(
@@ -245,7 +303,7 @@ def cmd_info(a: argparse.Namespace) -> int:
 def cmd_bench(a: argparse.Namespace) -> int:
     from sma_wrist import bench
 
-    result = bench.run(a.section or None, quick=a.quick)
+    result = bench.run(a.section or None, quick=a.quick, out=a.out)
     print(json.dumps(result, indent=2) if a.json else bench.format_text(result))
     return 0
 
@@ -422,6 +480,23 @@ def build_parser() -> argparse.ArgumentParser:
         '--hardware', metavar='PORT', default=None, help='use hardware_bridge on this serial port instead of plant_sim'
     )
     r.add_argument(
+        '--foxglove',
+        type=_live_address,
+        default=None,
+        metavar='[HOST:]PORT',
+        help="serve the running graph's topics to the Foxglove app over its WebSocket protocol, as foxglove_bridge "
+        'does under ROS 2 (HOST default 127.0.0.1, this machine only; 0.0.0.0 for others; PORT 0: any free '
+        "port); needs the extra live: pip install 'sma_wrist[live]' (doc/howto/live_view.md)",
+    )
+    r.add_argument(
+        '--real-time-factor',
+        type=_real_time_factor,
+        default=None,
+        metavar='X',
+        help='hold simulated time to X times real time, or max: as fast as the machine allows (default: 1 with '
+        "--foxglove, so that the run can be watched, else max; a hardware run goes at its device's pace)",
+    )
+    r.add_argument(
         '--soft-start',
         type=_soft_start,
         default=None,
@@ -529,6 +604,7 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument('--json', action='store_true', help='print JSON instead of section.key = value lines')
     b.add_argument('--quick', action='store_true', help='short runs (smoke test of the benchmark itself)')
     b.add_argument('--section', action='append', help='only these sections')
+    b.add_argument('--out', metavar='DIR', help=BENCH_OUT_HELP)
     b.set_defaults(func=cmd_bench)
     return ap
 

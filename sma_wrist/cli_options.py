@@ -266,6 +266,11 @@ def commission_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser
         'into the params file and go on (after verifying them)',
     )
     ap.add_argument(
+        '--bring-up-only',
+        action='store_true',
+        help='stop after the bring-up (wiring checked, bridge calibration written): no excitation or identification',
+    )
+    ap.add_argument(
         '--heat-V',
         type=float,
         default=20.0,

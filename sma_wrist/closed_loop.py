@@ -180,12 +180,16 @@ def run_closed_loop(
     delivery: Any = None,
     measure: bool = False,
     monitor: dict[str, Any] | None = None,
+    live: Any = None,
+    real_time_factor: float | None = None,
 ) -> RunSummary:
     """Run the graph for ``duration_s`` of simulated time; metrics are read back from the bag.
 
     ``measure`` without a ``bag``: record to a temporary bag, removed afterwards, for the metrics (``sma-wrist run``
     without --bag printed none). ``monitor``: also run twin_monitor with these parameter overrides ({} for its
     defaults); its last verdict and how many checks it made and skipped are in ``RunSummary.monitor``.
+    ``live``: a :class:`sma_wrist.runtime.live.LiveServer` that serves the graph's topics (attached before the
+    nodes, started once they are built, stopped at the end); ``real_time_factor``: hold simulated time to this multiple of real time (None: as fast as possible).
     ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops the run; the bag is
     closed with everything up to the interrupt and the summary says so (and ``metrics_missing`` why there are
     none, when it holds no reference yet).
@@ -212,6 +216,8 @@ def run_closed_loop(
             delivery,
             kept,
             monitor,
+            live,
+            real_time_factor,
         )
     if not kept:
         summary.bag = None
@@ -231,6 +237,8 @@ def _run(
     delivery: Any,
     kept: bool,
     monitor: dict[str, Any] | None,
+    live: Any = None,
+    real_time_factor: float | None = None,
 ) -> RunSummary:
     """:func:`run_closed_loop` with its bag (or none); ``kept``: the bag is the user's, not a temporary one."""
     source = 'hardware_bridge' if hardware else 'plant_sim'
@@ -256,10 +264,16 @@ def _run(
     ) as rt:
         if bag is not None:
             rec = rt.record(bag, topics)
+        if live is not None:  # before the nodes, as the recorder: the latched payload is published at start-up
+            rt.serve_live(live)
+        if real_time_factor is not None:
+            rt.pace(real_time_factor)
         from sma_wrist.nodes.common import add_or_refuse
 
         # a value a node refuses (a params file's): its reason, not rclpy's traceback
         built = [add_or_refuse(rt, cls) for cls in nodes]
+        if live is not None:  # the nodes' topics advertised, then the server opened
+            live.start()
         source_node = built[0]
         monitor_node = built[-1] if monitor is not None else None
         chunk = max(duration_s / 100.0, 0.01)
@@ -396,4 +410,137 @@ def bench_graph(quick: bool = False, repeats: int = 3) -> dict[str, Any]:
         ]
         out[f'{controller}_messages_per_sim_s'] = r.messages_recorded / duration
         out[f'{controller}_recording_cost_us_per_message'] = 1e6 * (r.wall_s - s.wall_s) / max(r.messages_recorded, 1)
+    return out
+
+
+def _stalled_client(url: str, topics: set[str], stack: Any, done: Any) -> None:
+    """A WebSocket client (``websockets``) that subscribes to ``topics`` as they are advertised, then reads nothing
+    more: its receive queue holds 4 messages and its socket buffer 4 KiB, so the server's queue for it fills and
+    the server drops its oldest messages. ``done`` is set once it has subscribed."""
+    import json
+    import socket
+
+    from websockets.sync.client import connect
+
+    host, port = url.removeprefix('ws://').rsplit(':', 1)
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect((host, int(port)))
+    ws = stack.enter_context(connect(url, subprotocols=['foxglove.sdk.v1'], sock=sock, max_queue=4))
+    seen: set[str] = set()
+    n = 0
+    while not topics <= seen:
+        frame = ws.recv(timeout=60)
+        msg = json.loads(frame) if isinstance(frame, str) else {}
+        if msg.get('op') == 'advertise':
+            subs = [{'id': n + i + 1, 'channelId': c['id']} for i, c in enumerate(msg['channels'])]
+            n += len(subs)
+            seen |= {c['topic'] for c in msg['channels']}
+            ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subs}))
+    done.set()
+
+
+#: a client in its own process that subscribes to every channel and reads until the server closes (bench_live)
+_READER = """
+import json, sys
+from websockets.sync.client import connect
+with connect(sys.argv[1], subprotocols=['foxglove.sdk.v1'], max_size=None) as ws:
+    n = 0
+    try:
+        for frame in ws:
+            msg = json.loads(frame) if isinstance(frame, str) else {}
+            if msg.get('op') == 'advertise':
+                subs = [{'id': n + i + 1, 'channelId': c['id']} for i, c in enumerate(msg['channels'])]
+                n += len(subs)
+                ws.send(json.dumps({'op': 'subscribe', 'subscriptions': subs}))
+    except Exception:
+        pass
+"""
+
+
+def _serve(topics: set[str], stack: Any, client: str | None) -> Any:
+    """A LiveServer on a free port in ``stack``; once it listens, ``client`` connects: None, ``'reading'`` (a
+    process of its own that reads everything) or ``'stalled'`` (:func:`_stalled_client`, a thread)."""
+    import subprocess
+    import threading
+
+    from sma_wrist.runtime.live import LiveServer
+
+    done = threading.Event()
+
+    def connect_client(server: Any) -> None:
+        if client == 'reading':
+            proc = subprocess.Popen([sys.executable, '-c', _READER, server.url])
+            stack.callback(proc.wait, 10.0)
+            stack.callback(proc.terminate)
+            done.set()
+        elif client == 'stalled':
+            thread = threading.Thread(target=_stalled_client, args=(server.url, topics, stack, done), daemon=True)
+            thread.start()
+            stack.callback(thread.join, 5.0)
+
+    live = stack.enter_context(LiveServer('127.0.0.1', 0, announce=connect_client))
+    live.subscribed = done
+    return live
+
+
+def bench_live(quick: bool = False, repeats: int = 5) -> dict[str, Any]:
+    """What the live view (``run --foxglove``) costs an unpaced run: interleaved runs of the closed loop without a
+    server (``plain``), with a server and no client, with a client that reads everything (its own process), and
+    with a client that subscribed to every topic and then stopped reading (:func:`_stalled_client`).
+
+    Two measures per run, each the best of ``repeats`` (the least disturbed run) over ``plain``'s: the wall time,
+    and the CPU time of the thread that runs the graph (the taps, the encoding, the hand-over to the server's
+    queues). On a shared machine the load moves one run's wall time by a factor of several; the CPU time much
+    less. ``stalled_over_reading_*``: what a client that stops reading costs over one that reads: the server
+    drops its oldest messages instead of waiting for it. (foxglove-sdk also drops a client that has left 1024 of
+    its control messages unread, the time broadcast with each /clock among them.)"""
+    try:
+        import foxglove  # noqa: F401
+        import websockets.sync.client  # noqa: F401
+    except ImportError as exc:
+        return {'skipped': f"needs foxglove-sdk and websockets ({exc}): pip install 'sma_wrist[test]'"}
+    import contextlib
+
+    from sma_wrist import runtime
+    from sma_wrist.contract import load_contract
+
+    runtime.activate()
+    duration = 10.0 if quick else 30.0
+    controller = 'inverse_adaptive'
+    topics = {t for t in load_contract().topics if not t.startswith('/wrist/twin/')}  # the graph without the monitor
+
+    def timed(client: str | None = None, serve: bool = True) -> tuple[float, float]:
+        with contextlib.ExitStack() as stack:
+            live = _serve(topics, stack, client) if serve else None
+            cpu0 = time.thread_time()
+            summary = run_closed_loop(controller, 0.3, duration, live=live)
+            cpu = time.thread_time() - cpu0
+            if client is not None and not live.subscribed.wait(5.0):
+                raise RuntimeError(f'the {client} benchmark client did not subscribe')
+        return summary.wall_s, cpu
+
+    run_closed_loop(controller, 0.3, 0.5)  # imports, numba cache load
+    cases = {'plain': (None, False), 'no_client': (None, True), 'reading': ('reading', True)}
+    cases['stalled'] = ('stalled', True)
+    runs: dict[str, list[tuple[float, float]]] = {k: [] for k in cases}
+    for _ in range(repeats):
+        for case, (client, serve) in cases.items():
+            runs[case].append(timed(client, serve))
+    wall = {k: min(w for w, _ in v) for k, v in runs.items()}
+    cpu = {k: min(c for _, c in v) for k, v in runs.items()}
+    out: dict[str, Any] = {
+        'controller': controller,
+        'sim_time_s': duration,
+        'repeats': repeats,
+        'plain_wall_s': wall['plain'],
+        'plain_real_time_factor': duration / wall['plain'],
+    }
+    for case in ('no_client', 'reading', 'stalled'):
+        out[f'{case}_wall_ratio'] = wall[case] / wall['plain']
+        out[f'{case}_cpu_ratio'] = cpu[case] / cpu['plain']
+    out['stalled_over_reading_wall_ratio'] = wall['stalled'] / wall['reading']
+    out['stalled_over_reading_cpu_ratio'] = cpu['stalled'] / cpu['reading']
+    out['wall_s_ranges'] = {k: [min(w for w, _ in v), max(w for w, _ in v)] for k, v in runs.items()}
+    out['cpu_s_ranges'] = {k: [min(c for _, c in v), max(c for _, c in v)] for k, v in runs.items()}
     return out

@@ -80,12 +80,18 @@ def check_output_folder(
     _check(path, flag, inputs, error, folder=True)
 
 
+#: where ``sma-wrist bench`` writes its figures unless ``--out`` or ``$SMA_WRIST_BENCH_DIR`` says otherwise
+BENCH_DIR = 'runs/bench'
+BENCH_OUT_HELP = f"folder for the sections' figures (default $SMA_WRIST_BENCH_DIR, else {BENCH_DIR})"
+
+
 def bench_png(name: str) -> str:
-    """Path of a benchmark's figure: in ``$SMA_WRIST_BENCH_DIR`` (default: the current directory),
-    created if missing, so a run does not end in a traceback after minutes of work."""
+    """Path of a benchmark's figure: in ``$SMA_WRIST_BENCH_DIR`` (``sma-wrist bench --out`` sets it; default
+    :data:`BENCH_DIR`, next to the other commands' ``runs/`` folders, not the current folder), created if
+    missing, so a run does not end in a traceback after minutes of work."""
     import os
 
-    folder = Path(os.environ.get('SMA_WRIST_BENCH_DIR', '.'))
+    folder = Path(os.environ.get('SMA_WRIST_BENCH_DIR') or BENCH_DIR)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -93,4 +99,4 @@ def bench_png(name: str) -> str:
     return str(folder / name)
 
 
-__all__ = ['check_output_file', 'check_output_folder', 'bench_png']
+__all__ = ['BENCH_DIR', 'BENCH_OUT_HELP', 'check_output_file', 'check_output_folder', 'bench_png']

@@ -4,7 +4,8 @@ probe node that publishes inputs and collects outputs of a node under test."""
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager
 from typing import Any
 
 import pytest
@@ -12,6 +13,15 @@ import pytest
 from sma_wrist import runtime
 
 runtime.activate()
+
+try:  # the property tests guard results, not speed: hypothesis's 200 ms deadline per example failed them on a loaded
+    # machine (DeadlineExceeded in the codec's round trip with ~10 processes per core); tests may still set their own
+    from hypothesis import settings as _hypothesis
+
+    _hypothesis.register_profile('sma_wrist', deadline=None)
+    _hypothesis.load_profile('sma_wrist')
+except ImportError:
+    pass
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -70,16 +80,39 @@ def _warm_kernels(config: pytest.Config) -> None:
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Under ``pytest -n 2 --dist loadgroup`` keep a module on one worker when its tests share a
-    module- or class-scoped fixture, so the fixture (the diagnosis cases, the experiment runs:
-    tens of seconds each) is built once, not once per worker. Tests with only function-scoped
-    fixtures stay free to balance the load. Serial runs ignore the mark; tryfirst: before
-    xdist's own hook reads it."""
+    """Under ``pytest -n 2 --dist loadgroup`` keep the tests that share a module- or class-scoped
+    fixture on one worker, so the fixture (the diagnosis cases, the experiment runs: tens of seconds
+    each) is built once, not once per worker. One group per set of such fixtures that tests tie
+    together, not per module: test_diagnose's open-loop cases (~130 s) and its closed-loop runs (3 x ~10 s)
+    share nothing and may run on both workers at once. Tests with only function-scoped
+    fixtures stay free to balance the load. Serial runs ignore the mark; tryfirst: before xdist's
+    own hook reads it."""
+    parent: dict[str, str] = {}
+
+    def root(k: str) -> str:
+        while parent.setdefault(k, k) != k:
+            k = parent[k]
+        return k
+
+    shared: list[tuple[pytest.Item, list[str]]] = []
     for item in items:
         defs = getattr(item, '_fixtureinfo', None)
-        scopes = {fd.scope for fds in (defs.name2fixturedefs.values() if defs else ()) for fd in fds}
-        if scopes & {'module', 'class', 'package'}:
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split('::')[0]))
+        module = item.nodeid.split('::')[0]
+        names = sorted(
+            f'{module}::{name}'
+            for name, fds in (defs.name2fixturedefs.items() if defs else ())
+            if any(fd.scope in ('module', 'class', 'package') for fd in fds)
+        )
+        if names:
+            shared.append((item, names))
+            for n in names[1:]:  # a test using two such fixtures ties their groups together
+                parent[root(n)] = root(names[0])
+    for item, names in shared:
+        item.add_marker(pytest.mark.xdist_group(root(names[0])))
+
+
+#: the open (turnstile, lock) files of the running test under pytest-xdist, for :func:`alone`
+_LOCK_FILES = pytest.StashKey[tuple]()
 
 
 @pytest.hookimpl(hookwrapper=True)
@@ -87,7 +120,9 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
     """Under pytest-xdist: every test holds a shared lock from setup to teardown, an ``exclusive``
     one the exclusive lock. A real-time loop (the emulated device on its own wall clock) starved
     by the other worker falls behind and stalls, which is no fault of the code under test. The
-    turnstile lets a waiting exclusive test in before the next shared one. Serial runs: no-op."""
+    turnstile lets a waiting exclusive test in before the next shared one. A test whose real-time
+    part is only a section of it takes the exclusive lock for that section (:func:`alone`), so the
+    other worker is not held up by the rest of it. Serial runs: no-op."""
     if 'PYTEST_XDIST_WORKER' not in os.environ:
         yield
         return
@@ -103,11 +138,42 @@ def pytest_runtest_protocol(item: pytest.Item, nextitem: pytest.Item | None) -> 
         else:
             fcntl.flock(gate, fcntl.LOCK_UN)
             fcntl.flock(lock, fcntl.LOCK_SH)
+            item.stash[_LOCK_FILES] = (gate, lock)
         try:
             yield
         finally:
+            if _LOCK_FILES in item.stash:
+                del item.stash[_LOCK_FILES]
             fcntl.flock(lock, fcntl.LOCK_UN)
             fcntl.flock(gate, fcntl.LOCK_UN)
+
+
+@pytest.fixture
+def alone(request: pytest.FixtureRequest) -> Callable[[], AbstractContextManager[None]]:
+    """``with alone():`` runs a test's wall-clock section as an ``exclusive`` test runs whole: under
+    pytest-xdist the other workers finish their current test and wait at the turnstile until the section
+    ends. The test's work before and after it (a simulated reference run, the analysis of a bag) runs
+    beside the other workers as usual. Serial runs: no-op."""
+    import fcntl
+    from contextlib import contextmanager
+
+    @contextmanager
+    def section() -> Iterator[None]:
+        files = request.node.stash.get(_LOCK_FILES, None)
+        if files is None:  # a serial run, or a test marked exclusive: already alone
+            yield
+            return
+        gate, lock = files
+        fcntl.flock(lock, fcntl.LOCK_UN)  # queue at the turnstile as an exclusive test does
+        fcntl.flock(gate, fcntl.LOCK_EX)
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(lock, fcntl.LOCK_SH)  # still holding the gate: no exclusive holder gets in between
+            fcntl.flock(gate, fcntl.LOCK_UN)
+
+    return section
 
 
 @pytest.fixture

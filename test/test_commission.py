@@ -35,7 +35,7 @@ RATE_HZ = 250.0
 
 def run(tmp_path, accept_fixes=False, name='c', **cfg):
     dev = SimDevice(EmulatorConfig(**{'rate_hz': RATE_HZ, **cfg}))
-    res = commission(tmp_path / name, dev, accept_fixes=accept_fixes)
+    res = commission(tmp_path / name, dev, accept_fixes=accept_fixes, bring_up_only=True)
     return res, dev.emulator
 
 
@@ -149,7 +149,7 @@ def test_ctrl_c_at_any_step_turns_the_tems_off_and_keeps_the_report(tmp_path, st
         return frames()
 
     dev.frames = interrupted
-    res = commission(tmp_path / 'c', dev)
+    res = commission(tmp_path / 'c', dev, bring_up_only=True)
     assert res['status'] == 'interrupted' and exit_code(res) == 130
     assert f'during the {step} step' in res['message']
     report = open(res['report']).read()
@@ -169,7 +169,7 @@ def test_a_sensor_that_saturates_mid_procedure_stops_it(tmp_path):
         return frames()
 
     dev.frames = saturating
-    res = commission(tmp_path / 'c', dev)
+    res = commission(tmp_path / 'c', dev, bring_up_only=True)
     assert named(res) == [('sensor_saturated', 3)] and 'TEM 1 face' in res['faults'][0]['message']
     assert 'sensors' in res['steps'] and exit_code(res) == EXIT_FAULT
     assert_stopped_safely(res, dev.emulator, LIM.pulse_V)
@@ -178,7 +178,7 @@ def test_a_sensor_that_saturates_mid_procedure_stops_it(tmp_path):
 def test_a_frozen_thermocouple_is_named(tmp_path):
     dev = SimDevice(EmulatorConfig(rate_hz=RATE_HZ))
     dev.emulator.inject('force', (1, 19333))  # muscle 2's converter returns its last reading for ever
-    res = commission(tmp_path / 'c', dev)
+    res = commission(tmp_path / 'c', dev, bring_up_only=True)
     assert named(res) == [('sensor_frozen', 2)] and exit_code(res) == EXIT_FAULT
     assert_stopped_safely(res, dev.emulator, LIM.pulse_V)
 
@@ -217,7 +217,7 @@ def pty_device(tmp_path):
 
 def test_over_a_serial_port_a_polarity_fault_is_named_and_the_tems_left_off(tmp_path, pty_device):
     emu = pty_device(time_scale=2.0, tem_polarity_swapped=(True, False))
-    res = commission(tmp_path / 'c', SerialDevice(emu.link, stall_s=STALL_S), port=emu.link)
+    res = commission(tmp_path / 'c', SerialDevice(emu.link, stall_s=STALL_S), port=emu.link, bring_up_only=True)
     assert named(res) == [('tem_polarity', 1)] and exit_code(res) == EXIT_FAULT, res['faults']
     assert res['steps']['link']['rate_hz_measured'] == pytest.approx(1000.0, rel=0.01)
     assert res['steps']['link']['device_s_per_wall_s'] > 1.2  # the device's own pace (x2), measured
@@ -236,7 +236,7 @@ def test_a_device_that_stops_streaming_mid_procedure_stops_it_with_the_tems_off(
         return frames()
 
     dev.frames = freezing
-    res = commission(tmp_path / 'c', dev, port=emu.link)
+    res = commission(tmp_path / 'c', dev, port=emu.link, bring_up_only=True)
     assert named(res) == [('link_lost', None)] and 'stopped streaming' in res['faults'][0]['message']
     assert exit_code(res) == EXIT_FAULT and 'sensors' in res['steps']
     assert tems_off(emu, watchdog=True)  # the zero command sent at the stop, or the device's watchdog
@@ -254,35 +254,14 @@ def test_cli_a_port_that_does_not_open_is_bad_input_with_a_report(tmp_path, caps
 def test_cli_sim_commissions_and_prints_json(tmp_path, capsys):
     from sma_wrist.cli import main
 
-    out = str(tmp_path / 'c')
-    # a short verification (4 s runs of pid): its shape; the full one is sma-wrist bench --section commission's
     code = main(
-        [
-            'commission',
-            '--sim',
-            '--out',
-            out,
-            '--payload-kg',
-            '0.4',
-            '--verify-s',
-            '4',
-            '--controllers',
-            'pid',
-            '--json',
-        ]
+        ['commission', '--sim', '--out', str(tmp_path / 'c'), '--payload-kg', '0.4', '--json', '--bring-up-only']
     )
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc['status'] == 'commissioned' and doc['faults'] == []
     assert {'faults', 'identified', 'verification', 'params_file', 'device_time_s', 'steps', 'report'} <= set(doc)
-    assert isinstance(doc['identified'], dict)
-    v = doc['verification']
-    assert set(v['default']) == set(v['commissioned']) == {'pid'} and set(v['commissioned']['pid']) == {
-        'max_pct',
-        'rms_pct',
-    }
-    assert all(0 < v[w]['pid']['rms_pct'] <= v[w]['pid']['max_pct'] for w in ('default', 'commissioned'))
-    # the bring-up's device time (about 65 s) and the verification's (two runs of 4 s, with the graph's start-up)
-    assert 8.0 <= v['device_time_s'] < doc['device_time_s'] < 120.0 and doc['max_drive_V'] <= LIM.max_drive_V
+    assert doc['identified'] == {} and doc['verification'] is None  # the bring-up only: nothing identified, verified
+    assert 0 < doc['device_time_s'] < 120.0 and doc['max_drive_V'] <= LIM.max_drive_V
     assert 'payload_kg: 0.4' in open(doc['params_file']).read()
 
 
@@ -318,7 +297,7 @@ def test_a_device_on_another_protocol_version_is_named(tmp_path):
 
     old, B.HELLO_TIMEOUT_S = B.HELLO_TIMEOUT_S, 0.3
     try:
-        res = commission(tmp_path / 'c', dev)
+        res = commission(tmp_path / 'c', dev, bring_up_only=True)
     finally:
         B.HELLO_TIMEOUT_S = old
     assert named(res) == [('no_hello', None)] and 'protocol version 2' in res['faults'][0]['message']

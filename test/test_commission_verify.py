@@ -58,10 +58,13 @@ def handed_over(out, payload_kg=0.4) -> dict:
 
 
 def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp_path):
-    dev, res = device(), handed_over(tmp_path / 'c')
+    """commission() after the bring-up (no excitation here: it takes minutes), with a short verification."""
+    dev = device()
     (tmp_path / 'c' / 'verification' / 'pid_commissioned').mkdir(parents=True)  # an earlier commissioning's bag
-    run_verification(res, tmp_path / 'c', dev, dataclasses.replace(SHORT, diagnose=True))
-    assert res['status'] == 'commissioned', (res['message'], res['faults'])
+    res = commission(
+        tmp_path / 'c', dev, payload_kg=0.4, bring_up_only=True, verification=dataclasses.replace(SHORT, diagnose=True)
+    )
+    assert res['status'] == 'commissioned' and exit_code(res) == 0, (res['message'], res['faults'])
     v = res['verification']
     for which in ('default', 'commissioned'):
         m = v[which]['pid']
@@ -72,9 +75,9 @@ def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp
     assert set(bridge) == set(CALIBRATION_KEYS)  # the bring-up's calibration, no payload, no port
     # device time: both runs counted, on top of the bring-up's
     assert all(r['device_s'] >= SHORT.duration_s for r in v['runs']) and v['device_time_s'] >= 2 * SHORT.duration_s
-    assert res['device_time_s'] == pytest.approx(60.0 + v['device_time_s'], abs=1e-3)
+    assert res['device_time_s'] > 60.0 + v['device_time_s']  # the bring-up alone takes over 60 s on this wrist
     report = open(res['report']).read()
-    assert report.startswith('# Wrist commissioning report\n\nbring-up findings')  # kept, the section added
+    assert 'Angle: which way' in report  # the bring-up's sections kept, the verification's added
     assert '## Verification' in report and '| pid |' in report and '](verification/pid.png)' in report
     assert os.path.getsize(v['plots'][0]) > 10_000
     assert np.all(dev.emulator._u == 0.0)  # TEMs off at the end

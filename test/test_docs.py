@@ -137,6 +137,29 @@ def test_the_readme_results_block_is_the_json(results) -> None:
     )
 
 
+def test_each_validation_row_carries_its_own_start_time(monkeypatch) -> None:
+    """measure.py stamped every row with the time the whole ~10 min run started, not when its command ran."""
+    import datetime
+
+    sys.path.insert(0, str(DOC / 'validation'))
+    import measure
+
+    clock = iter(datetime.datetime(2026, 1, 1, 12, m, tzinfo=datetime.timezone.utc) for m in range(0, 60, 7))
+
+    class Clock(datetime.datetime):
+        @classmethod
+        def now(cls, tz=None):  # type: ignore[override]
+            return next(clock)
+
+    monkeypatch.setattr(measure.datetime, 'datetime', Clock)
+    monkeypatch.setattr(measure, 'run_one', lambda name: {'what': name})
+    monkeypatch.setattr(measure, '_git', lambda *a: '')
+    names = list(measure.RUNS)[:3]
+    runs = measure.measure(names)['runs']
+    assert [runs[n]['date'] for n in names] == ['2026-01-01 12:00 UTC', '2026-01-01 12:07 UTC', '2026-01-01 12:14 UTC']
+    assert all('load_1min_at_start' in runs[n]['machine'] for n in names)
+
+
 def test_a_readme_without_the_markers_is_refused(results) -> None:
     with pytest.raises(ValueError, match='results:begin'):
         refgen.replace_readme_block('# README\n', results)

@@ -782,35 +782,35 @@ CLOSED_LOOP_TOL_PCT = {'max_error_pct': 5.0, 'rms_error_pct': 1.5}
 TIME_SCALE = 3.0
 
 
-@pytest.mark.exclusive  # wall-clock: the emulated device falls behind on a shared core
-def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_path, ros_shutdown):
+def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_path, ros_shutdown, alone):
     """126 s (two 62.8 s cycles of the Sec. 6.1 sine) through emulator (subprocess, time x3) +
     bridge + the controller graph, bag recorded; metrics close to plant_sim's on the same run."""
     from sma_wrist.closed_loop import run_closed_loop
     from sma_wrist.runs import load_run, run_metrics
 
     link = str(tmp_path / 'wrist')
-    proc = subprocess.Popen(
-        [sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link, '--time-scale', str(TIME_SCALE)],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        proc.stdout.readline()
-        t0 = time.monotonic()
-        hw = run_closed_loop(
-            'direct_adaptive',
-            0.3,
-            126.0,
-            tmp_path / 'hw',
-            hardware=True,
-            extra_params={'/hardware_bridge': {'port': link}},
+    with alone():  # wall-clock: the emulated device falls behind on a shared core; the rest runs beside others
+        proc = subprocess.Popen(
+            [sys.executable, '-m', 'sma_wrist.cli', 'emulate-device', '--port', link, '--time-scale', str(TIME_SCALE)],
+            stdout=subprocess.PIPE,
+            text=True,
         )
-        wall = time.monotonic() - t0
-    finally:
-        proc.terminate()
-        proc.wait(10)
-        proc.stdout.close()
+        try:
+            proc.stdout.readline()
+            t0 = time.monotonic()
+            hw = run_closed_loop(
+                'direct_adaptive',
+                0.3,
+                126.0,
+                tmp_path / 'hw',
+                hardware=True,
+                extra_params={'/hardware_bridge': {'port': link}},
+            )
+            wall = time.monotonic() - t0
+        finally:
+            proc.terminate()
+            proc.wait(10)
+            proc.stdout.close()
     sim = run_closed_loop('direct_adaptive', 0.3, 126.0, tmp_path / 'sim')
     run = load_run(tmp_path / 'hw')
     m = run_metrics(run)

@@ -11,33 +11,34 @@ RMS 0.58 / 0.62 degC on runs 39 / 16 against Table 4.9's 2.05 / 2.13 degC.
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
 import pytest
 
 DATA = Path(__file__).parent / 'data' / 'tec_chamber'
-SUPPLY_V, FULL_DUTY = 5.0, 255.0  # the logger's supply and analogWrite range (README)
 TABLE = ['--columns', 'u=u_V,T1=oven_c', '--sample-period-s', '1', '--dt', '1']
-
-
-def _volts(src: Path, dst: Path) -> Path:
-    """The upstream table with its PWM duty as the mean drive voltage (the only conversion), still without time."""
-    rows = list(csv.reader(src.open()))
-    if rows[0][0] != 'set_c':  # rtempco_run1.csv has no header
-        rows.insert(0, ['set_c', 'oven_c', 'output', 'ambient_c'])
-    with dst.open('w') as f:
-        f.write('u_V,oven_c,ambient_c\n')
-        for _set_c, oven_c, output, ambient_c in rows[1:]:
-            f.write(f'{float(output) / FULL_DUTY * SUPPLY_V:.6f},{oven_c},{ambient_c}\n')
-    return dst
 
 
 @pytest.fixture(scope='module')
 def tables(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     d = tmp_path_factory.mktemp('tec_chamber')
-    return {n: _volts(DATA / f'{n}.csv', d / f'{n}.csv') for n in ('run40', 'run39', 'run16', 'rtempco_run1')}
+    from sma_wrist.identify.thermal import tec_chamber_volts
+
+    return {
+        n: tec_chamber_volts(DATA / f'{n}.csv', d / f'{n}.csv') for n in ('run40', 'run39', 'run16', 'rtempco_run1')
+    }
+
+
+def test_the_logged_pwm_duty_becomes_the_mean_drive_voltage(tmp_path: Path) -> None:
+    """duty / 255 x 5 V, the chamber and room temperatures as logged; rtempco_run1.csv's missing header changes nothing."""
+    from sma_wrist.identify.thermal import tec_chamber_volts
+
+    rows = '25.000,23.756,205.00,20.675\n25.000,23.754,0,20.664\n26.000,25.1,255,20.7\n'
+    want = 'u_V,oven_c,ambient_c\n4.019608,23.756,20.675\n0.000000,23.754,20.664\n5.000000,25.1,20.7\n'
+    for name, text in (('headed', 'set_c,oven_c,output,ambient_c\n' + rows), ('bare', rows)):
+        (tmp_path / f'{name}.csv').write_text(text)
+        assert tec_chamber_volts(tmp_path / f'{name}.csv', tmp_path / f'{name}_V.csv').read_text() == want, name
 
 
 def _cli(args: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, dict]:

@@ -16,7 +16,6 @@ their outputs under ``runs/validation/`` (ignored by git).
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import json
 import os
@@ -34,6 +33,7 @@ HERE = Path(__file__).resolve().parent
 DOC = HERE.parent
 ROOT = DOC.parent
 sys.path.insert(0, str(DOC))
+sys.path.insert(0, str(ROOT))  # the checkout's sma_wrist (the tables' conversion), also when an installed copy exists
 
 import refgen  # noqa: E402  (the renderer the docs build uses)
 
@@ -47,16 +47,13 @@ OFF_MODEL_CASES = ('sensors', 'T-10', 'T+5', 'stroke x1.3', 'TEM gain -30%', 'ph
 
 
 def _tec_volts() -> None:
-    """The Peltier logs' PWM duty as the mean drive voltage (duty / 255 x the 5 V supply: test/data/tec_chamber's
-    README), the only conversion; the tables keep no time column (one row per second)."""
+    """The Peltier logs with their PWM duty as the mean drive voltage (sma_wrist.identify.thermal.tec_chamber_volts)."""
+    from sma_wrist.identify.thermal import tec_chamber_volts
+
     dst = ROOT / TEC
     dst.mkdir(parents=True, exist_ok=True)
     for name in ('run40', 'run39', 'run16'):
-        rows = list(csv.reader((ROOT / 'test/data/tec_chamber' / f'{name}.csv').open()))
-        with (dst / f'{name}.csv').open('w') as f:
-            f.write('u_V,oven_c,ambient_c\n')
-            for _set_c, oven_c, output, ambient_c in rows[1:]:
-                f.write(f'{float(output) / 255.0 * 5.0:.6f},{oven_c},{ambient_c}\n')
+        tec_chamber_volts(ROOT / 'test/data/tec_chamber' / f'{name}.csv', dst / f'{name}.csv')
 
 
 def _hysteresis(d: dict[str, Any]) -> dict[str, Any]:
@@ -310,6 +307,11 @@ def machine() -> dict[str, Any]:
     }
 
 
+def row_stamp() -> dict[str, Any]:
+    """When a row's command started (UTC, to the minute) and the machine with its load at that moment."""
+    return {'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'), 'machine': machine()}
+
+
 def run_one(name: str) -> dict[str, Any]:
     what, argv, extract, prepare = RUNS[name]
     if prepare:
@@ -347,14 +349,13 @@ def run_one(name: str) -> dict[str, Any]:
 def measure(names: list[str]) -> dict[str, Any]:
     old = json.loads(refgen.RESULTS.read_text()) if refgen.RESULTS.exists() else {}
     runs = dict(old.get('runs', {})) if len(names) < len(RUNS) else {}
-    meta = {
-        'date': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC'),
+    code = {
         'commit': _git('rev-parse', '--short=12', 'HEAD'),
         'dirty': bool(_git('status', '--porcelain', '--untracked-files=no')),
-        'machine': machine(),
     }
     for n in names:
-        runs[n] = {**run_one(n), **meta}
+        started = row_stamp()  # this row's start and load, not the whole run's (~10 min)
+        runs[n] = {**run_one(n), 'date': started['date'], **code, 'machine': started['machine']}
     return {'about': 'written by doc/validation/measure.py; rendered by doc/refgen.py', 'runs': runs}
 
 

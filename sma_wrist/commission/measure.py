@@ -5,6 +5,9 @@ emulated device) on every wiring fault alone, on each channel, on the model and 
 quiet (2 counts) and noisy (25 counts: 0.1 degC, 2.5 mrad) sensors; and on devices without a fault that are not
 the model. It prints one JSON object: per case the faults named, the largest |drive| the device received and the
 device time.
+``--cases identify`` runs the whole procedure (bring-up, excitation, identification) on the devices of
+:data:`IDENTIFY` and prints the identified values against the device's truth, the held-out errors of the
+commissioned and the built-in model, the device time and the wall time.
 """
 
 from __future__ import annotations
@@ -43,13 +46,68 @@ HEALTHY: dict[str, dict[str, Any]] = {
 }
 
 
+#: devices for the identification (the payload is never given to commissioning): {name: (emulator config, truth)}
+IDENTIFY: dict[str, tuple[dict[str, Any], dict[str, float]]] = {
+    'phase-fraction wrist, wire +8 degC, TEM 1 0.8 x, 0.5 kg': (
+        {
+            'plant': 'phase_fraction',
+            'scenario': {'transition_shift_C': 8.0},
+            'tem_drive_scale': (0.8, 1.0),
+            'payload_kg': 0.5,
+        },
+        {'transition_shift_C': 8.0, 'tem1_gain_relative_to_tem2': 0.8, 'payload_kg': 0.5},
+    ),
+    'phase-fraction wrist, nominal': (
+        {'plant': 'phase_fraction'},
+        {'transition_shift_C': 0.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.3},
+    ),
+    'SD-GPI wire +8 degC, TEM 1 0.8 x, 0.5 kg': (
+        {'plant': 'sdgpi', 'scenario': {'transition_shift_C': 8.0}, 'tem_drive_scale': (0.8, 1.0), 'payload_kg': 0.5},
+        {'transition_shift_C': 8.0, 'tem1_gain_relative_to_tem2': 0.8, 'payload_kg': 0.5},
+    ),
+    'model (nominal)': ({}, {'transition_shift_C': 0.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.3}),
+}
+
+
+def measure_identification(rate_hz: float = 1000.0) -> dict[str, Any]:
+    """The identification table of doc/howto/commission.md: per device the identified values and their truth."""
+    from sma_wrist.commission.device import SimDevice
+    from sma_wrist.commission.run import commission
+    from sma_wrist.hw.emulator import EmulatorConfig
+
+    rows: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as d:
+        for name, (cfg, truth) in IDENTIFY.items():
+            t0 = time.time()
+            res = commission(f'{d}/{len(rows)}', SimDevice(EmulatorConfig(rate_hz=rate_hz, **cfg)))
+            ident = res.get('identified') or {}
+            found = {
+                'transition_shift_C': ident.get('hysteresis', {}).get('parameters', {}).get('transition_shift_C'),
+                'tem1_gain_relative_to_tem2': ident.get('thermal', {})
+                .get('parameters', {})
+                .get('tem1_gain_relative_to_tem2'),
+                'payload_kg': ident.get('joint', {}).get('parameters', {}).get('payload_kg'),
+            }
+            rows[name] = {
+                'status': res['status'],
+                'identified': found,
+                'truth': truth,
+                'heldout': {k: {**v['heldout'], 'handed_over': v.get('handed_over')} for k, v in ident.items()},
+                'device_time_s': res['device_time_s'],
+                'excitation_s': res['steps'].get('excite', {}).get('device_time_s'),
+                'wall_s': round(time.time() - t0, 1),
+                'warnings': res['warnings'],
+            }
+    return {'rate_hz': rate_hz, 'cases': rows}
+
+
 def _one(cfg: dict[str, Any], out: str) -> dict[str, Any]:
     from sma_wrist.commission.device import SimDevice
     from sma_wrist.commission.run import commission
     from sma_wrist.hw.emulator import EmulatorConfig
 
     dev = SimDevice(EmulatorConfig(**cfg))
-    res = commission(out, dev)
+    res = commission(out, dev, bring_up_only=True)
     return {
         'named': [(f['kind'], f['channel']) for f in res['faults']],
         'status': res['status'],
@@ -99,7 +157,7 @@ DEVICES: dict[str, dict[str, Any]] = {
     'phase-fraction wire 8 degC hotter, TEM 1 0.8x, 0.45 kg not given': {
         'plant': 'phase_fraction',
         'scenario': {'transition_shift_C': 8.0},
-        'tem_drive_gain': (0.8, 1.0),
+        'tem_drive_scale': (0.8, 1.0),
         'payload_kg': 0.45,
     },
     'nominal (the model)': {},
@@ -185,9 +243,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog='python3 -m sma_wrist.commission.measure', description=__doc__.split('\n')[0])
     ap.add_argument('--seeds', type=int, default=3)
     ap.add_argument('--rate-hz', type=float, default=1000.0)
-    ap.add_argument('--cases', choices=('all', 'faults', 'healthy'), default='all')
+    ap.add_argument('--cases', choices=('all', 'faults', 'healthy', 'identify'), default='all')
     a = ap.parse_args(argv)
-    print(json.dumps(measure(a.seeds, a.rate_hz, a.cases), indent=1))
+    doc = measure_identification(a.rate_hz) if a.cases == 'identify' else measure(a.seeds, a.rate_hz, a.cases)
+    print(json.dumps(doc, indent=1))
     return 0
 
 

@@ -102,6 +102,7 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
         png = {'tem_pulses': 'pulses.png', 'angle': 'angle.png'}.get(key)
         if png in pngs:
             lines += [f'![{key}]({png})', '']
+    lines += _identified(result)
     lines += ['## Parameters', '']
     lines += (
         (
@@ -115,6 +116,52 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
     path = out / 'commission.md'
     path.write_text('\n'.join(lines))
     return path
+
+
+def _identified(result: dict[str, Any]) -> list[str]:
+    """The excitation's phases and the identified parts with their held-out errors against the built-in model."""
+    ex = result['steps'].get('excite')
+    if ex is None:
+        return []
+    out = [
+        '## Excitation',
+        '',
+        f"{ex['device_time_s']:.1f} s of device time, drive up to {ex['max_drive_V']:g} V, muscles kept in the TEMs' "
+        f'window {ex["window_C"]} degC (governor active {ex["governed_s"]} s per muscle). Muscles '
+        f'{ex["muscle_C"]} degC, angle {ex["angle_rad"]} rad.',
+        '',
+        '| phase | part | from [s] | to [s] | amplitude [V] | period [s] |',
+        '|---|---|---|---|---|---|',
+    ]
+    for p in ex['phases']:
+        out.append(
+            f'| {p["label"]} | {p["part"]} | {p["t_start_s"]:.1f} | {p["t_end_s"]:.1f} | {p["amplitude_V"]:g} | '
+            f'{p["period_s"] or "-"} |'
+        )
+    out.append('')
+    out += [f'![{f}]({f})' for f in result.get('figures', [])] + ['']
+    ident = result.get('identified')
+    if not ident:
+        return out
+    out += [
+        '## Identified model',
+        '',
+        'Each part fitted on the fit phases and predicted on the held-out phases, against the built-in model on the '
+        'same data.',
+        '',
+        '| part | held-out metric | commissioned | built-in | file |',
+        '|---|---|---|---|---|',
+    ]
+    for name, part in ident.items():
+        h = part['heldout']
+        out.append(
+            f'| {name} | {h["metric"]} [{h["unit"]}] | {h["commissioned"]:.4g} | {h["builtin"]:.4g} | '
+            f'{part["file"] or "-"} |'
+        )
+    out.append('')
+    for name, part in ident.items():
+        out += [f'{name}: ' + _short(part['parameters']), '']
+    return out
 
 
 def _pulses(step: dict[str, Any]) -> list[str]:

@@ -67,8 +67,14 @@ def calibration_of(values: dict[str, Any]) -> Calibration:
     return HardwareBridge._calibration(values)
 
 
-def write_params(path: Path, params_files: Sequence[str | Path], bridge: dict[str, Any]) -> Path:
-    """``params_files`` merged (later ones win) with ``bridge`` set under hardware_bridge: the file to hand over."""
+def write_params(
+    path: Path,
+    params_files: Sequence[str | Path],
+    bridge: dict[str, Any],
+    nodes: dict[str, dict[str, Any]] | None = None,
+) -> Path:
+    """``params_files`` merged (later ones win) with ``nodes`` (the identified model's parameters per node) and
+    ``bridge`` set under hardware_bridge: the file to hand over."""
     import yaml
 
     doc: dict[str, Any] = {}
@@ -77,11 +83,13 @@ def write_params(path: Path, params_files: Sequence[str | Path], bridge: dict[st
             doc.setdefault(node, {'ros__parameters': {}})['ros__parameters'].update(
                 copy.deepcopy((body or {}).get('ros__parameters', {}))
             )
-    key = next((k for k in doc if k.strip('/') == BRIDGE), BRIDGE)
-    doc.setdefault(key, {'ros__parameters': {}})['ros__parameters'].update(bridge)
+    for node, values in {**(nodes or {}), BRIDGE: {**(nodes or {}).get(BRIDGE, {}), **bridge}}.items():
+        key = next((k for k in doc if k.strip('/') == node), node)
+        doc.setdefault(key, {'ros__parameters': {}})['ros__parameters'].update(values)
     head = (
         '# sma_wrist parameters of a commissioned wrist (sma-wrist commission; doc/howto/commission.md).\n'
-        '# hardware_bridge: the wiring and the angle calibration the bring-up measured.\n'
+        '# hardware_bridge: the wiring and the angle calibration the bring-up measured'
+        + ('; every node: the model identified from the excitation.\n' if nodes else '.\n')
     )
     path.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
     return path
@@ -97,9 +105,12 @@ def commission(
     limits: BringUpLimits | None = None,
     progress: Callable[[str], None] | None = None,
     port: str | None = None,
+    bring_up_only: bool = False,
+    excite_budget_s: float = 600.0,
     verification: Any = None,
 ) -> dict[str, Any]:
-    """Bring the wrist on ``device`` (SerialDevice or SimDevice) up; write the report (and, when it passes, the
+    """Bring the wrist on ``device`` (SerialDevice or SimDevice) up, then (unless ``bring_up_only``) excite it for
+    at most ``excite_budget_s`` of device time and identify its model; write the report (and, when it passes, the
     params file) into ``out``; return the result (JSON-ready). KeyboardInterrupt is caught: status 'interrupted'.
     PortError (bad input) propagates after the report is written. ``verification``
     (:class:`sma_wrist.commission.verify.VerifyOptions`): then verify the params file in closed loop."""
@@ -113,11 +124,13 @@ def commission(
         raise ParameterError(problem)
     out.mkdir(parents=True, exist_ok=True)
     bring = BringUp(device, calibration_of(values), Wiring.from_params(values), lim, accept_fixes, progress)
-    status, message = 'fault', ''
+    status, message, ident = 'fault', '', None
     try:
         try:
             device.open()
             status = 'commissioned' if bring.run() == 'passed' else 'fault'
+            if status == 'commissioned' and not bring_up_only:
+                status, ident = _identify(bring, out, payload_kg, excite_budget_s)
         except PortError as e:
             status, message = 'bad_port', str(e)
             raise
@@ -139,7 +152,12 @@ def commission(
             if payload_kg is not None:
                 bridge['payload_kg'] = float(payload_kg)
             result['bridge_params'] = bridge
-            result['params_file'] = str(write_params(out / PARAMS_FILE, params_files, bridge))
+            nodes = ident.node_params if ident else None
+            result['params_file'] = str(write_params(out / PARAMS_FILE, params_files, bridge, nodes))
+        if ident is not None:
+            result['identified'] = ident.identified
+            result['warnings'] += ident.warnings
+            result['figures'] = ident.figures
         result['report'] = str(write_report(out, result, bring))
     # ---- verification: the closed loop with the params file handed over (sma_wrist/commission/verify.py)
     result.setdefault('identified', {})
@@ -150,6 +168,36 @@ def commission(
         run_verification(result, out, device, verification, progress)
     # ---- end of verification
     return result
+
+
+def _identify(bring: BringUp, out: Path, payload_kg: float | None, budget_s: float) -> tuple[str, Any]:
+    """The excitation and identification after a passed bring-up: ('commissioned', Identified) or ('fault', None)
+    with the fault in ``bring.faults`` (the TEMs off)."""
+    from sma_wrist.commission.bringup import Stop
+    from sma_wrist.commission.detect import Fault
+    from sma_wrist.commission.device import DeviceLost
+    from sma_wrist.commission.excite import excite
+    from sma_wrist.commission.identification import IdentificationError, identify_wrist
+
+    try:
+        excite(bring, budget_s)
+    except Stop as e:
+        bring.faults.append(e.fault)
+        return 'fault', None
+    except DeviceLost as e:
+        fix = "check the cable, the port and the device's supply; then run commissioning again"
+        bring.faults.append(Fault('link_lost', None, f'{e} during the excitation', fix))
+        return 'fault', None
+    bring.off()
+    bring.step = 'identify'
+    bring.progress('identify')
+    try:
+        return 'commissioned', identify_wrist(bring, out, payload_kg)
+    except (IdentificationError, SmaWristError) as e:  # the data cannot identify a part (e.g. a thermal fit refused)
+        bring.faults.append(Fault('not_identified', None, str(e), 'see the excitation plot in the report'))
+        return 'fault', None
+    finally:
+        bring.step = ''
 
 
 def _result(bring: BringUp, status: str, message: str, port: str, lim: BringUpLimits) -> dict[str, Any]:
@@ -267,7 +315,8 @@ def run_cli(a: argparse.Namespace) -> int:
             limits=lim,
             progress=progress,
             port=a.hardware,
-            verification=verification,
+            bring_up_only=a.bring_up_only,
+            verification=None if a.bring_up_only else verification,
         )
     except PortError as e:
         print(f'error: {e} (report: {Path(a.out) / "commission.md"})', file=sys.stderr)

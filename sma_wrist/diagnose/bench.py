@@ -110,8 +110,8 @@ def bench_diagnose(quick: bool = False, full: bool = False) -> dict[str, Any]:
     """Own-model accuracy, the 10-minute bag, and independently applied effects side by side.
 
     ``full`` (section ``diagnose_full``): effects at three noise levels, three clean seeds
-    per noise level. A PNG of the independent part goes to $SMA_WRIST_BENCH_DIR (default:
-    the current directory) as ``diagnose_independent.png``.
+    per noise level. A PNG of the independent part goes to the bench's folder as
+    ``diagnose_independent.png`` (:func:`sma_wrist.outputs.bench_png`).
     """
     from sma_wrist.outputs import bench_png
 

@@ -79,7 +79,9 @@ class Fit:
 class Evaluator:
     """Predictions, residuals and held-out statistics of one run."""
 
-    def __init__(self, model: fx.ExtendedModel) -> None:
+    def __init__(self, model: fx.ExtendedModel, train_until: int | None = None) -> None:
+        """``train_until``: the first held-out sample (default: ``TRAIN_FRACTION`` of the run after its burn-in), for
+        a run whose held-out part was designed as such (commissioning's excitation)."""
         self.model = model
         run = model.run
         self.run = run
@@ -101,6 +103,8 @@ class Evaluator:
             # neither fitted nor scored, and the split is over what follows it
             self.i0 = max(self.i0, min(int(round(settle / run.dt)), K // 2))
             self.i_train = self.i0 + int(TRAIN_FRACTION * (K - self.i0))
+        if train_until is not None:
+            self.i_train = int(np.clip(train_until, self.i0 + 1, K - N_SEGMENTS))
         self.seg_edges = np.linspace(self.i_train, K, N_SEGMENTS + 1).astype(int)
         # noise level per channel, floored at the replay's own resolution so that noise-free
         # (simulated) data is not held to a standard the replay cannot meet

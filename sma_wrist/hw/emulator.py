@@ -93,9 +93,9 @@ class EmulatorConfig:
     broken_wire: int = (
         0  # muscle 1 or 2 whose wire does not pull (broken, unhooked): heating it moves nothing (0: none)
     )
-    # each TEM's heat per volt against the model's (TEM i weaker: its drive reaches it scaled by this), beside the
-    # scenario's tem_gain_scale, which scales both alike
-    tem_drive_gain: tuple[float, float] = (1.0, 1.0)
+    # TEM i gets this fraction of its driver output's voltage (a weaker TEM, a lossy lead): unlike the scenario's
+    # tem_gain_scale (both TEMs of a registered plant), one TEM alone can be off
+    tem_drive_scale: tuple[float, float] = (1.0, 1.0)
     # device time waits for a host that falls behind (its line full) instead of overrunning it: a simulated device
     # serving a node graph in the same process (sma-wrist commission --sim's verification), where a busy machine
     # would otherwise drop the samples a real UART keeps streaming
@@ -151,6 +151,8 @@ class DeviceEmulator:
             self.sensors = SensorBank([sc], 1.0 / c.rate_hz)
         if c.broken_wire not in (0, 1, 2):
             raise ValueError(f'broken_wire {c.broken_wire!r}: 0 (none), 1 or 2')
+        if len(c.tem_drive_scale) != 2 or not all(0.0 < float(k) <= 2.0 for k in c.tem_drive_scale):
+            raise ValueError(f'tem_drive_scale {c.tem_drive_scale!r}: two fractions in (0, 2]')
         # a broken wire: the joint is a second wrist's in which that muscle is never heated; the temperatures
         # are the first's (the TEM still heats the muscle, the wire no longer pulls)
         self._joint_plant: Any = copy.deepcopy(self.plant) if c.broken_wire else None
@@ -318,8 +320,8 @@ class DeviceEmulator:
             u = u[:, ::-1]
         if any(c.tem_polarity_swapped):
             u = u * np.where(np.asarray(c.tem_polarity_swapped), -1.0, 1.0)
-        if c.tem_drive_gain != (1.0, 1.0):
-            u = u * np.asarray(c.tem_drive_gain, float)
+        if tuple(c.tem_drive_scale) != (1.0, 1.0):
+            u = u * np.asarray(c.tem_drive_scale, float)
         return u
 
     def emit(self, n: int) -> bytes:

@@ -27,6 +27,7 @@ reads, reports (markdown + PNG), and writes the params file (:mod:`sma_wrist.cor
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import math
 import re
@@ -124,6 +125,33 @@ def read_table(path: Path) -> tuple[list[str] | None, Any]:
         raise ThermalInputError(f'{path}: is a directory but not a rosbag2 (no metadata.yaml, .mcap or .db3)')
     t = io.read_table(path, need='time, voltage, T1[, T2]', error=ThermalInputError)
     return t.header, t.data
+
+
+#: the logger of test/data/tec_chamber (a real Peltier module, its README): 5 V supply, ``analogWrite`` 0-255
+PWM_SUPPLY_V, PWM_FULL_DUTY = 5.0, 255.0
+#: test/data/tec_chamber's columns (``rtempco_run1.csv`` has no header line)
+TEC_CHAMBER_COLUMNS = ('set_c', 'oven_c', 'output', 'ambient_c')
+
+
+def pwm_volts(duty: float, full_duty: float = PWM_FULL_DUTY, supply_V: float = PWM_SUPPLY_V) -> float:
+    """The mean drive voltage [V] of a PWM at ``duty`` counts of ``full_duty`` from ``supply_V``: what the thermal
+    model's u is when a logger recorded the duty, not the voltage (the Joule term then sees the mean, not the
+    mean square, of the chopped drive: a caveat of such data, test/data/tec_chamber/README.md)."""
+    return duty / full_duty * supply_V
+
+
+def tec_chamber_volts(src: Path, dst: Path) -> Path:
+    """One of test/data/tec_chamber's logs as a table identify thermal reads: ``u_V,oven_c,ambient_c`` with the
+    PWM duty as :func:`pwm_volts` (the only conversion), still without a time column (one row per second)."""
+    with Path(src).open(newline='') as f:
+        rows = list(csv.reader(f))
+    if rows and rows[0] == list(TEC_CHAMBER_COLUMNS):
+        rows = rows[1:]
+    with Path(dst).open('w') as f:
+        f.write('u_V,oven_c,ambient_c\n')
+        for _set_c, oven_c, output, ambient_c in rows:
+            f.write(f'{pwm_volts(float(output)):.6f},{oven_c},{ambient_c}\n')
+    return Path(dst)
 
 
 def _roles(

@@ -99,6 +99,7 @@ class Runtime:
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes: list[Any] = []
         self.recorders: list[Any] = []
+        self.attached: list[Any] = []  # live servers and pacers: detached, and servers stopped, by close()
         self._sim_ns: int | None = None
         self.context.graph.add_tap(self._on_clock, ['/clock'])
         from .rclpy import logging as rlog
@@ -139,6 +140,21 @@ class Runtime:
         rec = BagRecorder(path, topics, context=self.context, **kwargs).start()
         self.recorders.append(rec)
         return rec
+
+    def serve_live(self, server: Any) -> Any:
+        """Serve this graph's topics on a :class:`sma_wrist.runtime.live.LiveServer` (log times on the bag's
+        clock); the server is stopped by close()/the with block."""
+        server.attach(self.context, self._record_time_ns)
+        self.attached.append(server)
+        return server
+
+    def pace(self, real_time_factor: float) -> Any:
+        """Hold /clock to ``real_time_factor`` x real time (:class:`sma_wrist.runtime.live.RealTimePacer`)."""
+        from .live import RealTimePacer
+
+        pacer = RealTimePacer(real_time_factor).attach(self.context)
+        self.attached.append(pacer)
+        return pacer
 
     # -- time --------------------------------------------------------------
     @property
@@ -207,6 +223,9 @@ class Runtime:
                 rec.close()
             except Exception as exc:  # noqa: BLE001 - keep closing the others
                 errors.append(exc)
+        for item in self.attached:
+            item.close()
+        self.attached = []
         for node in self.nodes:
             node.destroy_node()
         self.nodes = []

@@ -1,0 +1,147 @@
+"""Commissioning's excitation and identification (sma_wrist/commission/excite.py, identification.py) on emulated
+devices that are not the model: a wire transforming 8 degC hotter, TEM 1 getting 0.8 of its drive, a payload of
+0.5 kg the identification is not told; the phase-fraction wrist; the nominal device.
+
+To stay light the device is emulated in lockstep at 100 Hz, the bring-up's checks that need seconds of heating
+are left to test_commission.py (here only the link and sensor steps run before the excitation, the wiring being
+right), and on the nominal device the excitation is shortened (``budget_s``: its sines and rests)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sma_wrist.commission.bringup import BringUp, Stop
+from sma_wrist.commission.device import SimDevice
+from sma_wrist.commission.excite import MARK, excite, schedule
+from sma_wrist.commission.identification import identify_wrist
+from sma_wrist.commission.run import bridge_values, calibration_of, commission
+from sma_wrist.hw.calibration import Wiring
+from sma_wrist.hw.emulator import EmulatorConfig
+
+RATE_HZ = 100.0
+BUDGET_S = 600.0  # the whole excitation (what the command uses)
+SHORT_S = 420.0  # the sines and rests shortened to a third
+OFF_MODEL = {
+    'plant': 'sdgpi',
+    'scenario': {'transition_shift_C': 8.0},
+    'tem_drive_scale': (0.8, 1.0),
+    'payload_kg': 0.5,
+}
+
+
+def brought_up(**cfg) -> tuple[BringUp, SimDevice]:
+    """A BringUp on the emulated device after its link and sensor steps (the wiring as documented)."""
+    dev = SimDevice(EmulatorConfig(rate_hz=RATE_HZ, **cfg))
+    v = bridge_values()
+    bring = BringUp(dev, calibration_of(v), Wiring.from_params(v))
+    dev.open()
+    bring.step_link()
+    bring.step_sensors()
+    return bring, dev
+
+
+@pytest.fixture(scope='module')
+def off_model(tmp_path_factory):
+    bring, dev = brought_up(**OFF_MODEL)
+    summary = excite(bring, BUDGET_S)
+    return bring, dev, summary, identify_wrist(bring, tmp_path_factory.mktemp('off'), payload_kg=None)
+
+
+def test_the_excitation_is_marked_split_and_within_its_limits(off_model):
+    bring, dev, summary, _ = off_model
+    marks = [label for _, label in bring.rec.marks if label.startswith(MARK)]
+    assert len(marks) == len(schedule(BUDGET_S)) == len(summary['phases'])
+    parts = [p['part'] for p in summary['phases']]
+    assert parts == sorted(parts, key=lambda p: p == 'heldout') and {'fit', 'heldout'} == set(parts)
+    assert summary['device_time_s'] <= BUDGET_S
+    assert dev.emulator.stats.max_abs_command_V <= bring.lim.max_drive_V + 1e-9
+    assert max(hi for _, hi in summary['muscle_C']) <= summary['window_C'][1]
+    # the wires through their transformation, both ways: the joint swept to either side of where it rested (the
+    # wire 8 degC hotter only part of the way within the TEMs' window: 0.65 rad measured)
+    q0 = bring._q_start
+    assert summary['angle_rad'][0] < q0 - 0.15 and summary['angle_rad'][1] > q0 + 0.15
+    assert np.all(dev.emulator._u == 0.0)
+
+
+def test_identification_recovers_the_shift_payload_and_weaker_tem(off_model):
+    *_, ident = off_model
+    p = ident.identified
+    assert p['hysteresis']['parameters']['transition_shift_C'] == pytest.approx(8.0, abs=1.0)
+    assert p['joint']['parameters']['payload_kg'] == pytest.approx(0.5, abs=0.06)
+    assert p['thermal']['parameters']['tem1_gain_relative_to_tem2'] == pytest.approx(0.8, abs=0.03)
+    assert any('TEM 1 pumps' in w for w in ident.warnings)
+
+
+def test_the_commissioned_model_beats_the_built_in_one_on_held_out_data(off_model):
+    *_, ident = off_model
+    for part in ('thermal', 'hysteresis', 'joint'):
+        h = ident.identified[part]['heldout']
+        assert h['commissioned'] < 0.5 * h['builtin'], (part, h)
+        assert ident.identified[part]['handed_over'] is True
+    nodes = ident.node_params
+    assert nodes['plant_sim']['payload_kg'] == pytest.approx(0.5, abs=0.06)
+    assert nodes['hysteresis_compensator']['hysteresis_file'].endswith('hysteresis.yaml')
+    assert nodes['tem_controller']['thermal_file'].endswith('thermal.yaml')
+
+
+def test_on_the_phase_fraction_wrist_the_weaker_tem_is_found_and_no_misfit_handed_over(tmp_path):
+    bring, _ = brought_up(plant='phase_fraction', tem_drive_scale=(0.8, 1.0), payload_kg=0.5)
+    excite(bring, BUDGET_S)
+    ident = identify_wrist(bring, tmp_path)
+    th = ident.identified['thermal']
+    # 0.8 of the voltage pumps a little more than 0.8 of the heat through this wrist's Peltier model (its Seebeck
+    # back-voltage is not scaled with the drive): measured 0.85 after a bring-up, 0.88 here
+    assert 0.75 < th['parameters']['tem1_gain_relative_to_tem2'] < 0.9
+    assert th['heldout']['commissioned'] < 0.5 * th['heldout']['builtin']
+    # the SD-GPI and joint model do not describe this wire: whatever the fit found is handed over only if it predicts
+    # the held-out cycle better with every value inside its range; else the built-in wire and joint stand, said so
+    joint = ident.identified['joint']
+    if joint['handed_over']:
+        assert joint['heldout']['commissioned'] < joint['heldout']['builtin']
+        assert not any('at the end of the range' in w for w in ident.warnings)
+    else:
+        assert ident.node_params['plant_sim']['preload_elongation_mm'] == pytest.approx(1.98)
+        assert ident.node_params['plant_sim']['payload_kg'] == pytest.approx(0.3)
+        assert any('the built-in wire, pre-load and friction are handed over' in w for w in ident.warnings)
+
+
+def test_commission_on_the_nominal_device_identifies_values_near_the_defaults(tmp_path):
+    res = commission(tmp_path / 'c', SimDevice(EmulatorConfig(rate_hz=RATE_HZ)), excite_budget_s=SHORT_S)
+    assert res['status'] == 'commissioned' and res['faults'] == []
+    p = res['identified']
+    assert abs(p['hysteresis']['parameters']['transition_shift_C']) <= 0.5
+    assert p['joint']['parameters']['payload_kg'] == pytest.approx(0.3, abs=0.03)
+    assert p['thermal']['parameters']['tem1_gain_relative_to_tem2'] == pytest.approx(1.0, abs=0.02)
+    assert p['thermal']['heldout']['commissioned'] < 0.1  # degC: the model itself, sensor noise 0.008 degC
+    text = open(res['params_file']).read()
+    assert 'thermal_file' in text and 'hysteresis_file' in text and 'calibration.tem_sign' in text
+    report = open(res['report']).read()
+    assert '## Identified model' in report and '![excitation.png](excitation.png)' in report
+    assert res['device_time_s'] < 400.0
+
+
+def test_a_muscle_over_the_window_stops_the_excitation_with_the_tems_off(tmp_path):
+    bring, dev = brought_up()
+    counts = dev.emulator.cfg.calibration.to_counts(np.array([83.0, 30.0, 25.0, 25.0]), 0.5)
+    dev.emulator.inject('force', (0, int(counts[0])))  # muscle 1 reads 83 degC: beyond the TEMs' window
+    with pytest.raises(Stop, match='muscle 1'):
+        excite(bring, BUDGET_S)
+    dev.frames()  # the device takes the last command (0 V) after its latency
+    assert np.all(dev.emulator._u == 0.0) and bring.lim.max_muscle_C == 75.0  # the bring-up's limit restored
+
+
+def test_ctrl_c_during_the_excitation_turns_the_tems_off_and_names_the_step(tmp_path):
+    dev = SimDevice(EmulatorConfig(rate_hz=RATE_HZ))
+    frames = dev.frames
+
+    def interrupted():
+        if dev.emulator.device_time_s > 80.0:  # the bring-up takes 66 s on this device
+            raise KeyboardInterrupt
+        return frames()
+
+    dev.frames = interrupted
+    res = commission(tmp_path / 'c', dev)
+    assert res['status'] == 'interrupted' and 'excite' in res['message']
+    assert np.all(dev.emulator._u == 0.0) and res['params_file'] is None
+    assert 'excite' in open(res['report']).read()
