@@ -140,7 +140,7 @@ def test_ctrl_c_during_the_verification_keeps_the_params_file_and_turns_the_tems
 def test_a_device_that_stops_streaming_during_the_verification_is_a_fault_with_the_tems_off(tmp_path, monkeypatch):
     import sma_wrist.closed_loop as cl
 
-    monkeypatch.setattr(cl, 'DEVICE_STALL_S', 3.0)  # wall s: the run's 10 s, shortened; under load a start-up took 1
+    monkeypatch.setattr(cl, 'DEVICE_STALL_S', 3.0)  # wall s: the run's 10 s, shortened (1 s failed once under load)
     dev, res = device(), handed_over(tmp_path / 'c')
     emu = dev.emulator
     frozen = []
