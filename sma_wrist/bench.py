@@ -329,6 +329,15 @@ def bench_measured_wire(quick: bool = False) -> dict:
     )
 
 
+@section('commission')
+def bench_commission(quick: bool = False) -> dict:
+    """sma-wrist commission on an emulated wrist that is not the model and on the nominal one (device time, faults,
+    verification defaults vs commissioned, diagnosis), and the wiring-fault matrix (doc/howto/commission.md)."""
+    from sma_wrist.commission.measure import bench_commission as run_commission
+
+    return run_commission(quick)
+
+
 # -------------------------------------------------------------------------------- driver
 
 

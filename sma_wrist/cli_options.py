@@ -284,6 +284,21 @@ def commission_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser
         metavar='DEGC',
         help='bring-up temperature limit of the muscles (default 75)',
     )
+    ap.add_argument(
+        '--controllers',
+        default=None,
+        metavar='NAMES',
+        help="controllers the verification runs (comma separated, or all; default: the params files' "
+        'adaptive_controller mode, inverse_adaptive in config/wrist.yaml)',
+    )
+    ap.add_argument(
+        '--verify-s',
+        type=float,
+        default=100.0,
+        metavar='S',
+        help='device seconds of each verification run, defaults and commissioned per controller (default 100: '
+        "run's 30 s soft start and a full cycle of the sine; 0: no verification)",
+    )
     ap.add_argument('--baud-rate', type=int, default=921600, help='serial baud rate (default 921600)')
     ap.add_argument(
         '--stall-s',

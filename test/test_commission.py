@@ -259,7 +259,8 @@ def test_cli_sim_commissions_and_prints_json(tmp_path, capsys):
     )
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc['status'] == 'commissioned' and doc['faults'] == []
-    assert {'faults', 'params_file', 'device_time_s', 'steps', 'report'} <= set(doc)
+    assert {'faults', 'identified', 'verification', 'params_file', 'device_time_s', 'steps', 'report'} <= set(doc)
+    assert doc['identified'] == {} and doc['verification'] is None  # the bring-up only: nothing identified, verified
     assert 0 < doc['device_time_s'] < 120.0 and doc['max_drive_V'] <= LIM.max_drive_V
     assert 'payload_kg: 0.4' in open(doc['params_file']).read()
 

@@ -4,8 +4,10 @@ frames, parsed by the same :class:`sma_wrist.hw.protocol.Parser`."""
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import time
+from collections.abc import Iterator
 from typing import Any
 
 from sma_wrist.core.errors import SmaWristError
@@ -119,6 +121,27 @@ class SimDevice:
     def close(self) -> None:
         self.send(0.0, 0.0)
         self.emulator.emit(1)
+
+    @contextlib.contextmanager
+    def serve(self, link: str, time_scale: float = 1.0) -> Iterator[str]:
+        """The same device (its wrist as warm as it is now) served on a pseudo-terminal linked at ``link``, device
+        time ``time_scale`` times wall time, or slower when the host falls behind (``host_paced``): for the node
+        graph's hardware_bridge (verification). Yields the port; the device time it served is
+        :attr:`device_time_s`."""
+        emu = self.emulator
+        emu.link = link
+        emu.cfg.time_scale = time_scale
+        emu.cfg.host_paced = True
+        emu.start(resume=True)
+        try:
+            yield link
+        finally:
+            emu.stop()
+            emu.link = None
+
+    @property
+    def device_time_s(self) -> float:
+        return self.emulator.device_time_s
 
 
 __all__ = ['SerialDevice', 'SimDevice', 'PortError', 'DeviceLost']

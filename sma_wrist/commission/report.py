@@ -174,7 +174,11 @@ def _pulses(step: dict[str, Any]) -> list[str]:
         'on the diagonal only.',
         '',
     ]
-    for name, title in (('first', 'pulses'), ('verified', 'pulses through the corrected wiring')):
+    for name, title in (
+        ('first', 'pulses'),
+        ('longer', 'pulses twice as long (a face answered within its noise)'),
+        ('verified', 'pulses through the corrected wiring'),
+    ):
         p = step.get(name)
         if p is None:
             continue

@@ -1,7 +1,7 @@
 """The ``sma-wrist commission`` command: bring-up on a port (or the simulated plant), report, params file, JSON.
 
-Exit codes: 0 commissioned (for now: the bring-up passed and the params file is written), 3 a fault found on the
-device stopped it (wiring, sensor, link; the JSON is printed all the same), 2 bad input (options, params files, a
+Exit codes: 0 commissioned (the bring-up passed, the params file is written and verified in closed loop), 3 a
+fault found on the device stopped it (wiring, sensor, link; the JSON is printed all the same), 2 bad input (options, params files, a
 port that does not open), 130 interrupted (Ctrl-C). In every case the TEMs are left at 0 V and the report holds
 what was learnt.
 """
@@ -107,11 +107,13 @@ def commission(
     port: str | None = None,
     bring_up_only: bool = False,
     excite_budget_s: float = 600.0,
+    verification: Any = None,
 ) -> dict[str, Any]:
     """Bring the wrist on ``device`` (SerialDevice or SimDevice) up, then (unless ``bring_up_only``) excite it for
     at most ``excite_budget_s`` of device time and identify its model; write the report (and, when it passes, the
     params file) into ``out``; return the result (JSON-ready). KeyboardInterrupt is caught: status 'interrupted'.
-    PortError (bad input) propagates after the report is written."""
+    PortError (bad input) propagates after the report is written. ``verification``
+    (:class:`sma_wrist.commission.verify.VerifyOptions`): then verify the params file in closed loop."""
     from sma_wrist.commission.report import write_report
 
     out = Path(out)
@@ -157,6 +159,14 @@ def commission(
             result['warnings'] += ident.warnings
             result['figures'] = ident.figures
         result['report'] = str(write_report(out, result, bring))
+    # ---- verification: the closed loop with the params file handed over (sma_wrist/commission/verify.py)
+    result.setdefault('identified', {})
+    result['verification'] = None
+    if verification is not None and result['status'] == 'commissioned':
+        from sma_wrist.commission.verify import run_verification
+
+        run_verification(result, out, device, verification, progress)
+    # ---- end of verification
     return result
 
 
@@ -258,6 +268,18 @@ def _print_text(result: dict[str, Any]) -> None:
     print(f'report: {result["report"]}')
 
 
+def verify_options(a: argparse.Namespace) -> Any:
+    """The verification the command line asks for (None: ``--verify-s 0``); ValueError naming a bad option."""
+    from sma_wrist.commission.verify import VerifyOptions, controllers_of
+
+    if not (math.isfinite(a.verify_s) and a.verify_s >= 0):
+        raise ValueError(f'--verify-s {a.verify_s!r} must be a finite number >= 0 (0: no verification)')
+    if a.verify_s == 0:
+        return None
+    ctrls = None if a.controllers is None else tuple(controllers_of(a.controllers))
+    return VerifyOptions(controllers=ctrls, duration_s=a.verify_s)
+
+
 def run_cli(a: argparse.Namespace) -> int:
     """``sma-wrist commission``; errors of the user's input are 'error: ...' with exit 2."""
     from sma_wrist.contract import PAYLOAD_RANGE_KG
@@ -283,6 +305,7 @@ def run_cli(a: argparse.Namespace) -> int:
             else SerialDevice(a.hardware, a.baud_rate, stall_s=a.stall_s)
         )
         progress = None if a.json else (lambda step: print(f'step: {step}', file=sys.stderr, flush=True))
+        verification = verify_options(a)
         result = commission(
             a.out,
             device,
@@ -293,6 +316,7 @@ def run_cli(a: argparse.Namespace) -> int:
             progress=progress,
             port=a.hardware,
             bring_up_only=a.bring_up_only,
+            verification=None if a.bring_up_only else verification,
         )
     except PortError as e:
         print(f'error: {e} (report: {Path(a.out) / "commission.md"})', file=sys.stderr)
@@ -304,6 +328,10 @@ def run_cli(a: argparse.Namespace) -> int:
         print(json.dumps(result, indent=2))
     else:
         _print_text(result)
+        if result['verification']:
+            from sma_wrist.commission.verify import text_lines
+
+            print('\n'.join(text_lines(result['verification'])))
     if result['status'] == 'interrupted':
         print(f'interrupted: TEMs off; report so far: {result["report"]}', file=sys.stderr)
     return exit_code(result)

@@ -48,6 +48,7 @@ from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration, quantise
 
 MAX_BACKLOG = 1 << 16  # bytes buffered for a host that does not read; beyond, output is dropped (UART overrun)
+PACED_BACKLOG = 4096  # host_paced: beyond this many bytes unread (~0.1 s of samples) the device time waits
 
 
 @dataclass
@@ -95,6 +96,10 @@ class EmulatorConfig:
     # TEM i gets this fraction of its driver output's voltage (a weaker TEM, a lossy lead): unlike the scenario's
     # tem_gain_scale (both TEMs of a registered plant), one TEM alone can be off
     tem_drive_scale: tuple[float, float] = (1.0, 1.0)
+    # device time waits for a host that falls behind (its line full) instead of overrunning it: a simulated device
+    # serving a node graph in the same process (sma-wrist commission --sim's verification), where a busy machine
+    # would otherwise drop the samples a real UART keeps streaming
+    host_paced: bool = False
 
 
 @dataclass
@@ -425,6 +430,9 @@ class DeviceEmulator:
         k = 0
         frozen = wall_now < self._freeze_until
         while self._n < due:
+            if c.host_paced and len(self._out) > PACED_BACKLOG:
+                self._t_boot_wall = wall_now - self._n / (c.rate_hz * c.time_scale)  # wait for the host
+                break
             line = self._sample()
             if not frozen:
                 self._out += line
@@ -448,11 +456,13 @@ class DeviceEmulator:
         """Wall time [s] the next sample is due."""
         return self._t_boot_wall + (self._n + 1) / (self.cfg.rate_hz * self.cfg.time_scale)
 
-    def run(self, duration_wall_s: float | None = None) -> None:
-        """Serve until :meth:`stop` (or ``duration_wall_s``); opens the pty if not open."""
+    def run(self, duration_wall_s: float | None = None, resume: bool = False) -> None:
+        """Serve until :meth:`stop` (or ``duration_wall_s``); opens the pty if not open. ``resume``: the device
+        time goes on from where :meth:`emit` left it (a device stepped in lockstep, then served on a pty: the same
+        wrist, warm as it was), rather than from its boot."""
         if self._master is None:
             self.open()
-        self._t_boot_wall = self.clock()
+        self._t_boot_wall = self.clock() - (self._n / (self.cfg.rate_hz * self.cfg.time_scale) if resume else 0.0)
         t_end = None if duration_wall_s is None else self._t_boot_wall + duration_wall_s
         try:
             while not self._stop.is_set():
@@ -465,10 +475,13 @@ class DeviceEmulator:
         finally:
             self.close()
 
-    def start(self) -> str:
-        """Open the pty and serve in a daemon thread; returns the port path."""
+    def start(self, resume: bool = False) -> str:
+        """Open the pty and serve in a daemon thread (``resume``: see :meth:`run`); returns the port path."""
         path = self.open()
-        self._thread = threading.Thread(target=self.run, name='sma-wrist-emulator', daemon=True)
+        self._stop.clear()
+        self._thread = threading.Thread(
+            target=self.run, kwargs={'resume': resume}, name='sma-wrist-emulator', daemon=True
+        )
         self._thread.start()
         return path
 
