@@ -67,6 +67,15 @@ def test_the_generator_starts_an_effect_at_its_onset(clean_run):
         h = ds.apply(clean_run, ds.Distortion(kind, 'plant', value, ''), onset_s=ONSET_S)
         assert np.abs(h.T[before] - clean_run.T[before]).max() < 1e-6
         assert np.abs(h.T[~before] - clean_run.T[~before]).max() > 0.1, kind
+    # the wires' transitions drift: the temperatures are the recorded ones, the angle leaves the recording only as
+    # the drift grows (ramped over 40 s)
+    w = ds.apply(clean_run, ds.Distortion('transition_drift', 'plant', 6.0, 'degC', ramp_s=40.0), onset_s=ONSET_S)
+    assert np.abs(w.q[before] - clean_run.q[before]).max() < 1e-6
+    assert np.abs(w.T - clean_run.T).max() < 1e-6
+    soon = (clean_run.t >= ONSET_S) & (clean_run.t < ONSET_S + 1.0)
+    late = clean_run.t >= ONSET_S + 40.0
+    assert np.abs(w.q[soon] - clean_run.q[soon]).max() < np.abs(w.q[late] - clean_run.q[late]).max()
+    assert np.abs(w.q[late] - clean_run.q[late]).max() > 0.01
 
 
 @pytest.mark.parametrize(
