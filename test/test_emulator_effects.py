@@ -20,7 +20,7 @@ ONSET_S = 1.0
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _readings(effects: list[str], seconds: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
+def _readings(effects: list[str], seconds: float = 2.5, drive: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """(t [s], physical readings (K, 5): 4 temperatures [degC], angle [rad]) of a device at 100 Hz driven at +8 / -4 V."""
     ap = argparse.ArgumentParser()
     emulator_arguments(ap)
@@ -29,7 +29,8 @@ def _readings(effects: list[str], seconds: float = 2.5) -> tuple[np.ndarray, np.
         args += ['--effect', e]
     cfg = config_from_args(ap.parse_args(args))
     emu = DeviceEmulator(cfg)
-    emu.receive(P.encode(P.Command(0, 8000, -4000)))
+    if drive:
+        emu.receive(P.encode(P.Command(0, 8000, -4000)))
     parser = P.Parser()
     samples = [f for f in parser.feed(emu.emit(int(seconds * RATE_HZ))) if isinstance(f, P.Sample)]
     t = np.array([s.t_us for s in samples]) * 1e-6
@@ -59,6 +60,14 @@ def test_an_effect_changes_what_the_device_reports_from_its_onset_only(clean, sp
     before = t < ONSET_S - 1e-9
     assert np.array_equal(x[before], ref[before])  # to the count: the same device until the onset
     assert np.abs(x[~before, channel] - ref[~before, channel]).max() > smallest_change
+
+
+def test_the_onset_counts_from_the_first_command():
+    """A device not yet driven by a host has no effect however long it has been on: the onset is the same time into
+    every run, whenever the host started."""
+    _, ref = _readings([], drive=False)
+    _, x = _readings(['offset:T1:3@1'], drive=False)
+    assert np.array_equal(x, ref)
 
 
 def test_a_bad_effect_spec_is_refused_with_what_a_spec_looks_like():

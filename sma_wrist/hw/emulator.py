@@ -66,7 +66,8 @@ EFFECT_SPEC = 'KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]'
 
 @dataclass(frozen=True)
 class Effect:
-    """An effect that begins at ``onset_s`` of device time (``--effect KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]``)."""
+    """An effect that begins ``onset_s`` [s of device time] after the first command the device receives (the host
+    starting to drive the wrist: the same time into every run) (``--effect KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]``)."""
 
     kind: str  # SENSOR_EFFECTS on SENSOR_CHANNELS, or PLANT_EFFECTS on 'plant'
     channel: str
@@ -149,7 +150,7 @@ class EmulatorConfig:
         0  # muscle 1 or 2 whose wire does not pull (broken, unhooked): heating it moves nothing (0: none)
     )
     # effects that begin mid-run (:class:`Effect`, ``--effect``): a sensor, the TEMs, the payload, the coolant or
-    # the wires change at a device time, as a running wrist does
+    # the wires change that long after the first command, as a running wrist does
     effects: tuple[Effect, ...] = ()
 
 
@@ -223,6 +224,9 @@ class DeviceEmulator:
                         if e.kind in PLANT_EFFECTS
                     ]
         self._lagged: dict[int, float] = {}  # a lag effect's sensor reading (index in effects)
+        # the effects' clock: samples since the first command arrived (the host started driving the wrist), so that
+        # an onset means the same time into every run however long the host took to start; it runs on across resets
+        self._effect_n: int | None = None
         self.rng = np.random.default_rng(c.seed)
         self.stats = EmulatorStats()
         self.parser = P.Parser()
@@ -411,8 +415,8 @@ class DeviceEmulator:
         return self._tc_held
 
     def _sensor_effects(self, t: float, temps: np.ndarray, q: float) -> float:
-        """The sensor effects begun by device time ``t`` [s] on the muscle thermocouples (``temps[:2]``, in place)
-        and the potentiometer; returns the angle read [rad]. A lag starts from the true reading at its onset."""
+        """The sensor effects begun by ``t`` [s on the effects' clock] on the muscle thermocouples (``temps[:2]``, in
+        place) and the potentiometer; returns the angle read [rad]. A lag starts from the true reading at its onset."""
         from sma_wrist.diagnose.distort import GAIN_REF_C, Q_REF_RAD
 
         for k, e in enumerate(self.cfg.effects):
@@ -456,7 +460,12 @@ class DeviceEmulator:
             flags |= P.FLAG_BOOT
             self._boot_flag = False
         u = self._wired(u)
-        t0 = (self._n - 1) / c.rate_hz  # this sample's stamp: the interval it ends begins here
+        if self._effect_n is None and self.stats.commands_received:
+            self._effect_n = 0
+        if self._effect_n is not None:
+            self._effect_n += 1
+        # this sample's time on the effects' clock: the interval it ends begins here (-1: not driven yet)
+        t0 = -1.0 if self._effect_n is None else (self._effect_n - 1) / c.rate_hz
         for e, plant, change in self._changes:
             if t0 >= e.onset_s - 1e-12:
                 change(plant, t0 - e.onset_s)
@@ -477,7 +486,7 @@ class DeviceEmulator:
         temps = np.array([T[0, 0], T[0, 1], th[0, 1], th[1, 1]])
         q_read = float(q[0])
         if c.effects:
-            q_read = self._sensor_effects(t0, temps, q_read)  # from the sample stamped at the onset on
+            q_read = self._sensor_effects(t0, temps, q_read)
         if c.thermocouples_swapped:
             temps[:2] = temps[1::-1]
         counts = c.calibration.to_counts(temps, q_read)
