@@ -137,11 +137,13 @@ def emulated_case(
     onset_s: float = EMULATED_ONSET_S,
     duration_s: float = 210.0,
     seed: int = 0,
+    monitor: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """One case: ``sma-wrist emulate-device --effect SPEC@ONSET`` (no effect for ``spec`` None) and
     ``sma-wrist run --hardware PORT --monitor verdicts.json`` on it, as a user runs them; the verdicts file read back.
 
-    Times are the device's (the run's clock is the device's: its stamps). Detected: the first verdict raised after
+    ``monitor``: twin_monitor parameters other than its defaults (a params file given to ``run``). Times are the
+    device's (the run's clock is the device's: its stamps, from the bridge's first sample). Detected: the first verdict raised after
     the onset names ``subsystem`` within ``DETECT_WITHIN_S`` of it, and nothing was raised before the onset."""
     import json
     import signal
@@ -153,6 +155,14 @@ def emulated_case(
     hist = os.path.join(directory, 'verdicts.json')
     env = _child_env()
     emu_args = ['--port', port, '--seed', str(seed)]
+    run_args = []
+    if monitor:
+        import yaml
+
+        params = os.path.join(directory, 'monitor.yaml')
+        with open(params, 'w') as f:
+            yaml.safe_dump({'twin_monitor': {'ros__parameters': dict(monitor)}}, f)
+        run_args = ['--params-file', params]
     if spec:
         ramp = f'+{EMULATED_RAMP_S:g}' if spec.startswith('transition_drift') else ''
         emu_args += ['--effect', f'{spec}@{onset_s:g}{ramp}']
@@ -173,7 +183,7 @@ def emulated_case(
         c0 = time.time()
         r = subprocess.run(
             [sys.executable, '-m', 'sma_wrist', 'run', '--hardware', port, '--controller', controller]
-            + ['--duration', f'{duration_s:g}', '--monitor', hist, '--json', '--quiet'],
+            + ['--duration', f'{duration_s:g}', '--monitor', hist, '--json', '--quiet', *run_args],
             capture_output=True,
             text=True,
             env=env,
