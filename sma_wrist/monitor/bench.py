@@ -144,7 +144,8 @@ def emulated_case(
 
     ``monitor``: twin_monitor parameters other than its defaults (a params file given to ``run``). Times are the
     device's (the run's clock is the device's: its stamps, from the bridge's first sample). Detected: the first verdict raised after
-    the onset names ``subsystem`` within ``DETECT_WITHIN_S`` of it, and nothing was raised before the onset."""
+    the onset names ``subsystem`` within ``DETECT_WITHIN_S`` of it, the first check it rests on came after the onset,
+    and nothing was raised before the onset."""
     import json
     import signal
     import subprocess
@@ -216,6 +217,7 @@ def emulated_case(
         and first
         and not early
         and first['subsystem'] == subsystem
+        and first['onset_s'] >= onset_s  # the checks that raised it saw the change, not a misfit from before it
         and out['delay_s'] <= DETECT_WITHIN_S
         and out['checks_before_onset'] > 0
     )
