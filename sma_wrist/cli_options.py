@@ -233,6 +233,17 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
         metavar='N',
         help="muscle N's (1 or 2) wire does not pull (broken, unhooked): heating it moves nothing",
     )
+    # effects that begin mid-run: what the twin monitor must notice (doc/howto/monitor.md)
+    ap.add_argument(
+        '--effect',
+        action='append',
+        default=[],
+        metavar='KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]',
+        help='from ONSET_S [device s] after the first command on: offset/gain/lag/drift of thermocouple T1 or T2 or the potentiometer q '
+        '(degC or rad / fraction / s / per h), or on channel plant: tem_weak (fraction both TEMs lose), payload '
+        '(kg added), ambient_drift (degC/h), transition_drift (degC the wires transform hotter, reached over '
+        'RAMP_S); e.g. offset:T1:3@60, transition_drift:plant:6@60+120; repeatable; --plant model only for plant',
+    )
 
 
 def commission_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:

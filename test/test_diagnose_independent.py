@@ -84,6 +84,16 @@ def test_offset_on_one_thermocouple_is_named_on_that_channel(clean_run):
     assert v['temp_offset_1_C'] == pytest.approx(3.0, rel=0.15) and abs(v['temp_offset_2_C']) < 0.3
 
 
+def test_wire_transitions_drifting_over_the_run_are_named_in_the_hysteresis(clean_run):
+    """The wires transforming 6 degC hotter by the end of the run (fatigue), made by the sweep's perturbed wire,
+    not by the diagnosis' drift-per-cycle extension: the wire subsystem, with a drift that moves them hotter."""
+    d = ds.Distortion('transition_drift', 'plant', 6.0, 'degC', ramp_s=RUN_S)
+    assert d.subsystem == 'hysteresis'
+    res = diagnose_run(ds.apply(clean_run, d, 0.1, 1e-3, 3))
+    assert res.discrepancy and res.subsystem == 'hysteresis' and res.cause == 'hysteresis_drift', res.summary
+    assert _values(res)['hyst_drift_C_per_cycle'] > 0
+
+
 def test_a_fit_on_its_bound_is_never_reported_as_the_value(clean_run):
     """Off-model heat balance (Peltier, Joule and exchanger losses 40-70 % off; no sensor fault).
     Before: recalibrate_thermal with ambient_offset_C = 15 degC, the upper bound, as the value."""

@@ -44,6 +44,26 @@ def test_advance_matches_numpy_steps_under_random_commands(thermal_coupling):
     assert fast.state.t == pytest.approx(ref.state.t)
 
 
+@pytest.mark.parametrize('engine', ['auto', 'numpy'])
+def test_segments_in_one_call_match_one_advance_per_segment(engine):
+    payload = np.array([0.2, 0.5])
+    one, each = (WristPlant(PlantParams(engine=engine), payload_kg=payload) for _ in range(2))
+    rng = np.random.default_rng(2)
+    u = rng.uniform(-30.0, 30.0, (12, 2, 2))  # also beyond the +-24 V limits: clipped alike
+    n = rng.integers(1, 15, 12)
+    thermal, q, qd = one.advance_segments(u, n)
+    for k in range(12):
+        s = each.advance(u[k], int(n[k]))
+        np.testing.assert_allclose(thermal[k], s.thermal, atol=1e-9)
+        np.testing.assert_allclose(q[k], s.q, atol=1e-9)
+        np.testing.assert_allclose(qd[k], s.qd, atol=1e-9)
+    np.testing.assert_array_equal(one.state.w, each.state.w)
+    assert one.state.t == pytest.approx(each.state.t)
+    assert one.state.flags['command_saturated'].all()
+    with pytest.raises(ModelInputError, match='TEM command'):
+        one.advance_segments(np.array([[[0.0, np.nan]]]), np.array([3]))
+
+
 def test_advance_rejects_non_finite_commands():
     pl = WristPlant()
     with pytest.raises(ModelInputError, match='TEM command'):

@@ -50,6 +50,7 @@ def replays() -> None:
     from sma_wrist.sweep.simulate import simulate as closed_loops_on
 
     WristPlant().advance(np.zeros((1, 2)), 5)
+    WristPlant().advance_segments(np.zeros((2, 1, 2)), np.array([5, 5]))  # the twin monitor's batches
     closed_loops_on(_cases(), 0.05, plant='phase_fraction')
     diagnose_run(run_from_truth(simulate('none', seed=0, duration_s=4.0)), candidates=['backlash', 'tem_mismatch'])
     T = np.linspace(30.0, 80.0, 20)

@@ -15,6 +15,8 @@ holds.
   commands) change what heats the wires, so the plant is re-simulated open loop at its
   1 kHz step on the recorded commands passed through a model of the driver
   (:func:`resimulate`, :class:`sma_wrist.core.plant.wrist.WristPlant`).
+* **Plant changes of a running wrist** (:data:`PLANT_SUBSYSTEM`: TEMs weakening, a heavier payload, the ambient /
+  coolant drifting, the wires' transitions drifting with fatigue) re-simulate from their onset on.
 * **Plant effects outside the catalogue** re-simulate with other physics: the heat
   balance's Peltier, Joule and exchanger-face loss coefficients changed by 20-40 %
   (:data:`OFF_MODEL_THERMAL`), none of which a catalogue entry frees.
@@ -53,17 +55,29 @@ OFF_MODEL_THERMAL = (
 #: ``tem_weak`` the TEMs' Peltier terms (both faces) lose this fraction, ``payload`` this mass [kg] is added at the
 #: lever (``/wrist/payload`` still says the old one), ``ambient_drift`` both faces' ambient / coolant temperature
 #: drifts at this rate [degC/h]; ``thermal_physics`` is the off-model heat balance above
-PLANT_SUBSYSTEM = {'thermal_physics': 'thermal', 'tem_weak': 'thermal', 'ambient_drift': 'thermal', 'payload': 'joint'}
+#: ``transition_drift`` the wires' transition temperatures move by this much [degC] (functional fatigue of a wire
+#: cycled for long: Sec. 3.1's transformation temperatures drift with the number of cycles), reached over
+#: :attr:`Distortion.ramp_s` after the onset (0: at once)
+PLANT_SUBSYSTEM = {
+    'thermal_physics': 'thermal',
+    'tem_weak': 'thermal',
+    'ambient_drift': 'thermal',
+    'payload': 'joint',
+    'transition_drift': 'hysteresis',
+}
+#: a transition drift is applied in steps of this size [degC]: each step rebuilds the wire's envelopes
+DRIFT_STEP_C = 0.1
 
 
 @dataclass(frozen=True)
 class Distortion:
     """One effect applied to a recording."""
 
-    kind: str  # offset | gain | delay | lag | drift | dead_zone | saturation | command_delay | thermal_physics
+    kind: str  # offset | gain | delay | lag | drift | dead_zone | saturation | command_delay | PLANT_SUBSYSTEM kinds
     channel: str  # T1 | T2 | T (both thermocouples) | q | u (drive) | plant
     value: float  # in `unit`
     unit: str
+    ramp_s: float = 0.0  # a plant change reaches `value` this long after its onset [s] (transition_drift only)
 
     @property
     def subsystem(self) -> str:
@@ -187,9 +201,40 @@ def resimulate(
     return T, q
 
 
-def plant_change(kind: str, value: float, base: PlantParams | None = None) -> Callable[[WristPlant, float], None]:
-    """A `change` for :func:`resimulate` (:data:`PLANT_SUBSYSTEM` kinds other than thermal_physics)."""
+def transition_params(shift_C: float, base: PlantParams | None = None) -> PlantParams:
+    """The plant whose wires transform `shift_C` [degC] hotter (> 0) or colder: the SD-GPI's envelopes and memory
+    curves moved along the temperature axis (:func:`sma_wrist.plants.spread.perturbed_hysteresis`, the sweep's wire
+    that is not the model), stroke unchanged."""
+    from sma_wrist.plants.spread import perturbed_hysteresis
+
+    p = base or PlantParams()
+    return dataclasses.replace(p, hysteresis=perturbed_hysteresis(p.hysteresis, float(shift_C)))
+
+
+def plant_change(
+    kind: str, value: float, base: PlantParams | None = None, ramp_s: float = 0.0
+) -> Callable[[WristPlant, float], None]:
+    """A `change` for :func:`resimulate` (:data:`PLANT_SUBSYSTEM` kinds other than thermal_physics); `ramp_s`: a
+    transition drift grows linearly to `value` over this long [s]."""
     base = base or PlantParams()
+    if kind == 'transition_drift':
+        from sma_wrist.core.hysteresis.muscle import MuscleModel
+
+        cache: dict[int, PlantParams] = {}
+        now = {'step': None}
+
+        def drift(plant: WristPlant, t: float) -> None:
+            frac = 1.0 if ramp_s <= 0 else min(t / ramp_s, 1.0)
+            step = int(round(frac * value / DRIFT_STEP_C))
+            if step != now['step']:
+                now['step'] = step
+                if step not in cache:
+                    cache[step] = transition_params(step * DRIFT_STEP_C, base)
+                # the wire state (play operators, loads) is kept: the same wire, now transforming elsewhere
+                plant.params = cache[step]
+                plant.muscles = MuscleModel(plant.params.hysteresis, plant.params.muscle)
+
+        return drift
     if kind == 'tem_weak':
         weak = weak_tem_params(value, base)
 
@@ -247,7 +292,7 @@ def apply(
             else:
                 T, q = resimulate(run, params=off_model_params(d.value))
         elif d.channel == 'plant':
-            T, q = resimulate(run, onset_s=onset_s, change=plant_change(d.kind, d.value))
+            T, q = resimulate(run, onset_s=onset_s, change=plant_change(d.kind, d.value, ramp_s=d.ramp_s))
         elif d.channel == 'q':
             q[i_on:] = (
                 rewrite(t_on, q[i_on:], d.kind, d.value, Q_REF_RAD)
@@ -267,7 +312,14 @@ def apply(
     if noise_q_rad > 0:
         q = q + rng.normal(0.0, noise_q_rad, q.shape)
     label = (
-        (d.id + f'={d.value:g}{d.unit}' + (f' from {onset_s:g} s' if onset_s > 0 else '')) if d is not None else 'clean'
+        (
+            d.id
+            + f'={d.value:g}{d.unit}'
+            + (f' from {onset_s:g} s' if onset_s > 0 else '')
+            + (f' over {d.ramp_s:g} s' if d.ramp_s > 0 else '')
+        )
+        if d is not None
+        else 'clean'
     )
     return dataclasses.replace(
         run,

@@ -18,7 +18,10 @@ Python with :meth:`DeviceEmulator.inject`: garbage bytes, checksum errors, cut l
 resets, unplug (the pty's master is closed, the link removed; on replug the device
 boots again on a new pty at the same link), freezes (no samples), forced ADC counts. Wiring faults of a wrist as
 built (``--swap-tem-polarity N``, ``--swap-tem-channels``, ``--swap-thermocouples``, ``--reverse-angle``,
-``--broken-wire N``; doc/explanation/protocol.md "Wiring"), for ``sma-wrist commission``; the largest drive a command asked
+``--broken-wire N``; doc/explanation/protocol.md "Wiring"), for ``sma-wrist commission``. Effects that begin
+mid-run (``--effect KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]``, :class:`Effect`: a sensor's offset, gain, lag or drift,
+the TEMs weakening, a payload change, the coolant drifting, the wires' transitions drifting), for the twin
+monitor (doc/howto/monitor.md); the largest drive a command asked
 for is kept (``stats.max_abs_command_V``) and printed on exit. :meth:`DeviceEmulator.receive` /
 :meth:`DeviceEmulator.emit` step the device in lockstep with a host that is no serial port.
 """
@@ -49,6 +52,60 @@ from sma_wrist.hw.calibration import Calibration, quantise
 
 MAX_BACKLOG = 1 << 16  # bytes buffered for a host that does not read; beyond, output is dropped (UART overrun)
 PACED_BACKLOG = 4096  # host_paced: beyond this many bytes unread (~0.1 s of samples) the device time waits
+
+
+#: sensor effects (on muscle thermocouple T1 / T2 or the potentiometer q): offset [degC | rad], gain error [1] about
+#: 25 degC / the neutral angle (as :mod:`sma_wrist.diagnose.distort`), first-order lag [s], drift [degC/h | rad/h]
+SENSOR_EFFECTS = ('offset', 'gain', 'lag', 'drift')
+SENSOR_CHANNELS = ('T1', 'T2', 'q')
+#: plant effects (channel ``plant``), as :data:`sma_wrist.diagnose.distort.PLANT_SUBSYSTEM`: ``tem_weak`` both TEMs
+#: lose this fraction of their Peltier terms, ``payload`` this mass [kg] is added, ``ambient_drift`` [degC/h],
+#: ``transition_drift`` the wires transform this much hotter [degC] (reached over the ramp)
+PLANT_EFFECTS = ('tem_weak', 'payload', 'ambient_drift', 'transition_drift')
+EFFECT_SPEC = 'KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]'
+
+
+@dataclass(frozen=True)
+class Effect:
+    """An effect that begins ``onset_s`` [s of device time] after the first command the device receives (the host
+    starting to drive the wrist: the same time into every run) (``--effect KIND:CHANNEL:VALUE@ONSET_S[+RAMP_S]``)."""
+
+    kind: str  # SENSOR_EFFECTS on SENSOR_CHANNELS, or PLANT_EFFECTS on 'plant'
+    channel: str
+    value: float
+    onset_s: float
+    ramp_s: float = 0.0  # transition_drift: reaches `value` this long after the onset
+
+    @classmethod
+    def parse(cls, spec: str) -> Effect:
+        """``offset:T1:3@60``, ``transition_drift:plant:6@60+120``; ValueError saying what a spec looks like."""
+        help_ = (
+            f'--effect {spec!r}: expected {EFFECT_SPEC}, e.g. offset:T1:3@60 or transition_drift:plant:6@60+120; '
+            f'KIND:CHANNEL one of {"/".join(SENSOR_EFFECTS)} on {"/".join(SENSOR_CHANNELS)}, or '
+            f'{"/".join(PLANT_EFFECTS)} on plant'
+        )
+        try:
+            head, when = spec.split('@')
+            kind, channel, value = head.split(':')
+            onset, _, ramp = when.partition('+')
+            e = cls(kind.strip(), channel.strip(), float(value), float(onset), float(ramp) if ramp else 0.0)
+        except ValueError:
+            raise ValueError(help_) from None
+        sensor = e.kind in SENSOR_EFFECTS and e.channel in SENSOR_CHANNELS
+        plant = e.kind in PLANT_EFFECTS and e.channel == 'plant'
+        if not (sensor or plant):
+            raise ValueError(help_)
+        if not all(math.isfinite(x) for x in (e.value, e.onset_s, e.ramp_s)) or e.onset_s < 0 or e.ramp_s < 0:
+            raise ValueError(f'--effect {spec!r}: value, onset and ramp must be finite, onset and ramp >= 0')
+        if e.ramp_s and e.kind != 'transition_drift':
+            raise ValueError(f'--effect {spec!r}: only transition_drift takes a ramp (+RAMP_S)')
+        if e.kind == 'lag' and e.value <= 0:
+            raise ValueError(f'--effect {spec!r}: a lag is a time constant > 0 [s]')
+        if e.kind == 'tem_weak' and not 0 <= e.value < 1:
+            raise ValueError(f'--effect {spec!r}: tem_weak is the fraction the TEMs lose, in [0, 1)')
+        if e.kind == 'transition_drift' and abs(e.value) > 15:
+            raise ValueError(f'--effect {spec!r}: a transition drift within +-15 degC')
+        return e
 
 
 @dataclass
@@ -100,6 +157,9 @@ class EmulatorConfig:
     # serving a node graph in the same process (sma-wrist commission --sim's verification), where a busy machine
     # would otherwise drop the samples a real UART keeps streaming
     host_paced: bool = False
+    # effects that begin mid-run (:class:`Effect`, ``--effect``): a sensor, the TEMs, the payload, the coolant or
+    # the wires change that long after the first command, as a running wrist does
+    effects: tuple[Effect, ...] = ()
 
 
 @dataclass
@@ -156,6 +216,27 @@ class DeviceEmulator:
         # a broken wire: the joint is a second wrist's in which that muscle is never heated; the temperatures
         # are the first's (the TEM still heats the muscle, the wire no longer pulls)
         self._joint_plant: Any = copy.deepcopy(self.plant) if c.broken_wire else None
+        # plant effects: (effect, plant, change(plant, s since the onset)); each plant (the broken wire's second wrist
+        # too) changes by a closure of its own: a payload change remembers the mass that plant carried
+        self._changes: list[tuple[Effect, Any, Callable[[Any, float], None]]] = []
+        if any(e.kind in PLANT_EFFECTS for e in c.effects):
+            if c.plant != 'model':
+                raise ValueError(
+                    f'plant effects (--effect {"/".join(PLANT_EFFECTS)}:plant:...) act on --plant model only'
+                )
+            from sma_wrist.diagnose.distort import plant_change
+
+            for plant in (self.plant, self._joint_plant):
+                if plant is not None:
+                    self._changes += [
+                        (e, plant, plant_change(e.kind, e.value, plant.params, e.ramp_s))
+                        for e in c.effects
+                        if e.kind in PLANT_EFFECTS
+                    ]
+        self._lagged: dict[int, float] = {}  # a lag effect's sensor reading (index in effects)
+        # the effects' clock: samples since the first command arrived (the host started driving the wrist), so that
+        # an onset means the same time into every run however long the host took to start; it runs on across resets
+        self._effect_n: int | None = None
         self.rng = np.random.default_rng(c.seed)
         self.stats = EmulatorStats()
         self.parser = P.Parser()
@@ -345,6 +426,33 @@ class DeviceEmulator:
             self._tc_next_s = t + period if self._tc_next_s is None else self._tc_next_s + period
         return self._tc_held
 
+    def _sensor_effects(self, t: float, temps: np.ndarray, q: float) -> float:
+        """The sensor effects begun by ``t`` [s on the effects' clock] on the muscle thermocouples (``temps[:2]``, in
+        place) and the potentiometer; returns the angle read [rad]. A lag starts from the true reading at its onset."""
+        from sma_wrist.diagnose.distort import GAIN_REF_C, Q_REF_RAD
+
+        for k, e in enumerate(self.cfg.effects):
+            if e.kind not in SENSOR_EFFECTS or t < e.onset_s - 1e-12:
+                continue
+            i = SENSOR_CHANNELS.index(e.channel)
+            x = q if i == 2 else float(temps[i])
+            if e.kind == 'offset':
+                x += e.value
+            elif e.kind == 'gain':
+                ref = Q_REF_RAD if i == 2 else GAIN_REF_C
+                x = ref + (1.0 + e.value) * (x - ref)
+            elif e.kind == 'drift':
+                x += e.value / 3600.0 * (t - e.onset_s)
+            else:  # lag: y' = (x - y) / tau, exact for x held over the sample
+                y = self._lagged.get(k, x)
+                x = y + (1.0 - math.exp(-1.0 / (self.cfg.rate_hz * e.value))) * (x - y)
+                self._lagged[k] = x
+            if i == 2:
+                q = x
+            else:
+                temps[i] = x
+        return q
+
     def _sample(self) -> bytes:
         c = self.cfg
         self._n += 1
@@ -364,6 +472,15 @@ class DeviceEmulator:
             flags |= P.FLAG_BOOT
             self._boot_flag = False
         u = self._wired(u)
+        if self._effect_n is None and self.stats.commands_received:
+            self._effect_n = 0
+        if self._effect_n is not None:
+            self._effect_n += 1
+        # this sample's time on the effects' clock: the interval it ends begins here (-1: not driven yet)
+        t0 = -1.0 if self._effect_n is None else (self._effect_n - 1) / c.rate_hz
+        for e, plant, change in self._changes:
+            if t0 >= e.onset_s - 1e-12:
+                change(plant, t0 - e.onset_s)
         self.plant.advance(u, self.steps_per_sample)
         st = self.plant.state
         T, q, qd = self.plant.muscle_temperature_C, st.q, st.qd
@@ -379,9 +496,12 @@ class DeviceEmulator:
             T = self._convert(t, T[0])[None]
         th = st.thermal[0]  # (layer, face): the TEMs' exchanger faces
         temps = np.array([T[0, 0], T[0, 1], th[0, 1], th[1, 1]])
+        q_read = float(q[0])
+        if c.effects:
+            q_read = self._sensor_effects(t0, temps, q_read)
         if c.thermocouples_swapped:
             temps[:2] = temps[1::-1]
-        counts = c.calibration.to_counts(temps, float(q[0]))
+        counts = c.calibration.to_counts(temps, q_read)
         if c.angle_reversed:
             counts[4] = P.ADC_MAX - counts[4]
         if c.noise_counts > 0:
@@ -574,7 +694,11 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         from sma_wrist.sweep.graph_params import plant_params
 
         base = plant_params(a.params_file)  # ParameterError (a ValueError) names a bad file or value
+    effects = tuple(Effect.parse(spec) for spec in (getattr(a, 'effect', None) or ()))
+    if plant != 'model' and any(e.kind in PLANT_EFFECTS for e in effects):
+        raise ValueError(f'--effect {"/".join(PLANT_EFFECTS)}:plant:... act on --plant model only (not {plant})')
     return EmulatorConfig(
+        effects=effects,
         plant=plant,
         scenario=scenario,
         base=base,
@@ -644,6 +768,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 __all__ = [
+    'Effect',
     'EmulatorConfig',
     'EmulatorStats',
     'DeviceEmulator',

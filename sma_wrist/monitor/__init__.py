@@ -142,7 +142,6 @@ class Monitor:
         self.payload_kg: float | None = None
         self._payload_pending = 0.3
         self._buf: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in TOPICS if k != 'payload'}
-        self._states: tuple[list[float], list[np.ndarray]] = ([], [])
         self.t_first: float | None = None
         self.t_last: float | None = None
         self.last_check: float | None = None
@@ -176,13 +175,8 @@ class Monitor:
         self.tick(t_s)
 
     def tick(self, t_s: float) -> None:
-        """Advance the twin to the measurement stamp ``t_s`` [s] and keep its heat-balance state."""
-        tw = self._ensure_twin(t_s)
-        tw.advance_to(t_s)
-        ts, xs = self._states
-        if not ts or t_s > ts[-1]:
-            ts.append(float(tw.t))
-            xs.append(tw.thermal_state)
+        """Advance the twin to the measurement stamp ``t_s`` [s] (it keeps its heat-balance state at each)."""
+        self._ensure_twin(t_s).advance_to(t_s)
 
     def _ensure_twin(self, t_s: float) -> Twin:
         if self.twin is None:
@@ -251,15 +245,15 @@ class Monitor:
         except DiagnoseInputError as exc:
             return str(exc)
         # the heat-balance state the twin had at the window's first sample
-        ts, xs = self._states
-        if ts:
-            j = int(np.clip(np.searchsorted(np.asarray(ts), run.t0_s + 1e-9) - 1, 0, len(ts) - 1))
-            run.thermal_x0 = xs[j]
+        if self.twin is not None:
+            run.thermal_x0 = self.twin.thermal_state_at(run.t0_s)
         run.settle_s = min(self.config.settle_s, max(run.duration - 20.0, 0.0))
         return run
 
     def _trim(self, t_min: float) -> None:
-        for t, x in list(self._buf.values()) + [self._states]:
+        if self.twin is not None:
+            self.twin.trim(t_min)
+        for t, x in self._buf.values():
             n = int(np.searchsorted(np.asarray(t), t_min)) if t else 0
             if n > 0:
                 del t[:n]

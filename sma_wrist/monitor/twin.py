@@ -1,7 +1,7 @@
 """The digital twin of a running wrist: the plant model driven by the measured TEM commands.
 
 :class:`Twin` steps :class:`sma_wrist.core.plant.wrist.WristPlant` (the plant ``plant_sim`` runs, at its 1 kHz
-step) over each interval between two measurement stamps under the command held over it (the command stamped at
+step) over each interval between two measurement stamps under the command held over it (in batches of intervals) (the command stamped at
 t_k drives [t_k, t_k+1), plant_sim's convention and the diagnosis'). Its predictions are what the wrist would read
 if it were its model; its heat-balance state at the start of a check window is where the diagnosis' thermal replay
 of that window starts (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`), because a window cut from the middle of a
@@ -117,34 +117,92 @@ def load_model(
 
 
 class Twin:
-    """The model wrist stepped beside the real one (``plant_sim``'s plant, no sensor effects)."""
+    """The model wrist stepped beside the real one (``plant_sim``'s plant, no sensor effects).
+
+    The samples' intervals are queued and stepped in batches (:meth:`WristPlant.advance_segments`, one compiled call
+    per batch) when a prediction is read or :data:`BATCH` have queued: stepped one call per 100 Hz sample, the twin
+    was most of the node's own work (the call overhead, not the 10 plant steps). The heat-balance state after every
+    interval is kept (:meth:`thermal_state_at`) for the checks' windows."""
+
+    #: intervals queued before they are stepped without being asked for
+    BATCH = 100
 
     def __init__(self, model: Model, payload_kg: float) -> None:
         self.model = model
         self.payload_kg = float(payload_kg)
-        self.plant = WristPlant(model.params, payload_kg=max(self.payload_kg + model.payload_err_kg, 0.0))
-        self.t: float | None = None  # stamp of the state [s]
+        self._plant = WristPlant(model.params, payload_kg=max(self.payload_kg + model.payload_err_kg, 0.0))
+        self.t: float | None = None  # stamp of the state [s] (queued intervals included)
         self.command_V = np.zeros((1, 2))
+        self._queue_u: list[tuple[float, float]] = []
+        self._queue_n: list[int] = []
+        self._queue_t: list[float] = []
+        # heat-balance states after each stepped interval: chunks of stamps (K,) [s] and states (K, 2, 2) [degC]
+        self._log_t: list[np.ndarray] = []
+        self._log_x: list[np.ndarray] = []
 
     def set_payload(self, payload_kg: float) -> None:
         """The recorded payload changed (``/wrist/payload``): the twin carries the new mass from now on."""
+        self.flush()
         self.payload_kg = float(payload_kg)
-        self.plant.state.payload_kg[:] = max(self.payload_kg + self.model.payload_err_kg, 0.0)
+        self._plant.state.payload_kg[:] = max(self.payload_kg + self.model.payload_err_kg, 0.0)
 
     def set_command(self, i: int, volts: float) -> None:
         """TEM ``i`` (0, 1) was commanded ``volts`` [V]; it drives the twin from the next measurement stamp on."""
         self.command_V[0, i] = volts
 
     def advance_to(self, t_s: float) -> None:
-        """Integrate to the measurement stamp ``t_s`` [s] under the held commands (steps of the plant's dt)."""
-        if self.t is None or t_s <= self.t:
-            self.t = t_s if self.t is None else self.t
+        """Integrate to the measurement stamp ``t_s`` [s] under the held commands (steps of the plant's dt; queued)."""
+        if self.t is None:
+            self.t = t_s
+            self._log_t.append(np.array([t_s]))
+            self._log_x.append(np.array(self._plant.state.thermal[:1], dtype=float))
+            return
+        if t_s <= self.t:
             return
         n = int(round((t_s - self.t) / self.model.params.dt))
         if n > 0:
             # a stamp far ahead (a pause of the recording) is integrated too: the plant went on meanwhile
-            self.plant.advance(self.command_V, n)
             self.t += n * self.model.params.dt
+            self._queue_u.append((float(self.command_V[0, 0]), float(self.command_V[0, 1])))
+            self._queue_n.append(n)
+            self._queue_t.append(self.t)
+            if len(self._queue_n) >= self.BATCH:
+                self.flush()
+
+    def flush(self) -> None:
+        """Step the queued intervals (one compiled call) and log the heat-balance state after each."""
+        if not self._queue_n:
+            return
+        u = np.array(self._queue_u, dtype=float)[:, None, :]
+        thermal, _, _ = self._plant.advance_segments(u, np.array(self._queue_n, dtype=np.int64))
+        self._log_t.append(np.array(self._queue_t))
+        self._log_x.append(thermal[:, 0])
+        self._queue_u.clear()
+        self._queue_n.clear()
+        self._queue_t.clear()
+
+    def thermal_state_at(self, t_s: float) -> np.ndarray:
+        """Heat-balance state (2 layers, 2 faces) [degC] of the last stepped stamp at or before ``t_s`` [s] (the
+        first one kept, for an earlier ``t_s``)."""
+        self.flush()
+        ts = np.concatenate(self._log_t)
+        j = int(np.clip(np.searchsorted(ts, t_s + 1e-9) - 1, 0, ts.size - 1))
+        return np.concatenate(self._log_x)[j].copy()
+
+    def trim(self, t_min: float) -> None:
+        """Forget the logged states before ``t_min`` [s] (keeping the last one before it)."""
+        self.flush()
+        if not self._log_t:
+            return
+        ts, xs = np.concatenate(self._log_t), np.concatenate(self._log_x)
+        n = max(int(np.searchsorted(ts, t_min)) - 1, 0)
+        self._log_t, self._log_x = [ts[n:]], [xs[n:]]
+
+    @property
+    def plant(self) -> WristPlant:
+        """The model wrist, stepped to :attr:`t`."""
+        self.flush()
+        return self._plant
 
     @property
     def temperatures_C(self) -> np.ndarray:

@@ -32,7 +32,6 @@ from sma_wrist.monitor import (
     MonitorInputError,
     Verdict,
     diagnose_window,
-    ignore_interrupts,
     write_history,
 )
 from sma_wrist.nodes.common import HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, Param, WristNode, finite, main_for
@@ -116,6 +115,16 @@ class TwinMonitor(WristNode):
             'thread (no process start; shares the interpreter), or inline in the callback (holds the node up '
             'for the check: only for offline simulation, where every check must be made)',
             choices=('process', 'thread', 'inline'),
+            runtime=False,
+        ),
+        Param(
+            'worker_nice',
+            5,
+            "the check worker process's niceness above the node's (Unix; 0: the same priority): on a busy machine "
+            'the checks take what the control loop leaves over (a check still running when the next is due is '
+            'skipped, counted in skipped_checks)',
+            '1',
+            (0, 19),
             runtime=False,
         ),
         Param(
@@ -252,9 +261,14 @@ class TwinMonitor(WristNode):
                 import multiprocessing
                 from concurrent.futures import ProcessPoolExecutor
 
+                from sma_wrist.monitor.worker import start_worker
+
                 # spawn: a fork of a process running rclpy's threads may inherit a held lock
                 self._pool = ProcessPoolExecutor(
-                    max_workers=1, mp_context=multiprocessing.get_context('spawn'), initializer=ignore_interrupts
+                    max_workers=1,
+                    mp_context=multiprocessing.get_context('spawn'),
+                    initializer=start_worker,
+                    initargs=(int(self.p['worker_nice']),),
                 )
             else:
                 from concurrent.futures import ThreadPoolExecutor

@@ -88,6 +88,69 @@ def step_many(
     )
 
 
+@_jit
+def step_segments(
+    n_steps,
+    u,
+    thermal,
+    q,
+    qd,
+    w,
+    heating,
+    T_prev,
+    load,
+    compliance,
+    payload,
+    flags,
+    th_coef,
+    mech,
+    stacked,
+    edges,
+    r,
+    p,
+    mem_c,
+    mem_d,
+    joint,
+    thermal_out,
+    q_out,
+    qd_out,
+):  # pragma: no cover - compiled
+    """:func:`step_many` over K segments in one call: segment k holds commands u[k] (N, 2) [V] for n_steps[k] plant
+    steps; the state after each segment goes to thermal_out[k] (N, 2, 2), q_out[k], qd_out[k] (N,). A twin
+    replaying measured commands (one per 10 ms sample) pays numba's call overhead once per batch, not per sample."""
+    w_now, rk, env = scratch(w.shape[1])
+    for k in range(n_steps.size):
+        step_many_into(
+            n_steps[k],
+            u[k],
+            thermal,
+            q,
+            qd,
+            w,
+            heating,
+            T_prev,
+            load,
+            compliance,
+            payload,
+            flags,
+            th_coef,
+            mech,
+            stacked,
+            edges,
+            r,
+            p,
+            mem_c,
+            mem_d,
+            joint,
+            w_now,
+            rk,
+            env,
+        )
+        thermal_out[k] = thermal
+        q_out[k] = q
+        qd_out[k] = qd
+
+
 @_jit_inline
 def scratch(n_play):  # pragma: no cover - compiled
     """Work arrays of :func:`step_many_into`: w_now (n_play,), RK4 stages (4, 2, 2), envelope (2, 8)."""

@@ -300,6 +300,47 @@ class WristPlant:
         }
         return s
 
+    def advance_segments(
+        self, commands_V: FloatArray, n_steps: np.ndarray
+    ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """K segments at once: ``n_steps[k]`` steps under commands ``commands_V[k]`` (N, 2) [V], as :meth:`advance`
+        in a loop (commands clipped to the TEM limits; flags ORed over the segments, the last segment's without
+        numba). Returns the state after each segment:
+        thermal (K, N, 2, 2) [degC], q (K, N) [rad], qd (K, N) [rad/s]."""
+        p = self.params
+        tp = p.thermal
+        u = np.ascontiguousarray(np.broadcast_to(np.asarray(commands_V, dtype=float), (len(n_steps), self.n, 2)))
+        if not np.isfinite(u).all():
+            check_finite('TEM command', u, 'V')
+        clipped = (u < tp.u_min_V) | (u > tp.u_max_V)
+        u = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)
+        K = u.shape[0]
+        if K == 0:
+            return np.empty((0, self.n, 2, 2)), np.empty((0, self.n)), np.empty((0, self.n))
+        thermal = np.empty((K, self.n, 2, 2))
+        q = np.empty((K, self.n))
+        qd = np.empty((K, self.n))
+        if not (jit.AVAILABLE and p.engine == 'auto'):
+            for k in range(K):
+                s = self.advance(u[k], int(n_steps[k]))
+                thermal[k], q[k], qd[k] = s.thermal, s.q, s.qd
+            s.flags['command_saturated'] = clipped.any(axis=(0, 2))
+            return thermal, q, qd
+        s = self.state
+        self.advance(u[0], 0)  # the kernel's constants and writeable state arrays, as advance prepares them
+        flags = np.zeros((self.n, 4), bool)
+        steps = np.ascontiguousarray(n_steps, dtype=np.int64)
+        plant_kernel.step_segments(steps, u, *self._kernel_arrays, flags, *self._kernel_constants[1], thermal, q, qd)
+        s.t += int(steps.sum()) * p.dt
+        s.flags = {
+            'command_saturated': clipped.any(axis=(0, 2)),
+            'over_temperature': flags[:, 0],
+            'slack': flags[:, 1],
+            'overload': flags[:, 2],
+            'at_stop': flags[:, 3],
+        }
+        return thermal, q, qd
+
     def step_mechanics(self, muscle_temperature_C: ArrayLike) -> PlantState:
         """Advance loads and joint by dt at given (N, 2) muscle temperatures (steps 2-4).
 
