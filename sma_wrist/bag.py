@@ -145,6 +145,10 @@ class BagRecorder:
         publishing node's clock.
     """
 
+    #: write message records straight into the MCAP writer's pending chunk (:meth:`_write_direct`); False (or a
+    #: writer this recorder does not know): rosbags' ``Writer.write``
+    direct: bool = True
+
     def __init__(
         self,
         path: str | Path,
@@ -168,8 +172,6 @@ class BagRecorder:
         self.counts: dict[str, int] = {}
         self._since_flush = 0
         self.closed = False
-        #: write message records straight into the MCAP writer's pending chunk (see :meth:`_write_direct`)
-        self.direct = True
 
     # -- lifecycle ---------------------------------------------------------
     def start(self) -> BagRecorder:
