@@ -117,7 +117,7 @@ def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma
                 out_X[j, l, f] = x[l, f]
 
 
-@_jit_inline
+@_jit
 def _loads(
     T1,
     T2,
