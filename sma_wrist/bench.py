@@ -338,6 +338,88 @@ def bench_commission(quick: bool = False) -> dict:
     return run_commission(quick)
 
 
+@section('speed')
+def bench_speed(quick: bool = False) -> dict:
+    """What repeated work costs: a recorded graph run with the recorder's direct MCAP records against rosbags'
+    ``Writer.write`` (old/new ratio of interleaved runs), and the diagnosis of one synthetic run with its
+    mechanics replay's cost per scenario and sample."""
+    import tempfile
+
+    from sma_wrist import runtime
+    from sma_wrist.bag import BagRecorder
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.diagnose import diagnose_run
+    from sma_wrist.diagnose import testdata as td
+    from sma_wrist.diagnose.kernels import Constants
+
+    runtime.activate()
+    repeats = 3 if quick else 5
+    duration = 10.0 if quick else 60.0
+
+    def recorded(direct: bool) -> float:
+        BagRecorder.direct = direct
+        try:
+            with tempfile.TemporaryDirectory() as d:
+                t0 = time.perf_counter()
+                run_closed_loop('pid', 0.3, duration, Path(d) / 'bag')
+                return time.perf_counter() - t0
+        finally:
+            BagRecorder.direct = True
+
+    def plain() -> float:
+        t0 = time.perf_counter()
+        run_closed_loop('pid', 0.3, duration)
+        return time.perf_counter() - t0
+
+    run_closed_loop('pid', 0.3, 0.5)  # imports, numba cache load
+    walls: dict[str, list[float]] = {'writer': [], 'direct': [], 'plain': []}
+    for i in range(repeats):  # interleaved, the order alternating: a shared machine's speed drifts
+        order = ('writer', 'direct', 'plain') if i % 2 == 0 else ('plain', 'direct', 'writer')
+        for name in order:
+            walls[name].append(plain() if name == 'plain' else recorded(name == 'direct'))
+    med = {k: float(np.median(v)) for k, v in walls.items()}
+    out: dict = {
+        'graph_sim_time_s': duration,
+        'repeats': repeats,
+        'graph_recorded_wall_s_writer': med['writer'],
+        'graph_recorded_wall_s_direct': med['direct'],
+        'graph_wall_s_unrecorded': med['plain'],
+        'graph_recorded_ratio_writer_over_direct': med['writer'] / med['direct'],
+        'recording_cost_ratio_writer_over_direct': (med['writer'] - med['plain'])
+        / max(med['direct'] - med['plain'], 1e-9),
+    }
+    # the diagnosis of one run, as the live monitor and the benchmarks repeat it
+    run = td.run_from_truth(td.simulate('thermal_coupling', seed=3, duration_s=60.0 if quick else 240.0))
+    diagnose_run(run)  # numba cache load
+    calls = []
+    mechanics = Constants.mechanics
+
+    def counted(self, T, dt, jrow, substeps=1):  # type: ignore[no-untyped-def]
+        t0 = time.perf_counter()
+        res = mechanics(self, T, dt, jrow, substeps)
+        calls.append((T.shape[0] * T.shape[1] * substeps, time.perf_counter() - t0))
+        return res
+
+    diag = []
+    Constants.mechanics = counted  # type: ignore[method-assign]
+    try:
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            diagnose_run(run)
+            diag.append(time.perf_counter() - t0)
+    finally:
+        Constants.mechanics = mechanics  # type: ignore[method-assign]
+    steps = sum(c[0] for c in calls)
+    out.update(
+        diagnose_run_s=run.n * run.dt,
+        diagnose_wall_s_median=float(np.median(diag)),
+        mechanics_calls_per_diagnosis=len(calls) / repeats,
+        mechanics_wall_share=sum(c[1] for c in calls) / sum(diag),
+        mechanics_us_per_scenario_step=1e6 * sum(c[1] for c in calls) / max(steps, 1),
+    )
+    return out
+
+
 # -------------------------------------------------------------------------------- driver
 
 

@@ -145,6 +145,51 @@ def test_identical_runs_give_identical_mcap_bytes(tmp_path):
     assert ma == mb
 
 
+def test_direct_message_records_are_the_rosbags_writers_bytes(tmp_path, monkeypatch):
+    """The recorder packs MCAP message records itself; the bag must be the one rosbags' Writer.write
+    writes (same records, chunk boundaries, indexes and statistics), several chunks long."""
+    from sma_wrist import bag as bagmod
+
+    monkeypatch.setattr(bagmod, '_MCAP_CHUNK_BYTES', 4096)  # many chunks in a short run
+    direct = []
+    write_direct = bagmod.BagRecorder._write_direct
+
+    def spy(self, *args):
+        direct.append(1)
+        return write_direct(self, *args)
+
+    monkeypatch.setattr(bagmod.BagRecorder, '_write_direct', spy)
+    _run(tmp_path / 'a' / 'run', 1.0)
+    n_direct = len(direct)
+    monkeypatch.setattr(bagmod.BagRecorder, 'direct', False)
+    monkeypatch.setattr('rosbags.rosbag2.storage_mcap.McapWriter.write', _chunked_write(4096))
+    _run(tmp_path / 'b' / 'run', 1.0)
+    assert n_direct > 200 and len(direct) == n_direct  # the first bag written directly, the second by rosbags
+    a = (tmp_path / 'a' / 'run' / 'run.mcap').read_bytes()
+    b = (tmp_path / 'b' / 'run' / 'run.mcap').read_bytes()
+    assert len(bagmod._mcap_summary(a).chunk_indexes) > 5
+    assert a == b
+    meta_a = (tmp_path / 'a' / 'run' / 'metadata.yaml').read_text()
+    assert meta_a == (tmp_path / 'b' / 'run' / 'metadata.yaml').read_text()
+
+
+def _chunked_write(limit):
+    """rosbags' McapWriter.write with its 1 MiB chunk limit lowered to ``limit`` bytes."""
+    from rosbags.rosbag2.storage_mcap import McapWriter
+
+    original = McapWriter.write
+
+    def write(self, connection, timestamp, data):
+        bio = self.chunk.bio
+        original_close = self.close_chunk
+        before = len(self.chunks)
+        original(self, connection, timestamp, data)
+        if len(self.chunks) == before and bio.tell() > limit:
+            original_close()
+
+    return write
+
+
 def test_exception_during_run_leaves_readable_bag(tmp_path, monkeypatch):
     monkeypatch.setattr(Controller, 'fail_at', 0.5)
     bag = tmp_path / 'crash'

@@ -20,12 +20,13 @@ import numpy as np
 
 from sma_wrist.core.hysteresis import kernel as hk
 from sma_wrist.core.jit import _jit as _jit_switch
+from sma_wrist.core.jit import _jit_inline
 from sma_wrist.core.joint.kernel import joint_step_one
 from sma_wrist.core.plant.kernel import pack_constants
 from sma_wrist.core.plant.wrist import PlantParams
 
 _jit = _jit_switch  # numba.njit(cache=True, nogil=True) when numba is installed
-_solve_load = hk._solve_load
+_solve_load_into = hk._solve_load_into
 _envelopes = hk._envelopes
 
 #: indices in the per-scenario thermal coefficient rows (pack_thermal)
@@ -34,7 +35,7 @@ TH_IPV, TH_COUPLING = 0, 1
 J_COULOMB, J_VISCOUS, J_STATIC, J_PRELOAD, J_PAYLOAD = 0, 1, 2, 3, 4
 
 
-@_jit
+@_jit_inline
 def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
     """One RK4 step of both layers (2 x 2 faces) in place; ambient_shift [degC] moves K_inf."""
     for stage in range(4):
@@ -138,8 +139,11 @@ def _loads(
     r,
     p,
     mech,
+    c8,
+    s8,
 ):  # pragma: no cover - compiled
-    """Solve both bundles' loads at angle q; returns (torque, stiffness)."""
+    """Solve both bundles' loads at angle q; returns (torque, stiffness). c8, s8: (8,) envelope scratch
+    owned by the caller (the plant step's load solve; a fresh pair per solve was ~a fifth of the replay)."""
     scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
     max_it = int(mech[8])
     n_g_r, r_eff, q_neutral = mech[14], mech[15], mech[16]
@@ -151,7 +155,7 @@ def _loads(
         T = T1 if side == 0 else T2
         y_mem = y_mem1 if side == 0 else y_mem2
         y_geo = preload - x_mm if side == 0 else preload + x_mm
-        m, dy, res = _solve_load(
+        m, dy, res = _solve_load_into(
             T,
             y_geo,
             w[i],
@@ -170,6 +174,8 @@ def _loads(
             m_max,
             tol,
             max_it,
+            c8,
+            s8,
         )
         if commit:
             w[i, :] = w_now
@@ -180,7 +186,7 @@ def _loads(
     return torque, n_g_r * 1e3 * r_eff * inv_c
 
 
-@_jit
+@_jit_inline
 def _memoryless(T, heating, mem_c, mem_d, p0):  # pragma: no cover - compiled
     if heating:
         return p0 * (mem_c[0] * math.tanh(mem_c[1] * T + mem_c[2]) + mem_c[3])
@@ -212,6 +218,8 @@ def mechanics_sim(
     T_prev = np.empty(2)
     load = np.empty(2)
     compliance = np.ones(2)
+    c8 = np.empty(8)
+    s8 = np.empty(8)
     for j in range(N):
         coulomb, viscous, static, preload, payload = jrow[j, 0], jrow[j, 1], jrow[j, 2], jrow[j, 3], jrow[j, 4]
         # this scenario's joint for the plant's own step (plant_kernel.joint_step_one)
@@ -257,6 +265,8 @@ def mechanics_sim(
                 r,
                 p,
                 mech,
+                c8,
+                s8,
             )
             tau -= payload * g * lever * math.cos(mid)
             if tau > 0:
@@ -265,7 +275,28 @@ def mechanics_sim(
                 hi = mid
         q = 0.5 * (lo + hi)
         _loads(
-            T1, T2, q, w, 0, 1, w_now, heating, load, compliance, ym1, ym2, preload, 2, True, stacked, edges, r, p, mech
+            T1,
+            T2,
+            q,
+            w,
+            0,
+            1,
+            w_now,
+            heating,
+            load,
+            compliance,
+            ym1,
+            ym2,
+            preload,
+            2,
+            True,
+            stacked,
+            edges,
+            r,
+            p,
+            mech,
+            c8,
+            s8,
         )
         qd = 0.0
         out_q[0, j] = q
@@ -309,6 +340,8 @@ def mechanics_sim(
                     r,
                     p,
                     mech,
+                    c8,
+                    s8,
                 )
                 q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
             out_q[k, j] = q

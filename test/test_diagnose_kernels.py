@@ -1,0 +1,61 @@
+"""The diagnosis' compiled mechanics replay against its own source run as Python (its loops interpreted, the
+inlined helpers called as functions: the structure of the path without numba), and a batch of scenarios
+against the same scenarios one by one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sma_wrist.core import jit
+from sma_wrist.diagnose import kernels
+
+K, DT = 200, 0.01
+
+
+def _inputs(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Muscle temperatures (K, n, 2) through heating and cooling (with a reversal, so the hysteresis
+    memory and the branch switches are exercised) and joint rows with different friction, pre-load and payload."""
+    t = np.arange(K) * DT
+    rng = np.random.default_rng(3)
+    T = np.empty((K, n, 2))
+    for j in range(n):
+        T[:, j, 0] = 45.0 + 30.0 * np.sin(2.0 * t + 0.3 * j) + rng.normal(0.0, 0.05, K)
+        T[:, j, 1] = 45.0 - 30.0 * np.sin(2.0 * t + 0.3 * j) + rng.normal(0.0, 0.05, K)
+    jrow = np.repeat(kernels.Constants().joint_row[None], n, axis=0)
+    jrow[:, 0] *= np.linspace(0.5, 2.0, n)  # coulomb
+    jrow[:, 3] += np.linspace(-0.2, 0.2, n)  # pre-load [mm]
+    jrow[:, 4] = np.linspace(0.1, 0.6, n)  # payload [kg]
+    return T, jrow
+
+
+def _replay(fn, T: np.ndarray, jrow: np.ndarray, substeps: int) -> tuple[np.ndarray, ...]:
+    c = kernels.Constants()
+    k, n = T.shape[:2]
+    q, qd, load = np.empty((k, n)), np.empty((k, n)), np.empty((k, n, 2))
+    fn(T, DT, substeps, jrow, c.stacked, c.edges, c.r, c.p, c.mem_c, c.mem_d, c.mech, c.joint, q, qd, load)
+    return q, qd, load
+
+
+@pytest.mark.parametrize('substeps', [1, 2])
+def test_compiled_mechanics_replay_agrees_with_its_plain_python_source(substeps):
+    T, jrow = _inputs(2)
+    compiled = _replay(kernels.mechanics_sim, T, jrow, substeps)
+    plain = _replay(kernels.mechanics_sim.py_func, T, jrow, substeps)
+    assert np.ptp(compiled[0]) > 0.05  # the joint moves (rad)
+    for a, b in zip(compiled, plain):
+        # same operations; only libm's and LLVM's tanh may differ in the last bit
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-12)
+    if not jit.AVAILABLE:
+        assert kernels.mechanics_sim.py_func is kernels.mechanics_sim
+
+
+def test_a_batch_of_scenarios_replays_each_scenario_bit_for_bit():
+    """The kernel's scratch (memory, loads, envelope coefficients) is reused across scenarios and sides:
+    nothing of one scenario may leak into the next."""
+    T, jrow = _inputs(4)
+    batch = _replay(kernels.mechanics_sim, T, jrow, 1)
+    for j in (3, 1):
+        alone = _replay(kernels.mechanics_sim, np.ascontiguousarray(T[:, j : j + 1]), jrow[j : j + 1], 1)
+        for a, b in zip(batch, alone):
+            assert np.array_equal(a[:, j], b[:, 0])
