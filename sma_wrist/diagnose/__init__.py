@@ -61,10 +61,11 @@ N_CONFIDENCE = 500
 #: practical floor: a cause is named only when some fitted parameter is at least this fraction of its catalogue
 #: typical effect (``typical`` in sma_wrist/core/plant/extensions.py) away from nominal. Below it the fit is a
 #: polish, not a fault: on the nominal simulated wrist under ROS 2 a window's fit said tem_gain_err = 0.002 (typical
-#: 0.1) with confidence 1.00, and 30 min of a nominal pid run through realistic sensors gave thermocouple offsets of
-#: 0.05 degC (typical 0.5) and a potentiometer offset of 1.7 mrad (typical 20). The smallest effects the tests
-#: inject are 0.6 x typical (sma_wrist/diagnose/testdata.py RANGES)
-MIN_SIZE_FRACTION = 0.25
+#: 0.1) with confidence 1.00; on 30 min of a nominal pid run through realistic sensors windows fitted thermocouple
+#: offsets of 0.05 degC (typical 0.5), a potentiometer offset of 1.7 mrad (typical 20) with a gain error of 0.011
+#: (0.37 of typical, confidence 0.96) and a pre-load error of 0.014 mm (0.28 of typical, confidence 0.9): a quarter
+#: was too low. The smallest effects the tests inject are 0.75 x typical (sma_wrist/diagnose/testdata.py RANGES)
+MIN_SIZE_FRACTION = 0.5
 #: ... and the fitted effect must move its main channel's held-out prediction by at least this fraction of the
 #: channel's noise level (RMS): an effect that only thousands of averaged samples show is beyond what a sensor of
 #: that noise can tell apart from the model
