@@ -83,7 +83,7 @@ def monitor_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
         type=float,
         default=0.5,
         metavar='P',
-        help='a discrepancy found with a lower confidence (0-1) counts as OK (default 0.5)',
+        help='a discrepancy found with this confidence (0-1) or lower counts as OK (default 0.5)',
     )
     ap.add_argument(
         '--sure-confidence',

@@ -90,6 +90,22 @@ def test_clean_run_is_no_false_alarm(open_loop, k):
     assert 'no significant discrepancy' in res.summary
 
 
+@pytest.mark.parametrize('gain_err', [0.002, 0.01])
+def test_a_fit_too_small_to_matter_is_no_discrepancy(gain_err):
+    """A noise-free run of a wrist whose TEMs are 0.2 % (1 %) off the model: the fit finds tem_gain_err to the last
+    digit and removes all the misfit, but a TEM within 1 % of its model is a nominal wrist. The rule named it
+    ("tem_gain_err = 0.002, confidence 1.00", as a window of the nominal simulated wrist under ROS 2 did)."""
+    truth = td.simulate('tem_mismatch', seed=3, duration_s=90.0, params={'tem_gain_err': gain_err})
+    run = td.run_from_truth(truth)
+    run.T, run.q = truth.T_true.copy(), truth.q_true.copy()  # no sensor noise: only the practical floor decides
+    res = diagnose_run(run, candidates=['tem_mismatch', 'temp_sensor_offset', 'payload_mismatch'])
+    assert not res.discrepancy and not res.unexplained and res.cause is None, res.summary
+    assert 'within its tolerance: tem_mismatch' in res.summary
+    tem = next(a for a in res.alternatives if a['cause'] == 'tem_mismatch')
+    assert tem['size'] < 1.0 and tem['score'] < -1.0  # far better than nominal, and far below what matters
+    assert tem['parameters']['tem_gain_err']['value'] == pytest.approx(gain_err, rel=0.1)
+
+
 def test_structure_outside_the_catalogue_is_reported_unexplained_not_named():
     truth = td.simulate('none', seed=5, duration_s=DURATION_S)
     run = td.run_from_truth(truth)

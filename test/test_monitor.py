@@ -257,6 +257,17 @@ def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clea
         if s.name == 'twin_monitor: model'
     ]
     levels = [lv for lv, _, _ in ours]
+    # the verdict is repeated at 1 Hz, OK included: a healthy wrist shows that it is being watched (it published
+    # nothing before its first WARN)
+    ok = [
+        (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, s.message)
+        for m in data['/diagnostics'][1]
+        for s in m.status
+        if s.name == 'twin_monitor: model' and (s.level[0] if isinstance(s.level, bytes) else int(s.level)) == 0
+    ]
+    t_ok = np.array([t for t, _ in ok])
+    assert np.sum(t_ok < t_ok[0] + ONSET_S - 2.0) >= 0.9 * (ONSET_S - 2.0), ok[:5]
+    assert ok[0][1].startswith('watching: first check at'), ok[0]
     warn = [(vals, msg) for lv, vals, msg in ours if lv == 1]
     assert warn and warn[0][0]['subsystem'] == 'sensor', ours
     assert float(warn[0][0]['since_s']) >= ONSET_S and 'temp_offset_1_C' in warn[0][0]
@@ -340,3 +351,31 @@ def test_the_twin_stepped_in_batches_is_the_twin_stepped_per_sample(clean_run):
     assert batched.angle_rad == pytest.approx(single.angle_rad, abs=1e-9)
     for k in (1, 700, n - 1):
         assert np.allclose(batched.thermal_state_at(float(clean_run.t[k])), states[k], atol=1e-9)
+
+
+def test_a_verdict_at_the_confidence_of_a_coin_toss_is_not_raised(monkeypatch):
+    """An ambiguous verdict's confidence is capped at 0.5 (two subsystems explain the window equally well): at the
+    default min_confidence 0.5 it is no alarm (a nominal 30 min pid run raised viscous_damping at exactly 0.5)."""
+    import types
+
+    import sma_wrist.diagnose as dg
+    from sma_wrist.monitor import diagnose_window
+
+    def fake(confidence):  # type: ignore[no-untyped-def]
+        return types.SimpleNamespace(
+            discrepancy=True,
+            cause='viscous_damping',
+            subsystem='joint',
+            confidence=confidence,
+            parameters={'viscous_Nms': {'value': 2.0}},
+            gain_pct=20.0,
+            summary='joint discrepancy',
+            correlates=[],
+        )
+
+    window = dg.Run(t=np.arange(10.0), dt=1.0, u=None, T=None, q=None, payload_kg=0.3)
+    levels = {}
+    for p in (0.5, 0.51):
+        monkeypatch.setattr(dg, 'diagnose_run', lambda *a, p=p, **k: fake(p))
+        levels[p] = diagnose_window(window, 60.0, MonitorConfig()).level
+    assert levels == {0.5: 'OK', 0.51: 'WARN'}

@@ -61,7 +61,7 @@ class MonitorConfig:
     settle_s: float = 20.0  # lead-in that settles the replays' memory [s]
     check_period_s: float = 15.0  # time between checks [s]
     persist_checks: int = 2  # consecutive agreeing checks before a verdict is raised or cleared
-    min_confidence: float = 0.5  # a discrepancy verdict below this confidence counts as OK
+    min_confidence: float = 0.5  # a discrepancy verdict at or below this confidence counts as OK
     sure_confidence: float = 0.95  # a named cause at or above this confidence is raised by one check
     candidates: tuple[str, ...] | None = None  # catalogue ids to try (None: all)
     hysteresis_file: str = ''
@@ -410,14 +410,14 @@ def diagnose_window(
         'check_confidence': res.confidence,
         'check_cpu_s': cpu,
     }
-    if res.confidence < c.min_confidence:
+    if res.confidence <= c.min_confidence:  # at 0.5 (the cap of an ambiguous verdict) a coin toss, no alarm
         return Verdict(
             t_s,
             'OK',
             None,
             None,
             1.0 - res.confidence,
-            summary=f'not raised (confidence {res.confidence:.2f} < {c.min_confidence:g}): {res.summary}',
+            summary=f'not raised (confidence {res.confidence:.2f} <= {c.min_confidence:g}): {res.summary}',
             **seen,
         )
     if known(res.cause, params, extension or {}):

@@ -95,8 +95,11 @@ def detection(
     delays = [r['delay_s'] for r in rows if r['detected']]
     return {
         'cases': len(rows),
+        'within_s': DETECT_WITHIN_S,
         'detected': ok,
         'rate': ok / max(len(rows), 1),
+        'first_subsystem_right': sum(r['first_subsystem'] == r['subsystem'] for r in rows),
+        'missed': [(r['source'], r['effect'], r['first_subsystem'], r['delay_s']) for r in rows if not r['detected']],
         'false_before_onset': sum(r['false_before_onset'] for r in rows),
         'delay_s_median': float(np.median(delays)) if delays else None,
         'delay_s_max': float(np.max(delays)) if delays else None,
@@ -288,7 +291,12 @@ def _nominal_case(args: tuple) -> dict[str, Any]:
 
         c0 = time.process_time()
         d = diagnose(bag)
-        out['diagnose'] = {'discrepancy': d.discrepancy, 'summary': d.summary, 'cpu_s': time.process_time() - c0}
+        out['diagnose'] = {
+            'discrepancy': d.discrepancy,
+            'confidence': d.confidence,
+            'summary': d.summary,
+            'cpu_s': time.process_time() - c0,
+        }
     return out
 
 
@@ -298,6 +306,15 @@ def false_alarms(runs: dict[str, Any], seed: int = 11, with_diagnose: bool = Tru
         rows = list(pool.map(_nominal_case, [(n, r, seed, d, with_diagnose) for n, r in runs.items()]))
     return {
         'runs': len(rows),
+        'per_controller': {
+            r['controller']: {
+                'minutes': r['duration_s'] / 60.0,
+                'checks': r['checks'],
+                'false_alarm_episodes': len(r['episodes']),
+                'diagnose_whole_bag': r.get('diagnose', {}).get('summary'),
+            }
+            for r in rows
+        },
         'monitor_false_alarms': sum(len(r['episodes']) for r in rows),
         'diagnose_false_alarms': sum(bool(r.get('diagnose', {}).get('discrepancy')) for r in rows),
         'hours': sum(r['duration_s'] for r in rows) / 3600.0,

@@ -267,6 +267,21 @@ class WristNode(Node):
         """Stamp of /diagnostics: the node clock; a node that owns /clock overrides it with that time base."""
         return self.get_clock().now().to_msg()
 
+    def publish_status(self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None) -> Any:
+        """Publish one DiagnosticStatus ``<node>: key`` on /diagnostics now (no log, no change test; a periodic
+        status calls this directly); returns its stamp."""
+        status = DiagnosticStatus(
+            level=level,
+            name=f'{self.get_name()}: {key}',
+            message=message,
+            hardware_id='sma_wrist',
+            values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()],
+        )
+        arr = DiagnosticArray(status=[status])
+        arr.header.stamp = stamp = self.diagnostics_stamp()
+        self._diag_pub.publish(arr)
+        return stamp
+
     def diagnose(
         self, key: str, level: bytes, message: str, values: Mapping[str, Any] | None = None, *, routine: bool = False
     ) -> None:
@@ -284,16 +299,7 @@ class WristNode(Node):
             self._diag_last[key] = (level, message)
             return
         self._diag_last[key] = (level, message)
-        status = DiagnosticStatus(
-            level=level,
-            name=f'{self.get_name()}: {key}',
-            message=message,
-            hardware_id='sma_wrist',
-            values=[KeyValue(key=k, value=str(v)) for k, v in (values or {}).items()],
-        )
-        arr = DiagnosticArray(status=[status])
-        arr.header.stamp = stamp = self.diagnostics_stamp()
-        self._diag_pub.publish(arr)
+        stamp = self.publish_status(key, level, message, values)
         # the log follows /diagnostics: an error's onset and its end are always logged, and so is the end of any
         # problem whose onset was logged (a TEM off for 0.23 s logged its WARN, and its "commands fresh" fell in the
         # throttle: the console read as if it stayed off); any other change (a command touching its limit every few

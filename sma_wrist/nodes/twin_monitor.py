@@ -38,6 +38,8 @@ from sma_wrist.nodes.common import HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, Param, 
 
 _LEVEL = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN, 'ERROR': DiagnosticStatus.ERROR}
 _DEFAULTS = MonitorConfig()
+#: period of the repeated verdict on /diagnostics [s]
+HEARTBEAT_S = 1.0
 
 
 class TwinMonitor(WristNode):
@@ -71,7 +73,7 @@ class TwinMonitor(WristNode):
         Param(
             'min_confidence',
             _DEFAULTS.min_confidence,
-            'a discrepancy found with a lower confidence counts as OK',
+            'a discrepancy found with this confidence or lower counts as OK',
             '1',
             (0.0, 1.0),
         ),
@@ -193,8 +195,10 @@ class TwinMonitor(WristNode):
                 '/wrist/twin/residual/angle',
             )
         }
-        # a result that arrives while the wrist publishes nothing is still published
-        self.timer = self.create_timer(1.0, self._collect)
+        # a result that arrives while the wrist publishes nothing is still published, and the verdict is repeated
+        # every second (diagnostic_updater's 1 Hz convention): a healthy run shows that it is being watched
+        self._status: tuple[Any, str, dict[str, Any]] | None = None
+        self.timer = self.create_timer(HEARTBEAT_S, self._heartbeat)
         self.get_logger().info(
             f'twin_monitor: {self.monitor.model.description}; a check of {p["settle_s"]:g} + '
             f'{p["window_s"]:g} s every {p["check_period_s"]:g} s in a worker {p["worker"]}'
@@ -339,7 +343,21 @@ class TwinMonitor(WristNode):
             'skipped_checks': self.skipped_checks,
             **{k: f'{x:.6g}' for k, x in v.parameters.items()},
         }
+        self._status = (_LEVEL[v.level], text, values)
         self.diagnose('model', _LEVEL[v.level], text, values)
+
+    def _heartbeat(self) -> None:
+        """Collect a finished check, then repeat the current verdict on /diagnostics (OK with what is awaited
+        before the first check)."""
+        self._collect()
+        if self._status is None:
+            with self._lock:
+                t0, span = self.monitor.t_first, self.monitor.span_s
+            first = 'no measurement yet' if t0 is None else f'first check at {t0 + span:.1f} s'
+            level, text, values = DiagnosticStatus.OK, f'watching: {first}', {'skipped_checks': self.skipped_checks}
+        else:
+            level, text, values = self._status
+        self.publish_status('model', level, text, values)
 
     def _publish_twin(self, header: Any) -> None:
         tw = self.monitor.twin
