@@ -59,7 +59,7 @@ SHIFT_RANGE_C = 15.0  # the wire shifts searched [degC]: the emulator's range
 #: noise is 3 mrad; 0.3 rad is under half the stroke of a wire transforming at the window's top)
 ONSET_RAD = (0.1, 0.2, 0.3)
 #: the onsets of the relay's second half-cycle [degC RMS] within which the built-in wire model describes the wire,
-#: so that its stress dependence reads the payload (measured: <= 0.07 on SD-GPI wires, >= 2.2 on the phase-fraction
+#: so that its stress dependence reads the payload (measured: <= 0.3 on SD-GPI wires, >= 2.2 on the phase-fraction
 #: wrist)
 ONSET_TOLERANCE_C = 1.0
 #: the phase whose heating of muscle 1 (muscle 2 cooling from rest, untransformed) places the wire's transformation
