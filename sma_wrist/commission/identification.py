@@ -62,6 +62,8 @@ ONSET_RAD = (0.1, 0.2, 0.3)
 #: so that its stress dependence reads the payload (measured: <= 0.3 on SD-GPI wires, >= 2.2 on the phase-fraction
 #: wrist)
 ONSET_TOLERANCE_C = 1.0
+#: the whole trace may move the onset's shift this much [degC] (the thermocouples' accuracy) where it reads the payload
+REFINE_TOLERANCE_C = 1.0
 #: the phase whose heating of muscle 1 (muscle 2 cooling from rest, untransformed) places the wire's transformation
 FIRST_HEATING = schedule()[0].label
 #: the layers' drive gains differ by more than this: the one heat balance of thermal.yaml averages two TEMs
@@ -362,35 +364,56 @@ def identify_mechanics(
     row[i_pay], row[fx.INDEX['temp_offset_C']] = payload - prior_kg, shift
     mismatch = second_onset_mismatch(builtin_model, row, grid, second['t_start_s'], second['t_end_s'])
     payload_found = payload_kg is None and mismatch <= ONSET_TOLERANCE_C
+
+    def fit_joint(shift: float, payload: float, free: bool) -> tuple[Any, np.ndarray, float, float, Any, Any]:
+        """(fit, its row, shift, payload, wire, replay model) of friction and pre-load by the replay of the whole
+        trace; with ``free`` the shift and the payload refined with them (the onset places shift and payload along
+        a line, a payload 0.1 kg heavier reading as a wire ~1.4 degC colder; the whole trace finds the point)."""
+        params = ('coulomb_Nm', 'preload_err_mm') + (('temp_offset_C', 'payload_err_kg') if free else ())
+        wire = shifted_wire(base, shift)
+        model = fx.ExtendedModel(dataclasses.replace(run, payload_kg=payload), PlantParams(dt=dt_step, hysteresis=wire))
+        eff = fx.Effect('commission', 'joint recalibration', 'joint', params, 'friction, pre-load (shift, payload)')
+        fitted = Evaluator(model, train_until=i_held).fit(eff, max_nfev=15)
+        row = fitted.row.copy()
+        if free:
+            shift = round(shift + float(row[fx.INDEX['temp_offset_C']]), 1)  # finer than the thermocouples is noise
+            payload += float(row[i_pay])
+            row[fx.INDEX['temp_offset_C']] = row[i_pay] = 0.0
+            wire = shifted_wire(base, shift)
+            model = fx.ExtendedModel(
+                dataclasses.replace(run, payload_kg=payload), PlantParams(dt=dt_step, hysteresis=wire)
+            )
+        return fitted, row, shift, payload, wire, model
+
+    dt_step = MECH_STEP_S
+    why_not = (
+        f'where the angle moves as muscle 2 heats is {mismatch:.1f} degC off the built-in wire model at its best fit'
+    )
+    if payload_found:
+        fitted, row, shift_r, payload_r, wire, model = fit_joint(shift, payload, True)
+        # the whole trace moving the shift beyond the thermocouples' accuracy from the onset's is the fit making up
+        # for the wire's structure again (on the phase-fraction wrist: -1.5 to -7 degC), not a reading of the payload
+        if abs(shift_r - shift) <= REFINE_TOLERANCE_C:
+            shift, payload = shift_r, payload_r
+        else:
+            payload_found = False
+            why_not = (
+                f"the whole angle trace moves the onset's wire shift {shift:+.1f} degC to {shift_r:+.1f} degC to "
+                'fit it: the built-in wire model does not describe this wire'
+            )
     if payload_kg is None and not payload_found:
         # the payload is read through the built-in wire's stress dependence, and the built-in wire does not describe
-        # where this one transforms back: the payload is not determined (the trace's best was a structure's
-        # compensation: 0.06-0.8 kg for 0.3-0.5 kg on the phase-fraction wrist), the prior's shift is taken
+        # this one: the payload is not determined (the trace's best was a structure's compensation: 0.06-0.8 kg for
+        # 0.3-0.5 kg on the phase-fraction wrist), the prior's shift is taken
         pays, shifts, _ = on_curve(np.array([prior_kg]))
         if pays.size:
             shift, payload = float(shifts[0]), prior_kg
         warnings.append(
-            f'joint: the payload is not determined by the excitation (where the angle moves as muscle 2 heats is '
-            f'{mismatch:.1f} degC off the built-in wire model at its best fit): {prior_kg:g} kg is assumed, give '
+            f'joint: the payload is not determined by the excitation ({why_not}): {prior_kg:g} kg is assumed, give '
             '--payload-kg'
         )
-    # friction and pre-load by the replay of the whole trace; where the built-in wire model describes the wire (the
-    # payload read), the shift and the payload are refined with them: the onset places the shift and payload along
-    # a line (a payload 0.1 kg heavier reads as a wire ~1.4 degC colder), the whole trace finds the point on it
-    params = ('coulomb_Nm', 'preload_err_mm') + (('temp_offset_C', 'payload_err_kg') if payload_found else ())
-    wire = shifted_wire(base, shift)
-    run = dataclasses.replace(run, payload_kg=payload)
-    model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=wire))
-    eff = fx.Effect('commission', 'joint recalibration', 'joint', params, 'friction, pre-load (shift, payload)')
-    fitted = Evaluator(model, train_until=i_held).fit(eff, max_nfev=15)
-    row = fitted.row.copy()
-    if payload_found:
-        shift = round(shift + float(row[fx.INDEX['temp_offset_C']]), 1)  # finer than the thermocouples is noise
-        payload += float(row[i_pay])
-        row[fx.INDEX['temp_offset_C']] = row[i_pay] = 0.0
-        wire = shifted_wire(base, shift)
-        run = dataclasses.replace(run, payload_kg=payload)
-        model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=wire))
+    if not payload_found:
+        fitted, row, shift, payload, wire, model = fit_joint(shift, payload, False)
     wire_only = fx.NOMINAL.copy()
     wire_only[i_pay] = prior_kg - payload  # the shifted wire with the built-in joint
     rows = np.stack([wire_only, row])
@@ -446,7 +469,7 @@ def identify_mechanics(
     }
     on_bound = [
         f'{k} = {fitted.row[fx.INDEX[k]]:.3g}'
-        for k in params
+        for k in fitted.values()
         if k != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
         and (
             fitted.row[fx.INDEX[k]] <= fx.LOWER[fx.INDEX[k]] + 1e-6
