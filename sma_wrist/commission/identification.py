@@ -22,9 +22,9 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
 * **joint**: the payload moves the onset through the SD-GPI's stress dependence, so the onset gives one shift per
   payload; the payload is the one whose shift replays the fit phases best, kept only if the built-in wire model
   then also reproduces the relay's second half-cycle (muscle 2 heated while muscle 1 transforms back, within
-  :data:`ONSET_TOLERANCE_C`) and the whole trace keeps the onset's shift (within :data:`REFINE_TOLERANCE_C`): a wire the SD-GPI does not describe there does not read its payload through the
-  SD-GPI's stress dependence, and the payload is then not identified (the default or ``--payload-kg`` assumed,
-  with a warning). Coulomb friction and pre-load elongation are then fitted by the diagnosis' fit
+  :data:`ONSET_TOLERANCE_C`) and the whole trace keeps the onset's shift (within :data:`REFINE_TOLERANCE_C`): a
+  wire the SD-GPI does not describe there does not read its payload through the SD-GPI's stress dependence, and
+  the payload is then not identified (the default or ``--payload-kg`` assumed, with a warning). Coulomb friction and pre-load elongation are then fitted by the diagnosis' fit
   (:class:`sma_wrist.diagnose.fit.Evaluator`, trained on the fit phases); a payload given on the command line is
   taken as known. Held out: RMS angle error [mrad] of the replay from the measured temperatures.
 
