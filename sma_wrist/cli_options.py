@@ -205,6 +205,14 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
         metavar='K',
         help="TEMs K times as strong as the model's (0.5-1.5; < 1: weaker), as --transition-shift-C",
     )
+    # one TEM weaker than the other (a poor thermal contact, a supply lead's drop): --tem-gain-scale scales both
+    ap.add_argument(
+        '--tem-drive-scale',
+        default=None,
+        metavar='S1,S2',
+        help="TEM 1 and TEM 2 get these fractions of their driver's voltage (each in (0, 2]; e.g. 0.8,1: "
+        'TEM 1 20 %% weaker); default 1,1',
+    )
     # wiring faults of a wrist as built: what `sma-wrist commission` finds (doc/howto/commission.md)
     ap.add_argument(
         '--swap-tem-polarity',

@@ -69,6 +69,9 @@ def test_identification_recovers_the_shift_payload_and_weaker_tem(off_model):
     p = ident.identified
     assert p['hysteresis']['parameters']['transition_shift_C'] == pytest.approx(8.0, abs=1.0)
     assert p['joint']['parameters']['payload_kg'] == pytest.approx(0.5, abs=0.06)
+    # the SD-GPI wire: the built-in model reproduces the relay's second half too, the payload is read
+    assert p['joint']['parameters']['payload_identified'] is True
+    assert p['joint']['parameters']['second_onset_mismatch_C'] < 0.5
     assert p['thermal']['parameters']['tem1_gain_relative_to_tem2'] == pytest.approx(0.8, abs=0.03)
     assert any('TEM 1 pumps' in w for w in ident.warnings)
 
@@ -85,8 +88,10 @@ def test_the_commissioned_model_beats_the_built_in_one_on_held_out_data(off_mode
     assert nodes['tem_controller']['thermal_file'].endswith('thermal.yaml')
 
 
-def test_on_the_phase_fraction_wrist_the_weaker_tem_is_found_and_no_misfit_handed_over(tmp_path):
-    bring, _ = brought_up(plant='phase_fraction', tem_drive_scale=(0.8, 1.0), payload_kg=0.5)
+def test_on_the_phase_fraction_wrist_the_shift_is_found_and_the_undetermined_payload_is_said(tmp_path):
+    bring, _ = brought_up(
+        plant='phase_fraction', scenario={'transition_shift_C': 8.0}, tem_drive_scale=(0.8, 1.0), payload_kg=0.5
+    )
     excite(bring, BUDGET_S)
     ident = identify_wrist(bring, tmp_path)
     th = ident.identified['thermal']
@@ -94,16 +99,21 @@ def test_on_the_phase_fraction_wrist_the_weaker_tem_is_found_and_no_misfit_hande
     # back-voltage is not scaled with the drive): measured 0.85 after a bring-up, 0.88 here
     assert 0.75 < th['parameters']['tem1_gain_relative_to_tem2'] < 0.9
     assert th['heldout']['commissioned'] < 0.5 * th['heldout']['builtin']
-    # the SD-GPI and joint model do not describe this wire: whatever the fit found is handed over only if it predicts
-    # the held-out cycle better with every value inside its range; else the built-in wire and joint stand, said so
+    # the wire 8 degC hotter: found from where the angle starts to move as muscle 1 heats (the nominal wire of this
+    # wrist is measured -1.4 degC from the built-in one: 6.9 here); the replay of the whole trace, fitted with the
+    # joint, had it -10 degC and the payload at its bound
+    hyst = ident.identified['hysteresis']
+    assert 5.5 <= hyst['parameters']['transition_shift_C'] <= 10.0
+    assert hyst['heldout']['commissioned'] < hyst['heldout']['builtin']
+    # the SD-GPI does not describe where this wire transforms back, so its stress dependence cannot read the payload:
+    # not identified, said so, the default assumed (not a compensating value handed over as a payload)
     joint = ident.identified['joint']
+    assert joint['parameters']['payload_identified'] is False
+    assert joint['parameters']['second_onset_mismatch_C'] > 1.0
+    assert ident.node_params['plant_sim']['payload_kg'] == pytest.approx(0.3)
+    assert any('the payload is not determined' in w and '--payload-kg' in w for w in ident.warnings)
     if joint['handed_over']:
         assert joint['heldout']['commissioned'] < joint['heldout']['builtin']
-        assert not any('at the end of the range' in w for w in ident.warnings)
-    else:
-        assert ident.node_params['plant_sim']['preload_elongation_mm'] == pytest.approx(1.98)
-        assert ident.node_params['plant_sim']['payload_kg'] == pytest.approx(0.3)
-        assert any('the built-in wire, pre-load and friction are handed over' in w for w in ident.warnings)
 
 
 def test_commission_on_the_nominal_device_identifies_values_near_the_defaults(tmp_path):

@@ -628,6 +628,9 @@ def test_emulator_port_never_replaces_a_users_file(tmp_path, capsys):
         (['--thermocouple-rate-hz', '-10'], '--thermocouple-rate-hz'),
         (['--thermocouple-rate-hz', '2000'], '--thermocouple-rate-hz 2000 is above the sample rate'),
         (['--thermocouple-resolution-C', '0.25'], '--thermocouple-resolution-C models a converter chip'),
+        (['--tem-drive-scale', '0.8'], "--tem-drive-scale '0.8': two fractions"),
+        (['--tem-drive-scale', '0,1'], "--tem-drive-scale '0,1': two fractions"),
+        (['--tem-drive-scale', 'nan,1'], "--tem-drive-scale 'nan,1': two fractions"),
     ],
 )
 def test_emulator_refuses_a_fault_or_noise_option_it_cannot_be(tmp_path, capsys, args, named):
@@ -732,6 +735,13 @@ def test_the_emulated_device_can_hold_the_wrist_a_params_file_describes(tmp_path
     assert main(['emulate-device', '--port', str(link), '--duration', '0.1', '--params-file', str(f)]) == 2
     out = capsys.readouterr().out
     assert out.startswith('error: ') and 'preload_elongation_mm' in out and not os.path.lexists(link)
+
+
+def test_the_emulator_drives_one_tem_weaker_from_the_command_line():
+    """--tem-drive-scale S1,S2: each TEM gets its fraction of the driver's voltage (one TEM weaker than the other),
+    as EmulatorConfig.tem_drive_scale; without it both get all of it."""
+    assert config_from_args(argparse_for(['--tem-drive-scale', '0.8,1'])).tem_drive_scale == (0.8, 1.0)
+    assert config_from_args(argparse_for([])).tem_drive_scale == (1.0, 1.0)
 
 
 def argparse_for(argv):

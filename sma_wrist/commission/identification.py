@@ -10,13 +10,21 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
   drive gain of TEM 1 relative to TEM 2 (TEM 1's data under TEM 2's heat balance with input_per_volt scaled)
   says whether one TEM is weaker. Held out: RMS muscle-face error [degC] of the free-run prediction.
 * **hysteresis**: the built-in SD-GPI shifted in temperature (:func:`sma_wrist.identify.wrist.shifted_wire`). The
-  shift is the temperature offset of the diagnosis' mechanics replay (:class:`sma_wrist.diagnose.effects.
-  ExtendedModel`: the angle predicted from the measured temperatures, T_wire = T_measured - offset, which for the
-  SD-GPI is exactly the shifted wire), fitted with the joint below. The stroke and the stress dependence stay the
-  built-in's: without measured stresses the excitation spans only the loads pre-load and payload give, and a
-  stroke scale of 0.7-1.0 changed the phase-fraction wrist's held-out error by under 4 %. Written as
-  ``hysteresis.yaml``.
-* **joint**: payload, Coulomb friction and pre-load elongation, fitted with the shift by the diagnosis' fit
+  shift is read where the angle starts to move as the relay's first half-cycle heats muscle 1 from rest
+  (:func:`wire_shift_from_onset`): the muscle temperatures at which the angle has moved 0.1, 0.2 and 0.3 rad,
+  measured and in the built-in model's replay of the same measured temperatures (the diagnosis'
+  :class:`sma_wrist.diagnose.effects.ExtendedModel`, whose temperature offset T_wire = T_measured - offset is exactly
+  the shifted SD-GPI). Where a transformation starts does not depend on the stroke, stiffness or branch shape, in
+  which wire models differ; a fit of the whole angle trace made up for those with the shift (on the
+  phase-fraction wrist -10 degC for a wire 8 degC hotter). The stroke and the stress dependence stay the built-in's:
+  without measured stresses the excitation spans only the loads pre-load and payload give, and a stroke scale of
+  0.7-1.0 changed the phase-fraction wrist's held-out error by under 4 %. Written as ``hysteresis.yaml``.
+* **joint**: the payload moves the onset through the SD-GPI's stress dependence, so the onset gives one shift per
+  payload; the payload is the one whose shift replays the fit phases best, kept only if the built-in wire model
+  then also reproduces the relay's second half-cycle (muscle 2 heated while muscle 1 transforms back, within
+  :data:`ONSET_TOLERANCE_C`) and the whole trace keeps the onset's shift (within :data:`REFINE_TOLERANCE_C`): a
+  wire the SD-GPI does not describe there does not read its payload through the SD-GPI's stress dependence, and
+  the payload is then not identified (the default or ``--payload-kg`` assumed, with a warning). Coulomb friction and pre-load elongation are then fitted by the diagnosis' fit
   (:class:`sma_wrist.diagnose.fit.Evaluator`, trained on the fit phases); a payload given on the command line is
   taken as known. Held out: RMS angle error [mrad] of the replay from the measured temperatures.
 
@@ -37,6 +45,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from sma_wrist.commission.bringup import BringUp
+from sma_wrist.commission.excite import schedule
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal import identification as ti
@@ -45,7 +54,18 @@ THERMAL_DT_S = 0.25  # grid of the heat-balance records [s]: 48 samples a period
 MECH_DT_S = 0.05  # grid of the angle replay [s]
 MECH_STEP_S = 0.01  # the replay's plant step [s]
 MIN_SWEEP_RAD = 0.05  # the joint must move at least this much in the excitation for the wire and joint [rad]
-SHIFT_BOUND_C = 10.0  # the diagnosis' temperature-offset bound: a larger shift is re-centred once
+SHIFT_RANGE_C = 15.0  # the wire shifts searched [degC]: the emulator's range
+#: the angle's moves [rad] whose muscle temperatures place the start of the transformation (the potentiometer's
+#: noise is 3 mrad; 0.3 rad is under half the stroke of a wire transforming at the window's top)
+ONSET_RAD = (0.1, 0.2, 0.3)
+#: the onsets of the relay's second half-cycle [degC RMS] within which the built-in wire model describes the wire,
+#: so that its stress dependence reads the payload (measured: <= 0.3 on SD-GPI wires, >= 2.2 on the phase-fraction
+#: wrist)
+ONSET_TOLERANCE_C = 1.0
+#: the whole trace may move the onset's shift this much [degC] (the thermocouples' accuracy) where it reads the payload
+REFINE_TOLERANCE_C = 1.0
+#: the phase whose heating of muscle 1 (muscle 2 cooling from rest, untransformed) places the wire's transformation
+FIRST_HEATING = schedule()[0].label
 #: the layers' drive gains differ by more than this: the one heat balance of thermal.yaml averages two TEMs
 LAYER_GAIN_TOLERANCE = 0.1
 
@@ -196,8 +216,86 @@ def identify_thermal_part(
 
 
 # ------------------------------------------------------------------------------------------------ wire, joint
+def onset_temperatures(T: np.ndarray, q: np.ndarray, sign: float) -> np.ndarray:
+    """The temperatures ``T`` [degC] at which the angle ``q`` [rad] has first moved :data:`ONSET_RAD` from its
+    first value in the direction ``sign`` (NaN for a distance it never moves)."""
+    moved = sign * (q - q[0])
+    return np.array([T[np.argmax(moved >= d)] if np.any(moved >= d) else np.nan for d in ONSET_RAD])
+
+
+def wire_shift_from_onset(model: Any, rows: np.ndarray, grid: np.ndarray, a: float, b: float) -> np.ndarray:
+    """The wire's transition shift [degC] under each parameter row of ``rows`` (its payload) from the heating of
+    muscle 1 over [a, b) of ``grid`` (the first relay half-cycle, muscle 2 cooled from rest: only muscle 1's wire
+    transforms); NaN if the angle does not move.
+
+    The feature is the muscle 1 temperature at which the angle has moved :data:`ONSET_RAD` (the start of the
+    reverse transformation, A_s and a little beyond), measured and in the built-in model's replay of the same
+    measured temperatures (``model``, an :class:`~sma_wrist.diagnose.effects.ExtendedModel`, under the row with its
+    temperature offset on a grid); the shift is the offset whose onsets match. Unlike the whole angle trace, where the
+    transformation starts does not depend on the stroke, the stiffness or the shape of the branch, which differ
+    between wire models. The load moves the transformation (the SD-GPI's stress dependence): hence one shift per
+    payload.
+    """
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose.data import Run
+
+    run = model.run
+    idx = np.nonzero((grid >= a) & (grid < b))[0]
+    i0, i1 = int(idx[0]), int(idx[-1]) + 1
+    sub = Run(t=run.t[:i1], dt=run.dt, u=None, T=run.T[:i1], q=run.q[:i1], payload_kg=run.payload_kg)
+    replay = fx.ExtendedModel(sub, model.consts.params)
+    offsets = np.arange(-SHIFT_RANGE_C, SHIFT_RANGE_C + 0.5, 1.0)
+    R = np.repeat(rows, offsets.size, axis=0)
+    R[:, fx.INDEX['temp_offset_C']] = np.tile(offsets, rows.shape[0])
+    P = replay.angle_measured(R, None, 'measured')[i0:]
+    T1, q1 = run.T[i0:i1, 0], run.q[i0:i1]
+    sign = float(np.sign(np.median(P[-1] - P[0]))) or 1.0  # the way heating muscle 1 turns the joint
+    measured = onset_temperatures(T1, q1, sign)
+    out = np.full(rows.shape[0], np.nan)
+    ok = ~np.isnan(measured)
+    if not ok.any():
+        return out
+    for r in range(rows.shape[0]):
+        Pr = P[:, r * offsets.size : (r + 1) * offsets.size]
+        pred = np.array([onset_temperatures(T1, Pr[:, k], sign)[ok] for k in range(offsets.size)])
+        # a distance the model does not reach at an offset counts as far off (the transformation beyond the window)
+        d = np.where(np.isnan(pred), 2.0 * SHIFT_RANGE_C, pred - measured[ok])
+        k = int(np.argmin(np.sum(d**2, axis=1)))
+        # the onsets move about one for one with the offset: the grid's best refined by its mean remaining difference
+        rest = float(np.mean(d[k])) if np.all(np.isfinite(pred[k])) else 0.0
+        out[r] = round(float(np.clip(offsets[k] - rest, -SHIFT_RANGE_C, SHIFT_RANGE_C)), 1)
+    return out
+
+
+def second_onset_mismatch(model: Any, row: np.ndarray, grid: np.ndarray, a: float, b: float) -> float:
+    """RMS difference [degC] between the muscle 2 temperatures at which the angle has moved :data:`ONSET_RAD` over
+    [a, b) of ``grid`` (the relay's second half-cycle: muscle 2 heated while muscle 1 cools and transforms back),
+    measured and in ``model``'s replay under ``row``; inf where one moves that far and the other does not."""
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose.data import Run
+
+    run = model.run
+    idx = np.nonzero((grid >= a) & (grid < b))[0]
+    i0, i1 = int(idx[0]), int(idx[-1]) + 1
+    sub = Run(t=run.t[:i1], dt=run.dt, u=None, T=run.T[:i1], q=run.q[:i1], payload_kg=run.payload_kg)
+    p = fx.ExtendedModel(sub, model.consts.params).angle_measured(row[None], None, 'measured')[i0:, 0]
+    sign = float(np.sign(p[-1] - p[0])) or -1.0
+    T2 = run.T[i0:i1, 1]
+    m, pr = onset_temperatures(T2, run.q[i0:i1], sign), onset_temperatures(T2, p, sign)
+    if np.any(np.isnan(m) != np.isnan(pr)):
+        return math.inf
+    ok = ~np.isnan(m)
+    return float(np.sqrt(np.mean((m[ok] - pr[ok]) ** 2))) if ok.any() else math.inf
+
+
 def identify_mechanics(
-    bring: BringUp, out: Path, payload_kg: float | None, t_fit: float, t_held: float, t_end: float
+    bring: BringUp,
+    out: Path,
+    payload_kg: float | None,
+    phases: list[dict[str, Any]],
+    t_fit: float,
+    t_held: float,
+    t_end: float,
 ) -> tuple[dict[str, Any], dict[str, Any], dict[str, Any], list[str]]:
     """(hysteresis part, joint part, values for the node params, warnings)."""
     from sma_wrist.core.hysteresis.default_params import default_sdgpi
@@ -226,27 +324,99 @@ def identify_mechanics(
     base = default_sdgpi()
     builtin_model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=base))
     pred = builtin_model.angle_measured(fx.NOMINAL[None], None, 'measured')[:, 0]
-    # the wire's shift is the mechanics replay's temperature offset (T_wire = T_measured - offset: exactly the SD-GPI
-    # shifted by it, shifted_wire), fitted with the joint by the diagnosis' fit on the fit phases; beyond the
-    # offset's bound the wire is re-centred once and fitted again
-    params = ('temp_offset_C', 'coulomb_Nm', 'preload_err_mm') + (('payload_err_kg',) if payload_kg is None else ())
-    eff = fx.Effect('commission', 'wire and joint recalibration', 'joint', params, 'shift, payload, friction, pre-load')
-    shift0 = 0.0
-    for _ in range(2):
-        wire = shifted_wire(base, shift0)
-        model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=wire))
-        ev = Evaluator(model, train_until=i_held)
-        fitted = ev.fit(eff, max_nfev=15)
-        off = float(fitted.row[fx.INDEX['temp_offset_C']])
-        if abs(off) < 0.8 * SHIFT_BOUND_C:
-            break
-        shift0 += off
-    shift = round(shift0 + off, 1)  # finer than the thermocouples' accuracy is noise
-    wire = shifted_wire(base, shift)
-    model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=wire))
-    row = fitted.row.copy()
-    row[fx.INDEX['temp_offset_C']] = 0.0
-    rows = np.stack([fx.NOMINAL, row])
+    # the wire's shift from where the angle starts to move as the first relay half-cycle heats muscle 1
+    # (wire_shift_from_onset), one per payload; the payload the one whose shift replays the fit phases best (the
+    # payload and the shift trade against each other in the onset, the whole trace tells them apart); then friction
+    # and pre-load by the diagnosis' replay fit with that wire and payload. One fit of shift and joint together made
+    # up, on a wrist the SD-GPI does not describe, for the structure's mismatch with wrong values (the shift the
+    # wrong way, the payload at its bound)
+    first = next((p for p in phases if p['part'] == 'fit' and p['label'] == FIRST_HEATING), phases[0])
+    i_pay = fx.INDEX['payload_err_kg']
+    lo_kg = max(0.0, prior_kg + fx.LOWER[i_pay])  # a payload is >= 0
+    hi_kg = prior_kg + fx.UPPER[i_pay]
+
+    def on_curve(payloads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(payloads, their shifts, RMS angle error [rad] of the fit phases' replay) for the candidate payloads."""
+        rows = np.repeat(fx.NOMINAL[None], payloads.size, axis=0)
+        rows[:, i_pay] = payloads - prior_kg
+        shifts = wire_shift_from_onset(builtin_model, rows, grid, first['t_start_s'], first['t_end_s'])
+        keep = np.isfinite(shifts)
+        rows[:, fx.INDEX['temp_offset_C']] = np.nan_to_num(shifts)
+        P = builtin_model.angle_measured(rows[keep], None, 'measured')
+        return payloads[keep], shifts[keep], np.sqrt(np.mean((P[:i_held] - qg[:i_held, None]) ** 2, axis=0))
+
+    if payload_kg is None:
+        pays, shifts, err = on_curve(np.arange(lo_kg, hi_kg + 1e-9, 0.1))
+        if pays.size:  # refined around the best of the coarse grid
+            best = pays[int(np.argmin(err))]
+            pays, shifts, err = on_curve(np.clip(np.arange(best - 0.08, best + 0.081, 0.02), lo_kg, hi_kg))
+    else:
+        pays, shifts, err = on_curve(np.array([payload_kg]))
+    if not pays.size:
+        raise IdentificationError(
+            f'the joint did not move {ONSET_RAD[0]:g} rad while muscle 1 heated to {T[:, 0].max():.0f} degC: the '
+            'wire transforms beyond the TEMs window, or does not pull the joint; it cannot be identified'
+        )
+    k = int(np.argmin(err))
+    shift, payload = float(shifts[k]), float(pays[k])
+    second = phases[phases.index(first) + 1]
+    row = fx.NOMINAL.copy()
+    row[i_pay], row[fx.INDEX['temp_offset_C']] = payload - prior_kg, shift
+    mismatch = second_onset_mismatch(builtin_model, row, grid, second['t_start_s'], second['t_end_s'])
+    payload_found = payload_kg is None and mismatch <= ONSET_TOLERANCE_C
+
+    def fit_joint(shift: float, payload: float, free: bool) -> tuple[Any, np.ndarray, float, float, Any, Any]:
+        """(fit, its row, shift, payload, wire, replay model) of friction and pre-load by the replay of the whole
+        trace; with ``free`` the shift and the payload refined with them (the onset places shift and payload along
+        a line, a payload 0.1 kg heavier reading as a wire ~1.4 degC colder; the whole trace finds the point)."""
+        params = ('coulomb_Nm', 'preload_err_mm') + (('temp_offset_C', 'payload_err_kg') if free else ())
+        wire = shifted_wire(base, shift)
+        model = fx.ExtendedModel(dataclasses.replace(run, payload_kg=payload), PlantParams(dt=dt_step, hysteresis=wire))
+        eff = fx.Effect('commission', 'joint recalibration', 'joint', params, 'friction, pre-load (shift, payload)')
+        fitted = Evaluator(model, train_until=i_held).fit(eff, max_nfev=15)
+        row = fitted.row.copy()
+        if free:
+            shift = round(shift + float(row[fx.INDEX['temp_offset_C']]), 1)  # finer than the thermocouples is noise
+            payload += float(row[i_pay])
+            row[fx.INDEX['temp_offset_C']] = row[i_pay] = 0.0
+            wire = shifted_wire(base, shift)
+            model = fx.ExtendedModel(
+                dataclasses.replace(run, payload_kg=payload), PlantParams(dt=dt_step, hysteresis=wire)
+            )
+        return fitted, row, shift, payload, wire, model
+
+    dt_step = MECH_STEP_S
+    why_not = (
+        f'where the angle moves as muscle 2 heats is {mismatch:.1f} degC off the built-in wire model at its best fit'
+    )
+    if payload_found:
+        fitted, row, shift_r, payload_r, wire, model = fit_joint(shift, payload, True)
+        # the whole trace moving the shift beyond the thermocouples' accuracy from the onset's is the fit making up
+        # for the wire's structure again (on the phase-fraction wrist: -1.5 to -7 degC), not a reading of the payload
+        if abs(shift_r - shift) <= REFINE_TOLERANCE_C:
+            shift, payload = shift_r, payload_r
+        else:
+            payload_found = False
+            why_not = (
+                f"the whole angle trace moves the onset's wire shift {shift:+.1f} degC to {shift_r:+.1f} degC to "
+                'fit it: the built-in wire model does not describe this wire'
+            )
+    if payload_kg is None and not payload_found:
+        # the payload is read through the built-in wire's stress dependence, and the built-in wire does not describe
+        # this one: the payload is not determined (the trace's best was a structure's compensation: 0.06-0.8 kg for
+        # 0.3-0.5 kg on the phase-fraction wrist), the prior's shift is taken
+        pays, shifts, _ = on_curve(np.array([prior_kg]))
+        if pays.size:
+            shift, payload = float(shifts[0]), prior_kg
+        warnings.append(
+            f'joint: the payload is not determined by the excitation ({why_not}): {prior_kg:g} kg is assumed, give '
+            '--payload-kg'
+        )
+    if not payload_found:
+        fitted, row, shift, payload, wire, model = fit_joint(shift, payload, False)
+    wire_only = fx.NOMINAL.copy()
+    wire_only[i_pay] = prior_kg - payload  # the shifted wire with the built-in joint
+    rows = np.stack([wire_only, row])
     p_wire, p_all = model.angle_measured(rows, None, 'measured').T
     held = slice(i_held, None)
 
@@ -256,7 +426,6 @@ def identify_mechanics(
     builtin_rms = rms_mrad(pred)
     v = fitted.values()
     preload_mm = PlantParams().preload_elongation_mm + v['preload_err_mm']
-    payload = run.payload_kg + v.get('payload_err_kg', 0.0)
     hpath = save_hysteresis(
         out / 'hysteresis.yaml',
         dataclasses.replace(wire, name=f'{base.name}, commissioned ({shift:+.1f} degC)'),
@@ -285,6 +454,8 @@ def identify_mechanics(
         'parameters': {
             'payload_kg': round(payload, 4),
             'payload_given': payload_kg is not None,
+            'payload_identified': payload_found,
+            'second_onset_mismatch_C': round(mismatch, 3) if math.isfinite(mismatch) else None,
             'coulomb_Nm': round(v['coulomb_Nm'], 5),
             'preload_elongation_mm': round(preload_mm, 4),
         },
@@ -298,13 +469,18 @@ def identify_mechanics(
     }
     on_bound = [
         f'{k} = {fitted.row[fx.INDEX[k]]:.3g}'
-        for k in params
+        for k in fitted.values()
         if k != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
         and (
             fitted.row[fx.INDEX[k]] <= fx.LOWER[fx.INDEX[k]] + 1e-6
             or fitted.row[fx.INDEX[k]] >= fx.UPPER[fx.INDEX[k]] - 1e-6
         )
     ]
+    # the payload at the top of its search, the shift at the end of its range: the same (a payload of 0 is a value)
+    if payload_kg is None and not lo_kg - 1e-6 <= payload <= hi_kg - 1e-6:
+        on_bound.append(f'payload_kg = {payload:.3g}')
+    if abs(shift) >= SHIFT_RANGE_C - 1e-6:
+        on_bound.append(f'transition_shift_C = {shift:.3g}')
     # handed over only where it predicts the held-out cycle better than the built-in model with every fitted value
     # inside its range: a parameter at its bound is the fit compensating what the model cannot describe (on a wrist
     # the SD-GPI and joint model do not fit), not a measurement, and would mislead the controllers
@@ -351,7 +527,7 @@ def identify_wrist(bring: BringUp, out: Path, payload_kg: float | None = None) -
     fit = _records(t, temps, u, t_fit, t_held, 'fit')
     held = _records(t, temps, u, t_held, t_end, 'held out')
     thermal, thermal_params, warnings = identify_thermal_part(fit, held, out)
-    hyst, joint, values, w2 = identify_mechanics(bring, out, payload_kg, t_fit, t_held, t_end)
+    hyst, joint, values, w2 = identify_mechanics(bring, out, payload_kg, ph, t_fit, t_held, t_end)
     warnings += w2
     nodes, problems = wrist_params(
         hyst['file'], values['wire'], thermal['file'], thermal_params.window_C, preload_mm=values['preload_mm']

@@ -61,6 +61,14 @@ IDENTIFY: dict[str, tuple[dict[str, Any], dict[str, float]]] = {
         {'plant': 'phase_fraction'},
         {'transition_shift_C': 0.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.3},
     ),
+    'phase-fraction wrist, wire +8 degC, TEM 1 0.8 x, 0.3 kg': (
+        {'plant': 'phase_fraction', 'scenario': {'transition_shift_C': 8.0}, 'tem_drive_scale': (0.8, 1.0)},
+        {'transition_shift_C': 8.0, 'tem1_gain_relative_to_tem2': 0.8, 'payload_kg': 0.3},
+    ),
+    'phase-fraction wrist, nominal, 0.5 kg': (
+        {'plant': 'phase_fraction', 'payload_kg': 0.5},
+        {'transition_shift_C': 0.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.5},
+    ),
     'SD-GPI wire +8 degC, TEM 1 0.8 x, 0.5 kg': (
         {'plant': 'sdgpi', 'scenario': {'transition_shift_C': 8.0}, 'tem_drive_scale': (0.8, 1.0), 'payload_kg': 0.5},
         {'transition_shift_C': 8.0, 'tem1_gain_relative_to_tem2': 0.8, 'payload_kg': 0.5},
@@ -87,6 +95,7 @@ def measure_identification(rate_hz: float = 1000.0) -> dict[str, Any]:
                 .get('parameters', {})
                 .get('tem1_gain_relative_to_tem2'),
                 'payload_kg': ident.get('joint', {}).get('parameters', {}).get('payload_kg'),
+                'payload_identified': ident.get('joint', {}).get('parameters', {}).get('payload_identified'),
             }
             rows[name] = {
                 'status': res['status'],

@@ -682,6 +682,14 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         from sma_wrist.plants.spread import Scenario
 
         scenario = Scenario.from_mapping({'payload_kg': a.payload_kg, **scenario, **off_model}).to_dict()
+    drive_scale = (1.0, 1.0)
+    if getattr(a, 'tem_drive_scale', None) is not None:
+        try:
+            drive_scale = tuple(float(x) for x in a.tem_drive_scale.split(','))  # type: ignore[assignment]
+        except ValueError:
+            drive_scale = ()  # type: ignore[assignment]
+        if len(drive_scale) != 2 or not all(0.0 < k <= 2.0 for k in drive_scale):  # False for NaN
+            raise ValueError(f'--tem-drive-scale {a.tem_drive_scale!r}: two fractions in (0, 2], comma separated')
     polarity = set(getattr(a, 'swap_tem_polarity', None) or ())
     broken = getattr(a, 'broken_wire', None) or 0
     if not polarity <= {1, 2} or broken not in (0, 1, 2):
@@ -723,6 +731,7 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         thermocouples_swapped=bool(getattr(a, 'swap_thermocouples', False)),
         angle_reversed=bool(getattr(a, 'reverse_angle', False)),
         broken_wire=broken,
+        tem_drive_scale=drive_scale,
     )
 
 
