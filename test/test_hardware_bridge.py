@@ -891,6 +891,34 @@ def test_a_stuck_thermocouple_under_drive_turns_the_tems_off(emulator, graph):
     assert not s.update(25.0, np.array([40.25]), np.array([-22.0]))[0]  # a new reading clears it
 
 
+def test_a_graph_that_starts_behind_the_device_drives_it_at_the_window_it_answers(emulator, graph):
+    """The device streams before the graph takes its first window: with 40 ms queued, the bridge published the
+    queued windows one per tick, and the first command, which a bag stamps with the window it answers, reached the
+    device 40 ms after that stamp. A diagnosis replays the commands at their stamps: on a nominal emulated wrist
+    that start alone left a 0.18 degC offset that took 40 s to fade. The bridge now publishes the newest complete
+    window and skips the older ones (counted), so a command takes effect within a window of its stamp."""
+    clock = ManualClock()
+    applied: list[tuple[float, float]] = []
+    emu = emulator(clock, noise_counts=0.0)
+    sample = emu._sample
+
+    def recorded() -> bytes:
+        line = sample()
+        applied.append((emu.device_time_s, float(emu._u[0, 0])))
+        return line
+
+    emu._sample = recorded
+    rt, bridge, probe = graph(emu, (20.0, 20.0), clock)
+    clock.now += 0.04  # 40 ms of samples on the line before the graph's first turn
+    rt.run_until(0.2, until='sim')
+    a = np.array(applied)
+    on_s = a[np.flatnonzero(a[:, 1] > 0)[0], 0] - a[0, 0]  # device time, rebased as the bridge rebases it
+    stamps = [m.clock.sec + m.clock.nanosec * 1e-9 for m in probe.got['/clock']]
+    assert on_s - stamps[0] <= bridge.period_s + 0.002, (on_s, stamps[:3])
+    assert bridge.counters['windows_skipped'] >= 2
+    assert np.allclose(np.diff(stamps), 0.01, atol=1e-6)  # the windows after the skip stay on their grid
+
+
 def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):
     """A device whose microsecond stamps jitter by a few us (a timer read in an interrupt) lost one window in 20:
     each window started where the previous one had overshot its edge, so /clock stepped 11 ms instead of 10 and
