@@ -283,13 +283,36 @@ def theta(**kw: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- helpers
+def _d2_var(x: np.ndarray, lag: int) -> float:
+    """Robust (MAD) variance of the second differences x[i] - 2 x[i + lag] + x[i + 2 lag] along axis 0."""
+    d2 = (x[: -2 * lag] - 2.0 * x[lag:-lag] + x[2 * lag :]).ravel()
+    return float((np.median(np.abs(d2 - np.median(d2))) * 1.4826) ** 2)
+
+
 def noise_sigma(x: np.ndarray, lsb: float = 0.0) -> float:
-    """White-noise std of a smooth signal from its second differences (robust, MAD)."""
-    d2 = np.diff(x, 2, axis=0).ravel()
-    if d2.size < 10:
+    """White-noise std of a smooth signal's samples, from its second differences two samples apart (robust, MAD).
+
+    Two apart, not adjacent: a bag's samples are interpolated onto the analysis grid between jittered stamps,
+    which averages neighbours and correlates the noise of adjacent grid points; adjacent second differences then
+    cancel most of it. On a 30 min pid run read through realistic sensors (0.3 degC / 3 mrad white noise, stamp
+    jitter 1 ms at 100 Hz) adjacent ones gave 0.19 degC / 1.9 mrad for the 0.24 degC / 2.4 mrad on the grid."""
+    if x.shape[0] < 14:
         return float(np.std(x)) or 1.0
-    mad = np.median(np.abs(d2 - np.median(d2))) * 1.4826
-    return float(max(mad / np.sqrt(6.0), lsb / np.sqrt(12.0), 1e-9))
+    return float(max(np.sqrt(_d2_var(x, 2) / 6.0), lsb / np.sqrt(12.0), 1e-9))
+
+
+def noise_density_sigma(x: np.ndarray, lsb: float = 0.0) -> float:
+    """Std of the white noise with the same low-frequency power as the noise of a smooth signal's samples.
+
+    What a smoothing filter (or the replays' slow physics) lets through of the noise is its low-frequency power,
+    sigma^2 + 2 c1 for noise correlated over one sample (c1: covariance of neighbours, left by the interpolation
+    onto the grid). With V1, V2 the variances of the second differences one and two samples apart,
+    V2 = 6 sigma^2 and V1 = 6 sigma^2 - 8 c1, so sigma_lf^2 = (10 V2 / 6 - V1) / 4; for white noise sigma_lf =
+    sigma; it is taken as never below sigma. On the 30 min pid run of :func:`noise_sigma` 0.305 degC / 3.05 mrad for the sensors' 0.3 degC / 3 mrad."""
+    if x.shape[0] < 14:
+        return noise_sigma(x, lsb)
+    v2, v1 = _d2_var(x, 2), _d2_var(x, 1)
+    return float(max(np.sqrt(max(10.0 * v2 / 6.0 - v1, v2 / 6.0 * 4.0) / 4.0), lsb / np.sqrt(12.0), 1e-9))
 
 
 def play(x: np.ndarray, width: float) -> np.ndarray:
@@ -586,7 +609,7 @@ class ExtendedModel:
         if run.T is None or self.T_noise < SMOOTH_ABOVE_C:
             return 0.0
         rng = np.random.default_rng(seed)
-        sig = np.array([noise_sigma(run.T[:, c]) for c in (0, 1)])
+        sig = np.array([noise_density_sigma(run.T[:, c], 200.0 / 2**16) for c in (0, 1)])
         r = NOMINAL
         # the stand-in for the truth: the least smoothed (a smoother one hides the transitions'
         # distortion by smoothing: the error of a 0.3 s window came out 2x too small)
