@@ -411,12 +411,12 @@ def _feed(mon, run, until):  # type: ignore[no-untyped-def]
 
 
 def test_a_window_with_a_change_in_it_is_diagnosed_after_the_change(clean_run):
-    """The potentiometer slips by 0.05 rad at 70 s; the window ending 30 s later holds 35 s from before it. Fitted
+    """The potentiometer slips by 0.05 rad at 70 s; the window ending 35 s later holds 30 s from before it. Fitted
     with constant parameters over the whole window, that change was named a joint effect at confidence 0.99; the
     monitor places the change in the twin's residuals and diagnoses what follows it (with settle_s before it)."""
     run = ds.apply(clean_run, ds.Distortion('offset', 'q', 0.05, 'rad'), 0.1, 1e-3, 2, onset_s=ONSET_S)
     mon = Monitor(MonitorConfig())
-    t_check = ONSET_S + 30.0
+    t_check = ONSET_S + 35.0
     _feed(mon, run, t_check)
     w = mon.window(t_check)
     assert not isinstance(w, str), w
