@@ -164,6 +164,7 @@ class Monitor:
         self.history: list[Verdict] = []
         self.current: Verdict | None = None  # the raised verdict
         self._streak: list[Verdict] = []
+        self._change_s: float | None = None  # the last change located in the twin's residuals [s]
 
     # -- input ----------------------------------------------------------------------------------------------
     def payload(self, kg: float) -> None:
@@ -285,6 +286,12 @@ class Monitor:
         if stat < CP_THRESHOLD or k == 0:
             return None
         t_cp = float(tb[k])
+        if self._change_s is not None and 0.0 < t_cp - self._change_s < self.span_s:
+            # the same change still unfolding (the loop answering a weaker TEM moved the split on by 20-25 s, and
+            # the part after it was unexplained): what follows the first change is the new wrist
+            t_cp = self._change_s
+        else:
+            self._change_s = t_cp
         return t_cp if t_cp - lo > self.config.settle_s else None
 
     def residual_blocks(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
