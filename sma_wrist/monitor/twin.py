@@ -22,6 +22,7 @@ import numpy as np
 
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+from sma_wrist.core.thermal import heat_balance as th
 
 
 class MonitorInputError(SmaWristError):
@@ -139,6 +140,7 @@ class Twin:
         # heat-balance states after each stepped interval: chunks of stamps (K,) [s] and states (K, 2, 2) [degC]
         self._log_t: list[np.ndarray] = []
         self._log_x: list[np.ndarray] = []
+        self._log_q: list[np.ndarray] = []  # angles [rad] at the same stamps (the residuals' change point)
 
     def set_payload(self, payload_kg: float) -> None:
         """The recorded payload changed (``/wrist/payload``): the twin carries the new mass from now on."""
@@ -156,6 +158,7 @@ class Twin:
             self.t = t_s
             self._log_t.append(np.array([t_s]))
             self._log_x.append(np.array(self._plant.state.thermal[:1], dtype=float))
+            self._log_q.append(np.array(self._plant.state.q[:1], dtype=float))
             return
         if t_s <= self.t:
             return
@@ -174,9 +177,10 @@ class Twin:
         if not self._queue_n:
             return
         u = np.array(self._queue_u, dtype=float)[:, None, :]
-        thermal, _, _ = self._plant.advance_segments(u, np.array(self._queue_n, dtype=np.int64))
+        thermal, q, _ = self._plant.advance_segments(u, np.array(self._queue_n, dtype=np.int64))
         self._log_t.append(np.array(self._queue_t))
         self._log_x.append(thermal[:, 0])
+        self._log_q.append(q[:, 0])
         self._queue_u.clear()
         self._queue_n.clear()
         self._queue_t.clear()
@@ -194,9 +198,18 @@ class Twin:
         self.flush()
         if not self._log_t:
             return
-        ts, xs = np.concatenate(self._log_t), np.concatenate(self._log_x)
+        ts, xs, qs = np.concatenate(self._log_t), np.concatenate(self._log_x), np.concatenate(self._log_q)
         n = max(int(np.searchsorted(ts, t_min)) - 1, 0)
-        self._log_t, self._log_x = [ts[n:]], [xs[n:]]
+        self._log_t, self._log_x, self._log_q = [ts[n:]], [xs[n:]], [qs[n:]]
+
+    def predictions(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The twin's stamps [s], muscle temperatures (K, 2) [degC] and angles (K,) [rad] logged in [lo, hi]."""
+        self.flush()
+        ts = np.concatenate(self._log_t)
+        sel = (ts >= lo) & (ts <= hi)
+        x = np.concatenate(self._log_x)[sel]
+        T = th.muscle_temperature(self.model.params.thermal, x) if x.size else np.empty((0, 2))
+        return ts[sel], np.asarray(T, dtype=float), np.concatenate(self._log_q)[sel]
 
     @property
     def plant(self) -> WristPlant:
