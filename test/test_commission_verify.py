@@ -162,15 +162,19 @@ def test_a_device_that_stops_streaming_during_the_verification_is_a_fault_with_t
 
 def test_a_weak_but_healthy_wrist_is_not_stopped_for_want_of_an_angle(tmp_path):
     """TEMs at 0.6x the model's and a wire 10 degC hotter: one muscle turns the joint only after 63 s at 20 V.
-    The heating ended at 60 s and the bring-up stopped this healthy wrist with angle_not_determined."""
+    The heating ended at 60 s and the bring-up stopped this healthy wrist with angle_not_determined. Its
+    identification then needs a muscle hotter than the excitation makes it: a named stop, not a traceback."""
     dev = SimDevice(
         EmulatorConfig(
             rate_hz=100.0, plant='sdgpi', scenario={'tem_gain_scale': 0.6, 'transition_shift_C': 10.0}, seed=2
         )
     )
     res = commission(tmp_path / 'c', dev)
-    assert res['faults'] == [] and res['status'] == 'commissioned', res['faults']
-    assert res['steps']['angle']['angle_sign'] == 1
+    assert res['steps']['angle']['angle_sign'] == 1  # the bring-up found the angle and went on
+    # the excitation's relay (at most 100 s a half-cycle) heats muscle 1 of so weak a wrist only to ~64 degC, short
+    # of its transformation: the identification says so and stops with the TEMs off (it raised from numpy before)
+    assert [f['kind'] for f in res['faults']] == ['not_identified'], res['faults']
+    assert 'did not move' in res['faults'][0]['message'] and res['status'] == 'fault'
     assert dev.emulator.stats.max_abs_command_V <= 20.0 and np.all(dev.emulator._u == 0.0)
 
 

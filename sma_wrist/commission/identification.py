@@ -341,6 +341,8 @@ def identify_mechanics(
         rows[:, i_pay] = payloads - prior_kg
         shifts = wire_shift_from_onset(builtin_model, rows, grid, first['t_start_s'], first['t_end_s'])
         keep = np.isfinite(shifts)
+        if not keep.any():  # the angle never moved far enough at any candidate payload: nothing to replay
+            return payloads[keep], shifts[keep], np.empty(0)
         rows[:, fx.INDEX['temp_offset_C']] = np.nan_to_num(shifts)
         P = builtin_model.angle_measured(rows[keep], None, 'measured')
         return payloads[keep], shifts[keep], np.sqrt(np.mean((P[:i_held] - qg[:i_held, None]) ** 2, axis=0))
