@@ -80,6 +80,21 @@ def _detect_case(args: tuple) -> dict[str, Any]:
     }
 
 
+def _detected(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """What a set of detection cases (``detected``, ``delay_s``, ``false_before_onset`` per row) adds up to."""
+    ok = sum(r['detected'] for r in rows)
+    delays = [r['delay_s'] for r in rows if r['detected']]
+    return {
+        'cases': len(rows),
+        'detected': ok,
+        'rate': ok / max(len(rows), 1),
+        'false_before_onset': sum(bool(r.get('false_before_onset')) for r in rows),
+        'delay_s_median': float(np.median(delays)) if delays else None,
+        'delay_s_max': float(np.max(delays)) if delays else None,
+        'rows': rows,
+    }
+
+
 def detection(
     runs: dict[str, Any], duration_s: float = 210.0, seeds: tuple[int, ...] = (1,), workers: int = 2
 ) -> dict[str, Any]:
@@ -91,19 +106,11 @@ def detection(
         cases += [(cut, e, s) for e in EFFECTS for s in seeds]
     with ProcessPoolExecutor(workers) as pool:
         rows = list(pool.map(_detect_case, cases))
-    ok = sum(r['detected'] for r in rows)
-    delays = [r['delay_s'] for r in rows if r['detected']]
     return {
-        'cases': len(rows),
+        **_detected(rows),
         'within_s': DETECT_WITHIN_S,
-        'detected': ok,
-        'rate': ok / max(len(rows), 1),
         'first_subsystem_right': sum(r['first_subsystem'] == r['subsystem'] for r in rows),
         'missed': [(r['source'], r['effect'], r['first_subsystem'], r['delay_s']) for r in rows if not r['detected']],
-        'false_before_onset': sum(r['false_before_onset'] for r in rows),
-        'delay_s_median': float(np.median(delays)) if delays else None,
-        'delay_s_max': float(np.max(delays)) if delays else None,
-        'rows': rows,
     }
 
 
@@ -243,18 +250,7 @@ def emulated_detection(
                 enumerate(effects),
             )
         )
-    ok = sum(r['detected'] for r in rows)
-    delays = [r['delay_s'] for r in rows if r['detected']]
-    return {
-        'cases': len(rows),
-        'detected': ok,
-        'rate': ok / max(len(rows), 1),
-        'failed_runs': sum('error' in r for r in rows),
-        'false_before_onset': sum(bool(r.get('false_before_onset')) for r in rows),
-        'delay_s_median': float(np.median(delays)) if delays else None,
-        'delay_s_max': float(np.max(delays)) if delays else None,
-        'rows': rows,
-    }
+    return {**_detected(rows), 'failed_runs': sum('error' in r for r in rows)}
 
 
 def _nominal_case(args: tuple) -> dict[str, Any]:
