@@ -217,10 +217,11 @@ class BagRecorder:
             entry = self._connection(topic)
         conn, encode = entry
         t = self._clock_ns() if self._clock_ns is not None else t_ns
+        data = topic.cdr(msg, encode)
         if self.direct:
-            self._write_direct(conn, t, encode(msg))
+            self._write_direct(conn, t, data)
         else:
-            self._writer.write(conn, t, encode(msg))
+            self._writer.write(conn, t, data)
         self.count += 1
         self.counts[topic.name] += 1
         if self.flush_every:

@@ -317,6 +317,45 @@ def test_record_topic_subset(tmp_path):
     assert set(read_bag(bag)) == {'/clock', '/wrist/joint_states'}
 
 
+class Reuser(Node):
+    """Publishes one Float64 object again and again, changing it in between (rclpy allows it)."""
+
+    def __init__(self):
+        super().__init__('reuser')
+        self.pub = self.create_publisher(Float64, '/wrist/tem_1/command', 10)
+        self.msg = Float64(data=0.0)
+        self.create_timer(0.01, self.step)
+
+    def step(self):
+        self.msg.data += 1.0
+        self.pub.publish(self.msg)
+
+
+def test_taps_share_one_encoding_per_publication_and_a_changed_message_is_encoded_again(tmp_path):
+    """The bag recorder and the live view both take a publication's CDR bytes: encoded once for both, and never
+    taken from an earlier publication of the same (since changed) object."""
+    from sma_wrist.runtime.launch import Runtime
+
+    calls = []
+
+    def counting(msg):
+        calls.append(msg.data)
+        return serialize(msg)
+
+    seen = []
+    bag = tmp_path / 'reused'
+    with Runtime() as rt:
+        rec = rt.record(bag)
+        rt.add_nodes([Reuser])
+        rt.context.graph.add_tap(lambda topic, msg, t: seen.append(topic.cdr(msg, counting)), ['/wrist/tem_1/command'])
+        rt.run_until(0.1)
+        rec.close()
+    values = [deserialize(b, 'std_msgs/msg/Float64').data for b in seen]
+    assert values == [float(i) for i in range(1, len(values) + 1)] and len(values) >= 9
+    assert calls == []  # the recorder (first tap) encoded each publication; the second tap reused its bytes
+    assert [m.data for m in read_bag(bag)['/wrist/tem_1/command'][1]][: len(values)] == values
+
+
 # ------------------------------------------------------------------ direct CDR of the high-rate types
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402

@@ -17,7 +17,7 @@ Tap = Callable[['Topic', Any, int], None]
 
 
 class Topic:
-    __slots__ = ('name', 'msg_type', 'publishers', 'subscriptions', 'taps')
+    __slots__ = ('name', 'msg_type', 'publishers', 'subscriptions', 'taps', '_cdr')
 
     def __init__(self, name: str, msg_type: type) -> None:
         self.name = name
@@ -25,6 +25,17 @@ class Topic:
         self.publishers: list[Any] = []
         self.subscriptions: list[Any] = []
         self.taps: list[Tap] = []
+        self._cdr: tuple[Any, bytes] | None = None  # the publication being dispatched to the taps, encoded
+
+    def cdr(self, msg: Any, encode: Callable[[Any], bytes]) -> bytes:
+        """``msg`` CDR-encoded once for all the taps of one publication (a bag recorder and the live view both
+        need the bytes). Valid only while the publisher dispatches ``msg`` to the taps: it forgets the encoding
+        before and after, so a node that publishes the same message object again after changing it is encoded
+        again."""
+        memo = self._cdr
+        if memo is None or memo[0] is not msg:
+            memo = self._cdr = (msg, bytes(encode(msg)))
+        return memo[1]
 
 
 class _TapEntry:

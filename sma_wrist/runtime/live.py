@@ -206,12 +206,12 @@ class LiveServer:
                 self.flush()
             self._time_ns = clock
         if latched:  # kept for the next subscriber (on_subscribe)
-            data = bytes(encode(msg))
+            data = topic.cdr(msg, encode)
             self._latched[channel.id()] = (channel, data, clock)
         elif not channel.has_sinks():  # nobody subscribed: no encoding
             return
         else:
-            data = bytes(encode(msg))
+            data = topic.cdr(msg, encode)
         self._pending.append((channel.base, data, clock))
 
     def flush(self) -> None:

@@ -41,8 +41,10 @@ class Publisher:
         topic = self._topic
         if topic.taps:
             t = self._clock._now_ns()
+            topic._cdr = None
             for tap in topic.taps:
                 tap(topic, msg, t)
+            topic._cdr = None
         delivery = self._graph.delivery
         if delivery is None:
             for sub in self._matched:
