@@ -115,24 +115,27 @@ class FakeGraph:
     def __init__(self, errors):
         self.errors = list(errors)
         self.calls = []
+        self.clock = [0.0]  # device s: each run takes its duration and a second
 
     def __call__(self, ctrl, payload, duration, bag, files, extra_params, hardware, measure):
         from sma_wrist.closed_loop import RunSummary
 
         self.calls.append({'controller': ctrl, 'files': [str(f) for f in files], 'extra': extra_params})
+        self.clock[0] += duration + 1.0
         run = sine_run(self.errors.pop(0))
         return RunSummary(None, ctrl, payload, duration, 1.0, 0, False, {'max_error_pct': 1.0}, run)
 
 
-def verify_with(tmp_path, monkeypatch, params_file, errors, controllers=('pid',)):
+def verify_with(tmp_path, monkeypatch, params_file, errors, controllers=('pid',), budget_s=None):
     import sma_wrist.closed_loop as cl
 
     graph = FakeGraph(errors)
     monkeypatch.setattr(cl, 'run_closed_loop', graph)
     starts = []
 
-    def settle_to_start():
-        starts.append(len(graph.calls))
+    def settle_to_start(timeout_s):
+        starts.append((len(graph.calls), timeout_s))
+        graph.clock[0] += timeout_s  # the wrist never settles: each takes all it is given
         return {'settled': True, 'seconds': 1.0, 'muscle_C': [27.0, 27.0], 'face_C': [27.0, 27.0], 'angle_rad': 0.1}
 
     res = V.verify(
@@ -143,7 +146,9 @@ def verify_with(tmp_path, monkeypatch, params_file, errors, controllers=('pid',)
         list(controllers),
         duration_s=V.DURATION_S,
         diagnose=False,
+        device_clock=lambda: graph.clock[0],
         settle_to_start=settle_to_start,
+        budget_s=budget_s,
     )
     return res, graph, starts
 
@@ -152,7 +157,7 @@ def test_the_defaults_parameters_are_run_once_and_said_to_be_the_same(tmp_path, 
     nodes = builtin_handed_over(tmp_path)
     f = write(tmp_path / 'wrist_params.yaml', {n: {'ros__parameters': v} for n, v in nodes.items()})
     res, graph, starts = verify_with(tmp_path, monkeypatch, f, [[0.01, 0.02]])
-    assert len(graph.calls) == 1 and starts == [0]
+    assert len(graph.calls) == 1 and [n for n, _ in starts] == [0]
     assert res['comparison']['pid']['verdict'] == 'identical_parameters'
     assert res['default']['pid'] == res['commissioned']['pid'] and res['default']['pid']['cycles'] == 2
     assert '(the same)' in res['runs'][0]['parameters']
@@ -162,12 +167,16 @@ def test_the_defaults_parameters_are_run_once_and_said_to_be_the_same(tmp_path, 
 def test_each_run_starts_settled_with_run_s_soft_start_and_is_judged_on_its_cycles(tmp_path, monkeypatch):
     f = write(tmp_path / 'wrist_params.yaml', {'adaptive_controller': {'ros__parameters': {'temperature_mid_C': 57.0}}})
     # commissioned first: cycles of 0.01 and 0.012 rad; the defaults 0.05 and 0.06 rad
-    res, graph, starts = verify_with(tmp_path, monkeypatch, f, [[0.01, 0.012], [0.05, 0.06]])
+    # 15 min less a 449 s bring-up and excitation: two runs of 158.7 s leave 66.8 s to settle before each
+    res, graph, starts = verify_with(tmp_path, monkeypatch, f, [[0.01, 0.012], [0.05, 0.06]], budget_s=451.0)
     assert [c['files'][0].endswith(n) for c, n in zip(graph.calls, ('wrist_params.yaml', 'defaults.yaml'))] == [
         True,
         True,
     ]
-    assert starts == [0, 1]  # settled before each run
+    assert [n for n, _ in starts] == [0, 1]  # settled before each run, each given its share of the budget
+    share = (451.0 - 2 * (V.DURATION_S + V.RUN_OVERHEAD_S)) / 2
+    assert starts[0][1] == pytest.approx(share) and starts[1][1] == pytest.approx(share)
+    assert res['device_time_s'] <= 451.0
     # the soft start sma-wrist run uses (the trajectory generator's own default is none)
     assert all(c['extra']['/trajectory_generator'] == {'soft_start_s': 30.0} for c in graph.calls)
     c = res['comparison']['pid']
@@ -212,3 +221,10 @@ def test_the_command_line_runs_two_cycles_a_run_by_default():
 
     a = commission_arguments(argparse.ArgumentParser()).parse_args(['--sim', '--out', 'x'])
     assert a.verify_s == V.DURATION_S and V.cycle_metrics(sine_run([0.01, 0.01]), a.verify_s)['cycles'][1]
+
+
+def test_without_a_budget_the_runs_fit_into_each_settling_takes_what_it_needs(tmp_path, monkeypatch):
+    f = write(tmp_path / 'wrist_params.yaml', {'adaptive_controller': {'ros__parameters': {'temperature_mid_C': 57.0}}})
+    errors = [[0.01, 0.012], [0.05, 0.06]] * 3
+    _, graph, starts = verify_with(tmp_path, monkeypatch, f, errors, controllers=V.CONTROLLERS, budget_s=451.0)
+    assert len(graph.calls) == 6 and {t for _, t in starts} == {V.SettleLimits().timeout_s}

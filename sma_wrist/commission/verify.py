@@ -57,6 +57,12 @@ CYCLES = 2
 #: device seconds per run: the soft start, the cycles, and a margin for the graph's first samples
 DURATION_S = round(SOFT_START_S + CYCLES * SEED_PERIOD_S + 2.0, 1)
 CONTROLLERS = ('inverse_adaptive', 'direct_adaptive', 'pid')
+#: device seconds the whole procedure may take (bring-up, excitation, identification, verification): 15 min
+BUDGET_S = 900.0
+#: device seconds a run takes beyond its duration (the graph's first and last samples)
+RUN_OVERHEAD_S = 1.0
+#: the least device time the settling before a run gets when the budget is short [s]
+MIN_SETTLE_S = 15.0
 DEFAULTS_FILE = 'defaults.yaml'
 #: a simulated device is served by a thread of this process, which shares the interpreter with the graph: on a
 #: loaded machine (load 16-20 on 2 cores) it paused the stream for more than the bridge's 0.1 s sensor timeout dozens
@@ -91,11 +97,11 @@ class VerifyOptions:
 class SettleLimits:
     """How :func:`settle` brings the wrist to its start: temperatures [degC], drives [V], device times [s]."""
 
-    tolerance_C: float = 0.5  # each muscle within this of its rest temperature
+    tolerance_C: float = 1.0  # each muscle within this of its rest temperature
     gain_V_per_C: float = 3.0  # the drive per degC away from it (cooling at up to the bring-up's cool_V)
     integral_V_per_C_s: float = 0.5  # ... and per degC s: the heat a warm exchanger face leaks back, held off
     heat_V: float = 6.0  # the most it heats (a muscle below its rest temperature: the bring-up's pulse drive)
-    still_s: float = 4.0  # this long the muscles within the tolerance and the angle still
+    still_s: float = 2.0  # this long the muscles within the tolerance and the angle still
     still_rad: float = 0.005  # the angle's range over still_s
     timeout_s: float = 90.0  # then the run starts from where the wrist is, said so (settled: false)
     command_period_s: float = 0.02
@@ -168,6 +174,9 @@ def settle(bring: Any, lim: SettleLimits | None = None) -> dict[str, Any]:
     cool_V = min(lim0.cool_V, lim0.max_drive_V)
     heat_V = min(lim.heat_V, lim0.max_drive_V)
     face_hi = lim0.max_face_C - 5.0  # an exchanger face this hot takes no more heat (as the excitation's governor)
+    # the samples that arrive first: the device time a run had the device for lies before them, not in the settling
+    bring.set_drive(0.0, 0.0)
+    bring.pump()
     t0 = bring.t
     still_since: float | None = None
     settled = False
@@ -348,11 +357,15 @@ def verify(
     device_clock: Callable[[], float] | None = None,
     into: dict[str, Any] | None = None,
     bridge: dict[str, Any] | None = None,
-    settle_to_start: Callable[[], dict[str, Any]] | None = None,
+    settle_to_start: Callable[[float], dict[str, Any]] | None = None,
+    budget_s: float | None = None,
 ) -> dict[str, Any]:
     """Run the sine per controller with the defaults and with ``params_file`` on the device ``serve()`` gives
-    (a context manager yielding its port, entered for each run), each run after ``settle_to_start()`` (the start
-    state it measured; None: no settling).
+    (a context manager yielding its port, entered for each run), each run after ``settle_to_start(timeout_s)`` (the
+    start state it measured; None: no settling). ``budget_s``: the device seconds the verification may take (the
+    15 min of the whole procedure less what came before): where the runs fit into it, the settling before each
+    run is cut short so that they all do (the start then says ``settled: false``); None, or runs that do not fit
+    however short the settling (several controllers): each settling takes what it needs, up to its timeout.
 
     Returns ``{'default': {ctrl: side}, 'commissioned': {ctrl: side}, 'comparison': {ctrl: compare + differs},
     'identical_parameters': {ctrl: bool}, 'device_time_s', 'duration_s', 'runs': [...], 'plots': [...],
@@ -395,8 +408,22 @@ def verify(
 
     account()
     diagnosed = None
+    same_as = {
+        ctrl: differences(graph_values([params_file], ctrl), graph_values([defaults], ctrl)) for ctrl in controllers
+    }
+    runs_left = sum(1 if not d else 2 for d in same_as.values())
+    # the budget is kept where the runs fit into it at all: then the settling before each run gets its share of
+    # what the runs leave (at least MIN_SETTLE_S), else it takes what it needs
+    keep_budget = budget_s is not None and runs_left * (duration_s + RUN_OVERHEAD_S) <= budget_s
+
+    def settle_timeout() -> float:
+        if not keep_budget:
+            return SettleLimits().timeout_s
+        left = budget_s - (clock() - t0) - runs_left * (duration_s + RUN_OVERHEAD_S)
+        return float(min(SettleLimits().timeout_s, max(MIN_SETTLE_S, left / runs_left)))
+
     for ctrl in controllers:
-        differs = differences(graph_values([params_file], ctrl), graph_values([defaults], ctrl))
+        differs = same_as[ctrl]
         same = not differs
         res['identical_parameters'][ctrl] = same
         runs = {}
@@ -405,7 +432,8 @@ def verify(
         pairs = (('default', [defaults]),) if same else (('commissioned', [params_file]), ('default', [defaults]))
         for which, files in pairs:
             progress(f'verification: {ctrl}, {which} parameters' + (' (the same as commissioned)' if same else ''))
-            start = settle_to_start() if settle_to_start is not None else None
+            start = settle_to_start(settle_timeout()) if settle_to_start is not None else None
+            runs_left -= 1
             account()
             recorded = diagnose and diagnosed is None and (which == 'commissioned' or same)
             bag = folder / f'{ctrl}_commissioned' if recorded else None
@@ -509,13 +537,13 @@ def run_verification(
     settling = bring is not None and opts.settle and getattr(bring, '_T_start', None) is not None
     t_settle = [0.0]
 
-    def settle_to_start() -> dict[str, Any]:
+    def settle_to_start(timeout_s: float) -> dict[str, Any]:
         if not sim:
             bring.dev = device.reopened()  # the bridge had the port: the bring-up's link again, for the settling
             bring.dev.open()
         t0 = bring.t
         try:
-            return settle(bring)
+            return settle(bring, dataclasses.replace(SettleLimits(), timeout_s=timeout_s))
         finally:
             t_settle[0] += bring.t - t0
             bring.dev.close()
@@ -542,6 +570,7 @@ def run_verification(
                 into=v,
                 bridge=SIM_BRIDGE if sim else None,
                 settle_to_start=settle_to_start if settling else None,
+                budget_s=BUDGET_S - result['device_time_s'],
             )
     except KeyboardInterrupt:
         result['status'] = 'interrupted'
