@@ -644,8 +644,9 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
         '+- half their range: a difference within the larger range is within what one cycle differs from the next. '
         "Defaults: config/wrist.yaml with only the bring-up's calibration "
         f'(`{Path(v["defaults_file"]).name}`); commissioned: `{Path(v["params_file"]).name}` (run first of each '
-        'pair). Before each run the muscles were brought back to their rest temperatures and the wrist left still '
-        f'at 0 V ({v.get("settle_s", 0):.0f} s of device time in all). Device time of the verification: '
+        'pair). Before each run the muscles were brought back to the temperatures they had at rest and held there '
+        f'until the angle was still ({v.get("settle_s", 0):.0f} s of device time in all). Device time of the '
+        'verification: '
         f'{v.get("device_time_s", 0):.0f} s.',
         '',
         '| controller | defaults max % | defaults RMS % | commissioned max % | commissioned RMS % | verdict |',
@@ -657,16 +658,17 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
         lines.append(f'| {ctrl} | {_pm(d, "max")} | {_pm(d, "rms")} | {_pm(c, "max")} | {_pm(c, "rms")} | {verdict} |')
     lines += [
         '',
-        '| run | start: muscles [degC], angle [rad] (settled) | soft start max / RMS % | cycles max / RMS % |',
+        '| run | start: muscles, TEM faces [degC], angle [rad] (settled, seconds) | soft start max / RMS % | '
+        'cycles max / RMS % |',
+        '|---|---|---|---|',
     ]
-    lines.append('|---|---|---|---|')
     for r in v.get('runs', []):
         st = r.get('start')
         start = (
             '-'
             if not st
-            else f'{st["muscle_C"][0]:.1f}, {st["muscle_C"][1]:.1f}, {st["angle_rad"]:.3f} '
-            f'({"yes" if st["settled"] else "no"}, {st["seconds"]:.0f} s)'
+            else f'{st["muscle_C"][0]:.1f}, {st["muscle_C"][1]:.1f}; {st["face_C"][0]:.1f}, {st["face_C"][1]:.1f}; '
+            f'{st["angle_rad"]:.3f} ({"yes" if st["settled"] else "no"}, {st["seconds"]:.0f} s)'
         )
         su = r.get('start_up') or {}
         cyc = '; '.join(f'{_f(c["max_pct"])} / {_f(c["rms_pct"])}' for c in r.get('cycles', [])) or '-'
