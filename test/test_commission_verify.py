@@ -76,6 +76,10 @@ def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp
     # device time: both runs counted, on top of the bring-up's
     assert all(r['device_s'] >= SHORT.duration_s for r in v['runs']) and v['device_time_s'] >= 2 * SHORT.duration_s
     assert res['device_time_s'] > 60.0 + v['device_time_s']  # the bring-up alone takes over 60 s on this wrist
+    # each run from the rest temperatures the bring-up measured, the settling counted once
+    assert all(r['start']['settled'] for r in v['runs']), v['runs']
+    assert v['settle_s'] == pytest.approx(sum(r['start']['seconds'] for r in v['runs']), abs=0.1)
+    assert v['settle_s'] < v['device_time_s'] - 2 * SHORT.duration_s
     report = open(res['report']).read()
     assert 'Angle: which way' in report  # the bring-up's sections kept, the verification's added
     assert '## Verification' in report and '| pid |' in report and '](verification/pid.png)' in report

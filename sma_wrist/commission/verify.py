@@ -541,11 +541,11 @@ def run_verification(
         if not sim:
             bring.dev = device.reopened()  # the bridge had the port: the bring-up's link again, for the settling
             bring.dev.open()
-        t0 = bring.t
         try:
-            return settle(bring, dataclasses.replace(SettleLimits(), timeout_s=timeout_s))
+            start = settle(bring, dataclasses.replace(SettleLimits(), timeout_s=timeout_s))
+            t_settle[0] += start['seconds']
+            return start
         finally:
-            t_settle[0] += bring.t - t0
             bring.dev.close()
 
     try:
