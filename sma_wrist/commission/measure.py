@@ -175,8 +175,10 @@ DEVICES: dict[str, dict[str, Any]] = {
 
 def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -> dict[str, Any]:
     """``commission`` on each of :data:`DEVICES` (the emulated device, its 1 kHz) with verification: device time,
-    faults, defaults against commissioned per controller, the diagnosis' verdict. ``quick``: the params file's
-    controller only, else all three."""
+    faults, defaults against commissioned per controller (the mean of each side's cycles and their spread, the
+    verdict, what the commissioned parameters change; ``commissioned_worse``: the controllers whose verdict is
+    ``worse``, beyond the spread), each run's start and cycles, the diagnosis' verdict. ``quick``: the params file's
+    controller only, else all three (beyond the 15 min then: six runs)."""
     from sma_wrist.commission.device import SimDevice
     from sma_wrist.commission.run import commission
     from sma_wrist.commission.verify import CONTROLLERS, VerifyOptions
