@@ -104,6 +104,8 @@ class SettleLimits:
     still_s: float = 2.0  # this long the muscles within the tolerance and the angle still
     still_rad: float = 0.005  # the angle's range over still_s
     timeout_s: float = 90.0  # then the run starts from where the wrist is, said so (settled: false)
+    max_muscle_C: float = 90.0  # over this a muscle stops the procedure (hardware_bridge's max_muscle_temperature_C)
+    max_face_C: float = 85.0  # ... a TEM face (hardware_bridge's max_tem_face_temperature_C)
     command_period_s: float = 0.02
 
 
@@ -169,11 +171,19 @@ def settle(bring: Any, lim: SettleLimits | None = None) -> dict[str, Any]:
     lim = lim or SettleLimits()
     lim0 = bring.lim
     target = np.asarray(bring._T_start[:2], float)
-    # the muscles may start as hot as the excitation or a run left them, and the joint anywhere in its range
-    bring.lim = dataclasses.replace(lim0, max_muscle_C=max(lim0.max_muscle_C, 82.0), max_excursion_rad=1.8)
+    # the muscles and faces may start as hot as a closed-loop run leaves them (the controllers take a muscle up to
+    # 85 degC and keep the faces in the TEMs' 0-80 degC: a muscle above 82 degC after a run on the nominal wrist
+    # stopped a settling held to the excitation's 82 degC), the joint anywhere in its range: the limits are the
+    # bridge's, which ran the wrist just before
+    bring.lim = dataclasses.replace(
+        lim0,
+        max_muscle_C=max(lim0.max_muscle_C, lim.max_muscle_C),
+        max_face_C=max(lim0.max_face_C, lim.max_face_C),
+        max_excursion_rad=1.8,
+    )
     cool_V = min(lim0.cool_V, lim0.max_drive_V)
     heat_V = min(lim.heat_V, lim0.max_drive_V)
-    face_hi = lim0.max_face_C - 5.0  # an exchanger face this hot takes no more heat (as the excitation's governor)
+    face_hi = lim.max_face_C - 5.0  # an exchanger face this hot takes no more heat (as the excitation's governor)
     # the samples that arrive first: the device time a run had the device for lies before them, not in the settling
     bring.set_drive(0.0, 0.0)
     bring.pump()
