@@ -313,10 +313,10 @@ def commission_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser
     ap.add_argument(
         '--verify-s',
         type=float,
-        default=100.0,
+        default=157.7,
         metavar='S',
-        help='device seconds of each verification run, defaults and commissioned per controller (default 100: '
-        "run's 30 s soft start and a full cycle of the sine; 0: no verification)",
+        help='device seconds of each verification run, defaults and commissioned per controller (default 157.7: '
+        "run's 30 s soft start and two full cycles of the sine, compared with their spread; 0: no verification)",
     )
     ap.add_argument('--baud-rate', type=int, default=921600, help='serial baud rate (default 921600)')
     ap.add_argument(

@@ -76,6 +76,10 @@ def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp
     # device time: both runs counted, on top of the bring-up's
     assert all(r['device_s'] >= SHORT.duration_s for r in v['runs']) and v['device_time_s'] >= 2 * SHORT.duration_s
     assert res['device_time_s'] > 60.0 + v['device_time_s']  # the bring-up alone takes over 60 s on this wrist
+    # each run from the rest temperatures the bring-up measured, the settling counted once
+    assert all(r['start']['settled'] for r in v['runs']), v['runs']
+    assert v['settle_s'] == pytest.approx(sum(r['start']['seconds'] for r in v['runs']), abs=0.1)
+    assert v['settle_s'] < v['device_time_s'] - 2 * SHORT.duration_s
     report = open(res['report']).read()
     assert 'Angle: which way' in report  # the bring-up's sections kept, the verification's added
     assert '## Verification' in report and '| pid |' in report and '](verification/pid.png)' in report
@@ -89,15 +93,23 @@ def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp
 
 def test_on_a_serial_port_the_verification_runs_the_graph_on_that_port(tmp_path):
     """``--hardware PORT``: hardware_bridge on the port the bring-up used (closed by then), wall time as device time."""
+    from sma_wrist.commission.bringup import BringUp
     from sma_wrist.commission.device import SerialDevice
+    from sma_wrist.hw.calibration import Calibration, Wiring
     from sma_wrist.hw.emulator import DeviceEmulator
 
     emu = DeviceEmulator(EmulatorConfig(rate_hz=RATE_HZ, time_scale=2.0, seed=5), link=str(tmp_path / 'wrist'))
     emu.start()
     try:
         res = handed_over(tmp_path / 'c')
+        dev = SerialDevice(emu.link)
+        bring = BringUp(dev, Calibration(), Wiring())  # the rest temperatures each run is settled to
+        dev.open()
+        bring.step_link()
+        bring.step_sensors()
+        dev.close()
         t0 = time.monotonic()
-        run_verification(res, tmp_path / 'c', SerialDevice(emu.link), SHORT)
+        run_verification(res, tmp_path / 'c', dev, SHORT, bring=bring)
         wall = time.monotonic() - t0
         got = emu.stats.commands_received
         t_end = time.monotonic() + 3.0
@@ -110,6 +122,8 @@ def test_on_a_serial_port_the_verification_runs_the_graph_on_that_port(tmp_path)
     assert res['status'] == 'commissioned' and set(v['commissioned']) == {'pid'} and got > 100
     assert all(r['device_s'] >= SHORT.duration_s for r in v['runs'])
     assert 2 * SHORT.duration_s / 2.0 <= v['device_time_s'] <= wall + 0.1  # a real device: its wall time
+    # settled through the port between the runs (the bridge had it meanwhile): the link opened again each time
+    assert all(r['start']['settled'] for r in v['runs']) and bring.dev is not dev, v['runs']
 
 
 def test_ctrl_c_during_the_verification_keeps_the_params_file_and_turns_the_tems_off(tmp_path):

@@ -29,6 +29,7 @@ class SerialDevice:
         from sma_wrist.hw.link import SerialLink
 
         self.port = port
+        self.baud = baud
         self.stall_s = stall_s
         self.open_timeout_s = open_timeout_s
         # no silent reconnects: a link that drops mid-procedure stops it (silence_s > stall_s, so it is seen here)
@@ -55,6 +56,11 @@ class SerialDevice:
             f'the port {self.port} does not open ({why}): check the port name and that the wrist '
             'controller is plugged in and powered'
         )
+
+    def reopened(self) -> SerialDevice:
+        """The same port on a new link (a closed link does not start again): the verification settles the wrist
+        through it between the node graph's runs, which have the port meanwhile."""
+        return SerialDevice(self.port, self.baud, self.open_timeout_s, self.stall_s)
 
     def send(self, u1_V: float, u2_V: float) -> None:
         self.link.send_command(u1_V, u2_V)

@@ -165,7 +165,7 @@ def commission(
     if verification is not None and result['status'] == 'commissioned':
         from sma_wrist.commission.verify import run_verification
 
-        run_verification(result, out, device, verification, progress)
+        run_verification(result, out, device, verification, progress, bring)
     # ---- end of verification
     return result
 
