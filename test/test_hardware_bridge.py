@@ -928,8 +928,9 @@ def test_the_drive_the_device_read_back_is_published_where_it_took_effect(emulat
     """A command is stamped with the window it answers; the device applies it after the graph's delay and its own
     latency (25 ms here), which no stamp said, so a diagnosis replayed the TEMs' heat early. A device that reads its
     drive back gets asked for it, and the bridge publishes it per window in the host's terms (the muscle's TEM, its
-    sign: this wrist has its drive wires swapped and TEM 2's leads too), stamped from where it held: the window in
-    which the drive came on carries it in proportion. A device without the read-back: nothing on the topic."""
+    sign: this wrist has its drive wires swapped and TEM 2's leads too), each window's drive at its middle, stamped
+    with the window's start: the drive comes on in the window whose middle it held. A device without the read-back:
+    nothing on the topic."""
     clock = ManualClock()
     on: list[int] = []  # t_us of the device's driven samples
     emu = emulator(
@@ -963,10 +964,8 @@ def test_the_drive_the_device_read_back_is_published_where_it_took_effect(emulat
     drive = np.array([[m.effort[m.name.index(f'tem_{i}')] for i in (1, 2)] for m in got])
     assert np.allclose(np.diff(stamps), 0.01, atol=1e-6)
     k = int(np.flatnonzero(np.any(drive != 0.0, axis=1))[0])
-    assert stamps[k] < t_on <= stamps[k] + 0.01 + 1e-9, (stamps[k - 1 : k + 2], t_on)
-    fraction = (stamps[k] + 0.01 - t_on + 0.001) / 0.01  # of the window's samples, the ones driven
-    assert np.allclose(drive[k], (20.0 * fraction, -5.0 * fraction), atol=1e-6), (drive[k], fraction)
-    assert np.allclose(drive[k + 1 :], (20.0, -5.0), atol=1e-6)  # the muscles' drive, through the wiring
+    assert stamps[k] - 0.005 < t_on <= stamps[k] + 0.005 + 1e-9, (stamps[k - 1 : k + 2], t_on)
+    assert np.allclose(drive[k:], (20.0, -5.0), atol=1e-6)  # the muscles' drive, through the wiring
     assert t_on - stamps[0] > 0.025  # the device applied it well after the window its first command answered
 
 
