@@ -969,6 +969,27 @@ def test_the_drive_the_device_read_back_is_published_where_it_took_effect(emulat
     assert t_on - stamps[0] > 0.025  # the device applied it well after the window its first command answered
 
 
+def test_a_drive_switching_inside_each_window_is_published_as_it_was_not_as_its_mean(emulator, graph):
+    """The window's mean of a drive that switches inside it is a drive the TEMs never got, and it carries less Joule
+    heat (K_R I^2, Eqs. 4.13-4.14) than the drive did: +20 V for 5 ms and -10 V for 5 ms, every window, averaged to
+    5 V. The bridge publishes the drive in force at each window's middle: one of the two."""
+    clock = ManualClock()
+    emu = emulator(clock, noise_counts=0.0)
+    sample = emu._sample
+
+    def switching() -> bytes:
+        emu._pending.clear()  # the device's drive is this pattern, whatever the host sends
+        emu._last_cmd_t = emu._n / emu.cfg.rate_hz
+        emu._u[:] = 20.0 if emu._n % 10 < 5 else -10.0
+        return sample()
+
+    emu._sample = switching
+    rt, bridge, probe = graph(emu, (0.0, 0.0), clock)
+    rt.run_until(0.3, until='sim')
+    drive = np.array([m.effort for m in probe.got['/wrist/tem_drive_applied']])
+    assert len(drive) > 20 and set(np.unique(drive[1:])) <= {20.0, -10.0}, np.unique(drive)
+
+
 def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):
     """A device whose microsecond stamps jitter by a few us (a timer read in an interrupt) lost one window in 20:
     each window started where the previous one had overshot its edge, so /clock stepped 11 ms instead of 10 and
