@@ -140,6 +140,11 @@ def emulator_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument('--latency-ms', type=float, default=1.0, help='command -> drive delay, device time [ms]')
     ap.add_argument('--watchdog-s', type=float, default=0.5, help='zero drive without commands [device s]')
     ap.add_argument(
+        '--no-drive-readback',
+        action='store_true',
+        help="a firmware without the drive read-back: the host's D frame is ignored, samples carry no applied drive",
+    )
+    ap.add_argument(
         '--seed', type=nonnegative_int, default=0, help='seed of the ADC noise and injected garbage (default 0)'
     )
     ap.add_argument(

@@ -241,6 +241,27 @@ def test_flawed_bags_are_repaired_reported_and_still_diagnosed(tmp_path, corrupt
         assert res.parameters[k]['value'] == pytest.approx(v, rel=0.15)
 
 
+def test_a_drive_that_took_effect_after_its_commands_stamp_replays_right_from_the_devices_read_back(tmp_path):
+    """On hardware a command takes effect after the graph's delay (here 0.1 s: ten windows behind), and its stamp says
+    only which window it answered: replayed there, the TEMs' heat came early and a nominal wrist read as a TEM command
+    delay. A bag with the drive the device read back (/wrist/tem_drive_applied) is replayed on that instead: clean."""
+    dt, delay = 0.01, 0.1
+    t = np.arange(int(40.0 / dt) + 1) * dt
+    heat_1 = np.sin(2.0 * np.pi * t / 6.0 + 0.3) > 0  # switching every 3 s, as a closed loop's commands do
+    u = np.stack([np.where(heat_1, 12.0, -8.0), np.where(heat_1, -8.0, 12.0)], axis=1)
+    truth = td.simulate('actuator_delay', seed=4, duration_s=40.0, params={'command_delay_s': delay}, u=u)
+    candidates = ['actuator_delay', 'sensor_lag', 'tem_mismatch']
+    commanded = td.write_bag(truth, tmp_path / 'commanded')
+    res = diagnose(commanded, candidates=candidates)
+    assert res.drive == 'commanded' and res.cause == 'actuator_delay', res.summary  # what a bag without it says
+    applied = td.write_bag(truth, tmp_path / 'applied', applied=fx.delayed(truth.u, delay, dt))
+    run = load_run(applied)
+    assert run.drive == 'applied' and np.array_equal(run.u, fx.delayed(truth.u, delay, dt)[: run.n])
+    res = diagnose(applied, candidates=candidates)
+    assert res.drive == 'applied' and not res.discrepancy, res.summary
+    assert res.residual_stats['thermal']['nominal']['rms_over_noise'] < 1.2
+
+
 def test_missing_angle_still_checks_the_thermal_part(tmp_path):
     td.make_bag(
         tmp_path / 'b',

@@ -24,6 +24,7 @@ TOPICS = (
     '/wrist/muscle_2/stress',
     '/wrist/payload',
     '/clock',
+    '/wrist/tem_drive_applied',
 )
 
 
@@ -920,6 +921,73 @@ def test_a_graph_that_starts_behind_the_device_drives_it_at_the_window_it_answer
     assert on_s - stamps[0] <= bridge.period_s + 0.002, (on_s, stamps[:3])
     assert bridge.counters['windows_skipped'] >= 2
     assert np.allclose(np.diff(stamps), 0.01, atol=1e-6)  # the windows after the skip stay on their grid
+
+
+@pytest.mark.parametrize('readback', [True, False])
+def test_the_drive_the_device_read_back_is_published_where_it_took_effect(emulator, graph, readback):
+    """A command is stamped with the window it answers; the device applies it after the graph's delay and its own
+    latency (25 ms here), which no stamp said, so a diagnosis replayed the TEMs' heat early. A device that reads its
+    drive back gets asked for it, and the bridge publishes it per window in the host's terms (the muscle's TEM, its
+    sign: this wrist has its drive wires swapped and TEM 2's leads too), each window's drive at its middle, stamped
+    with the window's start: the drive comes on in the window whose middle it held. A device without the read-back:
+    nothing on the topic."""
+    clock = ManualClock()
+    on: list[int] = []  # t_us of the device's driven samples
+    emu = emulator(
+        clock,
+        noise_counts=0.0,
+        latency_s=0.025,
+        drive_readback=readback,
+        tem_channels_swapped=True,
+        tem_polarity_swapped=(False, True),
+    )
+    sample = emu._sample
+
+    def recorded() -> bytes:
+        line = sample()
+        if np.any(emu._u):
+            on.append(int(round((emu._n - 1) * 1e6 / emu.cfg.rate_hz)))  # the stamp the sample goes out with
+        return line
+
+    emu._sample = recorded
+    wired = {'calibration.tem_channel_map': [2, 1], 'calibration.tem_sign': [1, -1]}
+    rt, bridge, probe = graph(emu, (20.0, -5.0), clock, **wired)
+    rt.run_until(0.3, until='sim')
+    got = probe.got['/wrist/tem_drive_applied']
+    assert len(probe.got['/wrist/joint_states']) > 20
+    if not readback:
+        assert got == []
+        return
+    anchor_us, anchor_s = bridge._anchor
+    t_on = anchor_s + (on[0] - anchor_us) * 1e-6  # device time the drive came on, as the bridge rebases it
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in got])
+    drive = np.array([[m.effort[m.name.index(f'tem_{i}')] for i in (1, 2)] for m in got])
+    assert np.allclose(np.diff(stamps), 0.01, atol=1e-6)
+    k = int(np.flatnonzero(np.any(drive != 0.0, axis=1))[0])
+    assert stamps[k] - 0.005 < t_on <= stamps[k] + 0.005 + 1e-9, (stamps[k - 1 : k + 2], t_on)
+    assert np.allclose(drive[k:], (20.0, -5.0), atol=1e-6)  # the muscles' drive, through the wiring
+    assert t_on - stamps[0] > 0.025  # the device applied it well after the window its first command answered
+
+
+def test_a_drive_switching_inside_each_window_is_published_as_it_was_not_as_its_mean(emulator, graph):
+    """The window's mean of a drive that switches inside it is a drive the TEMs never got, and it carries less Joule
+    heat (K_R I^2, Eqs. 4.13-4.14) than the drive did: +20 V for 5 ms and -10 V for 5 ms, every window, averaged to
+    5 V. The bridge publishes the drive in force at each window's middle: one of the two."""
+    clock = ManualClock()
+    emu = emulator(clock, noise_counts=0.0)
+    sample = emu._sample
+
+    def switching() -> bytes:
+        emu._pending.clear()  # the device's drive is this pattern, whatever the host sends
+        emu._last_cmd_t = emu._n / emu.cfg.rate_hz
+        emu._u[:] = 20.0 if emu._n % 10 < 5 else -10.0
+        return sample()
+
+    emu._sample = switching
+    rt, bridge, probe = graph(emu, (0.0, 0.0), clock)
+    rt.run_until(0.3, until='sim')
+    drive = np.array([m.effort for m in probe.got['/wrist/tem_drive_applied']])
+    assert len(drive) > 20 and set(np.unique(drive[1:])) <= {20.0, -10.0}, np.unique(drive)
 
 
 def test_windows_stay_on_their_grid_when_device_stamps_jitter(tmp_path, graph):

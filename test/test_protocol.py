@@ -16,6 +16,7 @@ samples = st.builds(
     st.integers(0, (1 << 64) - 1),
     st.tuples(u16, u16, u16, u16, u16),
     st.integers(0, 0xFFFF),
+    st.none() | st.tuples(st.integers(-P.MV_LIMIT, P.MV_LIMIT), st.integers(-P.MV_LIMIT, P.MV_LIMIT)),
 )
 frames = st.one_of(
     samples,
@@ -29,6 +30,7 @@ frames = st.one_of(
     st.builds(P.Reset, text),
     st.builds(P.Error, st.integers(0, 65535), text),
     st.just(P.Query()),
+    st.builds(P.DriveReadback, st.booleans()),
 )
 
 
@@ -57,6 +59,24 @@ def test_crc_check_value_and_example_lines():
     assert P.Parser().feed(b'$C,1,7,-12000,13000*' + b'%04X' % P.crc16(b'C,1,7,-12000,13000') + b'\r\n') == [
         P.Command(7, -12000, 13000)
     ]
+
+
+def test_a_sample_with_the_drive_read_back_and_one_without_both_parse():
+    """The read-back is two optional fields at the end of S: a device without it (9 fields) parses as before, with
+    ``drive_mV`` None; out of the command range, or only one of the two, is malformed."""
+    old = P.encode_unchecked('S,1,41,41000,25000,24987,17500,17512,35388,0')
+    new = P.encode_unchecked('S,1,41,41000,25000,24987,17500,17512,35388,2,-24000,13000')
+    adc = (25000, 24987, 17500, 17512, 35388)
+    assert P.Parser().feed(old + new) == [P.Sample(41, 41000, adc, 0), P.Sample(41, 41000, adc, 2, (-24000, 13000))]
+    assert P.Parser().feed(P.encode_unchecked('D,1,1') + P.encode_unchecked('D,1,0')) == [
+        P.DriveReadback(True),
+        P.DriveReadback(False),
+    ]
+    p = P.Parser()
+    bad = ('S,1,1,1,1,1,1,1,1,0,30001,0', 'S,1,1,1,1,1,1,1,1,0,5', 'S,1,1,1,1,1,1,1,1,0,-0,0', 'D,1,2')
+    assert p.feed(b''.join(P.encode_unchecked(b) for b in bad)) == [] and p.stats.malformed == len(bad)
+    longest = P.Sample(P.SEQ_MODULUS - 1, (1 << 64) - 1, (P.ADC_MAX,) * 5, 0xFFFF, (-P.MV_LIMIT, -P.MV_LIMIT))
+    assert len(P.encode(longest)) <= P.MAX_LINE
 
 
 @given(st.lists(frames, max_size=20), st.lists(st.integers(1, 40), max_size=30))

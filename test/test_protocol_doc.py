@@ -33,6 +33,9 @@ class Device:
         self.seq += 1
         os.write(self.host, P.encode(P.Command(self.seq, u1_mV, u2_mV)))
 
+    def write(self, frame: P.Frame) -> None:
+        os.write(self.host, P.encode(frame))
+
     def samples(self, n: int) -> list[P.Sample]:
         out = []
         for _ in range(n):
@@ -105,6 +108,27 @@ def test_flag_2_stays_set_while_a_clipped_command_is_in_force(device):
     assert flags[1] & P.FLAG_CLIPPED and flags[-1] == P.FLAG_WATCHDOG
 
 
+@pytest.mark.parametrize('firmware_has_it', [True, False])
+def test_asked_the_device_reads_back_the_drive_it_applied_until_it_reboots(device, firmware_has_it):
+    """After a D frame every sample carries the drive of the period it ends, as applied: from the first sample at
+    the command's arrival + latency, clipped to the rating, zeroed by the watchdog; a reboot forgets it. A firmware
+    without the read-back ignores the D frame: its samples stay as they were."""
+    d = device(u_limit_V=24.0, watchdog_s=0.1, latency_s=0.002, drive_readback=firmware_has_it)
+    assert all(s.drive_mV is None for s in d.samples(5))  # not asked: the samples of protocol 1 as they were
+    d.write(P.DriveReadback(True))
+    d.send(30000, -5000)
+    drive = [s.drive_mV for s in d.samples(150)]
+    if not firmware_has_it:
+        assert drive == [None] * 150
+        return
+    # arrival (5 ms) + 2 ms: the sample at 6 ms is still undriven, then 24 V (clipped) until the watchdog
+    assert drive[0] == (0, 0) and drive[1] == (24000, -5000)
+    assert drive[-1] == (0, 0) and drive.count((24000, -5000)) == 101
+    d.emu.inject('reset')
+    d.emu._do_actions()
+    assert all(s.drive_mV is None for s in d.samples(5))
+
+
 def test_minus_zero_is_not_canonical():
     parser = P.Parser()
     assert parser.feed(P.encode_unchecked('C,1,5,-0,0')) == [] and parser.stats.malformed == 1
@@ -127,6 +151,7 @@ def test_the_doc_states_each_answer_and_the_bridges_safe_angle_range():
         'set from boot until the first command',
         'stays set on every sample while a clipped command is in force',
         '`-0` is not canonical',
+        'a reboot forgets it',
     ):
         assert statement in DOC, statement
     assert re.search(r'\| `C` \|', DOC)

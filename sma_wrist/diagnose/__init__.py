@@ -120,6 +120,8 @@ class DiagnosisResult:
     source: str = ''
     duration_s: float = 0.0
     wall_s: float = 0.0
+    #: the TEM drive the replays ran on: 'applied' (the device's read-back) or 'commanded' (the commands)
+    drive: str = 'commanded'
     params_file: str | None = None
 
     def to_json(self) -> dict[str, Any]:
@@ -420,6 +422,7 @@ def diagnose_run(
         warnings=list(run.warnings),
         source=run.source,
         duration_s=run.duration,
+        drive=run.drive,
     )
     if params_out is not None:
         res.params_file = str(write_params(res, params_out, run, hysteresis_file, thermal_file))

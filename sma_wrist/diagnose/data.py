@@ -5,13 +5,15 @@ The diagnosis needs, on one uniform time grid:
 * ``u``  (K, 2) TEM drive commands [V] (``/wrist/tem_{1,2}/command``, std_msgs/Float64),
   zero-order held: the command stamped at t_k drives the plant over [t_k, t_k+1)
   (plant_sim's convention: it publishes the state at t_k, the controller answers at t_k,
-  the plant integrates it until t_k+1);
+  the plant integrates it until t_k+1). Where the bag has the drive the device read back
+  (``/wrist/tem_drive_applied``, hardware_bridge), that is ``u`` instead, held the same way: on hardware a
+  command takes effect after the graph's delay, which its stamp (the window it answers) does not say;
 * ``T``  (K, 2) muscle temperatures [degC] (``/wrist/muscle_{1,2}/temperature``);
 * ``q``  (K,) wrist angle [rad] (``/wrist/joint_states`` position of joint ``wrist``);
 * ``payload_kg`` (``/wrist/payload``, latched std_msgs/Float64).
 
-Measurements are stamped with their header stamp when it is set (acquisition time), else
-with the bag's log time; commands with the log time. Problems are either fixed and
+Measurements (and the read-back drive) are stamped with their header stamp when it is set (acquisition time),
+else with the bag's log time; commands with the log time. Problems are either fixed and
 reported in ``Run.warnings`` (NaNs dropped, unsorted or duplicate stamps sorted/removed,
 Kelvin temperatures or degree angles converted, gaps: the longest gap-free stretch is
 analysed) or raised as :class:`DiagnoseInputError` naming the problem and what is needed.
@@ -37,6 +39,10 @@ TOPICS = {
     'joint': '/wrist/joint_states',
     'payload': '/wrist/payload',
 }
+#: the drive the TEMs got as the device read it back (sensor_msgs/JointState, effort [V] of tem_1 / tem_2, stamped
+#: in device time from where it held): preferred to the commands where a bag has it
+DRIVE_TOPIC = '/wrist/tem_drive_applied'
+DRIVE_NAMES = ('tem_1', 'tem_2')
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
@@ -74,6 +80,8 @@ class Run:
     #: the first settle_s [s] only settle the replays' memory (the wires' hysteresis, the joint): neither fitted nor
     #: scored; the train / held-out split is over the rest. 0: the usual 5 s burn-in
     settle_s: float = 0.0
+    #: where ``u`` comes from: 'applied' (the device's read-back, DRIVE_TOPIC) or 'commanded' (the commands)
+    drive: str = 'commanded'
 
     @property
     def n(self) -> int:
@@ -99,9 +107,12 @@ def _series(
         vals = np.array([float(m.temperature) for m in msgs])
     elif kind == 'joint':
         vals = np.array(joint_positions(msgs, joint_name))
+    elif kind in DRIVE_NAMES:  # one TEM's read-back drive out of DRIVE_TOPIC's JointState
+        vals = np.array([_effort(m, kind) for m in msgs])
     else:
         vals = np.array([float(m.data) for m in msgs])
-    stamps = np.array([_stamp_ns(m) for m in msgs], dtype=np.int64) if kind in ('temperature', 'joint') else None
+    stamped = kind in ('temperature', 'joint', *DRIVE_NAMES)
+    stamps = np.array([_stamp_ns(m) for m in msgs], dtype=np.int64) if stamped else None
     t = (stamps if stamps is not None and np.all(stamps > 0) else np.asarray(t_log, np.int64)).astype(float) * 1e-9
     bad = ~np.isfinite(vals)
     if bad.any():
@@ -112,7 +123,7 @@ def _series(
         t, vals = t[~bad], vals[~bad]
     # a glitch no sensor of this wrist can give, in any unit the checks below recognise (K, degF, degrees): one
     # 1e300 overflowed the fit ('internal error'), one 1e6 rad refused the whole bag as 'not radians'
-    wild = np.abs(vals) > IMPOSSIBLE[kind]  # sma_wrist.contract.IMPOSSIBLE
+    wild = np.abs(vals) > IMPOSSIBLE.get(kind, IMPOSSIBLE['float'])  # sma_wrist.contract.IMPOSSIBLE
     if wild.any():
         warnings.append(
             f'{name}: {int(wild.sum())} of {vals.size} samples beyond +-{IMPOSSIBLE[kind]:g} (up to '
@@ -131,6 +142,13 @@ def _series(
         warnings.append(f'{name}: {int(dup.sum())} duplicate stamps; the last sample of each stamp was kept')
         t, vals = t[~dup], vals[~dup]
     return t, vals
+
+
+def _effort(msg: Any, name: str) -> float:
+    """The effort of joint ``name`` in a JointState (NaN where it has none: dropped as a missing sample)."""
+    names = list(msg.name)
+    i = names.index(name) if name in names else DRIVE_NAMES.index(name)
+    return float(msg.effort[i]) if len(msg.effort) > i else float('nan')
 
 
 def _without_frozen(
@@ -188,7 +206,7 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
             f'{p}: no such bag (need a rosbag2 directory with metadata.yaml and .mcap, or an .mcap file)'
         )
     try:
-        data = read_bag(p, rec.recorded(TOPICS.values()))
+        data = read_bag(p, rec.recorded([*TOPICS.values(), DRIVE_TOPIC]))
     except BagError as exc:
         if not exc.salvaged:
             raise DiagnoseInputError(f'{p}: cannot read the bag: {exc.problem}') from None
@@ -202,6 +220,20 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
     data = rec.as_contract(data)
 
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    drive = 'commanded'
+    if DRIVE_TOPIC in data and len(data[DRIVE_TOPIC][1]):
+        try:
+            applied = {
+                k: _series(DRIVE_TOPIC, *data[DRIVE_TOPIC], name, warnings)
+                for k, name in zip(('u1', 'u2'), DRIVE_NAMES)
+            }
+        except (AttributeError, TypeError, ValueError) as exc:
+            raise DiagnoseInputError(
+                f'{DRIVE_TOPIC}: unexpected message content ({exc}); the contract type is required (msg_defs/topics.yaml)'
+            ) from None
+        if all(s[0].size for s in applied.values()):
+            series.update(applied)  # the commands' stamps are the windows they answer, not when the drive took effect
+            drive = 'applied'
     kinds = {
         'u1': 'float',
         'u2': 'float',
@@ -211,6 +243,8 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
         'payload': 'float',
     }
     for key, topic in TOPICS.items():
+        if key in series:
+            continue
         if topic in data and len(data[topic][1]):
             try:
                 s = _series(topic, data[topic][0], data[topic][1], kinds[key], warnings, rec.joint)
@@ -222,7 +256,9 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
                 ) from None
             if s[0].size:
                 series[key] = s
-    return run_from_series(series, str(p), warnings, max_rate_hz)
+    run = run_from_series(series, str(p), warnings, max_rate_hz)
+    run.drive = drive
+    return run
 
 
 def run_from_series(

@@ -180,6 +180,12 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
         f'| held-out RMS before / after ({result.channel}) | {result.rmse_before:.4g} / {result.rmse_after:.4g} |',
         f'| gain | {result.gain_pct:.1f} % (bootstrap 5-95 %: {result.gain_ci[0]:.1f} .. {result.gain_ci[1]:.1f}) |',
         f'| confidence | {result.confidence:.2f} |',
+        '| TEM drive replayed | '
+        + (
+            "the device's read-back (/wrist/tem_drive_applied) |"
+            if result.drive == 'applied'
+            else 'the commands (/wrist/tem_{1,2}/command) |'
+        ),
     ]
     if result.ambiguous_with:
         lines += [

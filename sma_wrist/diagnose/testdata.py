@@ -131,8 +131,10 @@ def simulate(
     params: dict[str, float] | None = None,
     payload_kg: float | None = None,
     dt: float = 0.01,
+    u: np.ndarray | None = None,
 ) -> Truth:
-    """The measured signals of one synthetic run (no bag)."""
+    """The measured signals of one synthetic run (no bag); ``u``: (K, 2) TEM commands [V] instead of
+    :func:`commands`' (K = duration_s / dt + 1)."""
     if effect != 'none' and effect not in fx.EFFECTS:
         raise ValueError(f'unknown effect {effect!r}; catalogue: {", ".join(fx.EFFECTS)}')
     rng = np.random.default_rng(seed)
@@ -140,7 +142,7 @@ def simulate(
     injected = sample_params(effect, rng) if params is None else dict(params)
     r = fx.theta(**injected)
     consts = Constants(PlantParams(dt=dt))
-    u = commands(duration_s, dt, rng)
+    u = commands(duration_s, dt, rng) if u is None else np.asarray(u, float)
     K = u.shape[0]
     coef, drift, off = fx.thermal_coef(consts, r[[fx.INDEX[k] for k in fx.THERMAL_KEYS]])
     x0 = th.rest_state(consts.params.thermal, 1)
@@ -201,8 +203,12 @@ def write_bag(
     corrupt: dict[str, Any] | None = None,
     nodes: Sequence[type] = (),
     params: dict[str, dict[str, Any]] | None = None,
+    applied: np.ndarray | None = None,
 ) -> Path:
     """Write a Truth as a rosbag2 (MCAP) bag through the embedded runtime and BagRecorder.
+
+    ``applied``: (K, 2) [V] the drive the device read back, published on /wrist/tem_drive_applied (as
+    hardware_bridge does) with each sample's stamp, as the drive that held from there (the commands' convention).
 
     ``nodes``: node classes that run beside the publisher (they see the data live and their topics are recorded
     too, e.g. twin_monitor), with ``params`` ({node: {name: value}}).
@@ -275,6 +281,8 @@ def write_bag(
             if '/wrist/payload' not in drop:
                 latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
                 self.create_publisher(Float64, '/wrist/payload', latched).publish(Float64(data=payload))
+            if applied is not None:
+                self.drive_pub = self.create_publisher(JointState, '/wrist/tem_drive_applied', 10)
             self.create_timer(truth.dt, self.tick)
 
         def tick(self) -> None:
@@ -304,6 +312,11 @@ def write_bag(
                 name = f'/wrist/tem_{i}/command'
                 if name in p:
                     p[name].publish(Float64(data=float(u[k, i - 1])))
+            if applied is not None:
+                d = JointState(name=['tem_1', 'tem_2'], effort=[float(applied[k, 0]), float(applied[k, 1])])
+                d.header.stamp = Time(nanoseconds=int(stamp_ns[k])).to_msg()
+                d.header.frame_id = 'wrist_base'
+                self.drive_pub.publish(d)
 
     path = Path(path)
     try:

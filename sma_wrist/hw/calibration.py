@@ -122,6 +122,12 @@ class Wiring:
         out[self.tem_channel_map[1] - 1] = self.tem_sign[1] * u2_V
         return out[0], out[1]
 
+    def muscle_drive(self, d1_V: float, d2_V: float) -> tuple[float, float]:
+        """The drive [V] muscle 1's and muscle 2's TEMs got from the driver outputs ``(d1_V, d2_V)`` (the inverse of
+        :meth:`device_command`: a device's read-back of its outputs in the host's terms)."""
+        d = (d1_V, d2_V)
+        return self.tem_sign[0] * d[self.tem_channel_map[0] - 1], self.tem_sign[1] * d[self.tem_channel_map[1] - 1]
+
     def channel_order(self) -> list[int]:
         """Column indices that put a sample's five counts in muscle order (``counts[:, order]``)."""
         return [self.thermocouple_map[0] - 1, self.thermocouple_map[1] - 1, 2, 3, 4]

@@ -10,7 +10,8 @@ scenario ``--scenario-file`` gives (its sensor lag and noise act on what the dev
 ``--params-file`` the wire, TEMs and pre-load plant_sim would simulate with those ROS params files (an
 identified wire's ``wrist_params.yaml``); ``$C`` commands
 take effect ``--latency-ms`` after they arrive; no command for ``--watchdog-s`` of device
-time -> zero drive (flag ``FLAG_WATCHDOG``). Device time runs ``--time-scale`` times
+time -> zero drive (flag ``FLAG_WATCHDOG``). Asked by a ``$D`` frame, every sample carries the drive applied over its
+period (a firmware without the read-back: ``--no-drive-readback``). Device time runs ``--time-scale`` times
 faster than wall time (the plant too), so a 126 s closed loop can take 25 s.
 
 Fault injection (for tests and demos), from the command line as rates/periods, or from
@@ -123,6 +124,9 @@ class EmulatorConfig:
     calibration: Calibration = field(default_factory=Calibration)
     device_id: str = 'sma-wrist-emulator'
     firmware: str = '1.0.0'
+    # the firmware can read its drive back (doc/explanation/protocol.md, D frame): asked, every sample carries the
+    # drive applied over its period. False: a firmware without it, which ignores the host's D frame
+    drive_readback: bool = True
     # random faults per sample line (probabilities) and periodic events (device s, 0 = never)
     garbage_rate: float = 0.0
     checksum_error_rate: float = 0.0
@@ -309,6 +313,7 @@ class DeviceEmulator:
         self._last_cmd_t = -1e9
         self._u[:] = 0.0
         self._pending.clear()
+        self._readback = False  # the host asks for the drive read-back again after each boot
         self.parser.reset()
         self._out += P.encode(P.Reset(reason)) + P.encode(
             P.Hello(self.cfg.device_id, self.cfg.firmware, int(round(self.cfg.rate_hz)))
@@ -393,6 +398,8 @@ class DeviceEmulator:
                 self._pending.append((now + self.cfg.latency_s, u))
             elif isinstance(f, P.Query):
                 self._out += P.encode(P.Hello(self.cfg.device_id, self.cfg.firmware, int(round(self.cfg.rate_hz))))
+            elif isinstance(f, P.DriveReadback) and self.cfg.drive_readback:
+                self._readback = f.on
 
     def _wired(self, u: np.ndarray) -> np.ndarray:
         """The drive (1, 2) [V] each TEM gets from the driver's outputs ``u``, through the wiring faults."""
@@ -471,6 +478,8 @@ class DeviceEmulator:
         if self._boot_flag:
             flags |= P.FLAG_BOOT
             self._boot_flag = False
+        # what the driver outputs apply over this sample's period, as the firmware reads it back (before the wiring)
+        drive = (int(round(u[0, 0] * 1000.0)), int(round(u[0, 1] * 1000.0))) if self._readback else None
         u = self._wired(u)
         if self._effect_n is None and self.stats.commands_received:
             self._effect_n = 0
@@ -512,7 +521,9 @@ class DeviceEmulator:
         adc = list(quantise(counts))
         for ch, v in self._forced.items():
             adc[ch] = v
-        s = P.Sample((self._n - 1) % P.SEQ_MODULUS, int(round((self._n - 1) * 1e6 / c.rate_hz)), tuple(adc), flags)
+        s = P.Sample(
+            (self._n - 1) % P.SEQ_MODULUS, int(round((self._n - 1) * 1e6 / c.rate_hz)), tuple(adc), flags, drive
+        )
         line = P.encode(s)
         if self.sent_log is not None:
             self.sent_log.append((self.clock(), s))
@@ -732,6 +743,7 @@ def config_from_args(a: argparse.Namespace) -> EmulatorConfig:
         angle_reversed=bool(getattr(a, 'reverse_angle', False)),
         broken_wire=broken,
         tem_drive_scale=drive_scale,
+        drive_readback=not getattr(a, 'no_drive_readback', False),
     )
 
 

@@ -17,7 +17,8 @@ reference implementation:
 * :class:`SequenceTracker` detects lost, repeated and reordered sample numbers.
 
 Device -> host: :class:`Sample` (``S``), :class:`Hello` (``H``), :class:`Reset` (``R``),
-:class:`Error` (``E``). Host -> device: :class:`Command` (``C``), :class:`Query` (``Q``).
+:class:`Error` (``E``). Host -> device: :class:`Command` (``C``), :class:`Query` (``Q``),
+:class:`DriveReadback` (``D``: asks a device that can for the drive it applied, two more fields in every ``S``).
 """
 
 from __future__ import annotations
@@ -68,13 +69,16 @@ class Sample:
 
     ``t_us`` is device time since boot [us]; ``adc`` are raw 16-bit counts in the order
     (muscle 1 thermocouple, muscle 2 thermocouple, TEM 1 exchanger face, TEM 2 exchanger
-    face, angle potentiometer); calibration to degC / rad is the host's job.
+    face, angle potentiometer); calibration to degC / rad is the host's job. ``drive_mV``: the drive
+    (u1, u2) [mV] the driver outputs applied over the sample period this sample ends (after the device's clipping,
+    watchdog and over-temperature cut), sent only after the host asked with :class:`DriveReadback`; None without.
     """
 
     seq: int
     t_us: int
     adc: tuple[int, int, int, int, int]
     flags: int = 0
+    drive_mV: tuple[int, int] | None = None
     version: int = PROTOCOL_VERSION
 
 
@@ -122,14 +126,24 @@ class Query:
     version: int = PROTOCOL_VERSION
 
 
-Frame = Sample | Hello | Reset | Error | Command | Query
+@dataclass(frozen=True)
+class DriveReadback:
+    """Host asks the device to append the drive it applied to every :class:`Sample` (``D``, ``on`` 1) or to stop
+    (0), until the device reboots. A device without the read-back ignores it: its samples stay as they were."""
+
+    on: bool = True
+    version: int = PROTOCOL_VERSION
+
+
+Frame = Sample | Hello | Reset | Error | Command | Query | DriveReadback
 
 
 def _body(frame: Frame) -> str:
     v = frame.version
     if isinstance(frame, Sample):
         a = frame.adc
-        return f'S,{v},{frame.seq},{frame.t_us},{a[0]},{a[1]},{a[2]},{a[3]},{a[4]},{frame.flags}'
+        d = '' if frame.drive_mV is None else f',{frame.drive_mV[0]},{frame.drive_mV[1]}'
+        return f'S,{v},{frame.seq},{frame.t_us},{a[0]},{a[1]},{a[2]},{a[3]},{a[4]},{frame.flags}{d}'
     if isinstance(frame, Command):
         return f'C,{v},{frame.seq},{frame.u1_mV},{frame.u2_mV}'
     if isinstance(frame, Hello):
@@ -140,6 +154,8 @@ def _body(frame: Frame) -> str:
         return f'E,{v},{frame.code},{frame.text}'
     if isinstance(frame, Query):
         return f'Q,{v}'
+    if isinstance(frame, DriveReadback):
+        return f'D,{v},{int(frame.on)}'
     raise TypeError(f'not a protocol frame: {frame!r}')
 
 
@@ -152,6 +168,9 @@ def check_frame(frame: Frame) -> None:
             raise ValueError(f'sample header out of range: {frame!r}')
         if len(frame.adc) != 5 or not all(0 <= c <= ADC_MAX for c in frame.adc):
             raise ValueError(f'ADC counts must be 5 values in 0..{ADC_MAX}: {frame.adc!r}')
+        d = frame.drive_mV
+        if d is not None and (len(d) != 2 or not all(abs(x) <= MV_LIMIT for x in d)):
+            raise ValueError(f'applied drive must be 2 values within +-{MV_LIMIT} mV: {d!r}')
     elif isinstance(frame, Command):
         if not (0 <= frame.seq < SEQ_MODULUS and abs(frame.u1_mV) <= MV_LIMIT and abs(frame.u2_mV) <= MV_LIMIT):
             raise ValueError(f'command out of range (|u| <= {MV_LIMIT} mV): {frame!r}')
@@ -188,12 +207,14 @@ _N = rb'(0|[1-9][0-9]{0,19})'  # unsigned decimal, canonical (no leading zeros, 
 _I = rb'(0|-?[1-9][0-9]{0,5})'  # signed decimal
 _T = rb'([A-Za-z0-9_.\-]{0,40})'
 _PATTERNS = {
-    ord('S'): re.compile(rb'S,' + b','.join([_N] * 9)),
+    # a sample's last two fields, the applied drive, are there only when the host asked (DriveReadback)
+    ord('S'): re.compile(rb'S,' + b','.join([_N] * 9) + rb'(?:,' + _I + b',' + _I + b')?'),
     ord('C'): re.compile(rb'C,' + _N + b',' + _N + b',' + _I + b',' + _I),
     ord('H'): re.compile(rb'H,' + _N + b',' + _T + b',' + _T + b',' + _N),
     ord('R'): re.compile(rb'R,' + _N + b',' + _T),
     ord('E'): re.compile(rb'E,' + _N + b',' + _N + b',' + _T),
     ord('Q'): re.compile(rb'Q,' + _N),
+    ord('D'): re.compile(rb'D,' + _N + rb',([01])'),
 }
 _HEX = re.compile(rb'[0-9A-F]{4}')
 
@@ -222,7 +243,10 @@ def _build(kind: int, g: tuple[bytes, ...]) -> Frame | None:
         adc = (int(g[3]), int(g[4]), int(g[5]), int(g[6]), int(g[7]))
         if seq >= SEQ_MODULUS or t_us >= 1 << 64 or flags > 0xFFFF or max(adc) > ADC_MAX:
             return None
-        return Sample(seq, t_us, adc, flags)
+        drive = None if g[9] is None else (int(g[9]), int(g[10]))
+        if drive is not None and max(abs(drive[0]), abs(drive[1])) > MV_LIMIT:
+            return None
+        return Sample(seq, t_us, adc, flags, drive)
     if kind == ord('C'):
         seq, u1, u2 = int(g[1]), int(g[2]), int(g[3])
         if seq >= SEQ_MODULUS or abs(u1) > MV_LIMIT or abs(u2) > MV_LIMIT:
@@ -238,6 +262,8 @@ def _build(kind: int, g: tuple[bytes, ...]) -> Frame | None:
     if kind == ord('E'):
         code = int(g[1])
         return Error(code, g[2].decode()) if code <= 65535 else None
+    if kind == ord('D'):
+        return DriveReadback(g[1] == b'1')
     return Query()
 
 
@@ -377,6 +403,7 @@ __all__ = [
     'Error',
     'Command',
     'Query',
+    'DriveReadback',
     'Frame',
     'crc16',
     'encode',
