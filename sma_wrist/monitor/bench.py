@@ -213,6 +213,9 @@ def emulated_case(
     out['checks_s'] = (vs[0]['t_s'], vs[-1]['t_s']) if vs else None  # device time of the first and last check
     out['checks'] = len(vs)
     out['skipped_checks'] = summary['monitor']['skipped_checks']
+    # the worker process' CPU (the twin and the checks) per second of device time: the monitor's cost at 100 Hz
+    out['worker_core_fraction'] = summary['monitor'].get('worker_cpu_s', 0.0) / max(summary['sim_time_s'], 1e-9)
+    out['sim_time_s'] = summary['sim_time_s']
     m = summary.get('metrics') or {}
     out['metrics'] = {k: m[k] for k in ('max_error_pct_all', 'rms_error_pct_all') if k in m}
     early = [e for e in ep if e['raised_s'] < onset_s]
@@ -250,7 +253,13 @@ def emulated_detection(
                 enumerate(effects),
             )
         )
-    return {**_detected(rows), 'failed_runs': sum('error' in r for r in rows)}
+    fr = [r['worker_core_fraction'] for r in rows if 'worker_core_fraction' in r]
+    return {
+        **_detected(rows),
+        'failed_runs': sum('error' in r for r in rows),
+        'skipped_checks': sum(r.get('skipped_checks', 0) for r in rows),
+        'worker_core_fraction': float(np.mean(fr)) if fr else None,
+    }
 
 
 def _nominal_case(args: tuple) -> dict[str, Any]:
