@@ -12,8 +12,10 @@ verdict, so that neither holds up its subscriptions or the control loop; a check
 waits for it and starts on the newest data (never queued). The verdict goes to
 ``/diagnostics`` (``twin_monitor: model``): OK while the wrist is its model; WARN naming the cause, subsystem,
 fitted parameters, held-out gain and confidence when it is not (cause ``unexplained`` with what the residual
-correlates with when the catalogue has nothing); ERROR when the data cannot be checked (what is missing). The
-verdict history goes to ``history_file`` (.csv, .json or .md).
+correlates with when the catalogue has nothing); ERROR when the data cannot be checked (what is missing); its
+key/values carry the check's details, among them ``change_s`` (where the check placed a change of the residuals in
+its window) and ``pending`` (that change too recent to name: the published verdict stands), as in the verdict
+history, which goes to ``history_file`` (.csv, .json or .md).
 
 Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monitor``.
 """
