@@ -360,6 +360,38 @@ def test_the_worker_process_steps_the_twin_like_the_node_would_and_runs_below_th
     assert b[6] == pytest.approx(a[6], abs=1e-12) and abs(a[6]['T1']) < 5.0  # 25 degC measured, near the twin's
 
 
+def test_handing_batches_to_a_worker_that_does_not_read_never_holds_up_the_node():
+    """A worker process that stops reading (stopped here before it even started) lets the node's sends return at
+    once: what the pipe cannot take waits in the node's memory, in order."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from sma_wrist.monitor.worker import WorkerLink
+
+    link = WorkerLink('process', MonitorConfig())
+    os.kill(link._proc.pid, signal.SIGSTOP)
+    batches = [('feed', k, _events(float(k), k + 1.0), True) for k in range(20)]  # ~20 x 15 kB: past a pipe's 64 kB
+    took: list[float] = []
+
+    def send_all() -> None:
+        for b in batches:
+            t0 = time.monotonic()
+            link.send(b)
+            took.append(time.monotonic() - t0)
+
+    th = threading.Thread(target=send_all, daemon=True)
+    th.start()
+    th.join(20)
+    try:
+        assert not th.is_alive() and len(took) == len(batches), 'a send waited for the worker'
+        assert max(took) < 1.0 and len(link._unsent) > 100_000  # kept for later, not dropped
+    finally:
+        os.kill(link._proc.pid, signal.SIGCONT)
+        link.close()
+
+
 def test_a_check_due_while_the_last_one_runs_waits_for_it_and_the_twin_keeps_up(monkeypatch):
     """A slow check holds up neither the twin nor the samples; the check due meanwhile is not queued: it starts on
     the newest data as soon as the last one is done, and the periods without a check are counted."""
