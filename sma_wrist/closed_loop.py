@@ -293,12 +293,15 @@ def _run(
         sim_s = (rt.sim_ns or 0) / 1e9
         monitor_out = None
         if monitor_node is not None:
+            monitor_node.collect()  # the verdicts the worker sent since the last sample
             v = monitor_node.verdict
             monitor_out = {
-                'checks': len(monitor_node.monitor.history),
+                'checks': len(monitor_node.history),
                 'skipped_checks': monitor_node.skipped_checks,
+                'worker': monitor_node.p['worker'],
+                'worker_cpu_s': monitor_node.worker_cpu_s,
                 'verdict': v.to_json() if v is not None else None,
-                'episodes': monitor_node.monitor.episodes(),
+                'episodes': monitor_node.episodes,
             }
         why = source_node.why_no_data() if stalled else ''
         if bag is not None:

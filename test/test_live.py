@@ -249,8 +249,22 @@ def test_a_served_run_advertises_the_contract_and_sends_what_its_bag_records(tmp
 
     store = get_typestore(Stores.ROS2_HUMBLE)
     bag = tmp_path / 'bag'
+    # the twin in a worker thread: a worker process publishes the twin once it has started (seconds, more on a busy
+    # machine), later than this 1 s run
+    params = tmp_path / 'monitor.yaml'
+    params.write_text('twin_monitor:\n  ros__parameters:\n    worker: thread\n')
     proc, url, _ = _serve_run(
-        tmp_path, '--duration', '8', '--real-time-factor', '8', '--monitor', '--bag', str(bag), '--json'
+        tmp_path,
+        '--duration',
+        '8',
+        '--real-time-factor',
+        '8',
+        '--monitor',
+        '--bag',
+        str(bag),
+        '--json',
+        '--params-file',
+        str(params),
     )
     with contextlib.ExitStack() as stack:
         stack.callback(proc.kill)

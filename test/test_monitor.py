@@ -271,6 +271,9 @@ def test_twin_monitor_node_publishes_the_twin_the_residuals_and_the_verdict(clea
     warn = [(vals, msg) for lv, vals, msg in ours if lv == 1]
     assert warn and warn[0][0]['subsystem'] == 'sensor', ours
     assert float(warn[0][0]['since_s']) >= ONSET_S and 'temp_offset_1_C' in warn[0][0]
+    # where the check placed the change, and the checks that waited for enough data after it
+    assert abs(float(warn[0][0]['change_s']) - ONSET_S) < 5.0, warn[0][0]
+    assert any(vals.get('pending') == 'true' for _, vals, _ in ours) and warn[0][0]['pending'] == 'false'
     assert 2 not in levels  # never ERROR
     doc = json.loads(hist.read_text())
     assert [v['level'] for v in doc['verdicts']][0] == 'OK' and doc['episodes'][0]['subsystem'] == 'sensor'
@@ -314,21 +317,111 @@ def test_an_unexplained_discrepancy_is_raised_only_once_the_window_holds_no_data
     assert [v.level for v in out].index('WARN') == 6 and out[-1].cause == 'unexplained'
 
 
-def test_the_check_worker_runs_below_the_node_priority():
-    """The checks take the CPU the control loop leaves over: the worker process' niceness is worker_nice above
-    the node's."""
-    import multiprocessing
+def _events(t0: float, t1: float) -> list[tuple[str, int, float, float]]:
+    """A wrist at rest, sampled at 100 Hz over [t0, t1) as twin_monitor buffers it (commands, temperatures, angle)."""
+    out = []
+    for k in range(int(round(t0 * 100)), int(round(t1 * 100))):
+        t = k / 100.0
+        out += [('u', 1, t, 2.0), ('u', 2, t, -2.0), ('T', 1, t, 25.0), ('T', 2, t, 25.0), ('q', 0, t, 0.3)]
+    return out
+
+
+def _answers(link, kind, n=1, timeout=90.0):  # type: ignore[no-untyped-def]
+    import time
+
+    got, t_end = [], time.monotonic() + timeout
+    while len(got) < n and time.monotonic() < t_end:
+        got += [a for a in link.poll() if a[0] == kind]
+        time.sleep(0.02)
+    return got
+
+
+def test_the_worker_process_steps_the_twin_like_the_node_would_and_runs_below_the_node():
+    """The twin runs in the worker process, niced worker_nice below the node, and answers a batch with the same
+    prediction as the same worker in the node's callback."""
     import os
-    from concurrent.futures import ProcessPoolExecutor
 
-    from sma_wrist.monitor.worker import start_worker
+    from sma_wrist.monitor.worker import WorkerLink
 
-    mine = os.nice(0)
-    with ProcessPoolExecutor(
-        1, mp_context=multiprocessing.get_context('spawn'), initializer=start_worker, initargs=(7,)
-    ) as p:
-        theirs = p.submit(os.nice, 0).result(timeout=60)
-    assert theirs == min(mine + 7, 19)
+    cfg = MonitorConfig()
+    batch = [('p', 0, 0.0, 0.3), *_events(0.0, 2.0)]
+    inline, proc = WorkerLink('inline', cfg), WorkerLink('process', cfg, nice=1)
+    try:
+        for link in (inline, proc):
+            link.send(('feed', 1, batch, True))
+        (a,) = _answers(inline, 'twin')
+        (b,) = _answers(proc, 'twin')
+        theirs = os.getpriority(os.PRIO_PROCESS, proc._proc.pid)
+    finally:
+        proc.close()
+    assert theirs == min(os.nice(0) + 1, 19)
+    assert a[:3] == (a[0], 1, 1.99) and b[:3] == a[:3]
+    assert np.allclose(b[3], a[3], atol=1e-12) and b[4] == pytest.approx(a[4], abs=1e-12)
+    assert b[6] == pytest.approx(a[6], abs=1e-12) and abs(a[6]['T1']) < 5.0  # 25 degC measured, near the twin's
+
+
+def test_handing_batches_to_a_worker_that_does_not_read_never_holds_up_the_node():
+    """A worker process that stops reading (stopped here before it even started) lets the node's sends return at
+    once: what the pipe cannot take waits in the node's memory, in order."""
+    import os
+    import signal
+    import threading
+    import time
+
+    from sma_wrist.monitor.worker import WorkerLink
+
+    link = WorkerLink('process', MonitorConfig())
+    os.kill(link._proc.pid, signal.SIGSTOP)
+    batches = [('feed', k, _events(float(k), k + 1.0), True) for k in range(20)]  # ~20 x 15 kB: past a pipe's 64 kB
+    took: list[float] = []
+
+    def send_all() -> None:
+        for b in batches:
+            t0 = time.monotonic()
+            link.send(b)
+            took.append(time.monotonic() - t0)
+
+    th = threading.Thread(target=send_all, daemon=True)
+    th.start()
+    th.join(20)
+    try:
+        assert not th.is_alive() and len(took) == len(batches), 'a send waited for the worker'
+        assert max(took) < 1.0 and len(link._unsent) > 100_000  # kept for later, not dropped
+    finally:
+        os.kill(link._proc.pid, signal.SIGCONT)
+        link.close()
+
+
+def test_a_check_due_while_the_last_one_runs_waits_for_it_and_the_twin_keeps_up(monkeypatch):
+    """A slow check holds up neither the twin nor the samples; the check due meanwhile is not queued: it starts on
+    the newest data as soon as the last one is done, and the periods without a check are counted."""
+    import threading
+
+    from sma_wrist.monitor import worker as W
+
+    release, started = threading.Event(), []
+
+    def slow(window, t, *a):  # type: ignore[no-untyped-def]
+        started.append(t)
+        assert release.wait(30)
+        return Verdict(t, 'OK', None, None, 1.0)
+
+    monkeypatch.setattr(W, 'diagnose_window', slow)
+    link = W.WorkerLink('thread', MonitorConfig(window_s=45.0, settle_s=20.0, check_period_s=15.0))
+    try:
+        for seq, t0 in enumerate(range(0, 100), 1):  # a batch per second; the first check is due at 65 s
+            link.send(('feed', seq, _events(float(t0), t0 + 1.0), True))
+        twins = _answers(link, 'twin', 100)
+        assert started == [65.0] and twins[-1][2] == pytest.approx(99.99)  # stepped to the end while it ran
+        release.set()
+        (v,) = _answers(link, 'verdict')
+        link.send(('feed', 101, _events(100.0, 100.02), False))
+        (v2,) = _answers(link, 'verdict')
+    finally:
+        release.set()
+        link.close()
+    assert started == [65.0, 100.0]  # not 80 and 95 (queued), nor 110 (the next period): the newest data
+    assert (v[1].t_s, v2[1].t_s, v2[3]) == (65.0, 100.0, 1)  # 80 and 95 were due: one period had no check
 
 
 def test_the_twin_stepped_in_batches_is_the_twin_stepped_per_sample(clean_run):

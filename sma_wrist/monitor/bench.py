@@ -6,7 +6,9 @@
   right subsystem within ``DETECT_WITHIN_S`` of the onset and nothing was raised before it;
 * **emulated detection**: the same on a device that changes while it runs: ``sma-wrist emulate-device --effect``
   (:data:`EMULATED_EFFECTS`, onset at ``EMULATED_ONSET_S`` of device time) and ``sma-wrist run --hardware PORT
-  --monitor verdicts.json`` on it, in real time, the verdicts file read back;
+  --monitor verdicts.json`` on it, in real time, the verdicts file read back; a case in which a check period passed
+  without a check (``skipped_checks``: the check worker starved of CPU by a busy machine) is flagged ``starved`` and
+  left out of the ``valid`` summary; ``worker_core_fraction``: the worker process' CPU per second of device time;
 * **false alarms**: long nominal recordings per controller read through realistic sensors
   (:func:`sma_wrist.diagnose.distort.realistic`, jittering stamps and dropped samples from the bag writer), played
   through the monitor as a bag; and ``diagnose`` on the same whole bags;
@@ -213,6 +215,9 @@ def emulated_case(
     out['checks_s'] = (vs[0]['t_s'], vs[-1]['t_s']) if vs else None  # device time of the first and last check
     out['checks'] = len(vs)
     out['skipped_checks'] = summary['monitor']['skipped_checks']
+    # the worker process' CPU (the twin and the checks) per second of device time: the monitor's cost at 100 Hz
+    out['worker_core_fraction'] = summary['monitor'].get('worker_cpu_s', 0.0) / max(summary['sim_time_s'], 1e-9)
+    out['sim_time_s'] = summary['sim_time_s']
     m = summary.get('metrics') or {}
     out['metrics'] = {k: m[k] for k in ('max_error_pct_all', 'rms_error_pct_all') if k in m}
     early = [e for e in ep if e['raised_s'] < onset_s]
@@ -231,6 +236,9 @@ def emulated_case(
         and out['delay_s'] <= DETECT_WITHIN_S
         and out['checks_before_onset'] > 0
     )
+    # a check period that passed without a check (the worker starved of CPU): the case measured the machine's load,
+    # not the monitor's detection
+    out['starved'] = out['skipped_checks'] > 0
     out['verdicts'] = [(v['t_s'], v['level'], v['subsystem'], v['check_cause'], v['check_confidence']) for v in vs]
     return out
 
@@ -250,7 +258,15 @@ def emulated_detection(
                 enumerate(effects),
             )
         )
-    return {**_detected(rows), 'failed_runs': sum('error' in r for r in rows)}
+    fr = [r['worker_core_fraction'] for r in rows if 'worker_core_fraction' in r]
+    return {
+        **_detected(rows),
+        'failed_runs': sum('error' in r for r in rows),
+        'skipped_checks': sum(r.get('skipped_checks', 0) for r in rows),
+        # the cases that ran through with every check made: the valid measure of detection
+        'valid': _detected([r for r in rows if 'error' not in r and not r.get('starved')]) | {'rows': None},
+        'worker_core_fraction': float(np.mean(fr)) if fr else None,
+    }
 
 
 def _nominal_case(args: tuple) -> dict[str, Any]:

@@ -122,7 +122,7 @@ class Twin:
 
     The samples' intervals are queued and stepped in batches (:meth:`WristPlant.advance_segments`, one compiled call
     per batch) when a prediction is read or :data:`BATCH` have queued: stepped one call per 100 Hz sample, the twin
-    was most of the node's own work (the call overhead, not the 10 plant steps). The heat-balance state after every
+    was most of the monitor's own work (the call overhead, not the 10 plant steps). The heat-balance state after every
     interval is kept (:meth:`thermal_state_at`) for the checks' windows."""
 
     #: intervals queued before they are stepped without being asked for

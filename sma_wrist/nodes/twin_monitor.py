@@ -4,13 +4,18 @@ Subscribes the contract topics (TEM commands, muscle temperatures, joint state, 
 the measured commands beside the wrist (:class:`sma_wrist.monitor.twin.Twin`: the built-in model, the identified
 ``hysteresis_file`` / ``thermal_file``, or a diagnosis' ``extended_params.yaml`` as ``params_file``) and publishes
 its predictions and the residuals (measured - twin) on ``/wrist/twin/...`` (msg_defs/topics.yaml). Every
-``check_period_s`` it diagnoses a rolling window of the recent data (:mod:`sma_wrist.monitor`, doc/howto/monitor.md) in a
-worker process (``worker: thread`` for a worker thread), so the checks never hold up its subscriptions or the
-control loop; a check still running when the next is due is skipped, not queued. The verdict goes to
+``check_period_s`` it diagnoses a rolling window of the recent data (:mod:`sma_wrist.monitor`, doc/howto/monitor.md).
+The node itself only buffers the samples: the twin and the checks run in a worker process
+(:mod:`sma_wrist.monitor.worker`; ``worker: thread`` for a worker thread) that it hands them to every ``BATCH_S``
+of measurement time and that answers with the twin's prediction at the batch's last stamp and with each check's
+verdict, so that neither holds up its subscriptions or the control loop; a check due while the last one still runs
+waits for it and starts on the newest data (never queued). The verdict goes to
 ``/diagnostics`` (``twin_monitor: model``): OK while the wrist is its model; WARN naming the cause, subsystem,
 fitted parameters, held-out gain and confidence when it is not (cause ``unexplained`` with what the residual
-correlates with when the catalogue has nothing); ERROR when the data cannot be checked (what is missing). The
-verdict history goes to ``history_file`` (.csv, .json or .md).
+correlates with when the catalogue has nothing); ERROR when the data cannot be checked (what is missing); its
+key/values carry the check's details, among them ``change_s`` (where the check placed a change of the residuals in
+its window) and ``pending`` (that change too recent to name: the published verdict stands), as in the verdict
+history, which goes to ``history_file`` (.csv, .json or .md).
 
 Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monitor``.
 """
@@ -18,7 +23,7 @@ Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monit
 from __future__ import annotations
 
 import threading
-from concurrent.futures import Executor, Future
+from collections import OrderedDict
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -26,20 +31,19 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64, Header
 
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.monitor import (
-    Monitor,
-    MonitorConfig,
-    MonitorInputError,
-    Verdict,
-    diagnose_window,
-    write_history,
-)
+from sma_wrist.monitor import MonitorConfig, MonitorInputError, Verdict, history_format, write_history
+from sma_wrist.monitor.twin import load_model
+from sma_wrist.monitor.worker import RUNTIME_FIELDS, WorkerLink
 from sma_wrist.nodes.common import HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, Param, WristNode, finite, main_for
 
 _LEVEL = {'OK': DiagnosticStatus.OK, 'WARN': DiagnosticStatus.WARN, 'ERROR': DiagnosticStatus.ERROR}
 _DEFAULTS = MonitorConfig()
 #: period of the repeated verdict on /diagnostics [s]
 HEARTBEAT_S = 1.0
+#: measurement time between two batches handed to the worker [s] (and the fastest twin prediction it sends back)
+BATCH_S = 0.1
+#: batches the node keeps the stamps of while the worker has not answered them
+MAX_PENDING = 1000
 
 
 class TwinMonitor(WristNode):
@@ -113,7 +117,7 @@ class TwinMonitor(WristNode):
         Param(
             'worker',
             'process',
-            'where the checks run: a worker process (never holds the node up), a worker '
+            'where the twin and the checks run: a worker process (never holds the node up), a worker '
             'thread (no process start; shares the interpreter), or inline in the callback (holds the node up '
             'for the check: only for offline simulation, where every check must be made)',
             choices=('process', 'thread', 'inline'),
@@ -121,10 +125,10 @@ class TwinMonitor(WristNode):
         ),
         Param(
             'worker_nice',
-            5,
-            "the check worker process's niceness above the node's (Unix; 0: the same priority): on a busy machine "
-            'the checks take what the control loop leaves over (a check still running when the next is due is '
-            'skipped, counted in skipped_checks)',
+            19,
+            "the worker process's niceness above the node's (Unix; 0: the same priority): the twin and the checks "
+            'take the CPU the control loop leaves over (a check due while the last one still runs waits for it, '
+            'the periods without a check counted in skipped_checks)',
             '1',
             (0, 19),
             runtime=False,
@@ -163,22 +167,32 @@ class TwinMonitor(WristNode):
                 hysteresis_file=p['hysteresis_file'],
                 thermal_file=p['thermal_file'],
                 params_file=p['params_file'],
-            )
+            ).check()
             if p['history_file']:
-                from sma_wrist.monitor import history_format
-
                 history_format(p['history_file'])
-            self.monitor = Monitor(self.config)
+            # loaded here so that a file that does not load stops the node with its name; the worker loads its own
+            model = load_model(p['hysteresis_file'] or None, p['thermal_file'] or None, p['params_file'] or None)
         except MonitorInputError as exc:
             raise SmaWristError(f'twin_monitor: {exc}') from None
-        self.monitor.payload(p['payload_kg'])
+        # the node only buffers: the twin and the checks run in the worker (sma_wrist/monitor/worker.py), which
+        # it feeds a batch every BATCH_S of measurement time
         self._lock = threading.Lock()
-        self._pool: Executor | None = None
-        self._job: Future | None = None
-        self._job_t = 0.0
+        self._events: list[tuple[str, int, float, float]] = [('p', 0, 0.0, float(p['payload_kg']))]
+        self._batch_s = min(BATCH_S, 1.0 / p['twin_rate_hz']) if p['twin_rate_hz'] > 0 else BATCH_S
+        self._sent_t: float | None = None
+        self._twin_t: float | None = None  # stamp of the last twin prediction asked for
+        self._seq = 0
+        self._stamps: OrderedDict[int, Any] = OrderedDict()  # batch -> its last joint state's stamp
+        self.t_first: float | None = None
+        self.span_s = self.config.window_s + self.config.settle_s
         self.skipped_checks = 0
-        self._last_pub: float | None = None
+        self.history: list[Verdict] = []
+        self.episodes: list[dict[str, Any]] = []
         self.verdict: Verdict | None = None
+        #: CPU time of the worker process so far (its last answer) [s]: the twin's and the checks' whole cost
+        self.worker_cpu_s = 0.0
+        self._worker_ended = False
+        self._link = WorkerLink(p['worker'], self.config, int(p['worker_nice']))
         for i in (1, 2):
             self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m))
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
@@ -200,36 +214,35 @@ class TwinMonitor(WristNode):
         self._status: tuple[Any, str, dict[str, Any]] | None = None
         self.timer = self.create_timer(HEARTBEAT_S, self._heartbeat)
         self.get_logger().info(
-            f'twin_monitor: {self.monitor.model.description}; a check of {p["settle_s"]:g} + '
+            f'twin_monitor: {model.description}; a check of {p["settle_s"]:g} + '
             f'{p["window_s"]:g} s every {p["check_period_s"]:g} s in a worker {p["worker"]}'
         )
 
     def apply(self, changed: dict[str, Any]) -> None:
-        c = self.config
-        c.check_period_s = self.p['check_period_s']
-        c.persist_checks = self.p['persist_checks']
-        c.min_confidence = self.p['min_confidence']
-        c.sure_confidence = self.p['sure_confidence']
+        values = {k: self.p[k] for k in RUNTIME_FIELDS}
+        for k, v in values.items():
+            setattr(self.config, k, v)
+        self._link.send(('config', values))
 
-    # -- input ------------------------------------------------------------------------------------------------
+    # -- input: buffered, handed to the worker every BATCH_S ----------------------------------------------------
     def _on_command(self, i: int, msg: Float64) -> None:
         if not finite(msg.data):
             self.reject_input(f'/wrist/tem_{i}/command', f'non-finite command {msg.data!r}')
             return
         with self._lock:
-            self.monitor.command(i, self.now_ns() * 1e-9, float(msg.data))
+            self._events.append(('u', i, self.now_ns() * 1e-9, float(msg.data)))
 
     def _on_temperature(self, i: int, msg: Temperature) -> None:
         if not finite(msg.temperature):
             self.reject_input(f'/wrist/muscle_{i}/temperature', f'non-finite temperature {msg.temperature!r}')
             return
         with self._lock:
-            self.monitor.temperature(i, self.stamp_s(msg), float(msg.temperature))
+            self._events.append(('T', i, self.stamp_s(msg), float(msg.temperature)))
 
     def _on_payload(self, msg: Float64) -> None:
         if finite(msg.data) and 0.0 <= msg.data <= 2.0:
             with self._lock:
-                self.monitor.payload(float(msg.data))
+                self._events.append(('p', 0, 0.0, float(msg.data)))
         else:
             self.reject_input('/wrist/payload', f'{msg.data!r} is not a payload in kg (0-2)')
 
@@ -244,77 +257,50 @@ class TwinMonitor(WristNode):
             return
         t = self.stamp_s(msg)
         with self._lock:
-            self.monitor.angle(t, q)
-            due = self.monitor.due(t)
-            window = self.monitor.window(t) if due and (self._job is None or self._job.done()) else None
-            if due and window is None:
-                self.monitor.last_check = t
-                self.skipped_checks += 1
-        if window is not None:
-            self._submit(window, t)
-        self._collect()
+            self._events.append(('q', 0, t, q))
+            if self._sent_t is not None and t - self._sent_t < self._batch_s - 1e-9:
+                return
+            events, self._events = self._events, []
+            self._sent_t = t
+            self._seq += 1
+            seq = self._seq
+        if self.t_first is None:
+            self.t_first = min(e[2] for e in events if e[0] != 'p')
         rate = self.p['twin_rate_hz']
-        if rate > 0 and (self._last_pub is None or t - self._last_pub >= 1.0 / rate - 1e-9):
-            self._last_pub = t
-            self._publish_twin(msg.header)
+        want_twin = rate > 0 and (self._twin_t is None or t - self._twin_t >= 1.0 / rate - 1e-9)
+        if want_twin:
+            self._twin_t = t
+            self._stamps[seq] = msg.header.stamp
+            while len(self._stamps) > MAX_PENDING:  # a worker that answers nothing: forget the oldest
+                self._stamps.popitem(last=False)
+        self._link.send(('feed', seq, events, want_twin))
+        self.collect()
 
-    # -- checks -----------------------------------------------------------------------------------------------
-    def _check_pool(self) -> Executor:
-        if self._pool is None:
-            if self.p['worker'] == 'process':
-                import multiprocessing
-                from concurrent.futures import ProcessPoolExecutor
+    # -- the worker's answers -----------------------------------------------------------------------------------
+    def collect(self) -> None:
+        """Publish what the worker answered so far: the twin's predictions and the checks' verdicts."""
+        for a in self._link.poll():
+            if a[0] == 'twin':
+                stamp = self._stamps.pop(a[1], None)
+                while self._stamps and next(iter(self._stamps)) < a[1]:  # answered out of reach: never published
+                    self._stamps.popitem(last=False)
+                self.worker_cpu_s = a[7]
+                if stamp is not None:
+                    self._publish_twin(stamp, *a[3:7])
+            elif a[0] == 'verdict':
+                self._on_verdict(*a[1:])
 
-                from sma_wrist.monitor.worker import start_worker
-
-                # spawn: a fork of a process running rclpy's threads may inherit a held lock
-                self._pool = ProcessPoolExecutor(
-                    max_workers=1,
-                    mp_context=multiprocessing.get_context('spawn'),
-                    initializer=start_worker,
-                    initargs=(int(self.p['worker_nice']),),
-                )
-            else:
-                from concurrent.futures import ThreadPoolExecutor
-
-                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix='twin_monitor_check')
-        return self._pool
-
-    def _submit(self, window: Any, t: float) -> None:
-        m = self.monitor.model
-        self._job_t = t
-        if self.p['worker'] == 'inline':
-            job: Future = Future()
-            try:
-                job.set_result(diagnose_window(window, t, self.config, m.hysteresis_file, m.thermal_file, m.extension))
-            except Exception as exc:  # noqa: BLE001 - reported by _collect like a worker's failure
-                job.set_exception(exc)
-            self._job = job
-            return
-        self._job = self._check_pool().submit(
-            diagnose_window, window, t, self.config, m.hysteresis_file, m.thermal_file, m.extension
-        )
-
-    def _collect(self) -> None:
-        job = self._job
-        if job is None or not job.done():
-            return
-        self._job = None
-        try:
-            raw = job.result()
-        except Exception as exc:  # noqa: BLE001 - a check that failed is reported, the node goes on
-            raw = Verdict(
-                self._job_t, 'ERROR', None, None, 1.0, summary=f'the check failed: {type(exc).__name__}: {exc}'
-            )
-        with self._lock:
-            v = self.monitor.decide(raw)
-            history = list(self.monitor.history)
-            episodes = self.monitor.episodes()
+    def _on_verdict(self, v: Verdict, episodes: list[dict[str, Any]], skipped: int, cpu_s: float | None = None) -> None:
+        if cpu_s is not None:
+            self.worker_cpu_s = cpu_s
         self.verdict = v
+        self.history.append(v)
+        self.episodes = episodes
+        self.skipped_checks = skipped
         self._publish_verdict(v)
         if self.p['history_file']:
             try:
-                write_history(self.p['history_file'], history, episodes)
+                write_history(self.p['history_file'], self.history, episodes)
             except OSError as exc:
                 self.diagnose('history', DiagnosticStatus.WARN, f'cannot write {self.p["history_file"]}: {exc}')
 
@@ -341,59 +327,65 @@ class TwinMonitor(WristNode):
             'check': v.summary,
             'check_cpu_s': f'{v.check_cpu_s:.2f}',
             'skipped_checks': self.skipped_checks,
+            'change_s': '' if v.change_s is None else f'{v.change_s:.2f}',
+            'pending': 'true' if v.pending else 'false',
             **{k: f'{x:.6g}' for k, x in v.parameters.items()},
         }
         self._status = (_LEVEL[v.level], text, values)
         self.diagnose('model', _LEVEL[v.level], text, values)
 
     def _heartbeat(self) -> None:
-        """Collect a finished check, then repeat the current verdict on /diagnostics (OK with what is awaited
+        """Collect the worker's answers, then repeat the current verdict on /diagnostics (OK with what is awaited
         before the first check)."""
-        self._collect()
+        self.collect()
+        code = self._link.ended()
+        if code is not None and not self._worker_ended:
+            self._worker_ended = True
+            v = Verdict(
+                self.verdict.t_s if self.verdict else 0.0,
+                'ERROR',
+                None,
+                None,
+                1.0,
+                summary=f'the monitor worker process ended (exit code {code}): no twin and no checks; restart the node',
+            )
+            self._on_verdict(v, self.episodes, self.skipped_checks)
         if self._status is None:
-            with self._lock:
-                t0, span = self.monitor.t_first, self.monitor.span_s
-            first = 'no measurement yet' if t0 is None else f'first check at {t0 + span:.1f} s'
+            t0 = self.t_first
+            first = 'no measurement yet' if t0 is None else f'first check at {t0 + self.span_s:.1f} s'
             level, text, values = DiagnosticStatus.OK, f'watching: {first}', {'skipped_checks': self.skipped_checks}
         else:
             level, text, values = self._status
         self.publish_status('model', level, text, values)
 
-    def _publish_twin(self, header: Any) -> None:
-        tw = self.monitor.twin
-        if tw is None:
-            return
-        T = tw.temperatures_C
-        stamp = header.stamp
+    def _publish_twin(
+        self, stamp: Any, T: tuple[float, float], q: float, qd: float, residuals: dict[str, float]
+    ) -> None:
+        """The twin's prediction at ``stamp`` (the stamp of the joint state it was stepped to)."""
         for i in (0, 1):
-            m = Temperature(
-                header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=float(T[i]), variance=0.0
-            )
+            m = Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=T[i], variance=0.0)
             self.pub[f'/wrist/twin/muscle_{i + 1}/temperature'].publish(m)
         self.pub['/wrist/twin/joint_states'].publish(
             JointState(
                 header=Header(stamp=stamp, frame_id=self.contract.frame_id),
                 name=[self.contract.joint_name],
-                position=[tw.angle_rad],
-                velocity=[float(tw.plant.state.qd[0])],
+                position=[q],
+                velocity=[qd],
                 effort=[],
             )
         )
-        r = self.monitor.residuals()
         for name, key in (
             ('/wrist/twin/residual/muscle_1/temperature', 'T1'),
             ('/wrist/twin/residual/muscle_2/temperature', 'T2'),
             ('/wrist/twin/residual/angle', 'q'),
         ):
-            self.pub[name].publish(Float64(data=r[key]))
+            self.pub[name].publish(Float64(data=residuals[key]))
 
     def destroy_node(self) -> Any:
-        if self._pool is not None:
-            # a check still running is abandoned: its worker process is ended, not waited for (seconds)
-            for proc in list((getattr(self._pool, '_processes', None) or {}).values()):
-                proc.terminate()
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        if self._link is not None:
+            self.collect()  # the answers already in (a check still running is abandoned)
+            self._link.close()
+            self._link = None
         return super().destroy_node()
 
 
