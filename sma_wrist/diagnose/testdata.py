@@ -12,7 +12,8 @@ The bag is written by the embedded runtime and :class:`sma_wrist.bag.BagRecorder
 publishes, at every 10 ms tick of the virtual clock, ``/clock``, both temperatures and
 ``/wrist/joint_states`` (header stamp = sample time), then both TEM commands (the command
 that drives the next interval, as plant_sim's graph does); ``/wrist/payload`` is latched
-once. ``corrupt=`` makes bad bags for the input checks.
+once; the TEMs' exchanger faces where the Truth has them (``faces_start_C``). ``corrupt=`` makes bad bags for the
+input checks.
 """
 
 from __future__ import annotations
