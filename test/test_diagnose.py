@@ -420,3 +420,28 @@ def test_sensor_chain_matches_the_replay_sensor_model():
     row = fx.theta(**v)
     np.testing.assert_allclose(got_q, fx.ExtendedModel.angle_sensor(model, q, row), atol=1e-12)
     np.testing.assert_allclose(got_T, fx.first_order(T, 2.0, dt) + 1.5, atol=1e-12)
+
+
+def test_a_run_that_starts_with_warm_tem_faces_is_replayed_from_the_measured_faces(tmp_path):
+    """A run started right after an excitation: the muscles have settled, the TEMs' exchanger faces are still ~75 degC.
+    Replayed from rest that is a large thermal discrepancy outside the catalogue; a bag with the face thermocouples
+    (/wrist/tem_{1,2}/face_temperature) starts the replay where the faces were: clean. Without them, as before."""
+    dt = 0.01
+    t = np.arange(int(60.0 / dt) + 1) * dt
+    heat_1 = np.sin(2.0 * np.pi * t / 6.0 + 0.3) > 0
+    u = np.stack([np.where(heat_1, 12.0, -8.0), np.where(heat_1, -8.0, 12.0)], axis=1)
+    truth = td.simulate('none', seed=4, duration_s=60.0, u=u, faces_start_C=(76.0, 74.0))
+    candidates = ['ambient_drift', 'thermal_coupling', 'tem_mismatch']
+    faces = ['/wrist/tem_1/face_temperature', '/wrist/tem_2/face_temperature']
+    blind = td.write_bag(truth, tmp_path / 'blind', corrupt={'drop_topics': faces})
+    run = load_run(blind)
+    assert run.thermal_start == 'rest' and run.thermal_x0 is None
+    res = diagnose(blind, candidates=candidates)
+    assert res.thermal_start == 'rest' and res.discrepancy, res.summary
+    seen = td.write_bag(truth, tmp_path / 'seen')
+    run = load_run(seen)
+    assert run.thermal_start == 'measured'
+    np.testing.assert_allclose(run.thermal_x0[:, 1], [76.0, 74.0], atol=0.3)  # the faces' first samples
+    res = diagnose(seen, candidates=candidates)
+    assert res.thermal_start == 'measured' and not res.discrepancy, res.summary
+    assert res.residual_stats['thermal']['nominal']['rms_over_noise'] < 1.2

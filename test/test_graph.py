@@ -281,7 +281,7 @@ def test_floor_benchmark_runs_the_contracts_topology_every_tick():
 
     periodic = [t for t in load_contract().topics.values() if t.rate_hz > 0 and t.publisher in (*FLOOR_TRIGGERS, '*')]
     r = bench_contract_floor(0.5)
-    assert r['published_per_tick'] == len(periodic) == 16
+    assert r['published_per_tick'] == len(periodic) == 18
     # TEM commands: plant, compensator; joint states: trajectory_generator (its soft start), both controllers
     assert r['deliveries_per_tick'] == sum(len(t.subscribers) for t in periodic) == 24
     assert r['callbacks_per_tick'] == 2 + r['deliveries_per_tick']

@@ -25,6 +25,8 @@ TOPICS = (
     '/wrist/payload',
     '/clock',
     '/wrist/tem_drive_applied',
+    '/wrist/tem_1/face_temperature',
+    '/wrist/tem_2/face_temperature',
 )
 
 
@@ -200,6 +202,10 @@ def test_data_flows_calibrated_with_plant_sim_units(emulator, graph):
     T1 = probe.got['/wrist/muscle_1/temperature'][-1].temperature
     T2 = probe.got['/wrist/muscle_2/temperature'][-1].temperature
     assert abs(T1 - T_true[0]) < 0.3 and abs(T2 - T_true[1]) < 0.3  # latest device state ~ the last window
+    # the TEMs' exchanger faces (Eq. 4.14's T2 faces), in muscle order: the state a diagnosis replay starts from
+    faces = [probe.got[f'/wrist/tem_{i}/face_temperature'][-1] for i in (1, 2)]
+    assert [f.header.frame_id for f in faces] == ['tem_1', 'tem_2'] and faces[0].header.stamp == js[-1].header.stamp
+    assert np.allclose([f.temperature for f in faces], emu.plant.state.thermal[0, :, 1], atol=0.3)
     assert abs(js[-1].position[0] - float(emu.plant.state.q[0])) < 2e-3
     assert js[-1].header.frame_id == 'wrist_base' and js[-1].name == ['wrist']
     stress_true = emu.plant.wire_stress_Pa[0]
@@ -255,19 +261,24 @@ def test_faults_drive_zero_volts(emulator, graph, fault):
     assert levels(probe, 'safety')[-1] == 0 and bridge.command_to_send() == (8.0, 8.0)
 
 
-@pytest.mark.parametrize('fault', ['angle_adc_full_scale', 'angle_out_of_range', 'temperature_adc_full_scale'])
+@pytest.mark.parametrize(
+    'fault', ['angle_adc_full_scale', 'angle_out_of_range', 'temperature_adc_full_scale', 'tem_face_adc_full_scale']
+)
 def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulator, graph, tmp_path, fault):
     """A faulty reading cuts the TEMs and must not reach joint_states, the bag and the metrics."""
     from sma_wrist.bag import read_bag
 
     emu = emulator(noise_counts=0.0)
     rt, bridge, probe = graph(emu, (6.0, 0.0))
-    rec = rt.record(tmp_path / 'bag', ['/wrist/joint_states', '/wrist/muscle_2/temperature'])
+    rec = rt.record(
+        tmp_path / 'bag', ['/wrist/joint_states', '/wrist/muscle_2/temperature', '/wrist/tem_1/face_temperature']
+    )
     rt.run_until(0.3, until='sim')
     ch, counts = {
         'angle_adc_full_scale': (4, P.ADC_MAX),
         'angle_out_of_range': (4, int(Calibration().to_counts(np.zeros(4), 1.7)[4])),
         'temperature_adc_full_scale': (1, P.ADC_MAX),
+        'tem_face_adc_full_scale': (2, P.ADC_MAX),
     }[fault]
     n_js = len(probe.got['/wrist/joint_states'])
     emu.inject('force', (ch, counts))
@@ -288,6 +299,8 @@ def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulat
         assert np.all(np.abs(q - float(emu.plant.state.q[0])) < 0.05), q.max()
         assert np.all(np.abs(qd) < 1.0), np.abs(qd).max()
         assert np.all(T2 < 60.0), T2.max()
+        F1 = np.array([m.temperature for m in got['/wrist/tem_1/face_temperature']])
+        assert F1.size and np.all(F1 < 60.0), F1.max()
 
 
 def test_non_finite_command_turns_that_tem_off(emulator, graph):

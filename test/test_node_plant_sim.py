@@ -24,6 +24,8 @@ def _measure(
                 '/clock',
                 '/wrist/payload',
                 '/wrist/muscle_1/stress',
+                '/wrist/tem_1/face_temperature',
+                '/wrist/tem_2/face_temperature',
             ),
         )
         node = rt.add(PlantSim)
@@ -51,6 +53,13 @@ def test_heating_command_warms_muscle_1_and_moves_the_joint_up(probe_factory):
         < 0.5
     )
     assert hot.got['/wrist/joint_states'][-1].position[0] >= idle.got['/wrist/joint_states'][-1].position[0]
+    # the exchanger faces (Eq. 4.14) as a face thermocouple reads them: heating muscle 1 pumps heat out of TEM 1's
+    faces = [hot.got[f'/wrist/tem_{i}/face_temperature'][-1] for i in (1, 2)]
+    assert [f.temperature for f in faces] == node.plant.state.thermal[0, :, 1].tolist()
+    assert (
+        faces[0].header.frame_id == 'tem_1' and faces[0].header.stamp == hot.got['/wrist/joint_states'][-1].header.stamp
+    )
+    assert faces[0].temperature < idle.got['/wrist/tem_1/face_temperature'][-1].temperature - 1.0
 
 
 def test_clock_and_stamps_follow_simulated_time_at_the_publish_rate(probe_factory):

@@ -122,6 +122,9 @@ class DiagnosisResult:
     wall_s: float = 0.0
     #: the TEM drive the replays ran on: 'applied' (the device's read-back) or 'commanded' (the commands)
     drive: str = 'commanded'
+    #: where the heat-balance replay's exchanger faces started: 'measured' (the bag's face temperatures), 'rest',
+    #: or 'twin' (a live monitor's replay before the window)
+    thermal_start: str = 'rest'
     params_file: str | None = None
 
     def to_json(self) -> dict[str, Any]:
@@ -423,6 +426,7 @@ def diagnose_run(
         source=run.source,
         duration_s=run.duration,
         drive=run.drive,
+        thermal_start=run.thermal_start,
     )
     if params_out is not None:
         res.params_file = str(write_params(res, params_out, run, hysteresis_file, thermal_file))

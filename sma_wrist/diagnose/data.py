@@ -10,7 +10,10 @@ The diagnosis needs, on one uniform time grid:
   command takes effect after the graph's delay, which its stamp (the window it answers) does not say;
 * ``T``  (K, 2) muscle temperatures [degC] (``/wrist/muscle_{1,2}/temperature``);
 * ``q``  (K,) wrist angle [rad] (``/wrist/joint_states`` position of joint ``wrist``);
-* ``payload_kg`` (``/wrist/payload``, latched std_msgs/Float64).
+* ``payload_kg`` (``/wrist/payload``, latched std_msgs/Float64);
+* ``thermal_x0`` the heat-balance state at t = 0 where the bag has the TEMs' exchanger-face temperatures
+  (``/wrist/tem_{1,2}/face_temperature``): a run that starts with warm faces (after an excitation) is replayed from
+  where it was, not from rest.
 
 Measurements (and the read-back drive) are stamped with their header stamp when it is set (acquisition time),
 else with the bag's log time; commands with the log time. Problems are either fixed and
@@ -43,6 +46,10 @@ TOPICS = {
 #: in device time from where it held): preferred to the commands where a bag has it
 DRIVE_TOPIC = '/wrist/tem_drive_applied'
 DRIVE_NAMES = ('tem_1', 'tem_2')
+#: the TEMs' exchanger-face temperatures (sensor_msgs/Temperature, degC; the T2 faces of Eq. 4.14), muscle order
+FACE_TOPICS = ('/wrist/tem_1/face_temperature', '/wrist/tem_2/face_temperature')
+#: a face sample this far [s] from the analysed stretch's start is no start state
+FACE_START_TOLERANCE_S = 1.0
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
@@ -77,6 +84,9 @@ class Run:
     #: ran before the stretch (a live monitor's twin); None: the exchanger faces start at rest, right for a run
     #: that starts from rest, not for a window cut from the middle of one
     thermal_x0: np.ndarray | None = None
+    #: where the replay's exchanger faces start: 'rest', 'measured' (the bag's face temperatures, FACE_TOPICS) or
+    #: 'twin' (a live monitor's replay before the window)
+    thermal_start: str = 'rest'
     #: the first settle_s [s] only settle the replays' memory (the wires' hysteresis, the joint): neither fitted nor
     #: scored; the train / held-out split is over the rest. 0: the usual 5 s burn-in
     settle_s: float = 0.0
@@ -206,7 +216,7 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
             f'{p}: no such bag (need a rosbag2 directory with metadata.yaml and .mcap, or an .mcap file)'
         )
     try:
-        data = read_bag(p, rec.recorded([*TOPICS.values(), DRIVE_TOPIC]))
+        data = read_bag(p, rec.recorded([*TOPICS.values(), DRIVE_TOPIC, *FACE_TOPICS]))
     except BagError as exc:
         if not exc.salvaged:
             raise DiagnoseInputError(f'{p}: cannot read the bag: {exc.problem}') from None
@@ -258,7 +268,38 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
                 series[key] = s
     run = run_from_series(series, str(p), warnings, max_rate_hz)
     run.drive = drive
+    faces = _faces_at(data, run.t0_s, warnings)
+    if faces is not None and run.T is not None:
+        run.thermal_x0 = np.stack([run.T[0], faces], axis=1)  # (layer, face): [muscle (Eq. 4.13), exchanger (4.14)]
+        run.thermal_start = 'measured'
     return run
+
+
+def _faces_at(data: dict[str, Any], t0_s: float, warnings: list[str]) -> np.ndarray | None:
+    """The exchanger-face temperatures (2,) [degC] at ``t0_s`` [s] from FACE_TOPICS, or None (with a warning when
+    the topics are there but unusable): the first valid samples, interpolated to the stretch's start."""
+    if not all(tp in data and len(data[tp][1]) for tp in FACE_TOPICS):
+        return None
+    out = []
+    for tp in FACE_TOPICS:
+        try:
+            t, v = _series(tp, data[tp][0], data[tp][1], 'temperature', warnings)
+        except (AttributeError, TypeError, ValueError) as exc:
+            warnings.append(f'{tp}: unexpected message content ({exc}); the exchanger faces start at rest')
+            return None
+        near = np.abs(t - t0_s) <= FACE_START_TOLERANCE_S
+        if not near.any():
+            warnings.append(
+                f'{tp}: no sample within {FACE_START_TOLERANCE_S:g} s of the analysed start; the exchanger faces '
+                f'start at rest'
+            )
+            return None
+        f = float(np.interp(t0_s, t, v))
+        if not (-40.0 < f < 150.0):
+            warnings.append(f'{tp}: {f:g} is no exchanger-face temperature in degC; the exchanger faces start at rest')
+            return None
+        out.append(f)
+    return np.array(out)
 
 
 def run_from_series(

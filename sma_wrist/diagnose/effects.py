@@ -469,7 +469,11 @@ class ExtendedModel:
                 T0 = self.temp_inverse_static(self.T_start, kv, 0.0) if run.T is not None else self._rest[:, 0]
                 x0 = self._rest.copy()
                 x0[:, 1] += off  # exchanger face starts at its rest state, shifted by the ambient offset
-                if getattr(run, 'thermal_x0', None) is not None:
+                if getattr(run, 'thermal_start', 'rest') == 'measured':
+                    # the bag's face thermocouples: the faces' temperature, whatever the ambient (a device commissioned
+                    # after its excitation started 74-78 degC warm, and from rest its replay was 'unexplained')
+                    x0[:, 1] = np.asarray(run.thermal_x0)[:, 1]
+                elif getattr(run, 'thermal_x0', None) is not None:
                     # a window cut from a longer run: the exchanger faces are where the earlier replay left them
                     # (from rest, a 45 s window of a clean run was an 'unexplained thermal discrepancy')
                     x0[:, 1] += np.asarray(run.thermal_x0)[:, 1] - self._rest[:, 1]

@@ -186,6 +186,11 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
             if result.drive == 'applied'
             else 'the commands (/wrist/tem_{1,2}/command) |'
         ),
+        '| TEM exchanger faces started | '
+        + {
+            'measured': 'at the measured temperatures (/wrist/tem_{1,2}/face_temperature) |',
+            'twin': "where the twin's replay had them |",
+        }.get(result.thermal_start, 'at rest (no face temperatures recorded) |'),
     ]
     if result.ambiguous_with:
         lines += [

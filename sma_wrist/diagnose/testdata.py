@@ -12,7 +12,8 @@ The bag is written by the embedded runtime and :class:`sma_wrist.bag.BagRecorder
 publishes, at every 10 ms tick of the virtual clock, ``/clock``, both temperatures and
 ``/wrist/joint_states`` (header stamp = sample time), then both TEM commands (the command
 that drives the next interval, as plant_sim's graph does); ``/wrist/payload`` is latched
-once. ``corrupt=`` makes bad bags for the input checks.
+once; the TEMs' exchanger faces where the Truth has them (``faces_start_C``). ``corrupt=`` makes bad bags for the
+input checks.
 """
 
 from __future__ import annotations
@@ -85,6 +86,8 @@ class Truth:
     q: np.ndarray  # measured
     T_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
     q_true: np.ndarray = field(repr=False, default=None)  # type: ignore[assignment]
+    #: (K, 2) the TEMs' exchanger faces [degC] (published as /wrist/tem_{1,2}/face_temperature), or None: not recorded
+    faces: np.ndarray | None = field(repr=False, default=None)
 
 
 def commands(duration_s: float, dt: float, rng: np.random.Generator) -> np.ndarray:
@@ -132,9 +135,11 @@ def simulate(
     payload_kg: float | None = None,
     dt: float = 0.01,
     u: np.ndarray | None = None,
+    faces_start_C: tuple[float, float] | None = None,
 ) -> Truth:
     """The measured signals of one synthetic run (no bag); ``u``: (K, 2) TEM commands [V] instead of
-    :func:`commands`' (K = duration_s / dt + 1)."""
+    :func:`commands`' (K = duration_s / dt + 1). ``faces_start_C``: the TEMs' exchanger faces start there instead of
+    at rest (a run after an excitation), and the Truth carries their trace (``faces``, recorded by write_bag)."""
     if effect != 'none' and effect not in fx.EFFECTS:
         raise ValueError(f'unknown effect {effect!r}; catalogue: {", ".join(fx.EFFECTS)}')
     rng = np.random.default_rng(seed)
@@ -147,6 +152,8 @@ def simulate(
     coef, drift, off = fx.thermal_coef(consts, r[[fx.INDEX[k] for k in fx.THERMAL_KEYS]])
     x0 = th.rest_state(consts.params.thermal, 1)
     x0 = x0 + off  # the ambient offset moves the rest state by exactly off
+    if faces_start_C is not None:
+        x0[..., th.EXCHANGER_FACE] = faces_start_C
     u_applied = fx.drive(
         fx.delayed(u, r[fx.INDEX['command_delay_s']], dt),
         r[fx.INDEX['tem_dead_zone_V']],
@@ -155,6 +162,7 @@ def simulate(
     )
     T_true, _ = consts.thermal(u_applied, dt, coef, x0, np.array([drift]), SUBSTEPS)
     T_true = T_true[:, 0]
+    faces = None if faces_start_C is None else _face_trace(consts, u_applied, dt, coef, x0, drift)
     T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) - r[
         fx.INDEX['hyst_drift_C_per_cycle']
     ] * fx.cycle_count(T_true, dt)
@@ -175,7 +183,28 @@ def simulate(
     q_meas = quantise(q_meas + rng.normal(0.0, NOISE_Q_RAD, K), Q_SPAN_RAD)
     T_meas = quantise(T_meas + rng.normal(0.0, NOISE_T_C, (K, 2)), T_SPAN_C)
     t = np.arange(K) * dt
-    return Truth(effect, injected, seed, payload, dt, t, u, T_meas, q_meas, T_true, q_true)
+    if faces is not None:
+        faces = quantise(faces + rng.normal(0.0, NOISE_T_C, (K, 2)), T_SPAN_C)
+    return Truth(effect, injected, seed, payload, dt, t, u, T_meas, q_meas, T_true, q_true, faces)
+
+
+def _face_trace(
+    consts: Constants, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift: float, chunk: int = 10
+) -> np.ndarray:
+    """(K, 2) exchanger faces [degC] of the heat balance from x0 (the kernel returns the muscle faces only, and
+    its final state): the state at every ``chunk``-th sample, interpolated between."""
+    if drift:
+        raise ValueError('exchanger-face traces are simulated without an ambient drift')
+    K = u.shape[0]
+    ks, xs = [0], [x0[0, :, th.EXCHANGER_FACE].copy()]
+    x = x0
+    for a in range(0, K - 1, chunk):
+        b = min(a + chunk, K - 1)
+        _, x = consts.thermal(u[a : b + 1], dt, coef, x, np.zeros(1), SUBSTEPS)
+        ks.append(b)
+        xs.append(x[0, :, th.EXCHANGER_FACE].copy())
+    xs_a = np.array(xs)
+    return np.stack([np.interp(np.arange(K), ks, xs_a[:, i]) for i in range(2)], axis=1)
 
 
 def run_from_truth(truth: Truth) -> Run:
@@ -283,6 +312,10 @@ def write_bag(
                 self.create_publisher(Float64, '/wrist/payload', latched).publish(Float64(data=payload))
             if applied is not None:
                 self.drive_pub = self.create_publisher(JointState, '/wrist/tem_drive_applied', 10)
+            for i in (1, 2):
+                name = f'/wrist/tem_{i}/face_temperature'
+                if truth.faces is not None and name not in drop:
+                    self.pub[name] = self.create_publisher(Temperature, name, 10)
             self.create_timer(truth.dt, self.tick)
 
         def tick(self) -> None:
@@ -302,6 +335,13 @@ def write_bag(
                     m = Temperature(temperature=float(T[k, i - 1]), variance=NOISE_T_C**2)
                     m.header.stamp = stamp
                     m.header.frame_id = f'muscle_{i}'
+                    p[name].publish(m)
+            for i in (1, 2):
+                name = f'/wrist/tem_{i}/face_temperature'
+                if name in p:
+                    m = Temperature(temperature=float(truth.faces[k, i - 1]), variance=NOISE_T_C**2)
+                    m.header.stamp = stamp
+                    m.header.frame_id = f'tem_{i}'
                     p[name].publish(m)
             if '/wrist/joint_states' in p and not lost[k, 2]:
                 js = JointState(name=['wrist'], position=[float(q[k])], velocity=[0.0], effort=[0.0])

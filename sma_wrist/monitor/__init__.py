@@ -271,6 +271,7 @@ class Monitor:
         # the heat-balance state the twin had at the window's first sample
         if self.twin is not None:
             run.thermal_x0 = self.twin.thermal_state_at(run.t0_s)
+            run.thermal_start = 'twin'
         run.settle_s = min(self.config.settle_s, max(run.duration - 20.0, 0.0))
         if change is not None:
             run.change_s = change

@@ -10,8 +10,8 @@ The line protocol is doc/explanation/protocol.md (sma_wrist/hw/protocol.py); a r
 
 Measurements: every ``1 / publish_rate_hz`` of device time the samples of that window
 (1 kHz) are calibrated (``adc.*``, ``calibration.*``: counts -> degC / rad) and published:
-temperatures as the window mean (variance = the window's), the angle as the least-squares
-line's value at the window end and its slope, low-pass filtered over ``velocity_filter_s``,
+temperatures (the muscles and the TEMs' exchanger faces) as the window mean (variance = the window's), the angle
+as the least-squares line's value at the window end and its slope, low-pass filtered over ``velocity_filter_s``,
 as velocity. **The stresses and the effort are estimates**, not measurements: the SD-GPI
 wire-load solve at the measured temperatures and angle (sma_wrist/hw/estimate.py), taken
 through a Kalman filter first whose measurement noise is each window's own spread and whose
@@ -320,6 +320,7 @@ class HardwareBridge(WristNode):
         self.pub_clock = self.publisher('/clock')
         self.pub_joint = self.publisher('/wrist/joint_states')
         self.pub_temp = [self.publisher(f'/wrist/muscle_{i}/temperature') for i in (1, 2)]
+        self.pub_face = [self.publisher(f'/wrist/tem_{i}/face_temperature') for i in (1, 2)]
         self.pub_stress = [self.publisher(f'/wrist/muscle_{i}/stress') for i in (1, 2)]
         self.pub_payload = self.publisher('/wrist/payload')
         self.pub_drive = self.publisher('/wrist/tem_drive_applied')
@@ -679,6 +680,12 @@ class HardwareBridge(WristNode):
             msg.header.stamp = stamp
             msg.header.frame_id = f'muscle_{i + 1}'
             self.pub_temp[i].publish(msg)
+            # the TEM's exchanger face (the T2 face of Eq. 4.14): the heat-balance state a diagnosis replay starts
+            # from; from the same usable samples as the muscles (a sample rejected for safety is no measurement)
+            face = Temperature(temperature=float(T[2 + i]), variance=float(var[2 + i]))
+            face.header.stamp = stamp
+            face.header.frame_id = f'tem_{i + 1}'
+            self.pub_face[i].publish(face)
         for i, s in enumerate((s1, s2)):
             self.pub_stress[i].publish(Float64(data=float(s)))
         js = JointState(

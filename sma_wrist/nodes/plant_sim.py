@@ -41,6 +41,7 @@ from sma_wrist.contract import PAYLOAD_RANGE_KG
 from sma_wrist.core.errors import SmaWristError
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+from sma_wrist.core.thermal.heat_balance import EXCHANGER_FACE
 from sma_wrist.nodes.common import (
     HYSTERESIS_FILE_PARAM,
     MUSCLE_FRAMES,
@@ -194,6 +195,7 @@ class PlantSim(WristNode):
         self.pub_clock = self.publisher('/clock')
         self.pub_joint = self.publisher('/wrist/joint_states')
         self.pub_temp = [self.publisher(f'/wrist/muscle_{i}/temperature') for i in (1, 2)]
+        self.pub_face = [self.publisher(f'/wrist/tem_{i}/face_temperature') for i in (1, 2)]
         self.pub_stress = [self.publisher(f'/wrist/muscle_{i}/stress') for i in (1, 2)]
         self.pub_payload = self.publisher('/wrist/payload')
         for i in (1, 2):
@@ -366,12 +368,18 @@ class PlantSim(WristNode):
             T = self.sensors.temperatures(T)
             q_meas = self.sensors.angle(q_meas)
         T = T.tolist()
+        faces = s.thermal[0, :, EXCHANGER_FACE].tolist()
         stress = plant.wire_stress_Pa[0].tolist()
         for i in range(2):
             self.pub_temp[i].publish(
                 Temperature(header=Header(stamp=stamp, frame_id=MUSCLE_FRAMES[i]), temperature=T[i], variance=0.0)
             )
             self.pub_stress[i].publish(Float64(data=stress[i]))
+            # the model's exchanger face (Eq. 4.14), as the device's face thermocouple reads it: a bag of the
+            # simulation carries the heat-balance state a replay starts from, as a bag of the device does
+            self.pub_face[i].publish(
+                Temperature(header=Header(stamp=stamp, frame_id=f'tem_{i + 1}'), temperature=faces[i], variance=0.0)
+            )
         self.pub_joint.publish(
             JointState(
                 header=Header(stamp=stamp, frame_id=self.contract.frame_id),
