@@ -9,6 +9,10 @@ wrist, keeps the recent samples, and every ``check_period_s`` runs the model-dis
   hysteresis and the joint start where the wrist was, not from rest), and the thermal replay starts from the twin's
   heat-balance state (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`): cut from the middle of a clean run, a
   window replayed from rest was an "unexplained discrepancy" in 2 of 3 checks;
+* where the twin's residuals changed inside the window (:func:`change_point`), the part after the change is
+  diagnosed, from just before it when the temperatures changed (:data:`CHANGE_SETTLE_S`), with ``settle_s`` before
+  it when only the angle did; while such a change is unnamed a check is due every :data:`FRESH_PERIOD_S` from
+  :data:`MIN_AFTER_CHANGE_S` after it;
 * a verdict is *raised* only when ``persist_checks`` consecutive checks agree on the subsystem with a confidence of
   at least ``min_confidence``, and cleared after as many clean checks (a single noisy window is no alarm).
 
@@ -65,6 +69,21 @@ CP_THRESHOLD = 150.0
 #: before that the check names nothing. With 20 s (the diagnosis' shortest scored part) a 2 V driver dead zone was
 #: named `recalibrate_thermal` (thermal, confidence 1.0) 20 s after its onset; 35 s after it, it was unexplained
 MIN_AFTER_CHANGE_S = 30.0
+#: while a located change is not yet named, a check is due MIN_AFTER_CHANGE_S after it and then every this long [s]
+#: (until it is named or the window holds nothing from before it), instead of every ``check_period_s``
+FRESH_PERIOD_S = 5.0
+#: the window diagnosed after a change starts this long before it [s] (the change is placed to a block, the onset may
+#: be up to a block earlier). Not ``settle_s``: an effect the fit applies from the window's start acted over the
+#: lead-in too, and the replay entered the change from a state the wrist never had. Measured 30-35 s after the
+#: onset on a pid recording: with 20 s before the change a driver dead zone of 2 V and a thermocouple lag of 4 s
+#: were "unexplained" (the best fit removed 62 % / 43 % of the thermal misfit), with 5 s 77 % / 73 %, starting at
+#: the change they were named 35 s after the onset (2.04 V with 95 % of the misfit removed, 3.85 s)
+CHANGE_SETTLE_S = 2.0
+#: ... when the temperatures' residuals changed (their share of the change statistic at the split reaches this
+#: fraction of CP_THRESHOLD): a change in the angle alone (a potentiometer fault, a payload, the wires) is
+#: diagnosed with ``settle_s`` before it, which the mechanics replay's memory needs (from the change on, a
+#: potentiometer offset, lag and a payload were "unexplained" 35 s after the onset; with settle_s named)
+THERMAL_CHANGE_SHARE = 0.5
 
 
 @dataclass
@@ -165,6 +184,8 @@ class Monitor:
         self.current: Verdict | None = None  # the raised verdict
         self._streak: list[Verdict] = []
         self._change_s: float | None = None  # the last change located in the twin's residuals [s]
+        self._fresh_s: float | None = None  # a located change nothing has been raised for yet [s]
+        self.change_thermal = False  # the temperatures' residuals changed there too
 
     # -- input ----------------------------------------------------------------------------------------------
     def payload(self, kg: float) -> None:
@@ -230,10 +251,18 @@ class Monitor:
         return self.config.window_s + self.config.settle_s
 
     def due(self, t_s: float) -> bool:
-        """A check is due at ``t_s``: a full window of data and ``check_period_s`` since the last check."""
+        """A check is due at ``t_s``: a full window of data and ``check_period_s`` since the last check; while a
+        located change is unnamed, from ``MIN_AFTER_CHANGE_S`` after it every ``FRESH_PERIOD_S``."""
         if self.t_first is None or t_s - self.t_first < self.span_s:
             return False
-        return self.last_check is None or t_s - self.last_check >= self.config.check_period_s - 1e-9
+        if self.last_check is None or t_s - self.last_check >= self.config.check_period_s - 1e-9:
+            return True
+        c = self._fresh_s
+        return (
+            c is not None
+            and MIN_AFTER_CHANGE_S - 1e-9 <= t_s - c <= self.span_s
+            and t_s - self.last_check >= min(FRESH_PERIOD_S, self.config.check_period_s) - 1e-9
+        )
 
     def window(self, t_s: float) -> Run | Change | str:
         """The window ending at ``t_s`` as a Run (or a message saying why it cannot be checked); trims the buffers.
@@ -243,12 +272,14 @@ class Monitor:
         lo = t_s - self.span_s
         self._trim(lo - MARGIN_S)
         change = self.locate_change(lo, t_s)
+        if change is not None and (self.current is None or (self.current.since_s or 0.0) < change):
+            self._fresh_s = change  # nothing raised since it: checked often until it is named
         if change is not None:
             if t_s - change < MIN_AFTER_CHANGE_S:
                 return Change(change, t_s - change)
-            # the part after the change is diagnosed, with settle_s before it for the replays' memory: a
-            # constant-parameter fit over a window with a change in it gave confident wrong answers
-            lo = change - self.config.settle_s
+            # the part after the change is diagnosed (a constant-parameter fit over a window with a change in it gave
+            # confident wrong answers), from just before it: the fitted effect acts from the window's start
+            lo = change - (CHANGE_SETTLE_S if self.change_thermal else self.config.settle_s)
         series = {}
         for k, (t, x) in self._buf.items():
             ta, xa = np.asarray(t), np.asarray(x)
@@ -272,39 +303,44 @@ class Monitor:
         if self.twin is not None:
             run.thermal_x0 = self.twin.thermal_state_at(run.t0_s)
             run.thermal_start = 'twin'
-        run.settle_s = min(self.config.settle_s, max(run.duration - 20.0, 0.0))
+        run.settle_s = min(self.config.settle_s if change is None else change - lo, max(run.duration - 20.0, 0.0))
         if change is not None:
             run.change_s = change
         return run
 
     def locate_change(self, lo: float, hi: float) -> float | None:
         """Where the twin's residuals changed in [lo, hi] [s], when that is inside the scored part (after
-        ``settle_s``) and significant (:data:`CP_THRESHOLD`); None otherwise."""
-        tb, R = self.residual_blocks(lo, hi)
+        ``settle_s``) and significant (:data:`CP_THRESHOLD`); None otherwise. Sets :attr:`change_thermal`: the
+        temperatures' residuals changed there too (:data:`THERMAL_CHANGE_SHARE`)."""
+        tb, R, keys = self.residual_blocks(lo, hi)
         if R.size == 0:
             return None
-        k, stat = change_point(R)
+        k, stat, per = change_point(R, per_channel=True)
         if stat < CP_THRESHOLD or k == 0:
             return None
+        thermal = sum(float(x) for key, x in zip(keys, per) if key != 'joint') >= THERMAL_CHANGE_SHARE * CP_THRESHOLD
         t_cp = float(tb[k])
         if self._change_s is not None and 0.0 < t_cp - self._change_s < self.span_s:
             # the same change still unfolding (the loop answering a weaker TEM moved the split on by 20-25 s, and
             # the part after it was unexplained): what follows the first change is the new wrist
             t_cp = self._change_s
+            self.change_thermal = self.change_thermal or thermal
         else:
             self._change_s = t_cp
+            self.change_thermal = thermal
         return t_cp if t_cp - lo > self.config.settle_s else None
 
-    def residual_blocks(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray]:
-        """Measured minus twin over [lo, hi], averaged over blocks of ``CP_BLOCK_S``: block starts (B,) [s] and
-        residuals (B, C) (T1, T2 [degC], angle [rad]: the channels measured throughout)."""
+    def residual_blocks(self, lo: float, hi: float) -> tuple[np.ndarray, np.ndarray, list[str]]:
+        """Measured minus twin over [lo, hi], averaged over blocks of ``CP_BLOCK_S``: block starts (B,) [s],
+        residuals (B, C) and their channels (of T1, T2 [degC], joint [rad]: those measured throughout)."""
+        none: tuple[np.ndarray, np.ndarray, list[str]] = (np.empty(0), np.empty((0, 0)), [])
         if self.twin is None:
-            return np.empty(0), np.empty((0, 0))
+            return none
         tt, T, q = self.twin.predictions(lo, hi)
         nb = int((hi - lo) // CP_BLOCK_S)
         if nb < 1 or tt.size < 2:
-            return np.empty(0), np.empty((0, 0))
-        cols = []
+            return none
+        cols, keys = [], []
         for key, pred in (('T1', T[:, 0]), ('T2', T[:, 1]), ('joint', q)):
             t, x = self._buf[key]
             ta, xa = np.asarray(t), np.asarray(x)
@@ -318,9 +354,10 @@ class Monitor:
             if (cnt == 0).any():
                 continue  # a gap: that channel cannot place a change
             cols.append(np.bincount(b, weights=r, minlength=nb) / cnt)
+            keys.append(key)
         if not cols:
-            return np.empty(0), np.empty((0, 0))
-        return lo + CP_BLOCK_S * np.arange(nb), np.stack(cols, axis=1)
+            return none
+        return lo + CP_BLOCK_S * np.arange(nb), np.stack(cols, axis=1), keys
 
     def _trim(self, t_min: float) -> None:
         if self.twin is not None:
@@ -351,6 +388,17 @@ class Monitor:
             return 1
         return k
 
+    def _persisted(self, v: Verdict) -> bool:
+        """The streak ending with ``v`` is long enough to publish ``v``: :meth:`needed` checks, and for an unexplained
+        discrepancy as long in time as that many checks ``check_period_s`` apart (checks come faster while a change
+        is fresh, and the windows right after a change are unexplained until enough of it is in to name it)."""
+        n = self.needed(v)
+        if len(self._streak) < n:
+            return False
+        if v.cause != 'unexplained':
+            return True
+        return self._streak[-1].t_s - self._streak[0].t_s >= (n - 1) * self.config.check_period_s - 1e-9
+
     def decide(self, v: Verdict) -> Verdict:
         """Apply the persistence rule to this check's verdict; returns the published one and keeps it in history."""
         cur = self.current
@@ -372,7 +420,7 @@ class Monitor:
             if self._streak and _key(self._streak[-1]) != _key(v):
                 self._streak = []
             self._streak.append(v)
-            if len(self._streak) >= self.needed(v):
+            if self._persisted(v):
                 since = self._streak[0].t_s
                 self._streak = []
                 if v.level == 'OK':
@@ -380,6 +428,7 @@ class Monitor:
                 else:
                     v.since_s = since
                     self.current = v
+                    self._fresh_s = None  # named
                 out = v
             else:  # not (yet) persistent: the raised verdict (or OK) stands; this check's view is attached
                 pending = f'{v.level} {v.cause or ""} in this check ({len(self._streak)} of {self.needed(v)} needed): '
@@ -566,16 +615,17 @@ def known(cause: str | None, params: dict[str, float], extension: dict[str, floa
     )
 
 
-def change_point(r: np.ndarray, min_seg: int = CP_MIN_SEG) -> tuple[int, float]:
+def change_point(r: np.ndarray, min_seg: int = CP_MIN_SEG, per_channel: bool = False) -> tuple:
     """Where the residuals ``r`` (B blocks, C channels) change: the split ``k`` that maximises the Gaussian
     likelihood ratio of a change in mean and variance, summed over the channels,
     ``sum_c B log s_c^2 - k log s1_c^2 - (B - k) log s2_c^2`` (s^2 the ML variance about each segment's mean).
     It is invariant to each channel's scale (degC, rad) and sees a step (offset, payload), a change of the
-    residual's swing (gain, lag, a weaker TEM) and a change of its slope alike. Returns (k, statistic)."""
+    residual's swing (gain, lag, a weaker TEM) and a change of its slope alike. Returns (k, statistic), and with
+    ``per_channel`` each channel's share of the statistic at ``k`` (C,) as a third item."""
     r = np.asarray(r, dtype=float)
     B = r.shape[0]
     if B < 2 * min_seg:
-        return 0, 0.0
+        return (0, 0.0, np.zeros(r.shape[1] if r.ndim == 2 else 0)) if per_channel else (0, 0.0)
 
     def var_prefix(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         n = np.arange(1, x.shape[0] + 1)[:, None]
@@ -590,6 +640,8 @@ def change_point(r: np.ndarray, min_seg: int = CP_MIN_SEG) -> tuple[int, float]:
     stat = tot[None, :] - ks[:, None] * np.log(v1[ks - 1] + floor) - (B - ks)[:, None] * np.log(v2[B - ks - 1] + floor)
     s = stat.sum(axis=1)
     j = int(np.argmax(s))
+    if per_channel:
+        return int(ks[j]), float(s[j]), stat[j]
     return int(ks[j]), float(s[j])
 
 

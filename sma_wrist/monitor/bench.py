@@ -32,7 +32,9 @@ import numpy as np
 ONSET_S = 90.0
 #: the right subsystem must be raised this soon after the onset [s]
 DETECT_WITHIN_S = 60.0
-#: effects of the sizes the diagnosis' tests use: (kind, channel, value, unit, subsystem)
+#: the effects a running wrist undergoes (sensor offset, gain and lag; TEMs weaker; payload; ambient / coolant drift;
+#: wire transition drift), each of the size the diagnosis' tests use (test_diagnose_independent.py, and the top of
+#: testdata.RANGES where those draw it at random): (kind, channel, value, unit, subsystem)
 EFFECTS = (
     ('offset', 'T1', 3.0, 'degC', 'sensor'),  # a thermocouple coming loose
     ('offset', 'q', 0.05, 'rad', 'sensor'),  # the potentiometer slipping on its shaft
@@ -43,8 +45,14 @@ EFFECTS = (
     ('tem_weak', 'plant', 0.2, '1', 'thermal'),  # a TEM weakening
     ('payload', 'plant', 0.2, 'kg', 'joint'),  # a heavier payload than /wrist/payload says
     ('ambient_drift', 'plant', 20.0, 'degC/h', 'thermal'),  # coolant warming up
-    ('dead_zone', 'u', 2.0, 'V', 'actuator'),  # a driver that stops passing small commands
+    ('transition_drift', 'plant', 6.0, 'degC', 'hysteresis'),  # the wires transforming hotter (fatigue), ramped
 )
+#: measured and reported beside EFFECTS, not counted in its rate: a driver that stops passing small commands (an
+#: actuator effect outside the list of changes a running wrist undergoes)
+EXTRA_EFFECTS = (('dead_zone', 'u', 2.0, 'V', 'actuator'),)
+#: how long a transition drift takes to reach its size [s] (fatigue is gradual; the diagnosis' test ramps it over
+#: its 60 s run)
+RAMP_S = 60.0
 
 
 def _detect_case(args: tuple) -> dict[str, Any]:
@@ -53,7 +61,8 @@ def _detect_case(args: tuple) -> dict[str, Any]:
     from sma_wrist.monitor.playback import monitor_run
 
     kind, ch, value, unit, subsystem = effect
-    r = ds.apply(run, ds.Distortion(kind, ch, value, unit), 0.1, 1e-3, seed, onset_s=ONSET_S)
+    ramp = RAMP_S if kind == 'transition_drift' else 0.0
+    r = ds.apply(run, ds.Distortion(kind, ch, value, unit, ramp_s=ramp), 0.1, 1e-3, seed, onset_s=ONSET_S)
     c0 = time.process_time()
     res = monitor_run(r)
     cpu = time.process_time() - c0
@@ -98,22 +107,38 @@ def _detected(rows: list[dict[str, Any]]) -> dict[str, Any]:
 
 
 def detection(
-    runs: dict[str, Any], duration_s: float = 210.0, seeds: tuple[int, ...] = (1,), workers: int = 2
+    runs: dict[str, Any],
+    duration_s: float = ONSET_S + DETECT_WITHIN_S + 5.0,
+    seeds: tuple[int, ...] = (1,),
+    workers: int = 2,
+    effects: tuple[tuple, ...] = EFFECTS,
+    extra: tuple[tuple, ...] = EXTRA_EFFECTS,
 ) -> dict[str, Any]:
-    """Every effect of :data:`EFFECTS` x run (the first ``duration_s`` of each) x seed."""
+    """Every effect of ``effects`` x run (the first ``duration_s`` of each) x seed; the ``extra`` effects are measured
+    alike and summed apart (``extra``: not in the rate)."""
     cases = []
     for name, run in runs.items():
         n = int(round(duration_s / run.dt)) + 1
         cut = dataclasses.replace(run, t=run.t[:n], u=run.u[:n], T=run.T[:n], q=run.q[:n], valid=None, source=name)
-        cases += [(cut, e, s) for e in EFFECTS for s in seeds]
+        cases += [(cut, e, s) for e in effects + extra for s in seeds]
     with ProcessPoolExecutor(workers) as pool:
         rows = list(pool.map(_detect_case, cases))
-    return {
-        **_detected(rows),
+    extra_ids = {f'{ch}_{kind}={value:g}{unit}' for kind, ch, value, unit, _ in extra}
+    listed = [r for r in rows if r['effect'] not in extra_ids]
+
+    def missed(rs: list[dict[str, Any]]) -> list[tuple]:
+        return [(r['source'], r['effect'], r['first_subsystem'], r['delay_s']) for r in rs if not r['detected']]
+
+    out = {
+        **_detected(listed),
         'within_s': DETECT_WITHIN_S,
-        'first_subsystem_right': sum(r['first_subsystem'] == r['subsystem'] for r in rows),
-        'missed': [(r['source'], r['effect'], r['first_subsystem'], r['delay_s']) for r in rows if not r['detected']],
+        'first_subsystem_right': sum(r['first_subsystem'] == r['subsystem'] for r in listed),
+        'missed': missed(listed),
     }
+    rest = [r for r in rows if r['effect'] in extra_ids]
+    if rest:
+        out['extra'] = {**_detected(rest), 'missed': missed(rest)}
+    return out
 
 
 #: effects the emulated device starts (``emulate-device --effect SPEC@ONSET``; its own code, not the model's
@@ -132,7 +157,7 @@ EMULATED_EFFECTS = (
 #: settle_s + window_s (65 s) later, so that several checks see the wrist before the change
 EMULATED_ONSET_S = 120.0
 #: how long the transition drift takes to reach its size [s] (fatigue is gradual)
-EMULATED_RAMP_S = 60.0
+EMULATED_RAMP_S = RAMP_S
 
 
 def _child_env() -> dict[str, str]:
@@ -411,7 +436,7 @@ def bench_monitor(quick: bool = False) -> dict[str, Any]:
     bags = record_clean_runs(directory, ctrls, long_s)
     runs = {c: load_run(b) for c, b in bags.items()}
     out: dict[str, Any] = {'recordings': {c: f'{long_s:g} s closed loop, plant_sim 0.3 kg' for c in ctrls}}
-    out['detection'] = detection(runs, 210.0)
+    out['detection'] = detection(runs, ONSET_S + DETECT_WITHIN_S + 5.0)
     out['emulated_detection'] = emulated_detection(EMULATED_EFFECTS[:2] if quick else EMULATED_EFFECTS)
     out['false_alarms'] = false_alarms(runs, with_diagnose=not quick)
     out['graph_speed'] = graph_speed(120.0 if quick else 300.0, pairs=1 if quick else 5)
