@@ -65,7 +65,11 @@ class TwinMonitor(WristNode):
             runtime=False,
         ),
         Param(
-            'check_period_s', _DEFAULTS.check_period_s, 'time between two checks (measurement time)', 's', (1.0, 3600.0)
+            'check_period_s',
+            _DEFAULTS.check_period_s,
+            'time between two checks (measurement time); after a located change not yet named, every 5 s from 30 s after it',
+            's',
+            (1.0, 3600.0),
         ),
         Param(
             'persist_checks',
