@@ -216,6 +216,35 @@ def test_the_diagnosis_takes_the_model_files_the_params_file_names(tmp_path):
     }
 
 
+def test_the_diagnosis_scores_the_verification_run_after_its_soft_start(tmp_path, monkeypatch):
+    """The wires start the run with the memory the excitation and the settling left (the nominal device: 0.067 rad
+    below the replay's rest start until the first large cycle): the soft start only settles the replay's memory."""
+    import sma_wrist.diagnose as dg
+    from sma_wrist.commission import verify as vf
+
+    seen = {}
+
+    def fake(bag, **kw):
+        seen.update(kw)
+        raise dg.DiagnoseInputError('stop here')
+
+    params = tmp_path / 'wrist_params.yaml'
+    params.write_text('{}\n')
+    monkeypatch.setattr(dg, 'diagnose', fake)
+    assert vf.diagnosis(tmp_path / 'bag', params)['error'] == 'stop here'
+    assert seen['settle_s'] == vf.SOFT_START_S
+    vf.diagnosis(tmp_path / 'bag', params, 12.5)
+    assert seen['settle_s'] == 12.5
+
+
+@pytest.mark.parametrize('settle_s', [-1.0, float('nan'), float('inf')])
+def test_the_diagnosis_refuses_a_settling_time_that_is_no_duration(tmp_path, settle_s):
+    from sma_wrist.diagnose import DiagnoseInputError, diagnose
+
+    with pytest.raises(DiagnoseInputError, match='settle_s'):
+        diagnose(tmp_path / 'absent', settle_s=settle_s)
+
+
 @pytest.mark.parametrize(
     'args,named_',
     [(['--controllers', 'fuzzy'], '--controllers'), (['--verify-s', '-1'], '--verify-s'), (['--verify-s', 'nan'], '')],

@@ -12,9 +12,10 @@ hardware_bridge on the device's port, run's 30 s soft start), once per controlle
 
 **The same start** (:func:`settle`): before each run the muscles are brought back to the temperature they had at
 rest when the bring-up began (the TEMs cooling or heating them, within the bring-up's drive limits) and held
-there until the angle no longer moves: a wrist at ambient, as a first ``sma-wrist run`` finds it, and
-cooled below its transformation so that the wire's hysteresis keeps no memory of the run before. Without it the
-second run of a pair started from where the first left the muscles. The state each run started from is measured
+there until the angle no longer moves: a wrist at ambient, as a first ``sma-wrist run`` finds it. Without it the
+second run of a pair started from where the first left the muscles. The wires' hysteresis still remembers which
+muscle was heated last (the built-in wire: 0.013 rad after muscle 2 was heated to 76 degC and brought back, 0.090
+rad after muscle 1, 0.081 rad from rest); the run's first large cycle wipes that out. The state each run started from is measured
 and reported (``runs[].start``).
 
 **Steady cycles and their spread** (:func:`cycle_metrics`, :func:`compare`): each run is the 30 s soft start and
@@ -25,7 +26,9 @@ comparison: the commissioned loop is called ``worse`` or ``better`` only where t
 
 The commissioned run of the first controller is recorded as a bag and diagnosed
 (:func:`sma_wrist.diagnose.diagnose`) against the commissioned model (the params file's ``hysteresis_file`` /
-``thermal_file`` where it names them): a wrist that is its commissioned model gives no discrepancy.
+``thermal_file`` where it names them): a wrist that is its commissioned model gives no discrepancy. The soft start
+only settles the replay's memory (:attr:`sma_wrist.diagnose.data.Run.settle_s`), as it is apart in the metrics:
+the replay starts from the rest state, the wires from what the excitation and the settling left.
 
 A simulated device (``--sim``: the emulated device the bring-up stepped in lockstep) is served on a
 pseudo-terminal for each run, the same wrist, stepped in lockstep again for the settling between runs
@@ -418,6 +421,7 @@ def verify(
 
     account()
     diagnosed = None
+    diagnosed_soft = SOFT_START_S
     same_as = {
         ctrl: differences(graph_values([params_file], ctrl), graph_values([defaults], ctrl)) for ctrl in controllers
     }
@@ -476,7 +480,7 @@ def verify(
             if s.interrupted:
                 raise KeyboardInterrupt
             if bag is not None:
-                diagnosed = bag
+                diagnosed, diagnosed_soft = bag, soft
             m = s.metrics or {}
             per = cycle_metrics(s.run, duration_s, soft) if s.run is not None else {'cycles': [], 'start_up': None}
             one = (
@@ -520,7 +524,7 @@ def verify(
             res['plots'].append(str(png))
     if diagnosed is not None:
         progress('verification: diagnosis of the commissioned run')
-        res['diagnosis'] = diagnosis(diagnosed, params_file)
+        res['diagnosis'] = diagnosis(diagnosed, params_file, diagnosed_soft)
     return res
 
 
@@ -617,14 +621,21 @@ def _port(device: Any) -> Iterator[str]:
     yield device.port
 
 
-def diagnosis(bag: Path, params_file: str | Path) -> dict[str, Any]:
-    """``sma-wrist diagnose`` of ``bag`` against the model of ``params_file``: the verdict, compact."""
+def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S) -> dict[str, Any]:
+    """``sma-wrist diagnose`` of ``bag`` against the model of ``params_file``: the verdict, compact.
+
+    The run's soft start (``settle_s`` [s]) only settles the replay's memory, as in the cycle metrics: the wires
+    start the run with the hysteresis memory the excitation and the settling left (the angle at the rest
+    temperatures depends on which muscle was heated last), the replay from the rest state's (both cooled from hot
+    under the rest load), and the angles differ until the first large cycle has wiped that memory."""
     from sma_wrist.diagnose import DiagnoseInputError
     from sma_wrist.diagnose import diagnose as run_diagnosis
 
     files = model_files([params_file])
     try:
-        d = run_diagnosis(bag, hysteresis_file=files['hysteresis_file'], thermal_file=files['thermal_file'])
+        d = run_diagnosis(
+            bag, hysteresis_file=files['hysteresis_file'], thermal_file=files['thermal_file'], settle_s=settle_s
+        )
     except DiagnoseInputError as e:
         return {'bag': str(bag), 'error': str(e), 'discrepancy': None}
     return {
@@ -700,7 +711,10 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             else f'discrepancy: {d["summary"]}'
         )
         against = ', '.join(f'{k.split("_")[0]}: `{f}`' for k, f in d.get('against', {}).items())
-        lines += [f'Diagnosis of the commissioned run against the commissioned model ({against}): {verdict}.', '']
+        lines += [
+            f'Diagnosis of the commissioned run after its soft start against the commissioned model ({against}): {verdict}.',
+            '',
+        ]
     if v.get('stopped'):
         lines += [f'Stopped: {v["stopped"]}', '']
     return lines

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -530,10 +531,15 @@ def diagnose(
     hysteresis_file: str | None = None,
     thermal_file: str | None = None,
     recording: Recording | None = None,
+    settle_s: float = 0.0,
 ) -> DiagnosisResult:
     """Diagnose the bag at `path` (``recording``: how it names the contract's topics and the joint, if otherwise);
-    raises DiagnoseInputError for unusable input."""
+    the first ``settle_s`` [s] only settle the replays' memory (:attr:`Run.settle_s`: a bag that starts from a
+    history the replays' rest state does not hold). Raises DiagnoseInputError for unusable input."""
+    if not (math.isfinite(settle_s) and settle_s >= 0.0):
+        raise DiagnoseInputError(f'settle_s must be a finite number of seconds >= 0, got {settle_s!r}')
     run = load_run(path, recording=recording)
+    run.settle_s = float(settle_s)
     return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file, thermal_file)
 
 
