@@ -559,3 +559,44 @@ def test_a_thermocouple_lag_is_named_35_s_after_its_onset(clean_run):
     v = mon.diagnose(w, t_check)
     assert v.level == 'WARN' and v.subsystem == 'sensor' and v.cause == 'temp_sensor_lags', v.summary
     assert v.parameters['temp_lag_1_s'] == pytest.approx(4.0, rel=0.2)
+
+
+def test_answers_that_arrive_while_the_node_is_destroyed_go_to_the_history_file_not_to_a_dead_publisher(
+    tmp_path,
+):
+    """Under rclpy, Ctrl-C shuts the context down before the node is destroyed, and a publish then raises
+    ("publisher's context is invalid"): the answers the worker had sent by then are kept in the history file,
+    and the node is destroyed without a traceback."""
+    from sma_wrist import runtime
+    from sma_wrist.nodes.twin_monitor import TwinMonitor
+    from sma_wrist.runtime.launch import Runtime
+
+    runtime.activate()
+    from builtin_interfaces.msg import Time
+
+    hist = tmp_path / 'verdicts.json'
+
+    class Answered:
+        def poll(self):
+            residuals = {'T1': 0.1, 'T2': -0.1, 'q': 0.001}
+            return [
+                ('twin', 7, 11.9, (40.0, 30.0), 0.2, 0.0, residuals, 0.4),
+                ('verdict', Verdict(12.0, 'OK', None, None, 1.0), [], 0, 0.5),
+            ]
+
+        def close(self):
+            pass
+
+    def dead(msg):
+        raise RuntimeError("Failed to publish: publisher's context is invalid")
+
+    with Runtime(params={'/twin_monitor': {'worker': 'inline', 'history_file': str(hist)}}) as rt:
+        (node,) = rt.add_nodes([TwinMonitor])
+        node._link.close()
+        node._link = Answered()
+        node._stamps[7] = Time(sec=11, nanosec=900_000_000)  # the joint state the twin answers was stamped so
+        for pub in node.pub.values():
+            pub.publish = dead
+        node._diag_pub.publish = dead
+        node.destroy_node()
+    assert [v['t_s'] for v in json.loads(hist.read_text())['verdicts']] == [12.0]

@@ -281,32 +281,46 @@ class TwinMonitor(WristNode):
         self.collect()
 
     # -- the worker's answers -----------------------------------------------------------------------------------
-    def collect(self) -> None:
-        """Publish what the worker answered so far: the twin's predictions and the checks' verdicts."""
+    def collect(self, publish: bool = True) -> None:
+        """Publish what the worker answered so far: the twin's predictions and the checks' verdicts. ``publish``
+        False (the node is being destroyed: under rclpy Ctrl-C has already shut the context down, and a publish
+        raises): the verdicts only go into the history (and its file)."""
         for a in self._link.poll():
             if a[0] == 'twin':
                 stamp = self._stamps.pop(a[1], None)
                 while self._stamps and next(iter(self._stamps)) < a[1]:  # answered out of reach: never published
                     self._stamps.popitem(last=False)
                 self.worker_cpu_s = a[7]
-                if stamp is not None:
+                if stamp is not None and publish:
                     self._publish_twin(stamp, *a[3:7])
             elif a[0] == 'verdict':
-                self._on_verdict(*a[1:])
+                self._on_verdict(*a[1:], publish=publish)
 
-    def _on_verdict(self, v: Verdict, episodes: list[dict[str, Any]], skipped: int, cpu_s: float | None = None) -> None:
+    def _on_verdict(
+        self,
+        v: Verdict,
+        episodes: list[dict[str, Any]],
+        skipped: int,
+        cpu_s: float | None = None,
+        publish: bool = True,
+    ) -> None:
         if cpu_s is not None:
             self.worker_cpu_s = cpu_s
         self.verdict = v
         self.history.append(v)
         self.episodes = episodes
         self.skipped_checks = skipped
-        self._publish_verdict(v)
+        if publish:
+            self._publish_verdict(v)
         if self.p['history_file']:
             try:
                 write_history(self.p['history_file'], self.history, episodes)
             except OSError as exc:
-                self.diagnose('history', DiagnosticStatus.WARN, f'cannot write {self.p["history_file"]}: {exc}')
+                message = f'cannot write {self.p["history_file"]}: {exc}'
+                if publish:
+                    self.diagnose('history', DiagnosticStatus.WARN, message)
+                else:
+                    self.get_logger().warning(message)
 
     def _publish_verdict(self, v: Verdict) -> None:
         if v.level == 'OK':
@@ -387,7 +401,7 @@ class TwinMonitor(WristNode):
 
     def destroy_node(self) -> Any:
         if self._link is not None:
-            self.collect()  # the answers already in (a check still running is abandoned)
+            self.collect(publish=False)  # the answers already in, into the history (a running check is abandoned)
             self._link.close()
             self._link = None
         return super().destroy_node()
