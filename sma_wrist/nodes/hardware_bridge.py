@@ -583,8 +583,8 @@ class HardwareBridge(WristNode):
         # a whole window of 1 kHz samples queued behind a complete one: the device is a window or more ahead of
         # what would go out, and the controllers' answer would take effect that much later than the window it answers
         # (its stamp in a bag). Read on and publish the newest complete window (the older ones skipped, counted).
-        # Up to 5 windows were let through before: a graph that started 40 ms behind a streaming device drove it
-        # 40 ms after the windows its commands answered, and a diagnosis of a nominal run found the TEMs' heat late
+        # Letting up to 5 windows through drove a graph that started 40 ms behind a streaming device 40 ms after the
+        # windows its commands answered, and a diagnosis of a nominal run found the TEMs' heat late
         # (test_hardware_bridge.py::test_a_graph_that_starts_behind_the_device_drives_it_at_the_window_it_answers)
         backlog = self.period_s * 1000.0
         while True:
