@@ -156,3 +156,43 @@ def test_ctrl_c_inside_a_finaliser_is_not_raised_there():
     assert req.requested
     with pytest.raises(KeyboardInterrupt):
         _ShutdownRequest()._on_sigint(2, sys._getframe())
+
+
+def test_ctrl_c_shuts_the_context_down_before_the_node_is_destroyed_as_rclpy_does():
+    """rclpy's SIGINT handler shuts the context down, then Python's raises KeyboardInterrupt: a node publishing in
+    its teardown gets "publisher's context is invalid" under ROS 2, and so on the embedded runtime (a twin monitor
+    that published there exited 1 with a traceback at every Ctrl-C under Humble and 0 here)."""
+    p = _run("""
+    from std_msgs.msg import Float64
+    class Subject(Node):
+        def __init__(self):
+            super().__init__('subject')
+            self.pub = self.create_publisher(Float64, '/x', 10)
+            self.create_timer(0.01, ctrl_c)
+        def destroy_node(self):
+            print('ok in teardown:', rclpy.ok(), flush=True)
+            try:
+                self.pub.publish(Float64(data=1.0))
+            except RuntimeError as e:
+                print('publish in teardown:', type(e).__name__, e, flush=True)
+            super().destroy_node()
+    """)
+    assert p.returncode == 0, p.stderr
+    assert 'ok in teardown: False' in p.stdout
+    assert "publish in teardown: RCLError publisher's context is invalid" in p.stdout
+
+
+def test_in_process_tools_keep_their_own_ctrl_c_handling():
+    """``Runtime`` (run, experiment, sweep) stops the graph itself on Ctrl-C and keeps the bag: it installs no
+    handler that would shut the context down under it."""
+    import signal
+
+    from sma_wrist import runtime
+
+    runtime.activate()
+    from sma_wrist.runtime.launch import Runtime
+
+    before = signal.getsignal(signal.SIGINT)
+    with Runtime():
+        assert signal.getsignal(signal.SIGINT) is before
+    assert signal.getsignal(signal.SIGINT) is before

@@ -89,7 +89,10 @@ class Runtime:
         if rclpy.ok():
             raise GraphError('rclpy is already initialised; shut it down before creating a Runtime')
         VCLOCK.system_epoch_ns = int(system_epoch_ns)
-        rclpy.init(args=list(args) if args is not None else None)
+        from .rclpy.signals import SignalHandlerOptions
+
+        # in-process tools (run, experiment, sweep) handle Ctrl-C themselves: they stop the graph and keep the bag
+        rclpy.init(args=list(args) if args is not None else None, signal_handler_options=SignalHandlerOptions.NO)
         self.context: Context = rclpy.get_default_context()
         if params:
             tree = {node: {'ros__parameters': dict(values)} for node, values in params.items()}

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import Any
 
+from . import signals as _signals
 from .context import Context
 from .executors import Executor, SingleThreadedExecutor
 from .node import Node
@@ -50,6 +51,7 @@ def init(
     ctx.init(args, domain_id=domain_id)
     if context is None:
         _global_executor = None
+    _signals.install_signal_handlers(signal_handler_options)
 
 
 def shutdown(*, context: Context | None = None, uninstall_handlers: bool | None = None) -> None:
@@ -57,6 +59,8 @@ def shutdown(*, context: Context | None = None, uninstall_handlers: bool | None 
     _shutdown(context=context)
     if context is None:
         _global_executor = None
+    if uninstall_handlers or (uninstall_handlers is None and context is None):
+        _signals.uninstall_signal_handlers()
 
 
 def try_shutdown(*, context: Context | None = None, uninstall_handlers: bool | None = None) -> None:
@@ -64,6 +68,8 @@ def try_shutdown(*, context: Context | None = None, uninstall_handlers: bool | N
     _try_shutdown(context=context)
     if context is None:
         _global_executor = None
+    if uninstall_handlers or (uninstall_handlers is None and context is None):
+        _signals.uninstall_signal_handlers()
 
 
 def create_node(node_name: str, *, context: Context | None = None, **kwargs: Any) -> Node:

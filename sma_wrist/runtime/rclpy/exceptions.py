@@ -100,3 +100,7 @@ class ROSInterruptException(Exception):
 class InvalidHandle(Exception):
     def __init__(self, *args: Any) -> None:
         Exception.__init__(self, *args)
+
+
+class RCLError(RuntimeError):
+    """rcl's error (``rclpy._rclpy_pybind11.RCLError`` in rclpy), e.g. publishing after the context shut down."""

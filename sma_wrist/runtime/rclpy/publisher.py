@@ -6,6 +6,7 @@ from collections import deque
 from typing import Any
 
 from ..vclock import VCLOCK
+from .exceptions import RCLError
 from .qos import QoSProfile
 
 
@@ -38,6 +39,10 @@ class Publisher:
             raise TypeError(f'Expected {self.msg_type}, got {type(msg)}')
         if self._destroyed:
             raise RuntimeError('cannot publish on a destroyed publisher')
+        if not self._node._context.ok():
+            # as rclpy's rcl_publish: after shutdown (Ctrl-C under ros2 run) a publication raises, so a node that
+            # publishes while being torn down fails here as it does under ROS 2
+            raise RCLError("publisher's context is invalid")
         topic = self._topic
         if topic.taps:
             t = self._clock._now_ns()
