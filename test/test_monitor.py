@@ -364,6 +364,24 @@ def test_the_worker_process_steps_the_twin_like_the_node_would_and_runs_below_th
     assert b[6] == pytest.approx(a[6], abs=1e-12) and abs(a[6]['T1']) < 5.0  # 25 degC measured, near the twin's
 
 
+def test_the_worker_process_runs_below_the_node_from_its_start():
+    """The worker process is niced as soon as it is started, not once it has imported the monitor: those imports
+    (about a second of CPU) at the node's priority took the graph's CPU while the worker started."""
+    import os
+
+    from sma_wrist.monitor.worker import WorkerLink
+
+    ours = os.getpriority(os.PRIO_PROCESS, 0)
+    if ours >= 19:
+        pytest.skip('this process already runs at the lowest priority')
+    link = WorkerLink('process', MonitorConfig(), nice=1)
+    try:
+        theirs = os.getpriority(os.PRIO_PROCESS, link._proc.pid)  # still importing: that takes a second
+    finally:
+        link.close()
+    assert theirs == ours + 1
+
+
 def test_handing_batches_to_a_worker_that_does_not_read_never_holds_up_the_node():
     """A worker process that stops reading (stopped here before it even started) lets the node's sends return at
     once: what the pipe cannot take waits in the node's memory, in order."""
