@@ -35,16 +35,33 @@ Event = tuple[str, int, float, float]
 RUNTIME_FIELDS = ('check_period_s', 'persist_checks', 'min_confidence', 'sure_confidence')
 
 
-def start_worker(nice: int = 0) -> None:
+def worker_niceness(nice: int) -> int | None:
+    """The Unix niceness of a worker ``nice`` steps below this process (capped at 19), None where there is none
+    (Windows) or ``nice`` is 0."""
+    if nice <= 0 or not hasattr(os, 'getpriority'):
+        return None
+    return min(os.getpriority(os.PRIO_PROCESS, 0) + int(nice), 19)
+
+
+def lower_priority(pid: int, niceness: int | None) -> None:
+    """Set process ``pid`` (0: this one) to ``niceness`` when that lowers its priority; where this is not permitted
+    it keeps its own."""
+    if niceness is None:
+        return
+    try:
+        if os.getpriority(os.PRIO_PROCESS, pid) < niceness:
+            os.setpriority(os.PRIO_PROCESS, pid, niceness)
+    except OSError:  # not permitted here, or the process already ended
+        pass
+
+
+def start_worker(niceness: int | None = None) -> None:
     """A check worker's start-up: Ctrl-C left to the node that owns it (:func:`ignore_interrupts`), and its
-    scheduling priority lowered by ``nice`` (Unix niceness, 0-19) so that on a busy machine it takes the CPU the
-    control loop leaves over rather than a share of the loop's."""
+    scheduling priority lowered to ``niceness`` (:func:`worker_niceness`) so that on a busy machine it takes the CPU
+    the control loop leaves over rather than a share of the loop's. (The node lowers a worker process' priority as
+    soon as it starts, before its imports; this makes sure of it from inside.)"""
     ignore_interrupts()
-    if nice > 0 and hasattr(os, 'nice'):
-        try:
-            os.nice(int(nice))
-        except OSError:  # not permitted here: the worker runs at the node's priority
-            pass
+    lower_priority(0, niceness)
 
 
 class MonitorWorker:
@@ -146,10 +163,10 @@ class MonitorWorker:
             self.handle(msg)
 
 
-def serve(config: MonitorConfig, nice: int, inbox: Any, outbox: Any) -> None:
+def serve(config: MonitorConfig, niceness: int | None, inbox: Any, outbox: Any) -> None:
     """A worker process' main: niced (:func:`start_worker`), it serves the node's messages from the ``inbox``
     connection and answers on ``outbox`` (blocking: its own threads wait, never the node)."""
-    start_worker(nice)
+    start_worker(niceness)
     lock = threading.Lock()  # the twin's and the checks' answers come from two threads
 
     def send(msg: tuple) -> None:
@@ -194,10 +211,14 @@ class WorkerLink:
             ctx = multiprocessing.get_context('spawn')
             their_in, self._in = ctx.Pipe(duplex=False)
             self._out, their_out = ctx.Pipe(duplex=False)
+            niceness = worker_niceness(int(nice))
             self._proc = ctx.Process(
-                target=serve, args=(config, int(nice), their_in, their_out), name='twin_monitor_worker', daemon=True
+                target=serve, args=(config, niceness, their_in, their_out), name='twin_monitor_worker', daemon=True
             )
             self._proc.start()
+            # niced at once, not in serve(): a spawned worker first imports the monitor (about 1.2 s of CPU), which
+            # at the node's priority took the graph's CPU while it started
+            lower_priority(self._proc.pid, niceness)
             their_in.close()
             their_out.close()
             os.set_blocking(self._in.fileno(), False)

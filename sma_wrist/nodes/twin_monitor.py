@@ -22,7 +22,6 @@ Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monit
 
 from __future__ import annotations
 
-import threading
 from collections import OrderedDict
 from typing import Any
 
@@ -179,8 +178,8 @@ class TwinMonitor(WristNode):
         except MonitorInputError as exc:
             raise SmaWristError(f'twin_monitor: {exc}') from None
         # the node only buffers: the twin and the checks run in the worker (sma_wrist/monitor/worker.py), which
-        # it feeds a batch every BATCH_S of measurement time
-        self._lock = threading.Lock()
+        # it feeds a batch every BATCH_S of measurement time. No lock: the node's callbacks are in its default,
+        # mutually exclusive callback group, so they run one at a time under any executor
         self._events: list[tuple[str, int, float, float]] = [('p', 0, 0.0, float(p['payload_kg']))]
         self._batch_s = min(BATCH_S, 1.0 / p['twin_rate_hz']) if p['twin_rate_hz'] > 0 else BATCH_S
         self._sent_t: float | None = None
@@ -233,20 +232,17 @@ class TwinMonitor(WristNode):
         if not finite(msg.data):
             self.reject_input(f'/wrist/tem_{i}/command', f'non-finite command {msg.data!r}')
             return
-        with self._lock:
-            self._events.append(('u', i, self.now_ns() * 1e-9, float(msg.data)))
+        self._events.append(('u', i, self.now_ns() * 1e-9, float(msg.data)))
 
     def _on_temperature(self, i: int, msg: Temperature) -> None:
         if not finite(msg.temperature):
             self.reject_input(f'/wrist/muscle_{i}/temperature', f'non-finite temperature {msg.temperature!r}')
             return
-        with self._lock:
-            self._events.append(('T', i, self.stamp_s(msg), float(msg.temperature)))
+        self._events.append(('T', i, self.stamp_s(msg), float(msg.temperature)))
 
     def _on_payload(self, msg: Float64) -> None:
         if finite(msg.data) and 0.0 <= msg.data <= 2.0:
-            with self._lock:
-                self._events.append(('p', 0, 0.0, float(msg.data)))
+            self._events.append(('p', 0, 0.0, float(msg.data)))
         else:
             self.reject_input('/wrist/payload', f'{msg.data!r} is not a payload in kg (0-2)')
 
@@ -260,14 +256,13 @@ class TwinMonitor(WristNode):
             self.reject_input('/wrist/joint_states', f'non-finite angle {q!r}')
             return
         t = self.stamp_s(msg)
-        with self._lock:
-            self._events.append(('q', 0, t, q))
-            if self._sent_t is not None and t - self._sent_t < self._batch_s - 1e-9:
-                return
-            events, self._events = self._events, []
-            self._sent_t = t
-            self._seq += 1
-            seq = self._seq
+        self._events.append(('q', 0, t, q))
+        if self._sent_t is not None and t - self._sent_t < self._batch_s - 1e-9:
+            return
+        events, self._events = self._events, []
+        self._sent_t = t
+        self._seq += 1
+        seq = self._seq
         if self.t_first is None:
             self.t_first = min(e[2] for e in events if e[0] != 'p')
         rate = self.p['twin_rate_hz']
