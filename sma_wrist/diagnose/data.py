@@ -51,6 +51,8 @@ DRIVE_NAMES = ('tem_1', 'tem_2')
 FACE_TOPICS = ('/wrist/tem_1/face_temperature', '/wrist/tem_2/face_temperature')
 #: a face sample this far [s] from the analysed stretch's start is no start state
 FACE_START_TOLERANCE_S = 1.0
+#: an exchanger-face or muscle temperature outside this range [degC] is no start state (another unit, a fault)
+START_RANGE_C = (-40.0, 150.0)
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
@@ -311,7 +313,7 @@ def start_at_faces(run: Run, faces: Sequence[tuple[np.ndarray, np.ndarray]]) -> 
         if not (np.abs(t - run.t0_s) <= FACE_START_TOLERANCE_S).any():
             return f'{tp}: no sample within {FACE_START_TOLERANCE_S:g} s of the analysed start'
         f = float(np.interp(run.t0_s, t, v))
-        if not (-40.0 < f < 150.0):
+        if not (START_RANGE_C[0] < f < START_RANGE_C[1]):
             return f'{tp}: {f:g} is no exchanger-face temperature in degC'
         out.append(f)
     run.thermal_x0 = np.stack([run.T[0], np.array(out)], axis=1)

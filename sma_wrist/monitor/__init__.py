@@ -48,6 +48,7 @@ import numpy as np
 from sma_wrist.diagnose.data import (
     DRIVE_TOPIC,
     FACE_START_TOLERANCE_S,
+    START_RANGE_C,
     TOPICS,
     DiagnoseInputError,
     Run,
@@ -267,7 +268,7 @@ class Monitor:
         if not all(b[k][1] for k in ('F1', 'F2', 'T1', 'T2')):
             return
         x = np.array([[b['T1'][1][-1], b['F1'][1][-1]], [b['T2'][1][-1], b['F2'][1][-1]]])
-        if np.all((x > -40.0) & (x < 150.0)):  # degC (data.start_at_faces' range)
+        if np.all((x > START_RANGE_C[0]) & (x < START_RANGE_C[1])):
             self.twin.set_thermal_state(x)
         self._faces_started = True
 
