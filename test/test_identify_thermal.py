@@ -357,10 +357,13 @@ def test_cli_identifies_the_muscle_faces_from_a_recorded_bag(
     T1 is published, so the T1 column is fitted and each muscle predicted from the other."""
     bag = tmp_path / 'bag'
     _tem_loop(None, None, bag)
-    code, s = _cli([str(bag)], capsys)
+    code, s = _cli([str(bag), '--out', str(tmp_path / 'out')], capsys)
     assert code == 0, s
     assert s['fit']['faces_fitted'] == ['T1'] and s['validation'] == 'leave-one-out'
     assert [h['record'] for h in s['holdout']] == ['bag muscle 1', 'bag muscle 2']
+    # a simulated wrist reads no drive back: the commands are the drive, and the report says so
+    assert s['cleaning'][str(bag)]['drive'] == 'commanded'
+    assert f'TEM drive of {bag}: the commands' in Path(s['report']).read_text()
     for h, b in zip(s['holdout'], s['before']):
         assert set(h['faces']) == {'T1'}
         # own-model data: Table 4.9 is the truth (measured RMS 0.0007/0.002 degC); held out by the
