@@ -357,10 +357,13 @@ def test_cli_identifies_the_muscle_faces_from_a_recorded_bag(
     T1 is published, so the T1 column is fitted and each muscle predicted from the other."""
     bag = tmp_path / 'bag'
     _tem_loop(None, None, bag)
-    code, s = _cli([str(bag)], capsys)
+    code, s = _cli([str(bag), '--out', str(tmp_path / 'out')], capsys)
     assert code == 0, s
     assert s['fit']['faces_fitted'] == ['T1'] and s['validation'] == 'leave-one-out'
     assert [h['record'] for h in s['holdout']] == ['bag muscle 1', 'bag muscle 2']
+    # a simulated wrist reads no drive back: the commands are the drive, and the report says so
+    assert s['cleaning'][str(bag)]['drive'] == 'commanded'
+    assert f'TEM drive of {bag}: the commands' in Path(s['report']).read_text()
     for h, b in zip(s['holdout'], s['before']):
         assert set(h['faces']) == {'T1'}
         # own-model data: Table 4.9 is the truth (measured RMS 0.0007/0.002 degC); held out by the
@@ -492,3 +495,27 @@ def test_a_time_column_in_milliseconds_is_named_as_the_likely_cause(
     assert code == 2 and 'its rows are 1e+08 s apart' in doc['error'] and '--time-unit' in doc['error']
     code, doc = _cli([str(f), '--time-unit', 'ns', '--out', str(tmp_path / 'o')], capsys)
     assert code == 0, doc
+
+
+def test_a_bag_with_the_drive_the_device_read_back_is_fitted_on_the_read_back(tmp_path: Path) -> None:
+    """On hardware a command takes effect after the graph's delay (here 0.1 s), which its stamp does not say; a bag
+    with /wrist/tem_drive_applied has the drive as it was applied, and that is what each run's u is (the fit grid's
+    interval means of it), not the commands'."""
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose import testdata as td
+    from sma_wrist.identify.thermal import load_bag
+
+    dt, delay, grid_dt = 0.01, 0.1, 0.1
+    t = np.arange(int(40.0 / dt) + 1) * dt
+    heat_1 = np.sin(2.0 * np.pi * t / 6.0 + 0.3) > 0
+    u = np.stack([np.where(heat_1, 12.0, -8.0), np.where(heat_1, -8.0, 12.0)], axis=1)
+    truth = td.simulate('actuator_delay', seed=4, duration_s=40.0, params={'command_delay_s': delay}, u=u)
+    applied = fx.delayed(truth.u, delay, dt)
+    recs, cl = load_bag(td.write_bag(truth, tmp_path / 'bag', applied=applied), grid_dt)
+    assert cl.drive == 'applied'
+    per = int(round(grid_dt / dt))
+    for i, rec in enumerate(recs):
+        n = rec.u.size
+        # interval means to the midpoint rule's 22 points per interval (a 20 V step placed to 1/22 of it)
+        np.testing.assert_allclose(rec.u, applied[: n * per, i].reshape(n, per).mean(axis=1), atol=20.0 / 22)
+        assert np.abs(rec.u - truth.u[: n * per, i].reshape(n, per).mean(axis=1)).max() > 5.0  # not the commands

@@ -696,3 +696,113 @@ def test_the_node_hands_the_worker_every_sample_in_order_in_batches_of_0_1_s():
     # each batch ends at a joint state; the first at the first one, then every 0.1 s of its stamps
     assert all(m[2][-1][0] == 'q' for m in feeds)
     assert [m[2][-1][2] for m in feeds] == pytest.approx([10.0, 10.1, 10.2, 10.3], abs=1e-9) and len(rest) == 4 * 5
+
+
+def _delayed_warm_run():  # type: ignore[no-untyped-def]
+    """40 s of a wrist whose TEMs got their commands 0.1 s late (ten windows: the graph's delay on hardware) and whose
+    exchanger faces start warm (76 / 74 degC, right after an excitation): the Truth and the drive that was applied."""
+    from sma_wrist.diagnose import effects as fx
+
+    dt, delay = 0.01, 0.1
+    t = np.arange(int(40.0 / dt) + 1) * dt
+    heat_1 = np.sin(2.0 * np.pi * t / 6.0 + 0.3) > 0  # switching every 3 s, as a closed loop's commands do
+    u = np.stack([np.where(heat_1, 12.0, -8.0), np.where(heat_1, -8.0, 12.0)], axis=1)
+    truth = td.simulate(
+        'actuator_delay', seed=4, duration_s=40.0, params={'command_delay_s': delay}, u=u, faces_start_C=(76.0, 74.0)
+    )
+    return truth, fx.delayed(truth.u, delay, dt)
+
+
+def _feed_device(mon, truth, applied=None, faces=True):  # type: ignore[no-untyped-def]
+    """Feed a Truth as hardware_bridge and tem_controller publish it: per window the measurements (faces too), the
+    drive read back for the window before (stamped at its start), then the commands answering the window."""
+    mon.payload(truth.payload_kg)
+    for k, t in enumerate(truth.t):
+        for i in (1, 2):
+            mon.temperature(i, t, truth.T[k, i - 1])
+            if faces:
+                mon.face(i, t, truth.faces[k, i - 1])
+        if applied is not None and k > 0:
+            for i in (1, 2):
+                mon.drive(i, truth.t[k - 1], applied[k - 1, i - 1])
+        mon.angle(t, truth.q[k])
+        for i in (1, 2):
+            mon.command(i, t, truth.u[k, i - 1])
+
+
+def _twin_T_residual(mon, truth, lo=0.0, hi=40.0):  # type: ignore[no-untyped-def]
+    """RMS of the measured muscle temperatures minus the twin's over [lo, hi] [degC]."""
+    tt, T, _ = mon.twin.predictions(lo, hi)
+    meas = np.stack([np.interp(tt, truth.t, truth.T[:, i]) for i in (0, 1)], axis=1)
+    return float(np.sqrt(np.mean((meas - T) ** 2)))
+
+
+def test_the_twin_and_the_checks_run_on_the_drive_the_device_read_back_where_it_is_sent():
+    """On hardware a command takes effect after the graph's delay, which its stamp does not say. On the commands the
+    twin's temperatures were off by several times the sensor noise and the check named a TEM command delay on a
+    nominal wrist; on the read-back (/wrist/tem_drive_applied) the twin follows to the noise and the check is OK.
+    Without the read-back (a device that does not send it) the commands are still what the monitor runs on."""
+    truth, applied = _delayed_warm_run()
+    cfg = MonitorConfig(window_s=25.0, settle_s=5.0, candidates=('actuator_delay', 'sensor_lag', 'tem_mismatch'))
+    commanded, readback = Monitor(cfg), Monitor(cfg)
+    _feed_device(commanded, truth)
+    _feed_device(readback, truth, applied)
+    assert _twin_T_residual(readback, truth, 1.0) < 1.5 * td.NOISE_T_C
+    assert _twin_T_residual(commanded, truth, 1.0) > 3 * td.NOISE_T_C
+    t_check = 39.0
+    w = readback.window(t_check)
+    assert not isinstance(w, str) and w.drive == 'applied', w
+    k0 = int(round(w.t0_s / truth.dt))
+    np.testing.assert_array_equal(w.u[:-1], applied[k0 : k0 + w.n - 1])  # the read-back, held from its stamps
+    v = readback.diagnose(w, t_check)
+    assert v.level == 'OK', v.summary
+    w = commanded.window(t_check)
+    assert w.drive == 'commanded'  # type: ignore[union-attr]
+    v = commanded.diagnose(w, t_check)
+    assert v.level == 'WARN' and v.cause == 'actuator_delay', v.summary
+
+
+def test_the_twin_and_each_checks_replay_start_from_the_measured_exchanger_faces():
+    """A run that starts right after an excitation: the TEMs' exchanger faces are ~75 degC. A twin started at rest
+    reads its muscles degrees too cold for minutes; started from /wrist/tem_{1,2}/face_temperature it follows, and a
+    check's replay starts from the faces measured at its window's start."""
+    truth, applied = _delayed_warm_run()
+    cfg = MonitorConfig(window_s=25.0, settle_s=5.0)
+    seen, blind = Monitor(cfg), Monitor(cfg)
+    _feed_device(seen, truth, applied)
+    _feed_device(blind, truth, applied, faces=False)
+    assert _twin_T_residual(seen, truth) < 1.5 * td.NOISE_T_C
+    assert _twin_T_residual(blind, truth) > 10 * td.NOISE_T_C
+    w = seen.window(39.0)
+    assert w.thermal_start == 'measured'  # type: ignore[union-attr]
+    k0 = int(round(w.t0_s / truth.dt))  # type: ignore[union-attr]
+    np.testing.assert_allclose(w.thermal_x0[:, 1], truth.faces[k0], atol=1e-9)  # type: ignore[union-attr]
+    assert blind.window(39.0).thermal_start == 'twin'  # type: ignore[union-attr]
+
+
+def test_twin_monitor_node_runs_on_the_read_back_and_starts_from_the_measured_faces(tmp_path):
+    """The node subscribes /wrist/tem_drive_applied and /wrist/tem_{1,2}/face_temperature (embedded runtime, checks
+    inline): its twin follows the wrist of the tests above to the sensor noise and its check is clean."""
+    from sma_wrist.bag import read_bag
+    from sma_wrist.nodes.twin_monitor import TwinMonitor
+
+    truth, applied = _delayed_warm_run()
+    hist = tmp_path / 'verdicts.json'
+    params = {
+        'use_sim_time': True,
+        'worker': 'inline',
+        'history_file': str(hist),
+        'window_s': 25.0,
+        'settle_s': 5.0,
+        'check_period_s': 100.0,  # one check, at 30 s
+        'candidates': 'actuator_delay,sensor_lag,tem_mismatch',
+    }
+    bag = td.write_bag(truth, tmp_path / 'bag', nodes=[TwinMonitor], params={'/twin_monitor': params}, applied=applied)
+    t_res, res = read_bag(bag, ['/wrist/twin/residual/muscle_1/temperature'])[
+        '/wrist/twin/residual/muscle_1/temperature'
+    ]
+    r = np.array([m.data for m in res])
+    assert r.size > 300  # 10 Hz
+    assert np.sqrt(np.mean(r**2)) < 1.5 * td.NOISE_T_C
+    (v,) = json.loads(hist.read_text())['verdicts']
+    assert v['level'] == 'OK' and v['check_cause'] is None, v['summary']

@@ -24,6 +24,7 @@ analysed) or raised as :class:`DiagnoseInputError` naming the problem and what i
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,6 +51,8 @@ DRIVE_NAMES = ('tem_1', 'tem_2')
 FACE_TOPICS = ('/wrist/tem_1/face_temperature', '/wrist/tem_2/face_temperature')
 #: a face sample this far [s] from the analysed stretch's start is no start state
 FACE_START_TOLERANCE_S = 1.0
+#: an exchanger-face or muscle temperature outside this range [degC] is no start state (another unit, a fault)
+START_RANGE_C = (-40.0, 150.0)
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
@@ -231,19 +234,10 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
 
     series: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     drive = 'commanded'
-    if DRIVE_TOPIC in data and len(data[DRIVE_TOPIC][1]):
-        try:
-            applied = {
-                k: _series(DRIVE_TOPIC, *data[DRIVE_TOPIC], name, warnings)
-                for k, name in zip(('u1', 'u2'), DRIVE_NAMES)
-            }
-        except (AttributeError, TypeError, ValueError) as exc:
-            raise DiagnoseInputError(
-                f'{DRIVE_TOPIC}: unexpected message content ({exc}); the contract type is required (msg_defs/topics.yaml)'
-            ) from None
-        if all(s[0].size for s in applied.values()):
-            series.update(applied)  # the commands' stamps are the windows they answer, not when the drive took effect
-            drive = 'applied'
+    applied = drive_series(data, warnings)
+    if applied is not None and all(s[0].size for s in applied.values()):
+        series.update(applied)  # the commands' stamps are the windows they answer, not when the drive took effect
+        drive = 'applied'
     kinds = {
         'u1': 'float',
         'u2': 'float',
@@ -268,38 +262,63 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
                 series[key] = s
     run = run_from_series(series, str(p), warnings, max_rate_hz)
     run.drive = drive
-    faces = _faces_at(data, run.t0_s, warnings)
+    faces = face_series(data, warnings)
     if faces is not None and run.T is not None:
-        run.thermal_x0 = np.stack([run.T[0], faces], axis=1)  # (layer, face): [muscle (Eq. 4.13), exchanger (4.14)]
-        run.thermal_start = 'measured'
+        why = start_at_faces(run, faces)
+        if why:
+            warnings.append(f'{why}; the exchanger faces start at rest')
     return run
 
 
-def _faces_at(data: dict[str, Any], t0_s: float, warnings: list[str]) -> np.ndarray | None:
-    """The exchanger-face temperatures (2,) [degC] at ``t0_s`` [s] from FACE_TOPICS, or None (with a warning when
-    the topics are there but unusable): the first valid samples, interpolated to the stretch's start."""
+def drive_series(data: dict[str, Any], warnings: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]] | None:
+    """{'u1', 'u2': (t [s], volts)} of the drive the device read back (DRIVE_TOPIC in a bag's ``data``, cleaned as
+    every topic, stamped where each value began to hold), or None when the bag has none; DiagnoseInputError for
+    messages that are no JointState with the TEMs' efforts."""
+    if DRIVE_TOPIC not in data or not len(data[DRIVE_TOPIC][1]):
+        return None
+    try:
+        return {
+            k: _series(DRIVE_TOPIC, *data[DRIVE_TOPIC], name, warnings) for k, name in zip(('u1', 'u2'), DRIVE_NAMES)
+        }
+    except (AttributeError, TypeError, ValueError) as exc:
+        raise DiagnoseInputError(
+            f'{DRIVE_TOPIC}: unexpected message content ({exc}); the contract type is required (msg_defs/topics.yaml)'
+        ) from None
+
+
+def face_series(data: dict[str, Any], warnings: list[str]) -> list[tuple[np.ndarray, np.ndarray]] | None:
+    """The exchanger faces' (t [s], degC) per TEM from FACE_TOPICS in a bag's ``data``, or None (with a warning when
+    the topics are there but unusable)."""
     if not all(tp in data and len(data[tp][1]) for tp in FACE_TOPICS):
         return None
     out = []
     for tp in FACE_TOPICS:
         try:
-            t, v = _series(tp, data[tp][0], data[tp][1], 'temperature', warnings)
+            out.append(_series(tp, data[tp][0], data[tp][1], 'temperature', warnings))
         except (AttributeError, TypeError, ValueError) as exc:
             warnings.append(f'{tp}: unexpected message content ({exc}); the exchanger faces start at rest')
             return None
-        near = np.abs(t - t0_s) <= FACE_START_TOLERANCE_S
-        if not near.any():
-            warnings.append(
-                f'{tp}: no sample within {FACE_START_TOLERANCE_S:g} s of the analysed start; the exchanger faces '
-                f'start at rest'
-            )
-            return None
-        f = float(np.interp(t0_s, t, v))
-        if not (-40.0 < f < 150.0):
-            warnings.append(f'{tp}: {f:g} is no exchanger-face temperature in degC; the exchanger faces start at rest')
-            return None
+    return out
+
+
+def start_at_faces(run: Run, faces: Sequence[tuple[np.ndarray, np.ndarray]]) -> str:
+    """Start ``run``'s heat-balance replay where the exchanger faces were measured (``faces``: (t [s], degC) per TEM,
+    interpolated to the run's start ``t0_s``) and the muscles at their first samples: ``thermal_x0`` (2 muscles,
+    [muscle face (Eq. 4.13), exchanger face (Eq. 4.14)]) [degC], ``thermal_start`` 'measured'. Returns '' when it
+    did, else why not (nothing changed)."""
+    if run.T is None:
+        return 'no muscle temperatures'
+    out = []
+    for tp, (t, v) in zip(FACE_TOPICS, faces):
+        if not (np.abs(t - run.t0_s) <= FACE_START_TOLERANCE_S).any():
+            return f'{tp}: no sample within {FACE_START_TOLERANCE_S:g} s of the analysed start'
+        f = float(np.interp(run.t0_s, t, v))
+        if not (START_RANGE_C[0] < f < START_RANGE_C[1]):
+            return f'{tp}: {f:g} is no exchanger-face temperature in degC'
         out.append(f)
-    return np.array(out)
+    run.thermal_x0 = np.stack([run.T[0], np.array(out)], axis=1)
+    run.thermal_start = 'measured'
+    return ''
 
 
 def run_from_series(

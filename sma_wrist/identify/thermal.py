@@ -11,7 +11,9 @@ Inputs (seed Sec. 4.3.1: one TEM driven by 12 V sines at 1/128-1 Hz, both faces 
   with a warning (Kelvin temperatures);
 * a **rosbag2** recorded per msg_defs/topics.yaml (plant_sim or hardware_bridge): each
   muscle is one run, ``/wrist/tem_i/command`` [V] with ``/wrist/muscle_i/temperature``
-  [degC]; only the muscle face is published, so only the T1 column is fitted.
+  [degC]; where the bag has the drive the device read back (``/wrist/tem_drive_applied``, hardware_bridge) that is
+  the drive instead (a command takes effect after the graph's delay, which its stamp does not say; the choice of
+  :func:`sma_wrist.diagnose.data.load_run`). Only the muscle face is fitted (the T1 column).
 
 Cleaning (counted in the report): rows with NaN/unparseable cells dropped, unsorted stamps
 sorted, duplicate stamps removed (last kept), gaps longer than 2 s cut (longest stretch
@@ -100,6 +102,8 @@ class Cleaning:
     duplicates: int = 0
     gap_cut_s: float = 0.0
     warnings: list[str] = field(default_factory=list)
+    #: a bag's TEM drive: 'applied' (the device's read-back) or 'commanded' (the commands); None for a table
+    drive: str | None = None
 
 
 # ------------------------------------------------------------------------------ reading
@@ -459,7 +463,8 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh', recording: Any = None) ->
     """Both muscles of a recorded bag as muscle-face-only runs on the grid dt.
 
     The bag is read on its measurement grid (sma_wrist.diagnose.data.load_run: cleaning, gaps,
-    units) and the held commands averaged over each interval of the fit grid.
+    units, the device's drive read-back preferred to the commands) and the held drive averaged over each interval of
+    the fit grid.
     """
     import numpy as np
 
@@ -476,7 +481,7 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh', recording: Any = None) ->
         raise ThermalInputError(
             f'{path}: measurements every {run.dt:g} s are coarser than the {dt:g} s grid; use --dt {run.dt:g}'
         )
-    cl = Cleaning(rows=run.n, warnings=list(run.warnings))
+    cl = Cleaning(rows=run.n, warnings=list(run.warnings), drive=run.drive)
     grid = np.arange(run.t[0], run.t[-1] - dt + 1e-9, dt)
     valid = np.interp(grid, run.t, run.valid.astype(float)) > 0.999
     recs = []
@@ -531,6 +536,7 @@ def load_inputs(
                 'gap_cut_s': None,
                 'runs': len(recs),
                 'counts': 'per topic, in warnings',
+                'drive': cl.drive,
             }
         else:
             cleaning[str(p)] = {
@@ -684,6 +690,12 @@ def write_report(
             c[k] if c[k] is not None else 'see warnings' for k in ('dropped_nan', 'unsorted', 'duplicates', 'gap_cut_s')
         ]
         lines.append(f'| {f} | {c["rows"]} | ' + ' | '.join(map(str, cells)) + f' | {c["runs"]} |')
+    drives = {
+        'applied': "the device's read-back (/wrist/tem_drive_applied)",
+        'commanded': 'the commands (/wrist/tem_{1,2}/command)',
+    }
+    fitted = [f'- TEM drive of {f}: {drives[c["drive"]]}' for f, c in summary['cleaning'].items() if c.get('drive')]
+    lines += [''] + fitted if fitted else []
     ident, default = table_of(result.fit.params), table_of(result.base)
     lines += [
         '',

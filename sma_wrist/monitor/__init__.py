@@ -1,14 +1,22 @@
 """Live model monitoring of a running wrist: is it still its model, and if not, what changed since when.
 
 :class:`Monitor` is fed the contract topics as they arrive (TEM commands, muscle temperatures, the angle, the
-payload). It runs a :class:`~sma_wrist.monitor.twin.Twin` (the plant model on the measured commands) beside the
-wrist, keeps the recent samples, and every ``check_period_s`` runs the model-discrepancy diagnosis
-(:func:`sma_wrist.diagnose.diagnose_run`, doc/explanation/diagnosis.md) on a rolling window of them:
+payload, and where the device gives them the drive it read back and the TEMs' exchanger-face temperatures). It runs
+a :class:`~sma_wrist.monitor.twin.Twin` (the plant model on the TEM drive) beside the wrist, keeps the recent
+samples, and every ``check_period_s`` runs the model-discrepancy diagnosis (:func:`sma_wrist.diagnose.diagnose_run`,
+doc/explanation/diagnosis.md) on a rolling window of them:
+
+* the TEM drive is the device's read-back (``/wrist/tem_drive_applied``, stamped where it took effect) where it is
+  sent, else the commands, per TEM: on hardware a command takes effect after the graph's delay, which its stamp (the
+  window it answers) does not say, and replayed on the commands a nominal wrist was an unexplained thermal
+  discrepancy (the diagnosis' choice, :func:`sma_wrist.diagnose.data.load_run`);
 
 * the window is ``settle_s + window_s`` long; the first ``settle_s`` only settle the replays' memory (the wires'
-  hysteresis and the joint start where the wrist was, not from rest), and the thermal replay starts from the twin's
-  heat-balance state (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`): cut from the middle of a clean run, a
-  window replayed from rest was an "unexplained discrepancy" in 2 of 3 checks;
+  hysteresis and the joint start where the wrist was, not from rest), and the thermal replay starts from the
+  exchanger faces measured at the window's start (``/wrist/tem_{1,2}/face_temperature``) where they are published,
+  else from the twin's heat-balance state (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`): cut from the middle of
+  a clean run, a window replayed from rest was an "unexplained discrepancy" in 2 of 3 checks. The twin itself
+  starts from the measured faces (a wrist whose TEMs are still warm from an excitation is not at rest);
 * where the twin's residuals changed inside the window (:func:`change_point`), the part after the change is
   diagnosed, from just before it when the temperatures changed (:data:`CHANGE_SETTLE_S`), with ``settle_s`` before
   it when only the angle did; while such a change is unnamed a check is due every :data:`FRESH_PERIOD_S` from
@@ -37,7 +45,16 @@ from typing import Any
 
 import numpy as np
 
-from sma_wrist.diagnose.data import TOPICS, DiagnoseInputError, Run, run_from_series
+from sma_wrist.diagnose.data import (
+    DRIVE_TOPIC,
+    FACE_START_TOLERANCE_S,
+    START_RANGE_C,
+    TOPICS,
+    DiagnoseInputError,
+    Run,
+    run_from_series,
+    start_at_faces,
+)
 from sma_wrist.monitor.twin import Model, MonitorInputError, Twin, load_model
 
 __all__ = ['MonitorConfig', 'Monitor', 'Verdict', 'MonitorInputError', 'LEVELS', 'ignore_interrupts']
@@ -84,6 +101,10 @@ CHANGE_SETTLE_S = 2.0
 #: diagnosed with ``settle_s`` before it, which the mechanics replay's memory needs (from the change on, a
 #: potentiometer offset, lag and a payload were "unexplained" 35 s after the onset; with settle_s named)
 THERMAL_CHANGE_SHARE = 0.5
+#: a TEM's command is not the twin's input while the device's read-back of that TEM's drive is at most this old [s]
+#: (measurement time); older, the device has stopped reading it back (or never did) and the commands drive the twin.
+#: A window replays a TEM's read-back when it covers the window to within this at both ends
+READBACK_FRESH_S = 1.0
 
 
 @dataclass
@@ -167,7 +188,8 @@ def _key(v: Verdict) -> tuple[str, str | None]:
 
 
 class Monitor:
-    """The monitor of one wrist; feed it with :meth:`command`, :meth:`temperature`, :meth:`angle`, :meth:`payload`."""
+    """The monitor of one wrist; feed it with :meth:`command`, :meth:`temperature`, :meth:`angle`, :meth:`payload`,
+    and where the device gives them :meth:`drive` and :meth:`face`."""
 
     def __init__(self, config: MonitorConfig | None = None, model: Model | None = None) -> None:
         self.config = (config or MonitorConfig()).check()
@@ -176,7 +198,13 @@ class Monitor:
         self.twin: Twin | None = None
         self.payload_kg: float | None = None
         self._payload_pending = 0.3
-        self._buf: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in TOPICS if k != 'payload'}
+        # the contract topics' samples (TOPICS keys), the read-back drive ('a1', 'a2') and the exchanger faces ('F1',
+        # 'F2')
+        keys = [k for k in TOPICS if k != 'payload'] + ['a1', 'a2', 'F1', 'F2']
+        self._buf: dict[str, tuple[list[float], list[float]]] = {k: ([], []) for k in keys}
+        self._readback_s: list[float | None] = [None, None]  # the newest read-back stamp per TEM [s]
+        self._twin_start_s: float | None = None
+        self._faces_started = False  # the twin's heat balance was set from the measured faces (or can no longer be)
         self.t_first: float | None = None
         self.t_last: float | None = None
         self.last_check: float | None = None
@@ -195,11 +223,54 @@ class Monitor:
             self.twin.set_payload(kg)
 
     def command(self, i: int, t_s: float, volts: float) -> None:
-        """TEM ``i`` (1, 2) commanded ``volts`` [V] at ``t_s`` [s]."""
+        """TEM ``i`` (1, 2) commanded ``volts`` [V] at ``t_s`` [s]; the twin's input unless the device reads that
+        TEM's drive back (:meth:`drive`)."""
         if not math.isfinite(volts):
             return
         self._append(f'u{i}', t_s, volts)
-        self._ensure_twin(t_s).set_command(i - 1, volts)
+        last = self._readback_s[i - 1]
+        if last is None or t_s - last > READBACK_FRESH_S:
+            self._ensure_twin(t_s).set_command(i - 1, volts)
+
+    def drive(self, i: int, t_s: float, volts: float) -> None:
+        """TEM ``i`` (1, 2) got ``volts`` [V] from ``t_s`` [s] on, as the device read it back (``DRIVE_TOPIC``:
+        the drive at a window's middle, stamped at the window's start in device time, held like a command until the
+        next): the twin's input and the checks' in place of that TEM's commands."""
+        if not math.isfinite(volts):
+            return
+        self._append(f'a{i}', t_s, volts)
+        last = self._readback_s[i - 1]
+        self._readback_s[i - 1] = t_s if last is None else max(last, t_s)
+        twin = self._ensure_twin(t_s)
+        # the drive clocks the twin too: the device reads back every window, the windows the host skipped included
+        # (no measurement of them), and each held only over its own
+        twin.advance_to(t_s)
+        twin.set_command(i - 1, volts)
+
+    def face(self, i: int, t_s: float, celsius: float) -> None:
+        """TEM ``i``'s (1, 2) exchanger face measured ``celsius`` [degC], stamped ``t_s`` [s]: the twin's heat balance
+        starts there, and each check's thermal replay starts from the faces measured at its window's start."""
+        if not math.isfinite(celsius):
+            return
+        self._append(f'F{i}', t_s, celsius)
+        if not self._faces_started:
+            self._start_at_faces(t_s)
+
+    def _start_at_faces(self, t_s: float) -> None:
+        """Set the twin's heat balance from the first measured faces and muscles, when they come within
+        FACE_START_TOLERANCE_S of its start (later, the twin has run on and a jump would read as a change)."""
+        if self.twin is None or self._twin_start_s is None:
+            return
+        if t_s - self._twin_start_s > FACE_START_TOLERANCE_S:
+            self._faces_started = True
+            return
+        b = self._buf
+        if not all(b[k][1] for k in ('F1', 'F2', 'T1', 'T2')):
+            return
+        x = np.array([[b['T1'][1][-1], b['F1'][1][-1]], [b['T2'][1][-1], b['F2'][1][-1]]])
+        if np.all((x > START_RANGE_C[0]) & (x < START_RANGE_C[1])):
+            self.twin.set_thermal_state(x)
+        self._faces_started = True
 
     def temperature(self, i: int, t_s: float, celsius: float) -> None:
         """Muscle ``i`` (1, 2) measured ``celsius`` [degC], stamped ``t_s`` [s]."""
@@ -220,6 +291,7 @@ class Monitor:
         if self.twin is None:
             self.twin = Twin(self.model, self.payload_kg if self.payload_kg is not None else self._payload_pending)
             self.twin.advance_to(t_s)
+            self._twin_start_s = float(t_s)
         return self.twin
 
     def _append(self, key: str, t_s: float, v: float) -> None:
@@ -287,22 +359,34 @@ class Monitor:
             if sel.sum() > 1:
                 o = np.argsort(ta[sel], kind='stable')
                 series[k] = (ta[sel][o], xa[sel][o])
+        faces = [series.pop(f'F{i}', None) for i in (1, 2)]
+        applied = 0
+        for i in (1, 2):
+            a = series.pop(f'a{i}', None)
+            # a TEM's read-back where it covers the window (else its commands: a device without it, or it stopped)
+            if a is not None and a[0][0] - lo <= READBACK_FRESH_S and t_s - a[0][-1] <= READBACK_FRESH_S:
+                series[f'u{i}'] = a
+                applied += 1
         if self.payload_kg is not None:
             series['payload'] = (np.array([lo]), np.array([self.payload_kg]))
         warnings: list[str] = []
         if 'u1' not in series or 'u2' not in series:
             return (
                 f'no TEM commands in the last {self.span_s:g} s: the twin runs on {TOPICS["u1"]} and '
-                f'{TOPICS["u2"]} (std_msgs/Float64, V); is tem_controller (or the bridge) running?'
+                f'{TOPICS["u2"]} (std_msgs/Float64, V) or the drive read back on {DRIVE_TOPIC}; is tem_controller '
+                f'(or the bridge) running?'
             )
         try:
             run = run_from_series(series, f'window {lo:.1f}-{t_s:.1f} s', warnings)
         except DiagnoseInputError as exc:
             return str(exc)
-        # the heat-balance state the twin had at the window's first sample
-        if self.twin is not None:
-            run.thermal_x0 = self.twin.thermal_state_at(run.t0_s)
-            run.thermal_start = 'twin'
+        run.drive = 'applied' if applied == 2 else 'commanded'
+        # the replay's heat balance starts from the faces measured at the window's first sample, else where the twin
+        # had it there
+        if not (faces[0] is not None and faces[1] is not None and not start_at_faces(run, faces)):
+            if self.twin is not None:
+                run.thermal_x0 = self.twin.thermal_state_at(run.t0_s)
+                run.thermal_start = 'twin'
         run.settle_s = min(self.config.settle_s if change is None else change - lo, max(run.duration - 20.0, 0.0))
         if change is not None:
             run.change_s = change

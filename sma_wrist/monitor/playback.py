@@ -1,7 +1,8 @@
 """``sma-wrist monitor BAG``: the live monitor on a recorded bag, played through as if live.
 
-The bag's messages are fed to :class:`sma_wrist.monitor.Monitor` in the order they arrived (measurements at their
-header stamps, commands at their log time, a measurement before the command answering it), and every
+The bag's messages are fed to :class:`sma_wrist.monitor.Monitor` in the order they arrived (measurements and the
+drive the device read back at their header stamps, commands at their log time, a measurement before the command
+answering it), and every
 ``check_period_s`` of bag time the check runs, in line (no wall clock involved: the verdicts are those a live
 monitor would have published, whatever the speed of the machine). Prints the timeline of verdicts; ``--json`` one
 object (doc/howto/monitor.md).
@@ -21,7 +22,15 @@ import numpy as np
 
 from sma_wrist.contract import ContractError, Recording
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.diagnose.data import TOPICS, DiagnoseInputError, _series
+from sma_wrist.diagnose.data import (
+    DRIVE_TOPIC,
+    FACE_TOPICS,
+    TOPICS,
+    DiagnoseInputError,
+    _series,
+    drive_series,
+    face_series,
+)
 from sma_wrist.monitor import Monitor, MonitorConfig, MonitorInputError, Verdict, write_history
 
 KINDS = {'u1': 'float', 'u2': 'float', 'T1': 'temperature', 'T2': 'temperature', 'joint': 'joint', 'payload': 'float'}
@@ -30,7 +39,8 @@ KINDS = {'u1': 'float', 'u2': 'float', 'T1': 'temperature', 'T2': 'temperature',
 def _bag_series(
     path: str | Path, recording: Recording, warnings: list[str]
 ) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """{key of TOPICS: (t [s], values)} of the bag, cleaned as the diagnosis cleans them."""
+    """{key of TOPICS: (t [s], values)} of the bag, cleaned as the diagnosis cleans them, with the drive the device
+    read back ('a1', 'a2') and the exchanger faces ('F1', 'F2') where the bag has them."""
     from sma_wrist.bag import BagError, read_bag
 
     p = Path(path)
@@ -40,7 +50,7 @@ def _bag_series(
             f'.mcap file, recorded per msg_defs/topics.yaml)'
         )
     try:
-        data = read_bag(p, recording.recorded(TOPICS.values()))
+        data = read_bag(p, recording.recorded([*TOPICS.values(), DRIVE_TOPIC, *FACE_TOPICS]))
     except BagError as exc:
         if not exc.salvaged:
             raise MonitorInputError(f'{p}: cannot read the bag: {exc.problem}') from None
@@ -58,6 +68,16 @@ def _bag_series(
                 raise MonitorInputError(
                     f'{topic}: unexpected message content ({exc}); the contract type is required (msg_defs/topics.yaml)'
                 ) from None
+    try:
+        applied = drive_series(data, warnings)
+    except DiagnoseInputError as exc:
+        raise MonitorInputError(str(exc)) from None
+    for i, k in enumerate(('u1', 'u2'), 1):
+        if applied is not None and applied[k][0].size:
+            series[f'a{i}'] = applied[k]
+    for i, f in enumerate(face_series(data, warnings) or (), 1):
+        if f[0].size:
+            series[f'F{i}'] = f
     return series
 
 
@@ -72,11 +92,11 @@ def _events(
         + ' (or sma-wrist run --bag DIR); a bag '
         'that names them otherwise: --topic CONTRACT=RECORDED'
     )
-    no_u = [TOPICS[k] for k in ('u1', 'u2') if k not in series]
+    no_u = [TOPICS[f'u{i}'] for i in (1, 2) if f'u{i}' not in series and f'a{i}' not in series]
     if no_u:
         raise MonitorInputError(
-            f'{p}: no {" / ".join(no_u)} (std_msgs/Float64, V): the monitor runs the model on '
-            f'the TEM commands and has nothing to compare without them; {record}'
+            f'{p}: no {" / ".join(no_u)} (std_msgs/Float64, V) nor the drive read back on {DRIVE_TOPIC}: the monitor '
+            f'runs the model on the TEM drive and has nothing to compare without it; {record}'
         )
     if not (('T1' in series and 'T2' in series) or 'joint' in series):
         raise MonitorInputError(
@@ -92,7 +112,7 @@ def _events(
     for key, (t, v) in series.items():
         if key == 'payload':
             continue
-        order = 1 if key.startswith('u') else 0  # a measurement before the command that answers it
+        order = 1 if key[0] in 'ua' else 0  # a measurement before the command (drive) that answers it (holds after it)
         ev.extend(zip(t.tolist(), [order] * t.size, [key] * t.size, v.tolist()))
     ev.sort(key=lambda e: (e[0], e[1]))
     return ev, payload
@@ -147,6 +167,10 @@ def _play(
     feed = {
         'u1': lambda t, x: mon.command(1, t, x),
         'u2': lambda t, x: mon.command(2, t, x),
+        'a1': lambda t, x: mon.drive(1, t, x),
+        'a2': lambda t, x: mon.drive(2, t, x),
+        'F1': lambda t, x: mon.face(1, t, x),
+        'F2': lambda t, x: mon.face(2, t, x),
         'T1': lambda t, x: mon.temperature(1, t, x),
         'T2': lambda t, x: mon.temperature(2, t, x),
         'joint': mon.angle,

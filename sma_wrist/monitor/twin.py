@@ -1,4 +1,5 @@
-"""The digital twin of a running wrist: the plant model driven by the measured TEM commands.
+"""The digital twin of a running wrist: the plant model driven by the TEM drive (the device's read-back, else the
+commands).
 
 :class:`Twin` steps :class:`sma_wrist.core.plant.wrist.WristPlant` (the plant ``plant_sim`` runs, at its 1 kHz
 step) over each interval between two measurement stamps under the command held over it (in batches of intervals) (the command stamped at
@@ -151,6 +152,15 @@ class Twin:
     def set_command(self, i: int, volts: float) -> None:
         """TEM ``i`` (0, 1) was commanded ``volts`` [V]; it drives the twin from the next measurement stamp on."""
         self.command_V[0, i] = volts
+
+    def set_thermal_state(self, x: np.ndarray) -> None:
+        """Put the heat balance at the measured state ``x`` (2 muscles, [muscle face, exchanger face]) [degC] at the
+        twin's stamp: a wrist whose TEMs start warm (after an excitation) is followed from where it is, not from rest
+        (the exchangers' time constant is minutes)."""
+        self.flush()
+        self._plant.state.thermal[0] = np.asarray(x, dtype=float)
+        if self._log_x:  # the state logged at this stamp is the measured one
+            self._log_x[-1][-1] = self._plant.state.thermal[0]
 
     def advance_to(self, t_s: float) -> None:
         """Integrate to the measurement stamp ``t_s`` [s] under the held commands (steps of the plant's dt; queued)."""

@@ -29,7 +29,8 @@ from typing import Any
 from sma_wrist.monitor import Monitor, MonitorConfig, Verdict, diagnose_window, ignore_interrupts
 
 #: the node's events: (kind, muscle or TEM 1/2 (0 for the angle and payload), stamp [s], value); kinds: 'u' TEM
-#: command [V], 'T' muscle temperature [degC], 'q' angle [rad], 'p' payload [kg]
+#: command [V], 'd' the TEM drive the device read back [V], 'T' muscle temperature [degC], 'f' TEM exchanger-face
+#: temperature [degC], 'q' angle [rad], 'p' payload [kg]
 Event = tuple[str, int, float, float]
 #: the MonitorConfig fields a node may change while it runs (its runtime parameters)
 RUNTIME_FIELDS = ('check_period_s', 'persist_checks', 'min_confidence', 'sure_confidence')
@@ -108,6 +109,10 @@ class MonitorWorker:
                     m.temperature(i, t, v)
                 elif kind == 'u':
                     m.command(i, t, v)
+                elif kind == 'd':
+                    m.drive(i, t, v)
+                elif kind == 'f':
+                    m.face(i, t, v)
                 else:
                     m.payload(v)
             if kind == 'q':

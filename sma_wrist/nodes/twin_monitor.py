@@ -1,7 +1,8 @@
 """twin_monitor: tells, while the wrist runs, when it stops behaving like its model.
 
-Subscribes the contract topics (TEM commands, muscle temperatures, joint state, payload), runs the plant model on
-the measured commands beside the wrist (:class:`sma_wrist.monitor.twin.Twin`: the built-in model, the identified
+Subscribes the contract topics (TEM commands, muscle temperatures, joint state, payload, and where a device publishes
+them the drive it read back and the TEMs' exchanger-face temperatures), runs the plant model on the TEM drive (the
+read-back where it comes, else the commands) beside the wrist (:class:`sma_wrist.monitor.twin.Twin`: the built-in model, the identified
 ``hysteresis_file`` / ``thermal_file``, or a diagnosis' ``extended_params.yaml`` as ``params_file``) and publishes
 its predictions and the residuals (measured - twin) on ``/wrist/twin/...`` (msg_defs/topics.yaml). Every
 ``check_period_s`` it diagnoses a rolling window of the recent data (:mod:`sma_wrist.monitor`, doc/howto/monitor.md).
@@ -199,6 +200,10 @@ class TwinMonitor(WristNode):
         for i in (1, 2):
             self.subscription(f'/wrist/tem_{i}/command', lambda m, i=i: self._on_command(i, m))
             self.subscription(f'/wrist/muscle_{i}/temperature', lambda m, i=i: self._on_temperature(i, m))
+            self.subscription(f'/wrist/tem_{i}/face_temperature', lambda m, i=i: self._on_face(i, m))
+        # only a device that reads its drive back publishes it (hardware_bridge); subscribed before the joint state,
+        # whose sample closes the window the drive held over (an executor takes ready subscriptions in this order)
+        self.subscription('/wrist/tem_drive_applied', self._on_drive)
         self.subscription('/wrist/joint_states', self._on_joint)
         self.subscription('/wrist/payload', self._on_payload)
         self.pub = {
@@ -239,6 +244,19 @@ class TwinMonitor(WristNode):
             self.reject_input(f'/wrist/muscle_{i}/temperature', f'non-finite temperature {msg.temperature!r}')
             return
         self._events.append(('T', i, self.stamp_s(msg), float(msg.temperature)))
+
+    def _on_face(self, i: int, msg: Temperature) -> None:
+        if finite(msg.temperature):  # a face is no safety input here: a bad sample is left out
+            self._events.append(('f', i, self.stamp_s(msg), float(msg.temperature)))
+
+    def _on_drive(self, msg: JointState) -> None:
+        """The drive the device read back (effort [V] of tem_1, tem_2), held from its stamp."""
+        t = self.stamp_s(msg)
+        names = list(msg.name)
+        for i, name in enumerate(('tem_1', 'tem_2')):
+            j = names.index(name) if name in names else i
+            if j < len(msg.effort) and finite(msg.effort[j]):
+                self._events.append(('d', i + 1, t, float(msg.effort[j])))
 
     def _on_payload(self, msg: Float64) -> None:
         if finite(msg.data) and 0.0 <= msg.data <= 2.0:
