@@ -123,3 +123,14 @@ def test_hold_limits_with_per_tem_gains_are_the_ones_both_tems_hold() -> None:
     strong = ti.hold_limits(dataclasses.replace(th.ThermalParams(), input_per_volt=0.4 * 1.3), resolution_V=0.5)
     assert (lo, hi) == (max(weak[0], strong[0]), min(weak[1], strong[1]))
     assert strong[1] < weak[1]
+
+
+def test_the_muscle_window_both_tems_hold_is_the_weaker_ones() -> None:
+    """identify's pre-load calibration places the wire within what the TEMs hold at their limits: with TEM 2 the
+    weaker, its window (a weaker module neither heats nor cools its muscle as far)."""
+    from sma_wrist.core.plant.preload import reachable_window
+
+    weak_2 = dataclasses.replace(th.ThermalParams(), tem_gain=(1.0, 0.7))
+    alone = reachable_window(dataclasses.replace(th.ThermalParams(), input_per_volt=0.4 * 0.7))
+    assert reachable_window(weak_2) == pytest.approx(alone, abs=1e-9)
+    assert alone[1] < reachable_window(th.ThermalParams())[1]
