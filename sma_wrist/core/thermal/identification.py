@@ -32,7 +32,9 @@ of 12 V sine runs (1/128-1 Hz), starting every parameter at 1. Here:
   offset between the faces, and the first ``settle_s`` seconds are left out of the residual.
 
 The command scale input_per_volt is not identifiable apart from the K's (every K multiplies
-a power of I); it stays fixed (doc/explanation/model.md).
+a power of I); it stays fixed (doc/explanation/model.md). What is identifiable is one TEM's scale relative to the
+other's when both share the columns: ``fit_thermal(tem_gain=True)`` fits TEM 1's drive gain (``tem_gain``) from
+the runs of both (each run's ``layer``), and ``rest_C`` ties each fitted face's K_inf to a measured rest state.
 
 Error statistics (Table 4.10): e = measured - simulated on the evaluated samples, in degC and
 in % of the measured range of that face in that run (the form of Eq. 4.3).
