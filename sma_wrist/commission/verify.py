@@ -717,7 +717,8 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
         )
         against = ', '.join(f'{k.split("_")[0]}: `{f}`' for k, f in d.get('against', {}).items())
         residual = '; '.join(
-            f'{c} {r["rms"]:.4g} RMS ({r["rms_over_noise"]:.3g} x noise)' for c, r in d.get('residual', {}).items()
+            f'{c} {r["rms"]:.4g} {"degC" if c == "thermal" else "rad"} RMS ({r["rms_over_noise"]:.3g} x noise)'
+            for c, r in d.get('residual', {}).items()
         )
         lines += [
             f'Diagnosis of the commissioned run after its soft start against the commissioned model ({against}): {verdict}.'
