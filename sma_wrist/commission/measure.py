@@ -216,6 +216,11 @@ def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -
                 'diagnosis': None
                 if not diag
                 else diag.get('error') or ('no discrepancy' if not diag['discrepancy'] else diag['summary']),
+                'diagnosis_residual': diag.get('residual'),
+                'thermal': {
+                    k: (res.get('identified') or {}).get('thermal', {}).get(k) for k in ('handed_over', 'heldout')
+                }
+                | {'tem_gain': (res.get('identified') or {}).get('thermal', {}).get('parameters', {}).get('tem_gain')},
                 'device_max_drive_V': dev.emulator.stats.max_abs_command_V,
                 'wall_s': round(time.time() - t0, 1),
             }

@@ -161,6 +161,9 @@ def _identified(result: dict[str, Any]) -> list[str]:
     out.append('')
     for name, part in ident.items():
         out += [f'{name}: ' + _short(part['parameters']), '']
+        per_tem = part['heldout'].get('per_tem')
+        if per_tem:  # each TEM's held-out cycle: the heat balance is handed over only where both are better
+            out += [f'{name}, held out per TEM (TEM 1, TEM 2) [{part["heldout"]["unit"]}]: ' + _short(per_tem), '']
     return out
 
 

@@ -647,6 +647,11 @@ def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S
         'cause': d.cause,
         'confidence': round(d.confidence, 3),
         'summary': d.summary,
+        # per channel the commissioned model's residual (RMS, and over the sensors' noise): how far off it is
+        'residual': {
+            c: {k: round(float(per['nominal'][k]), 4) for k in ('rms', 'rms_over_noise')}
+            for c, per in d.residual_stats.items()
+        },
     }
 
 
@@ -711,8 +716,13 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             else f'discrepancy: {d["summary"]}'
         )
         against = ', '.join(f'{k.split("_")[0]}: `{f}`' for k, f in d.get('against', {}).items())
+        residual = '; '.join(
+            f'{c} {r["rms"]:.4g} {"degC" if c == "thermal" else "rad"} RMS ({r["rms_over_noise"]:.3g} x noise)'
+            for c, r in d.get('residual', {}).items()
+        )
         lines += [
-            f'Diagnosis of the commissioned run after its soft start against the commissioned model ({against}): {verdict}.',
+            f'Diagnosis of the commissioned run after its soft start against the commissioned model ({against}): {verdict}.'
+            + (f' Residual of the commissioned model: {residual}.' if residual else ''),
             '',
         ]
     if v.get('stopped'):

@@ -390,7 +390,7 @@ def thermocouples(T: np.ndarray, r: np.ndarray, dt: float) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- model
 def thermal_coef(consts: Constants, th_row: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """(coef (14,), ambient drift [degC/s], ambient offset [degC]) for values of THERMAL_KEYS."""
+    """(coef (16,), ambient drift [degC/s], ambient offset [degC]) for values of THERMAL_KEYS."""
     c = consts.th_coef.copy()
     v = dict(zip(THERMAL_KEYS, th_row))
     c[0] *= 1.0 + v['tem_gain_err']

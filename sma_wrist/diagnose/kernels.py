@@ -62,7 +62,7 @@ def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pra
         ipv = coef[0]
         coupling = coef[1]
         for l in range(2):
-            cur = -ipv * (u0 if l == 0 else u1)
+            cur = -ipv * coef[14 + l] * (u0 if l == 0 else u1)
             for f in range(2):
                 o = 1 - f
                 b = 2 + 6 * f
@@ -85,7 +85,7 @@ def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pra
 def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma: no cover - compiled
     """Muscle temperatures under sampled commands.
 
-    u (K, 2) [V] held from sample k to k+1 (already clipped); coef (N, 14) as
+    u (K, 2) [V] held from sample k to k+1 (already clipped); coef (N, 16) as
     plant_kernel.pack_constants' th_coef; x0 (N, 2, 2) initial faces; drift_per_s (N,)
     ambient shift rate [degC/s] of both faces; out_T (K, N, 2) muscle faces at the samples,
     out_X (N, 2, 2) the final state.

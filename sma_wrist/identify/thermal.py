@@ -498,6 +498,7 @@ def load_bag(path: Path, dt: float, hold: str = 'zoh', recording: Any = None) ->
                 valid=valid,
                 source=str(path),
                 u2=u2,
+                layer=i,  # muscle i is TEM i's face: a --base file's tem_gain applies per TEM
             )
         )
     return recs, cl

@@ -179,7 +179,7 @@ class TemControlResult:
     """One controller evaluation for N scenarios and L layers."""
 
     command_V: FloatArray  # (N, L) drive voltage after saturation, positive heats the T1 face
-    current: FloatArray  # (N, L) model input I = -input_per_volt * command_V
+    current: FloatArray  # (N, L) model input I = -input_per_volt * tem_gain[l] * command_V
     face_current: FloatArray  # (N, L, 2) I_1, I_2 of Eq. 5.46 before weighting and saturation
     no_root: BoolArray  # (N, L, 2) demanded rate unreachable (vertex used); False where the weight is 0
     saturated: BoolArray  # (N, L) command clipped to the limits
@@ -355,7 +355,7 @@ class MuscleTemperatureObserver:
         self.params = params
         self.faces: FloatArray | None = None  # (N, 2, 2) degC
         self.junction: FloatArray | None = None  # (N, 2) degC
-        # (N, 14) per-wrist heat balances (the online estimate's, core.thermal.online); None: ``thermal`` for all
+        # (N, 16) per-wrist heat balances (the online estimate's, core.thermal.online); None: ``thermal`` for all
         self.coef_rows: FloatArray | None = None
 
     def update(self, T_meas: ArrayLike, command_V: ArrayLike, dt: float) -> FloatArray:

@@ -41,7 +41,7 @@ def observer_step(x, u, dt, th_coef):  # pragma: no cover - compiled
 @_jit
 def observer_step_rows(x, u, dt, th_coef):  # pragma: no cover - compiled
     """:func:`observer_step` for each wrist j of x (N, 2, 2) in place under u (N, 2) held dt, with its own
-    constants th_coef (N, 14) (the online estimate's rows): one call, the same numbers row by row."""
+    constants th_coef (N, 16) (the online estimate's rows): one call, the same numbers row by row."""
     s = np.empty((4, 2, 2))
     for j in range(x.shape[0]):
         thermal_rk4(x[j], u[j], dt, th_coef[j], s[0], s[1], s[2], s[3])
@@ -79,7 +79,7 @@ def linearising_command(
                 no_root[l, f] = h[f] != 0
             face_current[l, f] = root
             cur += root * h[f]
-        u = -cur / ipv
+        u = -cur / (ipv * th_coef[14 + l])  # this layer's TEM: its own drive gain
         if not math.isfinite(u):
             return False
         clipped = min(max(u, u_min), u_max)

@@ -53,7 +53,7 @@ def step_many(
     Arrays: thermal (N, 2, 2); q, qd, payload (N,); w (2N, n) and heating, T_prev, load,
     compliance (2N,) stacked [muscle 1 of all wrists, then muscle 2] as in plant.PlantState;
     flags (N, 4) bool out: over_temperature, slack, overload, at_stop (OR over the steps).
-    th_coef (14,): input_per_volt, coupling, then per face (muscle, exchanger) the six
+    th_coef (16,): input_per_volt, coupling, then per face (muscle, exchanger) the six
     (K_at, K_t, K_Tinf, K_T, K_R, K_inf).
     mech (16,): dt, scale, c_el, k_f, m_lo, m_hi, m_max, tol, max_it, p0, T_lo, T_hi, T_hot,
     e0_mm, n_g_r, r_eff_m. joint (10,): I_w, lever, coulomb, viscous, static, stick_v,

@@ -23,7 +23,10 @@ seed's controller keeps when it sets h2 = 0 -- and the heat exchanger on its T2 
 (K_at1 + K_t1) T ~ -0.0087 T < 0, that of Eq. 4.14 is +0.0099 T > 0).
 
 Input (decision): the public command is a drive voltage ``u`` [V], positive heats the
-muscle face, as msg_defs/topics.yaml says. The model input is ``I = -input_per_volt * u``.
+muscle face, as msg_defs/topics.yaml says. The model input is ``I = -input_per_volt * u``
+(``I = -input_per_volt * tem_gain[l] * u`` on layer l: two modules of one kind pump
+differently per volt -- a supply lead's resistance, a thermal contact -- and commissioning
+measures each; Table 4.9's faces stay shared, :class:`ThermalParams`).
 The literal reading (I = u in V) cannot be what Table 4.9 was fitted to: the seed's 12 V
 identification sines then run away (hundreds to thousands of degC, see ``python -m
 sma_wrist.core.thermal.heat_balance``). With ``input_per_volt = 0.4`` (I in A through an effective
@@ -98,6 +101,11 @@ class ThermalParams:
     ambient_C:
         (muscle-face, exchanger-face) ambient/coolant temperatures [degC]; ``None`` keeps
         Table 4.9's K_inf (implied 25.596 / 31.568 degC).
+    tem_gain:
+        (TEM 1, TEM 2) drive gain relative to ``input_per_volt`` [1]: layer l's input is
+        I = -input_per_volt * tem_gain[l] * u (a weaker module pumps less heat per volt, its
+        Joule heat falls with the square). A one-layer model (the seed's experiment) takes
+        ``tem_gain[0]``. Default (1, 1): one heat balance for both modules.
     coupling_per_s:
         Conductance between the two muscle faces over their heat capacity [1/s], adds
         coupling * (T_other_muscle - T_muscle) to Eq. 4.13 of each layer. Default 0.
@@ -113,6 +121,7 @@ class ThermalParams:
     u_min_V: float = -12.0
     u_max_V: float = 13.0
     ambient_C: tuple[float, float] | None = None
+    tem_gain: tuple[float, float] = (1.0, 1.0)
     coupling_per_s: float = 0.0
     dt_max_s: float = 1.0
     window_C: tuple[float, float] = (0.0, 80.0)
@@ -136,6 +145,10 @@ class ThermalParams:
                 raise ParameterError(f'{name} = {getattr(self, name)!r} must be finite')
         if not self.input_per_volt > 0:
             raise ParameterError(f'input_per_volt = {self.input_per_volt} must be > 0')
+        gains = tuple(self.tem_gain)
+        if len(gains) != 2 or not all(np.isfinite(g) and g > 0 for g in gains):
+            raise ParameterError(f'tem_gain = {self.tem_gain!r} must be two finite numbers > 0')
+        object.__setattr__(self, 'tem_gain', (float(gains[0]), float(gains[1])))
         if not self.u_min_V < 0 < self.u_max_V:
             raise ParameterError(f'command limits [{self.u_min_V}, {self.u_max_V}] V must bracket 0')
         if self.coupling_per_s < 0:
@@ -176,6 +189,15 @@ class ThermalParams:
             float(self._k_inf[0] / self.muscle_face.loss_per_s),
             float(self._k_inf[1] / self.exchanger_face.loss_per_s),
         )
+
+    def layer_input_per_volt(self, layers: int = 2) -> FloatArray:
+        """Model input per volt of each of ``layers`` layers, input_per_volt * tem_gain [1/V], shape (layers,)
+        (any number of layers of one kind; two at most where the modules differ)."""
+        if self.tem_gain == (1.0, 1.0):
+            return np.full(layers, self.input_per_volt)
+        if not 1 <= layers <= 2:
+            raise ModelInputError('thermal layers with per-TEM gains', layers, '1 or 2')
+        return self.input_per_volt * np.asarray(self.tem_gain[:layers], dtype=float)
 
     @property
     def K_inf(self) -> FloatArray:
@@ -220,14 +242,24 @@ class ThermalParams:
 # ----------------------------------------------------------------------- commands
 
 
+def _per_layer(params: ThermalParams, x: FloatArray) -> FloatArray | float:
+    """input_per_volt for commands or inputs x (..., L) (a scalar where both modules pump alike)."""
+    if params.tem_gain == (1.0, 1.0) or x.ndim == 0:
+        return params.input_per_volt
+    return params.layer_input_per_volt(x.shape[-1])
+
+
 def model_input(params: ThermalParams, command_V: ArrayLike) -> FloatArray:
-    """Eq. 4.13/4.14 input I from the drive voltage u: I = -input_per_volt * u (u > 0 heats T1)."""
-    return -params.input_per_volt * np.asarray(command_V, dtype=float)
+    """Eq. 4.13/4.14 input I from the drive voltage u (..., L): I = -input_per_volt * tem_gain[l] * u (u > 0
+    heats T1)."""
+    u = np.asarray(command_V, dtype=float)
+    return -_per_layer(params, u) * u
 
 
 def command_from_input(params: ThermalParams, current: ArrayLike) -> FloatArray:
-    """Inverse of :func:`model_input`: u = -I / input_per_volt [V]."""
-    return -np.asarray(current, dtype=float) / params.input_per_volt
+    """Inverse of :func:`model_input`: u = -I / (input_per_volt * tem_gain[l]) [V]."""
+    i = np.asarray(current, dtype=float)
+    return -i / _per_layer(params, i)
 
 
 def check_command(params: ThermalParams, command_V: ArrayLike) -> None:
@@ -346,7 +378,7 @@ def step(
                 np.ascontiguousarray(T),
                 np.ascontiguousarray(u),
                 float(dt),
-                float(params.input_per_volt),
+                params.layer_input_per_volt(u.shape[1]),
                 params._k_at,
                 params._k_t,
                 params._col_neg_tinf[:, 0],
@@ -364,7 +396,7 @@ def step(
         u = np.broadcast_to(u, shape[:2])
     n_layers = shape[1]
     m = shape[0] * n_layers
-    i = u.reshape(m) * (-params.input_per_volt)  # model input I
+    i = (u * (-params.layer_input_per_volt(n_layers))).reshape(m)  # model input I per layer
     cs = params._col_at * i
     cs += params._col_neg_tinf
     cc = params._col_t * i
@@ -512,7 +544,7 @@ def characterise_constant_commands(
 ) -> ConstantCommandCharacterisation:
     """Find the largest constant |u| per direction that stays physical (the runaway of Eqs. 4.13/4.14).
 
-    One module (L = 1) starts at the zero-drive rest state; every u on a grid over
+    One module (L = 1, TEM 1's drive gain) starts at the zero-drive rest state; every u on a grid over
     [-span_V, span_V] is held for horizon_s (about 65 time constants of the slowest mode at
     rest). A command passes when every face stays inside ``params.window_C`` at every step and
     max |dT/dt| < converged_rate [degC/s] at the end. The limit is the end of the contiguous

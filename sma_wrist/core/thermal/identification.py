@@ -32,7 +32,9 @@ of 12 V sine runs (1/128-1 Hz), starting every parameter at 1. Here:
   offset between the faces, and the first ``settle_s`` seconds are left out of the residual.
 
 The command scale input_per_volt is not identifiable apart from the K's (every K multiplies
-a power of I); it stays fixed (doc/explanation/model.md).
+a power of I); it stays fixed (doc/explanation/model.md). What is identifiable is one TEM's scale relative to the
+other's when both share the columns: ``fit_thermal(tem_gain=True)`` fits TEM 1's drive gain (``tem_gain``) from
+the runs of both (each run's ``layer``), and ``rest_C`` ties each fitted face's K_inf to a measured rest state.
 
 Error statistics (Table 4.10): e = measured - simulated on the evaluated samples, in degC and
 in % of the measured range of that face in that run (the form of Eq. 4.3).
@@ -63,6 +65,8 @@ FACE_NAMES = ('T1', 'T2')  # Table 4.9 columns: muscle face (Eq. 4.13), exchange
 _LOWER = np.array([-1.0, -1.0, 1e-5, 0.0, 0.0, -50.0])
 _UPPER = np.array([1.0, 1.0, 5.0, 5.0, 1.0, 50.0])
 _COMPLEX_STEP = 1e-30
+#: bounds of a TEM's fitted drive gain relative to the other's (``fit_thermal(tem_gain=True)``)
+TEM_GAIN_BOUNDS = (0.2, 5.0)
 #: the temperature sensors' first-order lag [s] when fitted (--sensor-lag): its bounds, and the lags the start is
 #: chosen from on the fit without a lag (from 1 s a 7.8 h real staircase's fit ran to 0 s, a local minimum, where
 #: the same table read through 120-240 s was 35 % better)
@@ -84,7 +88,8 @@ class ThermalRecord:
     u[k]^2, a zero-order hold as the DAC does; :func:`interval_means` makes both from a log of a
     faster or continuous drive). ``T[k]`` the measured faces [T1/muscle, T2/exchanger] at t_k
     [degC]; a face that was not measured is an all-NaN column. ``valid`` (K,) masks samples left
-    out of every residual and statistic (bridged gaps).
+    out of every residual and statistic (bridged gaps). ``layer``: the wrist's TEM the run measured (0: TEM 1,
+    1: TEM 2), whose drive gain (``ThermalParams.tem_gain``) the model applies.
     """
 
     name: str
@@ -95,8 +100,11 @@ class ThermalRecord:
     valid: FloatArray | None = None
     source: str = ''
     u2: FloatArray | None = None
+    layer: int = 0
 
     def __post_init__(self) -> None:
+        if self.layer not in (0, 1):
+            raise ThermalIdentificationError(f'{self.name}: layer {self.layer!r} must be 0 (TEM 1) or 1 (TEM 2)')
         u = np.asarray(self.u, dtype=float)
         T = np.asarray(self.T, dtype=float)
         if not (math.isfinite(self.dt) and self.dt > 0):
@@ -161,23 +169,33 @@ def params_from_table(table: FloatArray, base: th.ThermalParams) -> th.ThermalPa
         raise ThermalIdentificationError(f'identified parameters are not a valid heat balance: {e}') from None
 
 
-def _free_from_table(table: FloatArray, faces: Sequence[int]) -> FloatArray:
+def _free_from_table(table: FloatArray, faces: Sequence[int], rest: bool = False) -> FloatArray:
+    """Free vector of ``faces`` (FREE_KEYS each; without K_inf where the rest state sets it)."""
     x = []
     for f in faces:
         k_at, k_t, k_tinf, k_tc, k_r, k_inf = table[f]
-        x.extend([k_at, k_t, k_tinf - k_tc, k_tc, k_r, k_inf])
+        x.extend([k_at, k_t, k_tinf - k_tc, k_tc, k_r] + ([] if rest else [k_inf]))
     return np.array(x, dtype=float)
 
 
-def _table_from_free(x: NDArray, base_table: FloatArray, faces: Sequence[int]) -> NDArray:
-    """(..., 2, 6) tables from free vectors x (..., 6 len(faces)); works for complex x."""
+def _table_from_free(
+    x: NDArray, base_table: FloatArray, faces: Sequence[int], rest_C: tuple[float, float] | None = None
+) -> NDArray:
+    """(..., 2, 6) tables from free vectors x (..., n len(faces)); works for complex x. ``rest_C``: the faces'
+    zero-drive rest temperatures [degC]; each fitted face's K_inf then holds it there (Eq. 4.13/4.14 at I = 0:
+    K_inf = K_Tinf T_own - K_T T_other) and is not in x (n = 5, else 6)."""
     x = np.asarray(x)
+    n = 5 if rest_C is not None else 6
     out = np.empty(x.shape[:-1] + (2, 6), dtype=np.result_type(x, float))
     out[...] = base_table
     for i, f in enumerate(faces):
-        k_at, k_t, loss, k_tc, k_r, k_inf = (x[..., 6 * i + j] for j in range(6))
+        k_at, k_t, loss, k_tc, k_r = (x[..., n * i + j] for j in range(5))
         out[..., f, 0], out[..., f, 1], out[..., f, 2] = k_at, k_t, loss + k_tc
-        out[..., f, 3], out[..., f, 4], out[..., f, 5] = k_tc, k_r, k_inf
+        out[..., f, 3], out[..., f, 4] = k_tc, k_r
+        if rest_C is None:
+            out[..., f, 5] = x[..., n * i + 5]
+        else:
+            out[..., f, 5] = (loss + k_tc) * rest_C[f] - k_tc * rest_C[1 - f]
     return out
 
 
@@ -232,18 +250,25 @@ def _pad(records: Sequence[ThermalRecord]) -> tuple[FloatArray, FloatArray, Floa
 
 
 def simulate_tables(
-    tables: NDArray, input_per_volt: float, u: FloatArray, T0: NDArray, dt: float, u2: FloatArray | None = None
+    tables: NDArray,
+    input_per_volt: float | NDArray,
+    u: FloatArray,
+    T0: NDArray,
+    dt: float,
+    u2: FloatArray | None = None,
 ) -> NDArray:
     """RK4 of Eqs. 4.13/4.14 for parameter tables (N, 2, 6) and runs u (K, R) [V] from T0 (N|1, R, 2).
 
-    ``u2`` (K, R) [V^2] is the interval mean of u^2 for the Joule term (default u^2).
+    ``input_per_volt``: one, or per parameter set and run (broadcastable to (N, R): each run's TEM its own drive
+    gain). ``u2`` (K, R) [V^2] is the interval mean of u^2 for the Joule term (default u^2).
 
     Returns (K, N, R, 2): row 0 is T0, row k + 1 the state after command k was held dt.
     Real or complex (complex-step differentiation) tables; exact RK4 of the held-input
     linear system (module docstring). Non-finite values propagate (runaway parameter sets).
     """
     tables = np.asarray(tables)
-    dtype = np.result_type(tables, T0, float)
+    ipv = np.asarray(input_per_volt)
+    dtype = np.result_type(tables, T0, ipv, float)
     K, R = u.shape
     N = tables.shape[0]
     c = [tables[:, f, j][:, None] for f in range(2) for j in range(6)]  # each (N, 1)
@@ -255,13 +280,13 @@ def simulate_tables(
     h = dt
     for k0 in range(0, K - 1, _BLOCK):
         k1 = min(K - 1, k0 + _BLOCK)
-        cur = (-input_per_volt * u[k0:k1])[:, None, :]  # (B, 1, R)
+        cur = -ipv * u[k0:k1][:, None, :]  # (B, 1 | N, R)
         # M = [[a, b], [c, d]] and the input term e (per face) for every step of the block
         a = kat0 * cur - ktinf0
         b = kt0 * cur + ktc0
         cc = kt1 * cur + ktc1
         d = kat1 * cur - ktinf1
-        i2 = cur * cur if u2 is None else (input_per_volt**2 * u2[k0:k1])[:, None, :]
+        i2 = cur * cur if u2 is None else ipv**2 * u2[k0:k1][:, None, :]
         e0 = kr0 * i2 + kinf0
         e1 = kr1 * i2 + kinf1
         ha, hb, hc, hd = h * a, h * b, h * cc, h * d
@@ -303,9 +328,16 @@ def simulate_records(
     sensors of first-order lag ``sensor_lag_s`` [s] read it (0: the faces themselves)."""
     u, u2, _, _ = _pad(records)
     T0 = start_states(records, base or params)
-    sim = simulate_tables(table_of(params)[None], params.input_per_volt, u, T0[None], records[0].dt, u2)
+    sim = simulate_tables(
+        table_of(params)[None], record_input_per_volt(params, records), u, T0[None], records[0].dt, u2
+    )
     sim = first_order(sim, sensor_lag_s, records[0].dt)
     return [sim[: r.n, 0, j] for j, r in enumerate(records)]
+
+
+def record_input_per_volt(params: th.ThermalParams, records: Sequence[ThermalRecord]) -> FloatArray:
+    """(R,) input per volt of each record's TEM (input_per_volt x its ``tem_gain``) [1/V]."""
+    return params.layer_input_per_volt(2)[[r.layer for r in records]]
 
 
 def start_states(records: Sequence[ThermalRecord], base: th.ThermalParams) -> FloatArray:
@@ -371,6 +403,7 @@ class ThermalFit:
     converged: bool = True  # False: stopped at max_iter with the cost still falling
     at_bounds: tuple[str, ...] = ()  # free parameters the fit left on a bound, e.g. 'T1 K_R = 0 (lower bound)'
     sensor_lag_s: float = 0.0  # the temperature sensors' first-order lag [s] fitted with the heat balance (0: none)
+    rest_C: tuple[float, float] | None = None  # the rest state the fitted faces' K_inf were tied to [degC]
 
 
 def _weights(mask: FloatArray) -> FloatArray:
@@ -439,13 +472,20 @@ class _Problem:
         masks: Sequence[FloatArray] | None,
         settle_s: float,
         sensor_lag: bool = False,
+        rest_C: tuple[float, float] | None = None,
+        tem_gain: bool = False,
     ) -> None:
         self.records = records
         self.lag = sensor_lag  # x's last entry is then the sensors' lag [s]
         self.base = base
         self.faces = faces
+        self.rest_C = rest_C
+        self.n_table = (5 if rest_C is not None else 6) * len(faces)  # x[:n_table]: the table's free entries
+        # x[n_table] with ``tem_gain``: TEM 1's drive gain relative to the base's (TEM 2's stays the base's)
+        self.gain = tem_gain
         self.base_table = table_of(base)
-        self.ipv = base.input_per_volt
+        self.ipv = record_input_per_volt(base, records)  # (R,)
+        self.tem1 = np.array([r.layer == 0 for r in records])
         self.dt = records[0].dt
         self.u, self.u2, self.T, mask = _pad(records)
         if masks is not None:  # training masks (K_r,) per record
@@ -463,6 +503,13 @@ class _Problem:
         self.Tm = np.where(mask, self.T, 0.0)
         self._cache: tuple[bytes, FloatArray, FloatArray] | None = None
 
+    def _ipv(self, x: NDArray) -> NDArray:
+        """(N, R) input per volt of each run under parameter rows x (N, n) (TEM 1's runs scaled by the fitted gain)."""
+        if not self.gain:
+            return self.ipv[None]
+        g = x[:, self.n_table, None]
+        return self.ipv[None] * np.where(self.tem1[None], g, 1.0)
+
     def _run(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
         key = x.tobytes()
         if self._cache is not None and self._cache[0] == key:
@@ -470,10 +517,10 @@ class _Problem:
         n = x.size
         xc = np.tile(x.astype(complex), (n, 1))
         xc[np.arange(n), np.arange(n)] += 1j * _COMPLEX_STEP
-        m = n - 1 if self.lag else n  # the table's columns; the lag's needs no heat-balance run of its own
-        tables = _table_from_free(xc[:m, :m], self.base_table, self.faces)
+        m = n - 1 if self.lag else n  # the heat balance's columns; the lag's needs no heat-balance run of its own
+        tables = _table_from_free(xc[:m, : self.n_table], self.base_table, self.faces, self.rest_C)
         with np.errstate(all='ignore'):
-            sim = simulate_tables(tables, self.ipv, self.u, self.T0[None], self.dt, self.u2)  # (K, m, R, 2)
+            sim = simulate_tables(tables, self._ipv(xc[:m]), self.u, self.T0[None], self.dt, self.u2)  # (K, m, R, 2)
             if self.lag:  # the table's columns through the lag at x's value; the lag's column: x's run, lag stepped
                 stepped = first_order(sim[:, :1].real.astype(complex), xc[-1, -1], self.dt)
                 sim = np.concatenate([first_order(sim, float(x[-1]), self.dt), stepped], axis=1)  # (K, n, R, 2)
@@ -491,9 +538,9 @@ class _Problem:
         return self._run(x)[1]
 
     def cost(self, x: FloatArray) -> float:
-        tables = _table_from_free((x[:-1] if self.lag else x)[None], self.base_table, self.faces)
+        tables = _table_from_free(x[None, : self.n_table], self.base_table, self.faces, self.rest_C)
         with np.errstate(all='ignore'):
-            sim = simulate_tables(tables, self.ipv, self.u, self.T0[None], self.dt, self.u2)
+            sim = simulate_tables(tables, self._ipv(x[None]), self.u, self.T0[None], self.dt, self.u2)
             if self.lag:
                 sim = first_order(sim, float(x[-1]), self.dt)
             r = ((sim[:, 0] - self.Tm) * self.w)[self.mask]
@@ -548,6 +595,8 @@ def fit_thermal(
     settle_s: float = 30.0,
     max_iter: int = 60,
     sensor_lag: bool = False,
+    rest_C: tuple[float, float] | None = None,
+    tem_gain: bool = False,
 ) -> ThermalFit:
     """Fit Table 4.9 columns to runs by simulation-error least squares (module docstring).
 
@@ -555,6 +604,12 @@ def fit_thermal(
     'muscle'. ``masks``: per-run (K_r,) bool training samples (default all valid samples).
     ``sensor_lag``: fit, with the table, one first-order lag [s] through which every temperature was measured
     (a thermistor on a block, a sheathed thermocouple: the simulation is compared as that sensor reads it).
+    ``rest_C``: the (muscle, exchanger) face temperatures the TEM settles at with no drive, measured [degC]; each
+    fitted face's K_inf is then tied to it (Eqs. 4.13/4.14 at I = 0) instead of fitted. Runs of minutes do not
+    tell a small loss to ambient from a large ambient (measured on the emulated phase-fraction wrist: the muscle
+    face's loss at its bound 1e-5 /s with an implied ambient of 1078 degC, a model that holds no drive in the
+    window); the rest state does. ``tem_gain``: fit TEM 1's drive gain relative to TEM 2's with the shared columns
+    (the runs' ``layer`` says which TEM each measured; ``params.tem_gain`` = (base's x gain, base's)).
     Raises ThermalIdentificationError when the data cannot support the fit.
     """
     t_wall = time.perf_counter()
@@ -581,20 +636,39 @@ def fit_thermal(
                 f'{r.name}: the drive voltage hardly changes (range {np.ptp(r.u):.3g} V); '
                 "identification needs an exciting input, e.g. the seed's 12 V sines"
             )
-    prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag)
-    lo, hi = np.tile(_LOWER, len(fitted)), np.tile(_UPPER, len(fitted))
+    if tem_gain and len({r.layer for r in records}) < 2:
+        raise ThermalIdentificationError("a TEM's drive gain relative to the other's needs runs of both TEMs")
+    rest = rest_C is not None
+    if rest and not all(math.isfinite(t) for t in rest_C):  # type: ignore[union-attr]
+        raise ThermalIdentificationError(f'rest temperatures {rest_C!r} must be finite degC')
+    prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag, rest_C, tem_gain)
+    per = 5 if rest else 6
+    lo, hi = np.tile(_LOWER[:per], len(fitted)), np.tile(_UPPER[:per], len(fitted))
+    extra = [1.0] if tem_gain else []  # TEM 1's gain relative to the base's, from the base's
+    if tem_gain:
+        lo, hi = np.r_[lo, TEM_GAIN_BOUNDS[0]], np.r_[hi, TEM_GAIN_BOUNDS[1]]
     if sensor_lag:  # the table fitted without a lag (from the starts below), read through the lag that suits it best
-        plain = fit_thermal(records, base, faces=faces, masks=masks, settle_s=settle_s, max_iter=max_iter)
-        x0 = _free_from_table(table_of(plain.params), fitted)
+        plain = fit_thermal(
+            records,
+            base,
+            faces=faces,
+            masks=masks,
+            settle_s=settle_s,
+            max_iter=max_iter,
+            rest_C=rest_C,
+            tem_gain=tem_gain,
+        )
+        x0 = np.r_[_free_from_table(table_of(plain.params), fitted, rest), plain.params.tem_gain[0] / base.tem_gain[0]]
+        x0 = x0 if tem_gain else x0[:-1]
         lags = [t for t in SENSOR_LAG_STARTS_S if SENSOR_LAG_BOUNDS_S[0] <= t <= SENSOR_LAG_BOUNDS_S[1]]
         starts = {f'no-lag fit, lag {t:g} s': np.r_[x0, t] for t in lags}
         lo, hi = np.r_[lo, SENSOR_LAG_BOUNDS_S[0]], np.r_[hi, SENSOR_LAG_BOUNDS_S[1]]
     else:
-        starts = {'base': _free_from_table(prob.base_table, fitted)}
+        starts = {'base': np.r_[_free_from_table(prob.base_table, fitted, rest), extra]}
         if both:
             ee = equation_error_table(records, base.input_per_volt, masks)
             if ee is not None and np.isfinite(ee).all():
-                starts['equation_error'] = _free_from_table(ee, fitted)
+                starts['equation_error'] = np.r_[_free_from_table(ee, fitted, rest), extra]
     costs = {k: prob.cost(np.clip(v, lo, hi)) for k, v in starts.items()}
     start = min(costs, key=lambda k: costs[k])
     if not math.isfinite(costs[start]):
@@ -604,11 +678,17 @@ def fit_thermal(
         )
     x, cost, nfev, message = _levenberg_marquardt(prob, np.clip(starts[start], lo, hi), lo, hi, max_iter)
     nfev += len(costs) + (plain.nfev if sensor_lag else 0)
-    table = _table_from_free((x[:-1] if sensor_lag else x)[None], prob.base_table, fitted)[0].real
+    table = _table_from_free(x[None, : prob.n_table], prob.base_table, fitted, rest_C)[0].real
     params = params_from_table(table, base)
+    if tem_gain:
+        params = dataclasses.replace(params, tem_gain=(base.tem_gain[0] * float(x[prob.n_table]), base.tem_gain[1]))
     # a bound the data pushed a parameter onto (measured: K_R = 0 on a heating-only real Peltier) says the data do
     # not determine it, which the fit's RMS alone does not show
-    names = [f'{FACE_NAMES[f]} {k}' for f in fitted for k in FREE_KEYS] + (['sensor lag [s]'] if sensor_lag else [])
+    names = (
+        [f'{FACE_NAMES[f]} {k}' for f in fitted for k in FREE_KEYS[:per]]
+        + (['TEM 1 drive gain'] if tem_gain else [])
+        + (['sensor lag [s]'] if sensor_lag else [])
+    )
     tol = 1e-9 * (hi - lo)
     at_bounds = tuple(
         f'{n} = {v:.4g} ({"lower" if v <= a + e else "upper"} bound)'
@@ -627,6 +707,7 @@ def fit_thermal(
         not message.startswith('stopped'),
         at_bounds,
         float(x[-1]) if sensor_lag else 0.0,
+        rest_C,
     )
 
 
@@ -769,14 +850,17 @@ def hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[f
     """Command hold limits of an identified model, found as doc/explanation/model.md found the defaults.
 
     :func:`sma_wrist.core.thermal.heat_balance.characterise_constant_commands` (every face in the window,
-    converged after 3000 s), rounded inward to whole volts. Raises when a direction holds
-    less than 1 V.
+    converged after 3000 s), rounded inward to whole volts; with per-TEM drive gains the limits both TEMs hold.
+    Raises when a direction holds less than 1 V.
     """
-    c = th.characterise_constant_commands(params, resolution_V=resolution_V)
-    hi, lo = math.floor(c.heating_max_V), math.ceil(c.cooling_max_V)
-    if hi < 1 or lo > -1:
-        raise ThermalIdentificationError(
-            f'the identified model holds only {c.cooling_max_V:+.2f}..{c.heating_max_V:+.2f} V with every face in '
-            f'{params.window_C} degC; it is not usable for the wrist (check the data and the voltage unit)'
-        )
+    lo, hi = -math.inf, math.inf
+    for g in sorted(set(params.tem_gain)):
+        one = dataclasses.replace(params, input_per_volt=params.input_per_volt * g, tem_gain=(1.0, 1.0))
+        c = th.characterise_constant_commands(one, resolution_V=resolution_V)
+        hi, lo = min(hi, math.floor(c.heating_max_V)), max(lo, math.ceil(c.cooling_max_V))
+        if hi < 1 or lo > -1:
+            raise ThermalIdentificationError(
+                f'the identified model holds only {c.cooling_max_V:+.2f}..{c.heating_max_V:+.2f} V with every face '
+                f'in {params.window_C} degC; it is not usable for the wrist (check the data and the voltage unit)'
+            )
     return float(lo), float(hi)

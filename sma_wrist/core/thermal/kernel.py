@@ -18,7 +18,7 @@ def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
     ipv = th_coef[0]
     coupling = th_coef[1]
     for l in range(2):
-        cur = -ipv * u[l]
+        cur = -ipv * th_coef[14 + l] * u[l]
         for f in range(2):
             o = 1 - f
             b = 2 + 6 * f  # K_at, K_t, K_Tinf, K_T, K_R, K_inf of this face
@@ -55,10 +55,16 @@ def thermal_rk4(x, u, dt, th_coef, y0, xs, kk, acc):  # pragma: no cover - compi
             x[l, f] = y0[l, f] + dt / 6.0 * acc[l, f]
 
 
+#: length of a th_coef vector: input_per_volt, coupling, six coefficients per face, the two TEMs' drive gains
+N_COEF = 16
+
+
 def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
-    """th_coef (14,) of :func:`~sma_wrist.core.plant.kernel.step_many` from a thermal.ThermalParams."""
+    """th_coef (16,) of :func:`~sma_wrist.core.plant.kernel.step_many` from a thermal.ThermalParams:
+    input_per_volt, coupling, per face (muscle, exchanger) K_at, K_t, K_Tinf, K_T, K_R, K_inf, then tem_gain (2,)
+    (layer l's input is -th_coef[0] * th_coef[14 + l] * u)."""
     faces = [[tp._k_at[f], tp._k_t[f], tp._k_tinf[f], tp._k_tc[f], tp._k_r[f], tp._k_inf[f]] for f in (0, 1)]
-    return np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1], dtype=float)
+    return np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1] + list(tp.tem_gain), dtype=float)
 
 
 @_jit_inline
@@ -78,14 +84,14 @@ def step_horner(T, u, dt, ipv, k_at, k_t, neg_k_tinf, k_tc, k_r, k_inf, coupling
     """heat_balance.step (Eqs. 4.13-4.14, RK4 in Horner form on the model linear over the step) for
     T (N, L, 2) [degC] under u (N, L) [V] held dt [s], into out: the same operations in the same order
     as its numpy code, wrist by wrist, so the same numbers (test_thermal) without ~40 numpy calls.
-    k_*: the per-face coefficient vectors (2,) of ThermalParams."""
+    ipv (L,): input per volt of each layer; k_*: the per-face coefficient vectors (2,) of ThermalParams."""
     n_layers = u.shape[1]
     cs, cc, c0 = np.empty((n_layers, 2)), np.empty((n_layers, 2)), np.empty((n_layers, 2))
     v, a, b = np.empty((n_layers, 2)), np.empty((n_layers, 2)), np.empty((n_layers, 2))
     h = (0.25 * dt, (1.0 / 3.0) * dt, 0.5 * dt)
     for j in range(u.shape[0]):
         for l in range(n_layers):
-            i = u[j, l] * (-ipv)  # model input I
+            i = u[j, l] * (-ipv[l])  # model input I
             for f in range(2):
                 cs[l, f] = k_at[f] * i + neg_k_tinf[f]
                 cc[l, f] = k_t[f] * i + k_tc[f]
@@ -114,7 +120,7 @@ def step_horner(T, u, dt, ipv, k_at, k_t, neg_k_tinf, k_tc, k_r, k_inf, coupling
 @_jit
 def predict_junction(x0, z0, us, ts, coef, reps, lag, out, x_end):  # pragma: no cover - compiled
     """The online estimate's window (core.thermal.online, ``ThermalScaleEstimator._predict``): per row m of
-    coef (M, 14) (wrist m // reps), the faces from x0[w] (N, 2, 2) under the commands us[k - 1, w] (K, N, 2)
+    coef (M, 16) (wrist m // reps), the faces from x0[w] (N, 2, 2) under the commands us[k - 1, w] (K, N, 2)
     held over the sample steps of ts (K,) [s] (RK4, :func:`thermal_rk4`), the muscle face seen through a
     first-order thermocouple of lag [s] from z0[w] (N, 2); out (K, M, 2) the junction, x_end (M, 2, 2) the
     faces at the end. The numpy path there is the reference (test_thermal_online)."""

@@ -34,7 +34,7 @@ from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.jit import AVAILABLE
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal import kernel as thermal_kernel
-from sma_wrist.core.thermal.kernel import thermal_constants
+from sma_wrist.core.thermal.kernel import N_COEF, thermal_constants
 
 FloatArray = NDArray[np.float64]
 
@@ -93,11 +93,11 @@ class OnlineThermalParams:
 
 
 def scaled_constants(base: th.ThermalParams, theta: FloatArray) -> FloatArray:
-    """th_coef rows (..., 14) of :func:`~sma_wrist.core.thermal.kernel.thermal_constants` for scales theta (..., 3).
+    """th_coef rows (..., N_COEF) of :func:`~sma_wrist.core.thermal.kernel.thermal_constants` for scales theta (..., 3).
 
     Same arithmetic as ``plant_params``: K_inf = (K_Tinf - K_T) x ambient per face (Eq. 4.15)."""
     theta = np.asarray(theta, dtype=float)
-    c = np.broadcast_to(thermal_constants(base), theta.shape[:-1] + (14,)).copy()
+    c = np.broadcast_to(thermal_constants(base), theta.shape[:-1] + (N_COEF,)).copy()
     g, s, a = theta[..., 0], theta[..., 1], theta[..., 2]
     amb = np.asarray(base.effective_ambient_C)
     loss = np.array([base.muscle_face.loss_per_s, base.exchanger_face.loss_per_s])
@@ -118,8 +118,8 @@ def theta_of(base: th.ThermalParams, thermal: th.ThermalParams) -> FloatArray:
 
 
 def _rates(x: FloatArray, u: FloatArray, c: FloatArray) -> FloatArray:
-    """dT/dt of Eqs. 4.13-4.14, x (M, 2 layers, 2 faces), u (M, 2), per-row constants c (M, 14)."""
-    cur = -c[:, 0, None] * u  # (M, 2) model input I per layer
+    """dT/dt of Eqs. 4.13-4.14, x (M, 2 layers, 2 faces), u (M, 2), per-row constants c (M, N_COEF)."""
+    cur = -c[:, 0, None] * c[:, 14:16] * u  # (M, 2) model input I per layer (each TEM's own drive gain)
     out = np.empty_like(x)
     for f in range(2):
         b = 2 + 6 * f
@@ -168,7 +168,7 @@ class ThermalScaleEstimator:
         self._recent: list[tuple[float, FloatArray]] = []  # the last samples, for the start's slope
 
     def constants(self) -> FloatArray:
-        """(N, 14) th_coef rows of the current estimate."""
+        """(N, N_COEF) th_coef rows of the current estimate."""
         return scaled_constants(self.base, self.theta)
 
     def sample(self, t: float, T_meas: FloatArray, command_V: FloatArray) -> bool:

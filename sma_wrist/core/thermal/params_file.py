@@ -8,6 +8,7 @@ its face protection all use the same identified model. Format (YAML, version 1):
     format: sma_wrist/thermal
     version: 1
     input_per_volt: 0.4          # I = -input_per_volt * u (u [V], positive heats the muscle face)
+    tem_gain: [0.8, 1.0]         # optional: TEM 1's and TEM 2's drive gain, I = -input_per_volt * tem_gain[l] * u
     muscle_face:                 # T1 column of Table 4.9, Eq. 4.13 [1/(s I), 1/s, degC/(s I^2), degC/s]
       K_alpha_tau: -0.004472
       K_tau: -0.004207
@@ -20,7 +21,8 @@ its face protection all use the same identified model. Format (YAML, version 1):
     window_C: [0.0, 80.0]
     identification: {...}        # provenance and held-out errors; informative only
 
-Unknown top-level keys are rejected (a typo must not silently fall back to a default).
+Unknown top-level keys are rejected (a typo must not silently fall back to a default). ``tem_gain`` may be left
+out (both modules alike, [1, 1]; it is written only where the modules differ, so such files read as before).
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ _KEYS = {
     'format',
     'version',
     'input_per_volt',
+    'tem_gain',
     'muscle_face',
     'exchanger_face',
     'hold_limits_V',
@@ -57,10 +60,12 @@ def thermal_file_dict(params: th.ThermalParams, identification: Mapping[str, Any
         row = {k: float(getattr(face, k)) for k in FACE_KEYS}
         row['K_inf'] = float(k_inf[i])
         faces[key] = row
+    gain = {} if params.tem_gain == (1.0, 1.0) else {'tem_gain': [float(g) for g in params.tem_gain]}
     return {
         'format': FORMAT,
         'version': VERSION,
         'input_per_volt': float(params.input_per_volt),
+        **gain,
         **faces,
         'hold_limits_V': [float(params.u_min_V), float(params.u_max_V)],
         'window_C': [float(params.window_C[0]), float(params.window_C[1])],
@@ -124,6 +129,10 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
         if not isinstance(row, dict) or set(row) != set(FACE_KEYS):
             raise ParameterError(f'{p}: {key} must map exactly {", ".join(FACE_KEYS)} to numbers')
         faces.append(th.FaceCoefficients(**{k: _number(p, f'{key}.{k}', row[k]) for k in FACE_KEYS}))
+    gain = data.get('tem_gain', [1.0, 1.0])
+    if not (isinstance(gain, list) and len(gain) == 2):
+        raise ParameterError(f'{p}: tem_gain must be a [TEM 1, TEM 2] list of drive gains (> 0)')
+    gains = (_number(p, 'tem_gain[0]', gain[0]), _number(p, 'tem_gain[1]', gain[1]))
     limits = data.get('hold_limits_V', [None, None])
     window = data.get('window_C', list((base or th.ThermalParams()).window_C))
     if not (isinstance(limits, list) and len(limits) == 2 and isinstance(window, list) and len(window) == 2):
@@ -136,6 +145,7 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
             exchanger_face=faces[1],
             ambient_C=None,
             input_per_volt=_number(p, 'input_per_volt', data.get('input_per_volt')),
+            tem_gain=gains,
             u_min_V=_number(p, 'hold_limits_V[0]', limits[0]),
             u_max_V=_number(p, 'hold_limits_V[1]', limits[1]),
             window_C=(_number(p, 'window_C[0]', window[0]), _number(p, 'window_C[1]', window[1])),
