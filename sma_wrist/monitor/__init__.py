@@ -13,8 +13,11 @@ wrist, keeps the recent samples, and every ``check_period_s`` runs the model-dis
   diagnosed, from just before it when the temperatures changed (:data:`CHANGE_SETTLE_S`), with ``settle_s`` before
   it when only the angle did; while such a change is unnamed a check is due every :data:`FRESH_PERIOD_S` from
   :data:`MIN_AFTER_CHANGE_S` after it;
+* where the diagnosis names nothing, a slow ambient / coolant drift is fitted to the 1 s averages of the whole
+  window (:mod:`.drift`): the diagnosis' held-out split sees a drift only once it is 1.6 x the per-sample noise;
 * a verdict is *raised* only when ``persist_checks`` consecutive checks agree on the subsystem with a confidence of
-  at least ``min_confidence``, and cleared after as many clean checks (a single noisy window is no alarm).
+  at least ``min_confidence``, and cleared after as many clean checks (a single noisy window is no alarm); an
+  "unexplained" one only after 90 s, unless a catalogue cause removed most of it (:data:`PARTIAL_NAME_GAIN_PCT`).
 
 The check is split so that a node can run the costly part in a worker thread: :meth:`Monitor.window` (cheap, under
 the node's lock) cuts the window, :meth:`Monitor.diagnose` (seconds of CPU) diagnoses it, :meth:`Monitor.decide`
@@ -390,7 +393,8 @@ class Monitor:
         return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension)
 
     def needed(self, v: Verdict) -> int:
-        """Consecutive checks that must agree before ``v`` is published: ``persist_checks``, one for a cause named
+        """Consecutive checks that must agree before ``v`` is published: ``persist_checks`` (also for a cause that
+        explains most of an unexplained misfit, :data:`PARTIAL_NAME_GAIN_PCT`), one for a cause named
         with at least ``sure_confidence``; for an unexplained
         discrepancy, as many as it takes the window to hold only data after a change (a wrist that changed inside
         the window fits no constant model: the windows straddling a change are unexplained before the change
