@@ -610,7 +610,7 @@ def test_a_coolant_drift_is_named_in_the_thermal_subsystem_45_s_after_its_onset(
     twin's, the noise level. The residuals' change point places a ramp late (here at 100 s, too recent to diagnose
     at 115 s: the check waited), and the diagnosis' held-out split named the drift 61-62 s after its onset on the
     benchmark's recordings. Fitted on the 1 s averages of the whole window (monitor/drift.py), it is named, about
-    its size."""
+    its size, and raised when two checks agree."""
     run = ds.apply(clean_run, ds.Distortion('ambient_drift', 'plant', 20.0, 'degC/h'), 0.1, 1e-3, 2, onset_s=ONSET_S)
     mon = Monitor(MonitorConfig())
     t_check = ONSET_S + 45.0
@@ -618,6 +618,8 @@ def test_a_coolant_drift_is_named_in_the_thermal_subsystem_45_s_after_its_onset(
     v = mon.diagnose(mon.window(t_check), t_check)
     assert v.level == 'WARN' and v.subsystem == 'thermal' and v.cause == 'ambient_drift', v.summary
     assert v.parameters['ambient_drift_C_per_h'] == pytest.approx(20.0, rel=0.5)
+    # one window's fit (a slow residual of nominal realistic data once reached 7.2 standard errors): two checks
+    assert v.drift_fit and mon.needed(v) == 2
 
 
 def test_the_drift_fit_names_no_drift_where_one_thermocouple_changed_or_the_tems_weakened(clean_run):
