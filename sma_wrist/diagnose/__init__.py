@@ -117,6 +117,9 @@ class DiagnosisResult:
     separating_measurement: str | None = None
     #: candidates whose fit ended on a bound of the catalogue: {cause, parameter, value, bound}
     bound_hits: list[dict[str, Any]] = field(default_factory=list)
+    #: the best cause when it was significant but explained only part of its channel (PARTIAL_RATIO,
+    #: PARTIAL_GAIN_PCT), so not named: {cause, subsystem, channel, gain_pct, parameters}; None otherwise
+    partial: dict[str, Any] | None = None
     warnings: list[str] = field(default_factory=list)
     source: str = ''
     duration_s: float = 0.0
@@ -423,6 +426,17 @@ def diagnose_run(
         ambiguous_with=ambiguous,
         separating_measurement=separating,
         bound_hits=hits,
+        partial=(
+            {
+                'cause': best.effect.id,
+                'subsystem': best.effect.subsystem,
+                'channel': channel,
+                'gain_pct': g_best['gain_pct'],
+                'parameters': _param_dict(best.row, best.effect.params),
+            }
+            if partial
+            else None
+        ),
         warnings=list(run.warnings),
         source=run.source,
         duration_s=run.duration,

@@ -15,8 +15,8 @@ waits for it and starts on the newest data (never queued). The verdict goes to
 fitted parameters, held-out gain and confidence when it is not (cause ``unexplained`` with what the residual
 correlates with when the catalogue has nothing); ERROR when the data cannot be checked (what is missing); its
 key/values carry the check's details, among them ``change_s`` (where the check placed a change of the residuals in
-its window) and ``pending`` (that change too recent to name: the published verdict stands), as in the verdict
-history, which goes to ``history_file`` (.csv, .json or .md).
+its window), ``pending`` (that change too recent to name: the published verdict stands) and ``partial`` (the cause
+explains most, not all, of the misfit), as in the verdict history, which goes to ``history_file`` (.csv, .json or .md).
 
 Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monitor``.
 """
@@ -346,7 +346,9 @@ class TwinMonitor(WristNode):
                 f'{v.cause} ({v.subsystem})' + (f': {ps}' if ps else '') + f'; held-out gain {v.gain_pct:.0f} %, '
                 f'confidence {v.confidence:.2f}, since {v.since_s:.1f} s'
             )
-            if v.cause == 'unexplained':
+            if v.partial:
+                text = f'partly explained ({v.gain_pct:.0f} % of the misfit): ' + text
+            if v.cause == 'unexplained' or v.partial:
                 text += '; correlates: ' + ', '.join(f'{c["regressor"]} ({c["r"]:+.2f})' for c in v.correlates[:3])
         values = {
             't_s': f'{v.t_s:.2f}',
@@ -360,6 +362,7 @@ class TwinMonitor(WristNode):
             'skipped_checks': self.skipped_checks,
             'change_s': '' if v.change_s is None else f'{v.change_s:.2f}',
             'pending': 'true' if v.pending else 'false',
+            'partial': 'true' if v.partial else 'false',
             **{k: f'{x:.6g}' for k, x in v.parameters.items()},
         }
         self._status = (_LEVEL[v.level], text, values)
