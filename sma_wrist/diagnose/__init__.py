@@ -33,7 +33,7 @@ from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
 from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
-__all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main']
+__all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main', 'nominal_plant']
 
 #: a candidate must lower the held-out score by this much (sum of log SSE ratios; 0.2 ~ 10 % RMS)
 MIN_SCORE = 0.2
@@ -180,6 +180,16 @@ def _regressors(
     return reg
 
 
+def nominal_plant(run: Run, hysteresis_file: str | None = None, thermal_file: str | None = None) -> Any:
+    """The nominal plant a run is replayed against: the one plant_sim would run with these files (PlantParams at the
+    run's step, at most 10 ms), or None for the built-in model."""
+    if not (hysteresis_file or thermal_file):
+        return None
+    from sma_wrist.core.plant.wrist import PlantParams
+
+    return PlantParams.from_files(hysteresis_file, thermal_file, dt=min(run.dt, 0.01))
+
+
 def diagnose_run(
     run: Run,
     report_dir: str | Path | None = None,
@@ -191,12 +201,7 @@ def diagnose_run(
     """Diagnose an aligned run (see :func:`diagnose` for a bag); ``hysteresis_file``: the wire's SD-GPI;
     ``thermal_file``: the TEMs' heat balance (``sma-wrist identify thermal``), so that what is left is the rest."""
     t_start = time.perf_counter()
-    base = None
-    if hysteresis_file or thermal_file:  # the plant plant_sim would run with these files
-        from sma_wrist.core.plant.wrist import PlantParams
-
-        base = PlantParams.from_files(hysteresis_file, thermal_file, dt=min(run.dt, 0.01))
-    model = fx.ExtendedModel(run, base)
+    model = fx.ExtendedModel(run, nominal_plant(run, hysteresis_file, thermal_file))
     ev = ft.Evaluator(model)
     if not ev.channels:
         raise DiagnoseInputError(

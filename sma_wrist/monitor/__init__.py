@@ -756,14 +756,10 @@ def _drift_verdict(
     if run is None or (config.candidates and 'ambient_drift' not in config.candidates):
         return None
     from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose import nominal_plant
     from sma_wrist.monitor.drift import ambient_drift_fit
 
-    base = None
-    if hysteresis_file or thermal_file:  # the plant the diagnosis replays with these files
-        from sma_wrist.core.plant.wrist import PlantParams
-
-        base = PlantParams.from_files(hysteresis_file, thermal_file, dt=min(run.dt, 0.01))
-    f = ambient_drift_fit(run, base)
+    f = ambient_drift_fit(run, nominal_plant(run, hysteresis_file, thermal_file))  # the plant the diagnosis replays
     if f is None or not f.named:
         return None
     params = {'ambient_drift_C_per_h': f.rate_C_per_h}
