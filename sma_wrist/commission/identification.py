@@ -168,8 +168,7 @@ def identify_thermal_part(
     params = both.params
     usable = ''
     try:
-        lo, hi = ti.hold_limits(params)
-        params = params.with_limits(lo, hi)
+        params = params.with_hold_limits(ti.tem_hold_limits(params))  # each TEM its own (a weaker one holds more)
     except ti.ThermalIdentificationError as e:
         usable = str(e)
     gain_1_to_2 = params.tem_gain[0] / params.tem_gain[1]
@@ -223,7 +222,7 @@ def identify_thermal_part(
             'muscle_face': {k: float(getattr(params.muscle_face, k)) for k in ti.FACE_KEYS},
             'exchanger_face': {k: float(getattr(params.exchanger_face, k)) for k in ti.FACE_KEYS},
             'tem_gain': [round(g, 4) for g in params.tem_gain],
-            'hold_limits_V': [params.u_min_V, params.u_max_V],
+            'hold_limits_V': [list(q) for q in zip(*(a.tolist() for a in params.layer_hold_limits()))],
             'rest_C': [round(x, 3) for x in rest_C],
             'tem1_gain_relative_to_tem2': round(gain_1_to_2, 4),
         },
