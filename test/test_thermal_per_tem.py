@@ -29,12 +29,25 @@ def test_a_thermal_file_carries_each_tems_gain_and_files_without_it_load_as_befo
     assert load_thermal_file(old).tem_gain == (1.0, 1.0)
 
 
-@pytest.mark.parametrize('value', ['[0.8]', '[0.8, -1.0]', '[0.8, .nan]', '0.8'])
-def test_a_bad_tem_gain_is_refused_naming_the_file(tmp_path: Path, value: str) -> None:
+@pytest.mark.parametrize(
+    ('key', 'value', 'match'),
+    [
+        *[('tem_gain', v, 'tem_gain') for v in ('[0.8]', '[0.8, -1.0]', '[0.8, .nan]', '0.8')],
+        # per-TEM hold limits: one pair per TEM, each bracketing 0
+        *[
+            ('hold_limits_V', v, 'hold_limits_V|bracket 0')
+            for v in ('[[-12.0, 13.0]]', '[[-12.0, 13.0], [-12.0]]', '[[-12.0, 13.0], [5.0, 13.0]]')
+        ],
+    ],
+)
+def test_a_bad_tem_gain_or_hold_limit_is_refused_naming_the_file(
+    tmp_path: Path, key: str, value: str, match: str
+) -> None:
     f = write_thermal_file(tmp_path / 't.yaml', WEAK)
     text = f.read_text()
-    f.write_text(text[: text.index('tem_gain:')] + f'tem_gain: {value}\n' + text[text.index('muscle_face:') :])
-    with pytest.raises(ParameterError, match='tem_gain') as e:
+    after = {'tem_gain': 'muscle_face:', 'hold_limits_V': 'window_C:'}[key]
+    f.write_text(text[: text.index(f'{key}:')] + f'{key}: {value}\n' + text[text.index(after) :])
+    with pytest.raises(ParameterError, match=match) as e:
         load_thermal_file(f)
     assert str(f) in str(e.value)
 
@@ -155,16 +168,6 @@ def test_a_thermal_file_carries_each_tems_hold_limits_and_one_pair_loads_as_befo
     assert 'hold_limits_V:\n- -12.0\n- 13.0\n' in old.read_text()
     assert load_thermal_file(old).tem_hold_limits_V is None
     np.testing.assert_array_equal(load_thermal_file(old).layer_hold_limits()[0], [-12.0, -12.0])
-
-
-@pytest.mark.parametrize('value', ['[[-12.0, 13.0]]', '[[-12.0, 13.0], [-12.0]]', '[[-12.0, 13.0], [5.0, 13.0]]'])
-def test_bad_per_tem_hold_limits_are_refused_naming_the_file(tmp_path: Path, value: str) -> None:
-    f = write_thermal_file(tmp_path / 't.yaml', WEAK)
-    text = f.read_text()
-    f.write_text(text[: text.index('hold_limits_V:')] + f'hold_limits_V: {value}\n' + text[text.index('window_C:') :])
-    with pytest.raises(ParameterError, match='hold_limits_V|bracket 0') as e:
-        load_thermal_file(f)
-    assert str(f) in str(e.value)
 
 
 @pytest.mark.parametrize('compiled', [False, True])
