@@ -173,10 +173,11 @@ def identify_thermal_part(
     # adds hot muscles cooled hard, which the closed loop does (refitted, one loop's muscle temperatures predicted
     # to 1.51 / 1.79 degC RMS per TEM instead of 2.10 / 2.84 on the phase-fraction wrist, doc/howto/commission.md)
     try:
-        params = ti.fit_thermal(fit + held, both.params, faces='both', rest_C=rest_C, tem_gain=True).params
+        final = ti.fit_thermal(fit + held, both.params, faces='both', rest_C=rest_C, tem_gain=True)
         refit = True
     except ti.ThermalIdentificationError:
-        params, refit = both.params, False
+        final, refit = both, False
+    params = final.params
     usable = ''
     try:
         params = params.with_hold_limits(ti.tem_hold_limits(params))  # each TEM its own (a weaker one holds more)
@@ -193,7 +194,7 @@ def identify_thermal_part(
     rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in per_tem.items()}
     prov = {
         'source': 'sma-wrist commission: excitation of the wrist on its own sensors',
-        'fit_rms_C': round(both.rms_C, 4),
+        'fit_rms_C': round(final.rms_C, 4),  # in-sample, of the heat balance written
         'refitted_on': 'fit and held-out phases' if refit else 'fit phases',
         'rest_C': [round(x, 3) for x in rest_C],
         'heldout_muscle_rms_C': [round(x, 4) for x in per_tem['commissioned']],
@@ -223,8 +224,8 @@ def identify_thermal_part(
         prov if better else {**prov, 'source': 'built-in (the identified heat balance was not handed over)'},
         header='TEM heat balance identified by sma-wrist commission',
     )
-    if both.at_bounds:
-        warnings.append(f'thermal: parameters on a bound (not determined by the data): {", ".join(both.at_bounds)}')
+    if final.at_bounds:  # of the heat balance handed over
+        warnings.append(f'thermal: parameters on a bound (not determined by the data): {", ".join(final.at_bounds)}')
     part = {
         'parameters': {
             'muscle_face': {k: float(getattr(params.muscle_face, k)) for k in ti.FACE_KEYS},
