@@ -195,6 +195,7 @@ def excite(bring: BringUp, budget_s: float = 600.0, limits: ExcitationLimits | N
         'face_C': [[round(float(temps[:, 2 + m].min()), 2), round(float(temps[:, 2 + m].max()), 2)] for m in (0, 1)],
         'angle_rad': [round(float(q.min()), 4), round(float(q.max()), 4)],
         'max_drive_V': round(float(np.abs(u).max()), 3) if len(u) else 0.0,
+        'sine_V': el.sine_V,
         'governed_s': [round(float(g), 2) for g in governed],
         'window_C': list(el.window_C),
     }
