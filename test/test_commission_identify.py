@@ -13,7 +13,7 @@ import pytest
 
 from sma_wrist.commission.bringup import BringUp, Stop
 from sma_wrist.commission.device import SimDevice
-from sma_wrist.commission.excite import MARK, excite, schedule
+from sma_wrist.commission.excite import MARK, ExcitationLimits, excite, schedule
 from sma_wrist.commission.identification import identify_wrist
 from sma_wrist.commission.run import bridge_values, calibration_of, commission
 from sma_wrist.hw.calibration import Wiring
@@ -55,13 +55,26 @@ def test_the_excitation_is_marked_split_and_within_its_limits(off_model):
     parts = [p['part'] for p in summary['phases']]
     assert parts == sorted(parts, key=lambda p: p == 'heldout') and {'fit', 'heldout'} == set(parts)
     assert summary['device_time_s'] <= BUDGET_S
-    assert dev.emulator.stats.max_abs_command_V <= bring.lim.max_drive_V + 1e-9
+    # the relays within the bring-up's largest drive, the sines up to the driver rating the closed loop uses
+    relays = [p for p in schedule(BUDGET_S) if p.period_s == 0]
+    assert max(abs(p.hold_V) for p in relays) <= bring.lim.max_drive_V
+    assert dev.emulator.stats.max_abs_command_V == pytest.approx(ExcitationLimits().sine_V, abs=0.05)
     assert max(hi for _, hi in summary['muscle_C']) <= summary['window_C'][1]
     # the wires through their transformation, both ways: the joint swept to either side of where it rested (the
     # wire 8 degC hotter only part of the way within the TEMs' window: 0.65 rad measured)
     q0 = bring._q_start
     assert summary['angle_rad'][0] < q0 - 0.15 and summary['angle_rad'][1] > q0 + 0.15
     assert np.all(dev.emulator._u == 0.0)
+
+
+def test_the_sines_drive_the_tems_as_far_as_the_loop_and_the_relays_keep_the_bring_ups_drive():
+    """The closed loop drives the TEMs up to the driver rating (a third of its time at +-24 V on the phase-fraction
+    wrist): a heat balance identified only up to 20 V mispredicted it (doc/howto/commission.md)."""
+    phases = schedule(BUDGET_S, 20.0, 77.0, ExcitationLimits().sine_V)
+    assert {p.amplitude_V for p in phases if p.period_s > 0} == {24.0}
+    assert {abs(p.hold_V) for p in phases if p.until_C is not None} == {20.0, 16.0}
+    with pytest.raises(ValueError, match='driver rating'):
+        ExcitationLimits(sine_V=30.0)
 
 
 def test_identification_recovers_the_shift_payload_and_weaker_tem(off_model):
@@ -155,3 +168,35 @@ def test_ctrl_c_during_the_excitation_turns_the_tems_off_and_names_the_step(tmp_
     assert res['status'] == 'interrupted' and 'excite' in res['message']
     assert np.all(dev.emulator._u == 0.0) and res['params_file'] is None
     assert 'excite' in open(res['report']).read()
+
+
+def test_a_heat_balance_better_only_within_the_sensors_noise_is_not_handed_over(tmp_path):
+    """A wrist the built-in heat balance describes to the noise (TEM 1 0.1 % weak, 8 mdegC of sensor noise): the fit
+    predicts the held-out data a few mdegC better, which is no gain; the built-in is kept and the warning says why
+    (with 24 V sines the nominal device's fit was handed over so, and its loop then replayed to 4x the noise)."""
+    import dataclasses
+
+    from sma_wrist.commission.identification import identify_thermal_part
+    from sma_wrist.core.thermal import heat_balance as th
+    from sma_wrist.core.thermal import identification as ti
+
+    device = dataclasses.replace(th.ThermalParams(), tem_gain=(0.999, 1.0))
+
+    def records(part: str, seconds: float, seed: int) -> list:
+        t = np.arange(0.0, seconds, 0.25)
+        u1 = 12.0 * np.sin(2 * np.pi * t / 30.0) + 6.0 * np.sign(np.sin(2 * np.pi * t / 11.0))
+        x, T = th.rest_state(device, 1), np.empty((t.size, 2, 2))
+        for k, u in enumerate(u1):
+            T[k] = x[0]
+            x = th.step(device, x, np.array([[u, -u]]), 0.25, validate=False)
+        T += np.random.default_rng(seed).normal(0.0, 0.008, T.shape)
+        return [ti.ThermalRecord(f'{part} {m}', 0.25, u1 * (1 - 2 * m), T[:, m], layer=m) for m in (0, 1)]
+
+    rest = tuple(float(v) for v in th.rest_state(device, 1)[0, 0])
+    part, params, warnings = identify_thermal_part(
+        records('fit', 60.0, 1), records('held', 30.0, 2), tmp_path, rest, 0.008
+    )
+    h = part['heldout']
+    assert h['commissioned'] < h['builtin'] < h['commissioned'] + 0.008  # better, by less than the noise
+    assert part['handed_over'] is False and params == th.ThermalParams()
+    assert any("no better than the built-in one beyond the sensors' noise" in w for w in warnings)

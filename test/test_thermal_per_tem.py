@@ -29,12 +29,25 @@ def test_a_thermal_file_carries_each_tems_gain_and_files_without_it_load_as_befo
     assert load_thermal_file(old).tem_gain == (1.0, 1.0)
 
 
-@pytest.mark.parametrize('value', ['[0.8]', '[0.8, -1.0]', '[0.8, .nan]', '0.8'])
-def test_a_bad_tem_gain_is_refused_naming_the_file(tmp_path: Path, value: str) -> None:
+@pytest.mark.parametrize(
+    ('key', 'value', 'match'),
+    [
+        *[('tem_gain', v, 'tem_gain') for v in ('[0.8]', '[0.8, -1.0]', '[0.8, .nan]', '0.8')],
+        # per-TEM hold limits: one pair per TEM, each bracketing 0
+        *[
+            ('hold_limits_V', v, 'hold_limits_V|bracket 0')
+            for v in ('[[-12.0, 13.0]]', '[[-12.0, 13.0], [-12.0]]', '[[-12.0, 13.0], [5.0, 13.0]]')
+        ],
+    ],
+)
+def test_a_bad_tem_gain_or_hold_limit_is_refused_naming_the_file(
+    tmp_path: Path, key: str, value: str, match: str
+) -> None:
     f = write_thermal_file(tmp_path / 't.yaml', WEAK)
     text = f.read_text()
-    f.write_text(text[: text.index('tem_gain:')] + f'tem_gain: {value}\n' + text[text.index('muscle_face:') :])
-    with pytest.raises(ParameterError, match='tem_gain') as e:
+    after = {'tem_gain': 'muscle_face:', 'hold_limits_V': 'window_C:'}[key]
+    f.write_text(text[: text.index(f'{key}:')] + f'{key}: {value}\n' + text[text.index(after) :])
+    with pytest.raises(ParameterError, match=match) as e:
         load_thermal_file(f)
     assert str(f) in str(e.value)
 
@@ -134,3 +147,44 @@ def test_the_muscle_window_both_tems_hold_is_the_weaker_ones() -> None:
     alone = reachable_window(dataclasses.replace(th.ThermalParams(), input_per_volt=0.4 * 0.7))
     assert reachable_window(weak_2) == pytest.approx(alone, abs=1e-9)
     assert alone[1] < reachable_window(th.ThermalParams())[1]
+
+
+def test_each_tem_holds_its_own_limits_a_weaker_one_a_larger_drive() -> None:
+    per = ti.tem_hold_limits(dataclasses.replace(th.ThermalParams(), tem_gain=(0.7, 1.0)), resolution_V=0.5)
+    alone = ti.hold_limits(dataclasses.replace(th.ThermalParams(), input_per_volt=0.4 * 0.7), resolution_V=0.5)
+    assert per[0] == alone  # TEM 1 characterised at its own gain
+    assert per[1] == ti.hold_limits(th.ThermalParams(), resolution_V=0.5)
+    assert per[0][1] > per[1][1] and per[0][0] < per[1][0]
+
+
+def test_a_thermal_file_carries_each_tems_hold_limits_and_one_pair_loads_as_before(tmp_path: Path) -> None:
+    weak = WEAK.with_hold_limits(((-17.0, 16.0), (-12.0, 13.0)))
+    assert (weak.u_min_V, weak.u_max_V) == (-12.0, 13.0)  # what both hold
+    f = write_thermal_file(tmp_path / 'weak.yaml', weak)
+    back = load_thermal_file(f)
+    assert back.tem_hold_limits_V == ((-17.0, 16.0), (-12.0, 13.0)) and (back.u_min_V, back.u_max_V) == (-12.0, 13.0)
+    np.testing.assert_array_equal(back.layer_hold_limits()[1], [16.0, 13.0])
+    old = write_thermal_file(tmp_path / 'old.yaml', WEAK)  # one pair for both TEMs, as every earlier file
+    assert 'hold_limits_V:\n- -12.0\n- 13.0\n' in old.read_text()
+    assert load_thermal_file(old).tem_hold_limits_V is None
+    np.testing.assert_array_equal(load_thermal_file(old).layer_hold_limits()[0], [-12.0, -12.0])
+
+
+@pytest.mark.parametrize('compiled', [False, True])
+@pytest.mark.parametrize('predictive', [False, True])
+def test_a_weaker_tem_is_not_held_to_the_stronger_ones_limits(compiled: bool, predictive: bool) -> None:
+    """tem_controller's loop (TemLoop, numpy and compiled) where the hold limits act: a hot face without the
+    predictive protection, and a face outside the window with it (the backstop). TEM 1 (0.7) holds 16 V heating,
+    TEM 2 13 V (cooling -17 and -12 V): each gets its own."""
+    hold = WEAK.with_hold_limits(((-17.0, 16.0), (-12.0, 13.0)))
+    drive = tem.DriveLimits(predictive=predictive, protect_above_C=60.0, face_max_C=80.0)
+    law = dataclasses.replace(hold, u_min_V=drive.boost_min_V, u_max_V=drive.boost_max_V)
+    loop = tem.TemLoop(law, tem.TemControlParams(), drive, hold, 120.0, compiled=compiled)
+    hot = 70.0 if not predictive else 81.0  # above protect_above_C / outside the 0-80 degC window
+    loop.observer[0, :, 1] = 30.0
+    for k in range(3):
+        s = loop.sample(0.01 * k, np.array([hot, hot]), np.array([hot + 30.0, hot + 30.0]))
+    assert s is not None
+    # outside the window no drive keeps the faces in it: the one that leaves it least (full cooling), bounded by each
+    # TEM's hold limits; without the predictive protection the heating asked for, bounded the same way
+    np.testing.assert_array_equal(s.command_V, [-17.0, -12.0] if predictive else [16.0, 13.0])

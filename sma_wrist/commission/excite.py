@@ -10,7 +10,8 @@ The phases (:func:`schedule`) are marked in ``bring.rec.marks``; each belongs to
 
 Safety is the bring-up's: every sample goes through :meth:`BringUp._check` (ADC rails, muscle and face limits,
 the joint's excursion; any breach raises :class:`~sma_wrist.commission.bringup.Stop` with the TEMs turned off),
-device time paces everything, and the drive never exceeds the bring-up's largest (``heat_V``). The muscle limit
+device time paces everything, and the relays' drive never exceeds the bring-up's largest (``heat_V``), the sines' the
+TEM driver rating the closed loop uses next (:attr:`ExcitationLimits.sine_V`). The muscle limit
 is raised from the bring-up's to the TEMs' window (the muscle is a TEM face: Table 4.9's model holds in
 ``window_C``, 0-80 degC), with a governor below it: a muscle within ``margin_C`` of the window's top is not
 heated further, one near its bottom not cooled further, an exchanger face near the face limit not loaded with
@@ -64,24 +65,28 @@ class Phase:
         return self.hold_V
 
 
-def schedule(budget_s: float = 600.0, max_V: float = 20.0, hot_C: float = 77.0) -> list[Phase]:
+def schedule(
+    budget_s: float = 600.0, max_V: float = 20.0, hot_C: float = 77.0, sine_V: float | None = None
+) -> list[Phase]:
     """The excitation's phases, at most 516 s of device time (the relay half-cycles end early once the heated muscle
     reaches ``hot_C``: 240-320 s on the emulated wrists); a smaller ``budget_s`` shortens the sines and rests (periods
-    too: their frequencies rise), below 380 s drops them and shortens the relays' caps. Amplitudes are capped at
-    ``max_V`` (the bring-up's largest drive).
+    too: their frequencies rise), below 380 s drops them and shortens the relays' caps. The relays' drive is
+    ``max_V`` (the bring-up's largest drive), the sines' amplitude ``sine_V`` (None: ``max_V``).
 
     Fit: a relay cycle at ``max_V`` (each muscle heated towards ``hot_C`` while the other cools: both wires through
     their transformation both ways, the joint across its range and held at each end), a rest at 0 V, sines of 30 s
-    and 12 s (the heat balance's faster modes). Held out: a second relay cycle at 0.8 ``max_V`` (another heating
-    rate, another path through the hysteresis) ending at rest.
+    and 12 s (the heat balance's faster modes, up to the drive the closed loop uses: :attr:`ExcitationLimits.sine_V`).
+    Held out: a second relay cycle at 0.8 ``max_V`` (another heating rate, another path through the hysteresis)
+    ending at rest.
     """
     v = max_V
+    a = v if sine_V is None else sine_V
     phases = [
         Phase('relay: muscle 1 heated', 'fit', hold_V=v, hold_s=100.0, until_C=hot_C),
         Phase('relay: muscle 2 heated', 'fit', hold_V=-v, hold_s=100.0, until_C=hot_C),
         Phase('rest at 0 V', 'fit', hold_s=20.0),
-        Phase('sine 30 s', 'fit', amplitude_V=min(18.0, v), period_s=30.0, cycles=2),
-        Phase('sine 12 s', 'fit', amplitude_V=min(18.0, v), period_s=12.0, cycles=3),
+        Phase('sine 30 s', 'fit', amplitude_V=a, period_s=30.0, cycles=2),
+        Phase('sine 12 s', 'fit', amplitude_V=a, period_s=12.0, cycles=3),
         Phase('relay: muscle 1 heated', 'heldout', hold_V=0.8 * v, hold_s=90.0, until_C=hot_C),
         Phase('relay: muscle 2 heated', 'heldout', hold_V=-0.8 * v, hold_s=90.0, until_C=hot_C),
         Phase('rest at 0 V', 'heldout', hold_s=20.0),
@@ -111,6 +116,15 @@ class ExcitationLimits:
     stop_margin_C: float = 2.0
     face_margin_C: float = 5.0  # an exchanger face this close to the bring-up's face limit takes no more heat
     max_excursion_rad: float = 1.8  # the whole range between the stops (-0.35 and 1.40 rad on the model wrist)
+    #: the sines' amplitude [V]: the TEM driver rating, which the closed loop drives (tem_controller's u_min_V /
+    #: u_max_V, a third of its time at +-24 V on the phase-fraction wrist). A heat balance identified up to the
+    #: relays' 20 V (18 V sines) predicted the loop's muscle temperatures to 2.46 / 2.85 degC RMS per TEM, fitted
+    #: with sines at 24 V 2.10 / 2.84, and refitted on every phase 1.51 / 1.79 (1.97 / 2.48 with 18 V sines)
+    sine_V: float = 24.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.sine_V) and 0.0 < self.sine_V <= 24.0):
+            raise ValueError(f'sine_V {self.sine_V!r} must be in (0, 24] V (the TEM driver rating)')
 
 
 def excite(bring: BringUp, budget_s: float = 600.0, limits: ExcitationLimits | None = None) -> dict[str, Any]:
@@ -124,11 +138,13 @@ def excite(bring: BringUp, budget_s: float = 600.0, limits: ExcitationLimits | N
     lim0 = bring.lim
     soft_hi, soft_lo = el.window_C[1] - el.margin_C, el.window_C[0] + el.margin_C
     face_hi = lim0.max_face_C - el.face_margin_C
-    phases = schedule(budget_s, lim0.max_drive_V, soft_hi - 1.0)
+    phases = schedule(budget_s, lim0.max_drive_V, soft_hi - 1.0, el.sine_V)
     bring.lim = dataclasses.replace(
         lim0,
         max_muscle_C=el.window_C[1] + el.stop_margin_C,
         max_excursion_rad=max(lim0.max_excursion_rad, el.max_excursion_rad),
+        # the sines up to the driver rating: the drive limit raised to it for the excitation (the wiring is known)
+        cool_V=max(lim0.cool_V, el.sine_V),
     )
     t_begin = bring.t
     governed = np.zeros(2)  # device seconds each muscle's drive was limited by the governor
@@ -179,6 +195,7 @@ def excite(bring: BringUp, budget_s: float = 600.0, limits: ExcitationLimits | N
         'face_C': [[round(float(temps[:, 2 + m].min()), 2), round(float(temps[:, 2 + m].max()), 2)] for m in (0, 1)],
         'angle_rad': [round(float(q.min()), 4), round(float(q.max()), 4)],
         'max_drive_V': round(float(np.abs(u).max()), 3) if len(u) else 0.0,
+        'sine_V': el.sine_V,
         'governed_s': [round(float(g), 2) for g in governed],
         'window_C': list(el.window_C),
     }

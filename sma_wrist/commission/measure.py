@@ -220,7 +220,10 @@ def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -
                 'thermal': {
                     k: (res.get('identified') or {}).get('thermal', {}).get(k) for k in ('handed_over', 'heldout')
                 }
-                | {'tem_gain': (res.get('identified') or {}).get('thermal', {}).get('parameters', {}).get('tem_gain')},
+                | {
+                    k: (res.get('identified') or {}).get('thermal', {}).get('parameters', {}).get(k)
+                    for k in ('tem_gain', 'hold_limits_V')
+                },
                 'device_max_drive_V': dev.emulator.stats.max_abs_command_V,
                 'wall_s': round(time.time() - t0, 1),
             }

@@ -63,11 +63,13 @@ def write_report(out: Path, result: dict[str, Any], bring: Any | None) -> Path:
     """``out/commission.md`` (and PNGs): the result, each step's findings, the faults and their fixes."""
     out.mkdir(parents=True, exist_ok=True)
     pngs = _plot(bring, out) if bring is not None else []
+    sine_V = (result['steps'].get('excite') or {}).get('sine_V')  # the excitation's sines: the driver rating
+    sines = f", the excitation's sines {sine_V:g} V" if sine_V else ''
     lines = [
         '# Wrist commissioning report',
         '',
         f'Status: **{result["status"]}** ({result["device_time_s"]:.1f} s of device time, largest drive sent '
-        f'{result["max_drive_V"]:g} V, bring-up limit {result["limits"]["max_drive_V"]:g} V). '
+        f'{result["max_drive_V"]:g} V, bring-up limit {result["limits"]["max_drive_V"]:g} V{sines}). '
         f'Device: `{result["port"]}`.',
         '',
     ]

@@ -936,8 +936,8 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
     )
     fit_warnings = _fit_warnings(result, records, hold_recs)
     say('characterising the hold limits of the identified model')
-    lo, hi = ti.hold_limits(result.fit.params)
-    params = result.fit.params.with_limits(lo, hi)
+    params = result.fit.params.with_hold_limits(ti.tem_hold_limits(result.fit.params))
+    lo, hi = params.u_min_V, params.u_max_V
     params_path: Path | None = Path(a.params_out) if a.params_out else (Path(a.out) / 'thermal.yaml' if a.out else None)
     held = [
         {
@@ -986,6 +986,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
         'before': [e.as_dict() for e in result.before],
         'validation': result.validation,
         'hold_limits_V': [lo, hi],
+        **({'tem_hold_limits_V': [list(q) for q in params.tem_hold_limits_V]} if params.tem_hold_limits_V else {}),
         'params_file': str(params_path) if params_path else None,
         'report': None,
         'inputs': [str(x) for x in a.inputs],

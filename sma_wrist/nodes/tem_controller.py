@@ -105,8 +105,8 @@ class TemController(WristNode):
         Param(
             'protect_above_C',
             DRIVE.protect_above_C,
-            'predictive_protection false: above this face temperature a layer falls back to the hold limits '
-            f'[{LIMITS.u_min_V:g}, {LIMITS.u_max_V:g}] V',
+            "predictive_protection false: above this face temperature a layer falls back to its TEM's hold limits "
+            f"([{LIMITS.u_min_V:g}, {LIMITS.u_max_V:g}] V; a thermal_file's per TEM)",
             'degC',
             (30.0, 80.0),
         ),
@@ -124,7 +124,7 @@ class TemController(WristNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('tem_controller', **kwargs)
-        # the model of the TEMs (law, observer, protection) with its own hold limits
+        # the model of the TEMs (law, observer, protection) with its own hold limits (each TEM's, where they differ)
         self.hold = load_thermal_file(self.p['thermal_file']) if self.p['thermal_file'] else LIMITS
         tem_kernel.warm_up()  # compile before the first sample, not inside the loop
         if online_thermal(self.p) is not None:

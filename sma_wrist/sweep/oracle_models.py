@@ -47,7 +47,9 @@ def own_tem_bank(built: Any, scenario: Scenario, base: PlantParams | None = None
     (command limits: ``built``'s law and hold limits)."""
     own = scenario_params(scenario, base).thermal
     law = dataclasses.replace(own, u_min_V=built.thermal.u_min_V, u_max_V=built.thermal.u_max_V)
-    hold = dataclasses.replace(own, u_min_V=built.hold.u_min_V, u_max_V=built.hold.u_max_V)
+    hold = dataclasses.replace(
+        own, u_min_V=built.hold.u_min_V, u_max_V=built.hold.u_max_V, tem_hold_limits_V=built.hold.tem_hold_limits_V
+    )
     return TemLoopBank(built.n, law, built.params, built.drive, hold, built.max_muscle_C)
 
 

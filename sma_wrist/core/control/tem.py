@@ -674,21 +674,20 @@ def protected_command(
     """
     T = np.asarray(state, dtype=float)
     u = np.asarray(command_V, dtype=float)
+    # each TEM's hold limits (a weaker TEM holds a larger drive), within the driver rating
+    hold_lo, hold_hi = (v[: T.shape[-2]] for v in thermal.layer_hold_limits())
+    hold_lo, hold_hi = np.maximum(hold_lo, limits.boost_min_V), np.minimum(hold_hi, limits.boost_max_V)
     if not limits.predictive:
         hot = (T > limits.protect_above_C).any(axis=-1)
-        lo = np.where(hot, max(thermal.u_min_V, limits.boost_min_V), limits.boost_min_V)
-        hi = np.where(hot, min(thermal.u_max_V, limits.boost_max_V), limits.boost_max_V)
+        lo = np.where(hot, hold_lo, limits.boost_min_V)
+        hi = np.where(hot, hold_hi, limits.boost_max_V)
         out = np.minimum(np.maximum(u, lo), hi)
         return out, out != u
     lo, hi = command_range if command_range is not None else safe_command_range(thermal, limits, T)
     out = np.minimum(np.maximum(u, lo), hi)
     # backstop: a face already outside the window -> hold limits for that layer
     outside = ((T > limits.face_max_C) | (T < limits.face_min_C)).any(axis=-1)
-    out = np.where(
-        outside,
-        np.minimum(np.maximum(out, max(thermal.u_min_V, limits.boost_min_V)), min(thermal.u_max_V, limits.boost_max_V)),
-        out,
-    )
+    out = np.where(outside, np.minimum(np.maximum(out, hold_lo), hold_hi), out)
     return out, out != u
 
 
@@ -799,8 +798,8 @@ class TemLoop:
                 drive.protect_above_C,
                 drive.boost_min_V,
                 drive.boost_max_V,
-                hold.u_min_V,
-                hold.u_max_V,
+                *hold.layer_hold_limits()[0],
+                *hold.layer_hold_limits()[1],
                 self.max_muscle_C,
             ],
             dtype=float,

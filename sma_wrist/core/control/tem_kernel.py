@@ -147,8 +147,10 @@ CONFIG_FIELDS = (
     'protect_above_C',
     'boost_min_V',
     'boost_max_V',
-    'hold_min_V',
-    'hold_max_V',
+    'hold_min_V_tem1',
+    'hold_min_V_tem2',
+    'hold_max_V_tem1',
+    'hold_max_V_tem2',
     'max_muscle_C',
 )
 
@@ -253,8 +255,8 @@ def control_sample_into(
     predictive = cfg[6] != 0.0
     if predictive and refresh:
         held_command_range(x, candidates, cfg[7], int(cfg[8]), cfg[9], cfg[10], th_coef, rng[0], rng[1])
-    hold_lo, hold_hi = max(cfg[14], cfg[12]), min(cfg[15], cfg[13])
-    for l in range(2):  # tem_control.protected_command
+    for l in range(2):  # tem_control.protected_command; each TEM its own hold limits within the driver rating
+        hold_lo, hold_hi = max(cfg[14 + l], cfg[12]), min(cfg[16 + l], cfg[13])
         if predictive:
             v = min(max(u[l], rng[0, l]), rng[1, l])
             if not (cfg[9] <= x[l, 0] <= cfg[10] and cfg[9] <= x[l, 1] <= cfg[10]):
@@ -266,7 +268,7 @@ def control_sample_into(
         bits = SATURATED if sat[l] else 0
         if v != u[l]:
             bits |= LIMITED
-        if T_meas[l] > cfg[16]:  # too hot a muscle may only be cooled
+        if T_meas[l] > cfg[18]:  # too hot a muscle may only be cooled
             bits |= HOT
             v = min(v, 0.0)
         command[l] = v

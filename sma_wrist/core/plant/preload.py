@@ -34,9 +34,9 @@ def reachable_window(
     thermal: th.ThermalParams, controllers_C: tuple[float, float] | None = None
 ) -> tuple[float, float]:
     """(coldest, hottest) muscle temperature [degC] the TEMs hold at their command limits (steady states of
-    Eqs. 4.13-4.14 at u_min_V / u_max_V; where the TEMs' gains differ, what both hold), inside ``controllers_C``
-    (the window the controllers may ask for)."""
-    ss, _ = th.steady_state(thermal, np.array([[thermal.u_min_V, thermal.u_min_V], [thermal.u_max_V, thermal.u_max_V]]))
+    Eqs. 4.13-4.14 at each TEM's hold limits, ThermalParams.layer_hold_limits; where the TEMs differ, what both
+    hold), inside ``controllers_C`` (the window the controllers may ask for)."""
+    ss, _ = th.steady_state(thermal, np.stack(thermal.layer_hold_limits()))
     cold, hot = float(ss[0, :, 0].max()), float(ss[1, :, 0].min())
     if controllers_C is not None:
         cold, hot = max(cold, float(controllers_C[0])), min(hot, float(controllers_C[1]))

@@ -97,7 +97,8 @@ class ThermalParams:
         Model input I per volt of command [1/V]; I = -input_per_volt * u (u > 0 heats T1).
     u_min_V, u_max_V:
         Command limits [V] (cooling, heating); from the runaway characterisation
-        (:func:`characterise_constant_commands`, doc/explanation/model.md).
+        (:func:`characterise_constant_commands`, doc/explanation/model.md). With ``tem_hold_limits_V`` the
+        limits both TEMs hold.
     ambient_C:
         (muscle-face, exchanger-face) ambient/coolant temperatures [degC]; ``None`` keeps
         Table 4.9's K_inf (implied 25.596 / 31.568 degC).
@@ -106,6 +107,10 @@ class ThermalParams:
         I = -input_per_volt * tem_gain[l] * u (a weaker module pumps less heat per volt, its
         Joule heat falls with the square). A one-layer model (the seed's experiment) takes
         ``tem_gain[0]``. Default (1, 1): one heat balance for both modules.
+    tem_hold_limits_V:
+        ((TEM 1 low, high), (TEM 2 low, high)) hold limits [V] where the TEMs' drive gains differ: a weaker TEM
+        holds a larger drive, and is not held to the stronger one's (:meth:`with_hold_limits` sets them and
+        u_min_V / u_max_V to what both hold); ``None``: both TEMs [u_min_V, u_max_V] (:meth:`layer_hold_limits`).
     coupling_per_s:
         Conductance between the two muscle faces over their heat capacity [1/s], adds
         coupling * (T_other_muscle - T_muscle) to Eq. 4.13 of each layer. Default 0.
@@ -122,6 +127,7 @@ class ThermalParams:
     u_max_V: float = 13.0
     ambient_C: tuple[float, float] | None = None
     tem_gain: tuple[float, float] = (1.0, 1.0)
+    tem_hold_limits_V: tuple[tuple[float, float], tuple[float, float]] | None = None
     coupling_per_s: float = 0.0
     dt_max_s: float = 1.0
     window_C: tuple[float, float] = (0.0, 80.0)
@@ -151,6 +157,13 @@ class ThermalParams:
         object.__setattr__(self, 'tem_gain', (float(gains[0]), float(gains[1])))
         if not self.u_min_V < 0 < self.u_max_V:
             raise ParameterError(f'command limits [{self.u_min_V}, {self.u_max_V}] V must bracket 0')
+        if self.tem_hold_limits_V is not None:
+            pairs = tuple(tuple(float(v) for v in pair) for pair in self.tem_hold_limits_V)
+            if len(pairs) != 2 or not all(len(q) == 2 and np.isfinite(q).all() and q[0] < 0 < q[1] for q in pairs):
+                raise ParameterError(
+                    f'tem_hold_limits_V = {self.tem_hold_limits_V!r} must be two (low < 0 < high) pairs of finite V'
+                )
+            object.__setattr__(self, 'tem_hold_limits_V', pairs)
         if self.coupling_per_s < 0:
             raise ParameterError(f'coupling_per_s = {self.coupling_per_s} must be >= 0')
         if not 0 < self.dt_max_s <= 10.0:
@@ -235,8 +248,29 @@ class ThermalParams:
         )
 
     def with_limits(self, u_min_V: float, u_max_V: float) -> ThermalParams:
-        """Copy with other command limits (e.g. for characterisation beyond the defaults)."""
-        return dataclasses.replace(self, u_min_V=u_min_V, u_max_V=u_max_V)
+        """Copy with other command limits, the same for both TEMs (e.g. for characterisation beyond the defaults,
+        the driver rating)."""
+        return dataclasses.replace(self, u_min_V=u_min_V, u_max_V=u_max_V, tem_hold_limits_V=None)
+
+    def with_hold_limits(self, per_tem: tuple[tuple[float, float], tuple[float, float]]) -> ThermalParams:
+        """Copy with each TEM's hold limits ((low, high) [V] of TEM 1, TEM 2); the command limits become what both
+        hold (the larger low, the smaller high); equal pairs are kept as one."""
+        (lo1, hi1), (lo2, hi2) = ((float(a), float(b)) for a, b in per_tem)
+        same = (lo1, hi1) == (lo2, hi2)
+        return dataclasses.replace(
+            self,
+            u_min_V=max(lo1, lo2),
+            u_max_V=min(hi1, hi2),
+            tem_hold_limits_V=None if same else ((lo1, hi1), (lo2, hi2)),
+        )
+
+    def layer_hold_limits(self) -> tuple[FloatArray, FloatArray]:
+        """(low, high) hold limits [V] of TEM 1 and TEM 2, each shape (2,): ``tem_hold_limits_V``, else
+        [u_min_V, u_max_V] for both."""
+        if self.tem_hold_limits_V is None:
+            return np.full(2, self.u_min_V), np.full(2, self.u_max_V)
+        (lo1, hi1), (lo2, hi2) = self.tem_hold_limits_V
+        return np.array([lo1, lo2]), np.array([hi1, hi2])
 
 
 # ----------------------------------------------------------------------- commands

@@ -846,21 +846,29 @@ def identify_thermal(
     return ThermalIdentification(final, base, in_sample, held, before, validation, time.perf_counter() - t0)
 
 
-def hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[float, float]:
-    """Command hold limits of an identified model, found as doc/explanation/model.md found the defaults.
+def tem_hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[tuple[float, float], ...]:
+    """Command hold limits [V] of each TEM of an identified model ((low, high) of TEM 1, TEM 2), found as
+    doc/explanation/model.md found the defaults.
 
     :func:`sma_wrist.core.thermal.heat_balance.characterise_constant_commands` (every face in the window,
-    converged after 3000 s), rounded inward to whole volts; with per-TEM drive gains the limits both TEMs hold.
-    Raises when a direction holds less than 1 V.
+    converged after 3000 s) at each TEM's drive gain, rounded inward to whole volts: a weaker TEM holds a larger
+    drive. Raises when a TEM holds less than 1 V in a direction.
     """
-    lo, hi = -math.inf, math.inf
+    out: dict[float, tuple[float, float]] = {}
     for g in sorted(set(params.tem_gain)):
         one = dataclasses.replace(params, input_per_volt=params.input_per_volt * g, tem_gain=(1.0, 1.0))
         c = th.characterise_constant_commands(one, resolution_V=resolution_V)
-        hi, lo = min(hi, math.floor(c.heating_max_V)), max(lo, math.ceil(c.cooling_max_V))
+        hi, lo = math.floor(c.heating_max_V), math.ceil(c.cooling_max_V)
         if hi < 1 or lo > -1:
             raise ThermalIdentificationError(
                 f'the identified model holds only {c.cooling_max_V:+.2f}..{c.heating_max_V:+.2f} V with every face '
                 f'in {params.window_C} degC; it is not usable for the wrist (check the data and the voltage unit)'
             )
-    return float(lo), float(hi)
+        out[g] = (float(lo), float(hi))
+    return tuple(out[g] for g in params.tem_gain)
+
+
+def hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[float, float]:
+    """The command hold limits [V] both TEMs hold (:func:`tem_hold_limits`: the larger low, the smaller high)."""
+    per = tem_hold_limits(params, resolution_V)
+    return max(lo for lo, _ in per), min(hi for _, hi in per)

@@ -17,12 +17,15 @@ its face protection all use the same identified model. Format (YAML, version 1):
       K_R: 0.012524
       K_inf: 0.615142
     exchanger_face: {...}        # T2 column, Eq. 4.14
-    hold_limits_V: [-12.0, 13.0] # commands held forever keep every face in window_C (doc/explanation/model.md)
+    hold_limits_V: [-12.0, 13.0] # commands held forever keep every face in window_C (doc/explanation/model.md);
+                                 # per TEM where they differ: [[TEM 1 low, high], [TEM 2 low, high]]
     window_C: [0.0, 80.0]
     identification: {...}        # provenance and held-out errors; informative only
 
 Unknown top-level keys are rejected (a typo must not silently fall back to a default). ``tem_gain`` may be left
 out (both modules alike, [1, 1]; it is written only where the modules differ, so such files read as before).
+``hold_limits_V`` is one [low, high] pair for both TEMs, or one pair per TEM (written only where they differ: a
+weaker TEM holds a larger drive, ThermalParams.tem_hold_limits_V); files with one pair read as before.
 """
 
 from __future__ import annotations
@@ -67,7 +70,9 @@ def thermal_file_dict(params: th.ThermalParams, identification: Mapping[str, Any
         'input_per_volt': float(params.input_per_volt),
         **gain,
         **faces,
-        'hold_limits_V': [float(params.u_min_V), float(params.u_max_V)],
+        'hold_limits_V': [float(params.u_min_V), float(params.u_max_V)]
+        if params.tem_hold_limits_V is None
+        else [[float(v) for v in pair] for pair in params.tem_hold_limits_V],
         'window_C': [float(params.window_C[0]), float(params.window_C[1])],
         'identification': dict(identification or {}),
     }
@@ -95,7 +100,8 @@ def _number(path: Path, where: str, value: Any) -> float:
 def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) -> th.ThermalParams:
     """ThermalParams from a thermal file; other fields (dt_max_s, coupling) from ``base``.
 
-    The command limits of the result are the file's hold limits. Raises ParameterError naming
+    The command limits of the result are the file's hold limits (with one pair per TEM, what both hold; each TEM's
+    in ``tem_hold_limits_V``). Raises ParameterError naming
     the file and what is wrong (missing, not YAML, wrong format/version, a missing, unknown or
     non-finite key, an inconsistent heat balance).
     """
@@ -135,20 +141,26 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
     gains = (_number(p, 'tem_gain[0]', gain[0]), _number(p, 'tem_gain[1]', gain[1]))
     limits = data.get('hold_limits_V', [None, None])
     window = data.get('window_C', list((base or th.ThermalParams()).window_C))
-    if not (isinstance(limits, list) and len(limits) == 2 and isinstance(window, list) and len(window) == 2):
-        raise ParameterError(f'{p}: hold_limits_V and window_C must be [low, high] lists')
+    per_tem = isinstance(limits, list) and len(limits) == 2 and all(isinstance(q, list) for q in limits)
+    pairs = limits if per_tem else [limits]
+    if not (all(isinstance(q, list) and len(q) == 2 for q in pairs) and isinstance(window, list) and len(window) == 2):
+        raise ParameterError(
+            f'{p}: hold_limits_V must be a [low, high] list (or one per TEM: [[low, high], [low, high]]) and '
+            'window_C a [low, high] list'
+        )
+    key = ['hold_limits_V[0]', 'hold_limits_V[1]'] if per_tem else ['hold_limits_V']
+    held = [(_number(p, f'{key[k]}[0]', q[0]), _number(p, f'{key[k]}[1]', q[1])) for k, q in enumerate(pairs)]
     base = base or th.ThermalParams()
     try:
-        return dataclasses.replace(
+        params = dataclasses.replace(
             base,
             muscle_face=faces[0],
             exchanger_face=faces[1],
             ambient_C=None,
             input_per_volt=_number(p, 'input_per_volt', data.get('input_per_volt')),
             tem_gain=gains,
-            u_min_V=_number(p, 'hold_limits_V[0]', limits[0]),
-            u_max_V=_number(p, 'hold_limits_V[1]', limits[1]),
             window_C=(_number(p, 'window_C[0]', window[0]), _number(p, 'window_C[1]', window[1])),
         )
+        return params.with_hold_limits((held[0], held[-1]))
     except ParameterError as e:
         raise ParameterError(f'{p}: {e}') from None
