@@ -124,7 +124,8 @@ def _solve_pair(T1, T2, yg1, yg2, w, w_now, ym1, ym2, load, stacked, edges, r, p
 
     A load solve is a chain of dependent steps (elongation, its tanh, the Newton quotient), so one bundle at a time
     leaves the CPU waiting on each link; the two bundles at one angle are independent, and interleaving their
-    iterations lets their chains overlap (the replay 1.4x faster, the same numbers bit for bit: test_diagnose_kernels).
+    iterations lets their chains overlap: the same numbers bit for bit, the replay 1.34x and a diagnosis 1.39x
+    faster (doc/explanation/diagnosis.md).
     """
     scale, c_el, k_f, m_lo, m_hi, m_max, tol = mech[1], mech[2], mech[3], mech[4], mech[5], mech[6], mech[7]
     max_it = int(mech[8])
