@@ -59,3 +59,30 @@ def test_a_batch_of_scenarios_replays_each_scenario_bit_for_bit():
         alone = _replay(kernels.mechanics_sim, np.ascontiguousarray(T[:, j : j + 1]), jrow[j : j + 1], 1)
         for a, b in zip(batch, alone):
             assert np.array_equal(a[:, j], b[:, 0])
+
+
+@pytest.mark.parametrize('j', [0, 2])
+def test_mechanics_replay_is_the_plants_own_step(j):
+    """The replay of prescribed temperatures is WristPlant.step_mechanics (the numpy path) from the plant's rest
+    state, with this scenario's friction, pre-load and payload: the two bundles' loads solved together in the kernel
+    are the plant's bundle-by-bundle solve."""
+    from dataclasses import replace
+
+    from sma_wrist.core.plant.wrist import PlantParams, WristPlant
+
+    T, jrow = _inputs(3)
+    base = PlantParams(dt=DT, engine='numpy')
+    jp = replace(base.joint, coulomb_Nm=jrow[j, 0], viscous_Nms=jrow[j, 1], static_Nm=jrow[j, 2])
+    plant = WristPlant(replace(base, joint=jp, preload_elongation_mm=jrow[j, 3]), payload_kg=jrow[j, 4])
+    T = T[:, j : j + 1].copy()
+    T[0, 0] = plant.state.T_prev  # the replay starts where the plant rests (cooled from hot, static equilibrium)
+    q, qd, load = _replay(kernels.mechanics_sim, T, jrow[j : j + 1], 1)
+    ref = np.empty((K, 3))
+    ref[0] = plant.state.q[0], plant.state.qd[0], 0.0
+    for k in range(1, K):
+        s = plant.step_mechanics(T[k])
+        ref[k] = s.q[0], s.qd[0], s.load_kgf[0]
+    assert np.ptp(q[:, 0]) > 0.05  # the joint moves (rad)
+    np.testing.assert_allclose(q[:, 0], ref[:, 0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(qd[:, 0], ref[:, 1], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(load[1:, 0, 0], ref[1:, 2], rtol=1e-12, atol=0)
