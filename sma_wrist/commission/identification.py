@@ -313,6 +313,131 @@ def second_onset_mismatch(model: Any, row: np.ndarray, grid: np.ndarray, a: floa
     return float(np.sqrt(np.mean((m[ok] - pr[ok]) ** 2))) if ok.any() else math.inf
 
 
+#: the warp's free values and their ranges (:class:`sma_wrist.core.hysteresis.warp.Warp`): shifts [degC] relative to
+#: the built-in wire at the working load, the scales [1]; a fitted value within WARP_BOUND_FRACTION of its range's
+#: end is at its bound. The stress scale stays <= 1.5: above it the load sections shrink inside the loads a wrist
+#: puts on its wires
+WARP_RANGE: dict[str, tuple[float, float]] = {
+    'heating_shift_C': (-30.0, 30.0),
+    'cooling_shift_C': (-30.0, 30.0),
+    'width_scale': (1.0 / 3.0, 3.0),
+    'stroke_scale': (0.5, 2.0),
+    'stress_scale': (0.05, 1.5),
+}
+WARP_BOUND_FRACTION = 0.01
+#: the warp fit starts from the shift-only wire with these stress scales (the built-in's stress dependence is
+#: 2-3x a phase-fraction wire's: a start at 1 alone stopped at a local minimum, 54 against 39 mrad held out)
+WARP_STARTS = (1.0, 0.5, 0.25)
+WARP_MAX_NFEV = 300  # residual evaluations per start (one replay of the fit phases each: ~0.03 s)
+
+
+@dataclass
+class WarpFit:
+    """A warped wire fitted by :func:`fit_warped_wire`: the warp, the joint's values, the fit phases' RMS angle error
+    [rad] and the fitted values at the end of their range."""
+
+    warp: Any
+    wire: Any
+    coulomb_Nm: float
+    preload_err_mm: float
+    payload_kg: float
+    fit_rms_rad: float
+    at_bounds: list[str]
+
+
+def fit_warped_wire(
+    run: Any,
+    base: Any,
+    i_held: int,
+    start: dict[str, float],
+    payload_range: tuple[float, float] | None = None,
+    starts: tuple[float, ...] = WARP_STARTS,
+    max_nfev: int = WARP_MAX_NFEV,
+) -> WarpFit:
+    """The SD-GPI ``base`` warped (:func:`sma_wrist.core.hysteresis.warp.warped_wire`: heating and cooling shifts,
+    transition width, stroke and stress dependence) with the joint's Coulomb friction and pre-load (and the payload
+    within ``payload_range`` [kg] where it is given, else ``run.payload_kg``) fitted by least squares of the angle
+    replayed from the measured temperatures (:class:`sma_wrist.diagnose.effects.ExtendedModel`) against the measured
+    one over the samples before ``i_held`` (the fit phases). ``start``: the shift-only fit's ``shift_C``,
+    ``coulomb_Nm``, ``preload_err_mm``, ``payload_kg``; one fit from each stress scale of ``starts``, the best on the
+    fit phases kept. The stroke is scaled about the base's mid-stroke (its length there kept, like
+    :func:`sma_wrist.plants.spread.perturbed_hysteresis`), so that stroke and pre-load do not trade."""
+    from scipy.optimize import least_squares
+
+    from sma_wrist.core.hysteresis.sdgpi import initial_state, mirrored_output
+    from sma_wrist.core.hysteresis.warp import REFERENCE_LOAD_KGF, Warp, warped_wire
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose import effects as fx
+
+    m0 = REFERENCE_LOAD_KGF
+    y_ref = 0.5 * float(
+        mirrored_output(base, initial_state(base, 20.0, m0, branch='cooling'), 20.0)[0]
+        + mirrored_output(base, initial_state(base, 80.0, m0, branch='heating'), 80.0)[0]
+    )
+    keys = list(WARP_RANGE)
+    logs = {'width_scale', 'stroke_scale', 'stress_scale'}  # scales fitted as logarithms (symmetric in x and 1/x)
+
+    def to_x(k: str, v: float) -> float:
+        return math.log(v) if k in logs else v
+
+    i_c, i_p = fx.INDEX['coulomb_Nm'], fx.INDEX['preload_err_mm']
+    lo = [to_x(k, WARP_RANGE[k][0]) for k in keys] + [fx.LOWER[i_c], fx.LOWER[i_p]]
+    hi = [to_x(k, WARP_RANGE[k][1]) for k in keys] + [fx.UPPER[i_c], fx.UPPER[i_p]]
+    scale = [1.0, 1.0, 0.1, 0.1, 0.1, 0.02, 0.05]
+    if payload_range is not None:
+        lo, hi, scale = lo + [payload_range[0]], hi + [payload_range[1]], scale + [0.1]
+    lo_a, hi_a = np.array(lo), np.array(hi)
+
+    def unpack(x: np.ndarray) -> tuple[Any, np.ndarray, float]:
+        vals = {k: (math.exp(x[i]) if k in logs else float(x[i])) for i, k in enumerate(keys)}
+        warp = Warp(**vals, y_ref_mm=y_ref, load_kgf=m0)
+        row = fx.NOMINAL.copy()
+        row[i_c], row[i_p] = x[5], x[6]
+        return warp, row, float(x[7]) if payload_range is not None else float(run.payload_kg)
+
+    def model_of(x: np.ndarray) -> tuple[Any, np.ndarray]:
+        warp, row, payload = unpack(x)
+        params = PlantParams(dt=MECH_STEP_S, hysteresis=warped_wire(base, warp))
+        return fx.ExtendedModel(dataclasses.replace(run, payload_kg=payload), params), row
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        model, row = model_of(x)
+        return model.angle_measured(row[None], i_held, 'measured')[:, 0] - run.q[:i_held]
+
+    best = None
+    for k in starts:
+        x0 = [start['shift_C'], start['shift_C'], 0.0, 0.0, math.log(k), start['coulomb_Nm'], start['preload_err_mm']]
+        x0 = np.clip(np.array(x0 + ([start['payload_kg']] if payload_range is not None else [])), lo_a, hi_a)
+        # strictly inside: a start on a bound (friction 0) leaves the solver no feasible finite difference there
+        x0 = np.clip(x0, lo_a + 1e-3 * (hi_a - lo_a), hi_a - 1e-3 * (hi_a - lo_a))
+        res = least_squares(
+            residual, x0, bounds=(lo_a, hi_a), x_scale=np.array(scale), diff_step=1e-3, max_nfev=max_nfev
+        )
+        if best is None or res.cost < best.cost:
+            best = res
+    assert best is not None
+    warp, row, payload = unpack(best.x)
+    span = hi_a - lo_a
+    names = keys + ['coulomb_Nm', 'preload_err_mm'] + (['payload_kg'] if payload_range is not None else [])
+    at = [
+        f'{n} = {(math.exp(v) if n in logs else v):.3g}'
+        for n, v, a, b, w in zip(names, best.x, lo_a, hi_a, span)
+        if n != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
+        and (v <= a + WARP_BOUND_FRACTION * w or v >= b - WARP_BOUND_FRACTION * w)
+    ]
+    if payload_range is not None and payload_range[0] == 0.0:  # a payload of 0 is a value
+        at = [a for a in at if not (a.startswith('payload_kg') and best.x[-1] < 0.5 * span[-1])]
+    return WarpFit(
+        warp,
+        warped_wire(base, warp),
+        float(row[i_c]),
+        float(row[i_p]),
+        payload,
+        float(np.sqrt(2.0 * best.cost / i_held)),
+        at,
+    )
+
+
 def identify_mechanics(
     bring: BringUp,
     out: Path,
@@ -413,6 +538,7 @@ def identify_mechanics(
         return fitted, row, shift, payload, wire, model
 
     dt_step = MECH_STEP_S
+    payload_warning = ''
     why_not = (
         f'where the angle moves as muscle 2 heats is {mismatch:.1f} degC off the built-in wire model at its best fit'
     )
@@ -435,7 +561,7 @@ def identify_mechanics(
         pays, shifts, _ = on_curve(np.array([prior_kg]))
         if pays.size:
             shift, payload = float(shifts[0]), prior_kg
-        warnings.append(
+        payload_warning = (
             f'joint: the payload is not determined by the excitation ({why_not}): {prior_kg:g} kg is assumed, give '
             '--payload-kg'
         )
@@ -452,48 +578,7 @@ def identify_mechanics(
 
     builtin_rms = rms_mrad(pred)
     v = fitted.values()
-    preload_mm = PlantParams().preload_elongation_mm + v['preload_err_mm']
-    hpath = save_hysteresis(
-        out / 'hysteresis.yaml',
-        dataclasses.replace(wire, name=f'{base.name}, commissioned ({shift:+.1f} degC)'),
-        {
-            'source': 'sma-wrist commission: angle against the measured muscle temperatures (fit phases)',
-            'transition_shift_C': round(shift, 3),
-            'stroke': 'built-in',
-            'stress_dependence': 'built-in (stresses are not measured on the device)',
-        },
-    )
-    hyst = {
-        'parameters': {
-            'transition_shift_C': round(shift, 3),
-            'stroke': 'built-in',
-            'stress_dependence': 'built-in',
-        },
-        'heldout': {
-            'metric': 'RMS angle error, replay from the measured temperatures (built-in joint)',
-            'unit': 'mrad',
-            'commissioned': round(rms_mrad(p_wire), 3),
-            'builtin': round(builtin_rms, 3),
-        },
-        'file': str(hpath),
-    }
-    joint = {
-        'parameters': {
-            'payload_kg': round(payload, 4),
-            'payload_given': payload_kg is not None,
-            'payload_identified': payload_found,
-            'second_onset_mismatch_C': round(mismatch, 3) if math.isfinite(mismatch) else None,
-            'coulomb_Nm': round(v['coulomb_Nm'], 5),
-            'preload_elongation_mm': round(preload_mm, 4),
-        },
-        'heldout': {
-            'metric': 'RMS angle error, replay from the measured temperatures (commissioned wire and joint)',
-            'unit': 'mrad',
-            'commissioned': round(rms_mrad(p_all), 3),
-            'builtin': round(builtin_rms, 3),
-        },
-        'file': None,
-    }
+    shift_rms = rms_mrad(p_all)
     on_bound = [
         f'{k} = {fitted.row[fx.INDEX[k]]:.3g}'
         for k in fitted.values()
@@ -508,20 +593,133 @@ def identify_mechanics(
         on_bound.append(f'payload_kg = {payload:.3g}')
     if abs(shift) >= SHIFT_RANGE_C - 1e-6:
         on_bound.append(f'transition_shift_C = {shift:.3g}')
+
+    # the warped wire (fit_warped_wire: heating and cooling shifts, width, stroke, stress dependence) from the
+    # shift-only fit on, the payload free unless given; the payload read through the warped wire's stress dependence
+    # only where that wire also places the relay's second half-cycle (as for the shift-only wire), else refitted at
+    # the prior
+    start = {'shift_C': shift, 'coulomb_Nm': v['coulomb_Nm'], 'preload_err_mm': v['preload_err_mm']}
+    wf = fit_warped_wire(
+        run, base, i_held, {**start, 'payload_kg': payload}, (lo_kg, hi_kg) if payload_kg is None else None
+    )
+
+    def warped_replay(wf: WarpFit) -> tuple[Any, np.ndarray]:
+        """(the warped model with its payload, its joint row)."""
+        m = fx.ExtendedModel(
+            dataclasses.replace(run, payload_kg=wf.payload_kg), PlantParams(dt=dt_step, hysteresis=wf.wire)
+        )
+        r = fx.NOMINAL.copy()
+        r[fx.INDEX['coulomb_Nm']], r[fx.INDEX['preload_err_mm']] = wf.coulomb_Nm, wf.preload_err_mm
+        return m, r
+
+    w_model, w_row = warped_replay(wf)
+    w_mismatch = second_onset_mismatch(w_model, w_row, grid, second['t_start_s'], second['t_end_s'])
+    w_payload_found = (
+        payload_kg is None
+        and w_mismatch <= ONSET_TOLERANCE_C
+        and not any(a.startswith('payload_kg') for a in wf.at_bounds)
+    )
+    if payload_kg is None and not w_payload_found:
+        wf = fit_warped_wire(
+            dataclasses.replace(run, payload_kg=prior_kg), base, i_held, {**start, 'payload_kg': prior_kg}
+        )
+        w_model, w_row = warped_replay(wf)
+    w_only = fx.NOMINAL.copy()
+    w_only[i_pay] = prior_kg - wf.payload_kg  # the warped wire with the built-in joint
+    pw_wire, pw_all = w_model.angle_measured(np.stack([w_only, w_row]), None, 'measured').T
+    warp_rms = rms_mrad(pw_all)
+    # the angle's noise [mrad]: a model better by less than that is not better (on the model wrist every recalibration
+    # is within it of the built-in)
+    noise_mrad = 1e3 * fx.noise_sigma(qg, 2 * np.pi / 2**16)
     # handed over only where it predicts the held-out cycle better than the built-in model with every fitted value
     # inside its range: a parameter at its bound is the fit compensating what the model cannot describe (on a wrist
-    # the SD-GPI and joint model do not fit), not a measurement, and would mislead the controllers
-    better = joint['heldout']['commissioned'] < joint['heldout']['builtin'] and not on_bound
-    hyst['handed_over'] = joint['handed_over'] = better
-    if better:
-        values = {'payload_kg': payload, 'coulomb_Nm': v['coulomb_Nm'], 'preload_mm': preload_mm, 'wire': wire}
+    # the SD-GPI and joint model do not fit), not a measurement, and would mislead the controllers. The warped wire
+    # only where it is better than both the built-in and the shift-only wire by more than the angle's noise
+    shift_ok = shift_rms < builtin_rms and not on_bound
+    warp_ok = warp_rms < min(builtin_rms, shift_rms) - noise_mrad and not wf.at_bounds
+    chosen = 'warped' if warp_ok else 'shifted' if shift_ok else 'built-in'
+    w = wf.warp
+    warp_values = {
+        'heating_shift_C': round(w.heating_shift_C, 2),
+        'cooling_shift_C': round(w.cooling_shift_C, 2),
+        'width_scale': round(w.width_scale, 4),
+        'stroke_scale': round(w.stroke_scale, 4),
+        'stress_scale': round(w.stress_scale, 4),
+        'load_kgf': w.load_kgf,
+    }
+    if chosen == 'warped':
+        wire, payload, payload_found, mismatch = wf.wire, wf.payload_kg, w_payload_found, w_mismatch
+        coulomb, preload_mm = wf.coulomb_Nm, PlantParams().preload_elongation_mm + wf.preload_err_mm
+        p_wire, p_all = pw_wire, pw_all
+        ident = {
+            'wire_model': 'built-in SD-GPI warped (heating and cooling shifts, width, stroke, stress dependence)',
+            **warp_values,
+        }
+    else:
+        coulomb, preload_mm = v['coulomb_Nm'], PlantParams().preload_elongation_mm + v['preload_err_mm']
+        ident = {'wire_model': 'built-in SD-GPI shifted', 'transition_shift_C': round(shift, 3)}
+    hyst = {
+        'parameters': {
+            'wire_model': chosen,
+            'transition_shift_C': round(shift, 3),
+            'warp': warp_values,
+            'warp_at_bounds': wf.at_bounds,
+            'stroke': 'scaled' if chosen == 'warped' else 'built-in',
+            'stress_dependence': 'scaled' if chosen == 'warped' else 'built-in',
+        },
+        'heldout': {
+            'metric': 'RMS angle error, replay from the measured temperatures (built-in joint)',
+            'unit': 'mrad',
+            'commissioned': round(rms_mrad(p_wire), 3),
+            'builtin': round(builtin_rms, 3),
+        },
+    }
+    joint = {
+        'parameters': {
+            'payload_kg': round(payload, 4),
+            'payload_given': payload_kg is not None,
+            'payload_identified': payload_found,
+            'second_onset_mismatch_C': round(mismatch, 3) if math.isfinite(mismatch) else None,
+            'coulomb_Nm': round(coulomb, 5),
+            'preload_elongation_mm': round(preload_mm, 4),
+        },
+        'heldout': {
+            'metric': 'RMS angle error, replay from the measured temperatures (commissioned wire and joint)',
+            'unit': 'mrad',
+            'commissioned': round(rms_mrad(p_all), 3),
+            'builtin': round(builtin_rms, 3),
+            'shift_only': round(shift_rms, 3),
+            'warped': round(warp_rms, 3),
+            'angle_noise': round(noise_mrad, 3),
+        },
+        'file': None,
+    }
+    hyst['handed_over'] = joint['handed_over'] = chosen != 'built-in'
+    if payload_warning and not (chosen == 'warped' and payload_found):
+        if chosen == 'warped':  # the warped wire did not place the second half-cycle either
+            payload_warning = payload_warning.replace(
+                ' at its best fit)', f' at its best fit, {w_mismatch:.1f} degC off the warped one)'
+            )
+        warnings.append(payload_warning)
+    if chosen != 'built-in':
+        values = {'payload_kg': payload, 'coulomb_Nm': coulomb, 'preload_mm': preload_mm, 'wire': wire}
+        hpath = save_hysteresis(
+            out / 'hysteresis.yaml',
+            dataclasses.replace(wire, name=f'{base.name}, commissioned ({chosen})'),
+            {
+                'source': 'sma-wrist commission: angle against the measured muscle temperatures (fit phases)',
+                **ident,
+                'heldout_angle_rms_mrad': {'commissioned': round(rms_mrad(p_all), 3), 'builtin': round(builtin_rms, 3)},
+                'stresses': 'not measured on the device: the stress dependence is read through the joint',
+            },
+        )
     else:
         why = (
             f'{", ".join(on_bound)} at the end of the range the fit allows: the built-in wire and joint model '
             'do not describe this wrist'
             if on_bound
             else 'the recalibrated model predicts the held-out cycle no better than the built-in one '
-            f'({joint["heldout"]["commissioned"]:.3g} against {joint["heldout"]["builtin"]:.3g} mrad RMS)'
+            f'({shift_rms:.3g} against {builtin_rms:.3g} mrad RMS)'
         )
         warnings.append(
             f'wire and joint: {why}; the built-in wire, pre-load and friction are handed over'
@@ -536,7 +734,15 @@ def identify_mechanics(
         hpath = save_hysteresis(
             out / 'hysteresis.yaml', base, {'source': 'built-in (the recalibration was not handed over)'}
         )
-        hyst['file'] = str(hpath)
+    if chosen != 'warped':
+        why_w = (
+            f'{", ".join(wf.at_bounds)} at the end of the range the fit allows'
+            if wf.at_bounds
+            else f'it predicts the held-out cycle {warp_rms:.3g} mrad RMS, not better than the built-in '
+            f"({builtin_rms:.3g}) and the shift-only wire ({shift_rms:.3g}) beyond the angle's noise ({noise_mrad:.2g})"
+        )
+        hyst['parameters']['warp_not_handed_over'] = why_w
+    hyst['file'] = str(hpath)
     return hyst, joint, values, warnings
 
 
