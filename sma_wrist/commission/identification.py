@@ -325,22 +325,25 @@ WARP_RANGE: dict[str, tuple[float, float]] = {
     'stress_scale': (0.05, 1.5),
 }
 WARP_BOUND_FRACTION = 0.01
-#: the warp fit starts from the shift-only wire with these stress scales (the built-in's stress dependence is
-#: 2-3x a phase-fraction wire's: a start at 1 alone stopped at a local minimum, 54 against 39 mrad held out)
+#: the warp fit starts from the shift-only wire with the one of these stress scales that replays the fit phases best
+#: (the built-in's stress dependence is 2.5x a phase-fraction wire's: from 1 the fit stopped at a local minimum with
+#: the cooling shift at its bound, 54 against 39 mrad held out)
 WARP_STARTS = (1.0, 0.5, 0.25)
-WARP_MAX_NFEV = 300  # residual evaluations per start (one replay of the fit phases each: ~0.03 s)
+WARP_MAX_NFEV = 200  # residual evaluations (one replay of the fit phases each: 0.03-0.09 s)
+#: a payload read through the built-in wire's stress dependence (the onset) stands with a warp whose stress scale is
+#: within this of 1
+STRESS_SCALE_TOLERANCE = 0.1
 
 
 @dataclass
 class WarpFit:
-    """A warped wire fitted by :func:`fit_warped_wire`: the warp, the joint's values, the fit phases' RMS angle error
-    [rad] and the fitted values at the end of their range."""
+    """A warped wire fitted by :func:`fit_warped_wire`: the warp and the wire, the joint's values, the fit phases'
+    RMS angle error [rad] and the fitted values at the end of their range."""
 
     warp: Any
     wire: Any
     coulomb_Nm: float
     preload_err_mm: float
-    payload_kg: float
     fit_rms_rad: float
     at_bounds: list[str]
 
@@ -350,18 +353,18 @@ def fit_warped_wire(
     base: Any,
     i_held: int,
     start: dict[str, float],
-    payload_range: tuple[float, float] | None = None,
     starts: tuple[float, ...] = WARP_STARTS,
     max_nfev: int = WARP_MAX_NFEV,
 ) -> WarpFit:
     """The SD-GPI ``base`` warped (:func:`sma_wrist.core.hysteresis.warp.warped_wire`: heating and cooling shifts,
-    transition width, stroke and stress dependence) with the joint's Coulomb friction and pre-load (and the payload
-    within ``payload_range`` [kg] where it is given, else ``run.payload_kg``) fitted by least squares of the angle
-    replayed from the measured temperatures (:class:`sma_wrist.diagnose.effects.ExtendedModel`) against the measured
-    one over the samples before ``i_held`` (the fit phases). ``start``: the shift-only fit's ``shift_C``,
-    ``coulomb_Nm``, ``preload_err_mm``, ``payload_kg``; one fit from each stress scale of ``starts``, the best on the
-    fit phases kept. The stroke is scaled about the base's mid-stroke (its length there kept, like
-    :func:`sma_wrist.plants.spread.perturbed_hysteresis`), so that stroke and pre-load do not trade."""
+    transition width, stroke and stress dependence) with the joint's Coulomb friction and pre-load fitted by least
+    squares of the angle replayed from the measured temperatures (:class:`sma_wrist.diagnose.effects.ExtendedModel`,
+    the payload ``run.payload_kg``) against the measured one over the samples before ``i_held`` (the fit phases).
+
+    ``start``: the shift-only fit's ``shift_C`` [degC], ``coulomb_Nm``, ``preload_err_mm``; the solve starts there
+    with the one stress scale of ``starts`` that replays the fit phases best. The stroke is scaled about the base's
+    mid-stroke (its length there kept, as :func:`sma_wrist.plants.spread.perturbed_hysteresis` does), so that stroke
+    and pre-load do not trade."""
     from scipy.optimize import least_squares
 
     from sma_wrist.core.hysteresis.sdgpi import initial_state, mirrored_output
@@ -375,66 +378,48 @@ def fit_warped_wire(
         + mirrored_output(base, initial_state(base, 80.0, m0, branch='heating'), 80.0)[0]
     )
     keys = list(WARP_RANGE)
-    logs = {'width_scale', 'stroke_scale', 'stress_scale'}  # scales fitted as logarithms (symmetric in x and 1/x)
-
-    def to_x(k: str, v: float) -> float:
-        return math.log(v) if k in logs else v
-
+    logs = {'width_scale', 'stroke_scale', 'stress_scale'}  # scales fitted as logarithms (x and 1/x alike)
     i_c, i_p = fx.INDEX['coulomb_Nm'], fx.INDEX['preload_err_mm']
-    lo = [to_x(k, WARP_RANGE[k][0]) for k in keys] + [fx.LOWER[i_c], fx.LOWER[i_p]]
-    hi = [to_x(k, WARP_RANGE[k][1]) for k in keys] + [fx.UPPER[i_c], fx.UPPER[i_p]]
-    scale = [1.0, 1.0, 0.1, 0.1, 0.1, 0.02, 0.05]
-    if payload_range is not None:
-        lo, hi, scale = lo + [payload_range[0]], hi + [payload_range[1]], scale + [0.1]
-    lo_a, hi_a = np.array(lo), np.array(hi)
+    lo = np.array([math.log(WARP_RANGE[k][0]) if k in logs else WARP_RANGE[k][0] for k in keys] + [0.0, 0.0])
+    hi = np.array([math.log(WARP_RANGE[k][1]) if k in logs else WARP_RANGE[k][1] for k in keys] + [0.0, 0.0])
+    # the pre-load error takes up the warped wire's length too (the mirror constant k_f, Eq. 4.2, and the pre-load
+    # lengthen both wires alike): from a slack pair to twice the built-in pre-load, not the diagnosis' +-1 mm
+    pre = PlantParams().preload_elongation_mm
+    lo[5:], hi[5:] = (fx.LOWER[i_c], -pre), (fx.UPPER[i_c], pre)
+    scale = np.array([1.0, 1.0, 0.1, 0.1, 0.1, 0.02, 0.05])  # degC, log, N m, mm: a typical step of each
 
-    def unpack(x: np.ndarray) -> tuple[Any, np.ndarray, float]:
-        vals = {k: (math.exp(x[i]) if k in logs else float(x[i])) for i, k in enumerate(keys)}
-        warp = Warp(**vals, y_ref_mm=y_ref, load_kgf=m0)
+    def unpack(x: np.ndarray) -> tuple[Any, np.ndarray]:
+        warp = Warp(**{k: (math.exp(x[i]) if k in logs else float(x[i])) for i, k in enumerate(keys)}, y_ref_mm=y_ref)
         row = fx.NOMINAL.copy()
         row[i_c], row[i_p] = x[5], x[6]
-        return warp, row, float(x[7]) if payload_range is not None else float(run.payload_kg)
-
-    def model_of(x: np.ndarray) -> tuple[Any, np.ndarray]:
-        warp, row, payload = unpack(x)
-        params = PlantParams(dt=MECH_STEP_S, hysteresis=warped_wire(base, warp))
-        return fx.ExtendedModel(dataclasses.replace(run, payload_kg=payload), params), row
+        return warp, row
 
     def residual(x: np.ndarray) -> np.ndarray:
-        model, row = model_of(x)
+        warp, row = unpack(x)
+        model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=warped_wire(base, warp)))
         return model.angle_measured(row[None], i_held, 'measured')[:, 0] - run.q[:i_held]
 
-    best = None
-    for k in starts:
-        x0 = [start['shift_C'], start['shift_C'], 0.0, 0.0, math.log(k), start['coulomb_Nm'], start['preload_err_mm']]
-        x0 = np.clip(np.array(x0 + ([start['payload_kg']] if payload_range is not None else [])), lo_a, hi_a)
-        # strictly inside: a start on a bound (friction 0) leaves the solver no feasible finite difference there
-        x0 = np.clip(x0, lo_a + 1e-3 * (hi_a - lo_a), hi_a - 1e-3 * (hi_a - lo_a))
-        res = least_squares(
-            residual, x0, bounds=(lo_a, hi_a), x_scale=np.array(scale), diff_step=1e-3, max_nfev=max_nfev
+    # strictly inside: a start on a bound (friction 0) leaves the solver no feasible finite difference there
+    inside = lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)
+    x0s = [
+        np.clip(
+            [start['shift_C'], start['shift_C'], 0.0, 0.0, math.log(k), start['coulomb_Nm'], start['preload_err_mm']],
+            *inside,
         )
-        if best is None or res.cost < best.cost:
-            best = res
-    assert best is not None
-    warp, row, payload = unpack(best.x)
-    span = hi_a - lo_a
-    names = keys + ['coulomb_Nm', 'preload_err_mm'] + (['payload_kg'] if payload_range is not None else [])
-    at = [
-        f'{n} = {(math.exp(v) if n in logs else v):.3g}'
-        for n, v, a, b, w in zip(names, best.x, lo_a, hi_a, span)
-        if n != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
-        and (v <= a + WARP_BOUND_FRACTION * w or v >= b - WARP_BOUND_FRACTION * w)
+        for k in starts
     ]
-    if payload_range is not None and payload_range[0] == 0.0:  # a payload of 0 is a value
-        at = [a for a in at if not (a.startswith('payload_kg') and best.x[-1] < 0.5 * span[-1])]
+    x0 = min(x0s, key=lambda x: float(np.sum(residual(x) ** 2)))
+    res = least_squares(residual, x0, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev)
+    warp, row = unpack(res.x)
+    margin = WARP_BOUND_FRACTION * (hi - lo)
+    at = [
+        f'{k} = {(math.exp(v) if k in logs else v):.3g}'
+        for k, v, a, b, m in zip(keys + ['coulomb_Nm', 'preload_err_mm'], res.x, lo, hi, margin)
+        if k != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
+        and not a + m < v < b - m
+    ]
     return WarpFit(
-        warp,
-        warped_wire(base, warp),
-        float(row[i_c]),
-        float(row[i_p]),
-        payload,
-        float(np.sqrt(2.0 * best.cost / i_held)),
-        at,
+        warp, warped_wire(base, warp), float(row[i_c]), float(row[i_p]), float(np.sqrt(2.0 * res.cost / i_held)), at
     )
 
 
@@ -595,42 +580,28 @@ def identify_mechanics(
         on_bound.append(f'transition_shift_C = {shift:.3g}')
 
     # the warped wire (fit_warped_wire: heating and cooling shifts, width, stroke, stress dependence) from the
-    # shift-only fit on, the payload free unless given; the payload read through the warped wire's stress dependence
-    # only where that wire also places the relay's second half-cycle (as for the shift-only wire), else refitted at
-    # the prior
+    # shift-only fit on, at its payload (the warp's stress dependence and the payload trade: a free payload came out
+    # 0.36 kg for 0.45 kg on the phase-fraction wrist). The angle's noise [mrad]: a model better by less than that is
+    # not better (on the model wrist the warp fits to 1.8 against the built-in's 0.3 mrad held out)
+    noise_mrad = 1e3 * fx.noise_sigma(qg, 2 * np.pi / 2**16)
     start = {'shift_C': shift, 'coulomb_Nm': v['coulomb_Nm'], 'preload_err_mm': v['preload_err_mm']}
-    wf = fit_warped_wire(
-        run, base, i_held, {**start, 'payload_kg': payload}, (lo_kg, hi_kg) if payload_kg is None else None
-    )
-
-    def warped_replay(wf: WarpFit) -> tuple[Any, np.ndarray]:
-        """(the warped model with its payload, its joint row)."""
-        m = fx.ExtendedModel(
-            dataclasses.replace(run, payload_kg=wf.payload_kg), PlantParams(dt=dt_step, hysteresis=wf.wire)
-        )
-        r = fx.NOMINAL.copy()
-        r[fx.INDEX['coulomb_Nm']], r[fx.INDEX['preload_err_mm']] = wf.coulomb_Nm, wf.preload_err_mm
-        return m, r
-
-    w_model, w_row = warped_replay(wf)
+    fit_run = dataclasses.replace(run, payload_kg=payload)
+    wf = fit_warped_wire(fit_run, base, i_held, start)
+    # a payload read by the shift-only wire went through the built-in stress dependence: a warp that scales it
+    # beyond STRESS_SCALE_TOLERANCE does not read that payload (the two trade: on an SD-GPI wire warped with the
+    # built-in stress dependence and 0.4 kg, 0.32 kg with a stress scale of 1.28), refitted at the prior
+    w_payload_found = payload_found and abs(wf.warp.stress_scale - 1.0) <= STRESS_SCALE_TOLERANCE
+    if payload_found and not w_payload_found:
+        fit_run = dataclasses.replace(run, payload_kg=prior_kg)
+        wf = fit_warped_wire(fit_run, base, i_held, start)
+    w_model = fx.ExtendedModel(fit_run, PlantParams(dt=dt_step, hysteresis=wf.wire))
+    w_row = fx.NOMINAL.copy()
+    w_row[fx.INDEX['coulomb_Nm']], w_row[fx.INDEX['preload_err_mm']] = wf.coulomb_Nm, wf.preload_err_mm
     w_mismatch = second_onset_mismatch(w_model, w_row, grid, second['t_start_s'], second['t_end_s'])
-    w_payload_found = (
-        payload_kg is None
-        and w_mismatch <= ONSET_TOLERANCE_C
-        and not any(a.startswith('payload_kg') for a in wf.at_bounds)
-    )
-    if payload_kg is None and not w_payload_found:
-        wf = fit_warped_wire(
-            dataclasses.replace(run, payload_kg=prior_kg), base, i_held, {**start, 'payload_kg': prior_kg}
-        )
-        w_model, w_row = warped_replay(wf)
     w_only = fx.NOMINAL.copy()
-    w_only[i_pay] = prior_kg - wf.payload_kg  # the warped wire with the built-in joint
+    w_only[i_pay] = prior_kg - fit_run.payload_kg  # the warped wire with the built-in joint
     pw_wire, pw_all = w_model.angle_measured(np.stack([w_only, w_row]), None, 'measured').T
     warp_rms = rms_mrad(pw_all)
-    # the angle's noise [mrad]: a model better by less than that is not better (on the model wrist every recalibration
-    # is within it of the built-in)
-    noise_mrad = 1e3 * fx.noise_sigma(qg, 2 * np.pi / 2**16)
     # handed over only where it predicts the held-out cycle better than the built-in model with every fitted value
     # inside its range: a parameter at its bound is the fit compensating what the model cannot describe (on a wrist
     # the SD-GPI and joint model do not fit), not a measurement, and would mislead the controllers. The warped wire
@@ -638,22 +609,22 @@ def identify_mechanics(
     shift_ok = shift_rms < builtin_rms and not on_bound
     warp_ok = warp_rms < min(builtin_rms, shift_rms) - noise_mrad and not wf.at_bounds
     chosen = 'warped' if warp_ok else 'shifted' if shift_ok else 'built-in'
-    w = wf.warp
     warp_values = {
-        'heating_shift_C': round(w.heating_shift_C, 2),
-        'cooling_shift_C': round(w.cooling_shift_C, 2),
-        'width_scale': round(w.width_scale, 4),
-        'stroke_scale': round(w.stroke_scale, 4),
-        'stress_scale': round(w.stress_scale, 4),
-        'load_kgf': w.load_kgf,
+        'heating_shift_C': round(wf.warp.heating_shift_C, 2),
+        'cooling_shift_C': round(wf.warp.cooling_shift_C, 2),
+        'width_scale': round(wf.warp.width_scale, 4),
+        'stroke_scale': round(wf.warp.stroke_scale, 4),
+        'stress_scale': round(wf.warp.stress_scale, 4),
+        'load_kgf': wf.warp.load_kgf,
+        'at_bounds': wf.at_bounds,
     }
     if chosen == 'warped':
-        wire, payload, payload_found, mismatch = wf.wire, wf.payload_kg, w_payload_found, w_mismatch
+        wire, payload, payload_found, mismatch = wf.wire, fit_run.payload_kg, w_payload_found, w_mismatch
         coulomb, preload_mm = wf.coulomb_Nm, PlantParams().preload_elongation_mm + wf.preload_err_mm
         p_wire, p_all = pw_wire, pw_all
         ident = {
             'wire_model': 'built-in SD-GPI warped (heating and cooling shifts, width, stroke, stress dependence)',
-            **warp_values,
+            **{k: x for k, x in warp_values.items() if k != 'at_bounds'},
         }
     else:
         coulomb, preload_mm = v['coulomb_Nm'], PlantParams().preload_elongation_mm + v['preload_err_mm']
@@ -663,7 +634,6 @@ def identify_mechanics(
             'wire_model': chosen,
             'transition_shift_C': round(shift, 3),
             'warp': warp_values,
-            'warp_at_bounds': wf.at_bounds,
             'stroke': 'scaled' if chosen == 'warped' else 'built-in',
             'stress_dependence': 'scaled' if chosen == 'warped' else 'built-in',
         },
@@ -696,9 +666,11 @@ def identify_mechanics(
     }
     hyst['handed_over'] = joint['handed_over'] = chosen != 'built-in'
     if payload_warning and not (chosen == 'warped' and payload_found):
-        if chosen == 'warped':  # the warped wire did not place the second half-cycle either
-            payload_warning = payload_warning.replace(
-                ' at its best fit)', f' at its best fit, {w_mismatch:.1f} degC off the warped one)'
+        if chosen == 'warped':  # the payload and the warp's stress dependence both move the transformation with load
+            payload_warning = (
+                'joint: the payload is not determined by the excitation (the warped wire model fits its stress '
+                'dependence, which trades with the payload: both move the transformation with the load): '
+                f'{prior_kg:g} kg is assumed, give --payload-kg'
             )
         warnings.append(payload_warning)
     if chosen != 'built-in':
@@ -735,13 +707,12 @@ def identify_mechanics(
             out / 'hysteresis.yaml', base, {'source': 'built-in (the recalibration was not handed over)'}
         )
     if chosen != 'warped':
-        why_w = (
+        hyst['parameters']['warp_not_handed_over'] = (
             f'{", ".join(wf.at_bounds)} at the end of the range the fit allows'
             if wf.at_bounds
             else f'it predicts the held-out cycle {warp_rms:.3g} mrad RMS, not better than the built-in '
             f"({builtin_rms:.3g}) and the shift-only wire ({shift_rms:.3g}) beyond the angle's noise ({noise_mrad:.2g})"
         )
-        hyst['parameters']['warp_not_handed_over'] = why_w
     hyst['file'] = str(hpath)
     return hyst, joint, values, warnings
 
