@@ -332,10 +332,13 @@ WARP_RANGE: dict[str, tuple[float, float]] = {
     'stress_scale': (0.05, 1.5),
 }
 WARP_BOUND_FRACTION = 0.01
-#: the warp fit starts from the shift-only wire with the one of these stress scales that replays the fit phases best
-#: (the built-in's stress dependence is 2.5x a phase-fraction wire's: from 1 the fit stopped at a local minimum with
-#: the cooling shift at its bound, 54 against 39 mrad held out)
+#: the warp fit starts from the one of these stress scales that replays the fit phases best (the built-in's stress
+#: dependence is 2.5x a phase-fraction wire's: from 1 the fit stopped at a local minimum with the cooling shift at
+#: its bound, 54 against 39 mrad held out) ...
 WARP_STARTS = (1.0, 0.5, 0.25)
+#: ... with the heating and cooling shifts each this far [degC] from the shift-only one (from the shift-only shift
+#: alone the nominal phase-fraction wrist's fit ran to the stress scale's bound, 447 mrad held out; from the grid 67)
+WARP_START_OFFSETS_C = (-8.0, 0.0, 8.0)
 WARP_MAX_NFEV = 200  # residual evaluations (one replay of the fit phases each: 0.03-0.09 s)
 #: a payload read through the built-in wire's stress dependence (the onset) stands with a warp whose stress scale is
 #: within this of 1
@@ -368,8 +371,9 @@ def fit_warped_wire(
     squares of the angle replayed from the measured temperatures (:class:`sma_wrist.diagnose.effects.ExtendedModel`,
     the payload ``run.payload_kg``) against the measured one over the samples before ``i_held`` (the fit phases).
 
-    ``start``: the shift-only fit's ``shift_C`` [degC], ``coulomb_Nm``, ``preload_err_mm``; the solve starts there
-    with the one stress scale of ``starts`` that replays the fit phases best. The stroke is scaled about the base's
+    ``start``: the shift-only fit's ``shift_C`` [degC], ``coulomb_Nm``, ``preload_err_mm``; the solve starts from
+    the stress scale of ``starts`` and the heating and cooling shifts :data:`WARP_START_OFFSETS_C` from ``shift_C``
+    that replay the fit phases best (one replay each). The stroke is scaled about the base's
     mid-stroke (its length there kept, as :func:`sma_wrist.plants.spread.perturbed_hysteresis` does), so that stroke
     and pre-load do not trade."""
     from scipy.optimize import least_squares
@@ -408,14 +412,14 @@ def fit_warped_wire(
 
     # strictly inside: a start on a bound (friction 0) leaves the solver no feasible finite difference there
     inside = lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)
+    s0 = start['shift_C']
     x0s = [
-        np.clip(
-            [start['shift_C'], start['shift_C'], 0.0, 0.0, math.log(k), start['coulomb_Nm'], start['preload_err_mm']],
-            *inside,
-        )
+        np.clip([s0 + dh, s0 + dc, 0.0, 0.0, math.log(k), start['coulomb_Nm'], start['preload_err_mm']], *inside)
         for k in starts
+        for dh in WARP_START_OFFSETS_C
+        for dc in WARP_START_OFFSETS_C
     ]
-    x0 = min(x0s, key=lambda x: float(np.sum(residual(x) ** 2)))
+    x0 = min(x0s, key=lambda x: float(np.sum(residual(x) ** 2)))  # one solve, from the grid's best start
     res = least_squares(residual, x0, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev)
     warp, row = unpack(res.x)
     margin = WARP_BOUND_FRACTION * (hi - lo)
