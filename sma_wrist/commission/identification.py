@@ -339,7 +339,7 @@ WARP_STARTS = (1.0, 0.5, 0.25)
 #: ... with the heating and cooling shifts each this far [degC] from the shift-only one (from the shift-only shift
 #: alone the nominal phase-fraction wrist's fit ran to the stress scale's bound, 447 mrad held out; from the grid 67)
 WARP_START_OFFSETS_C = (-8.0, 0.0, 8.0)
-WARP_MAX_NFEV = 200  # residual evaluations (one replay of the fit phases each: 0.03-0.09 s)
+WARP_MAX_NFEV = 200  # residual evaluations (one replay of the fit phases each: 0.01-0.02 s of CPU)
 #: a payload read through the built-in wire's stress dependence (the onset) stands with a warp whose stress scale is
 #: within this of 1
 STRESS_SCALE_TOLERANCE = 0.1
