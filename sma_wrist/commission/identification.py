@@ -17,9 +17,13 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
   :class:`sma_wrist.diagnose.effects.ExtendedModel`, whose temperature offset T_wire = T_measured - offset is exactly
   the shifted SD-GPI). Where a transformation starts does not depend on the stroke, stiffness or branch shape, in
   which wire models differ; a fit of the whole angle trace made up for those with the shift (on the
-  phase-fraction wrist -10 degC for a wire 8 degC hotter). The stroke and the stress dependence stay the built-in's:
-  without measured stresses the excitation spans only the loads pre-load and payload give, and a stroke scale of
-  0.7-1.0 changed the phase-fraction wrist's held-out error by under 4 %. Written as ``hysteresis.yaml``.
+  phase-fraction wrist -10 degC for a wire 8 degC hotter). Then the built-in SD-GPI warped
+  (:func:`fit_warped_wire`, :mod:`sma_wrist.core.hysteresis.warp`: heating and cooling branches shifted apart, the
+  transitions widened, the stroke and the stress dependence scaled) fitted with friction and pre-load to the whole
+  angle trace of the fit phases, from the shift-only fit at its payload; handed over in its place where it predicts
+  the held-out cycle better than both the built-in and the shifted wire beyond the angle's noise with no value at
+  the end of its range (:func:`choose_wire`): on the phase-fraction wrist 42 against 172 mrad, on the model wrist
+  not (1.8 against the built-in's 0.3 mrad). Written as ``hysteresis.yaml``.
 * **joint**: the payload moves the onset through the SD-GPI's stress dependence, so the onset gives one shift per
   payload; the payload is the one whose shift replays the fit phases best, kept only if the built-in wire model
   then also reproduces the relay's second half-cycle (muscle 2 heated while muscle 1 transforms back, within
@@ -27,7 +31,10 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
   wire the SD-GPI does not describe there does not read its payload through the SD-GPI's stress dependence, and
   the payload is then not identified (the default or ``--payload-kg`` assumed, with a warning). Coulomb friction and pre-load elongation are then fitted by the diagnosis' fit
   (:class:`sma_wrist.diagnose.fit.Evaluator`, trained on the fit phases); a payload given on the command line is
-  taken as known. Held out: RMS angle error [mrad] of the replay from the measured temperatures.
+  taken as known. The warped wire does not read the payload: its stress dependence and the payload trade (both move
+  the transformation with the load); a payload read through the built-in stress dependence stays with a warp that
+  keeps it (within :data:`STRESS_SCALE_TOLERANCE`), else the warp is refitted at the prior. Held out: RMS angle error
+  [mrad] of the replay from the measured temperatures.
 
 A part is handed over (into the node parameters) only where it predicts the held-out data better than the built-in
 model (the heat balance over both TEMs' held-out data, neither TEM worse beyond the sensors' noise), and the heat balance only if it holds the TEMs in their
@@ -324,6 +331,134 @@ def second_onset_mismatch(model: Any, row: np.ndarray, grid: np.ndarray, a: floa
     return float(np.sqrt(np.mean((m[ok] - pr[ok]) ** 2))) if ok.any() else math.inf
 
 
+#: the warp's free values and their ranges (:class:`sma_wrist.core.hysteresis.warp.Warp`): shifts [degC] relative to
+#: the built-in wire at the working load, the scales [1]; a fitted value within WARP_BOUND_FRACTION of its range's
+#: end is at its bound. The stress scale stays <= 1.5: above it the load sections shrink inside the loads a wrist
+#: puts on its wires
+WARP_RANGE: dict[str, tuple[float, float]] = {
+    'heating_shift_C': (-30.0, 30.0),
+    'cooling_shift_C': (-30.0, 30.0),
+    'width_scale': (1.0 / 3.0, 3.0),
+    'stroke_scale': (0.5, 2.0),
+    'stress_scale': (0.05, 1.5),
+}
+WARP_BOUND_FRACTION = 0.01
+#: the warp fit starts from the one of these stress scales that replays the fit phases best (the built-in's stress
+#: dependence is 2.5x a phase-fraction wire's: from 1 the fit stopped at a local minimum with the cooling shift at
+#: its bound, 54 against 39 mrad held out) ...
+WARP_STARTS = (1.0, 0.5, 0.25)
+#: ... with the heating and cooling shifts each this far [degC] from the shift-only one (from the shift-only shift
+#: alone the nominal phase-fraction wrist's fit ran to the stress scale's bound, 447 mrad held out; from the grid 67)
+WARP_START_OFFSETS_C = (-8.0, 0.0, 8.0)
+WARP_MAX_NFEV = 200  # residual evaluations (one replay of the fit phases each: 0.01-0.02 s of CPU)
+#: a payload read through the built-in wire's stress dependence (the onset) stands with a warp whose stress scale is
+#: within this of 1
+STRESS_SCALE_TOLERANCE = 0.1
+
+
+@dataclass
+class WarpFit:
+    """A warped wire fitted by :func:`fit_warped_wire`: the warp and the wire, the joint's values, the fit phases'
+    RMS angle error [rad] and the fitted values at the end of their range."""
+
+    warp: Any
+    wire: Any
+    coulomb_Nm: float
+    preload_err_mm: float
+    fit_rms_rad: float
+    at_bounds: list[str]
+
+
+def fit_warped_wire(
+    run: Any,
+    base: Any,
+    i_held: int,
+    start: dict[str, float],
+    starts: tuple[float, ...] = WARP_STARTS,
+    max_nfev: int = WARP_MAX_NFEV,
+) -> WarpFit:
+    """The SD-GPI ``base`` warped (:func:`sma_wrist.core.hysteresis.warp.warped_wire`: heating and cooling shifts,
+    transition width, stroke and stress dependence) with the joint's Coulomb friction and pre-load fitted by least
+    squares of the angle replayed from the measured temperatures (:class:`sma_wrist.diagnose.effects.ExtendedModel`,
+    the payload ``run.payload_kg``) against the measured one over the samples before ``i_held`` (the fit phases).
+
+    ``start``: the shift-only fit's ``shift_C`` [degC], ``coulomb_Nm``, ``preload_err_mm``; the solve starts from
+    the stress scale of ``starts`` and the heating and cooling shifts :data:`WARP_START_OFFSETS_C` from ``shift_C``
+    that replay the fit phases best (one replay each). The stroke is scaled about the base's
+    mid-stroke (its length there kept, as :func:`sma_wrist.plants.spread.perturbed_hysteresis` does), so that stroke
+    and pre-load do not trade."""
+    from scipy.optimize import least_squares
+
+    from sma_wrist.core.hysteresis.sdgpi import initial_state, mirrored_output
+    from sma_wrist.core.hysteresis.warp import REFERENCE_LOAD_KGF, Warp, warped_wire
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose import effects as fx
+
+    m0 = REFERENCE_LOAD_KGF
+    y_ref = 0.5 * float(
+        mirrored_output(base, initial_state(base, 20.0, m0, branch='cooling'), 20.0)[0]
+        + mirrored_output(base, initial_state(base, 80.0, m0, branch='heating'), 80.0)[0]
+    )
+    keys = list(WARP_RANGE)
+    logs = {'width_scale', 'stroke_scale', 'stress_scale'}  # scales fitted as logarithms (x and 1/x alike)
+    i_c, i_p = fx.INDEX['coulomb_Nm'], fx.INDEX['preload_err_mm']
+    lo = np.array([math.log(WARP_RANGE[k][0]) if k in logs else WARP_RANGE[k][0] for k in keys] + [0.0, 0.0])
+    hi = np.array([math.log(WARP_RANGE[k][1]) if k in logs else WARP_RANGE[k][1] for k in keys] + [0.0, 0.0])
+    # the pre-load error takes up the warped wire's length too (the mirror constant k_f, Eq. 4.2, and the pre-load
+    # lengthen both wires alike): from a slack pair to twice the built-in pre-load, not the diagnosis' +-1 mm
+    pre = PlantParams().preload_elongation_mm
+    lo[5:], hi[5:] = (fx.LOWER[i_c], -pre), (fx.UPPER[i_c], pre)
+    scale = np.array([1.0, 1.0, 0.1, 0.1, 0.1, 0.02, 0.05])  # degC, log, N m, mm: a typical step of each
+
+    def unpack(x: np.ndarray) -> tuple[Any, np.ndarray]:
+        warp = Warp(**{k: (math.exp(x[i]) if k in logs else float(x[i])) for i, k in enumerate(keys)}, y_ref_mm=y_ref)
+        row = fx.NOMINAL.copy()
+        row[i_c], row[i_p] = x[5], x[6]
+        return warp, row
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        warp, row = unpack(x)
+        model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=warped_wire(base, warp)))
+        return model.angle_measured(row[None], i_held, 'measured')[:, 0] - run.q[:i_held]
+
+    # strictly inside: a start on a bound (friction 0) leaves the solver no feasible finite difference there
+    inside = lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)
+    s0 = start['shift_C']
+    x0s = [
+        np.clip([s0 + dh, s0 + dc, 0.0, 0.0, math.log(k), start['coulomb_Nm'], start['preload_err_mm']], *inside)
+        for k in starts
+        for dh in WARP_START_OFFSETS_C
+        for dc in WARP_START_OFFSETS_C
+    ]
+    x0 = min(x0s, key=lambda x: float(np.sum(residual(x) ** 2)))  # one solve, from the grid's best start
+    res = least_squares(residual, x0, bounds=(lo, hi), x_scale=scale, diff_step=1e-3, max_nfev=max_nfev)
+    warp, row = unpack(res.x)
+    margin = WARP_BOUND_FRACTION * (hi - lo)
+    at = [
+        f'{k} = {(math.exp(v) if k in logs else v):.3g}'
+        for k, v, a, b, m in zip(keys + ['coulomb_Nm', 'preload_err_mm'], res.x, lo, hi, margin)
+        if k != 'coulomb_Nm'  # friction at 0 is a value (a free joint), not a model at its end
+        and not a + m < v < b - m
+    ]
+    return WarpFit(
+        warp, warped_wire(base, warp), float(row[i_c]), float(row[i_p]), float(np.sqrt(2.0 * res.cost / i_held)), at
+    )
+
+
+def choose_wire(
+    builtin_rms: float, shift_rms: float, shift_on_bound: bool, warp_rms: float, warp_on_bound: bool, noise: float
+) -> str:
+    """Which wire and joint are handed over: 'warped', 'shifted' or 'built-in', from the RMS angle errors of their
+    replays on the held-out cycle and the angle's noise (one unit, any). A recalibration only where it predicts the
+    held-out cycle better than the built-in model with every fitted value inside its range: a value at its bound is
+    the fit compensating what the model cannot describe, not a measurement, and would mislead the controllers. The
+    warped wire only where it is better than both others by more than the noise (on the model wrist the warp came out
+    1.8 against the built-in's 0.3 mrad)."""
+    if not warp_on_bound and warp_rms < min(builtin_rms, shift_rms) - noise:
+        return 'warped'
+    return 'shifted' if shift_rms < builtin_rms and not shift_on_bound else 'built-in'
+
+
 def identify_mechanics(
     bring: BringUp,
     out: Path,
@@ -424,6 +559,7 @@ def identify_mechanics(
         return fitted, row, shift, payload, wire, model
 
     dt_step = MECH_STEP_S
+    payload_warning = ''
     why_not = (
         f'where the angle moves as muscle 2 heats is {mismatch:.1f} degC off the built-in wire model at its best fit'
     )
@@ -446,7 +582,7 @@ def identify_mechanics(
         pays, shifts, _ = on_curve(np.array([prior_kg]))
         if pays.size:
             shift, payload = float(shifts[0]), prior_kg
-        warnings.append(
+        payload_warning = (
             f'joint: the payload is not determined by the excitation ({why_not}): {prior_kg:g} kg is assumed, give '
             '--payload-kg'
         )
@@ -463,48 +599,7 @@ def identify_mechanics(
 
     builtin_rms = rms_mrad(pred)
     v = fitted.values()
-    preload_mm = PlantParams().preload_elongation_mm + v['preload_err_mm']
-    hpath = save_hysteresis(
-        out / 'hysteresis.yaml',
-        dataclasses.replace(wire, name=f'{base.name}, commissioned ({shift:+.1f} degC)'),
-        {
-            'source': 'sma-wrist commission: angle against the measured muscle temperatures (fit phases)',
-            'transition_shift_C': round(shift, 3),
-            'stroke': 'built-in',
-            'stress_dependence': 'built-in (stresses are not measured on the device)',
-        },
-    )
-    hyst = {
-        'parameters': {
-            'transition_shift_C': round(shift, 3),
-            'stroke': 'built-in',
-            'stress_dependence': 'built-in',
-        },
-        'heldout': {
-            'metric': 'RMS angle error, replay from the measured temperatures (built-in joint)',
-            'unit': 'mrad',
-            'commissioned': round(rms_mrad(p_wire), 3),
-            'builtin': round(builtin_rms, 3),
-        },
-        'file': str(hpath),
-    }
-    joint = {
-        'parameters': {
-            'payload_kg': round(payload, 4),
-            'payload_given': payload_kg is not None,
-            'payload_identified': payload_found,
-            'second_onset_mismatch_C': round(mismatch, 3) if math.isfinite(mismatch) else None,
-            'coulomb_Nm': round(v['coulomb_Nm'], 5),
-            'preload_elongation_mm': round(preload_mm, 4),
-        },
-        'heldout': {
-            'metric': 'RMS angle error, replay from the measured temperatures (commissioned wire and joint)',
-            'unit': 'mrad',
-            'commissioned': round(rms_mrad(p_all), 3),
-            'builtin': round(builtin_rms, 3),
-        },
-        'file': None,
-    }
+    shift_rms = rms_mrad(p_all)
     on_bound = [
         f'{k} = {fitted.row[fx.INDEX[k]]:.3g}'
         for k in fitted.values()
@@ -519,20 +614,114 @@ def identify_mechanics(
         on_bound.append(f'payload_kg = {payload:.3g}')
     if abs(shift) >= SHIFT_RANGE_C - 1e-6:
         on_bound.append(f'transition_shift_C = {shift:.3g}')
-    # handed over only where it predicts the held-out cycle better than the built-in model with every fitted value
-    # inside its range: a parameter at its bound is the fit compensating what the model cannot describe (on a wrist
-    # the SD-GPI and joint model do not fit), not a measurement, and would mislead the controllers
-    better = joint['heldout']['commissioned'] < joint['heldout']['builtin'] and not on_bound
-    hyst['handed_over'] = joint['handed_over'] = better
-    if better:
-        values = {'payload_kg': payload, 'coulomb_Nm': v['coulomb_Nm'], 'preload_mm': preload_mm, 'wire': wire}
+
+    # the warped wire (fit_warped_wire: heating and cooling shifts, width, stroke, stress dependence) from the
+    # shift-only fit on, at its payload (the warp's stress dependence and the payload trade: a free payload came out
+    # 0.36 kg for 0.45 kg on the phase-fraction wrist). The angle's noise [mrad]: a model better by less than that is
+    # not better (on the model wrist the warp fits to 1.8 against the built-in's 0.3 mrad held out)
+    noise_mrad = 1e3 * fx.noise_sigma(qg, 2 * np.pi / 2**16)
+    start = {'shift_C': shift, 'coulomb_Nm': v['coulomb_Nm'], 'preload_err_mm': v['preload_err_mm']}
+    fit_run = dataclasses.replace(run, payload_kg=payload)
+    wf = fit_warped_wire(fit_run, base, i_held, start)
+    # a payload read by the shift-only wire went through the built-in stress dependence: a warp that scales it
+    # beyond STRESS_SCALE_TOLERANCE does not read that payload (the two trade: on an SD-GPI wire warped with the
+    # built-in stress dependence and 0.4 kg, 0.32 kg with a stress scale of 1.28), refitted at the prior
+    w_payload_found = payload_found and abs(wf.warp.stress_scale - 1.0) <= STRESS_SCALE_TOLERANCE
+    if payload_found and not w_payload_found:
+        fit_run = dataclasses.replace(run, payload_kg=prior_kg)
+        wf = fit_warped_wire(fit_run, base, i_held, start)
+    w_model = fx.ExtendedModel(fit_run, PlantParams(dt=dt_step, hysteresis=wf.wire))
+    w_row = fx.NOMINAL.copy()
+    w_row[fx.INDEX['coulomb_Nm']], w_row[fx.INDEX['preload_err_mm']] = wf.coulomb_Nm, wf.preload_err_mm
+    w_mismatch = second_onset_mismatch(w_model, w_row, grid, second['t_start_s'], second['t_end_s'])
+    w_only = fx.NOMINAL.copy()
+    w_only[i_pay] = prior_kg - fit_run.payload_kg  # the warped wire with the built-in joint
+    pw_wire, pw_all = w_model.angle_measured(np.stack([w_only, w_row]), None, 'measured').T
+    warp_rms = rms_mrad(pw_all)
+    chosen = choose_wire(builtin_rms, shift_rms, bool(on_bound), warp_rms, bool(wf.at_bounds), noise_mrad)
+    warp_values = {
+        'heating_shift_C': round(wf.warp.heating_shift_C, 2),
+        'cooling_shift_C': round(wf.warp.cooling_shift_C, 2),
+        'width_scale': round(wf.warp.width_scale, 4),
+        'stroke_scale': round(wf.warp.stroke_scale, 4),
+        'stress_scale': round(wf.warp.stress_scale, 4),
+        'load_kgf': wf.warp.load_kgf,
+        'at_bounds': wf.at_bounds,
+    }
+    if chosen == 'warped':
+        wire, payload, payload_found, mismatch = wf.wire, fit_run.payload_kg, w_payload_found, w_mismatch
+        coulomb, preload_mm = wf.coulomb_Nm, PlantParams().preload_elongation_mm + wf.preload_err_mm
+        p_wire, p_all = pw_wire, pw_all
+        ident = {
+            'wire_model': 'built-in SD-GPI warped (heating and cooling shifts, width, stroke, stress dependence)',
+            **{k: x for k, x in warp_values.items() if k != 'at_bounds'},
+        }
+    else:
+        coulomb, preload_mm = v['coulomb_Nm'], PlantParams().preload_elongation_mm + v['preload_err_mm']
+        ident = {'wire_model': 'built-in SD-GPI shifted', 'transition_shift_C': round(shift, 3)}
+    hyst = {
+        'parameters': {
+            'wire_model': chosen,
+            'transition_shift_C': round(shift, 3),
+            'warp': warp_values,
+            'stroke': 'scaled' if chosen == 'warped' else 'built-in',
+            'stress_dependence': 'scaled' if chosen == 'warped' else 'built-in',
+        },
+        'heldout': {
+            'metric': 'RMS angle error, replay from the measured temperatures (built-in joint)',
+            'unit': 'mrad',
+            'commissioned': round(rms_mrad(p_wire), 3),
+            'builtin': round(builtin_rms, 3),
+        },
+    }
+    joint = {
+        'parameters': {
+            'payload_kg': round(payload, 4),
+            'payload_given': payload_kg is not None,
+            'payload_identified': payload_found,
+            'second_onset_mismatch_C': round(mismatch, 3) if math.isfinite(mismatch) else None,
+            'coulomb_Nm': round(coulomb, 5),
+            'preload_elongation_mm': round(preload_mm, 4),
+        },
+        'heldout': {
+            'metric': 'RMS angle error, replay from the measured temperatures (commissioned wire and joint)',
+            'unit': 'mrad',
+            'commissioned': round(rms_mrad(p_all), 3),
+            'builtin': round(builtin_rms, 3),
+            'shift_only': round(shift_rms, 3),
+            'warped': round(warp_rms, 3),
+            'angle_noise': round(noise_mrad, 3),
+        },
+        'file': None,
+    }
+    hyst['handed_over'] = joint['handed_over'] = chosen != 'built-in'
+    if payload_warning and not (chosen == 'warped' and payload_found):
+        if chosen == 'warped':  # the payload and the warp's stress dependence both move the transformation with load
+            payload_warning = (
+                'joint: the payload is not determined by the excitation (the warped wire model fits its stress '
+                'dependence, which trades with the payload: both move the transformation with the load): '
+                f'{prior_kg:g} kg is assumed, give --payload-kg'
+            )
+        warnings.append(payload_warning)
+    if chosen != 'built-in':
+        values = {'payload_kg': payload, 'coulomb_Nm': coulomb, 'preload_mm': preload_mm, 'wire': wire}
+        hpath = save_hysteresis(
+            out / 'hysteresis.yaml',
+            dataclasses.replace(wire, name=f'{base.name}, commissioned ({chosen})'),
+            {
+                'source': 'sma-wrist commission: angle against the measured muscle temperatures (fit phases)',
+                **ident,
+                'heldout_angle_rms_mrad': {'commissioned': round(rms_mrad(p_all), 3), 'builtin': round(builtin_rms, 3)},
+                'stresses': 'not measured on the device: the stress dependence is read through the joint',
+            },
+        )
     else:
         why = (
             f'{", ".join(on_bound)} at the end of the range the fit allows: the built-in wire and joint model '
             'do not describe this wrist'
             if on_bound
             else 'the recalibrated model predicts the held-out cycle no better than the built-in one '
-            f'({joint["heldout"]["commissioned"]:.3g} against {joint["heldout"]["builtin"]:.3g} mrad RMS)'
+            f'({shift_rms:.3g} against {builtin_rms:.3g} mrad RMS)'
         )
         warnings.append(
             f'wire and joint: {why}; the built-in wire, pre-load and friction are handed over'
@@ -547,7 +736,14 @@ def identify_mechanics(
         hpath = save_hysteresis(
             out / 'hysteresis.yaml', base, {'source': 'built-in (the recalibration was not handed over)'}
         )
-        hyst['file'] = str(hpath)
+    if chosen != 'warped':
+        hyst['parameters']['warp_not_handed_over'] = (
+            f'{", ".join(wf.at_bounds)} at the end of the range the fit allows'
+            if wf.at_bounds
+            else f'it predicts the held-out cycle {warp_rms:.3g} mrad RMS, not better than the built-in '
+            f"({builtin_rms:.3g}) and the shift-only wire ({shift_rms:.3g}) beyond the angle's noise ({noise_mrad:.2g})"
+        )
+    hyst['file'] = str(hpath)
     return hyst, joint, values, warnings
 
 

@@ -74,20 +74,44 @@ IDENTIFY: dict[str, tuple[dict[str, Any], dict[str, float]]] = {
         {'transition_shift_C': 8.0, 'tem1_gain_relative_to_tem2': 0.8, 'payload_kg': 0.5},
     ),
     'model (nominal)': ({}, {'transition_shift_C': 0.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.3}),
+    # devices the warped wire was not designed on: another phase-fraction wire, and the built-in SD-GPI warped
+    # (``wire_warp``: :class:`sma_wrist.core.hysteresis.warp.Warp` of the emulated wire, its stress dependence kept)
+    'phase-fraction wrist, wire -4 degC, stroke 0.8 x, 0.35 kg': (
+        {'plant': 'phase_fraction', 'scenario': {'transition_shift_C': -4.0, 'stroke_scale': 0.8}, 'payload_kg': 0.35},
+        {'transition_shift_C': -4.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.35},
+    ),
+    'SD-GPI wire warped (heating +6, cooling +10 degC, width 1.3 x, stroke 0.9 x), 0.4 kg': (
+        {'wire_warp': (6.0, 10.0, 1.3, 0.9, 1.0), 'payload_kg': 0.4},
+        {'transition_shift_C': 8.0, 'tem1_gain_relative_to_tem2': 1.0, 'payload_kg': 0.4},
+    ),
 }
+
+
+def emulator_config(cfg: dict[str, Any], **kw: Any) -> Any:
+    """The EmulatorConfig of a device of :data:`IDENTIFY` (a ``wire_warp`` made the emulated wrist's wire)."""
+    from sma_wrist.hw.emulator import EmulatorConfig
+
+    cfg = dict(cfg)
+    warp = cfg.pop('wire_warp', None)
+    if warp is not None:
+        from sma_wrist.core.hysteresis.default_params import default_sdgpi
+        from sma_wrist.core.hysteresis.warp import Warp, warped_wire
+        from sma_wrist.core.plant.wrist import PlantParams
+
+        cfg['base'] = PlantParams(hysteresis=warped_wire(default_sdgpi(), Warp(*warp)))
+    return EmulatorConfig(**cfg, **kw)
 
 
 def measure_identification(rate_hz: float = 1000.0) -> dict[str, Any]:
     """The identification table of doc/howto/commission.md: per device the identified values and their truth."""
     from sma_wrist.commission.device import SimDevice
     from sma_wrist.commission.run import commission
-    from sma_wrist.hw.emulator import EmulatorConfig
 
     rows: dict[str, Any] = {}
     with tempfile.TemporaryDirectory() as d:
         for name, (cfg, truth) in IDENTIFY.items():
             t0 = time.time()
-            res = commission(f'{d}/{len(rows)}', SimDevice(EmulatorConfig(rate_hz=rate_hz, **cfg)))
+            res = commission(f'{d}/{len(rows)}', SimDevice(emulator_config(cfg, rate_hz=rate_hz)))
             ident = res.get('identified') or {}
             found = {
                 'transition_shift_C': ident.get('hysteresis', {}).get('parameters', {}).get('transition_shift_C'),
@@ -96,6 +120,10 @@ def measure_identification(rate_hz: float = 1000.0) -> dict[str, Any]:
                 .get('tem1_gain_relative_to_tem2'),
                 'payload_kg': ident.get('joint', {}).get('parameters', {}).get('payload_kg'),
                 'payload_identified': ident.get('joint', {}).get('parameters', {}).get('payload_identified'),
+                'wire_model': ident.get('hysteresis', {}).get('parameters', {}).get('wire_model'),
+                'warp': ident.get('hysteresis', {}).get('parameters', {}).get('warp'),
+                'preload_elongation_mm': ident.get('joint', {}).get('parameters', {}).get('preload_elongation_mm'),
+                'coulomb_Nm': ident.get('joint', {}).get('parameters', {}).get('coulomb_Nm'),
             }
             rows[name] = {
                 'status': res['status'],

@@ -23,7 +23,8 @@ from typing import Any
 import numpy as np
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, simulate
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, simulate
+from sma_wrist.core.hysteresis.warp import Warp, warped_wire
 from sma_wrist.identify.loops import transitions
 
 #: load [kgf] per wire at which the windows are placed: the seed's working band is 0.75-0.9 kgf
@@ -43,24 +44,10 @@ def shifted_wire(params: SDGPIParams, dT_C: float) -> SDGPIParams:
 
     Every tanh of Eqs. 3.21-3.22, k0 tanh(k1 T + k2) + k3, becomes k0 tanh(k1 (T - dT) + k2):
     k2 -> k2 - k1 dT, per load polynomial of Eqs. 4.4-4.5 (k1 and k2 are polynomials of the
-    load, so is their combination); the valid range's top moves up with it.
+    load, so is their combination); the valid range's top moves up with it. The special case of
+    :func:`warped_wire` with one shift for both directions.
     """
-    env = params.envelopes
-    a, b = env.a.copy(), env.b.copy()
-    a[:, 2] -= dT_C * a[:, 1]
-    b[:, 2] -= dT_C * b[:, 1]
-    c, d = params.c.copy(), params.d.copy()
-    c[2] -= dT_C * c[1]
-    d[2] -= dT_C * d[1]
-    lo, hi = params.T_valid
-    return dataclasses.replace(
-        params,
-        envelopes=EnvelopeSections(env.edges_kg, a, b),
-        c=c,
-        d=d,
-        T_valid=(lo, hi + max(dT_C, 0.0)),
-        name=f'{params.name}, {dT_C:+g} degC',
-    )
+    return dataclasses.replace(warped_wire(params, Warp(dT_C, dT_C)), name=f'{params.name}, {dT_C:+g} degC')
 
 
 def wire_transitions(params: SDGPIParams, load_kgf: float = WRIST_LOAD_KGF) -> dict[str, float]:

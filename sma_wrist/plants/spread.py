@@ -40,7 +40,8 @@ from numpy.typing import NDArray
 from sma_wrist.core.errors import ParameterError, check_finite
 from sma_wrist.core.hysteresis.kernel import _solve_load
 from sma_wrist.core.hysteresis.muscle import MuscleModel
-from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams, initial_state, mirrored_output, play_bounds
+from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, initial_state, mirrored_output, play_bounds
+from sma_wrist.core.hysteresis.warp import Warp, warped_wire
 from sma_wrist.core.jit import _jit
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant import kernel as plant_kernel
@@ -218,31 +219,11 @@ def perturbed_hysteresis(
     if shift_C == 0.0 and stroke_scale == 1.0:
         return base
     s = float(stroke_scale)
-    env = base.envelopes
-
-    def env_set(k: FloatArray) -> FloatArray:  # (K, 4, 3): k0..k3 per section, quadratic in m
-        k = k.copy()
-        k[:, 2, :] -= shift_C * k[:, 1, :]
-        k[:, 0, :] *= s
-        k[:, 3, :] *= s
-        return k
-
-    def mem_set(k: FloatArray) -> FloatArray:  # (4,)
-        return np.array([s * k[0], k[1], k[2] - shift_C * k[1], s * k[3]])
-
     cold = initial_state(base, T_cold_C, load_kgf, branch='cooling')
     hot = initial_state(base, T_hot_C, load_kgf, branch='heating')
     y_ref = 0.5 * float(mirrored_output(base, cold, T_cold_C)[0] + mirrored_output(base, hot, T_hot_C)[0])
-    return SDGPIParams(
-        EnvelopeSections(env.edges_kg, env_set(env.a), env_set(env.b)),
-        mem_set(base.c),
-        mem_set(base.d),
-        base.rho,
-        base.tau / s,
-        base.c_thr * s,
-        n=base.n,
-        p0=base.p0,
-        k_f=base.k_f - (1.0 - s) * y_ref,
+    return dataclasses.replace(
+        warped_wire(base, Warp(shift_C, shift_C, stroke_scale=s, y_ref_mm=y_ref)),
         T_valid=base.T_valid,
         name=f'{base.name} shifted {shift_C:+.2f} degC, stroke x{s:.3f}',
     )
