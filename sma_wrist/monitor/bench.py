@@ -229,7 +229,11 @@ def emulated_case(
         out['wall_s'] = time.time() - c0
     finally:
         emu.terminate()
-        emu.wait(10)
+        try:
+            emu.wait(10)
+        except subprocess.TimeoutExpired:  # a niced emulator on a busy machine may not get to end in time
+            emu.kill()
+            emu.wait()
     if r.returncode != 0 or not os.path.exists(hist):
         out['error'] = (r.stderr.strip().splitlines() or [f'exit {r.returncode}'])[-1]
         out['detected'] = False
