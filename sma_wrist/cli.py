@@ -260,7 +260,8 @@ def _run(a: argparse.Namespace, live: Any, real_time_factor: float | None) -> in
             m = summary.monitor
             v = m['verdict']
             print(
-                f'twin_monitor: {m["checks"]} checks ({m["skipped_checks"]} skipped while one ran); last verdict: '
+                f'twin_monitor: {m["checks"]} checks ({m["skipped_checks"]} skipped while one ran, '
+                f'{m["behind_s"]:.1f} s behind the wrist at the end); last verdict: '
                 + (f'{v["level"]} {v["cause"] or ""} {v["subsystem"] or ""}'.strip() if v else 'none yet')
                 + (f'; history: {a.monitor}' if a.monitor else '')
             )

@@ -298,6 +298,7 @@ def _run(
             monitor_out = {
                 'checks': len(monitor_node.history),
                 'skipped_checks': monitor_node.skipped_checks,
+                'behind_s': monitor_node.behind_s(),
                 'worker': monitor_node.p['worker'],
                 'worker_cpu_s': monitor_node.worker_cpu_s,
                 'verdict': v.to_json() if v is not None else None,

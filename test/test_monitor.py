@@ -886,3 +886,88 @@ def test_a_cause_that_explains_most_of_an_unexplained_misfit_is_raised_by_two_ch
                 raised[gain] = (t, v.cause, v.subsystem, v.partial)
                 break
     assert raised == {65.0: (125.0, 'recalibrate_thermal', 'thermal', True)}
+
+
+def test_a_worker_that_falls_behind_the_wrist_is_reported_apart_from_the_verdict(tmp_path):
+    """A worker starved of CPU takes its input in order and checks in its own time: it skips no check period, and
+    skipped_checks stayed 0 while its verdicts told of a wrist 35 s ago. The node says how far behind its checks are
+    (``behind_s``: the newest sample received minus the end of the window last checked) in the model status and the
+    verdict history, and warns on a status of its own (not a verdict on the wrist) beyond two check periods."""
+    from sma_wrist import runtime
+    from sma_wrist.nodes.twin_monitor import TwinMonitor
+    from sma_wrist.runtime.launch import Runtime
+
+    runtime.activate()
+    from builtin_interfaces.msg import Time
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+    from rclpy.node import Node
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Header
+
+    hist = tmp_path / 'verdicts.json'
+
+    class Late:
+        """A worker whose first verdict (the window ending at 65 s) comes when the wrist is at 100 s."""
+
+        def __init__(self):
+            self.answers = []
+
+        def send(self, msg):
+            pass
+
+        def poll(self):
+            out, self.answers = self.answers, []
+            return out
+
+        def ended(self):
+            return None
+
+        def close(self):
+            pass
+
+    statuses = []
+    params = {'/twin_monitor': {'worker': 'inline', 'history_file': str(hist), 'check_period_s': 15.0}}
+    with Runtime(params=params) as rt:
+        (node,) = rt.add_nodes([TwinMonitor])
+        node._link.close()
+        node._link = late = Late()
+        src = rt.add(Node('src'))
+        src.create_subscription(DiagnosticArray, '/diagnostics', lambda m: statuses.extend(m.status), 10)
+        joint = src.create_publisher(JointState, '/wrist/joint_states', 10)
+
+        def at(t):
+            joint.publish(JointState(header=Header(stamp=Time(sec=t)), name=['wrist'], position=[0.5], velocity=[0.0]))
+            rt.run_until(rt.steady_ns * 1e-9 + 0.001, until='steady')
+
+        def heartbeat():
+            del statuses[:]
+            node._heartbeat()
+            rt.run_until(rt.steady_ns * 1e-9 + 0.001, until='steady')
+            return {s.name: (s.level, {kv.key: kv.value for kv in s.values}, s.message) for s in statuses}
+
+        at(0)
+        at(70)
+        s = heartbeat()  # no check yet, the first was due at 65 s: 5 s behind
+        assert s['twin_monitor: model'][1]['behind_s'] == '5.00' and 'twin_monitor: checks' not in s
+        at(100)
+        late.answers.append(('verdict', Verdict(65.0, 'OK', None, None, 1.0), [], 0, 0.5))
+        s = heartbeat()
+        level, values, text = s['twin_monitor: model']
+        assert level == DiagnosticStatus.OK and values['behind_s'] == '35.00' and values['skipped_checks'] == '0'
+        level, values, text = s['twin_monitor: checks']  # 35 s > two periods of 15 s
+        assert level == DiagnosticStatus.WARN and values['behind_s'] == '35.00' and 'behind the wrist' in text
+        late.answers.append(('verdict', Verdict(95.0, 'OK', None, None, 1.0), [], 0, 0.5))
+        s = heartbeat()  # caught up: the checks' status is OK again, the model's still OK
+        assert s['twin_monitor: checks'][0] == DiagnosticStatus.OK and s['twin_monitor: model'][1]['behind_s'] == '5.00'
+        node.destroy_node()
+    assert [v['behind_s'] for v in json.loads(hist.read_text())['verdicts']] == [35.0, 5.0]
+
+
+def test_the_verdict_history_says_how_far_behind_the_newest_sample_each_check_came():
+    """Played through, every check is made at its window's end with the samples up to it: nothing behind."""
+    mon = Monitor(MonitorConfig(check_period_s=1e9))
+    v = mon.decide(Verdict(30.0, 'OK', None, None, 1.0))
+    assert v.behind_s is None  # nothing fed yet
+    mon.angle(42.5, 0.5)
+    v = mon.decide(Verdict(40.0, 'OK', None, None, 1.0))
+    assert v.behind_s == pytest.approx(2.5) and 'behind_s' in history_text(mon.history, 'csv').splitlines()[0]

@@ -50,6 +50,7 @@ RANGES: dict[str, dict[str, tuple[float, float, bool]]] = {
     'backlash': {'backlash_rad': (0.02, 0.06, False)},
     'hysteresis_rate': {'hyst_lag_s': (4.0, 12.0, False)},
     'hysteresis_drift': {'hyst_drift_C_per_cycle': (1.5, 4.0, True)},
+    'hysteresis_shift': {'hyst_shift_C': (2.0, 6.0, True)},
     'recalibrate_thermal': {'loss_scale_err': (0.12, 0.25, True)},
     'recalibrate_mechanics': {'preload_err_mm': (0.08, 0.2, True)},
     # per-channel sensors and the TEM driver
@@ -163,9 +164,11 @@ def simulate(
     T_true, _ = consts.thermal(u_applied, dt, coef, x0, np.array([drift]), SUBSTEPS)
     T_true = T_true[:, 0]
     faces = None if faces_start_C is None else _face_trace(consts, u_applied, dt, coef, x0, drift)
-    T_wire = fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt) - r[
-        fx.INDEX['hyst_drift_C_per_cycle']
-    ] * fx.cycle_count(T_true, dt)
+    T_wire = (
+        fx.first_order(T_true, r[fx.INDEX['hyst_lag_s']], dt)
+        - r[fx.INDEX['hyst_shift_C']]
+        - r[fx.INDEX['hyst_drift_C_per_cycle']] * fx.cycle_count(T_true, dt)
+    )
     jr = consts.joint_row.copy()
     jr[0] = r[fx.INDEX['coulomb_Nm']]
     jr[1] = r[fx.INDEX['viscous_Nms']]

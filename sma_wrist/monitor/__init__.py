@@ -115,6 +115,12 @@ THERMAL_CHANGE_SHARE = 0.5
 #: (measurement time); older, the device has stopped reading it back (or never did) and the commands drive the twin.
 #: A window replays a TEM's read-back when it covers the window to within this at both ends
 READBACK_FRESH_S = 1.0
+#: a live monitor's checks are falling behind the wrist (twin_monitor's WARN on ``twin_monitor: checks``) once the
+#: newest sample received is more than this many check periods past the end of the window last checked: one period
+#: is their rhythm and a check takes seconds, so a worker that keeps up stays within about one; a worker starved of
+#: CPU takes its input in order and checks in its own time (at load 11 one made a single check in 210 s of an
+#: emulated device and skipped no period)
+BEHIND_PERIODS = 2.0
 
 
 @dataclass
@@ -187,6 +193,9 @@ class Verdict:
     pending: bool = False  # a change too recent to diagnose: this check neither raises nor clears anything
     partial: bool = False  # the cause explains most, not all, of the misfit (PARTIAL_NAME_GAIN_PCT)
     drift_fit: bool = False  # named by the slow-drift fit (drift.py), not by the diagnosis
+    #: how far this check came behind the wrist [s]: the stamp of the newest sample received when its verdict was
+    #: made minus ``t_s`` (a check's own seconds; more when the check worker is starved of CPU and falls behind)
+    behind_s: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         from sma_wrist.diagnose import _plain
@@ -516,8 +525,7 @@ class Monitor:
                 out.summary = f'{v.summary}; raised before it: {cur.summary}'
                 out.parameters, out.correlates = dict(cur.parameters), list(cur.correlates)
                 out.change_s, out.pending = v.change_s, True
-            self.history.append(out)
-            return out
+            return self._keep(out)
         if _key(v) == (_key(cur) if cur is not None else ('OK', None)):
             self._streak = []
             if v.level != 'OK':
@@ -564,6 +572,12 @@ class Monitor:
                     )
                 out.check_cause, out.check_subsystem = v.check_cause, v.check_subsystem
                 out.check_confidence, out.check_cpu_s = v.check_confidence, v.check_cpu_s
+        return self._keep(out)
+
+    def _keep(self, out: Verdict) -> Verdict:
+        """Keep a published verdict in the history, with how far behind the newest sample fed it came."""
+        if self.t_last is not None:  # the samples fed while the check ran (a node knows of newer ones: it sets its own)
+            out.behind_s = max(self.t_last - out.t_s, 0.0)
         self.history.append(out)
         return out
 
@@ -838,6 +852,7 @@ HISTORY_FIELDS = (
     'since_s',
     'parameters',
     'change_s',
+    'behind_s',
     'summary',
 )
 

@@ -17,6 +17,10 @@ correlates with when the catalogue has nothing); ERROR when the data cannot be c
 key/values carry the check's details, among them ``change_s`` (where the check placed a change of the residuals in
 its window), ``pending`` (that change too recent to name: the published verdict stands) and ``partial`` (the cause
 explains most, not all, of the misfit), as in the verdict history, which goes to ``history_file`` (.csv, .json or .md).
+Both also carry ``behind_s``, how far the checks are behind the wrist (the newest sample received minus the end of the
+window last checked); a separate status, ``twin_monitor: checks``, is WARN while that exceeds
+:data:`sma_wrist.monitor.BEHIND_PERIODS` check periods (the worker starved of CPU: a fact about the monitor, not a
+verdict on the wrist).
 
 Optional in both launch files (``monitor:=true``) and in ``sma-wrist run --monitor``.
 """
@@ -31,7 +35,7 @@ from sensor_msgs.msg import JointState, Temperature
 from std_msgs.msg import Float64, Header
 
 from sma_wrist.core.errors import SmaWristError
-from sma_wrist.monitor import MonitorConfig, MonitorInputError, Verdict, history_format, write_history
+from sma_wrist.monitor import BEHIND_PERIODS, MonitorConfig, MonitorInputError, Verdict, history_format, write_history
 from sma_wrist.monitor.twin import load_model
 from sma_wrist.monitor.worker import RUNTIME_FIELDS, WorkerLink
 from sma_wrist.nodes.common import HYSTERESIS_FILE_PARAM, MUSCLE_FRAMES, Param, WristNode, finite, main_for
@@ -188,6 +192,7 @@ class TwinMonitor(WristNode):
         self._seq = 0
         self._stamps: OrderedDict[int, Any] = OrderedDict()  # batch -> its last joint state's stamp
         self.t_first: float | None = None
+        self.t_newest: float | None = None  # stamp of the newest measurement received [s]
         self.span_s = self.config.window_s + self.config.settle_s
         self.skipped_checks = 0
         self.history: list[Verdict] = []
@@ -243,7 +248,9 @@ class TwinMonitor(WristNode):
         if not finite(msg.temperature):
             self.reject_input(f'/wrist/muscle_{i}/temperature', f'non-finite temperature {msg.temperature!r}')
             return
-        self._events.append(('T', i, self.stamp_s(msg), float(msg.temperature)))
+        t = self.stamp_s(msg)
+        self._newest(t)
+        self._events.append(('T', i, t, float(msg.temperature)))
 
     def _on_face(self, i: int, msg: Temperature) -> None:
         if finite(msg.temperature):  # a face is no safety input here: a bad sample is left out
@@ -274,6 +281,7 @@ class TwinMonitor(WristNode):
             self.reject_input('/wrist/joint_states', f'non-finite angle {q!r}')
             return
         t = self.stamp_s(msg)
+        self._newest(t)
         self._events.append(('q', 0, t, q))
         if self._sent_t is not None and t - self._sent_t < self._batch_s - 1e-9:
             return
@@ -292,6 +300,40 @@ class TwinMonitor(WristNode):
                 self._stamps.popitem(last=False)
         self._link.send(('feed', seq, events, want_twin))
         self.collect()
+
+    def _newest(self, t: float) -> None:
+        if self.t_newest is None or t > self.t_newest:
+            self.t_newest = t
+
+    def behind_s(self) -> float:
+        """How far the checks are behind the wrist [s]: the stamp of the newest measurement received minus the end of
+        the window last checked (before the first check: minus when it was due); 0 before that."""
+        if self.t_newest is None:
+            return 0.0
+        if self.verdict is not None:
+            end = self.verdict.t_s
+        elif self.t_first is not None:
+            end = self.t_first + self.span_s
+        else:
+            return 0.0
+        return max(self.t_newest - end, 0.0)
+
+    def _keeping_up(self) -> None:
+        """``twin_monitor: checks``: WARN while the checks are more than BEHIND_PERIODS check periods behind the
+        wrist (the worker gets too little CPU; a fact about the monitor, not about the wrist), OK again once they
+        are not."""
+        behind, period = self.behind_s(), self.config.check_period_s
+        values = {'behind_s': f'{behind:.2f}', 'skipped_checks': self.skipped_checks}
+        if behind > BEHIND_PERIODS * period:
+            self.diagnose(
+                'checks',
+                DiagnosticStatus.WARN,
+                f'the checks are more than {BEHIND_PERIODS:g} check periods ({BEHIND_PERIODS * period:g} s) behind '
+                f'the wrist: the monitor worker gets too little CPU (a busy machine), its verdicts come late',
+                values,
+            )
+        else:
+            self.diagnose('checks', DiagnosticStatus.OK, 'the checks keep up with the wrist', values)
 
     # -- the worker's answers -----------------------------------------------------------------------------------
     def collect(self, publish: bool = True) -> None:
@@ -319,6 +361,8 @@ class TwinMonitor(WristNode):
     ) -> None:
         if cpu_s is not None:
             self.worker_cpu_s = cpu_s
+        if self.t_newest is not None:  # the node has seen newer samples than the worker had when it decided
+            v.behind_s = max(v.behind_s or 0.0, self.t_newest - v.t_s, 0.0)
         self.verdict = v
         self.history.append(v)
         self.episodes = episodes
@@ -360,6 +404,7 @@ class TwinMonitor(WristNode):
             'check': v.summary,
             'check_cpu_s': f'{v.check_cpu_s:.2f}',
             'skipped_checks': self.skipped_checks,
+            'behind_s': f'{self.behind_s():.2f}',
             'change_s': '' if v.change_s is None else f'{v.change_s:.2f}',
             'pending': 'true' if v.pending else 'false',
             'partial': 'true' if v.partial else 'false',
@@ -390,7 +435,9 @@ class TwinMonitor(WristNode):
             level, text, values = DiagnosticStatus.OK, f'watching: {first}', {'skipped_checks': self.skipped_checks}
         else:
             level, text, values = self._status
+        values = {**values, 'behind_s': f'{self.behind_s():.2f}'}  # of now, not of the verdict's arrival
         self.publish_status('model', level, text, values)
+        self._keeping_up()
 
     def _publish_twin(
         self, stamp: Any, T: tuple[float, float], q: float, qd: float, residuals: dict[str, float]

@@ -11,7 +11,7 @@ Where each effect acts (doc/explanation/diagnosis.md has the equations)::
     commands --delay--> TEM heat balance (gain, loss, Joule, coupling, ambient)--> T_true
     commands --TEM driver (dead zone, saturation below the rating)--> applied drive
     T_true --thermocouple i (lag, delay, gain, offset, drift; per channel)--> T_measured
-    T_true --wire lag, cycle drift--> T_wire --SD-GPI + joint (payload, friction, pre-load)--> q
+    T_true --wire lag, transition shift, cycle drift--> T_wire --SD-GPI + joint (payload, friction, pre-load)--> q
     q --backlash (play), potentiometer (delay, lag, offset, gain, drift)--> q_measured
 
 :func:`plant_params` folds the thermal and joint parameters into a
@@ -80,6 +80,15 @@ PARAMS: tuple[ExtensionParam, ...] = (
         10.0,
         1.0,
         'transition temperatures move with the cycle count (functional fatigue)',
+    ),
+    ExtensionParam(
+        'hyst_shift_C',
+        'degC',
+        0.0,
+        -15.0,
+        15.0,
+        1.0,
+        'the wires transform this much hotter (> 0) or colder than the model: transition temperatures shifted',
     ),
     ExtensionParam('payload_err_kg', 'kg', 0.0, -0.5, 1.0, 0.1, 'true payload minus the recorded /wrist/payload'),
     ExtensionParam('coulomb_Nm', 'N m', 0.004, 0.0, 0.3, 0.02, 'Coulomb friction moment (static = 1.5 x Coulomb)'),
@@ -184,7 +193,8 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
 
     Same arithmetic as the diagnosis' replay coefficients (diagnose.effects.thermal_coef):
     loss scaling multiplies the muscle face's K_Tinf, K_T and K_inf (ambient unchanged),
-    the Joule scaling both faces' K_R, the ambient offset shifts both faces' ambients.
+    the Joule scaling both faces' K_R, the ambient offset shifts both faces' ambients, the transition shift moves the
+    wire's SD-GPI along the temperature axis.
     Raises ParameterError for a :data:`REPLAY_ONLY` effect away from nominal.
     """
     v = check(values)
@@ -209,8 +219,19 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
         static_Nm=STATIC_PER_COULOMB * v['coulomb_Nm'],
         viscous_Nms=v['viscous_Nms'],
     )
+    hy = p.hysteresis
+    if v['hyst_shift_C'] != 0.0:
+        # the SD-GPI's envelopes and memory curves moved along the temperature axis: the wire at T is the model's
+        # wire at T - shift (the replay's T_wire = T - hyst_shift_C)
+        from sma_wrist.plants.spread import perturbed_hysteresis
+
+        hy = perturbed_hysteresis(hy, v['hyst_shift_C'])
     return dataclasses.replace(
-        p, thermal=tp, joint=jp, preload_elongation_mm=p.preload_elongation_mm + v['preload_err_mm']
+        p,
+        thermal=tp,
+        joint=jp,
+        hysteresis=hy,
+        preload_elongation_mm=p.preload_elongation_mm + v['preload_err_mm'],
     )
 
 
