@@ -38,6 +38,13 @@ def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
         metavar='FILE',
         help="the TEMs' heat balance to replay: thermal.yaml from sma-wrist identify thermal (default: Table 4.9)",
     )
+    ap.add_argument(
+        '--params-file',
+        metavar='FILE',
+        help="the model to replay: that of a params file's plant_sim (else hardware_bridge) section, e.g. "
+        "sma-wrist commission's wrist_params.yaml: its model files, pre-load and model.* values "
+        '(--hysteresis-file / --thermal-file replace its files)',
+    )
     recording_arguments(ap)
     return ap
 
