@@ -113,8 +113,9 @@ def monitor_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument(
         '--params-file',
         metavar='FILE',
-        help="a diagnosis' extended_params.yaml (sma-wrist diagnose --params): the twin runs that "
-        'extended model and the monitor stays OK while the wrist keeps to it',
+        help="a params file's plant model (plant_sim's section, else hardware_bridge's: a commissioned "
+        "wrist_params.yaml, or a diagnosis' extended_params.yaml): the twin runs it, the checks replay it, and the "
+        'monitor stays OK while the wrist keeps to it',
     )
     recording_arguments(ap)
     return ap

@@ -475,9 +475,7 @@ class Monitor:
     def diagnose(self, window: Run | Change | str, t_s: float) -> Verdict:
         """Diagnose one window (the costly part: seconds of CPU); returns this check's verdict, before persistence."""
         m = self.model
-        return diagnose_window(
-            window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension, params_file=m.params_file
-        )
+        return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension, m.params_file)
 
     def needed(self, v: Verdict) -> int:
         """Consecutive checks that must agree before ``v`` is published: ``persist_checks`` (also for a cause that

@@ -156,7 +156,7 @@ class MonitorWorker:
         try:
             mm = m.model
             raw = diagnose_window(
-                window, t, m.config, mm.hysteresis_file, mm.thermal_file, mm.extension, params_file=mm.params_file
+                window, t, m.config, mm.hysteresis_file, mm.thermal_file, mm.extension, mm.params_file
             )
         except Exception as exc:  # noqa: BLE001 - a check that failed is reported, the monitor goes on
             raw = Verdict(t, 'ERROR', None, None, 1.0, summary=f'the check failed: {type(exc).__name__}: {exc}')
