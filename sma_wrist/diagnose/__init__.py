@@ -189,7 +189,12 @@ def nominal_plant(
     the diagnosis' nominal row, :func:`plant_model`); explicit ``hysteresis_file`` / ``thermal_file`` replace its."""
     if not (hysteresis_file or thermal_file or params_file):
         return None
-    return plant_model(params_file, hysteresis_file, thermal_file).base(dt=min(run.dt, 0.01))
+    from sma_wrist.plant_model import PlantModelFileError
+
+    try:
+        return plant_model(params_file, hysteresis_file, thermal_file).base(dt=min(run.dt, 0.01))
+    except PlantModelFileError as exc:
+        raise DiagnoseInputError(str(exc)) from None
 
 
 def plant_model(
@@ -221,7 +226,7 @@ def diagnose_run(
     t_start = time.perf_counter()
     pm = plant_model(params_file, hysteresis_file, thermal_file)
     model = fx.ExtendedModel(
-        run, nominal_plant(run, hysteresis_file, thermal_file, params_file), fx.theta(**pm.extension)
+        run, nominal_plant(run, hysteresis_file, thermal_file, params_file), nominal=fx.theta(**pm.extension)
     )
     ev = ft.Evaluator(model)
     if not ev.channels:
@@ -491,8 +496,8 @@ def diagnose_run(
 
 
 def effect_size(f: ft.Fit, nominal: np.ndarray = fx.NOMINAL) -> float:
-    """The largest departure of `f`'s fitted parameters from ``nominal`` (the row the fits start from), in units of its practical floor
-    (:data:`MIN_SIZE_FRACTION` x the catalogue's typical effect); >= 1: a size that matters."""
+    """The largest departure of `f`'s fitted parameters from ``nominal`` (the row the fits start from), in units of
+    its practical floor (:data:`MIN_SIZE_FRACTION` x the catalogue's typical effect); >= 1: a size that matters."""
     idx = [fx.INDEX[k] for k in f.effect.params]
     if not idx:
         return 0.0

@@ -422,7 +422,9 @@ class ExtendedModel:
         (:func:`theta`), so that what is fitted is what that model does not describe.
     """
 
-    def __init__(self, run, params: PlantParams | None = None, nominal: np.ndarray | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(  # type: ignore[no-untyped-def]
+        self, run, params: PlantParams | None = None, nominal: np.ndarray | None = None
+    ) -> None:
         self.run = run
         self.nominal = NOMINAL.copy() if nominal is None else np.asarray(nominal, float).copy()
         self.consts = Constants(params or PlantParams(dt=min(run.dt, 0.01)))
