@@ -38,6 +38,13 @@ def diagnose_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
         metavar='FILE',
         help="the TEMs' heat balance to replay: thermal.yaml from sma-wrist identify thermal (default: Table 4.9)",
     )
+    ap.add_argument(
+        '--params-file',
+        metavar='FILE',
+        help="the model to replay: that of a params file's plant_sim (else hardware_bridge) section, e.g. "
+        "sma-wrist commission's wrist_params.yaml: its model files, pre-load and model.* values "
+        '(--hysteresis-file / --thermal-file replace its files)',
+    )
     recording_arguments(ap)
     return ap
 
@@ -106,8 +113,9 @@ def monitor_arguments(ap: argparse.ArgumentParser) -> argparse.ArgumentParser:
     ap.add_argument(
         '--params-file',
         metavar='FILE',
-        help="a diagnosis' extended_params.yaml (sma-wrist diagnose --params): the twin runs that "
-        'extended model and the monitor stays OK while the wrist keeps to it',
+        help="a params file's plant model (plant_sim's section, else hardware_bridge's: a commissioned "
+        "wrist_params.yaml, or a diagnosis' extended_params.yaml): the twin runs it, the checks replay it, and the "
+        'monitor stays OK while the wrist keeps to it',
     )
     recording_arguments(ap)
     return ap

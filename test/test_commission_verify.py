@@ -20,7 +20,7 @@ import yaml
 
 from sma_wrist.commission.device import SimDevice
 from sma_wrist.commission.run import EXIT_FAULT, commission, exit_code
-from sma_wrist.commission.verify import CALIBRATION_KEYS, VerifyOptions, controllers_of, model_files, run_verification
+from sma_wrist.commission.verify import CALIBRATION_KEYS, VerifyOptions, controllers_of, run_verification
 from sma_wrist.hw.emulator import EmulatorConfig
 
 RATE_HZ = 250.0
@@ -201,20 +201,22 @@ def test_the_controllers_to_verify():
         controllers_of('pid,fuzzy')
 
 
-def test_the_diagnosis_takes_the_model_files_the_params_file_names(tmp_path):
+def test_the_diagnosis_replays_the_model_the_params_file_describes(tmp_path, monkeypatch):
+    """Its plant node's whole model (files, pre-load, model.* values), not only the files any node names."""
+    import sma_wrist.diagnose as dg
+    from sma_wrist.commission import verify as vf
+
+    seen = {}
+
+    def fake(bag, **kw):
+        seen.update(kw)
+        raise dg.DiagnoseInputError('stop here')
+
+    monkeypatch.setattr(dg, 'diagnose', fake)
     f = tmp_path / 'wrist_params.yaml'
-    f.write_text(
-        yaml.safe_dump(
-            {
-                'plant_sim': {'ros__parameters': {'hysteresis_file': 'hysteresis.yaml', 'thermal_file': ''}},
-                'tem_controller': {'ros__parameters': {'thermal_file': '/abs/thermal.yaml'}},
-            }
-        )
-    )
-    assert model_files([f]) == {
-        'hysteresis_file': str(tmp_path / 'hysteresis.yaml'),
-        'thermal_file': '/abs/thermal.yaml',
-    }
+    f.write_text(yaml.safe_dump({'plant_sim': {'ros__parameters': {'preload_elongation_mm': 2.1}}}))
+    vf.diagnosis(tmp_path / 'bag', f)
+    assert seen['params_file'] == str(f) and 'hysteresis_file' not in seen
 
 
 def test_the_diagnosis_scores_the_verification_run_after_its_soft_start(tmp_path, monkeypatch):

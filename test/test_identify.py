@@ -484,7 +484,9 @@ def test_diagnose_replays_with_the_hysteresis_file_and_refuses_a_bad_one(
     assert str(bad) in err and 'model' in err
     seen = []
     orig = dg.fx.ExtendedModel
-    monkeypatch.setattr(dg.fx, 'ExtendedModel', lambda run, params=None: (seen.append(params), orig(run, params))[1])
+    monkeypatch.setattr(
+        dg.fx, 'ExtendedModel', lambda run, params=None, **kw: (seen.append(params), orig(run, params, **kw))[1]
+    )
     try:
         dg.diagnose_run(load_run(bag), candidates=['sensor_offset'], hysteresis_file=synthetic[0]['params_file'])
     except SmaWristError:

@@ -146,22 +146,6 @@ def write_defaults(path: Path, bridge_params: dict[str, Any]) -> Path:
     return path
 
 
-def model_files(params_files: Sequence[str | Path]) -> dict[str, str | None]:
-    """The wire's and the TEMs' identified model files the params files name (any node's ``hysteresis_file`` /
-    ``thermal_file``; '' or absent: the built-in model), for the diagnosis."""
-    import yaml
-
-    found: dict[str, str | None] = {'hysteresis_file': None, 'thermal_file': None}
-    for f in params_files:
-        for body in (yaml.safe_load(Path(f).read_text()) or {}).values():
-            for key in found:
-                v = ((body or {}).get('ros__parameters') or {}).get(key)
-                if v:
-                    p = Path(v)
-                    found[key] = str(p if p.is_absolute() else Path(f).parent / p)
-    return found
-
-
 def settle(bring: Any, lim: SettleLimits | None = None) -> dict[str, Any]:
     """Bring the wrist on ``bring``'s device (a :class:`~sma_wrist.commission.bringup.BringUp` after its bring-up)
     back to its rest: each muscle held by a PI drive at the temperature it had at rest when the bring-up began
@@ -628,19 +612,18 @@ def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S
     start the run with the hysteresis memory the excitation and the settling left (the angle at the rest
     temperatures depends on which muscle was heated last), the replay from the rest state's (both cooled from hot
     under the rest load), and the angles differ until the first large cycle has wiped that memory."""
-    from sma_wrist.diagnose import DiagnoseInputError
+    from sma_wrist.diagnose import DiagnoseInputError, plant_model
     from sma_wrist.diagnose import diagnose as run_diagnosis
 
-    files = model_files([params_file])
     try:
-        d = run_diagnosis(
-            bag, hysteresis_file=files['hysteresis_file'], thermal_file=files['thermal_file'], settle_s=settle_s
-        )
+        # the plant node's whole model (files, pre-load, friction): the commissioned wrist, not only its files
+        d = run_diagnosis(bag, params_file=str(params_file), settle_s=settle_s)
+        m = plant_model(str(params_file))
     except DiagnoseInputError as e:
         return {'bag': str(bag), 'error': str(e), 'discrepancy': None}
     return {
         'bag': str(bag),
-        'against': {k: v or 'built-in' for k, v in files.items()},
+        'against': {k: getattr(m, k) or 'built-in' for k in ('hysteresis_file', 'thermal_file')},
         'discrepancy': d.discrepancy,
         'unexplained': d.unexplained,
         'subsystem': d.subsystem,
@@ -781,7 +764,6 @@ __all__ = [
     'diagnosis',
     'controllers_of',
     'write_defaults',
-    'model_files',
     'report_section',
     'VerificationStopped',
     'VerifyOptions',

@@ -180,14 +180,34 @@ def _regressors(
     return reg
 
 
-def nominal_plant(run: Run, hysteresis_file: str | None = None, thermal_file: str | None = None) -> Any:
+def nominal_plant(
+    run: Run, hysteresis_file: str | None = None, thermal_file: str | None = None, params_file: str | None = None
+) -> Any:
     """The nominal plant a run is replayed against: the one plant_sim would run with these files (PlantParams at the
-    run's step, at most 10 ms), or None for the built-in model."""
-    if not (hysteresis_file or thermal_file):
+    run's step, at most 10 ms), or None for the built-in model. ``params_file``: the plain plant of its plant node
+    (model files and pre-load, :func:`sma_wrist.plant_model.read_plant_model`; its ``model.*`` values are
+    the diagnosis' nominal row, :func:`plant_model`); explicit ``hysteresis_file`` / ``thermal_file`` replace its."""
+    if not (hysteresis_file or thermal_file or params_file):
         return None
-    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.plant_model import PlantModelFileError
 
-    return PlantParams.from_files(hysteresis_file, thermal_file, dt=min(run.dt, 0.01))
+    try:
+        return plant_model(params_file, hysteresis_file, thermal_file).base(dt=min(run.dt, 0.01))
+    except PlantModelFileError as exc:
+        raise DiagnoseInputError(str(exc)) from None
+
+
+def plant_model(
+    params_file: str | None = None, hysteresis_file: str | None = None, thermal_file: str | None = None
+) -> Any:
+    """The model a diagnosis replays (:class:`sma_wrist.plant_model.PlantModel`); DiagnoseInputError
+    naming what does not load."""
+    from sma_wrist.plant_model import PlantModelFileError, read_plant_model
+
+    try:
+        return read_plant_model(params_file, hysteresis_file, thermal_file)
+    except PlantModelFileError as exc:
+        raise DiagnoseInputError(str(exc)) from None
 
 
 def diagnose_run(
@@ -197,11 +217,17 @@ def diagnose_run(
     candidates: Sequence[str] | None = None,
     hysteresis_file: str | None = None,
     thermal_file: str | None = None,
+    params_file: str | None = None,
 ) -> DiagnosisResult:
     """Diagnose an aligned run (see :func:`diagnose` for a bag); ``hysteresis_file``: the wire's SD-GPI;
-    ``thermal_file``: the TEMs' heat balance (``sma-wrist identify thermal``), so that what is left is the rest."""
+    ``thermal_file``: the TEMs' heat balance (``sma-wrist identify thermal``); ``params_file``: a params file whose
+    plant node's model (model files, pre-load, ``model.*`` values) is the nominal one, the explicit files replacing
+    its; so that what is left is what that model does not describe."""
     t_start = time.perf_counter()
-    model = fx.ExtendedModel(run, nominal_plant(run, hysteresis_file, thermal_file))
+    pm = plant_model(params_file, hysteresis_file, thermal_file)
+    model = fx.ExtendedModel(
+        run, nominal_plant(run, hysteresis_file, thermal_file, params_file), nominal=fx.theta(**pm.extension)
+    )
     ev = ft.Evaluator(model)
     if not ev.channels:
         raise DiagnoseInputError(
@@ -217,11 +243,11 @@ def diagnose_run(
     fits.sort(key=lambda f: f.score)
     # a cause is named only if its fit is an interior value that explains every channel it
     # touches (cross-channel consistency); the rest stay ranked, flagged
-    bounds = {id(f): at_bound(f) for f in fits}
+    bounds = {id(f): at_bound(f, ev.nominal) for f in fits}
     consistent = {
         id(f): all(f.log_ratio[c] <= CONSISTENT_LOG for c in ft.channels_of(f.effect, ev.channels)) for f in fits
     }
-    large = {id(f): effect_size(f) >= 1.0 for f in fits}
+    large = {id(f): effect_size(f, ev.nominal) >= 1.0 for f in fits}
     eligible = [f for f in fits if consistent[id(f)] and not bounds[id(f)] and large[id(f)]]
     # parsimony: among candidates within PARSIMONY_LOG of the best held-out score, the one
     # with the fewest parameters (a recalibration of three numbers always polishes a little
@@ -251,7 +277,7 @@ def diagnose_run(
                 'parameters': _param_dict(f.row, f.effect.params),
                 'at_bound': [h['parameter'] for h in bounds[id(f)]],
                 'consistent': consistent[id(f)],
-                'size': round(effect_size(f), 3),
+                'size': round(effect_size(f, ev.nominal), 3),
             }
         )
     channel = main_channel(best) if best else ev.channels[0]
@@ -279,9 +305,9 @@ def diagnose_run(
     )
     if partial:
         significant = False
-    final_row = best.row if significant else fx.NOMINAL
+    final_row = best.row if significant else ev.nominal
     final_fit = (
-        best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), fx.NOMINAL.copy()))
+        best if significant else ev.score(ft.Fit(fx.Effect('nominal', 'nominal', '-', (), ''), ev.nominal.copy()))
     )
 
     # residual statistics, nominal and final, after the burn-in
@@ -290,7 +316,7 @@ def diagnose_run(
     q_nom = load_nom = None
     if 'mechanics' in ev.channels or 'chain' in ev.channels:
         src = 'measured' if 'mechanics' in ev.channels else 'chain'
-        qq, _, ll = model.mechanics(fx.NOMINAL[None], None, src)
+        qq, _, ll = model.mechanics(ev.nominal[None], None, src)
         q_nom, load_nom = qq[:, 0], ll[:, 0]
     reg = _regressors(ev, q_nom, load_nom, sl)
     stats: dict[str, dict[str, Any]] = {}
@@ -449,12 +475,12 @@ def diagnose_run(
         thermal_start=run.thermal_start,
     )
     if params_out is not None:
-        res.params_file = str(write_params(res, params_out, run, hysteresis_file, thermal_file))
+        res.params_file = str(write_params(res, params_out, run, model=pm))
     if report_dir is not None:
         d = Path(report_dir)
         d.mkdir(parents=True, exist_ok=True)
         if res.params_file is None:
-            res.params_file = str(write_params(res, d / 'extended_params.yaml', run, hysteresis_file, thermal_file))
+            res.params_file = str(write_params(res, d / 'extended_params.yaml', run, model=pm))
         traces = {
             't': run.t[sl],
             'i_train': ev.i_train - ev.i0,
@@ -469,13 +495,13 @@ def diagnose_run(
     return res
 
 
-def effect_size(f: ft.Fit) -> float:
-    """The largest departure of `f`'s fitted parameters from nominal, in units of its practical floor
-    (:data:`MIN_SIZE_FRACTION` x the catalogue's typical effect); >= 1: a size that matters."""
+def effect_size(f: ft.Fit, nominal: np.ndarray = fx.NOMINAL) -> float:
+    """The largest departure of `f`'s fitted parameters from ``nominal`` (the row the fits start from), in units of
+    its practical floor (:data:`MIN_SIZE_FRACTION` x the catalogue's typical effect); >= 1: a size that matters."""
     idx = [fx.INDEX[k] for k in f.effect.params]
     if not idx:
         return 0.0
-    return float(np.max(np.abs(f.row[idx] - fx.NOMINAL[idx]) / (MIN_SIZE_FRACTION * fx.TYPICAL[idx])))
+    return float(np.max(np.abs(f.row[idx] - nominal[idx]) / (MIN_SIZE_FRACTION * fx.TYPICAL[idx])))
 
 
 def effect_over_noise(ev: ft.Evaluator, f: ft.Fit, c: str) -> float:
@@ -486,12 +512,13 @@ def effect_over_noise(ev: ft.Evaluator, f: ft.Fit, c: str) -> float:
     return float(np.sqrt(np.sum(d[ev.i_train :] ** 2) / ev.n_test(c)) / ev.sigma[c])
 
 
-def at_bound(f: ft.Fit) -> list[dict[str, Any]]:
-    """The fitted parameters of `f` that ended on a catalogue bound other than their nominal value."""
+def at_bound(f: ft.Fit, nominal: np.ndarray = fx.NOMINAL) -> list[dict[str, Any]]:
+    """The fitted parameters of `f` that ended on a catalogue bound other than their ``nominal`` value (the row the
+    fits start from)."""
     out = []
     for k in f.effect.params:
         i = fx.INDEX[k]
-        v, lo, hi, nom = f.row[i], fx.LOWER[i], fx.UPPER[i], fx.NOMINAL[i]
+        v, lo, hi, nom = f.row[i], fx.LOWER[i], fx.UPPER[i], nominal[i]
         tol = BOUND_FRACTION * (hi - lo)
         for b in (lo, hi):
             if abs(v - b) <= tol and abs(nom - b) > tol:
@@ -505,11 +532,14 @@ def write_params(
     run: Run,
     hysteresis_file: str | Path | None = None,
     thermal_file: str | Path | None = None,
+    model: Any = None,
 ) -> Path:
     """The extended model as a ROS 2 params file for plant_sim (schema: doc/explanation/diagnosis.md).
 
     ``hysteresis_file``, ``thermal_file``: the wire and TEMs the diagnosis replayed; carried (absolute) so that
-    the file runs the same plant instead of silently falling back to the built-in one.
+    the file runs the same plant instead of silently falling back to the built-in one. ``model``: the
+    :class:`~sma_wrist.plant_model.PlantModel` replayed instead (its files, pre-load and ``model.*``
+    values carried, the fitted values replacing its).
     """
     import yaml
 
@@ -518,12 +548,18 @@ def write_params(
     # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
     # model.payload_err_kg the joint carries on top of it
     params: dict[str, Any] = {'payload_kg': float(run.payload_kg)}
+    if model is not None:
+        hysteresis_file, thermal_file = model.hysteresis_file, model.thermal_file
     if hysteresis_file:
         params['hysteresis_file'] = str(Path(hysteresis_file).resolve())
     if thermal_file:
         params['thermal_file'] = str(Path(thermal_file).resolve())
-    params.update({f'model.{k}': float(d['value']) for k, d in res.parameters.items()})
-    replay_only = [k for k in res.parameters if k in mx.REPLAY_ONLY]
+    if model is not None and model.preload_elongation_mm is not None:
+        params['preload_elongation_mm'] = model.preload_elongation_mm
+    ext = dict(model.extension) if model is not None else {}
+    ext.update({k: float(d['value']) for k, d in res.parameters.items()})
+    params.update({f'model.{k}': v for k, v in ext.items()})
+    replay_only = [k for k, v in ext.items() if k in mx.REPLAY_ONLY and v != mx.NOMINAL[k]]
     doc = {'plant_sim': {'ros__parameters': params}}
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -551,15 +587,18 @@ def diagnose(
     thermal_file: str | None = None,
     recording: Recording | None = None,
     settle_s: float = 0.0,
+    params_file: str | None = None,
 ) -> DiagnosisResult:
     """Diagnose the bag at `path` (``recording``: how it names the contract's topics and the joint, if otherwise);
     the first ``settle_s`` [s] only settle the replays' memory (:attr:`Run.settle_s`: a bag that starts from a
-    history the replays' rest state does not hold). Raises DiagnoseInputError for unusable input."""
+    history the replays' rest state does not hold). ``params_file``: replay the model of its plant node
+    (:func:`diagnose_run`). Raises DiagnoseInputError for unusable input."""
     if not (math.isfinite(settle_s) and settle_s >= 0.0):
         raise DiagnoseInputError(f'settle_s must be a finite number of seconds >= 0, got {settle_s!r}')
+    plant_model(params_file, hysteresis_file, thermal_file)  # a model that does not load, before the bag is read
     run = load_run(path, recording=recording)
     run.settle_s = float(settle_s)
-    return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file, thermal_file)
+    return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file, thermal_file, params_file)
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -574,7 +613,15 @@ def run_cli(args: argparse.Namespace) -> int:
                 )
         from sma_wrist.outputs import check_output_file, check_output_folder
 
-        models = [f for f in (getattr(args, 'hysteresis_file', None), getattr(args, 'thermal_file', None)) if f]
+        models = [
+            f
+            for f in (
+                getattr(args, 'hysteresis_file', None),
+                getattr(args, 'thermal_file', None),
+                getattr(args, 'params_file', None),
+            )
+            if f
+        ]
         check_output_file(args.params, '--params', [args.bag, *models], DiagnoseInputError)
         check_output_folder(args.report, '--report', [args.bag, *models], DiagnoseInputError)
         recording = Recording.from_options(getattr(args, 'topic', None), getattr(args, 'joint', None))
@@ -586,6 +633,7 @@ def run_cli(args: argparse.Namespace) -> int:
             getattr(args, 'hysteresis_file', None),
             getattr(args, 'thermal_file', None),
             recording,
+            params_file=getattr(args, 'params_file', None),
         )
     except (DiagnoseInputError, ParameterError, ContractError) as exc:
         if args.json:

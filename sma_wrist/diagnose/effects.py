@@ -426,10 +426,16 @@ class ExtendedModel:
         :class:`sma_wrist.diagnose.data.Run` (uniform grid, commands, temperatures, angle, payload).
     params:
         Nominal plant; default ``PlantParams()``.
+    nominal:
+        The row the fits start from (default :data:`NOMINAL`): a params file's ``model.*`` values
+        (:func:`theta`), so that what is fitted is what that model does not describe.
     """
 
-    def __init__(self, run, params: PlantParams | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(  # type: ignore[no-untyped-def]
+        self, run, params: PlantParams | None = None, nominal: np.ndarray | None = None
+    ) -> None:
         self.run = run
+        self.nominal = NOMINAL.copy() if nominal is None else np.asarray(nominal, float).copy()
         self.consts = Constants(params or PlantParams(dt=min(run.dt, 0.01)))
         self.dt = run.dt
         self.substeps = max(1, int(np.ceil(run.dt / 0.01 - 1e-9)))
@@ -637,7 +643,7 @@ class ExtendedModel:
             return 0.0
         rng = np.random.default_rng(seed)
         sig = np.array([noise_density_sigma(run.T[:, c], 200.0 / 2**16) for c in (0, 1)])
-        r = NOMINAL
+        r = self.nominal
         # the stand-in for the truth: the least smoothed (a smoother one hides the transitions'
         # distortion by smoothing: the error of a 0.3 s window came out 2x too small)
         ref, ref_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOWS_S[0])
@@ -672,8 +678,8 @@ class ExtendedModel:
         run = self.run
         if run.T is None or run.q is None:
             return 0.0
-        Tw = self.wire_temperature(NOMINAL, self.T_s, self.T_rate, self.cycles)[:, None]
-        jr = self.joint_row(NOMINAL)
+        Tw = self.wire_temperature(self.nominal, self.T_s, self.T_rate, self.cycles)[:, None]
+        jr = self.joint_row(self.nominal)
         q_h = self.consts.mechanics(Tw, self.dt, jr, self.substeps)[0][i0:, 0]
         q_h2 = self.consts.mechanics(Tw, self.dt, jr, 2 * self.substeps)[0][i0:, 0]
         err = 2.0 * float(np.sqrt(np.mean((q_h - q_h2) ** 2)))

@@ -123,7 +123,7 @@ class Evaluator:
                 self.sigma['mechanics'] = float(np.hypot(self.sigma['mechanics'], self.input_noise))
             # the replay's own step error must not pass for a discrepancy (or be fitted by one)
             self.step_error = model.choose_mechanics_step(self.sigma['mechanics'], self.i0)
-        self.nominal = fx.NOMINAL.copy()
+        self.nominal = model.nominal.copy()  # a params file's model.* values, else the catalogue's
         ntr = self.i_train - self.i0
         self.sub = max(1, ntr // MAX_FIT_SAMPLES)
         self.pred_nom = self.predict(self.nominal[None])

@@ -484,7 +484,7 @@ class Monitor:
     def diagnose(self, window: Run | Change | str, t_s: float) -> Verdict:
         """Diagnose one window (the costly part: seconds of CPU); returns this check's verdict, before persistence."""
         m = self.model
-        return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension)
+        return diagnose_window(window, t_s, self.config, m.hysteresis_file, m.thermal_file, m.extension, m.params_file)
 
     def needed(self, v: Verdict) -> int:
         """Consecutive checks that must agree before ``v`` is published: ``persist_checks`` (also for a cause that
@@ -635,10 +635,12 @@ def diagnose_window(
     hysteresis_file: str | None = None,
     thermal_file: str | None = None,
     extension: dict[str, float] | None = None,
+    params_file: str | None = None,
 ) -> Verdict:
     """One check's verdict on a window (:meth:`Monitor.window`), before persistence; a plain function of picklable
-    arguments, so that a node can run it in a worker process. ``extension``: the known model extension."""
-    v = _diagnose(window, t_s, config, hysteresis_file, thermal_file, extension)
+    arguments, so that a node can run it in a worker process. ``extension``: the known model extension;
+    ``params_file``: the params file whose plant model (pre-load, ``model.*`` values) the diagnosis replays."""
+    v = _diagnose(window, t_s, config, hysteresis_file, thermal_file, extension, params_file)
     change = getattr(window, 'change_s', None)
     if change is not None:  # the part after a change in the window was diagnosed
         v.change_s = change
@@ -653,11 +655,12 @@ def _diagnose(
     hysteresis_file: str | None,
     thermal_file: str | None,
     extension: dict[str, float] | None,
+    params_file: str | None = None,
 ) -> Verdict:
     import time
 
     if isinstance(window, Change):
-        drift = _drift_verdict(window.run, t_s, config, hysteresis_file, thermal_file, extension)
+        drift = _drift_verdict(window.run, t_s, config, hysteresis_file, thermal_file, extension, params_file)
         if drift is not None:  # the whole window, the change in it too recent to diagnose
             drift.change_s = window.t_s
             return drift
@@ -684,13 +687,14 @@ def _diagnose(
             candidates=list(c.candidates) if c.candidates else None,
             hysteresis_file=hysteresis_file,
             thermal_file=thermal_file,
+            params_file=params_file,
         )
     except DiagnoseInputError as exc:
         return Verdict(
             t_s, 'ERROR', None, None, 1.0, summary=f'cannot check: {exc}', check_cpu_s=time.process_time() - c0
         )
     if res.cause is None:  # nothing named: a slow drift the held-out split cannot see yet may be there
-        drift = _drift_verdict(window, t_s, config, hysteresis_file, thermal_file, extension)
+        drift = _drift_verdict(window, t_s, config, hysteresis_file, thermal_file, extension, params_file)
         if drift is not None:
             drift.check_cpu_s = time.process_time() - c0
             drift.summary += f'; the diagnosis: {res.summary}'
@@ -764,6 +768,7 @@ def _drift_verdict(
     hysteresis_file: str | None,
     thermal_file: str | None,
     extension: dict[str, float] | None,
+    params_file: str | None = None,
 ) -> Verdict | None:
     """A WARN naming an ambient / coolant drift when :func:`sma_wrist.monitor.drift.ambient_drift_fit` names one in
     ``run`` (and it is not the known extension, nor left out of ``config.candidates``); None otherwise."""
@@ -773,7 +778,9 @@ def _drift_verdict(
     from sma_wrist.diagnose import nominal_plant
     from sma_wrist.monitor.drift import ambient_drift_fit
 
-    f = ambient_drift_fit(run, nominal_plant(run, hysteresis_file, thermal_file))  # the plant the diagnosis replays
+    f = ambient_drift_fit(
+        run, nominal_plant(run, hysteresis_file, thermal_file, params_file)
+    )  # the plant the diagnosis replays
     if f is None or not f.named:
         return None
     params = {'ambient_drift_C_per_h': f.rate_C_per_h}

@@ -9,14 +9,14 @@ of that window starts (:attr:`sma_wrist.diagnose.data.Run.thermal_x0`), because 
 run does not start with its heat exchangers at rest.
 
 :func:`load_model` builds the model from the files a user has: the identified wire (``hysteresis_file``), the
-identified TEMs (``thermal_file``), or a diagnosis' ``extended_params.yaml`` (which may name both, plus the fitted
-``model.*`` extension).
+identified TEMs (``thermal_file``), or a params file: the model of its plant node (a commissioned
+``wrist_params.yaml``: model files, pre-load, ``model.*`` values; a diagnosis' ``extended_params.yaml``: its fitted
+``model.*`` extension), read by :func:`sma_wrist.plant_model.read_plant_model` as ``sma-wrist diagnose`` reads it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -42,79 +42,33 @@ class Model:
     thermal_file: str | None = None
     payload_err_kg: float = 0.0
     description: str = 'the built-in model'
-
-
-def _readable(path: str, what: str, how: str) -> Path:
-    p = Path(path).expanduser()
-    if not p.is_file():
-        raise MonitorInputError(f'{what} {path}: no such file ({how})')
-    return p
+    #: the params file the model is read from: the checks' diagnosis replays its model (pre-load, model.* values)
+    params_file: str | None = None
 
 
 def load_model(
     hysteresis_file: str | None = None, thermal_file: str | None = None, params_file: str | None = None
 ) -> Model:
-    """The twin's model; raises MonitorInputError naming the file that does not load and how to make one."""
-    import yaml
-
+    """The twin's model: that of ``params_file``'s plant node (:func:`sma_wrist.plant_model.read_plant_model`: a
+    commissioned ``wrist_params.yaml`` or a diagnosis' ``extended_params.yaml``), the explicit model files replacing
+    its; raises MonitorInputError naming what does not load and how to make it."""
     from sma_wrist.core.plant import extensions as mx
+    from sma_wrist.plant_model import PlantModelFileError, read_plant_model
 
-    ext: dict[str, float] = {}
-    src = []
-    if params_file:
-        p = _readable(params_file, 'params file', 'sma-wrist diagnose BAG --params FILE writes one')
-        try:
-            doc = yaml.safe_load(p.read_text())
-            node = next(iter(doc.values())) if isinstance(doc, dict) and doc else None
-            values = node['ros__parameters'] if isinstance(node, dict) else None
-            if not isinstance(values, dict):
-                raise ValueError('no "<node>: ros__parameters:" mapping')
-        except (yaml.YAMLError, ValueError, StopIteration, KeyError, TypeError) as exc:
-            raise MonitorInputError(
-                f'params file {params_file}: not a ROS 2 params file ({exc}); expected what '
-                f'sma-wrist diagnose --params writes (doc/howto/diagnose.md)'
-            ) from None
-        hysteresis_file = hysteresis_file or values.get('hysteresis_file') or None
-        thermal_file = thermal_file or values.get('thermal_file') or None
-        known = {e.name for e in mx.PARAMS}
-        unknown = [k for k in values if k.startswith('model.') and k[6:] not in known]
-        if unknown:
-            raise MonitorInputError(
-                f'params file {params_file}: unknown model parameter(s) {", ".join(unknown)} '
-                f'(sma_wrist/core/plant/extensions.py lists them)'
-            )
-        ext = {k[6:]: float(v) for k, v in values.items() if k.startswith('model.')}
-        src.append(f'the extended model of {params_file}')
-    for f, what, how in (
-        (hysteresis_file, 'hysteresis_file', 'sma-wrist identify hysteresis writes one'),
-        (thermal_file, 'thermal_file', 'sma-wrist identify thermal writes one'),
-    ):
-        if f:
-            _readable(f, what, how)
-            src.append(f'{what} {f}')
     try:
-        base = PlantParams.from_files(hysteresis_file, thermal_file)
-    except SmaWristError as exc:
-        raise MonitorInputError(f'model files do not load: {exc}') from None
-    except Exception as exc:  # noqa: BLE001 - a broken file is the user's problem to fix, said in one line
-        raise MonitorInputError(
-            f'model files do not load ({type(exc).__name__}: {exc}); write them with sma-wrist '
-            f'identify (hysteresis / thermal)'
-        ) from None
-    values_all = dict(mx.NOMINAL)
-    values_all.update(ext)
-    simulated = {k: (v if k not in mx.REPLAY_ONLY else mx.NOMINAL[k]) for k, v in values_all.items()}
-    try:
-        params = mx.plant_params(simulated, base)
-    except SmaWristError as exc:
-        raise MonitorInputError(f'params file {params_file}: {exc}') from None
+        pm = read_plant_model(params_file, hysteresis_file, thermal_file)
+        # the twin simulates what plant_sim can; the replay-only effects stay the diagnosis' known extension
+        params = pm.params(simulated_only=True)
+    except PlantModelFileError as exc:
+        raise MonitorInputError(str(exc)) from None
     return Model(
         params,
-        {k: v for k, v in ext.items() if v != mx.NOMINAL.get(k)},
-        hysteresis_file,
-        thermal_file,
-        float(values_all.get('payload_err_kg', 0.0)),
-        ', '.join(src) or 'the built-in model',
+        {k: v for k, v in pm.extension.items() if v != mx.NOMINAL[k]},
+        pm.hysteresis_file,
+        pm.thermal_file,
+        float(pm.extension.get('payload_err_kg', 0.0)),
+        pm.describe(),
+        str(params_file) if params_file else None,
     )
 
 

@@ -154,7 +154,10 @@ class MonitorWorker:
     def _check(self, window: Any, t: float) -> None:
         m = self.monitor
         try:
-            raw = diagnose_window(window, t, m.config, m.model.hysteresis_file, m.model.thermal_file, m.model.extension)
+            mm = m.model
+            raw = diagnose_window(
+                window, t, m.config, mm.hysteresis_file, mm.thermal_file, mm.extension, mm.params_file
+            )
         except Exception as exc:  # noqa: BLE001 - a check that failed is reported, the monitor goes on
             raw = Verdict(t, 'ERROR', None, None, 1.0, summary=f'the check failed: {type(exc).__name__}: {exc}')
         with self._lock:

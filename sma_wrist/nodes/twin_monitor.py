@@ -112,8 +112,8 @@ class TwinMonitor(WristNode):
         Param(
             'params_file',
             '',
-            "a diagnosis' extended_params.yaml (sma-wrist diagnose --params): the twin runs that "
-            'extended model, and the fitted extension is what the monitor expects',
+            "a params file whose plant model (plant_sim's section, else hardware_bridge's: a commissioned "
+            "wrist_params.yaml, a diagnosis' extended_params.yaml) the twin runs and the checks replay",
             runtime=False,
         ),
         Param(

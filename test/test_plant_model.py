@@ -1,0 +1,162 @@
+"""The plant model a params file describes: one reader for sma-wrist diagnose --params-file and the twin monitor."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import yaml
+
+from sma_wrist.core.hysteresis.params_file import save_hysteresis
+from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.plant_model import PlantModelFileError, read_plant_model
+
+PRELOAD_MM = PlantParams().preload_elongation_mm + 0.3  # a chain pre-loaded 0.3 mm more than the built-in's
+COULOMB_NM = 0.05  # and more friction than the built-in 0.004 N m
+
+
+def commissioned(folder, **plant):
+    """A wrist_params.yaml as sma-wrist commission hands it over: several nodes, the controllers' first, the model
+    files next to it named by relative paths."""
+    from sma_wrist.core.hysteresis.default_params import default_sdgpi
+
+    save_hysteresis(folder / 'hysteresis.yaml', default_sdgpi(), {'source': 'built-in'})
+    values = {
+        'hysteresis_file': 'hysteresis.yaml',
+        'thermal_file': '',
+        'preload_elongation_mm': PRELOAD_MM,
+        'payload_kg': 0.3,
+        'model.coulomb_Nm': COULOMB_NM,
+        **plant,
+    }
+    f = folder / 'wrist_params.yaml'
+    f.write_text(
+        yaml.safe_dump(
+            {
+                'tem_controller': {'ros__parameters': {'thermal_file': ''}},
+                'hysteresis_compensator': {'ros__parameters': {'preload_elongation_mm': 1.0}},
+                'hardware_bridge': {'ros__parameters': {'preload_elongation_mm': 1.5, 'hysteresis_file': ''}},
+                'plant_sim': {'ros__parameters': values},
+            },
+            sort_keys=False,
+        )
+    )
+    return f
+
+
+def test_a_commissioned_file_gives_plant_sims_model_with_paths_relative_to_it(tmp_path, monkeypatch):
+    f = commissioned(tmp_path)
+    monkeypatch.chdir('/')  # the relative paths are the file's, not the working directory's
+    m = read_plant_model(f)
+    assert m.node == 'plant_sim'
+    assert m.hysteresis_file == str((tmp_path / 'hysteresis.yaml').resolve())
+    assert m.thermal_file is None
+    assert m.preload_elongation_mm == PRELOAD_MM
+    p = m.params()
+    assert p.preload_elongation_mm == PRELOAD_MM and p.joint.coulomb_Nm == COULOMB_NM
+
+
+def test_without_plant_sim_the_bridges_model_is_read(tmp_path):
+    f = tmp_path / 'bridge.yaml'
+    f.write_text(yaml.safe_dump({'hardware_bridge': {'ros__parameters': {'preload_elongation_mm': 1.7}}}))
+    m = read_plant_model(f)
+    assert (m.node, m.preload_elongation_mm, m.hysteresis_file) == ('hardware_bridge', 1.7, None)
+
+
+@pytest.mark.parametrize(
+    'doc,named',
+    [
+        ({'tem_controller': {'ros__parameters': {'thermal_file': ''}}}, 'no plant node section'),
+        ({'plant_sim': {'ros__parameters': {'model.coulomb': 0.1}}}, 'has no parameter model.coulomb'),
+        ({'plant_sim': {'ros__parameters': {'preload_elongation': 2.0}}}, 'has no parameter preload_elongation'),
+        ({'plant_sim': {'ros__parameters': {'hysteresis_file': 'absent.yaml'}}}, 'absent.yaml: no such file'),
+        ({'plant_sim': {'ros__parameters': {'model.coulomb_Nm': 5.0}}}, 'coulomb_Nm = 5.0'),
+    ],
+)
+def test_a_file_that_describes_no_usable_plant_is_refused_by_name(tmp_path, doc, named):
+    f = tmp_path / 'p.yaml'
+    f.write_text(yaml.safe_dump(doc))
+    with pytest.raises(PlantModelFileError, match=named):
+        read_plant_model(f)
+
+
+def test_explicit_model_files_replace_the_params_files(tmp_path):
+    f = commissioned(tmp_path)
+    other = tmp_path / 'other'
+    other.mkdir()
+    h = commissioned(other).parent / 'hysteresis.yaml'
+    assert read_plant_model(f, hysteresis_file=str(h)).hysteresis_file == str(h.resolve())
+
+
+def test_the_twin_monitor_reads_the_same_model(tmp_path, monkeypatch):
+    from sma_wrist.monitor.twin import MonitorInputError, load_model
+
+    f = commissioned(tmp_path)
+    monkeypatch.chdir('/')
+    model = load_model(params_file=str(f))
+    assert model.params.preload_elongation_mm == PRELOAD_MM
+    assert model.params.joint == read_plant_model(f).params().joint
+    assert model.hysteresis_file == str((tmp_path / 'hysteresis.yaml').resolve())
+    assert model.extension == {'coulomb_Nm': COULOMB_NM}
+    # a diagnosis' extended_params.yaml: one plant_sim section, a replay-only effect the twin does not simulate
+    ext = tmp_path / 'extended_params.yaml'
+    ext.write_text(yaml.safe_dump({'plant_sim': {'ros__parameters': {'payload_kg': 0.3, 'model.hyst_lag_s': 2.0}}}))
+    model = load_model(params_file=str(ext))
+    assert model.extension == {'hyst_lag_s': 2.0}
+    assert model.params.joint == PlantParams().joint
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(yaml.safe_dump({'twin_monitor': {'ros__parameters': {'params_file': 'x'}}}))
+    with pytest.raises(MonitorInputError, match='no plant node section'):
+        load_model(params_file=str(bad))
+
+
+def test_diagnose_replays_the_params_files_preload_and_friction(tmp_path):
+    """A wrist pre-loaded and rubbing as its commissioned file says is clean against that file, and a discrepancy
+    against the built-in model; the extended model written carries the file's model."""
+    from sma_wrist.diagnose import diagnose_run
+    from sma_wrist.diagnose import testdata as td
+
+    f = commissioned(tmp_path)
+    truth = td.simulate(
+        'none',
+        seed=3,
+        duration_s=30.0,
+        params={'preload_err_mm': PRELOAD_MM - PlantParams().preload_elongation_mm, 'coulomb_Nm': COULOMB_NM},
+    )
+    run = td.run_from_truth(truth)
+    cands = ['recalibrate_mechanics', 'friction']
+    assert diagnose_run(run, candidates=cands).discrepancy
+    res = diagnose_run(run, params_out=tmp_path / 'ext.yaml', candidates=cands, params_file=str(f))
+    assert not res.discrepancy, res.summary
+    written = read_plant_model(tmp_path / 'ext.yaml')
+    expect = dataclasses.replace(read_plant_model(f), source=written.source, payload_kg=run.payload_kg)
+    assert written == expect
+
+
+def test_diagnose_cli_names_a_params_file_without_a_plant(tmp_path, capsys):
+    from sma_wrist.cli import main
+
+    f = tmp_path / 'p.yaml'
+    f.write_text(yaml.safe_dump({'tem_controller': {'ros__parameters': {}}}))
+    assert main(['diagnose', str(tmp_path / 'bag'), '--params-file', str(f)]) == 2
+    err = capsys.readouterr().err
+    assert 'no plant node section' in err and 'Traceback' not in err
+
+
+def test_the_monitors_checks_replay_the_params_files_model(tmp_path):
+    """A check of the same wrist is OK against the file the twin runs, not against the built-in pre-load."""
+    from sma_wrist.diagnose import testdata as td
+    from sma_wrist.monitor import MonitorConfig, diagnose_window
+
+    f = commissioned(tmp_path)
+    truth = td.simulate(
+        'none',
+        seed=3,
+        duration_s=30.0,
+        params={'preload_err_mm': PRELOAD_MM - PlantParams().preload_elongation_mm, 'coulomb_Nm': COULOMB_NM},
+    )
+    run = td.run_from_truth(truth)
+    config = MonitorConfig(candidates=('recalibrate_mechanics', 'friction'))
+    assert diagnose_window(run, 30.0, config).level == 'WARN'
+    v = diagnose_window(run, 30.0, config, params_file=str(f))
+    assert v.level == 'OK', v.summary
