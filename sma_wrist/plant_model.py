@@ -94,17 +94,21 @@ class PlantModel:
 
 
 def _model_file(value: Any, key: str, how: str, folder: Path | None, where: str) -> str | None:
-    """An existing model file's absolute path ('' or None: the built-in model); relative to ``folder`` if given."""
+    """An existing model file's absolute path ('' or None: the built-in model). A relative name is looked up in
+    ``folder`` (the params file's) first, then in the working folder, where the nodes look for it: a params file
+    written as ``runs/x/wrist_params.yaml`` names its files ``runs/x/...`` (relative to where it was written)."""
     if value is None or value == '':
         return None
     if not isinstance(value, str):
         raise PlantModelFileError(f'{where}{key} must be a file name, got {value!r}')
     p = Path(value).expanduser()
+    tried = [p]
     if folder is not None and not p.is_absolute():
-        p = folder / p
-    if not p.is_file():
-        raise PlantModelFileError(f'{where}{key} {p}: no such file ({how})')
-    return str(p.resolve())
+        tried = [folder / p, p]
+    for c in tried:
+        if c.is_file():
+            return str(c.resolve())
+    raise PlantModelFileError(f'{where}{key} {" or ".join(map(str, tried))}: no such file ({how})')
 
 
 def declared_parameters(node: str) -> set[str]:

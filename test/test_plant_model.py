@@ -160,3 +160,35 @@ def test_the_monitors_checks_replay_the_params_files_model(tmp_path):
     assert diagnose_window(run, 30.0, config).level == 'WARN'
     v = diagnose_window(run, 30.0, config, params_file=str(f))
     assert v.level == 'OK', v.summary
+
+
+def test_model_files_named_relative_to_the_folder_the_file_was_written_from_are_found(tmp_path, monkeypatch):
+    """A params file written into runs/x names its model files runs/x/... (what the nodes, started from that folder,
+    look for); the reader finds them there when they are not beside the file under that name."""
+    (tmp_path / 'runs' / 'x').mkdir(parents=True)
+    f = commissioned(tmp_path / 'runs' / 'x', hysteresis_file='runs/x/hysteresis.yaml')
+    monkeypatch.chdir(tmp_path)
+    m = read_plant_model(f.relative_to(tmp_path))
+    assert m.hysteresis_file == str((tmp_path / 'runs' / 'x' / 'hysteresis.yaml').resolve())
+    monkeypatch.chdir('/')
+    with pytest.raises(PlantModelFileError, match='no such file'):
+        read_plant_model(f)
+
+
+def test_the_commissioned_params_file_points_the_twin_monitor_at_its_own_model(tmp_path, monkeypatch):
+    """sma-wrist commission hands over one file for every node: the twin monitor (run --monitor, monitor:=true)
+    watches the wrist as commissioned (plant_sim's model in that file), named by an absolute path."""
+    from sma_wrist.commission.run import write_params
+    from sma_wrist.monitor.twin import load_model
+
+    (tmp_path / 'out').mkdir()
+    monkeypatch.chdir(tmp_path)
+    nodes = {'plant_sim': {'preload_elongation_mm': PRELOAD_MM, 'model.coulomb_Nm': COULOMB_NM}}
+    f = write_params(tmp_path / 'out' / 'wrist_params.yaml', [], {}, nodes)
+    twin = yaml.safe_load(f.read_text())['twin_monitor']['ros__parameters']
+    assert twin['params_file'] == str(f.resolve())
+    monkeypatch.chdir('/')
+    model = load_model(params_file=twin['params_file'])
+    assert model.params.preload_elongation_mm == PRELOAD_MM and model.extension == {'coulomb_Nm': COULOMB_NM}
+    # a bring-up alone (no model identified) leaves the twin on its defaults
+    assert 'twin_monitor' not in yaml.safe_load(write_params(tmp_path / 'b.yaml', [], {}).read_text())

@@ -24,6 +24,7 @@ from sma_wrist.hw.calibration import Calibration, Wiring
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_FAULT, EXIT_INTERRUPTED = 0, 2, 3, 130
 BRIDGE = 'hardware_bridge'
+TWIN = 'twin_monitor'
 PARAMS_FILE = 'wrist_params.yaml'
 
 
@@ -83,7 +84,10 @@ def write_params(
             doc.setdefault(node, {'ros__parameters': {}})['ros__parameters'].update(
                 copy.deepcopy((body or {}).get('ros__parameters', {}))
             )
-    for node, values in {**(nodes or {}), BRIDGE: {**(nodes or {}).get(BRIDGE, {}), **bridge}}.items():
+    nodes = dict(nodes or {})
+    if nodes:  # the twin monitor watches the wrist as commissioned (plant_sim's model of this file), not the built-in
+        nodes.setdefault(TWIN, {})['params_file'] = str(path.resolve())
+    for node, values in {**nodes, BRIDGE: {**nodes.get(BRIDGE, {}), **bridge}}.items():
         key = next((k for k in doc if k.strip('/') == node), node)
         doc.setdefault(key, {'ros__parameters': {}})['ros__parameters'].update(values)
     head = (
@@ -116,7 +120,8 @@ def commission(
     (:class:`sma_wrist.commission.verify.VerifyOptions`): then verify the params file in closed loop."""
     from sma_wrist.commission.report import write_report
 
-    out = Path(out)
+    # absolute, so that the params file names its model files for nodes started from any folder
+    out = Path(out).expanduser().resolve()
     values = bridge_values(params_files)
     lim = limits or BringUpLimits()
     problem = lim.problem()
