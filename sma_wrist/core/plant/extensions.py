@@ -223,9 +223,12 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
     if v['hyst_shift_C'] != 0.0:
         # the SD-GPI's envelopes and memory curves moved along the temperature axis: the wire at T is the model's
         # wire at T - shift (the replay's T_wire = T - hyst_shift_C)
-        from sma_wrist.plants.spread import perturbed_hysteresis
+        from sma_wrist.core.hysteresis.warp import Warp, warped_wire
 
-        hy = perturbed_hysteresis(hy, v['hyst_shift_C'])
+        s = v['hyst_shift_C']
+        hy = dataclasses.replace(
+            warped_wire(hy, Warp(s, s)), T_valid=hy.T_valid, name=f'{hy.name} shifted {s:+.2f} degC'
+        )
     return dataclasses.replace(
         p,
         thermal=tp,
