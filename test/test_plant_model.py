@@ -110,20 +110,27 @@ def test_the_twin_monitor_reads_the_same_model(tmp_path, monkeypatch):
         load_model(params_file=str(bad))
 
 
-def test_diagnose_replays_the_params_files_preload_and_friction(tmp_path):
-    """A wrist pre-loaded and rubbing as its commissioned file says is clean against that file, and a discrepancy
-    against the built-in model; the extended model written carries the file's model."""
-    from sma_wrist.diagnose import diagnose_run
+@pytest.fixture(scope='module')
+def commissioned_wrist_run():
+    """30 s of a wrist pre-loaded and rubbing as :func:`commissioned`'s file says (one simulation for the tests)."""
     from sma_wrist.diagnose import testdata as td
 
-    f = commissioned(tmp_path)
     truth = td.simulate(
         'none',
         seed=3,
         duration_s=30.0,
         params={'preload_err_mm': PRELOAD_MM - PlantParams().preload_elongation_mm, 'coulomb_Nm': COULOMB_NM},
     )
-    run = td.run_from_truth(truth)
+    return td.run_from_truth(truth)
+
+
+def test_diagnose_replays_the_params_files_preload_and_friction(tmp_path, commissioned_wrist_run):
+    """A wrist pre-loaded and rubbing as its commissioned file says is clean against that file, and a discrepancy
+    against the built-in model; the extended model written carries the file's model."""
+    from sma_wrist.diagnose import diagnose_run
+
+    run = commissioned_wrist_run
+    f = commissioned(tmp_path)
     cands = ['recalibrate_mechanics', 'friction']
     assert diagnose_run(run, candidates=cands).discrepancy
     res = diagnose_run(run, params_out=tmp_path / 'ext.yaml', candidates=cands, params_file=str(f))
@@ -143,19 +150,12 @@ def test_diagnose_cli_names_a_params_file_without_a_plant(tmp_path, capsys):
     assert 'no plant node section' in err and 'Traceback' not in err
 
 
-def test_the_monitors_checks_replay_the_params_files_model(tmp_path):
+def test_the_monitors_checks_replay_the_params_files_model(tmp_path, commissioned_wrist_run):
     """A check of the same wrist is OK against the file the twin runs, not against the built-in pre-load."""
-    from sma_wrist.diagnose import testdata as td
     from sma_wrist.monitor import MonitorConfig, diagnose_window
 
+    run = commissioned_wrist_run
     f = commissioned(tmp_path)
-    truth = td.simulate(
-        'none',
-        seed=3,
-        duration_s=30.0,
-        params={'preload_err_mm': PRELOAD_MM - PlantParams().preload_elongation_mm, 'coulomb_Nm': COULOMB_NM},
-    )
-    run = td.run_from_truth(truth)
     config = MonitorConfig(candidates=('recalibrate_mechanics', 'friction'))
     assert diagnose_window(run, 30.0, config).level == 'WARN'
     v = diagnose_window(run, 30.0, config, params_file=str(f))
