@@ -14,7 +14,7 @@ import pytest
 from sma_wrist.commission.bringup import BringUp, Stop
 from sma_wrist.commission.device import SimDevice
 from sma_wrist.commission.excite import MARK, ExcitationLimits, excite, schedule
-from sma_wrist.commission.identification import identify_wrist
+from sma_wrist.commission.identification import LOOSE_TARGET_FILTER_S, LOOSE_WIRE_MRAD, identify_wrist, loop_tuning
 from sma_wrist.commission.run import bridge_values, calibration_of, commission
 from sma_wrist.hw.calibration import Wiring
 from sma_wrist.hw.emulator import EmulatorConfig
@@ -135,6 +135,11 @@ def test_on_the_phase_fraction_wrist_the_shift_is_found_and_the_undetermined_pay
     assert hyst['parameters']['wire_model'] == 'warped' and joint['handed_over']
     assert joint['heldout']['warped'] < 0.5 * joint['heldout']['shift_only']
     assert hyst['parameters']['warp']['at_bounds'] == []
+    # the warped wire still misses this wire's minor loops by more than LOOSE_WIRE_MRAD: the TEM loop gets the slower
+    # target prefilter with it (loop_tuning), said in the part's parameters
+    assert joint['heldout']['commissioned'] > LOOSE_WIRE_MRAD
+    assert ident.node_params['tem_controller']['target_filter_s'] == LOOSE_TARGET_FILTER_S
+    assert hyst['parameters']['loop']['target_filter_s'] == LOOSE_TARGET_FILTER_S
 
 
 def test_commission_on_the_nominal_device_identifies_values_near_the_defaults(tmp_path):
@@ -147,6 +152,7 @@ def test_commission_on_the_nominal_device_identifies_values_near_the_defaults(tm
     assert p['thermal']['parameters']['tem1_gain_relative_to_tem2'] == pytest.approx(1.0, abs=0.02)
     assert p['thermal']['heldout']['commissioned'] < 0.1  # degC: the model itself, sensor noise 0.008 degC
     text = open(res['params_file']).read()
+    assert 'target_filter_s' not in text  # the loop keeps config/wrist.yaml's prefilter with the model's own wire
     assert 'thermal_file' in text and 'hysteresis_file' in text and 'calibration.tem_sign' in text
     report = open(res['report']).read()
     assert '## Identified model' in report and '![excitation.png](excitation.png)' in report
@@ -209,3 +215,10 @@ def test_a_heat_balance_better_only_within_the_sensors_noise_is_not_handed_over(
     assert h['commissioned'] < h['builtin'] < h['commissioned'] + 0.008  # better, by less than the noise
     assert part['handed_over'] is False and params == th.ThermalParams()
     assert any("no better than the built-in one beyond the sensors' noise" in w for w in warnings)
+
+
+def test_the_tem_loop_gets_the_slower_target_prefilter_only_with_a_handed_over_wire_that_misses_the_angle():
+    assert loop_tuning(True, 2 * LOOSE_WIRE_MRAD) == {'target_filter_s': LOOSE_TARGET_FILTER_S}
+    assert loop_tuning(True, 0.5 * LOOSE_WIRE_MRAD) == {}  # a wire the model describes: config/wrist.yaml's 0.5 s
+    assert loop_tuning(False, 20 * LOOSE_WIRE_MRAD) == {}  # the built-in wire handed over: the defaults' loop
+    assert loop_tuning(True, float('nan')) == {}

@@ -75,6 +75,11 @@ REFINE_TOLERANCE_C = 1.0
 FIRST_HEATING = schedule()[0].label
 #: the TEMs' drive gains differ by more than this: a warning (a supply lead, a thermal contact)
 LAYER_GAIN_TOLERANCE = 0.1
+#: a handed-over wire model that predicts the held-out angle worse than this [mrad RMS, ~1 % of the Sec. 6.1 sine's
+#: 1.05 rad] gets the TEM loop's slower target prefilter (:func:`loop_tuning`)
+LOOSE_WIRE_MRAD = 10.0
+#: tem_controller.target_filter_s handed over with such a wire [s] (config/wrist.yaml's 0.5 s otherwise)
+LOOSE_TARGET_FILTER_S = 3.0
 
 
 class IdentificationError(SmaWristError):
@@ -773,9 +778,39 @@ def identify_wrist(bring: BringUp, out: Path, payload_kg: float | None = None) -
         {'payload_kg': round(values['payload_kg'], 4), 'model.coulomb_Nm': round(values['coulomb_Nm'], 5)}
     )
     nodes.setdefault('hardware_bridge', {})['payload_kg'] = round(values['payload_kg'], 4)
+    tuning = loop_tuning(bool(joint['handed_over']), joint['heldout']['commissioned'])
+    if tuning:
+        nodes.setdefault('tem_controller', {}).update(tuning)
+        hyst['parameters']['loop'] = tuning | {
+            'why': f"the wire model's held-out angle error {joint['heldout']['commissioned']:.3g} mrad exceeds "
+            f"{LOOSE_WIRE_MRAD:g} mrad: the TEMs follow the inverse's targets through a {LOOSE_TARGET_FILTER_S:g} s "
+            'prefilter'
+        }
     parts = {'thermal': thermal, 'hysteresis': hyst, 'joint': joint}
     figures = _figures(bring, out, t_fit, t_held, thermal_params, values)
     return Identified(parts, nodes, figures, warnings)
+
+
+def loop_tuning(wire_handed_over: bool, heldout_mrad: float) -> dict[str, float]:
+    """The TEM loop's parameters handed over with the wire model: {} (config/wrist.yaml's), or
+    ``tem_controller.target_filter_s`` = :data:`LOOSE_TARGET_FILTER_S` where the handed-over wire model predicts the
+    excitation's held-out angle worse than :data:`LOOSE_WIRE_MRAD`.
+
+    Why: the inverse compensator's answer jumps by the hysteresis' width (~18 degC) whenever the strain it is asked
+    for crosses the one its model gives at the measured temperature. With a wire model that misses the wire's minor
+    loops (the warped SD-GPI on the phase-fraction wrist, 44 mrad held out) those crossings follow the model's error,
+    several times a second (450-545 jumps of over 5 degC in 190 s, against 10-47 with the defaults), and the TEMs,
+    following the targets through the 0.5 s prefilter, reverse between +20 and -11.5 V while the sticking joint
+    slips. On that wrist (wire 8 degC hotter, TEM 1 0.8 x, 0.45 kg; three cycles of the Sec. 6.1 sine, two sensor
+    seeds) the commissioned loop's max error was 19.9 +- 11.1 and 14.5 +- 16.1 % with the 0.5 s prefilter, 15.8 with
+    1 s, 9.0 and 9.3 with 2 s, 9.5 +- 1.7 and 8.7 +- 2.3 with 3 s, 8.4 with 4 s; the defaults' 23.3 and 24.8. On
+    the SD-GPI wire 8 degC hotter (the shifted wire handed over, 3.2 mrad) a 2 s prefilter changed nothing (28.9
+    against 28.4 %, a wire that the TEMs cannot heat far enough). The defaults on the phase-fraction wrist tracked
+    worse with it (29.3 against 23.3 %): their wire misses by more than a prefilter hides, so it goes only with a
+    commissioned wire."""
+    if wire_handed_over and math.isfinite(heldout_mrad) and heldout_mrad > LOOSE_WIRE_MRAD:
+        return {'target_filter_s': LOOSE_TARGET_FILTER_S}
+    return {}
 
 
 def _figures(
@@ -810,4 +845,4 @@ def _figures(
     return ['excitation.png']
 
 
-__all__ = ['identify_wrist', 'Identified', 'IdentificationError', 'rest_faces']
+__all__ = ['identify_wrist', 'Identified', 'IdentificationError', 'rest_faces', 'loop_tuning']
