@@ -20,7 +20,13 @@ import yaml
 
 from sma_wrist.commission.device import SimDevice
 from sma_wrist.commission.run import EXIT_FAULT, commission, exit_code
-from sma_wrist.commission.verify import CALIBRATION_KEYS, VerifyOptions, controllers_of, run_verification
+from sma_wrist.commission.verify import (
+    CALIBRATION_KEYS,
+    VerifyOptions,
+    controllers_of,
+    diagnosis_warning,
+    run_verification,
+)
 from sma_wrist.hw.emulator import EmulatorConfig
 
 RATE_HZ = 250.0
@@ -285,3 +291,23 @@ def test_a_weak_tem_face_within_its_noise_is_pulsed_again_before_it_is_called_de
     assert min(-first['face_change_C'][0][0], -first['face_change_C'][1][1]) < first['face_response_floor_C']
     assert min(-longer['face_change_C'][0][0], -longer['face_change_C'][1][1]) > 2 * longer['face_response_floor_C']
     assert bring.faults == [] and bring.max_drive_sent_V <= 6.0
+
+
+def test_a_commissioned_model_that_does_not_describe_the_loop_is_said_with_what_it_means_for_diagnose_and_monitor():
+    assert diagnosis_warning(None) == ''
+    clean = {'discrepancy': False, 'residual': {'thermal': {'rms': 0.07, 'rms_over_noise': 1.38}}}
+    assert diagnosis_warning(clean) == ''
+    off = {
+        'discrepancy': True,
+        'unexplained': True,
+        'summary': 'unexplained discrepancy in mechanics',
+        'residual': {
+            'thermal': {'rms': 0.058, 'rms_over_noise': 1.11},
+            'mechanics': {'rms': 0.31, 'rms_over_noise': 271.0},
+        },
+    }
+    text = diagnosis_warning(off)
+    assert 'does not describe' in text and 'twin monitor' in text
+    assert 'mechanics 0.31 rad' in text and 'thermal' not in text  # only the channels with structure left
+    named = dict(off, unexplained=False, summary='thermal: tem_gain_err')
+    assert 'departs from (thermal: tem_gain_err)' in diagnosis_warning(named)

@@ -570,6 +570,8 @@ def run_verification(
                 settle_to_start=settle_to_start if settling else None,
                 budget_s=BUDGET_S - result['device_time_s'],
             )
+        if diagnosis_warning(v.get('diagnosis')):
+            result['warnings'].append(diagnosis_warning(v.get('diagnosis')))
     except KeyboardInterrupt:
         result['status'] = 'interrupted'
         result['message'] = (
@@ -636,6 +638,29 @@ def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S
             for c, per in d.residual_stats.items()
         },
     }
+
+
+def diagnosis_warning(d: dict[str, Any] | None) -> str:
+    """What a discrepancy in the commissioned run's diagnosis (:func:`diagnosis`) means for the wrist's user ('' when
+    there is none): the params file's model is what ``sma-wrist diagnose --params-file`` and the twin monitor judge
+    the wrist against, so a model that does not describe the loop makes them report this wrist from its first run."""
+    if not d or not d.get('discrepancy'):
+        return ''
+    from sma_wrist.diagnose import STRUCTURE_RATIO
+
+    off = [
+        f'{c} {r["rms"]:.3g} {"degC" if c == "thermal" else "rad"} RMS, {r["rms_over_noise"]:.3g}x the noise'
+        for c, r in (d.get('residual') or {}).items()
+        if r.get('rms_over_noise', 0.0) > STRUCTURE_RATIO  # the channels the diagnosis finds structure in
+    ]
+    what = 'does not describe' if d.get('unexplained') else f'departs from ({d.get("summary")})'
+    return (
+        f'verification: the commissioned model {what} this wrist in closed loop'
+        + (f' ({"; ".join(off)})' if off else '')
+        + ': `sma-wrist diagnose --params-file` and the twin monitor judge the wrist against this model and will '
+        'report this from its first run; read their verdicts on this wrist as departures from the commissioned '
+        'model (doc/howto/commission.md#limits)'
+    )
 
 
 def _r(x: Any) -> float | None:
@@ -708,6 +733,8 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             + (f' Residual of the commissioned model: {residual}.' if residual else ''),
             '',
         ]
+        if diagnosis_warning(d):
+            lines += [f'**{diagnosis_warning(d)}**', '']
     if v.get('stopped'):
         lines += [f'Stopped: {v["stopped"]}', '']
     return lines
