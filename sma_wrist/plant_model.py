@@ -82,11 +82,14 @@ class PlantModel:
             raise PlantModelFileError(f'{self._where()}{exc}') from None
 
     def describe(self) -> str:
-        """One line: what the model is made of."""
+        """One line: what the model is made of (the params file's node, model files, pre-load, ``model.*`` values)."""
         parts = [f'{self.node} of {self.source}'] if self.source else []
         parts += [
             f'{k} {v}' for k, v in (('hysteresis_file', self.hysteresis_file), ('thermal_file', self.thermal_file)) if v
         ]
+        if self.preload_elongation_mm is not None:
+            parts.append(f'preload_elongation_mm {self.preload_elongation_mm:g}')
+        parts += [f'model.{k} {v:g}' for k, v in self.extension.items()]
         return ', '.join(parts) or 'the built-in model'
 
     def _where(self) -> str:

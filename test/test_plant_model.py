@@ -140,6 +140,37 @@ def test_diagnose_replays_the_params_files_preload_and_friction(tmp_path, commis
     assert written == expect
 
 
+def test_diagnose_shows_the_replayed_models_values_as_nominal(tmp_path, commissioned_wrist_run):
+    """The fitted parameters' nominal is the value of the model replayed: a file's model.coulomb_Nm (0.05) and
+    model.viscous_Nms (0.3), not the catalogue's 0.004 and 0.15; an error such as preload_err_mm is 0, relative to
+    the file's pre-load, which the report's header names with the file. Here the file says the built-in pre-load,
+    0.3 mm less than the wrist's, so the diagnosis names a discrepancy and the report lists its parameters."""
+    from sma_wrist.diagnose import diagnose_run
+
+    viscous = 0.3
+    f = commissioned(
+        tmp_path, preload_elongation_mm=PlantParams().preload_elongation_mm, **{'model.viscous_Nms': viscous}
+    )
+    res = diagnose_run(
+        commissioned_wrist_run,
+        report_dir=tmp_path / 'report',
+        candidates=['recalibrate_mechanics', 'friction'],
+        params_file=str(f),
+    )
+    assert res.discrepancy and res.parameters, res.summary
+    replayed = {'coulomb_Nm': COULOMB_NM, 'viscous_Nms': viscous, 'preload_err_mm': 0.0, 'payload_err_kg': 0.0}
+    shown = [res.parameters] + [a['parameters'] for a in res.alternatives]
+    nominal = {k: v['nominal'] for params in shown for k, v in params.items()}
+    assert nominal == {k: replayed[k] for k in nominal} and {'coulomb_Nm', 'viscous_Nms'} <= set(nominal)
+    assert res.to_json()['parameters'] == res.parameters
+    report = (tmp_path / 'report' / 'diagnosis.md').read_text()
+    header = report.split('## ')[0]
+    assert str(f) in header and f'preload_elongation_mm {PlantParams().preload_elongation_mm:g}' in header
+    rows = {line.split(' | ')[0].strip('| '): line for line in report.splitlines() if line.startswith('| ')}
+    for k in res.parameters:
+        assert rows[k].rstrip(' |').endswith(f'{replayed[k]:.5g}'), rows[k]
+
+
 def test_diagnose_cli_names_a_params_file_without_a_plant(tmp_path, capsys):
     from sma_wrist.cli import main
 

@@ -73,8 +73,6 @@ ONSET_TOLERANCE_C = 1.0
 REFINE_TOLERANCE_C = 1.0
 #: the phase whose heating of muscle 1 (muscle 2 cooling from rest, untransformed) places the wire's transformation
 FIRST_HEATING = schedule()[0].label
-#: the TEMs' drive gains differ by more than this: a warning (a supply lead, a thermal contact)
-LAYER_GAIN_TOLERANCE = 0.1
 #: a handed-over wire model that predicts the held-out angle worse than this [mrad RMS, ~1 % of the Sec. 6.1 sine's
 #: 1.05 rad] gets the TEM loop's slower target prefilter (:func:`loop_tuning`)
 LOOSE_WIRE_MRAD = 10.0
@@ -196,13 +194,9 @@ def identify_thermal_part(
     except ti.ThermalIdentificationError as e:
         usable = str(e)
     gain_1_to_2 = params.tem_gain[0] / params.tem_gain[1]
-    if abs(gain_1_to_2 - 1.0) > LAYER_GAIN_TOLERANCE:
-        weaker = 1 if gain_1_to_2 < 1 else 2
-        warnings.append(
-            f'thermal: TEM {weaker} pumps {abs(1 - min(gain_1_to_2, 1 / gain_1_to_2)):.0%} less per volt than the '
-            f'other (thermal.yaml gives each its gain, tem_gain): check TEM {weaker} (its supply lead, its thermal '
-            'contact) if the difference is not intended'
-        )
+    differ = ti.tem_gain_warning(params.tem_gain, 'thermal.yaml gives each its gain, tem_gain')
+    if differ:
+        warnings.append(f'thermal: {differ}')
     rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in per_tem.items()}
     prov = {
         'source': 'sma-wrist commission: excitation of the wrist on its own sensors',

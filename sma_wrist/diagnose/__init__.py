@@ -130,6 +130,9 @@ class DiagnosisResult:
     #: or 'twin' (a live monitor's replay before the window)
     thermal_start: str = 'rest'
     params_file: str | None = None
+    #: the model replayed (:meth:`sma_wrist.plant_model.PlantModel.describe`): its params file, model files,
+    #: pre-load and ``model.*`` values, the nominal values the fits start from
+    model: str = 'the built-in model'
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -151,11 +154,15 @@ def _plain(x: Any) -> Any:
     return x
 
 
-def _param_dict(row: np.ndarray, names: Sequence[str]) -> dict[str, dict[str, Any]]:
+def _param_dict(row: np.ndarray, names: Sequence[str], nominal: np.ndarray) -> dict[str, dict[str, Any]]:
+    """``names``' fitted values in ``row`` with their ``nominal``: the value of the model replayed, the row the fits
+    start from (a params file's ``model.*`` values, e.g. a commissioned ``coulomb_Nm``, else the catalogue's; the
+    errors such as ``preload_err_mm`` are 0 there, relative to the replayed model's pre-load)."""
     out = {}
     for k in names:
-        p = fx.PARAMS[fx.INDEX[k]]
-        out[k] = {'value': float(row[fx.INDEX[k]]), 'unit': p.unit, 'nominal': p.nominal, 'meaning': p.description}
+        i = fx.INDEX[k]
+        p = fx.PARAMS[i]
+        out[k] = {'value': float(row[i]), 'unit': p.unit, 'nominal': float(nominal[i]), 'meaning': p.description}
     return out
 
 
@@ -274,7 +281,7 @@ def diagnose_run(
                 'score': round(f.score, 4),
                 'channel': c,
                 'gain_pct': round(g['gain_pct'], 2),
-                'parameters': _param_dict(f.row, f.effect.params),
+                'parameters': _param_dict(f.row, f.effect.params, ev.nominal),
                 'at_bound': [h['parameter'] for h in bounds[id(f)]],
                 'consistent': consistent[id(f)],
                 'size': round(effect_size(f, ev.nominal), 3),
@@ -376,7 +383,9 @@ def diagnose_run(
         )
     if significant:
         e = best.effect
-        ps = ', '.join(f'{k} = {v["value"]:.4g} {v["unit"]}' for k, v in _param_dict(best.row, e.params).items())
+        ps = ', '.join(
+            f'{k} = {v["value"]:.4g} {v["unit"]}' for k, v in _param_dict(best.row, e.params, ev.nominal).items()
+        )
         summary = (
             f'{e.subsystem} discrepancy: {e.name} ({e.id}; {ps}); held-out {channel} RMS '
             f'{g_best["rmse_before"]:.4g} -> {g_best["rmse_after"]:.4g} ({g_best["gain_pct"]:.1f} % better)'
@@ -441,7 +450,7 @@ def diagnose_run(
         discrepancy=significant or unexplained,
         subsystem=subsystem,
         cause=best.effect.id if significant else None,
-        parameters=_param_dict(best.row, best.effect.params) if significant else {},
+        parameters=_param_dict(best.row, best.effect.params, ev.nominal) if significant else {},
         channel=shown,
         rmse_before=g_best['rmse_before'] if significant else chan_gains[shown]['rmse_before'],
         rmse_after=g_best['rmse_after'] if significant else chan_gains[shown]['rmse_after'],
@@ -463,7 +472,7 @@ def diagnose_run(
                 'subsystem': best.effect.subsystem,
                 'channel': channel,
                 'gain_pct': g_best['gain_pct'],
-                'parameters': _param_dict(best.row, best.effect.params),
+                'parameters': _param_dict(best.row, best.effect.params, ev.nominal),
             }
             if partial
             else None
@@ -473,6 +482,7 @@ def diagnose_run(
         duration_s=run.duration,
         drive=run.drive,
         thermal_start=run.thermal_start,
+        model=pm.describe(),
     )
     if params_out is not None:
         res.params_file = str(write_params(res, params_out, run, model=pm))
@@ -654,6 +664,8 @@ def run_cli(args: argparse.Namespace) -> int:
     for w in res.warnings:
         print(f'warning: {w}')
     print(res.summary)
+    if res.model != DiagnosisResult.model:  # a params file's or model files' model: say which
+        print(f'  model replayed: {res.model}')
     for c, g in res.channels.items():
         print(f'  {c:9s} held-out RMS {g["rmse_before"]:.4g} -> {g["rmse_after"]:.4g} ({g["gain_pct"]:+.1f} %)')
     print('  ranked candidates: ' + ', '.join(f'{a["cause"]} {a["score"]:.2f}' for a in res.alternatives[:5]))

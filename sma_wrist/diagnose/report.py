@@ -163,7 +163,7 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
     plt.close(fig)
     pngs.append('candidates.png')
 
-    lines = [f'# Model-discrepancy diagnosis: {result.source}', '']
+    lines = [f'# Model-discrepancy diagnosis: {result.source}', '', f'Model replayed: {result.model}.', '']
     lines.append(f'**{result.summary}**')
     lines.append('')
     if result.warnings:
@@ -201,7 +201,14 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
         lines.append(f'| on its bound (not a value) | {h["cause"]}: {h["parameter"]} = {h["bound"]:g} |')
     lines.append('')
     if result.parameters:
-        lines += ['## Fitted parameters', '', '| parameter | value | unit | nominal |', '|---|---|---|---|']
+        lines += [
+            '## Fitted parameters',
+            '',
+            'nominal: the value of the model replayed (an error such as preload_err_mm is 0 there).',
+            '',
+            '| parameter | value | unit | nominal |',
+            '|---|---|---|---|',
+        ]
         for k, v in result.parameters.items():
             lines.append(f'| {k} | {v["value"]:.5g} | {v["unit"]} | {v["nominal"]:.5g} |')
         lines.append('')

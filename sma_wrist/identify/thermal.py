@@ -8,7 +8,8 @@ Inputs (seed Sec. 4.3.1: one TEM driven by 12 V sines at 1/128-1 Hz, both faces 
   is split by it). Columns are found by header name (``time``/``t``, ``u``/``voltage``,
   ``T1``/``muscle``, ``T2``/``exchanger``, ``frequency``) or given with ``--columns``; units
   in brackets (``time [ms]``, ``T1 [K]``, ``u [mV]``) or ``--*-unit`` options, else detected
-  with a warning (Kelvin temperatures);
+  with a warning (Kelvin temperatures). A ``tem`` column (1 or 2) says which of the wrist's TEMs a row
+  measured (runs of both: see below);
 * a **rosbag2** recorded per msg_defs/topics.yaml (plant_sim or hardware_bridge): each
   muscle is one run, ``/wrist/tem_i/command`` [V] with ``/wrist/muscle_i/temperature``
   [degC]; where the bag has the drive the device read back (``/wrist/tem_drive_applied``, hardware_bridge) that is
@@ -21,6 +22,9 @@ kept); then every run is put on one grid (``--dt``, default 0.1 s): temperatures
 interpolated, the drive as its mean and mean square over each interval
 (:func:`~sma_wrist.core.thermal.identification.interval_means`; ``--input-hold linear`` for a
 logged continuous drive, the tables' default, ``zoh`` for held commands, the bags' default).
+
+Runs of both TEMs (a bag's two muscles, a table's tem column): each TEM's drive gain is fitted as well and
+written to thermal.yaml only where it predicts the held-out data better than one shared gain (:func:`tem_gains`).
 
 The fit and its validation are :mod:`sma_wrist.core.thermal.identification`; this module
 reads, reports (markdown + PNG), and writes the params file (:mod:`sma_wrist.core.thermal.params_file`).
@@ -42,7 +46,7 @@ from typing import Any
 
 from sma_wrist.core.errors import SmaWristError
 
-ROLES = ('time', 'u', 'T1', 'T2', 'frequency')
+ROLES = ('time', 'u', 'T1', 'T2', 'frequency', 'tem')
 _NAMES = {
     'time': ('t', 'time', 'times', 'timestamp', 'sec', 'secs', 'seconds', 'time_s', 'elapsed', 't_s'),
     'u': ('u', 'v', 'voltage', 'volt', 'volts', 'command', 'drive', 'input', 'u_v', 'tem_voltage', 'tem_command'),
@@ -78,6 +82,7 @@ _NAMES = {
         'tem_face_2',
     ),
     'frequency': ('f', 'freq', 'frequency', 'f_hz', 'frequency_hz'),
+    'tem': ('tem', 'tem_number', 'tem_id'),
 }
 TIME_UNITS = {'s': 1.0, 'sec': 1.0, 'ms': 1e-3, 'us': 1e-6, 'ns': 1e-9, 'min': 60.0}
 VOLT_UNITS = {'v': 1.0, 'mv': 1e-3}
@@ -277,6 +282,7 @@ class Series:
     T: Any  # (n, 2), NaN column when T2 is absent
     frequency_Hz: float | None
     source: str
+    layer: int = 0  # the wrist's TEM the run measured (0: TEM 1, 1: TEM 2): a table's tem column
 
 
 def load_table(
@@ -285,8 +291,9 @@ def load_table(
     units: dict[str, str] | None = None,
     sample_period_s: float | None = None,
 ) -> tuple[list[Series], Cleaning]:
-    """Read, convert and clean one table; split by its frequency column if it has one. ``sample_period_s``: the
-    table has no time column, its rows are that many seconds apart (a logger that writes one row per period)."""
+    """Read, convert and clean one table; split by its frequency and tem columns if it has them (tem: which of the
+    wrist's TEMs, 1 or 2, a row measured). ``sample_period_s``: the table has no time column, its rows are that
+    many seconds apart (a logger that writes one row per period)."""
     import numpy as np
 
     header, data = read_table(path)
@@ -304,7 +311,7 @@ def load_table(
             'any row; fitting T1 only'
         )
         del idx['T2']
-    need = [idx['time'], idx['u'], idx['T1']] + ([idx['T2']] if 'T2' in idx else [])
+    need = [idx['time'], idx['u'], idx['T1']] + [idx[r] for r in ('T2', 'tem') if r in idx]
     bad = ~np.isfinite(data[:, need]).all(axis=1)
     cl.dropped_nan = int(bad.sum())
     if cl.dropped_nan:
@@ -337,6 +344,12 @@ def load_table(
                 (units.get('temperature') or hdr_units.get(role, '')).lower(),
                 cl.warnings,
             )
+    tem = data[:, idx['tem']] if 'tem' in idx else np.ones(t.size)
+    if not np.isin(tem, (1.0, 2.0)).all():
+        bad_tem = sorted({float(x) for x in tem[~np.isin(tem, (1.0, 2.0))]})[:3]
+        raise ThermalInputError(
+            f'{path}: the tem column says which TEM a row measured, 1 or 2; it holds {", ".join(map(repr, bad_tem))}'
+        )
     freq = data[:, idx['frequency']] if 'frequency' in idx else None
     if freq is not None and not np.isfinite(freq).all():
         # a blank cell (a spreadsheet writes each block's frequency on its first row only): the row above's; an
@@ -349,13 +362,18 @@ def load_table(
             f'{path.name}: {int(blank.sum())} row(s) without a frequency took the one above'
             + (f'; {int(lead.sum())} before the first frequency dropped' if lead.any() else '')
         )
-        t, u, T, freq = t[~lead], u[~lead], T[~lead], freq[~lead]
+        t, u, T, freq, tem = t[~lead], u[~lead], T[~lead], freq[~lead], tem[~lead]
         if t.size < 10:
             raise ThermalInputError(f'{path}: no frequency in its frequency column')
     groups = [None] if freq is None else sorted(set(np.round(freq, 9).tolist()))
+    tems = sorted(set(tem.tolist()))
     out = []
-    for g in groups:
-        sel = np.ones(t.size, bool) if g is None else np.round(freq, 9) == g
+    for m, g in ((m, g) for m in tems for g in groups):
+        sel = tem == m
+        if g is not None:
+            sel &= np.round(freq, 9) == g
+        if not sel.any():
+            continue
         ts, us, Ts = t[sel], u[sel], T[sel]
         back = int((np.diff(ts) < 0).sum())
         if back:
@@ -366,8 +384,8 @@ def load_table(
         if dup.any():
             cl.duplicates += int(dup.sum())
             ts, us, Ts = ts[~dup], us[~dup], Ts[~dup]
-        label = path.name if g is None else f'{path.name} f={g:g} Hz'
-        out.append(Series(label, ts, us, Ts, None if g is None else float(g), str(path)))
+        label = (path.name if g is None else f'{path.name} f={g:g} Hz') + (f' TEM {m:g}' if len(tems) > 1 else '')
+        out.append(Series(label, ts, us, Ts, None if g is None else float(g), str(path), int(m) - 1))
     if cl.unsorted:
         cl.warnings.append(f'{path.name}: {cl.unsorted} time steps back; rows sorted by time')
     if cl.duplicates:
@@ -448,7 +466,7 @@ def to_records(series: Sequence[Series], dt: float, cleaning: Cleaning, hold: st
             axis=1,
         )
         freq = s.frequency_Hz if s.frequency_Hz is not None else estimate_frequency(t, u)
-        out.append(ThermalRecord(s.name, dt, um, Tg, freq, source=s.source, u2=u2))
+        out.append(ThermalRecord(s.name, dt, um, Tg, freq, source=s.source, u2=u2, layer=s.layer))
     return out
 
 
@@ -713,6 +731,20 @@ def write_report(
             'The T2 (exchanger face) column is not fitted: no run measured T2, so the base values are kept '
             'and the T1 column is identified given them (doc/howto/identify_tems.md).',
         ]
+    g = summary.get('tem_gain')
+    if g:
+        lines += [
+            '',
+            "## Each TEM's drive gain",
+            '',
+            f"The runs cover both TEMs, so each TEM's drive gain was fitted: {_gain_sentence(g)}.",
+        ]
+        if g['heldout_T1_rms_C']:
+            lines += [
+                '',
+                'Held-out muscle-face RMS per TEM [degC], each its gain fitted: '
+                f'{g["heldout_T1_rms_C"]["per_tem"]}; one shared gain: {g["heldout_T1_rms_C"]["shared"]}.',
+            ]
     if summary['fit'].get('sensor_lag_s') is not None:
         lines += [
             '',
@@ -802,7 +834,9 @@ def register(subparsers: Any) -> argparse.ArgumentParser:
     ap.add_argument('--out', default=None, metavar='DIR', help='report (markdown, PNG) and thermal.yaml here')
     ap.add_argument('--params-out', default=None, metavar='FILE', help='params file (default DIR/thermal.yaml)')
     ap.add_argument('--base', default=None, metavar='FILE', help='thermal file to start from (default Table 4.9)')
-    ap.add_argument('--columns', type=_columns, default=None, help='ROLE=COLUMN,... roles time, u, T1, T2, frequency')
+    ap.add_argument(
+        '--columns', type=_columns, default=None, help='ROLE=COLUMN,... roles time, u, T1, T2, frequency, tem'
+    )
     ap.add_argument(
         '--time-unit',
         choices=sorted(TIME_UNITS),
@@ -934,7 +968,8 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
         sensor_lag=a.sensor_lag,
         progress=say,
     )
-    fit_warnings = _fit_warnings(result, records, hold_recs)
+    result, gains, gain_warnings = tem_gains(records, hold_recs, base, result, a, say)
+    fit_warnings = _fit_warnings(result, records, hold_recs) + gain_warnings
     say('characterising the hold limits of the identified model')
     params = result.fit.params.with_hold_limits(ti.tem_hold_limits(result.fit.params))
     lo, hi = params.u_min_V, params.u_max_V
@@ -965,6 +1000,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
                 'validation': result.validation,
                 'in_sample_rms_C': round(result.fit.rms_C, 4),
                 'holdout': held,
+                **({'tem_gain': {k: gains[k] for k in _GAIN_PROVENANCE}} if gains else {}),
             },
             header='sma_wrist thermal params file (TEM heat balance, seed Eqs. 4.13-4.15, Table 4.9 layout).\n'
             'Written by `sma-wrist identify thermal`. Load it in the wrist by setting the parameter\n'
@@ -985,6 +1021,7 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
         'holdout': [e.as_dict() for e in result.holdout],
         'before': [e.as_dict() for e in result.before],
         'validation': result.validation,
+        'tem_gain': gains,
         'hold_limits_V': [lo, hi],
         **({'tem_hold_limits_V': [list(q) for q in params.tem_hold_limits_V]} if params.tem_hold_limits_V else {}),
         'params_file': str(params_path) if params_path else None,
@@ -1002,6 +1039,100 @@ def identify(a: argparse.Namespace) -> dict[str, Any]:
         summary['report'] = str(rep)
     summary['wall_s'] = time.perf_counter() - t0
     return summary
+
+
+#: what thermal.yaml's provenance keeps of :func:`tem_gains`' finding
+_GAIN_PROVENANCE = ('fitted', 'tem1_relative_to_tem2', 'validation', 'heldout_T1_rms_C', 'noise_C', 'handed_over')
+
+
+def tem_gains(
+    records: Sequence[Any], hold_recs: Sequence[Any], base: Any, shared: Any, a: argparse.Namespace, say: Any
+) -> tuple[Any, dict[str, Any] | None, list[str]]:
+    """Each TEM's drive gain where the fitted runs cover both TEMs (a bag's two muscles, a table's tem column):
+    :func:`~sma_wrist.core.thermal.identification.fit_thermal`'s ``tem_gain``, in every fit of the validation.
+
+    Handed over (thermal.yaml's ``tem_gain``) only where it predicts the held-out muscle faces better than one
+    shared gain (``shared``, the identification without it) by more than the sensors' noise, and neither TEM's
+    worse by more than it: the rule ``sma-wrist commission`` hands its heat balance over by. Both are judged on
+    the same held-out data: the validation chosen, except that leave-one-out becomes the time split where a TEM
+    has a single run (a fit without a TEM's runs cannot know its gain). The noise is the largest white-noise std of
+    the runs' muscle faces (:func:`sma_wrist.diagnose.effects.noise_sigma`).
+
+    Returns (the identification handed over, the finding as JSON or None for runs of one TEM, warnings).
+    """
+    import numpy as np
+
+    from sma_wrist.core.thermal import identification as ti
+    from sma_wrist.diagnose.effects import noise_sigma
+
+    if len({r.layer for r in records}) < 2:
+        return shared, None, []
+    validation = shared.validation
+    if validation == 'leave-one-out' and any(sum(r.layer == m for r in records) < 2 for m in (0, 1)):
+        validation = 'time-split'
+    say(f"each TEM's drive gain ({validation} validation)")
+    opts = dict(faces=a.faces, train_fraction=a.train_fraction, sensor_lag=a.sensor_lag, progress=say)
+    found: dict[str, Any] = dict.fromkeys((*_GAIN_PROVENANCE, 'heldout_T1_rms_all_C', 'why'))
+    found |= {'validation': validation, 'handed_over': False}
+    try:
+        per = ti.identify_thermal(records, hold_recs, base, validation=validation, tem_gain=True, **opts)
+        same = (
+            shared
+            if validation == shared.validation
+            else ti.identify_thermal(records, hold_recs, base, validation=validation, **opts)
+        )
+    except ti.ThermalIdentificationError as e:  # e.g. runs too short to hold a part out: the gains are not judged
+        found['why'] = f'not judged on held-out data: {e}'
+        try:
+            gains = ti.fit_thermal(records, base, faces=a.faces, sensor_lag=a.sensor_lag, tem_gain=True).params.tem_gain
+        except ti.ThermalIdentificationError:
+            return shared, found, []
+        found |= {'fitted': [round(g, 4) for g in gains], 'tem1_relative_to_tem2': round(gains[0] / gains[1], 4)}
+        differ = ti.tem_gain_warning(gains, 'fitted, not judged: thermal.yaml keeps one gain')
+        return shared, found, [differ] if differ else []
+    layer = {r.name: r.layer for r in [*records, *hold_recs]}
+
+    def rms(res: Any, tems: Sequence[int] = (0, 1)) -> float | None:
+        e = [ev.faces['T1']['rms_C'] for ev in res.holdout if layer[ev.record] in tems]
+        return float(np.sqrt(np.mean(np.square(e)))) if e else None
+
+    noise = max(noise_sigma(r.T[r.valid, 0]) for r in [*records, *hold_recs])
+    gains = per.fit.params.tem_gain
+    per_tem = {'per_tem': [rms(per, (m,)) for m in (0, 1)], 'shared': [rms(same, (m,)) for m in (0, 1)]}
+    overall = {'per_tem': rms(per), 'shared': rms(same)}
+    if overall['per_tem'] is None or overall['shared'] is None:
+        better, why = False, 'no held-out data to judge them by (--validation none and no --holdout)'
+    else:
+        worse = [m + 1 for m, (c, b) in enumerate(zip(*per_tem.values())) if c is not None and not c <= b + noise]
+        better = overall['per_tem'] < overall['shared'] - noise and not worse
+        why = (
+            f"held out {overall['per_tem']:.3g} degC RMS (muscle faces) against one shared gain's "
+            f"{overall['shared']:.3g}, the sensors' noise {noise:.2g} degC"
+            + (f'; TEM {", ".join(map(str, worse))} worse beyond the noise' if worse else '')
+        )
+    found |= {
+        'fitted': [round(g, 4) for g in gains],
+        'tem1_relative_to_tem2': round(gains[0] / gains[1], 4),
+        'heldout_T1_rms_C': {k: [None if x is None else round(x, 4) for x in v] for k, v in per_tem.items()},
+        'heldout_T1_rms_all_C': {k: None if v is None else round(v, 4) for k, v in overall.items()},
+        'noise_C': round(noise, 4),
+        'handed_over': bool(better),
+        'why': why,
+    }
+    where = (
+        'thermal.yaml gives each its gain, tem_gain'
+        if better
+        else 'fitted; thermal.yaml keeps one gain: they predict the held-out data no better'
+    )
+    differ = ti.tem_gain_warning(gains, where)
+    return (per if better else shared), found, [differ] if differ else []
+
+
+def _gain_sentence(g: dict[str, Any]) -> str:
+    """One line of :func:`tem_gains`' finding for the text output and the report."""
+    fitted = 'not fitted' if g['fitted'] is None else f"TEM 1 {g['tem1_relative_to_tem2']:.4g} x TEM 2's"
+    where = 'in thermal.yaml (tem_gain)' if g['handed_over'] else 'not handed over: thermal.yaml keeps one gain'
+    return f'{fitted}, {where} ({g["validation"]} validation: {g["why"]})'
 
 
 def _fit_warnings(result: Any, records: Sequence[Any], hold_recs: Sequence[Any]) -> list[str]:
@@ -1076,6 +1207,8 @@ def format_text(s: dict[str, Any]) -> str:
                 f'  {e["record"]:<30s} {_freq_label(e["frequency_Hz"]):>10s} {face}: {st["rms_C"]:.3f}, '
                 f'{st["std_pct"]:.2f} %, {st["max_abs_pct"]:.2f} %' + (f'  ({b:.3f})' if b is not None else '')
             )
+    if s.get('tem_gain'):
+        out.append(f"each TEM's drive gain: {_gain_sentence(s['tem_gain'])}")
     out.append(f'hold limits of the identified model: {s["hold_limits_V"][0]:+g} .. {s["hold_limits_V"][1]:+g} V')
     if s['params_file']:
         out.append(f'params file: {s["params_file"]} (set thermal_file for plant_sim and tem_controller)')

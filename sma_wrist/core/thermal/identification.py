@@ -67,6 +67,8 @@ _UPPER = np.array([1.0, 1.0, 5.0, 5.0, 1.0, 50.0])
 _COMPLEX_STEP = 1e-30
 #: bounds of a TEM's fitted drive gain relative to the other's (``fit_thermal(tem_gain=True)``)
 TEM_GAIN_BOUNDS = (0.2, 5.0)
+#: the TEMs' drive gains differ by more than this: a warning (a supply lead, a thermal contact)
+LAYER_GAIN_TOLERANCE = 0.1
 #: the temperature sensors' first-order lag [s] when fitted (--sensor-lag): its bounds, and the lags the start is
 #: chosen from on the fit without a lag (from 1 s a 7.8 h real staircase's fit ran to 0 s, a local minimum, where
 #: the same table read through 120-240 s was 35 % better)
@@ -786,9 +788,10 @@ def identify_thermal(
     settle_s: float = 30.0,
     sensor_lag: bool = False,
     progress: Callable[[str], None] | None = None,
+    tem_gain: bool = False,
 ) -> ThermalIdentification:
-    """Fit on ``records`` and validate on data the fit never saw (``sensor_lag``: :func:`fit_thermal`'s, in every
-    fit; each prediction is read through the lag its fit found).
+    """Fit on ``records`` and validate on data the fit never saw (``sensor_lag``, ``tem_gain``: :func:`fit_thermal`'s,
+    in every fit; each prediction is read through the lag its fit found and drives its TEM with its fitted gain).
 
     ``validation``: 'leave-one-out' (each run predicted by the fit on the others; needs >= 2
     runs), 'time-split' (fit on the first ``train_fraction`` of every run, score the rest,
@@ -814,20 +817,35 @@ def identify_thermal(
     all_records = list(records) + list(holdout)
     if len({round(r.dt, 12) for r in all_records}) != 1:
         raise ThermalIdentificationError('all runs (and hold-out runs) must share one sample period')
+    if tem_gain and validation == 'leave-one-out' and any(sum(r.layer == m for r in records) < 2 for m in (0, 1)):
+        raise ThermalIdentificationError(
+            "leave-one-out validation of each TEM's drive gain needs at least two runs of each TEM (a fit without "
+            "a TEM's runs cannot know its gain); use time-split validation"
+        )
     say(f'fit on {len(records)} run(s)')
-    final = fit_thermal(records, base, faces=faces, settle_s=settle_s, sensor_lag=sensor_lag)
+    final = fit_thermal(records, base, faces=faces, settle_s=settle_s, sensor_lag=sensor_lag, tem_gain=tem_gain)
     fitted_faces = 'both' if len(final.faces) == 2 else 'muscle'
     held: list[RecordEvaluation] = []
     if validation == 'leave-one-out':
         for j, r in enumerate(records):
             say(f'leave-one-out {j + 1}/{len(records)}: predicting {r.name}')
             others = [q for i, q in enumerate(records) if i != j]
-            f = fit_thermal(others, base, faces=fitted_faces, settle_s=settle_s, sensor_lag=sensor_lag)
+            f = fit_thermal(
+                others, base, faces=fitted_faces, settle_s=settle_s, sensor_lag=sensor_lag, tem_gain=tem_gain
+            )
             held += evaluate(f.params, [r], 'leave-one-out', settle_s=settle_s, base=base, sensor_lag_s=f.sensor_lag_s)
     elif validation == 'time-split':
         say(f'time split: fit on the first {train_fraction:.0%} of every run')
         train = [np.arange(r.n) < int(train_fraction * r.n) for r in records]
-        f = fit_thermal(records, base, faces=fitted_faces, masks=train, settle_s=settle_s, sensor_lag=sensor_lag)
+        f = fit_thermal(
+            records,
+            base,
+            faces=fitted_faces,
+            masks=train,
+            settle_s=settle_s,
+            sensor_lag=sensor_lag,
+            tem_gain=tem_gain,
+        )
         held += evaluate(
             f.params,
             records,
@@ -844,6 +862,19 @@ def identify_thermal(
     in_sample = evaluate(final.params, records, 'in-sample', settle_s=settle_s, base=base, sensor_lag_s=lag)
     before = evaluate(base, all_records, 'default', settle_s=settle_s, base=base)
     return ThermalIdentification(final, base, in_sample, held, before, validation, time.perf_counter() - t0)
+
+
+def tem_gain_warning(tem_gain: tuple[float, float], where: str) -> str | None:
+    """The warning where TEM 1's and TEM 2's drive gains (``ThermalParams.tem_gain``) differ by more than
+    :data:`LAYER_GAIN_TOLERANCE` (``where``: what became of the gains, in brackets), else None."""
+    ratio = tem_gain[0] / tem_gain[1]
+    if abs(ratio - 1.0) <= LAYER_GAIN_TOLERANCE:
+        return None
+    weaker = 1 if ratio < 1 else 2
+    return (
+        f'TEM {weaker} pumps {abs(1 - min(ratio, 1 / ratio)):.0%} less per volt than the other ({where}): '
+        f'check TEM {weaker} (its supply lead, its thermal contact) if the difference is not intended'
+    )
 
 
 def tem_hold_limits(params: th.ThermalParams, resolution_V: float = 0.05) -> tuple[tuple[float, float], ...]:
