@@ -8,14 +8,18 @@ device time.
 ``--cases identify`` runs the whole procedure (bring-up, excitation, identification) on the devices of
 :data:`IDENTIFY` and prints the identified values against the device's truth, the held-out errors of the
 commissioned and the built-in model, the device time and the wall time.
+``--cases prefilter`` commissions the first device of :data:`DEVICES` and runs three cycles of the sine with its params
+file at each TEM target prefilter and with the defaults, on fresh devices of two sensor seeds (:func:`measure_prefilter`).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tempfile
 import time
+from pathlib import Path
 from typing import Any
 
 FAULTS: dict[str, tuple[dict[str, Any], list[tuple[str, int | None]]]] = {
@@ -197,6 +201,13 @@ DEVICES: dict[str, dict[str, Any]] = {
         'tem_drive_scale': (0.8, 1.0),
         'payload_kg': 0.45,
     },
+    # the model's own wire, transforming 8 degC hotter: its top beyond what the TEMs' 80 degC reach
+    'SD-GPI wire 8 degC hotter, TEM 1 0.8x, 0.5 kg not given': {
+        'plant': 'sdgpi',
+        'scenario': {'transition_shift_C': 8.0},
+        'tem_drive_scale': (0.8, 1.0),
+        'payload_kg': 0.5,
+    },
     'nominal (the model)': {},
 }
 
@@ -258,6 +269,76 @@ def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -
     return rows
 
 
+def loop_run(cfg: dict[str, Any], params_file: str | Path, seed: int, cycles: int = 3) -> dict[str, Any]:
+    """The Sec. 6.1 sine (inverse_adaptive, run's 30 s soft start, ``cycles`` full cycles) with ``params_file`` on a
+    fresh emulated device of ``cfg`` (its wrist at rest), served as the verification serves it: per cycle max / RMS
+    error [%]."""
+    from sma_wrist import runtime
+
+    runtime.activate()
+    from sma_wrist.closed_loop import file_choices, run_closed_loop
+    from sma_wrist.commission.device import SimDevice
+    from sma_wrist.commission.verify import SIM_BRIDGE, SOFT_START_S, cycle_metrics
+    from sma_wrist.core.metrics import SEED_PERIOD_S
+
+    duration = round(SOFT_START_S + cycles * SEED_PERIOD_S + 2.0, 1)
+    dev = SimDevice(emulator_config(cfg, seed=seed))
+    dev.open()
+    dev.close()
+    _, payload = file_choices([params_file], hardware=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        with dev.serve(f'{tmp}/wrist', 2.0) as port:
+            s = run_closed_loop(
+                'inverse_adaptive',
+                payload,
+                duration,
+                None,
+                [params_file],
+                extra_params={
+                    '/hardware_bridge': {**SIM_BRIDGE, 'port': port},
+                    '/trajectory_generator': {'soft_start_s': SOFT_START_S},
+                },
+                hardware=True,
+                measure=True,
+            )
+    return cycle_metrics(s.run, duration, SOFT_START_S) if s.run is not None else {'cycles': [], 'start_up': None}
+
+
+def measure_prefilter(
+    filters: tuple[float, ...] = (0.5, 1.0, 2.0, 3.0, 4.0), seeds: tuple[int, ...] = (11, 12), progress: Any = None
+) -> dict[str, Any]:
+    """The prefilter table of doc/howto/commission.md: device (a) of :data:`DEVICES` commissioned (seed 11, no
+    verification), then its params file with each ``tem_controller.target_filter_s`` of ``filters``, and the
+    defaults, on fresh devices of each sensor seed: {parameters: {seed: cycles}}."""
+    import yaml
+
+    from sma_wrist.commission.device import SimDevice
+    from sma_wrist.commission.run import commission
+    from sma_wrist.commission.verify import write_defaults
+
+    say = progress or (lambda text: None)
+    cfg = next(iter(DEVICES.values()))
+    rows: dict[str, Any] = {}
+    with tempfile.TemporaryDirectory() as d:
+        res = commission(f'{d}/a', SimDevice(emulator_config(cfg, seed=11)))
+        if res['status'] != 'commissioned':
+            return {'status': res['status'], 'faults': res['faults']}
+        params = yaml.safe_load(Path(res['params_file']).read_text())
+        files = {'defaults': str(write_defaults(Path(d) / 'defaults.yaml', res['bridge_params']))}
+        for f in filters:
+            p = dict(params)
+            p['tem_controller'] = {
+                'ros__parameters': {**params['tem_controller']['ros__parameters'], 'target_filter_s': f}
+            }
+            files[f'commissioned, target_filter_s {f:g}'] = str(Path(d) / f'filter_{f:g}.yaml')
+            Path(files[f'commissioned, target_filter_s {f:g}']).write_text(yaml.safe_dump(p, sort_keys=False))
+        for name, path in files.items():
+            for seed in seeds:
+                say(f'{name}, seed {seed}')
+                rows.setdefault(name, {})[seed] = loop_run(cfg, path, seed)['cycles']
+    return {'handed_over': params['tem_controller']['ros__parameters'].get('target_filter_s'), 'runs': rows}
+
+
 def bench_commission(quick: bool = False) -> dict[str, Any]:
     """``sma-wrist bench --section commission``: the whole procedure on the devices of :data:`DEVICES`, and the
     wiring-fault matrix (:func:`measure`, one seed; 250 Hz with ``quick``)."""
@@ -287,9 +368,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog='python3 -m sma_wrist.commission.measure', description=__doc__.split('\n')[0])
     ap.add_argument('--seeds', type=int, default=3)
     ap.add_argument('--rate-hz', type=float, default=1000.0)
-    ap.add_argument('--cases', choices=('all', 'faults', 'healthy', 'identify'), default='all')
+    ap.add_argument('--cases', choices=('all', 'faults', 'healthy', 'identify', 'prefilter'), default='all')
     a = ap.parse_args(argv)
-    doc = measure_identification(a.rate_hz) if a.cases == 'identify' else measure(a.seeds, a.rate_hz, a.cases)
+    if a.cases == 'prefilter':
+        doc = measure_prefilter(progress=lambda text: print(f'[prefilter] {text}', file=sys.stderr, flush=True))
+    else:
+        doc = measure_identification(a.rate_hz) if a.cases == 'identify' else measure(a.seeds, a.rate_hz, a.cases)
     print(json.dumps(doc, indent=1))
     return 0
 
