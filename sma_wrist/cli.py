@@ -179,7 +179,8 @@ def _print_next(bag: str | None, plot: str | None) -> None:
     print(
         ('      ' if bag else 'next: ')
         + "sma-wrist run --params-file my.yaml ...   (change a gain or limit: copy a node's section of "
-        "config/wrist.yaml, e.g. adaptive_controller's adaptive.c1; `ros2 param describe` names each one)"
+        "config/wrist.yaml, e.g. adaptive_controller's pid.kp; every parameter with its range: the documentation's "
+        'node reference, or `ros2 param describe` under ROS 2)'
     )
 
 

@@ -182,3 +182,19 @@ def test_adaptive_controller_numeric_parameters_have_real_ranges():
         (ok,) = node.set_parameters([Parameter('adaptive.c1', value=600.0)])
     assert not res.successful and '5000' in res.reason
     assert ok.successful and node.law.params.adaptive.c1 == 600.0
+
+
+def test_run_hint_names_a_parameter_its_params_file_holds(capsys):
+    """The hint `sma-wrist run` ends with sends the user to a node's section of config/wrist.yaml for an example
+    parameter: that section must hold it (a user without ROS 2 has no `ros2 param describe` to find it)."""
+    import re
+
+    from sma_wrist.cli import _print_next
+
+    _print_next('runs/x', None)
+    hint = capsys.readouterr().out
+    m = re.search(r"config/wrist\.yaml, e\.g\. (\w+)'s ([\w.]+)", hint)
+    assert m, hint
+    node, name = m.groups()
+    section = yaml.safe_load((ROOT / 'config' / 'wrist.yaml').read_text())[node]['ros__parameters']
+    assert name in _flat_keys(section), f'the run hint names {node}.{name}, which config/wrist.yaml does not hold'
