@@ -854,6 +854,34 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     assert res.channels['thermal']['rmse_before'] < 1.0  # degC: the emulator is the nominal plant
 
 
+def test_a_hardware_run_starts_without_a_watchdog_error(emulator, tmp_path, ros_shutdown, alone):
+    """`sma-wrist run --hardware` (soft start: the reference waits for the measured angle) logged
+    "adaptive_controller: watchdog: no fresh reference: output stopped" about 0.14 s into every run and cleared it
+    0.04 s later: the first /clock is the device's time at the bridge's first window, the controller's 50 ms
+    watchdog timer was overdue and ran between the first joint state and the first reference."""
+    from sma_wrist.bag import read_bag
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.core.control.trajectory import RUN_SOFT_START_S
+
+    emu = emulator()
+    with alone():  # wall-clock: the device runs in real time
+        run_closed_loop(
+            'inverse_adaptive',
+            0.3,
+            1.0,
+            tmp_path / 'hw',
+            hardware=True,
+            extra_params={
+                '/hardware_bridge': {'port': emu.link},
+                '/trajectory_generator': {'soft_start_s': RUN_SOFT_START_S},
+            },
+        )
+    data = read_bag(tmp_path / 'hw', ['/diagnostics', '/wrist/reference', '/wrist/muscle_1/strain_desired'])
+    status = [(s.name, s.level[0], s.message) for arr in data['/diagnostics'][1] for s in arr.status]
+    assert not [s for s in status if s[0] == 'adaptive_controller: watchdog' and s[1] != 0], status
+    assert len(data['/wrist/reference'][0]) > 50 and len(data['/wrist/muscle_1/strain_desired'][0]) > 50  # it ran
+
+
 def test_hardware_run_without_a_device_stops_with_a_clear_error(tmp_path, monkeypatch, ros_shutdown):
     from sma_wrist import closed_loop
     from sma_wrist.core.errors import SmaWristError

@@ -847,3 +847,62 @@ def test_a_controller_node_says_at_start_what_it_waits_for(executable, waits_for
     severity, line = records[0]
     assert severity == rlog.LoggingSeverity.INFO and line.startswith(f'{executable}: ')
     assert 'waiting for /clock (use_sim_time)' in line and waits_for in line, line
+
+
+def _controller_watchdog(probe_factory, reference_from_s: float | None, reference_until_s: float, seconds: float):
+    """adaptive_controller fed joint states every 10 ms from t = 0.045 s, and the reference every 10 ms from
+    ``reference_from_s`` (None: never) until ``reference_until_s``: its watchdog statuses as (time [s], level,
+    message), time of the node's clock."""
+    from sma_wrist.nodes.adaptive_controller import AdaptiveController
+
+    js = {'position': [0.1], 'velocity': [0.0]}
+    ref = {'position': [0.1], 'velocity': [0.0], 'effort': [0.0]}
+    seen: list[tuple[float, int, str]] = []
+    with Runtime() as rt:
+        probe = probe_factory(rt)
+        node = rt.add(AdaptiveController)
+        diagnose = node.diagnose
+
+        def spy(key, level, message, *a, **kw):
+            if key == 'watchdog':
+                seen.append((node.now_ns() * 1e-9, level[0], message))
+            diagnose(key, level, message, *a, **kw)
+
+        node.diagnose = spy
+        rt.run_until(0.045, until='steady')
+        probe.publish('/wrist/joint_states', **js)  # the first joint state, 5 ms before the watchdog's first tick
+        joint = probe.every(0.01, '/wrist/joint_states', **js)
+        reference = None
+        if reference_from_s is not None:
+            rt.run_until(reference_from_s, until='steady')
+            reference = probe.every(0.01, '/wrist/reference', **ref)
+        rt.run_until(reference_until_s, until='steady')
+        if reference is not None:
+            reference.cancel()
+        rt.run_until(seconds, until='steady')
+        joint.cancel()
+    return seen
+
+
+def test_adaptive_controller_watchdog_is_quiet_while_the_first_reference_follows_the_first_joint_state(
+    probe_factory,
+):
+    """trajectory_generator's soft start publishes its first reference only once it has a measured angle: at every
+    start the controller has a joint state before it has a reference. The watchdog took the reference it had not
+    received yet for a stale one and logged "no fresh reference: output stopped" at the start of every hardware
+    run (0.11-0.14 s, cleared 0.04 s later). A reference that follows within stale_timeout_s is none of that; one
+    that stops mid-run still is."""
+    seen = _controller_watchdog(probe_factory, 0.07, 1.0, 1.5)
+    assert not [s for s in seen if s[0] < 1.0 and s[1] != 0], seen  # the start included
+    errors = [s for s in seen if s[1] == 2]
+    assert errors, seen  # the reference stopped at 1.0 s: reported ...
+    t, _, message = errors[0]
+    assert message == 'no fresh reference: output stopped'
+    assert 1.25 < t <= 1.25 + 0.05 + 1e-6, seen  # ... one stale_timeout_s later, at the watchdog's next tick
+
+
+def test_adaptive_controller_watchdog_reports_a_reference_that_never_comes(probe_factory):
+    seen = _controller_watchdog(probe_factory, None, 0.0, 0.5)
+    errors = [s for s in seen if s[1] == 2]
+    assert errors and errors[0][2] == 'no fresh reference: output stopped', seen
+    assert 0.045 + 0.25 < errors[0][0] <= 0.045 + 0.25 + 0.05 + 1e-6, seen  # stale_timeout_s after the joint state

@@ -11,7 +11,9 @@ Computes on each measured joint state (100 Hz with the default plant) with the l
 reference. In ``inverse_adaptive`` mode it publishes desired strain and stress of both
 muscles for hysteresis_compensator; in ``direct_adaptive`` and ``pid`` it publishes the
 desired temperatures itself. A stale or missing reference or joint state stops the
-output (tem_controller then switches the TEMs off) and is reported on /diagnostics.
+output (tem_controller then switches the TEMs off) and is reported on /diagnostics: an input
+silent for more than ``stale_timeout_s``, or, from the first joint state on, a reference that has
+not come within ``stale_timeout_s`` of it.
 """
 
 from __future__ import annotations
@@ -165,6 +167,7 @@ class AdaptiveController(WristNode):
         self.reference: tuple[float, float, float] | None = None
         self.T_meas = np.full(2, np.nan)
         self.t_last: float | None = None
+        self.t_first_ns: int | None = None  # node clock at the first joint state: the watchdog's start [ns]
         self._saturated: bool | None = None  # last diagnosed
         self.fresh = Freshness(self, ('reference', 'joint_states'))
         self.pub_strain = [self.publisher(f'/wrist/muscle_{i}/strain_desired') for i in (1, 2)]
@@ -243,6 +246,8 @@ class AdaptiveController(WristNode):
             self.reject_input('joint_states', f'non-finite joint state ({q}, {qd})')
             return
         self.fresh.mark('joint_states')
+        if self.t_first_ns is None:
+            self.t_first_ns = self.fresh.stamp_ns['joint_states']
         t = self.stamp_s(msg)
         dt, self.t_last = (None if self.t_last is None else t - self.t_last), t
         if self.reference is None or dt is None or dt <= 0:
@@ -286,8 +291,13 @@ class AdaptiveController(WristNode):
                 )
 
     def _check_stale(self) -> None:
-        stale = self.fresh.stale(self.p['stale_timeout_s'])
-        level = DiagnosticStatus.ERROR if stale and self.t_last is not None else DiagnosticStatus.OK
+        # Armed by the first joint state; a reference not yet received is judged by the time since then, as one
+        # that stopped is by the time since its last message. trajectory_generator's soft start publishes its first
+        # reference only after it has a measured angle, so the first reference always comes after the first joint
+        # state; judged stale at once, it was an ERROR at the start of every hardware run (the first /clock is the
+        # device's time, 0.11-0.14 s, so this timer is overdue and ran in that first instant between the two).
+        stale = self.fresh.stale(self.p['stale_timeout_s'], since_ns=self.t_first_ns)
+        level = DiagnosticStatus.ERROR if stale and self.t_first_ns is not None else DiagnosticStatus.OK
         self.diagnose(
             'watchdog',
             level,

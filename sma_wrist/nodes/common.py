@@ -357,9 +357,16 @@ class Freshness:
     def mark(self, name: str) -> None:
         self.stamp_ns[name] = self.node.now_ns()
 
-    def stale(self, timeout_s: float) -> list[str]:
+    def stale(self, timeout_s: float, since_ns: int | None = None) -> list[str]:
+        """The inputs with no good sample for more than ``timeout_s`` [s]. One never received is stale at once, or,
+        given ``since_ns`` (node clock [ns] at which waiting for it began), once ``timeout_s`` has passed since."""
         now = self.node.now_ns()
-        return [n for n, t in self.stamp_ns.items() if t is None or (now - t) > timeout_s * 1e9]
+        out = []
+        for name, t in self.stamp_ns.items():
+            t = since_ns if t is None else t
+            if t is None or now - t > timeout_s * 1e9:
+                out.append(name)
+        return out
 
     def seen_all(self) -> bool:
         return all(t is not None for t in self.stamp_ns.values())
