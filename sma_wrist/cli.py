@@ -201,7 +201,7 @@ def _run(a: argparse.Namespace, live: Any, real_time_factor: float | None) -> in
     """:func:`cmd_run` once its live server (or none) is up."""
     _prepare_bag(a.bag, a.overwrite)
     _activate()
-    from sma_wrist.closed_loop import print_progress, run_closed_loop
+    from sma_wrist.closed_loop import NothingToMeasure, print_progress, run_closed_loop
 
     if a.controller is None or a.payload_kg is None:  # the params files' choice, else config/wrist.yaml's
         from sma_wrist.closed_loop import file_choices
@@ -218,20 +218,23 @@ def _run(a: argparse.Namespace, live: Any, real_time_factor: float | None) -> in
     if a.hardware:
         extra['/hardware_bridge'] = {'port': a.hardware}
     # without --bag the run is recorded to a temporary bag all the same: its metrics are the bag's, whether kept
-    summary = run_closed_loop(
-        a.controller,
-        a.payload_kg,
-        a.duration,
-        a.bag,
-        a.params_file or (),
-        progress=None if a.quiet else print_progress,
-        hardware=a.hardware is not None,
-        extra_params=extra,
-        measure=True,
-        monitor=None if a.monitor is None else {'history_file': a.monitor},
-        live=live,
-        real_time_factor=real_time_factor,
-    )
+    try:
+        summary = run_closed_loop(
+            a.controller,
+            a.payload_kg,
+            a.duration,
+            a.bag,
+            a.params_file or (),
+            progress=None if a.quiet else print_progress,
+            hardware=a.hardware is not None,
+            extra_params=extra,
+            measure=True,
+            monitor=None if a.monitor is None else {'history_file': a.monitor},
+            live=live,
+            real_time_factor=real_time_factor,
+        )
+    except NothingToMeasure as exc:  # printed as a run without metrics, exit 2
+        summary = exc.summary
     if a.json:
         print(
             json.dumps(
@@ -267,7 +270,9 @@ def _run(a: argparse.Namespace, live: Any, real_time_factor: float | None) -> in
                 + (f'; history: {a.monitor}' if a.monitor else '')
             )
         _print_next(summary.bag, a.plot)
-    return 130 if summary.interrupted else 0
+    if summary.interrupted:
+        return 130
+    return 2 if summary.metrics_missing else 0  # a run that ended with nothing to measure failed to measure
 
 
 def cmd_info(a: argparse.Namespace) -> int:
@@ -460,7 +465,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="payload at 0.09 m [kg] (default: plant_sim's payload_kg in the params files, 0.3)",
     )
-    r.add_argument('--duration', type=_positive_float, default=126.0, help='simulated seconds (default 126)')
+    r.add_argument(
+        '--duration',
+        type=_positive_float,
+        default=126.0,
+        help='simulated seconds (default 126); with --hardware, seconds of device time from the first /clock',
+    )
     r.add_argument(
         '--bag',
         default=None,

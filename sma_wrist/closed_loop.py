@@ -44,6 +44,15 @@ class RunSummary:
         return self.sim_time_s / self.wall_s if self.wall_s > 0 else float('inf')
 
 
+class NothingToMeasure(SmaWristError):
+    """A run that ended normally with too little in its bag to measure (``summary.metrics_missing`` says why): no
+    metric is made up from it. ``summary``: the run as it was, for ``sma-wrist run`` to print."""
+
+    def __init__(self, summary: RunSummary) -> None:
+        super().__init__(f'no tracking metrics: {summary.metrics_missing}')
+        self.summary = summary
+
+
 #: a hardware run whose device time has not advanced for this long (wall) [s] is stopped
 DEVICE_STALL_S = 10.0
 
@@ -192,7 +201,9 @@ def run_closed_loop(
     nodes, started once they are built, stopped at the end); ``real_time_factor``: hold simulated time to this multiple of real time (None: as fast as possible).
     ``progress(t_sim, duration, wall)`` is called about every 1 % of the run. Ctrl-C stops the run; the bag is
     closed with everything up to the interrupt and the summary says so (and ``metrics_missing`` why there are
-    none, when it holds no reference yet).
+    none, when it holds no reference yet). A run that ended normally with too little recorded to measure (one
+    sample) raises :class:`NothingToMeasure`. On hardware (the device's clock counts from its boot) the run lasts
+    ``duration_s`` from the first /clock the graph sees.
     """
     import contextlib
     import tempfile
@@ -203,22 +214,27 @@ def run_closed_loop(
     ) as tmp:
         if tmp is not None:
             bag = Path(tmp) / 'bag'
-        summary = _run(
-            controller,
-            payload_kg,
-            duration_s,
-            bag,
-            params_files,
-            extra_params,
-            topics,
-            progress,
-            hardware,
-            delivery,
-            kept,
-            monitor,
-            live,
-            real_time_factor,
-        )
+        try:
+            summary = _run(
+                controller,
+                payload_kg,
+                duration_s,
+                bag,
+                params_files,
+                extra_params,
+                topics,
+                progress,
+                hardware,
+                delivery,
+                kept,
+                monitor,
+                live,
+                real_time_factor,
+            )
+        except NothingToMeasure as exc:
+            if not kept:  # the temporary bag is gone with its folder
+                exc.summary.bag = None
+            raise
     if not kept:
         summary.bag = None
     return summary
@@ -279,18 +295,28 @@ def _run(
         chunk = max(duration_s / 100.0, 0.01)
         t = 0.0
         stall = _Stall(rt, DEVICE_STALL_S) if hardware else None
+        # sim time the run starts at [s]: plant_sim's clock starts at 0 when the loop spins. hardware_bridge's counts
+        # from the first sample after it opened the port, and the device streams on while the nodes after it are
+        # built (28 s on a cold numba cache, their kernels compiling): the first /clock the graph sees is that far
+        # in, and a run ending at device time duration_s ended there with one sample. So: from the first /clock.
+        start_s: float | None = None if hardware else 0.0
         try:
-            while t < duration_s - 1e-12:
+            if start_s is None:
+                rt.run_until(0.0, until='sim', stop_when=stall)  # returns at the first /clock
+                if rt.sim_ns is not None:
+                    start_s = rt.sim_ns / 1e9
+            while start_s is not None and t < duration_s - 1e-12:
                 t = min(duration_s, t + chunk)
-                rt.run_until(t, until='sim', stop_when=stall)
+                rt.run_until(start_s + t, until='sim', stop_when=stall)
                 if stall is not None and stall.stalled:
-                    stalled = True
                     break
                 if progress is not None:
                     progress(t, duration_s, time.perf_counter() - wall0)
         except KeyboardInterrupt:
             interrupted = True
-        sim_s = (rt.sim_ns or 0) / 1e9
+        stalled = stall is not None and stall.stalled
+        device_s = (rt.sim_ns or 0) / 1e9
+        sim_s = device_s - (start_s or 0.0)  # of the run, not of the device
         monitor_out = None
         if monitor_node is not None:
             monitor_node.collect()  # the verdicts the worker sent since the last sample
@@ -309,7 +335,7 @@ def _run(
             recorded = rec.count
     if stalled:
         raise SmaWristError(
-            f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {sim_s:.2f} s of device time: check '
+            f'no data from the device for {DEVICE_STALL_S:g} s (wall) at {device_s:.2f} s of device time: check '
             f"hardware_bridge's port, that the device is powered and streaming (doc/explanation/protocol.md); TEMs were "
             f'held at 0 V'
             + (f'; the bag {bag} holds everything up to here' if kept else '')
@@ -327,16 +353,22 @@ def _run(
     summary.monitor = monitor_out
     if bag is not None:
         from sma_wrist.bag import BagError
-        from sma_wrist.runs import load_run, run_metrics
+        from sma_wrist.runs import load_run, run_metrics, unmeasurable
 
         try:
             summary.run = load_run(bag)
         except BagError as exc:
-            if not interrupted:  # a run that ended normally and left no readable run is a fault
-                raise
+            missing = exc.problem
+        else:
+            missing = unmeasurable(summary.run)
+        if missing:  # never a metric from nothing: one sample read "max error 0.00 %"
             summary.metrics_missing = (
-                f'interrupted at {sim_s:.2f} s before there was an error to measure: {exc.problem}'
+                f'interrupted at {sim_s:.2f} s before there was an error to measure: {missing}'
+                if interrupted
+                else f'the run ended at {sim_s:.2f} s with nothing to measure: {missing}'
             )
+            if not interrupted:  # a run that ended normally and left nothing to measure is a fault
+                raise NothingToMeasure(summary)
         else:
             summary.metrics = run_metrics(summary.run)
     return summary

@@ -143,6 +143,20 @@ def load_run(path: str | Path, recording: Recording | None = None) -> RunData:
     )
 
 
+def unmeasurable(run: RunData) -> str:
+    """Why ``run`` holds too little to measure ('' when it can be measured): an error over a run needs two measured
+    angles at different times inside the reference's span. One sample (a run that ended at its first /clock) gave
+    "max error 0.00 %" and "peak TEM command 0.00 V" as if measured: the soft-started reference begins at the
+    measured angle."""
+    span = float(run.t[-1] - run.t[0]) if run.t.size else 0.0
+    if run.t.size < 2 or span <= 0.0:
+        return (
+            f"{run.t.size} measured angle{'' if run.t.size == 1 else 's'} inside the reference's time span "
+            f'({span:.3f} s): too little to measure'
+        )
+    return ''
+
+
 def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]:
     """Tracking metrics (sma_wrist.core.metrics) over the last full reference cycle, plus peak TEM command.
 
@@ -182,7 +196,7 @@ def run_metrics(run: RunData, period_s: float = SEED_PERIOD_S) -> dict[str, Any]
     return out
 
 
-__all__ = ['RunData', 'load_run', 'run_metrics']
+__all__ = ['RunData', 'load_run', 'run_metrics', 'unmeasurable']
 
 
 def plot_runs(runs: list[RunData], labels: list[str], path: str | Path, title: str = '') -> None:

@@ -256,6 +256,20 @@ def test_cli_run_interrupted_before_any_reference_says_why_it_has_no_metrics(mon
     assert 'interrupted at 0.00 s' in out['metrics_missing'] and '/wrist/reference' in out['metrics_missing']
 
 
+def test_cli_run_with_one_sample_reports_no_metrics_instead_of_zero_error(capsys):
+    """A run that ended at its first joint state (0.01 s: one sample inside the reference) printed "max error 0.00 %"
+    and "peak TEM command 0.00 V" as if measured: the metrics are missing with the reason, and the exit code is 2."""
+    from sma_wrist.cli import main
+
+    assert main(['run', '--duration', '0.01', '--json', '--quiet']) == 2
+    out = json.loads(capsys.readouterr().out)
+    assert not out['interrupted'] and out['metrics'] == {} and out['bag'] is None
+    assert 'too little to measure' in out['metrics_missing'] and '1 measured angle' in out['metrics_missing']
+    assert main(['run', '--duration', '0.01', '--quiet']) == 2
+    text = capsys.readouterr().out
+    assert 'no tracking metrics: the run ended at 0.01 s' in text and 'max error' not in text and ' V' not in text
+
+
 @pytest.mark.parametrize(
     'args, message',
     [

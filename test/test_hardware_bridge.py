@@ -8,6 +8,8 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pytest
@@ -15,6 +17,9 @@ import pytest
 from sma_wrist.hw import protocol as P
 from sma_wrist.hw.calibration import Calibration
 from sma_wrist.hw.emulator import DeviceEmulator, EmulatorConfig, config_from_args
+
+if TYPE_CHECKING:
+    from sma_wrist.closed_loop import RunSummary
 
 TOPICS = (
     '/wrist/joint_states',
@@ -854,32 +859,62 @@ def test_closed_loop_through_bridge_and_emulator_tracks_like_the_simulator(tmp_p
     assert res.channels['thermal']['rmse_before'] < 1.0  # degC: the emulator is the nominal plant
 
 
+def _run_as_cli(controller: str, emu: DeviceEmulator, bag: Path) -> RunSummary:
+    """1 s of `sma-wrist run --hardware` (its soft start) on ``emu``, recorded to ``bag``; the RunSummary."""
+    from sma_wrist.closed_loop import run_closed_loop
+    from sma_wrist.core.control.trajectory import RUN_SOFT_START_S
+
+    return run_closed_loop(
+        controller,
+        0.3,
+        1.0,
+        bag,
+        hardware=True,
+        extra_params={
+            '/hardware_bridge': {'port': emu.link},
+            '/trajectory_generator': {'soft_start_s': RUN_SOFT_START_S},
+        },
+    )
+
+
 def test_a_hardware_run_starts_without_a_watchdog_error(emulator, tmp_path, ros_shutdown, alone):
     """`sma-wrist run --hardware` (soft start: the reference waits for the measured angle) logged
     "adaptive_controller: watchdog: no fresh reference: output stopped" about 0.14 s into every run and cleared it
     0.04 s later: the first /clock is the device's time at the bridge's first window, the controller's 50 ms
     watchdog timer was overdue and ran between the first joint state and the first reference."""
     from sma_wrist.bag import read_bag
-    from sma_wrist.closed_loop import run_closed_loop
-    from sma_wrist.core.control.trajectory import RUN_SOFT_START_S
 
     emu = emulator()
     with alone():  # wall-clock: the device runs in real time
-        run_closed_loop(
-            'inverse_adaptive',
-            0.3,
-            1.0,
-            tmp_path / 'hw',
-            hardware=True,
-            extra_params={
-                '/hardware_bridge': {'port': emu.link},
-                '/trajectory_generator': {'soft_start_s': RUN_SOFT_START_S},
-            },
-        )
+        _run_as_cli('inverse_adaptive', emu, tmp_path / 'hw')
     data = read_bag(tmp_path / 'hw', ['/diagnostics', '/wrist/reference', '/wrist/muscle_1/strain_desired'])
     status = [(s.name, s.level[0], s.message) for arr in data['/diagnostics'][1] for s in arr.status]
     assert not [s for s in status if s[0] == 'adaptive_controller: watchdog' and s[1] != 0], status
     assert len(data['/wrist/reference'][0]) > 50 and len(data['/wrist/muscle_1/strain_desired'][0]) > 50  # it ran
+
+
+def test_a_hardware_run_lasts_its_duration_when_the_first_clock_is_well_ahead(
+    emulator, tmp_path, monkeypatch, ros_shutdown, alone
+):
+    """The bridge opens its port first; while the other nodes compile their kernels (about 30 s on a cold numba cache)
+    the device streams on, and the first /clock the graph sees is that far into the bridge's time base: a run of
+    --duration 10 ended at its first /clock with one joint state. The duration counts from the first /clock."""
+    from sma_wrist.bag import read_bag
+    from sma_wrist.nodes.tem_controller import TemController
+
+    built = TemController.__init__
+
+    def slow_start(self, *args, **kwargs):  # a cold cache's compilation, shortened
+        time.sleep(3.0)
+        built(self, *args, **kwargs)
+
+    monkeypatch.setattr(TemController, '__init__', slow_start)
+    emu = emulator()
+    with alone():  # wall-clock: the device runs in real time
+        s = _run_as_cli('pid', emu, tmp_path / 'hw')
+    t = read_bag(tmp_path / 'hw', ['/wrist/joint_states'])['/wrist/joint_states'][0] / 1e9
+    assert t[0] > 2.0 and t[-1] - t[0] >= 1.0 - 0.02 and t.size > 50, (t[0], t[-1], t.size)  # 100 Hz device
+    assert 1.0 - 1e-9 <= s.sim_time_s < 1.1 and s.metrics and not s.metrics_missing  # the run's time, not the device's
 
 
 def test_hardware_run_without_a_device_stops_with_a_clear_error(tmp_path, monkeypatch, ros_shutdown):
