@@ -810,16 +810,15 @@ def loop_tuning(wire_handed_over: bool, heldout_mrad: float) -> dict[str, float]
 
     Why: the inverse compensator's answer jumps by the hysteresis' width (~18 degC) whenever the strain it is asked
     for crosses the one its model gives at the measured temperature. With a wire model that misses the wire's minor
-    loops (the warped SD-GPI on the phase-fraction wrist, 44 mrad held out) those crossings follow the model's error,
+    loops (the warped SD-GPI on the phase-fraction wrist, 41 mrad held out) those crossings follow the model's error,
     several times a second (450-545 jumps of over 5 degC in 190 s, against 10-47 with the defaults), and the TEMs,
     following the targets through the 0.5 s prefilter, reverse between +20 and -11.5 V while the sticking joint
-    slips. On that wrist (wire 8 degC hotter, TEM 1 0.8 x, 0.45 kg; three cycles of the Sec. 6.1 sine, two sensor
-    seeds) the commissioned loop's max error was 19.9 +- 11.1 and 14.5 +- 16.1 % with the 0.5 s prefilter, 15.8 with
-    1 s, 9.0 and 9.3 with 2 s, 9.5 +- 1.7 and 8.7 +- 2.3 with 3 s, 8.4 with 4 s; the defaults' 23.3 and 24.8. On
-    the SD-GPI wire 8 degC hotter (the shifted wire handed over, 3.2 mrad) a 2 s prefilter changed nothing (28.9
-    against 28.4 %, a wire that the TEMs cannot heat far enough). The defaults on the phase-fraction wrist tracked
-    worse with it (29.3 against 23.3 %): their wire misses by more than a prefilter hides, so it goes only with a
-    commissioned wire."""
+    slips at the sine's peaks. On that wrist (wire 8 degC hotter, TEM 1 0.8 x, 0.45 kg; three measurements of three
+    cycles on two sensor seeds, ``python3 -m sma_wrist.commission.measure --cases prefilter``) cycles slipped to
+    over 15 % max error in 8 of 18 with the 0.5 s prefilter, 12 of 15 with 1 s, 3 of 18 with 2 s, none with 3 s
+    (7.0-13.4 %) or 4 s; the defaults' cycles were 19-38 %. The defaults tracked worse with a 2 s prefilter (25.9-34.6
+    against 20.3-29.1 %): their wire misses by more than a prefilter hides, so it goes only with a commissioned
+    wire; on the simulated commissioned model the 0.5 s prefilter tracks better (the slips are the device's)."""
     if wire_handed_over and math.isfinite(heldout_mrad) and heldout_mrad > LOOSE_WIRE_MRAD:
         return {'target_filter_s': LOOSE_TARGET_FILTER_S}
     return {}
