@@ -274,11 +274,16 @@ def compare_runs(
 ) -> list[dict[str, Any]]:
     """Metrics of each bag (same definitions for sim and hardware), optionally overlaid in one plot.
 
-    A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one).
+    A row's ``damaged`` is the problem of a bag read only up to its cut (None for an intact one). A bag with too
+    little to measure (:func:`unmeasurable`) is a BagError naming it, not a row of zeros.
     """
     if plot is not None:
         check_plot_file(plot, paths, 'compare.png')
     runs = [load_run(p, recording) for p in paths]
+    for p, r in zip(paths, runs):  # one sample "measured" 0.00 % (the reference starts at the measured angle)
+        why = unmeasurable(r)
+        if why:
+            raise BagError(p, f'no tracking metrics: {why}')
     rows = [
         {'bag': str(p), **run_metrics(r), 'damaged': r.damage or None, 'dropped': r.dropped or None}
         for p, r in zip(paths, runs)

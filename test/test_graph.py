@@ -270,6 +270,19 @@ def test_cli_run_with_one_sample_reports_no_metrics_instead_of_zero_error(capsys
     assert 'no tracking metrics: the run ended at 0.01 s' in text and 'max error' not in text and ' V' not in text
 
 
+def test_cli_compare_of_a_one_sample_bag_says_there_is_nothing_to_measure(tmp_path, capsys):
+    """compare read the one-sample bag of a run that ended at its first joint state as "0.00 %" max error."""
+    from sma_wrist.cli import main
+
+    bag = tmp_path / 'one'
+    assert main(['run', '--duration', '0.01', '--quiet', '--bag', str(bag)]) == 2
+    capsys.readouterr()
+    assert main(['compare', str(bag)]) == 2
+    captured = capsys.readouterr()
+    assert 'too little to measure' in captured.err and str(bag) in captured.err
+    assert '0.00' not in captured.out
+
+
 @pytest.mark.parametrize(
     'args, message',
     [
