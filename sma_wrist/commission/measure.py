@@ -270,38 +270,25 @@ def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -
 
 
 def loop_run(cfg: dict[str, Any], params_file: str | Path, seed: int, cycles: int = 3) -> dict[str, Any]:
-    """The Sec. 6.1 sine (inverse_adaptive, run's 30 s soft start, ``cycles`` full cycles) with ``params_file`` on a
-    fresh emulated device of ``cfg`` (its wrist at rest), served as the verification serves it: per cycle max / RMS
+    """The Sec. 6.1 sine (inverse_adaptive, run's soft start, ``cycles`` full cycles) with ``params_file`` on a
+    fresh emulated device of ``cfg`` (its wrist at rest), run as the verification runs it: per cycle max / RMS
     error [%]."""
     from sma_wrist import runtime
 
     runtime.activate()
-    from sma_wrist.closed_loop import file_choices, run_closed_loop
     from sma_wrist.commission.device import SimDevice
-    from sma_wrist.commission.verify import SIM_BRIDGE, SOFT_START_S, cycle_metrics
+    from sma_wrist.commission.verify import SIM_BRIDGE, SOFT_START_S, cycle_metrics, run_on_port, run_settings
     from sma_wrist.core.metrics import SEED_PERIOD_S
 
     duration = round(SOFT_START_S + cycles * SEED_PERIOD_S + 2.0, 1)
     dev = SimDevice(emulator_config(cfg, seed=seed))
     dev.open()
     dev.close()
-    _, payload = file_choices([params_file], hardware=True)
+    payload, soft = run_settings([params_file])
     with tempfile.TemporaryDirectory() as tmp:
         with dev.serve(f'{tmp}/wrist', 2.0) as port:
-            s = run_closed_loop(
-                'inverse_adaptive',
-                payload,
-                duration,
-                None,
-                [params_file],
-                extra_params={
-                    '/hardware_bridge': {**SIM_BRIDGE, 'port': port},
-                    '/trajectory_generator': {'soft_start_s': SOFT_START_S},
-                },
-                hardware=True,
-                measure=True,
-            )
-    return cycle_metrics(s.run, duration, SOFT_START_S) if s.run is not None else {'cycles': [], 'start_up': None}
+            s = run_on_port(port, 'inverse_adaptive', [params_file], payload, soft, duration, bridge=SIM_BRIDGE)
+    return cycle_metrics(s.run, duration, soft) if s.run is not None else {'cycles': [], 'start_up': None}
 
 
 def measure_prefilter(
@@ -330,8 +317,9 @@ def measure_prefilter(
             p['tem_controller'] = {
                 'ros__parameters': {**params['tem_controller']['ros__parameters'], 'target_filter_s': f}
             }
-            files[f'commissioned, target_filter_s {f:g}'] = str(Path(d) / f'filter_{f:g}.yaml')
-            Path(files[f'commissioned, target_filter_s {f:g}']).write_text(yaml.safe_dump(p, sort_keys=False))
+            filter_file = Path(d) / f'filter_{f:g}.yaml'
+            filter_file.write_text(yaml.safe_dump(p, sort_keys=False))
+            files[f'commissioned, target_filter_s {f:g}'] = str(filter_file)
         for name, path in files.items():
             for seed in seeds:
                 say(f'{name}, seed {seed}')

@@ -375,7 +375,6 @@ def verify(
     from sma_wrist import runtime
 
     runtime.activate()  # the embedded runtime where rclpy is absent (as sma-wrist run)
-    from sma_wrist.closed_loop import file_choices, file_soft_start, run_closed_loop
     from sma_wrist.runs import plot_runs
 
     folder = Path(out) / 'verification'
@@ -437,24 +436,10 @@ def verify(
             bag = folder / f'{ctrl}_commissioned' if recorded else None
             if bag is not None and bag.is_dir():
                 shutil.rmtree(bag)  # an earlier commissioning into this folder: its report and params are replaced too
-            _, payload = file_choices(files, hardware=True)
-            soft = file_soft_start(files)
-            soft = SOFT_START_S if soft is None else soft
+            payload, soft = run_settings(files)
             try:
                 with serve() as port:
-                    s = run_closed_loop(
-                        ctrl,
-                        payload,
-                        duration_s,
-                        bag,
-                        files,
-                        extra_params={
-                            '/hardware_bridge': {**(bridge or {}), 'port': port},
-                            '/trajectory_generator': {'soft_start_s': soft},  # as sma-wrist run
-                        },
-                        hardware=True,
-                        measure=True,
-                    )
+                    s = run_on_port(port, ctrl, files, payload, soft, duration_s, bag, bridge)
             except ParameterError:
                 raise  # a value of the params file a node refuses: bad input, before the graph started
             except SmaWristError as e:
@@ -510,6 +495,46 @@ def verify(
         progress('verification: diagnosis of the commissioned run')
         res['diagnosis'] = diagnosis(diagnosed, params_file, diagnosed_soft)
     return res
+
+
+def run_settings(files: Sequence[str | Path]) -> tuple[float, float]:
+    """(payload [kg], soft start [s]) a verification run takes from its params ``files``, as ``sma-wrist run --hardware``
+    would (the soft start :data:`SOFT_START_S` where the files give none)."""
+    from sma_wrist.closed_loop import file_choices, file_soft_start
+
+    _, payload = file_choices(files, hardware=True)
+    soft = file_soft_start(files)
+    return payload, SOFT_START_S if soft is None else soft
+
+
+def run_on_port(
+    port: str,
+    controller: str,
+    files: Sequence[str | Path],
+    payload_kg: float,
+    soft_start_s: float,
+    duration_s: float,
+    bag: Path | None = None,
+    bridge: dict[str, Any] | None = None,
+) -> Any:
+    """The hardware graph of ``sma-wrist run --hardware PORT`` with ``files`` for ``duration_s`` of device time,
+    measured (:func:`sma_wrist.closed_loop.run_closed_loop`'s summary); ``bridge``: hardware_bridge parameters beside
+    the port."""
+    from sma_wrist.closed_loop import run_closed_loop
+
+    return run_closed_loop(
+        controller,
+        payload_kg,
+        duration_s,
+        bag,
+        files,
+        extra_params={
+            '/hardware_bridge': {**(bridge or {}), 'port': port},
+            '/trajectory_generator': {'soft_start_s': soft_start_s},  # as sma-wrist run
+        },
+        hardware=True,
+        measure=True,
+    )
 
 
 def run_verification(
@@ -570,8 +595,9 @@ def run_verification(
                 settle_to_start=settle_to_start if settling else None,
                 budget_s=BUDGET_S - result['device_time_s'],
             )
-        if diagnosis_warning(v.get('diagnosis')):
-            result['warnings'].append(diagnosis_warning(v.get('diagnosis')))
+        warning = diagnosis_warning(v.get('diagnosis'))
+        if warning:
+            result['warnings'].append(warning)
     except KeyboardInterrupt:
         result['status'] = 'interrupted'
         result['message'] = (
@@ -733,8 +759,9 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             + (f' Residual of the commissioned model: {residual}.' if residual else ''),
             '',
         ]
-        if diagnosis_warning(d):
-            lines += [f'**{diagnosis_warning(d)}**', '']
+        warning = diagnosis_warning(d)
+        if warning:
+            lines += [f'**{warning}**', '']
     if v.get('stopped'):
         lines += [f'Stopped: {v["stopped"]}', '']
     return lines
