@@ -495,7 +495,8 @@ def identify_mechanics(
     t, temps, q, _ = _signals(bring, -math.inf)
     dt = MECH_DT_S
     i_fit = int(np.floor((t_fit - t[0]) / dt + 1e-9)) if t.size else 0
-    grid = t_fit + dt * np.arange(-i_fit, np.arange(t_fit, t_end - dt, dt).size)
+    n_excitation = np.arange(t_fit, t_end - dt, dt).size  # the samples of the grid the excitation had alone
+    grid = t_fit + dt * np.arange(-i_fit, n_excitation)
     T = np.column_stack([np.interp(grid, t, temps[:, m]) for m in (0, 1)])
     qg = np.interp(grid, t, q)
     exc = slice(i_fit, None)

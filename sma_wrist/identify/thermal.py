@@ -1068,7 +1068,7 @@ def tem_gains(
     if len({r.layer for r in records}) < 2:
         return shared, None, []
     validation = shared.validation
-    if validation == 'leave-one-out' and any(sum(r.layer == m for r in records) < 2 for m in (0, 1)):
+    if validation == 'leave-one-out' and not ti.each_tem_twice(records):
         validation = 'time-split'
     say(f"each TEM's drive gain ({validation} validation)")
     opts = dict(faces=a.faces, train_fraction=a.train_fraction, sensor_lag=a.sensor_lag, progress=say)

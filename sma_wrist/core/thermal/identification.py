@@ -817,7 +817,7 @@ def identify_thermal(
     all_records = list(records) + list(holdout)
     if len({round(r.dt, 12) for r in all_records}) != 1:
         raise ThermalIdentificationError('all runs (and hold-out runs) must share one sample period')
-    if tem_gain and validation == 'leave-one-out' and any(sum(r.layer == m for r in records) < 2 for m in (0, 1)):
+    if tem_gain and validation == 'leave-one-out' and not each_tem_twice(records):
         raise ThermalIdentificationError(
             "leave-one-out validation of each TEM's drive gain needs at least two runs of each TEM (a fit without "
             "a TEM's runs cannot know its gain); use time-split validation"
@@ -862,6 +862,12 @@ def identify_thermal(
     in_sample = evaluate(final.params, records, 'in-sample', settle_s=settle_s, base=base, sensor_lag_s=lag)
     before = evaluate(base, all_records, 'default', settle_s=settle_s, base=base)
     return ThermalIdentification(final, base, in_sample, held, before, validation, time.perf_counter() - t0)
+
+
+def each_tem_twice(records: Sequence[ThermalRecord]) -> bool:
+    """Whether leave-one-out can validate each TEM's drive gain: two runs or more of each TEM (a fit without a TEM's
+    runs cannot know its gain)."""
+    return all(sum(r.layer == m for r in records) >= 2 for m in (0, 1))
 
 
 def tem_gain_warning(tem_gain: tuple[float, float], where: str) -> str | None:
