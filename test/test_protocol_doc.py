@@ -6,8 +6,12 @@ device time and deterministic; commands go in through the pty as a host writes t
 
 from __future__ import annotations
 
+import fcntl
 import os
 import re
+import struct
+import termios
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,18 +32,36 @@ class Device:
         self.emu.open()
         self.host = os.open(self.emu.link, os.O_RDWR | os.O_NOCTTY)
         self.seq = 0
+        self.unread = 0  # bytes written by the host that the emulator has not read yet
 
     def send(self, u1_mV: int, u2_mV: int) -> None:
         self.seq += 1
-        os.write(self.host, P.encode(P.Command(self.seq, u1_mV, u2_mV)))
+        self.write(P.Command(self.seq, u1_mV, u2_mV))
 
     def write(self, frame: P.Frame) -> None:
-        os.write(self.host, P.encode(frame))
+        self.unread += os.write(self.host, P.encode(frame))
+        self._until_delivered()
+
+    def _until_delivered(self, timeout_s: float = 5.0) -> None:
+        """Wait until the kernel has moved the host's bytes to the emulator's side of the pty.
+
+        A pty hands written bytes over asynchronously; on a loaded machine a frame written just
+        before a sample may not be readable yet, and would take effect samples later than the
+        device-time statements below say."""
+        end = time.monotonic() + timeout_s
+        while self._readable() < self.unread:
+            if time.monotonic() > end:
+                raise TimeoutError(f'{self.unread} bytes written, {self._readable()} readable after {timeout_s} s')
+            time.sleep(0.0005)
+
+    def _readable(self) -> int:
+        return struct.unpack('i', fcntl.ioctl(self.emu._master, termios.FIONREAD, b'\0\0\0\0'))[0]
 
     def samples(self, n: int) -> list[P.Sample]:
         out = []
         for _ in range(n):
             self.emu._read_commands()
+            self.unread = 0
             (s,) = P.Parser().feed(self.emu._sample())
             out.append(s)
         return out
