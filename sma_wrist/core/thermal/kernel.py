@@ -115,13 +115,13 @@ def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
 
 def heat_balance_constants(tp, peltier=None) -> np.ndarray:  # type: ignore[no-untyped-def]
     """th_coef of the plant: :func:`thermal_constants` of a thermal.ThermalParams (Table 4.9's form), with a
-    peltier.PeltierParams the Peltier form appended (:data:`N_COEF_PELTIER`; drive gain and Joule scale 1, the
-    Peltier form's own muscle-muscle coupling in entry 1)."""
+    peltier.PeltierParams the Peltier form appended (:data:`N_COEF_PELTIER`: flag, its drive gain and Joule scale,
+    both layers' vectors; its muscle-muscle coupling in entry 1)."""
     c = thermal_constants(tp)
     if peltier is None:
         return c
     c[1] = peltier.coupling_per_s
-    return np.concatenate([c, [1.0, 1.0, 1.0], peltier.coef(2).reshape(-1)])
+    return np.concatenate([c, [1.0, peltier.drive_gain, peltier.joule_scale], peltier.coef(2).reshape(-1)])
 
 
 @_jit

@@ -100,10 +100,14 @@ class PeltierLayer:
 @dataclass(frozen=True)
 class PeltierParams:
     """The Peltier form of both layers (layer 0: TEM 1 under muscle 1). ``coupling_per_s`` [1/s]: conductance
-    between the two muscle nodes over the muscle node's heat capacity (as ThermalParams.coupling_per_s)."""
+    between the two muscle nodes over the muscle node's heat capacity (as ThermalParams.coupling_per_s).
+    ``drive_gain`` scales the voltage the modules see (u -> drive_gain u), ``joule_scale`` their Joule heat: both 1
+    for an identified form, other values model a drifted device (:meth:`scaled`, the plant's extensions)."""
 
     layers: tuple[PeltierLayer, PeltierLayer] = (PeltierLayer(), PeltierLayer())
     coupling_per_s: float = 0.0
+    drive_gain: float = 1.0
+    joule_scale: float = 1.0
 
     def __post_init__(self) -> None:
         layers = tuple(self.layers)
@@ -112,12 +116,33 @@ class PeltierParams:
         object.__setattr__(self, 'layers', layers)
         if not (np.isfinite(self.coupling_per_s) and self.coupling_per_s >= 0):
             raise ParameterError(f'coupling_per_s = {self.coupling_per_s!r} must be finite and >= 0')
+        for k in ('drive_gain', 'joule_scale'):
+            if not (np.isfinite(getattr(self, k)) and getattr(self, k) > 0):
+                raise ParameterError(f'{k} = {getattr(self, k)!r} must be finite and > 0')
 
     def coef(self, layers: int = 2) -> FloatArray:
         """(layers, N_LAYER) per-layer vectors (one layer: TEM 1's)."""
         if not 1 <= layers <= 2:
             raise ModelInputError('Peltier layers', layers, '1 or 2')
         return np.stack([x.vector() for x in self.layers[:layers]])
+
+    def scaled(
+        self, gain: float = 1.0, losses: float = 1.0, joule: float = 1.0, ambient_shift_C: float = 0.0
+    ) -> PeltierParams:
+        """Copy as a drifted device, the Peltier counterpart of ThermalParams.scaled: drive gain x ``gain``, every
+        muscle node's loss h_m x ``losses``, the Joule heat x ``joule``, T_amb and T_cool + ``ambient_shift_C``."""
+        layers = tuple(
+            dataclasses.replace(
+                x,
+                muscle_loss_W_per_K=x.muscle_loss_W_per_K * losses,
+                ambient_C=x.ambient_C + ambient_shift_C,
+                coolant_C=x.coolant_C + ambient_shift_C,
+            )
+            for x in self.layers
+        )
+        return dataclasses.replace(
+            self, layers=layers, drive_gain=self.drive_gain * gain, joule_scale=self.joule_scale * joule
+        )
 
     def with_layer(self, index: int, layer: PeltierLayer) -> PeltierParams:
         new = list(self.layers)
@@ -127,10 +152,17 @@ class PeltierParams:
 
 # --------------------------------------------------------------------------------------------------- dynamics
 def derivative_coef(
-    coef: ArrayLike, state: ArrayLike, command_V: ArrayLike, u2: ArrayLike | None = None, coupling_per_s: float = 0.0
+    coef: ArrayLike,
+    state: ArrayLike,
+    command_V: ArrayLike,
+    u2: ArrayLike | None = None,
+    coupling_per_s: float = 0.0,
+    gain: float = 1.0,
+    joule: float = 1.0,
 ) -> FloatArray:
     """dT/dt (Eqs. P.1-P.3) [degC/s] for per-layer vectors coef (..., L, N_LAYER) (broadcast against the state),
-    states (..., L, 2) [degC], commands (..., L) [V] and their interval mean squares u2 (default u^2) [V^2]."""
+    states (..., L, 2) [degC], commands (..., L) [V] and their interval mean squares u2 (default u^2) [V^2]; the
+    drive x ``gain``, the Joule heat x ``joule`` (PeltierParams.drive_gain, joule_scale)."""
     c = np.asarray(coef, dtype=float)
     T = np.asarray(state, dtype=float)
     u = np.asarray(command_V, dtype=float)
@@ -138,8 +170,10 @@ def derivative_coef(
     Tm, Tx = T[..., 0], T[..., 1]
     d = Tm - Tx
     emf = S * d
-    cur = (u - emf) / R
-    i2r = cur * cur * R if u2 is None else (np.asarray(u2, dtype=float) - 2.0 * u * emf + emf * emf) / R
+    ug = gain * u
+    u2g = ug * ug if u2 is None else gain * gain * np.asarray(u2, dtype=float)
+    cur = (ug - emf) / R
+    i2r = joule * (u2g - 2.0 * ug * emf + emf * emf) / R
     qm = S * cur * (Tm + KELVIN) + 0.5 * i2r - K * d - hm * (Tm - Ta)
     qx = -S * cur * (Tx + KELVIN) + 0.5 * i2r + K * d - hx * (Tx - Tc)
     dm = qm / Cm
@@ -151,7 +185,9 @@ def derivative_coef(
 def derivative(params: PeltierParams, state: ArrayLike, command_V: ArrayLike) -> FloatArray:
     """dT/dt (Eqs. P.1-P.3) for states (N, L, 2) [degC] under commands (N, L) [V]."""
     T = np.asarray(state, dtype=float)
-    return derivative_coef(params.coef(T.shape[-2]), T, command_V, None, params.coupling_per_s)
+    return derivative_coef(
+        params.coef(T.shape[-2]), T, command_V, None, params.coupling_per_s, params.drive_gain, params.joule_scale
+    )
 
 
 def step_coef(
@@ -161,13 +197,16 @@ def step_coef(
     dt: float,
     u2: ArrayLike | None = None,
     coupling_per_s: float = 0.0,
+    gain: float = 1.0,
+    joule: float = 1.0,
 ) -> FloatArray:
     """One classical RK4 step [degC] of Eqs. P.1-P.3, the drive (and its mean square u2) held over dt [s]."""
     T = np.asarray(state, dtype=float)
-    k1 = derivative_coef(coef, T, command_V, u2, coupling_per_s)
-    k2 = derivative_coef(coef, T + 0.5 * dt * k1, command_V, u2, coupling_per_s)
-    k3 = derivative_coef(coef, T + 0.5 * dt * k2, command_V, u2, coupling_per_s)
-    k4 = derivative_coef(coef, T + dt * k3, command_V, u2, coupling_per_s)
+    a = (command_V, u2, coupling_per_s, gain, joule)
+    k1 = derivative_coef(coef, T, *a)
+    k2 = derivative_coef(coef, T + 0.5 * dt * k1, *a)
+    k3 = derivative_coef(coef, T + 0.5 * dt * k2, *a)
+    k4 = derivative_coef(coef, T + dt * k3, *a)
     return T + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
 
 
@@ -176,7 +215,9 @@ def step(params: PeltierParams, state: ArrayLike, command_V: ArrayLike, dt: floa
     T = np.asarray(state, dtype=float)
     if not (np.isfinite(dt) and dt > 0):
         raise ModelInputError('thermal step dt', dt, '> 0', 's')
-    return step_coef(params.coef(T.shape[-2]), T, command_V, dt, None, params.coupling_per_s)
+    return step_coef(
+        params.coef(T.shape[-2]), T, command_V, dt, None, params.coupling_per_s, params.drive_gain, params.joule_scale
+    )
 
 
 def simulate(
@@ -196,9 +237,11 @@ def simulate(
     return out
 
 
-def steady_state_coef(coef: ArrayLike, command_V: ArrayLike, iterations: int = 60) -> FloatArray:
+def steady_state_coef(
+    coef: ArrayLike, command_V: ArrayLike, iterations: int = 60, gain: float = 1.0, joule: float = 1.0
+) -> FloatArray:
     """Equilibrium faces (..., L, 2) [degC] under held commands (..., L) [V] (Newton on Eqs. P.2/P.3 with the
-    exact 2 x 2 Jacobian by differences; no muscle-muscle coupling)."""
+    2 x 2 Jacobian by central differences; no muscle-muscle coupling)."""
     c = np.asarray(coef, dtype=float)
     u = np.asarray(command_V, dtype=float)
     shape = np.broadcast_shapes(c.shape[:-1], u.shape)
@@ -207,12 +250,15 @@ def steady_state_coef(coef: ArrayLike, command_V: ArrayLike, iterations: int = 6
     T[..., 1] = np.broadcast_to(c[..., 8], shape)
     h = 1e-4
     for _ in range(iterations):
-        f = derivative_coef(c, T, u)
+        f = derivative_coef(c, T, u, None, 0.0, gain, joule)
         J = np.empty(shape + (2, 2))
         for j in range(2):
             e = np.zeros(2)
             e[j] = h
-            J[..., :, j] = (derivative_coef(c, T + e, u) - derivative_coef(c, T - e, u)) / (2 * h)
+            J[..., :, j] = (
+                derivative_coef(c, T + e, u, None, 0.0, gain, joule)
+                - derivative_coef(c, T - e, u, None, 0.0, gain, joule)
+            ) / (2 * h)
         dx = np.linalg.solve(J, -f[..., None])[..., 0]
         T = T + dx
         if np.all(np.abs(dx) < 1e-10):
@@ -222,7 +268,7 @@ def steady_state_coef(coef: ArrayLike, command_V: ArrayLike, iterations: int = 6
 
 def rest_state(params: PeltierParams, n: int, layers: int = 2) -> FloatArray:
     """Zero-drive equilibrium of n scenarios, (n, layers, 2) [degC]."""
-    T = steady_state_coef(params.coef(layers), np.zeros(layers))
+    T = steady_state_coef(params.coef(layers), np.zeros(layers), gain=params.drive_gain, joule=params.joule_scale)
     return np.repeat(T[None], n, axis=0)
 
 
