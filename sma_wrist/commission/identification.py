@@ -242,7 +242,7 @@ def identify_heat_balance_form(
                 {
                     'source': 'sma-wrist commission: excitation of the wrist on its own sensors',
                     'refitted_on': 'fit and held-out phases' if refit else 'fit phases',
-                    'rest_C': [round(x, 3) for x in rest_C],
+                    'rest_C': [round(float(x), 3) for x in rest_C],
                     'heldout_muscle_rms_C': [round(x, 4) for x in per_tem],
                     'table_4_9_heldout_muscle_rms_C': [round(x, 4) for x in table_per_tem],
                     'fixed': "resistance_ohm (the form's one unidentifiable scale, core/thermal/peltier.py)",

@@ -424,11 +424,11 @@ def peltier_coef(c: np.ndarray, v: dict[str, float]) -> tuple[np.ndarray, float,
     """The thermal extension effects on a Peltier-form row (thermal.kernel.heat_balance_constants), each the
     Peltier form's counterpart of its Table 4.9 meaning: ``tem_gain_err`` scales the drive (the voltage the module
     sees), ``loss_scale_err`` the muscle node's loss h_m, ``joule_scale_err`` the Joule heat, ``ambient_offset_C``
-    moves T_amb and T_cool, ``ambient_drift_C_per_h`` moves both over time, ``coupling_per_s`` the muscle-muscle
-    conductance. Returns (coef, ambient drift [degC/s], ambient offset [degC])."""
+    moves T_amb and T_cool, ``ambient_drift_C_per_h`` moves both over time, ``coupling_per_s`` adds to the form's own
+    muscle-muscle conductance. Returns (coef, ambient drift [degC/s], ambient offset [degC])."""
     c[tk.P_GAIN] *= 1.0 + v['tem_gain_err']
     c[tk.P_JOULE] *= 1.0 + v['joule_scale_err']
-    c[1] = v['coupling_per_s']
+    c[1] += v['coupling_per_s']  # on top of the form's own (its file's)
     for layer in range(2):
         o = tk.P_LAYER + tk.N_PELTIER_LAYER * layer
         c[o + 5] *= 1.0 + v['loss_scale_err']

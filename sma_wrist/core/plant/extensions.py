@@ -220,7 +220,7 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
             hb.scaled(
                 1.0 + v['tem_gain_err'], 1.0 + v['loss_scale_err'], 1.0 + v['joule_scale_err'], v['ambient_offset_C']
             ),
-            coupling_per_s=v['coupling_per_s'],
+            coupling_per_s=hb.coupling_per_s + v['coupling_per_s'],  # on top of the form's own (its file's)
         )
     jp = dataclasses.replace(
         p.joint,
