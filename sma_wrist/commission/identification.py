@@ -10,6 +10,12 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
   K_inf tied to the rest state the bring-up measured (a fit of minutes cannot tell a small loss from a far
   ambient). Written as ``thermal.yaml``; the nodes apply each TEM's gain. Held out: RMS muscle-face error [degC]
   of the free-run prediction, per TEM.
+* **heat balance form**: the Peltier two-node form (:mod:`sma_wrist.core.thermal.peltier`, Eqs. P.1-P.3), fitted
+  per TEM layer on the same fit phases, against Table 4.9's form handed over on the same held-out cycle
+  (:func:`identify_heat_balance_form`); written as ``heat_balance.yaml`` and named by ``plant_sim.heat_balance_file``
+  (the model's heat balance) only where it predicts better by :func:`predicts_better`'s rule. tem_controller keeps
+  Table 4.9's form (its linearisation). On the phase-fraction wrist 0.22 / 0.22 against 1.11 / 3.43 degC per TEM
+  (handed over), on the SD-GPI wrist 4.86 / 2.36 against 0.0097 / 0.0095 (not).
 * **hysteresis**: the built-in SD-GPI shifted in temperature (:func:`sma_wrist.identify.wrist.shifted_wire`). The
   shift is read where the angle starts to move as the relay's first half-cycle heats muscle 1 from rest
   (:func:`wire_shift_from_onset`): the muscle temperatures at which the angle has moved 0.1, 0.2 and 0.3 rad,

@@ -169,7 +169,7 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
 # ------------------------------------------------------------------------ the model's heat balance (another form)
 #: the heat-balance file: the MODEL's heat balance where it is not Table 4.9's form (the node parameter
 #: ``heat_balance_file``; empty: Table 4.9's form of ``thermal_file``). ``sma-wrist commission`` writes one where the
-#: Peltier form predicts the held-out excitation better (doc/explanation/thermal.md). Format (YAML, version 1)::
+#: Peltier form predicts the held-out excitation better (doc/explanation/model.md). Format (YAML, version 1)::
 #:
 #:     format: sma_wrist/heat_balance
 #:     version: 1
