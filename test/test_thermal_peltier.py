@@ -225,3 +225,20 @@ def test_the_sweep_refuses_a_heat_balance_file_naming_the_key():
     (why,) = _refusals({'plant_sim': {'heat_balance_file': '/x/heat_balance.yaml'}}, 'sdgpi')
     assert why.startswith("plant_sim.heat_balance_file = '/x/heat_balance.yaml'")
     assert "spread Table 4.9's form" in why and 'sma-wrist run --params-file' in why
+
+
+def test_the_twin_monitor_runs_the_heat_balance_its_params_file_names(tmp_path):
+    """The twin (monitor) is the params file's plant node's model: with heat_balance_file, the Peltier form."""
+    from sma_wrist.monitor.twin import Twin, load_model
+
+    write_heat_balance_file(tmp_path / 'heat_balance.yaml', TRUTH)
+    model = load_model(params_file=_params_file(tmp_path, 'heat_balance.yaml'))
+    assert model.params.heat_balance == TRUTH and 'heat_balance_file' in model.description
+    twin = Twin(model, 0.3)
+    twin.advance_to(0.0)
+    twin.set_command(0, 12.0)
+    twin.advance_to(2.0)
+    x = pe.rest_state(TRUTH, 1)
+    for _ in range(int(round(2.0 / model.params.dt))):
+        x = pe.step(TRUTH, x, np.array([[12.0, 0.0]]), model.params.dt)
+    assert twin.thermal_state == pytest.approx(x[0], abs=1e-9)

@@ -260,22 +260,8 @@ def identify_heat_balance_form(
         'parameters': {
             'form': 'peltier' if better else 'table_4_9',
             'why': why,
-            'peltier': [
-                {
-                    k: round(getattr(x, k), 5)
-                    for k in (
-                        'seebeck_V_per_K',
-                        'conductance_W_per_K',
-                        'muscle_capacity_J_per_K',
-                        'exchanger_capacity_J_per_K',
-                        'muscle_loss_W_per_K',
-                        'exchanger_loss_W_per_K',
-                        'ambient_C',
-                        'coolant_C',
-                    )
-                }
-                for x in params.layers
-            ],
+            # the fitted entries (the resistance is the form's fixed scale)
+            'peltier': [{k: round(getattr(x, k), 5) for k in pf.FITTED_KEYS} for x in params.layers],
             'at_bounds': list(first.at_bounds),
         },
         'heldout': {

@@ -6,7 +6,7 @@ control kernel, so the plant and the TEM law's model integrate the same numbers.
 
 The Peltier form (Eqs. P.1-P.3, numpy reference :mod:`sma_wrist.core.thermal.peltier`) rides on the same
 coefficient vector: :func:`heat_balance_constants` appends a flag, a drive gain, a Joule scale and both layers'
-Peltier vectors to the 16 Table 4.9 entries (:data:`N_COEF_PELTIER`), and :func:`thermal_rk4` integrates that
+Peltier vectors to the 16 Table 4.9 entries (``N_COEF_PELTIER``), and :func:`thermal_rk4` integrates that
 form where the flag is set. The TEM control kernel always gets Table 4.9's 16 (its linearisation).
 """
 
@@ -115,7 +115,7 @@ def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
 
 def heat_balance_constants(tp, peltier=None) -> np.ndarray:  # type: ignore[no-untyped-def]
     """th_coef of the plant: :func:`thermal_constants` of a thermal.ThermalParams (Table 4.9's form), with a
-    peltier.PeltierParams the Peltier form appended (:data:`N_COEF_PELTIER`: flag, its drive gain and Joule scale,
+    peltier.PeltierParams the Peltier form appended (``N_COEF_PELTIER``: flag, its drive gain and Joule scale,
     both layers' vectors; its muscle-muscle coupling in entry 1)."""
     c = thermal_constants(tp)
     if peltier is None:

@@ -82,11 +82,16 @@ def write_thermal_file(
     path: str | Path, params: th.ThermalParams, identification: Mapping[str, Any] | None = None, header: str = ''
 ) -> Path:
     """Write ``params`` as a version-1 thermal file (YAML) with an optional comment header."""
+    return _write_yaml(path, thermal_file_dict(params, identification), header)
+
+
+def _write_yaml(path: str | Path, doc: Mapping[str, Any], header: str) -> Path:
+    """``doc`` as YAML (in its order) under a comment header of ``header``'s lines."""
     import yaml
 
     p = Path(path)
     text = ''.join(f'# {line}\n' if line else '#\n' for line in header.splitlines())
-    text += yaml.safe_dump(thermal_file_dict(params, identification), sort_keys=False, default_flow_style=False)
+    text += yaml.safe_dump(dict(doc), sort_keys=False, default_flow_style=False)
     p.write_text(text)
     return p
 
@@ -202,13 +207,7 @@ def write_heat_balance_file(
     path: str | Path, params: Any, identification: Mapping[str, Any] | None = None, header: str = ''
 ) -> Path:
     """Write a peltier.PeltierParams as a version-1 heat-balance file (YAML) with an optional comment header."""
-    import yaml
-
-    p = Path(path)
-    text = ''.join(f'# {line}\n' if line else '#\n' for line in header.splitlines())
-    text += yaml.safe_dump(heat_balance_file_dict(params, identification), sort_keys=False, default_flow_style=False)
-    p.write_text(text)
-    return p
+    return _write_yaml(path, heat_balance_file_dict(params, identification), header)
 
 
 def load_heat_balance_file(path: str | Path) -> Any:

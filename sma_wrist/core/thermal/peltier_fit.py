@@ -9,7 +9,7 @@ alike, Table 4.10's statistics. Here:
   without runs keeps the base's. Per-layer parameters take the place of Table 4.9's per-TEM drive gain (a gain
   would trade with S and the capacities, peltier's module docstring).
 * **free parameters**: S, K, C_m, C_x, h_m, h_x on a log scale (all positive), T_amb and T_cool in degC, or, given
-  the measured rest faces ``rest_C``, T_amb and T_cool tied to them (:func:`peltier.ambients_for_rest`; minutes of
+  the measured rest faces ``rest_C``, T_amb and T_cool tied to them (:func:`sma_wrist.core.thermal.peltier.ambients_for_rest`; minutes of
   data do not tell a small loss from a far ambient). R is fixed at the base's (the form's one unidentifiable scale).
 * **solver**: scipy's ``least_squares`` (trf, bounds), Jacobian by forward differences on the log scale, all its
   simulations one call of the compiled kernel (:func:`sma_wrist.core.thermal.kernel.peltier_simulate_runs`).
@@ -34,6 +34,8 @@ FloatArray = NDArray[np.float64]
 #: fitted entries of a layer's vector (indices into peltier.LAYER_KEYS): log-scaled, then the ambients (degC)
 LOG_IDX = (0, 2, 3, 4, 5, 6)
 AMBIENT_IDX = (7, 8)
+#: the fitted entries' names (all but the resistance, the form's fixed scale)
+FITTED_KEYS = tuple(pe.LAYER_KEYS[i] for i in LOG_IDX + AMBIENT_IDX)
 _LOG_LO = np.log([1e-3, 1e-3, 1.0, 1.0, 1e-3, 1e-3])
 _LOG_HI = np.log([1.0, 20.0, 1e4, 1e5, 50.0, 500.0])
 _AMB_LO, _AMB_HI = -20.0, 120.0
