@@ -134,9 +134,14 @@ def _records(t: np.ndarray, temps: np.ndarray, u: np.ndarray, a: float, b: float
     return out
 
 
-def _muscle_rms(params: th.ThermalParams, records: list[ti.ThermalRecord]) -> float:
-    """RMS muscle-face error [degC] of the free-run predictions of ``records`` (each from its measured start)."""
-    ev = ti.evaluate(params, records, 'heldout', settle_s=0.0)
+def _muscle_rms(params: Any, records: list[ti.ThermalRecord]) -> float:
+    """RMS muscle-face error [degC] of the free-run predictions of ``records`` (each from its measured start) under a
+    heat balance of Table 4.9's form (th.ThermalParams) or the Peltier form (peltier.PeltierParams)."""
+    from sma_wrist.core.thermal import peltier as pe
+    from sma_wrist.core.thermal import peltier_fit as pf
+
+    evaluate = pf.evaluate if isinstance(params, pe.PeltierParams) else ti.evaluate
+    ev = evaluate(params, records, 'heldout', settle_s=0.0)
     return float(np.sqrt(np.mean([e.faces['T1']['rms_C'] ** 2 for e in ev])))
 
 
@@ -203,16 +208,7 @@ def identify_heat_balance_form(
     table_rms = float(np.sqrt(np.mean(np.square(table_per_tem))))
     try:
         first = pf.fit_peltier(fit, rest_C=rest_C)
-        per_tem = [
-            float(
-                np.sqrt(
-                    np.mean(
-                        [e.faces['T1']['rms_C'] ** 2 for e in pf.evaluate(first.params, [r], 'heldout', settle_s=0.0)]
-                    )
-                )
-            )
-            for r in held
-        ]
+        per_tem = [_muscle_rms(first.params, [r]) for r in held]
     except ti.ThermalIdentificationError as e:
         part = {
             'parameters': {'form': 'table_4_9', 'why': f'the Peltier form could not be fitted: {e}'},
