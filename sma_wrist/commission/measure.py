@@ -263,6 +263,10 @@ def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -
                     k: (res.get('identified') or {}).get('thermal', {}).get('parameters', {}).get(k)
                     for k in ('tem_gain', 'hold_limits_V')
                 },
+                # the model's heat balance: the Peltier form where it predicts the held-out cycle better
+                'heat_balance': {
+                    k: (res.get('identified') or {}).get('heat_balance', {}).get(k) for k in ('handed_over', 'heldout')
+                },
                 'device_max_drive_V': dev.emulator.stats.max_abs_command_V,
                 'wall_s': round(time.time() - t0, 1),
             }

@@ -651,7 +651,7 @@ def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S
         return {'bag': str(bag), 'error': str(e), 'discrepancy': None}
     return {
         'bag': str(bag),
-        'against': {k: getattr(m, k) or 'built-in' for k in ('hysteresis_file', 'thermal_file')},
+        'against': {k: getattr(m, k) or 'built-in' for k in ('hysteresis_file', 'thermal_file', 'heat_balance_file')},
         'discrepancy': d.discrepancy,
         'unexplained': d.unexplained,
         'subsystem': d.subsystem,

@@ -26,7 +26,7 @@ from scipy.signal import savgol_filter
 from sma_wrist.core.plant.extensions import PARAMS, STATIC_PER_COULOMB, TEMP_CHANNEL_KEYS, TEMP_GAIN_REF_C, drive
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.signals import first_order  # noqa: F401 - the catalogue's lags, re-exported
-from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal import kernel as tk
 from sma_wrist.diagnose.kernels import Constants, _jit
 
 INDEX = {p.name: i for i, p in enumerate(PARAMS)}
@@ -399,9 +399,12 @@ def thermocouples(T: np.ndarray, r: np.ndarray, dt: float) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- model
 def thermal_coef(consts: Constants, th_row: np.ndarray) -> tuple[np.ndarray, float, float]:
-    """(coef (16,), ambient drift [degC/s], ambient offset [degC]) for values of THERMAL_KEYS."""
+    """(coef (16,), ambient drift [degC/s], ambient offset [degC]) for values of THERMAL_KEYS; (37,) where the
+    model's heat balance is the Peltier form (:func:`peltier_coef`)."""
     c = consts.th_coef.copy()
     v = dict(zip(THERMAL_KEYS, th_row))
+    if c.size > tk.N_COEF:
+        return peltier_coef(c, v)
     c[0] *= 1.0 + v['tem_gain_err']
     c[1] = v['coupling_per_s']
     ls = 1.0 + v['loss_scale_err']
@@ -414,6 +417,23 @@ def thermal_coef(consts: Constants, th_row: np.ndarray) -> tuple[np.ndarray, flo
     for f in (0, 1):
         bb = 2 + 6 * f
         c[bb + 5] += (c[bb + 2] - c[bb + 3]) * v['ambient_offset_C']
+    return c, v['ambient_drift_C_per_h'] / 3600.0, v['ambient_offset_C']
+
+
+def peltier_coef(c: np.ndarray, v: dict[str, float]) -> tuple[np.ndarray, float, float]:
+    """The thermal extension effects on a Peltier-form row (thermal.kernel.heat_balance_constants), each the
+    Peltier form's counterpart of its Table 4.9 meaning: ``tem_gain_err`` scales the drive (the voltage the module
+    sees), ``loss_scale_err`` the muscle node's loss h_m, ``joule_scale_err`` the Joule heat, ``ambient_offset_C``
+    moves T_amb and T_cool, ``ambient_drift_C_per_h`` moves both over time, ``coupling_per_s`` adds to the form's own
+    muscle-muscle conductance. Returns (coef, ambient drift [degC/s], ambient offset [degC])."""
+    c[tk.P_GAIN] *= 1.0 + v['tem_gain_err']
+    c[tk.P_JOULE] *= 1.0 + v['joule_scale_err']
+    c[1] += v['coupling_per_s']  # on top of the form's own (its file's)
+    for layer in range(2):
+        o = tk.P_LAYER + tk.N_PELTIER_LAYER * layer
+        c[o + 5] *= 1.0 + v['loss_scale_err']
+        c[o + 7] += v['ambient_offset_C']
+        c[o + 8] += v['ambient_offset_C']
     return c, v['ambient_drift_C_per_h'] / 3600.0, v['ambient_offset_C']
 
 
@@ -440,8 +460,7 @@ class ExtendedModel:
         self.dt = run.dt
         self.substeps = max(1, int(np.ceil(run.dt / 0.01 - 1e-9)))
         self.extrapolate = False  # choose_mechanics_step: Richardson-extrapolate the mechanics replay
-        tp = self.consts.params.thermal
-        self._rest = th.rest_state(tp, 1)[0]  # (2 layers, 2 faces)
+        self._rest = self.consts.params.rest_thermal(1)[0]  # (2 layers, 2 faces) of the model's heat balance
         self.T_noise = 0.0
         if run.T is not None:
             self.T_noise = noise_sigma(run.T)

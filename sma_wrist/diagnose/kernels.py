@@ -25,6 +25,7 @@ from sma_wrist.core.jit import _jit_inline
 from sma_wrist.core.joint.kernel import joint_step_one
 from sma_wrist.core.plant.kernel import pack_constants
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.thermal import kernel as tk
 
 _jit = _jit_switch  # numba.njit(cache=True, nogil=True) when numba is installed
 _envelopes = hk._envelopes
@@ -37,7 +38,8 @@ J_COULOMB, J_VISCOUS, J_STATIC, J_PRELOAD, J_PAYLOAD = 0, 1, 2, 3, 4
 
 @_jit_inline
 def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pragma: no cover - compiled
-    """One RK4 step of both layers (2 x 2 faces) in place; ambient_shift [degC] moves K_inf."""
+    """One RK4 step of both layers (2 x 2 faces) in place; ambient_shift [degC] moves K_inf (the Peltier form's
+    ambients where coef carries it, thermal.kernel.heat_balance_constants)."""
     for stage in range(4):
         if stage == 0:
             for l in range(2):
@@ -61,6 +63,25 @@ def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pra
             out = k4
         ipv = coef[0]
         coupling = coef[1]
+        if coef.shape[0] > tk.N_COEF and coef[tk.P_FLAG] != 0.0:  # the Peltier form (Eqs. P.1-P.3)
+            for l in range(2):
+                ul = u0 if l == 0 else u1
+                dm, dx = tk.peltier_rate_layer(
+                    tmp[l, 0],
+                    tmp[l, 1],
+                    ul,
+                    ul * ul,
+                    coef,
+                    tk.P_LAYER + tk.N_PELTIER_LAYER * l,
+                    coef[tk.P_GAIN],
+                    coef[tk.P_JOULE],
+                    ambient_shift,
+                )
+                if coupling != 0.0:
+                    dm += coupling * (tmp[1 - l, 0] - tmp[l, 0])
+                out[l, 0] = dm
+                out[l, 1] = dx
+            continue
         for l in range(2):
             cur = -ipv * coef[14 + l] * (u0 if l == 0 else u1)
             for f in range(2):
@@ -85,7 +106,7 @@ def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pra
 def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma: no cover - compiled
     """Muscle temperatures under sampled commands.
 
-    u (K, 2) [V] held from sample k to k+1 (already clipped); coef (N, 16) as
+    u (K, 2) [V] held from sample k to k+1 (already clipped); coef (N, 16) (or (N, 37), the Peltier form) as
     plant_kernel.pack_constants' th_coef; x0 (N, 2, 2) initial faces; drift_per_s (N,)
     ambient shift rate [degC/s] of both faces; out_T (K, N, 2) muscle faces at the samples,
     out_X (N, 2, 2) the final state.

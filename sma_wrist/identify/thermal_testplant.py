@@ -166,10 +166,13 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
     sources: the project's model (continuous drive, noise-free), the same with the sensor
     effects (thermocouple lag 0.15 s, noise 0.2 degC), the independent Peltier plant
     noise-free, and the Peltier plant with the sensor effects. Leave-one-frequency-out:
-    every frequency is predicted by the fit on the other seven.
+    every frequency is predicted by the fit on the other seven. Each row also gives the Peltier two-node form's
+    held-out RMS (``*_peltier_rms_C``, :mod:`sma_wrist.core.thermal.peltier_fit`, fitted the same way): on the
+    project's model it is the off-model form, on the Peltier plant Table 4.9's is.
     """
     import time as _time
 
+    from sma_wrist.core.thermal import peltier_fit as pf
     from sma_wrist.core.thermal.identification import identify_thermal
 
     freqs = (1 / 128, 1 / 32, 1 / 8) if quick else th.SEED_SINE_FREQUENCIES_HZ
@@ -187,6 +190,9 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
         res = identify_thermal(recs)
         wall = _time.perf_counter() - t0
         before = {e.record: e for e in res.before}
+        t1 = _time.perf_counter()
+        peltier = {e.record: e for e in pf.leave_one_out(recs)}
+        wall_peltier = _time.perf_counter() - t1
         rows = []
         for e in res.holdout:
             rows.append(
@@ -196,11 +202,13 @@ def holdout_table(quick: bool = False, seed: int = 0) -> dict:
                     **{f'{face}_std_pct': round(st['std_pct'], 3) for face, st in e.faces.items()},
                     **{f'{face}_max_abs_pct': round(st['max_abs_pct'], 3) for face, st in e.faces.items()},
                     **{f'{face}_default_rms_C': round(before[e.record].faces[face]['rms_C'], 4) for face in e.faces},
+                    **{f'{face}_peltier_rms_C': round(peltier[e.record].faces[face]['rms_C'], 4) for face in e.faces},
                 }
             )
         out['sources'][label] = {
             'in_sample_rms_C': round(res.fit.rms_C, 4),
             'wall_s': round(wall, 2),
+            'peltier_wall_s': round(wall_peltier, 2),
             'fits': len(recs) + 1,
             'holdout': rows,
         }

@@ -125,6 +125,13 @@ class PlantSim(WristNode):
                 'identified TEM heat balance (sma-wrist identify thermal; empty: Table 4.9)',
                 runtime=False,
             ),
+            Param(
+                'heat_balance_file',
+                '',
+                "the model's heat balance in the Peltier form (sma-wrist commission writes one where it predicts "
+                "better; empty: Table 4.9's form of thermal_file)",
+                runtime=False,
+            ),
             HYSTERESIS_FILE_PARAM,
             PRELOAD_PARAM,
         )
@@ -164,6 +171,7 @@ class PlantSim(WristNode):
         base = PlantParams.from_files(
             p['hysteresis_file'],
             p['thermal_file'],
+            p['heat_balance_file'],
             dt=p['dt_s'],
             max_muscle_temperature_C=p['max_muscle_temperature_C'],
             preload_elongation_mm=p['preload_elongation_mm'],

@@ -105,6 +105,10 @@ _INSTEAD = {
     ('adaptive_controller', 'mode'): 'choose the modes with --controllers',
     ('plant_sim', 'payload_kg'): 'the plants carry their sampled payloads; fix them with --payloads',
     ('plant_sim', 'plant'): 'choose the plant with --plant',
+    # the sampled plants are spread around Table 4.9's form (sma_wrist.plants.spread): a Peltier-form heat balance
+    # is simulated by plant_sim (sma-wrist run --params-file), not spread
+    ('plant_sim', 'heat_balance_file'): "the sweep's sampled plants spread Table 4.9's form of thermal_file; "
+    'the Peltier form runs in plant_sim (sma-wrist run --params-file)',
     ('hysteresis_compensator', 'method'): "the sweep's inverse is the numerical one",
 }
 #: the pre-load three nodes must share (nodes.common.PRELOAD_PARAM)

@@ -194,7 +194,8 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
     Same arithmetic as the diagnosis' replay coefficients (diagnose.effects.thermal_coef):
     loss scaling multiplies the muscle face's K_Tinf, K_T and K_inf (ambient unchanged),
     the Joule scaling both faces' K_R, the ambient offset shifts both faces' ambients, the transition shift moves the
-    wire's SD-GPI along the temperature axis.
+    wire's SD-GPI along the temperature axis. A Peltier-form heat balance (``base.heat_balance``) gets the same effects
+    as their Peltier counterparts (core.thermal.peltier.PeltierParams.scaled, diagnose.effects.peltier_coef).
     Raises ParameterError for a :data:`REPLAY_ONLY` effect away from nominal.
     """
     v = check(values)
@@ -213,6 +214,14 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
         ),
         coupling_per_s=v['coupling_per_s'],
     )
+    hb = p.heat_balance
+    if hb is not None:  # the model's heat balance in the Peltier form: the same effects, its counterparts
+        hb = dataclasses.replace(
+            hb.scaled(
+                1.0 + v['tem_gain_err'], 1.0 + v['loss_scale_err'], 1.0 + v['joule_scale_err'], v['ambient_offset_C']
+            ),
+            coupling_per_s=hb.coupling_per_s + v['coupling_per_s'],  # on top of the form's own (its file's)
+        )
     jp = dataclasses.replace(
         p.joint,
         coulomb_Nm=v['coulomb_Nm'],
@@ -232,6 +241,7 @@ def plant_params(values: Mapping[str, float], base: PlantParams | None = None) -
     return dataclasses.replace(
         p,
         thermal=tp,
+        heat_balance=hb,
         joint=jp,
         hysteresis=hy,
         preload_elongation_mm=p.preload_elongation_mm + v['preload_err_mm'],

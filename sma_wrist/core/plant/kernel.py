@@ -21,7 +21,7 @@ import numpy as np
 from sma_wrist.core.hysteresis.kernel import _solve_load_into
 from sma_wrist.core.jit import _jit, _jit_inline
 from sma_wrist.core.joint.kernel import joint_step_one
-from sma_wrist.core.thermal.kernel import thermal_constants, thermal_rk4
+from sma_wrist.core.thermal.kernel import heat_balance_constants, thermal_rk4
 
 
 @_jit
@@ -54,7 +54,7 @@ def step_many(
     compliance (2N,) stacked [muscle 1 of all wrists, then muscle 2] as in plant.PlantState;
     flags (N, 4) bool out: over_temperature, slack, overload, at_stop (OR over the steps).
     th_coef (16,): input_per_volt, coupling, then per face (muscle, exchanger) the six
-    (K_at, K_t, K_Tinf, K_T, K_R, K_inf).
+    (K_at, K_t, K_Tinf, K_T, K_R, K_inf); (37,) with the Peltier form appended (thermal.kernel.heat_balance_constants).
     mech (16,): dt, scale, c_el, k_f, m_lo, m_hi, m_max, tol, max_it, p0, T_lo, T_hi, T_hot,
     e0_mm, n_g_r, r_eff_m. joint (10,): I_w, lever, coulomb, viscous, static, stick_v,
     q_neutral, q_min, q_max, g.
@@ -259,7 +259,7 @@ def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped
     from sma_wrist.core.joint.dynamics import G
 
     tp, hp, mg, jp = params.thermal, params.hysteresis, params.muscle, params.joint
-    th_coef = thermal_constants(tp)
+    th_coef = heat_balance_constants(tp, params.heat_balance)
     m_lo, m_hi = hp.load_range
     mech = np.array(
         [

@@ -32,6 +32,7 @@ from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, play_bounds
 from sma_wrist.core.joint.dynamics import G, JointParams, joint_step
 from sma_wrist.core.plant import kernel as plant_kernel
 from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.thermal import peltier as pe
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -48,6 +49,10 @@ class PlantParams:
     #: heat balance's hold limits (-12/+13 V), which the TEM controller enforces only while a
     #: face is hot (tem_control.DriveLimits, doc/explanation/model.md).
     thermal: th.ThermalParams = field(default_factory=lambda: th.ThermalParams().with_limits(-24.0, 24.0))
+    #: the model's heat balance where it is not Table 4.9's form: a Peltier two-node form per layer
+    #: (:mod:`sma_wrist.core.thermal.peltier`, ``heat_balance_file``); ``thermal`` then keeps the command limits
+    #: and the window. None: ``thermal``'s Eqs. 4.13-4.14.
+    heat_balance: pe.PeltierParams | None = None
     #: Bundle elongation at q_neutral [mm], set by the pre-load calibration of Sec. 2.2.3:
     #: with it the +-30 deg range is reachable up to ~0.7 kg at 0.09 m in the TEM-reachable window (doc/explanation/model.md).
     preload_elongation_mm: float = 1.98
@@ -68,11 +73,17 @@ class PlantParams:
 
     @classmethod
     def from_files(
-        cls, hysteresis_file: str | Path | None = None, thermal_file: str | Path | None = None, **fields: Any
+        cls,
+        hysteresis_file: str | Path | None = None,
+        thermal_file: str | Path | None = None,
+        heat_balance_file: str | Path | None = None,
+        **fields: Any,
     ) -> PlantParams:
         """The wrist with the wire of ``hysteresis_file`` (``sma-wrist identify hysteresis``; empty: the built-in set)
-        and the TEMs of ``thermal_file`` (``identify thermal``; empty: Table 4.9), still clipped at the driver rating;
-        ``fields``: the other fields. What plant_sim, hardware_bridge and diagnose build from their parameters."""
+        and the TEMs of ``thermal_file`` (``identify thermal``; empty: Table 4.9), still clipped at the driver rating,
+        their heat balance that of ``heat_balance_file`` where given (the Peltier form, ``sma-wrist commission``;
+        empty: Table 4.9's form of the thermal file); ``fields``: the other fields. What plant_sim, hardware_bridge
+        and diagnose build from their parameters."""
         from sma_wrist.core.hysteresis.params_file import hysteresis_params
 
         p = cls(hysteresis=hysteresis_params(hysteresis_file or None), **fields)
@@ -81,7 +92,23 @@ class PlantParams:
 
             lim = p.thermal
             p = replace(p, thermal=load_thermal_file(thermal_file).with_limits(lim.u_min_V, lim.u_max_V))
+        if heat_balance_file:
+            from sma_wrist.core.thermal.params_file import load_heat_balance_file
+
+            p = replace(p, heat_balance=load_heat_balance_file(heat_balance_file))
         return p
+
+    def rest_thermal(self, n: int) -> FloatArray:
+        """Zero-drive faces (n, 2, 2) [degC] of the model's heat balance (Table 4.9's form or ``heat_balance``)."""
+        if self.heat_balance is not None:
+            return pe.rest_state(self.heat_balance, n)
+        return th.rest_state(self.thermal, n)
+
+    def thermal_step(self, state: FloatArray, command_V: FloatArray, dt: float) -> FloatArray:
+        """One RK4 step of the model's heat balance, commands (N, 2) in range [V] (th.step or peltier.step)."""
+        if self.heat_balance is not None:
+            return pe.step(self.heat_balance, state, command_V, dt)
+        return th.step(self.thermal, state, command_V, dt, validate=False)
 
 
 @dataclass
@@ -155,7 +182,7 @@ class WristPlant:
         """Wrists at thermal rest (zero drive), cooled from hot, at static equilibrium (or q0)."""
         p = self.params
         n = payload_kg.size
-        thermal = th.rest_state(p.thermal, n)
+        thermal = p.rest_thermal(n)
         T = th.muscle_temperature(p.thermal, thermal).T.reshape(-1)  # (2N,)
         m0 = np.full(2 * n, 0.8)
         lower, upper = play_bounds(p.hysteresis, T, m0)
@@ -248,11 +275,10 @@ class WristPlant:
         non-finite commands raise ModelInputError.
         """
         p = self.params
-        tp = p.thermal
         s = self.state
         u, clipped = self._commands(command_V)
         # command in range, dt checked by PlantParams (<= 0.01 s < dt_max_s), state finite by construction
-        s.thermal = th.step(tp, s.thermal, u, p.dt, validate=False)
+        s.thermal = p.thermal_step(s.thermal, u, p.dt)
         self._mechanics(s.thermal[:, :, th.MUSCLE_FACE].T.reshape(-1))
         if clipped is not None:
             s.flags['command_saturated'] = clipped

@@ -342,10 +342,13 @@ def record_input_per_volt(params: th.ThermalParams, records: Sequence[ThermalRec
     return params.layer_input_per_volt(2)[[r.layer for r in records]]
 
 
-def start_states(records: Sequence[ThermalRecord], base: th.ThermalParams) -> FloatArray:
+def start_states(
+    records: Sequence[ThermalRecord], base: th.ThermalParams | None, rest: FloatArray | None = None
+) -> FloatArray:
     """(R, 2) initial faces: measured where measured; an unmeasured exchanger face starts at the
-    measured muscle face plus the base model's zero-drive offset between the faces."""
-    rest = th.rest_state(base, 1, 1)[0, 0]
+    measured muscle face plus the base model's zero-drive offset between the faces (``rest``: that model's
+    (muscle, exchanger) rest faces [degC] where the base is another form, e.g. the Peltier form's)."""
+    rest = th.rest_state(base, 1, 1)[0, 0] if rest is None else np.asarray(rest, dtype=float)
     T0 = np.empty((len(records), 2))
     for j, r in enumerate(records):
         T0[j, MUSCLE] = r.T[0, MUSCLE]

@@ -3,6 +3,11 @@
 Scalar loops compiled by numba when present (:mod:`sma_wrist.core.jit`); the numpy reference is
 :mod:`sma_wrist.core.thermal.heat_balance` (``rate_terms``). Shared by the plant kernel and the TEM
 control kernel, so the plant and the TEM law's model integrate the same numbers.
+
+The Peltier form (Eqs. P.1-P.3, numpy reference :mod:`sma_wrist.core.thermal.peltier`) rides on the same
+coefficient vector: :func:`heat_balance_constants` appends a flag, a drive gain, a Joule scale and both layers'
+Peltier vectors to the 16 Table 4.9 entries (``N_COEF_PELTIER``), and :func:`thermal_rk4` integrates that
+form where the flag is set. The TEM control kernel always gets Table 4.9's 16 (its linearisation).
 """
 
 from __future__ import annotations
@@ -11,12 +16,53 @@ import numpy as np
 
 from sma_wrist.core.jit import _jit, _jit_inline
 
+#: Peltier entries of a coefficient vector after the 16 of Table 4.9: flag (1: the Peltier form), drive gain, Joule
+#: scale, then both layers' vectors (peltier.LAYER_KEYS order)
+P_FLAG, P_GAIN, P_JOULE, P_LAYER = 16, 17, 18, 19
+N_PELTIER_LAYER = 9
+N_COEF_PELTIER = P_LAYER + 2 * N_PELTIER_LAYER
+
+
+@_jit_inline
+def peltier_rate_layer(tm, tx, u, u2, c, o, gain, joule, shift):  # pragma: no cover - compiled
+    """(dT_m/dt, dT_x/dt) [degC/s] of Eqs. P.1-P.3 (peltier.derivative_coef) for one layer whose vector starts at
+    c[o]: faces tm, tx [degC], drive u [V] (x gain) with interval mean square u2 [V^2] (x gain^2), the Joule heat x
+    joule, both ambients + shift [degC]."""
+    S, R, K = c[o], c[o + 1], c[o + 2]
+    d = tm - tx
+    emf = S * d
+    ug = gain * u
+    cur = (ug - emf) / R
+    i2r = joule * (gain * gain * u2 - 2.0 * ug * emf + emf * emf) / R
+    qm = S * cur * (tm + 273.15) + 0.5 * i2r - K * d - c[o + 5] * (tm - c[o + 7] - shift)
+    qx = -S * cur * (tx + 273.15) + 0.5 * i2r + K * d - c[o + 6] * (tx - c[o + 8] - shift)
+    return qm / c[o + 3], qx / c[o + 4]
+
 
 @_jit_inline
 def _thermal_rate(x, u, th_coef, out):  # pragma: no cover - compiled
-    """dT/dt (2 layers x 2 faces) of Eqs. 4.13-4.14 (thermal.rate_terms) at commands u (2,) [V]."""
+    """dT/dt (2 layers x 2 faces) of Eqs. 4.13-4.14 (thermal.rate_terms) at commands u (2,) [V]; of Eqs. P.1-P.3
+    where th_coef carries the Peltier form (:func:`heat_balance_constants`)."""
     ipv = th_coef[0]
     coupling = th_coef[1]
+    if th_coef.shape[0] > N_COEF and th_coef[P_FLAG] != 0.0:
+        for l in range(2):
+            dm, dx = peltier_rate_layer(
+                x[l, 0],
+                x[l, 1],
+                u[l],
+                u[l] * u[l],
+                th_coef,
+                P_LAYER + N_PELTIER_LAYER * l,
+                th_coef[P_GAIN],
+                th_coef[P_JOULE],
+                0.0,
+            )
+            if coupling != 0.0:
+                dm += coupling * (x[1 - l, 0] - x[l, 0])
+            out[l, 0] = dm
+            out[l, 1] = dx
+        return
     for l in range(2):
         cur = -ipv * th_coef[14 + l] * u[l]
         for f in range(2):
@@ -65,6 +111,45 @@ def thermal_constants(tp) -> np.ndarray:  # type: ignore[no-untyped-def]
     (layer l's input is -th_coef[0] * th_coef[14 + l] * u)."""
     faces = [[tp._k_at[f], tp._k_t[f], tp._k_tinf[f], tp._k_tc[f], tp._k_r[f], tp._k_inf[f]] for f in (0, 1)]
     return np.array([tp.input_per_volt, tp.coupling_per_s] + faces[0] + faces[1] + list(tp.tem_gain), dtype=float)
+
+
+def heat_balance_constants(tp, peltier=None) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """th_coef of the plant: :func:`thermal_constants` of a thermal.ThermalParams (Table 4.9's form), with a
+    peltier.PeltierParams the Peltier form appended (``N_COEF_PELTIER``: flag, its drive gain and Joule scale,
+    both layers' vectors; its muscle-muscle coupling in entry 1)."""
+    c = thermal_constants(tp)
+    if peltier is None:
+        return c
+    c[1] = peltier.coupling_per_s
+    return np.concatenate([c, [1.0, peltier.drive_gain, peltier.joule_scale], peltier.coef(2).reshape(-1)])
+
+
+@_jit
+def peltier_simulate_runs(coef, u, u2, T0, dt, out):  # pragma: no cover - compiled
+    """RK4 of Eqs. P.1-P.3 for parameter sets and runs: coef (P, R, N_PELTIER_LAYER) (each run its layer's vector),
+    drive u and its interval mean square u2 (K, R) held over each step of dt [s], from T0 (R, 2) [degC]; out
+    (K, P, R, 2): row 0 T0, row k + 1 after u[k]. peltier.step_coef is the reference."""
+    K, R = u.shape
+    P = coef.shape[0]
+    k1, k2, k3, k4 = np.empty(2), np.empty(2), np.empty(2), np.empty(2)
+    for p in range(P):
+        for r in range(R):
+            c = coef[p, r]
+            tm, tx = T0[r, 0], T0[r, 1]
+            out[0, p, r, 0], out[0, p, r, 1] = tm, tx
+            for k in range(K - 1):
+                uk, u2k = u[k, r], u2[k, r]
+                k1[0], k1[1] = peltier_rate_layer(tm, tx, uk, u2k, c, 0, 1.0, 1.0, 0.0)
+                k2[0], k2[1] = peltier_rate_layer(
+                    tm + 0.5 * dt * k1[0], tx + 0.5 * dt * k1[1], uk, u2k, c, 0, 1.0, 1.0, 0.0
+                )
+                k3[0], k3[1] = peltier_rate_layer(
+                    tm + 0.5 * dt * k2[0], tx + 0.5 * dt * k2[1], uk, u2k, c, 0, 1.0, 1.0, 0.0
+                )
+                k4[0], k4[1] = peltier_rate_layer(tm + dt * k3[0], tx + dt * k3[1], uk, u2k, c, 0, 1.0, 1.0, 0.0)
+                tm = tm + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
+                tx = tx + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+                out[k + 1, p, r, 0], out[k + 1, p, r, 1] = tm, tx
 
 
 @_jit_inline

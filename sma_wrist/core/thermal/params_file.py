@@ -82,11 +82,16 @@ def write_thermal_file(
     path: str | Path, params: th.ThermalParams, identification: Mapping[str, Any] | None = None, header: str = ''
 ) -> Path:
     """Write ``params`` as a version-1 thermal file (YAML) with an optional comment header."""
+    return _write_yaml(path, thermal_file_dict(params, identification), header)
+
+
+def _write_yaml(path: str | Path, doc: Mapping[str, Any], header: str) -> Path:
+    """``doc`` as YAML (in its order) under a comment header of ``header``'s lines."""
     import yaml
 
     p = Path(path)
     text = ''.join(f'# {line}\n' if line else '#\n' for line in header.splitlines())
-    text += yaml.safe_dump(thermal_file_dict(params, identification), sort_keys=False, default_flow_style=False)
+    text += yaml.safe_dump(dict(doc), sort_keys=False, default_flow_style=False)
     p.write_text(text)
     return p
 
@@ -162,5 +167,95 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
             window_C=(_number(p, 'window_C[0]', window[0]), _number(p, 'window_C[1]', window[1])),
         )
         return params.with_hold_limits((held[0], held[-1]))
+    except ParameterError as e:
+        raise ParameterError(f'{p}: {e}') from None
+
+
+# ------------------------------------------------------------------------ the model's heat balance (another form)
+#: the heat-balance file: the MODEL's heat balance where it is not Table 4.9's form (the node parameter
+#: ``heat_balance_file``; empty: Table 4.9's form of ``thermal_file``). ``sma-wrist commission`` writes one where the
+#: Peltier form predicts the held-out excitation better (doc/explanation/model.md). Format (YAML, version 1)::
+#:
+#:     format: sma_wrist/heat_balance
+#:     version: 1
+#:     form: peltier                # Eqs. P.1-P.3 (core.thermal.peltier)
+#:     coupling_per_s: 0.0          # optional: muscle-muscle conductance over the muscle node's capacity [1/s]
+#:     layers:                      # TEM 1 (muscle 1), TEM 2 (muscle 2): peltier.LAYER_KEYS each
+#:       - {seebeck_V_per_K: 0.05, resistance_ohm: 2.0, conductance_W_per_K: 0.6, ...}
+#:       - {...}
+#:     identification: {...}       # provenance and held-out errors; informative only
+HEAT_BALANCE_FORMAT = 'sma_wrist/heat_balance'
+HEAT_BALANCE_FORMS = ('peltier',)
+_HB_KEYS = {'format', 'version', 'form', 'coupling_per_s', 'layers', 'identification'}
+
+
+def heat_balance_file_dict(params: Any, identification: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The heat-balance file's content for a peltier.PeltierParams."""
+    from sma_wrist.core.thermal import peltier as pe
+
+    return {
+        'format': HEAT_BALANCE_FORMAT,
+        'version': VERSION,
+        'form': 'peltier',
+        'coupling_per_s': float(params.coupling_per_s),
+        'layers': [{k: float(getattr(layer, k)) for k in pe.LAYER_KEYS} for layer in params.layers],
+        'identification': dict(identification or {}),
+    }
+
+
+def write_heat_balance_file(
+    path: str | Path, params: Any, identification: Mapping[str, Any] | None = None, header: str = ''
+) -> Path:
+    """Write a peltier.PeltierParams as a version-1 heat-balance file (YAML) with an optional comment header."""
+    return _write_yaml(path, heat_balance_file_dict(params, identification), header)
+
+
+def load_heat_balance_file(path: str | Path) -> Any:
+    """The peltier.PeltierParams of a heat-balance file. Raises ParameterError naming the file and what is wrong
+    (missing, not YAML, wrong format/version/form, a missing, unknown or non-finite key, a non-physical value)."""
+    import yaml
+
+    from sma_wrist.core.thermal import peltier as pe
+
+    p = Path(path)
+    how = 'sma-wrist commission writes one where the Peltier form predicts better'
+    try:
+        data = yaml.safe_load(p.read_text(encoding='utf-8'))
+    except OSError as e:
+        raise ParameterError(f'{p}: cannot read the heat-balance file ({e.strerror or e}); {how}') from None
+    except UnicodeDecodeError as e:
+        raise ParameterError(f'{p}: not a UTF-8 text heat-balance file (byte {e.start}: {e.reason})') from None
+    except yaml.YAMLError as e:
+        raise ParameterError(f'{p}: not a YAML heat-balance file ({str(e).splitlines()[0]})') from None
+    if not isinstance(data, dict) or data.get('format') != HEAT_BALANCE_FORMAT:
+        hint = " (a thermal file is thermal_file's)" if isinstance(data, dict) and data.get('format') == FORMAT else ''
+        raise ParameterError(
+            f'{p}: not a heat-balance file (need `format: {HEAT_BALANCE_FORMAT}` at the top level){hint}'
+        )
+    if data.get('version') != VERSION:
+        raise ParameterError(
+            f'{p}: heat-balance file version {data.get("version")!r} is not supported (need {VERSION})'
+        )
+    unknown = sorted(set(data) - _HB_KEYS)
+    if unknown:
+        raise ParameterError(
+            f'{p}: unknown key(s) {", ".join(map(str, unknown))}; known: {", ".join(sorted(_HB_KEYS))}'
+        )
+    if data.get('form') not in HEAT_BALANCE_FORMS:
+        raise ParameterError(f'{p}: form {data.get("form")!r} is not one of {", ".join(HEAT_BALANCE_FORMS)}')
+    layers = data.get('layers')
+    if not (isinstance(layers, list) and len(layers) == 2):
+        raise ParameterError(f'{p}: layers must be a list of two (TEM 1, TEM 2)')
+    out = []
+    for i, row in enumerate(layers):
+        if not isinstance(row, dict) or set(row) != set(pe.LAYER_KEYS):
+            raise ParameterError(f'{p}: layers[{i}] must map exactly {", ".join(pe.LAYER_KEYS)} to numbers')
+        try:
+            out.append(pe.PeltierLayer(**{k: _number(p, f'layers[{i}].{k}', row[k]) for k in pe.LAYER_KEYS}))
+        except ParameterError as e:
+            raise ParameterError(f'{p}: layers[{i}]: {e}') from None
+    coupling = _number(p, 'coupling_per_s', data.get('coupling_per_s', 0.0))
+    try:
+        return pe.PeltierParams(layers=(out[0], out[1]), coupling_per_s=coupling)
     except ParameterError as e:
         raise ParameterError(f'{p}: {e}') from None

@@ -1,0 +1,252 @@
+"""Identification of the Peltier heat-balance form (Eqs. P.1-P.3, :mod:`sma_wrist.core.thermal.peltier`) per layer.
+
+The same data and the same error as Table 4.9's fit (:mod:`sma_wrist.core.thermal.identification`): measured runs
+(:class:`~sma_wrist.core.thermal.identification.ThermalRecord`, the drive's interval means and mean squares, each
+run's ``layer``), simulation error of the free-run prediction from the measured start, every run-face weighted
+alike, Table 4.10's statistics. Here:
+
+* **per layer**: each TEM's module gets its own vector, fitted on that TEM's runs (the runs' ``layer``); a layer
+  without runs keeps the base's. Per-layer parameters take the place of Table 4.9's per-TEM drive gain (a gain
+  would trade with S and the capacities, peltier's module docstring).
+* **free parameters**: S, K, C_m, C_x, h_m, h_x on a log scale (all positive), T_amb and T_cool in degC, or, given
+  the measured rest faces ``rest_C``, T_amb and T_cool tied to them (:func:`sma_wrist.core.thermal.peltier.ambients_for_rest`; minutes of
+  data do not tell a small loss from a far ambient). R is fixed at the base's (the form's one unidentifiable scale).
+* **solver**: scipy's ``least_squares`` (trf, bounds), Jacobian by forward differences on the log scale, all its
+  simulations one call of the compiled kernel (:func:`sma_wrist.core.thermal.kernel.peltier_simulate_runs`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from sma_wrist.core.thermal import identification as ti
+from sma_wrist.core.thermal import kernel as tk
+from sma_wrist.core.thermal import peltier as pe
+
+FloatArray = NDArray[np.float64]
+
+#: fitted entries of a layer's vector (indices into peltier.LAYER_KEYS): log-scaled, then the ambients (degC)
+LOG_IDX = (0, 2, 3, 4, 5, 6)
+AMBIENT_IDX = (7, 8)
+#: the fitted entries' names (all but the resistance, the form's fixed scale)
+FITTED_KEYS = tuple(pe.LAYER_KEYS[i] for i in LOG_IDX + AMBIENT_IDX)
+_LOG_LO = np.log([1e-3, 1e-3, 1.0, 1.0, 1e-3, 1e-3])
+_LOG_HI = np.log([1.0, 20.0, 1e4, 1e5, 50.0, 500.0])
+_AMB_LO, _AMB_HI = -20.0, 120.0
+_FD_STEP = 1e-6
+
+
+@dataclass
+class PeltierFit:
+    """Result of :func:`fit_peltier`."""
+
+    params: pe.PeltierParams
+    layers: tuple[int, ...]  # the layers fitted (others: the base's)
+    rms_C: float  # in-sample RMS over run-faces [degC]
+    nfev: int
+    wall_s: float
+    at_bounds: tuple[str, ...] = ()
+    rest_C: tuple[float, float] | None = None
+
+
+def simulate_records(
+    params: pe.PeltierParams, records: Sequence[ti.ThermalRecord], base_rest: FloatArray | None = None
+) -> list[FloatArray]:
+    """Free-run simulation (K_r, 2) [degC] of each record under its layer's vector, from its measured start (an
+    unmeasured exchanger face from the muscle face and ``params``' rest offset, ti.start_states)."""
+    u, u2, _, _ = ti._pad(records)
+    rest = pe.rest_state(params, 1, 2)[0, 0] if base_rest is None else base_rest
+    T0 = ti.start_states(records, None, rest)
+    coef = params.coef(2)[[r.layer for r in records]][None]
+    out = np.empty((u.shape[0], 1, len(records), 2))
+    with np.errstate(all='ignore'):
+        tk.peltier_simulate_runs(np.ascontiguousarray(coef), u, u2, np.ascontiguousarray(T0), records[0].dt, out)
+    return [out[: r.n, 0, j] for j, r in enumerate(records)]
+
+
+def evaluate(
+    params: pe.PeltierParams,
+    records: Sequence[ti.ThermalRecord],
+    mode: str,
+    masks: Sequence[FloatArray] | None = None,
+    settle_s: float = 30.0,
+) -> list[ti.RecordEvaluation]:
+    """Table 4.10 statistics per run and measured face of the free-run prediction (as ti.evaluate)."""
+    sims = simulate_records(params, records)
+    out = []
+    for j, r in enumerate(records):
+        ev = r.valid.copy()
+        ev[0] = False
+        if ti.EXCHANGER not in r.faces:
+            ev[: int(round(settle_s / r.dt))] = False
+        if masks is not None:
+            ev &= np.asarray(masks[j], bool)
+        if not ev.any():
+            raise ti.ThermalIdentificationError(f'{r.name}: no samples left to evaluate')
+        faces = {
+            ti.FACE_NAMES[f]: ti.error_statistics(r.T[:, f], sims[j][:, f], ev, span_C=float(np.ptp(r.T[r.valid, f])))
+            for f in r.faces
+        }
+        out.append(ti.RecordEvaluation(r.name, r.frequency_Hz, mode, faces, sims[j], ev))
+    return out
+
+
+class _LayerProblem:
+    """Residuals of one layer's runs as a function of its free vector (module docstring)."""
+
+    def __init__(
+        self,
+        records: Sequence[ti.ThermalRecord],
+        base: pe.PeltierLayer,
+        masks: Sequence[FloatArray] | None,
+        settle_s: float,
+        rest_C: tuple[float, float] | None,
+    ) -> None:
+        self.records = records
+        self.base = base.vector()
+        self.rest_C = rest_C
+        self.dt = records[0].dt
+        self.u, self.u2, self.T, mask = ti._pad(records)
+        if masks is not None:
+            for j, (r, m) in enumerate(zip(records, masks)):
+                mask[: r.n, j] &= np.asarray(m, bool)[:, None]
+        for j, r in enumerate(records):
+            if ti.EXCHANGER not in r.faces:
+                mask[: int(round(settle_s / r.dt)), j] = False
+        mask[0] = False
+        if not mask.any():
+            raise ti.ThermalIdentificationError('no training samples left (runs too short for the settle time?)')
+        self.mask = mask
+        self.w = ti._weights(mask)
+        rest = pe.steady_state_coef(self.base, 0.0)
+        self.T0 = np.ascontiguousarray(ti.start_states(records, None, rest))
+        self.Tm = np.where(mask, self.T, 0.0)
+        n = len(LOG_IDX) + (0 if rest_C is not None else 2)
+        self.lo = np.r_[_LOG_LO, [_AMB_LO] * (n - 6)]
+        self.hi = np.r_[_LOG_HI, [_AMB_HI] * (n - 6)]
+
+    def vectors(self, x: FloatArray) -> FloatArray:
+        """(P, N_LAYER) layer vectors of free rows x (P, n)."""
+        v = np.tile(self.base, (x.shape[0], 1))
+        v[:, LOG_IDX] = np.exp(x[:, : len(LOG_IDX)])
+        if self.rest_C is None:
+            v[:, AMBIENT_IDX] = x[:, len(LOG_IDX) :]
+        else:
+            ta, tc = pe.ambients_for_rest(v, self.rest_C)
+            v[:, 7], v[:, 8] = ta, tc
+        return v
+
+    def free(self, layer: pe.PeltierLayer) -> FloatArray:
+        v = layer.vector()
+        x = np.log(v[list(LOG_IDX)])
+        return x if self.rest_C is not None else np.r_[x, v[list(AMBIENT_IDX)]]
+
+    def residuals_many(self, x: FloatArray) -> FloatArray:
+        """(P, M) weighted residuals of free rows x (P, n)."""
+        v = self.vectors(np.atleast_2d(x))
+        R = len(self.records)
+        coef = np.ascontiguousarray(np.repeat(v[:, None, :], R, axis=1))
+        out = np.empty((self.u.shape[0], v.shape[0], R, 2))
+        with np.errstate(all='ignore'):
+            tk.peltier_simulate_runs(coef, self.u, self.u2, self.T0, self.dt, out)
+            res = (out - self.Tm[:, None]) * self.w[None, None]
+        r = np.moveaxis(res, 1, 0)[:, self.mask]
+        return np.where(np.isfinite(r), r, 1e3)  # a run-away parameter set: a large, finite residual
+
+    def residuals(self, x: FloatArray) -> FloatArray:
+        return self.residuals_many(x[None])[0]
+
+    def jacobian(self, x: FloatArray) -> FloatArray:
+        n = x.size
+        X = np.tile(x, (n + 1, 1))
+        h = _FD_STEP * np.maximum(np.abs(x), 1.0)
+        X[1 + np.arange(n), np.arange(n)] += h
+        r = self.residuals_many(X)
+        return ((r[1:] - r[0]) / h[:, None]).T
+
+
+def fit_peltier(
+    records: Sequence[ti.ThermalRecord],
+    base: pe.PeltierParams | None = None,
+    *,
+    masks: Sequence[FloatArray] | None = None,
+    settle_s: float = 30.0,
+    rest_C: tuple[float, float] | None = None,
+    max_nfev: int = 200,
+) -> PeltierFit:
+    """Fit each layer's Peltier vector (Eqs. P.1-P.3) to its runs by simulation-error least squares (module
+    docstring). ``masks``: per-run training samples; ``rest_C``: the measured (muscle, exchanger) rest faces
+    [degC] the ambients are tied to. Raises ThermalIdentificationError when the data cannot support the fit."""
+    from scipy.optimize import least_squares
+
+    t0 = time.perf_counter()
+    if not records:
+        raise ti.ThermalIdentificationError('no runs to fit')
+    for r in records:
+        if float(np.ptp(r.u)) < 0.5:
+            raise ti.ThermalIdentificationError(
+                f'{r.name}: the drive voltage hardly changes (range {np.ptp(r.u):.3g} V); '
+                'identification needs an exciting input'
+            )
+    if rest_C is not None and not all(math.isfinite(t) for t in rest_C):
+        raise ti.ThermalIdentificationError(f'rest temperatures {rest_C!r} must be finite degC')
+    params = base or pe.PeltierParams()
+    fitted = tuple(sorted({r.layer for r in records}))
+    names = [pe.LAYER_KEYS[i] for i in LOG_IDX] + (
+        [] if rest_C is not None else [pe.LAYER_KEYS[i] for i in AMBIENT_IDX]
+    )
+    cost, n_res, nfev, at_bounds = 0.0, 0, 0, []
+    for layer in fitted:
+        idx = [j for j, r in enumerate(records) if r.layer == layer]
+        prob = _LayerProblem(
+            [records[j] for j in idx],
+            params.layers[layer],
+            None if masks is None else [masks[j] for j in idx],
+            settle_s,
+            rest_C,
+        )
+        x0 = np.clip(prob.free(params.layers[layer]), prob.lo + 1e-9, prob.hi - 1e-9)
+        sol = least_squares(
+            prob.residuals,
+            x0,
+            jac=prob.jacobian,
+            bounds=(prob.lo, prob.hi),
+            method='trf',
+            x_scale='jac',
+            max_nfev=max_nfev,
+        )
+        nfev += int(sol.nfev)
+        r = prob.residuals(sol.x)
+        cost += float(r @ r)
+        n_res += 1
+        params = params.with_layer(layer, pe.PeltierLayer.from_vector(prob.vectors(sol.x[None])[0]))
+        tol = 1e-6 * (prob.hi - prob.lo)
+        at_bounds += [
+            f'TEM {layer + 1} {k} = {math.exp(v) if i < len(LOG_IDX) else v:.4g}'
+            for i, (k, v, a, b, e) in enumerate(zip(names, sol.x, prob.lo, prob.hi, tol))
+            if v <= a + e or v >= b - e
+        ]
+    return PeltierFit(params, fitted, math.sqrt(cost / n_res), nfev, time.perf_counter() - t0, tuple(at_bounds), rest_C)
+
+
+def leave_one_out(
+    records: Sequence[ti.ThermalRecord], base: pe.PeltierParams | None = None, settle_s: float = 30.0
+) -> list[ti.RecordEvaluation]:
+    """Each run predicted by the fit on the others of its layer (as ti.identify_thermal's leave-one-out)."""
+    out = []
+    for j, r in enumerate(records):
+        others = [q for i, q in enumerate(records) if i != j and q.layer == r.layer]
+        if not others:
+            raise ti.ThermalIdentificationError(f'{r.name}: leave-one-out needs another run of TEM {r.layer + 1}')
+        f = fit_peltier(others, base, settle_s=settle_s)
+        out += evaluate(f.params, [r], 'leave-one-out', settle_s=settle_s)
+    return out
+
+
+__all__ = ['PeltierFit', 'fit_peltier', 'evaluate', 'simulate_records', 'leave_one_out']
