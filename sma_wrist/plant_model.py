@@ -7,6 +7,8 @@ controllers share). Of that section the model is
 
 * ``hysteresis_file`` (the wire's SD-GPI, ``sma-wrist identify``; empty: the built-in set),
 * ``thermal_file`` (the TEMs' heat balance, ``sma-wrist identify thermal``; empty: Table 4.9),
+* ``wire_file`` (the model's wire where it is not that SD-GPI: ``wire.yaml``, a phase-fraction wire that
+  ``sma-wrist commission`` hands over; empty: the SD-GPI of ``hysteresis_file``),
 * ``preload_elongation_mm`` (the chain's pre-load, Eq. 4.17; absent: the built-in 1.98 mm),
 * ``model.<name>`` (the extension parameters of :mod:`sma_wrist.core.plant.extensions`, e.g. the commissioned
   ``model.coulomb_Nm``; absent: nominal),
@@ -35,6 +37,7 @@ PLANT_NODES = ('plant_sim', 'hardware_bridge')
 MODEL_FILES = (
     ('hysteresis_file', 'sma-wrist identify hysteresis (or sma-wrist commission) writes one'),
     ('thermal_file', 'sma-wrist identify thermal (or sma-wrist commission) writes one'),
+    ('wire_file', 'sma-wrist commission writes one (wire.yaml)'),
 )
 
 
@@ -50,6 +53,7 @@ class PlantModel:
     node: str  # the section read ('' likewise)
     hysteresis_file: str | None = None  # absolute, or None for the built-in wire
     thermal_file: str | None = None  # absolute, or None for Table 4.9
+    wire_file: str | None = None  # absolute, or None for the SD-GPI of hysteresis_file
     preload_elongation_mm: float | None = None  # None: PlantParams' built-in pre-load
     #: the ``model.*`` values the file gives {name: value} (extensions.PARAMS names), validated
     extension: dict[str, float] = field(default_factory=dict)
@@ -61,7 +65,7 @@ class PlantModel:
         if self.preload_elongation_mm is not None:
             fields = {'preload_elongation_mm': self.preload_elongation_mm, **fields}
         try:
-            return PlantParams.from_files(self.hysteresis_file, self.thermal_file, **fields)
+            return PlantParams.from_files(self.hysteresis_file, self.thermal_file, self.wire_file, **fields)
         except Exception as exc:  # noqa: BLE001 - a broken model file is the user's to fix, said in one line
             raise PlantModelFileError(
                 f'{self._where()}model files do not load ({type(exc).__name__}: {exc}); write them with '
@@ -85,7 +89,13 @@ class PlantModel:
         """One line: what the model is made of (the params file's node, model files, pre-load, ``model.*`` values)."""
         parts = [f'{self.node} of {self.source}'] if self.source else []
         parts += [
-            f'{k} {v}' for k, v in (('hysteresis_file', self.hysteresis_file), ('thermal_file', self.thermal_file)) if v
+            f'{k} {v}'
+            for k, v in (
+                ('hysteresis_file', self.hysteresis_file),
+                ('thermal_file', self.thermal_file),
+                ('wire_file', self.wire_file),
+            )
+            if v
         ]
         if self.preload_elongation_mm is not None:
             parts.append(f'preload_elongation_mm {self.preload_elongation_mm:g}')
@@ -167,14 +177,18 @@ def plant_section(path: str | Path) -> tuple[str, dict[str, Any]]:
 
 
 def read_plant_model(
-    params_file: str | Path | None = None, hysteresis_file: str | None = None, thermal_file: str | None = None
+    params_file: str | Path | None = None,
+    hysteresis_file: str | None = None,
+    thermal_file: str | None = None,
+    wire_file: str | None = None,
 ) -> PlantModel:
     """The plant model of ``params_file``'s plant node; explicit ``hysteresis_file`` / ``thermal_file`` (relative to
     the working directory) replace the file's. Without a params file: the model files alone (or the built-in
     model). Raises PlantModelFileError for a file without a plant node section, an unknown or out-of-range
     ``model.*`` key, a pre-load that is not a number, or a model file that does not exist."""
     explicit = {
-        key: _model_file(f, key, how, None, '') for (key, how), f in zip(MODEL_FILES, (hysteresis_file, thermal_file))
+        key: _model_file(f, key, how, None, '')
+        for (key, how), f in zip(MODEL_FILES, (hysteresis_file, thermal_file, wire_file))
     }
     if not params_file:
         return PlantModel('', '', **explicit)

@@ -575,6 +575,8 @@ def write_params(
         params['hysteresis_file'] = str(Path(hysteresis_file).resolve())
     if thermal_file:
         params['thermal_file'] = str(Path(thermal_file).resolve())
+    if model is not None and model.wire_file:  # the model's phase-fraction wire (plant_sim's wire_file)
+        params['wire_file'] = str(Path(model.wire_file).resolve())
     if model is not None and model.preload_elongation_mm is not None:
         params['preload_elongation_mm'] = model.preload_elongation_mm
     ext = dict(model.extension) if model is not None else {}

@@ -126,6 +126,13 @@ class PlantSim(WristNode):
                 runtime=False,
             ),
             HYSTERESIS_FILE_PARAM,
+            Param(
+                'wire_file',
+                '',
+                "the model's wire where it is not the SD-GPI of hysteresis_file: wire.yaml (form phase_fraction) "
+                'from sma-wrist commission (empty: that SD-GPI)',
+                runtime=False,
+            ),
             PRELOAD_PARAM,
         )
         + tuple(
@@ -164,6 +171,7 @@ class PlantSim(WristNode):
         base = PlantParams.from_files(
             p['hysteresis_file'],
             p['thermal_file'],
+            p['wire_file'],
             dt=p['dt_s'],
             max_muscle_temperature_C=p['max_muscle_temperature_C'],
             preload_elongation_mm=p['preload_elongation_mm'],
