@@ -25,14 +25,14 @@ DT = 0.05
 def _histories(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
     """Temperatures and bundle elongations (k, n) that reverse inside the transformations (minor loops)."""
     t = np.arange(k)[:, None] * DT
-    T = 45.0 + 30.0 * np.sin(2 * np.pi * t / (20.0 + 5.0 * np.arange(n))) + 3.0 * np.sin(2 * np.pi * t / 3.3)
-    y = np.broadcast_to(2.0 + 0.5 * np.sin(2 * np.pi * t / 7.0), T.shape).copy()
+    T = 45.0 + 35.0 * np.sin(2 * np.pi * t / (10.0 + 2.0 * np.arange(n))) + 3.0 * np.sin(2 * np.pi * t / 3.3)
+    y = np.broadcast_to(1.2 + 0.5 * np.sin(2 * np.pi * t / 7.0), T.shape).copy()
     return T, y
 
 
 def test_the_compiled_load_solve_is_the_numpy_reference():
     muscle = pf.PhaseFractionMuscle(pf.PhaseFractionWire(), 83.0, AREA, 3.0)
-    T, y = _histories(5, 3000)
+    T, y = _histories(5, 1000)
     mem = pf.cooled_memory(muscle.wc, T[0], np.full(5, 0.8))
     mem_k, m, m_k = mem.copy(), np.full(5, 0.8), np.full(5, 0.8)
     out = np.empty((5, 3))
@@ -65,11 +65,11 @@ def test_the_fit_recovers_a_phase_fraction_wire_and_payload_from_the_angle_alone
     from sma_wrist.diagnose import effects as fx
     from sma_wrist.diagnose.data import Run
 
-    t = np.arange(0.0, 420.0, DT)
+    t = np.arange(0.0, 300.0, DT)
     # relays and sines of the excitation's kind: each muscle through its transformation and back, partly
     ph = 2 * np.pi * t / 60.0
     T = np.c_[46.0 + 32.0 * np.sin(ph) + 6.0 * np.sin(3.1 * ph), 46.0 - 32.0 * np.sin(ph) + 6.0 * np.cos(2.3 * ph)]
-    i_held = int(300.0 / DT)
+    i_held = int(240.0 / DT)
     truth = pf.PhaseFractionWire(
         M_f_C=44.0, M_s_C=58.0, A_s_C=61.0, A_f_C=77.0, C_M_MPa_per_C=9.0, C_A_MPa_per_C=9.0, eps_L=0.045
     )

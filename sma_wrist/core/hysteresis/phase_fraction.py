@@ -55,6 +55,11 @@ XI, XI_H, X_H, XI_C, X_C = range(5)
 #: xi by ~1e-15 either way, and a branch rescaled through every such point made the replay depend on the last bit
 #: of the angle (7 mrad apart after 12 s between two replays whose angles differed by 3e-16 rad)
 XI_EPS = 1e-9
+#: a branch starts this far [degC] past its anchor: an anchor beyond the end of its major branch (a wire that
+#: transformed on heating with x_M already below M_f) makes the scaled branch a step, and which side of it the
+#: rounding of the load put the wire decided whether the fraction jumped (2e-3 of xi between the numpy and the
+#: compiled plant, whose torques round differently)
+X_EPS = 1e-9
 MEMORY_SIZE = 5
 
 
@@ -181,13 +186,13 @@ def fraction(wc: FloatArray, T: FloatArray, sig: FloatArray, mem: FloatArray) ->
     xi_p, xi_h, x_h, xi_c, x_c = (mem[:, i] for i in range(5))
     fa, dfa = _major(x_a, A_s, A_f)
     fh, _ = _major(x_h, A_s, A_f)
-    on_h = x_a > x_h
+    on_h = x_a > x_h + X_EPS
     den_h = np.maximum(fh, 1e-12)
     H = np.where(on_h, np.minimum(xi_h * fa / den_h, 1.0), 1.0)
     dH = np.where(on_h & (xi_h * fa / den_h < 1.0), -xi_h * dfa / den_h / C_A, 0.0)
     fm, dfm = _major(x_m, M_f, M_s)
     fc, _ = _major(x_c, M_f, M_s)
-    on_c = x_m < x_c
+    on_c = x_m < x_c - X_EPS
     den_c = np.maximum(1.0 - fc, 1e-12)
     Cb = np.where(on_c, 1.0 - (1.0 - xi_c) * (1.0 - fm) / den_c, 0.0)
     dC = np.where(on_c, -(1.0 - xi_c) * dfm / den_c / C_M, 0.0)

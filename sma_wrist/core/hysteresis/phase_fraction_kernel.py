@@ -34,7 +34,7 @@ def fraction(wc, T, sig, mem):  # pragma: no cover - compiled
     xi_p, xi_h, x_h, xi_c, x_c = mem[0], mem[1], mem[2], mem[3], mem[4]
     H = 1.0
     dH = 0.0
-    if x_a > x_h:
+    if x_a > x_h + 1e-9:  # phase_fraction.X_EPS
         fa, dfa = _major(x_a, wc[2], wc[3])
         fh, _ = _major(x_h, wc[2], wc[3])
         den_h = max(fh, 1e-12)
@@ -44,7 +44,7 @@ def fraction(wc, T, sig, mem):  # pragma: no cover - compiled
             dH = -xi_h * dfa / den_h / C_A
     Cb = 0.0
     dC = 0.0
-    if x_m < x_c:
+    if x_m < x_c - 1e-9:
         fm, dfm = _major(x_m, wc[0], wc[1])
         fc, _ = _major(x_c, wc[0], wc[1])
         den_c = max(1.0 - fc, 1e-12)
