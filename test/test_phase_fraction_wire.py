@@ -163,3 +163,15 @@ def test_the_compiled_plant_steps_a_phase_fraction_wrist_as_the_numpy_path():
     seg = WristPlant(PlantParams(wire=wire, dt=0.01), payload_kg=[0.2, 0.5])
     _, q, _ = seg.advance_segments(cmds, np.array([1500, 1500, 1500]))
     assert np.allclose(q[-1], plants[0].state.q, rtol=0, atol=1e-12)
+
+
+def test_the_twin_monitor_simulates_the_wire_its_params_file_names(tmp_path):
+    from sma_wrist.monitor.twin import load_model
+
+    wire = pf.PhaseFractionWire(A_s_C=60.0)
+    save_wire_file(tmp_path / 'wire.yaml', wire)
+    params = tmp_path / 'wrist_params.yaml'
+    params.write_text('plant_sim:\n  ros__parameters:\n    wire_file: wire.yaml\n    model.coulomb_Nm: 0.02\n')
+    model = load_model(params_file=str(params))
+    assert model.params.wire == wire and model.params.joint.coulomb_Nm == 0.02
+    assert 'wire_file' in model.description

@@ -24,6 +24,12 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
   the held-out cycle better than both the built-in and the shifted wire beyond the angle's noise with no value at
   the end of its range (:func:`choose_wire`): on the phase-fraction wrist 8 degC hotter 35 against 188 mrad, on the
   model wrist not (0.34 against the built-in's 0.42 mrad, the angle's noise 0.24). Written as ``hysteresis.yaml``.
+* **the model's wire**: a phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`, fitted with the payload
+  and friction by :func:`fit_phase_fraction_wire` on the same fit phases) becomes the model's wire, written as
+  ``wire.yaml`` and named as plant_sim's ``wire_file``, only where it predicts the held-out cycle better than every SD-GPI
+  candidate beyond the angle's noise (:func:`choose_model_wire`): on the phase-fraction wrist 8 degC hotter 3.2
+  against the warped SD-GPI's 40.9 mrad, on the SD-GPI wrists not (52 against 0.24, 40 against 0.37). The compensator
+  keeps inverting the SD-GPI of ``hysteresis.yaml``.
 * **joint**: the payload moves the onset through the SD-GPI's stress dependence, so the onset gives one shift per
   payload; the payload is the one whose shift replays the fit phases best, kept only if the built-in wire model
   then also reproduces the relay's second half-cycle (muscle 2 heated while muscle 1 transforms back, within
