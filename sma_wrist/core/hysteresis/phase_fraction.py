@@ -26,9 +26,10 @@ wire, stress sigma [MPa] (sigma = m g / A of the per-wire load m [kgf]), tempera
 
 The wire's elongation is y = L eps - y_0 [mm] (L the bundle's wire length, 83 mm; y_0 the datum ``offset_mm``): the
 datum puts the wire on the scale of the chain's pre-load elongation e0 (Eq. 4.17) that the SD-GPI's mirror constant
-k_f sets (Eq. 4.2), so that the plant and the compensator, which inverts the SD-GPI, share one e0. eps(sigma) is strictly increasing at fixed T and memory ((1): a larger stress lowers x_A and
-x_M, which raises H and C), so the load for an elongation is one root, found against frozen memory by a safeguarded
-Newton iteration with the analytic slope, then the memory is committed there (as :class:`MuscleModel` does for the
+k_f sets (Eq. 4.2), so that the plant and the compensator, which inverts the SD-GPI, share one e0. eps(sigma) is
+strictly increasing at fixed T and memory ((1): a larger stress lowers x_A and x_M, which raises H and C), so the
+load for an elongation is one root, found against frozen memory by a safeguarded Newton iteration with the analytic
+slope, then the memory is committed there (as :class:`~sma_wrist.core.hysteresis.muscle.MuscleModel` does for the
 SD-GPI). The compiled kernel is :mod:`sma_wrist.core.hysteresis.phase_fraction_kernel` (same operations).
 
 Memory per wire, ``mem`` (5,): xi, xi_h, x_h, xi_c, x_c. A wire cooled from hot is on the major cooling branch

@@ -2,8 +2,8 @@
 
 Scalar per-wire code compiled by numba when present (:mod:`sma_wrist.core.jit`); the numpy reference is
 :class:`sma_wrist.core.hysteresis.phase_fraction.PhaseFractionMuscle` (same operations, test_phase_fraction_wire).
-``wc``: the constant row of :meth:`PhaseFractionWire.packed`; ``mem``: one wire's memory (5,) xi, xi_h, x_h, xi_c,
-x_c. The plant kernel and the diagnosis' replay call :func:`solve_load` and :func:`commit` once per bundle and step.
+``wc``: the constant row of :meth:`sma_wrist.core.hysteresis.phase_fraction.PhaseFractionWire.packed`; ``mem``: one
+wire's memory (5,) xi, xi_h, x_h, xi_c, x_c. The plant kernel and the diagnosis' replay call :func:`solve_load` and :func:`commit` once per bundle and step.
 """
 
 from __future__ import annotations
