@@ -9,6 +9,8 @@ controllers share). Of that section the model is
 * ``thermal_file`` (the TEMs' heat balance, ``sma-wrist identify thermal``; empty: Table 4.9),
 * ``heat_balance_file`` (the model's heat balance in another form than Table 4.9's, the Peltier two-node form
   ``sma-wrist commission`` hands over where it predicts better; empty: Table 4.9's form of ``thermal_file``),
+* ``wire_file`` (the model's wire where it is not that SD-GPI: ``wire.yaml``, a phase-fraction wire that
+  ``sma-wrist commission`` hands over; empty: the SD-GPI of ``hysteresis_file``),
 * ``preload_elongation_mm`` (the chain's pre-load, Eq. 4.17; absent: the built-in 1.98 mm),
 * ``model.<name>`` (the extension parameters of :mod:`sma_wrist.core.plant.extensions`, e.g. the commissioned
   ``model.coulomb_Nm``; absent: nominal),
@@ -38,6 +40,7 @@ MODEL_FILES = (
     ('hysteresis_file', 'sma-wrist identify hysteresis (or sma-wrist commission) writes one'),
     ('thermal_file', 'sma-wrist identify thermal (or sma-wrist commission) writes one'),
     ('heat_balance_file', 'sma-wrist commission writes one where the Peltier form predicts better'),
+    ('wire_file', 'sma-wrist commission writes one (wire.yaml)'),
 )
 
 
@@ -54,6 +57,7 @@ class PlantModel:
     hysteresis_file: str | None = None  # absolute, or None for the built-in wire
     thermal_file: str | None = None  # absolute, or None for Table 4.9
     heat_balance_file: str | None = None  # absolute, or None for Table 4.9's form of the thermal file
+    wire_file: str | None = None  # absolute, or None for the SD-GPI of hysteresis_file
     preload_elongation_mm: float | None = None  # None: PlantParams' built-in pre-load
     #: the ``model.*`` values the file gives {name: value} (extensions.PARAMS names), validated
     extension: dict[str, float] = field(default_factory=dict)
@@ -65,7 +69,9 @@ class PlantModel:
         if self.preload_elongation_mm is not None:
             fields = {'preload_elongation_mm': self.preload_elongation_mm, **fields}
         try:
-            return PlantParams.from_files(self.hysteresis_file, self.thermal_file, self.heat_balance_file, **fields)
+            return PlantParams.from_files(
+                self.hysteresis_file, self.thermal_file, self.heat_balance_file, self.wire_file, **fields
+            )
         except Exception as exc:  # noqa: BLE001 - a broken model file is the user's to fix, said in one line
             raise PlantModelFileError(
                 f'{self._where()}model files do not load ({type(exc).__name__}: {exc}); write them with '
@@ -94,6 +100,7 @@ class PlantModel:
                 ('hysteresis_file', self.hysteresis_file),
                 ('thermal_file', self.thermal_file),
                 ('heat_balance_file', self.heat_balance_file),
+                ('wire_file', self.wire_file),
             )
             if v
         ]
@@ -181,6 +188,7 @@ def read_plant_model(
     hysteresis_file: str | None = None,
     thermal_file: str | None = None,
     heat_balance_file: str | None = None,
+    wire_file: str | None = None,
 ) -> PlantModel:
     """The plant model of ``params_file``'s plant node; explicit ``hysteresis_file`` / ``thermal_file`` (relative to
     the working directory) replace the file's. Without a params file: the model files alone (or the built-in
@@ -188,7 +196,7 @@ def read_plant_model(
     ``model.*`` key, a pre-load that is not a number, or a model file that does not exist."""
     explicit = {
         key: _model_file(f, key, how, None, '')
-        for (key, how), f in zip(MODEL_FILES, (hysteresis_file, thermal_file, heat_balance_file))
+        for (key, how), f in zip(MODEL_FILES, (hysteresis_file, thermal_file, heat_balance_file, wire_file))
     }
     if not params_file:
         return PlantModel('', '', **explicit)

@@ -89,6 +89,10 @@ def test_identification_recovers_the_shift_payload_and_weaker_tem(off_model):
     assert any('TEM 1 pumps' in w for w in ident.warnings)
     # a shifted SD-GPI wire: the shift describes it, the warp is fitted but the simpler wire handed over
     assert p['hysteresis']['parameters']['wire_model'] == 'shifted'
+    # and it stays the model's wire: the phase-fraction wire, fitted too, is no better beyond the angle's noise
+    assert p['hysteresis']['parameters']['model_wire'] == 'sdgpi'
+    assert 'phase_fraction_not_handed_over' in p['hysteresis']['parameters']
+    assert 'wire_file' not in ident.node_params['plant_sim']
 
 
 def test_the_commissioned_model_beats_the_built_in_one_on_held_out_data(off_model):
@@ -123,21 +127,33 @@ def test_on_the_phase_fraction_wrist_the_shift_is_found_and_the_undetermined_pay
     # the SD-GPI does not describe where this wire transforms back, so its stress dependence cannot read the payload:
     # not identified, said so, the default assumed (not a compensating value handed over as a payload)
     joint = ident.identified['joint']
-    assert joint['parameters']['payload_identified'] is False
     assert joint['parameters']['second_onset_mismatch_C'] > 1.0
-    assert ident.node_params['plant_sim']['payload_kg'] == pytest.approx(0.3)
-    assert any('the payload is not determined' in w and '--payload-kg' in w for w in ident.warnings)
-    if joint['handed_over']:
-        assert joint['heldout']['commissioned'] < joint['heldout']['builtin']
+    # the phase-fraction wire, fitted with the payload and friction, predicts the held-out cycle better than every
+    # SD-GPI candidate beyond the angle's noise: it becomes the model's wire (plant_sim's wire_file) and its payload
+    # the one handed over, while the compensator keeps inverting the warped SD-GPI
+    assert (
+        hyst['parameters']['model_wire'] == 'phase_fraction' and hyst['parameters']['phase_fraction']['at_bounds'] == []
+    )
+    h = joint['heldout']
+    assert h['phase_fraction'] < min(h['warped'], h['shift_only'], h['builtin']) - h['angle_noise']
+    assert h['commissioned'] == h['phase_fraction'] and h['compensator_wire'] == h['warped']
+    assert ident.node_params['plant_sim']['wire_file'].endswith('wire.yaml')
+    assert ident.node_params['hysteresis_compensator']['hysteresis_file'].endswith('hysteresis.yaml')
+    # the payload read with the phase-fraction wire's stress dependence: 0.596 kg measured for 0.5 (0.54 for 0.45 on
+    # the 1 kHz device of doc/howto/commission.md): the wire's datum and strain trade a little with it
+    assert joint['parameters']['payload_identified'] is True
+    assert joint['parameters']['payload_kg'] == pytest.approx(0.5, abs=0.12)
+    assert ident.node_params['plant_sim']['payload_kg'] == joint['parameters']['payload_kg']
+    assert not any('the payload is not determined' in w for w in ident.warnings)
     # the shifted built-in wire misses this wire's branches and stress dependence; the warped SD-GPI (heating and
     # cooling shifts, width, stroke, stress dependence) fitted to the angle predicts the held-out cycle far better and
     # is handed over (measured 35 against 188 mrad RMS on the 1 kHz device)
     assert hyst['parameters']['wire_model'] == 'warped' and joint['handed_over']
     assert joint['heldout']['warped'] < 0.5 * joint['heldout']['shift_only']
     assert hyst['parameters']['warp']['at_bounds'] == []
-    # the warped wire still misses this wire's minor loops by more than LOOSE_WIRE_MRAD: the TEM loop gets the slower
-    # target prefilter with it (loop_tuning), said in the part's parameters
-    assert joint['heldout']['commissioned'] > LOOSE_WIRE_MRAD
+    # the warped wire still misses this wire's minor loops by more than LOOSE_WIRE_MRAD: the TEM loop, which follows
+    # the compensator's inverse of it, gets the slower target prefilter (loop_tuning), said in the part's parameters
+    assert joint['heldout']['compensator_wire'] > LOOSE_WIRE_MRAD
     assert ident.node_params['tem_controller']['target_filter_s'] == LOOSE_TARGET_FILTER_S
     assert hyst['parameters']['loop']['target_filter_s'] == LOOSE_TARGET_FILTER_S
 

@@ -204,3 +204,6 @@ def test_the_wire_and_joint_are_fitted_from_the_history_the_bring_up_left_in_the
     assert p['coulomb_Nm'] == pytest.approx(truth['coulomb_Nm'], abs=5e-5), p
     assert hyst['parameters']['transition_shift_C'] == pytest.approx(0.0, abs=0.05), hyst['parameters']
     assert joint['heldout']['commissioned'] < 2.0 * joint['heldout']['angle_noise'], joint['heldout']
+    # the wrist's wire is the model's SD-GPI: the phase-fraction wire, fitted too, does not replace it
+    assert hyst['parameters']['model_wire'] == 'sdgpi' and 'wire_file' not in values, hyst['parameters']
+    assert joint['heldout']['phase_fraction'] > joint['heldout']['commissioned'] + joint['heldout']['angle_noise']

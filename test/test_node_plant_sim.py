@@ -237,3 +237,27 @@ def test_plant_that_cannot_keep_real_time_warns_on_diagnostics(probe_factory, sl
         assert len(warned) == 1 and 'simulating at 0.50x' in warned[0]
     else:
         assert not warned
+
+
+def test_a_phase_fraction_wire_file_is_the_simulated_wire_and_a_malformed_one_is_refused(
+    probe_factory, tmp_path, capsys
+):
+    """plant_sim's wire_file (a commissioned wire.yaml): the plant steps that wire (its fraction falls as muscle 1
+    heats); a malformed file stops the node with its name and the reason, not a traceback."""
+    from sma_wrist.core.hysteresis.phase_fraction import XI, PhaseFractionWire
+    from sma_wrist.core.hysteresis.wire_file import save_wire_file
+    from sma_wrist.nodes.common import main_for
+    from sma_wrist.nodes.plant_sim import PlantSim
+
+    # a wire martensitic at the rest temperature (below M_f) that starts to transform just above it (A_s), so that 3 s
+    # of heating transform it
+    wire = save_wire_file(tmp_path / 'wire.yaml', PhaseFractionWire(A_s_C=28.0, A_f_C=45.0, M_s_C=40.0, M_f_C=30.0))
+    hot, node = _measure(probe_factory, 20.0, params={'wire_file': str(wire)})
+    assert node.plant.params.wire is not None
+    xi = node.plant.state.w[:, XI]
+    assert xi[0] < xi[1] - 0.01 and xi[1] > 0.99  # muscle 1 heated transforms, muscle 2 does not
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(wire.read_text().replace('eps_L:', 'strain_L:'))
+    assert main_for(PlantSim, ['plant_sim', '--ros-args', '-p', f'wire_file:={bad}']) == 2
+    out = capsys.readouterr().out
+    assert out.startswith('error: ') and 'bad.yaml' in out and 'strain_L' in out and 'Traceback' not in out

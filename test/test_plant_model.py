@@ -223,3 +223,14 @@ def test_the_commissioned_params_file_points_the_twin_monitor_at_its_own_model(t
     assert model.params.preload_elongation_mm == PRELOAD_MM and model.extension == {'coulomb_Nm': COULOMB_NM}
     # a bring-up alone (no model identified) leaves the twin on its defaults
     assert 'twin_monitor' not in yaml.safe_load(write_params(tmp_path / 'b.yaml', [], {}).read_text())
+
+
+def test_diagnose_cli_names_a_malformed_wire_file_of_the_params_file(tmp_path, capsys):
+    from sma_wrist.cli import main
+
+    (tmp_path / 'wire.yaml').write_text('format: sma_wrist.wire\nversion: 1\nform: phase_fraction\nmodel: [1, 2]\n')
+    f = tmp_path / 'p.yaml'
+    f.write_text(yaml.safe_dump({'plant_sim': {'ros__parameters': {'wire_file': 'wire.yaml'}}}))
+    assert main(['diagnose', str(tmp_path / 'bag'), '--params-file', str(f)]) == 2
+    err = capsys.readouterr().err
+    assert 'wire.yaml' in err and 'model must be a mapping' in err and 'Traceback' not in err

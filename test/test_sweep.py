@@ -470,6 +470,13 @@ def test_the_sweep_refuses_what_it_cannot_honour_and_names_it(tmp_path: Path) ->
         loop_settings([params({'tem_controller': {'face_max_C': 20.0}})])
     with pytest.raises(ParameterError, match=r'preload_elongation_mm differs'):
         loop_settings([params({'plant_sim': {'preload_elongation_mm': 2.5}})])
+    # a commissioned phase-fraction model wire: the sampled plants perturb an SD-GPI, so the key is named and refused
+    from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
+    from sma_wrist.core.hysteresis.wire_file import save_wire_file
+
+    wire = save_wire_file(tmp_path / 'wire.yaml', PhaseFractionWire())
+    with pytest.raises(ParameterError, match=r'plant_sim.wire_file = .*not a phase-fraction wire'):
+        loop_settings([params({'plant_sim': {'wire_file': str(wire)}})])
     with pytest.raises(ParameterError, match=r'no such file'):
         loop_settings([tmp_path / 'missing.yaml'])
     (tmp_path / 'broken.yaml').write_text('tem_controller:\n  ros__parameters:\n    gain_per_s: [1.0\n')

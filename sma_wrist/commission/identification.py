@@ -30,6 +30,12 @@ temperatures and the angle; the wires' stresses are not measured. Three parts, e
   the held-out cycle better than both the built-in and the shifted wire beyond the angle's noise with no value at
   the end of its range (:func:`choose_wire`): on the phase-fraction wrist 8 degC hotter 35 against 188 mrad, on the
   model wrist not (0.34 against the built-in's 0.42 mrad, the angle's noise 0.24). Written as ``hysteresis.yaml``.
+* **the model's wire**: a phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`, fitted with the payload
+  and friction by :func:`fit_phase_fraction_wire` on the same fit phases) becomes the model's wire, written as
+  ``wire.yaml`` and named as plant_sim's ``wire_file``, only where it predicts the held-out cycle better than every SD-GPI
+  candidate beyond the angle's noise (:func:`choose_model_wire`): on the phase-fraction wrist 8 degC hotter 3.2
+  against the warped SD-GPI's 40.9 mrad, on the SD-GPI wrists not (52 against 0.24, 40 against 0.37). The compensator
+  keeps inverting the SD-GPI of ``hysteresis.yaml``.
 * **joint**: the payload moves the onset through the SD-GPI's stress dependence, so the onset gives one shift per
   payload; the payload is the one whose shift replays the fit phases best, kept only if the built-in wire model
   then also reproduces the relay's second half-cycle (muscle 2 heated while muscle 1 transforms back, within
@@ -569,6 +575,166 @@ def fit_warped_wire(
     )
 
 
+#: the phase-fraction wire's free values, their ranges and typical steps (:class:`sma_wrist.core.hysteresis.
+#: phase_fraction.PhaseFractionWire`, temperatures at its reference stress): the heating branch's start A_s and width
+#: A_f - A_s, the cooling branch's end M_f and width M_s - M_f [degC]; one Clausius-Clapeyron slope for both
+#: transformations [MPa/degC] (fitted apart, on the phase-fraction wrist the reverse one ran to its bound: the
+#: excitation's loads do not tell them apart); the recoverable strain [1]; the elongation datum [mm]. The moduli and
+#: the detwinning stresses stay the literature's (freed, the detwinning ramp left the held-out error 6.3 against 3.4
+#: mrad on the phase-fraction wrist: a rougher fit, not a better wire)
+PF_RANGE: dict[str, tuple[float, float, float]] = {
+    'A_s_C': (10.0, 110.0, 1.0),
+    'A_width_C': (2.0, 50.0, 1.0),
+    'M_f_C': (0.0, 100.0, 1.0),
+    'M_width_C': (2.0, 50.0, 1.0),
+    'C_MPa_per_C': (2.0, 50.0, 1.0),
+    'eps_L': (0.01, 0.08, 0.005),
+    'offset_mm': (-3.0, 5.0, 0.05),
+}
+#: the phase-fraction fit's starts: the elongation datum [mm] (the pair's pre-tension, which no temperature moves)
+PF_START_OFFSETS_MM = (0.6, 1.2, 1.8, 2.4)
+PF_MAX_NFEV = 40  # solver iterations (each with a Jacobian: one replay per free value)
+#: the fit's replay steps once per sample (5x fewer plant steps than the held-out replay's 10 ms; the fit's angle
+#: moves by less than the angle's noise, measured on the phase-fraction wrist), the held-out error at 10 ms
+PF_FIT_SUBSTEPS = 1
+PF_DIFF_STEP = 1e-2
+PF_ROUNDS = 3
+
+
+@dataclass
+class FractionFit:
+    """A phase-fraction wire fitted by :func:`fit_phase_fraction_wire`: the wire, the joint's values, the fit phases'
+    RMS angle error [rad] and the fitted values at the end of their range."""
+
+    wire: Any
+    coulomb_Nm: float
+    payload_kg: float
+    fit_rms_rad: float
+    at_bounds: list[str]
+
+
+def builtin_transitions(base: Any, load_kgf: float = 0.8) -> dict[str, float]:
+    """The built-in SD-GPI's transitions at ``load_kgf`` as cosine branches (Eq. 2 of
+    :mod:`sma_wrist.core.hysteresis.phase_fraction`): A_s, A_f, M_s, M_f [degC], from where its major loop has covered
+    10 % and 90 % of each branch (:func:`sma_wrist.identify.loops.transitions`; a cosine branch covers them at
+    0.205 and 0.795 of its width): the phase-fraction fit's start, moved by the onset's shift."""
+    from sma_wrist.core.hysteresis.sdgpi import simulate
+    from sma_wrist.identify.loops import transitions
+
+    T = np.r_[np.linspace(0.0, 110.0, 600), np.linspace(110.0, 0.0, 600)]
+    tr = transitions(T, simulate(base, T, load_kgf, branch='cooling'), 'heating')
+    a, b = math.acos(0.8) / math.pi, 1.0 - math.acos(0.8) / math.pi  # 0.205, 0.795
+    w_a = (tr['A_f'] - tr['A_s']) / (b - a)
+    w_m = (tr['M_s'] - tr['M_f']) / (b - a)
+    A_s = tr['A_s'] - a * w_a
+    M_s = tr['M_s'] + a * w_m
+    return {'A_s_C': A_s, 'A_f_C': A_s + w_a, 'M_s_C': M_s, 'M_f_C': M_s - w_m}
+
+
+def fit_phase_fraction_wire(
+    run: Any,
+    i_held: int,
+    start: dict[str, float],
+    max_nfev: int = PF_MAX_NFEV,
+    i_fit: int = 0,
+) -> FractionFit:
+    """A phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`: transformation temperatures, both
+    Clausius-Clapeyron slopes, recoverable strain, elongation datum; the moduli and detwinning stresses the
+    literature's) with the joint's Coulomb friction and payload, fitted by least squares of the angle replayed from
+    the measured temperatures (:class:`sma_wrist.diagnose.effects.ExtendedModel`, the chain's pre-load the built-in
+    one, whose scale the datum takes) against the measured one over the samples from ``i_fit`` to ``i_held``.
+
+    ``start``: the temperatures A_s_C, A_f_C, M_s_C, M_f_C [degC] to start from (the built-in wire's, shifted by the
+    onset's shift: :func:`builtin_transitions`) and ``coulomb_Nm``; the solve starts from the datum of
+    :data:`PF_START_OFFSETS_MM` that replays the fit phases best."""
+    from scipy.optimize import least_squares
+
+    from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose import effects as fx
+
+    keys = list(PF_RANGE)
+    n = len(keys)
+    i_c, i_p = fx.INDEX['coulomb_Nm'], fx.INDEX['payload_err_kg']
+    lo = np.array([PF_RANGE[k][0] for k in keys] + [fx.LOWER[i_c], max(fx.LOWER[i_p], -run.payload_kg)])
+    hi = np.array([PF_RANGE[k][1] for k in keys] + [fx.UPPER[i_c], fx.UPPER[i_p]])
+    scale = np.array([PF_RANGE[k][2] for k in keys] + [0.02, 0.02])
+    w0 = PhaseFractionWire()
+
+    def unpack(x: np.ndarray) -> tuple[Any, np.ndarray]:
+        v = dict(zip(keys, (float(a) for a in x)))
+        s_s = v.get('sigma_s_MPa', w0.sigma_s_MPa)
+        wire = PhaseFractionWire(
+            A_s_C=v['A_s_C'],
+            A_f_C=v['A_s_C'] + v['A_width_C'],
+            M_f_C=v['M_f_C'],
+            M_s_C=v['M_f_C'] + v['M_width_C'],
+            C_M_MPa_per_C=v['C_MPa_per_C'],
+            C_A_MPa_per_C=v['C_MPa_per_C'],
+            eps_L=v['eps_L'],
+            offset_mm=v['offset_mm'],
+            sigma_s_MPa=s_s,
+            sigma_f_MPa=s_s + v.get('sigma_width_MPa', w0.sigma_f_MPa - w0.sigma_s_MPa),
+            name='phase-fraction wire, commissioned',
+        )
+        row = fx.NOMINAL.copy()
+        row[i_c], row[i_p] = x[n], x[n + 1]
+        return wire, row
+
+    def replay(x: np.ndarray, substeps: int | None, upto: int | None) -> np.ndarray:
+        wire, row = unpack(x)
+        model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, wire=wire))
+        if substeps is not None:
+            model.substeps = substeps
+        return model.angle_measured(row[None], upto, 'measured')[:, 0]
+
+    def residual(x: np.ndarray) -> np.ndarray:
+        return replay(x, PF_FIT_SUBSTEPS, i_held)[i_fit:] - run.q[i_fit:i_held]
+
+    inside = lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)
+    first = {
+        'A_s_C': start['A_s_C'],
+        'A_width_C': start['A_f_C'] - start['A_s_C'],
+        'M_f_C': start['M_f_C'],
+        'M_width_C': start['M_s_C'] - start['M_f_C'],
+        'C_MPa_per_C': w0.C_M_MPa_per_C,
+        'eps_L': w0.eps_L,
+        'sigma_s_MPa': w0.sigma_s_MPa,
+        'sigma_width_MPa': w0.sigma_f_MPa - w0.sigma_s_MPa,
+    }
+    x0s = [
+        np.clip([first.get(k, off) for k in keys] + [start['coulomb_Nm'], 0.0], *inside) for off in PF_START_OFFSETS_MM
+    ]
+    x0 = min(x0s, key=lambda x: float(np.sum(residual(x) ** 2)))
+    # the replayed angle is piecewise smooth in the values (friction sticks, branches switch): a solve stops where its
+    # finite differences see no way down; solved again from there (a fresh trust region), the best of the rounds kept
+    # (on the phase-fraction wrist one solve stopped anywhere from 12 to 25 mrad held out)
+    best = None
+    for _ in range(PF_ROUNDS):
+        res = least_squares(
+            residual, x0, bounds=(lo, hi), x_scale=scale, diff_step=PF_DIFF_STEP, max_nfev=max_nfev, xtol=1e-12
+        )
+        if best is None or res.cost < best.cost:
+            best = res
+        x0 = np.clip(best.x, *inside)
+    res = best
+    wire, row = unpack(res.x)
+    margin = WARP_BOUND_FRACTION * (hi - lo)
+    at = [
+        f'{k} = {v:.3g}'
+        for k, v, a, b, m in zip(keys + ['coulomb_Nm', 'payload_err_kg'], res.x, lo, hi, margin)
+        if k not in ('coulomb_Nm', 'payload_err_kg')  # friction 0 is a free joint; the payload is judged apart
+        and not a + m < v < b - m
+    ]
+    return FractionFit(
+        wire,
+        float(row[i_c]),
+        float(run.payload_kg + row[i_p]),
+        float(np.sqrt(2.0 * res.cost / (i_held - i_fit))),
+        at,
+    )
+
+
 def choose_wire(
     builtin_rms: float, shift_rms: float, shift_on_bound: bool, warp_rms: float, warp_on_bound: bool, noise: float
 ) -> str:
@@ -581,6 +747,17 @@ def choose_wire(
     if not warp_on_bound and warp_rms < min(builtin_rms, shift_rms) - noise:
         return 'warped'
     return 'shifted' if shift_rms < builtin_rms and not shift_on_bound else 'built-in'
+
+
+def choose_model_wire(
+    pf_rms: float, pf_on_bound: bool, sdgpi_rms: dict[str, float], eligible: dict[str, bool], noise: float
+) -> bool:
+    """Whether the phase-fraction wire becomes the model's wire (``wire_file``): only where its held-out RMS angle error
+    beats every SD-GPI candidate that could be handed over (``sdgpi_rms``, ``eligible``: not at a bound) by more than
+    the angle's noise, with none of its own values at a bound. Else the SD-GPI stays the model (as the compensator's
+    inverse it stays either way)."""
+    best = min(x for k, x in sdgpi_rms.items() if eligible.get(k, False))
+    return not pf_on_bound and math.isfinite(pf_rms) and pf_rms < best - noise
 
 
 def identify_mechanics(
@@ -775,6 +952,24 @@ def identify_mechanics(
     pw_wire, pw_all = w_model.angle_measured(np.stack([w_only, w_row]), None, 'measured').T
     warp_rms = rms_mrad(pw_all)
     chosen = choose_wire(builtin_rms, shift_rms, bool(on_bound), warp_rms, bool(wf.at_bounds), noise_mrad)
+    # the phase-fraction wire (fit_phase_fraction_wire), from the built-in wire's transitions moved by the onset's
+    # shift, its payload fitted with it; the model's wire (wire_file) only where it predicts the held-out cycle better
+    # than every SD-GPI candidate beyond the angle's noise with no value at its bound (choose_model_wire)
+    pf_start = {k: x + shift for k, x in builtin_transitions(base).items()} | {'coulomb_Nm': v['coulomb_Nm']}
+    pff = fit_phase_fraction_wire(dataclasses.replace(run, payload_kg=prior_kg), i_held, pf_start, i_fit=i_fit)
+    pf_bounds = list(pff.at_bounds)
+    if payload_kg is None and not lo_kg + 1e-3 < pff.payload_kg < hi_kg - 1e-3 and pff.payload_kg > 1e-3:
+        pf_bounds.append(f'payload_kg = {pff.payload_kg:.3g}')
+    pf_row = fx.NOMINAL.copy()
+    pf_row[fx.INDEX['coulomb_Nm']] = pff.coulomb_Nm
+    pf_rms = rms_mrad(
+        fx.ExtendedModel(
+            dataclasses.replace(run, payload_kg=pff.payload_kg), PlantParams(dt=dt_step, wire=pff.wire)
+        ).angle_measured(pf_row[None], None, 'measured')[:, 0]
+    )
+    sdgpi_rms = {'built-in': builtin_rms, 'shifted': shift_rms, 'warped': warp_rms}
+    eligible = {'built-in': True, 'shifted': not on_bound, 'warped': not wf.at_bounds}
+    pf_chosen = choose_model_wire(pf_rms, bool(pf_bounds), sdgpi_rms, eligible, noise_mrad)
     warp_values = {
         'heating_shift_C': round(wf.warp.heating_shift_C, 2),
         'cooling_shift_C': round(wf.warp.cooling_shift_C, 2),
@@ -831,7 +1026,35 @@ def identify_mechanics(
         'file': None,
     }
     hyst['handed_over'] = joint['handed_over'] = chosen != 'built-in'
-    if payload_warning and not (chosen == 'warped' and payload_found):
+    # the SD-GPI's error stays what the compensator's loop is tuned by (loop_tuning): it inverts that wire
+    joint['heldout']['compensator_wire'] = joint['heldout']['commissioned']
+    joint['heldout']['phase_fraction'] = round(pf_rms, 3)
+    pf_values = {k: round(x, 4) for k, x in pff.wire.values().items()}
+    hyst['parameters']['model_wire'] = 'phase_fraction' if pf_chosen else 'sdgpi'
+    hyst['parameters']['phase_fraction'] = {
+        **pf_values,
+        'payload_kg': round(pff.payload_kg, 4),
+        'coulomb_Nm': round(pff.coulomb_Nm, 5),
+        'heldout_mrad': round(pf_rms, 3),
+        'at_bounds': pf_bounds,
+    }
+    if pf_chosen:
+        # the model's wire: plant_sim, the diagnosis and the twin simulate it with its own payload and friction; its
+        # elongation datum moved so that it shares the SD-GPI's pre-load elongation with the compensator
+        payload, payload_found, coulomb = pff.payload_kg, payload_kg is None, pff.coulomb_Nm
+        joint['parameters'].update(
+            {'payload_kg': round(payload, 4), 'payload_identified': payload_found, 'coulomb_Nm': round(coulomb, 5)}
+        )
+        joint['heldout']['commissioned'] = round(pf_rms, 3)
+        joint['handed_over'] = True
+    else:
+        hyst['parameters']['phase_fraction_not_handed_over'] = (
+            f'{", ".join(pf_bounds)} at the end of the range the fit allows'
+            if pf_bounds
+            else f'it predicts the held-out cycle {pf_rms:.3g} mrad RMS, not better than the best SD-GPI candidate '
+            f"({min(x for k, x in sdgpi_rms.items() if eligible[k]):.3g}) beyond the angle's noise ({noise_mrad:.2g})"
+        )
+    if payload_warning and not pf_chosen and not (chosen == 'warped' and payload_found):
         if chosen == 'warped':  # the payload and the warp's stress dependence both move the transformation with load
             payload_warning = (
                 'joint: the payload is not determined by the excitation (the warped wire model fits its stress '
@@ -880,6 +1103,27 @@ def identify_mechanics(
             f"({builtin_rms:.3g}) and the shift-only wire ({shift_rms:.3g}) beyond the angle's noise ({noise_mrad:.2g})"
         )
     hyst['file'] = str(hpath)
+    if pf_chosen:
+        from sma_wrist.core.hysteresis.wire_file import save_wire_file
+
+        e0 = values['preload_mm']
+        wire = dataclasses.replace(pff.wire, offset_mm=pff.wire.offset_mm - (e0 - PlantParams().preload_elongation_mm))
+        values.update({'payload_kg': payload, 'coulomb_Nm': coulomb})
+        values['wire_file'] = str(
+            save_wire_file(
+                out / 'wire.yaml',
+                wire,
+                {
+                    'source': 'sma-wrist commission: angle against the measured muscle temperatures (fit phases)',
+                    'heldout_angle_rms_mrad': {'phase_fraction': round(pf_rms, 3)}
+                    | {k: round(x, 3) for k, x in sdgpi_rms.items()},
+                    'payload_kg': round(payload, 4),
+                    'coulomb_Nm': round(coulomb, 5),
+                    'preload_elongation_mm': round(e0, 4),
+                },
+            )
+        )
+        hyst['wire_file'] = values['wire_file']
     return hyst, joint, values, warnings
 
 
@@ -911,14 +1155,16 @@ def identify_wrist(bring: BringUp, out: Path, payload_kg: float | None = None) -
     nodes.setdefault('plant_sim', {}).update(
         {'payload_kg': round(values['payload_kg'], 4), 'model.coulomb_Nm': round(values['coulomb_Nm'], 5)}
     )
+    if values.get('wire_file'):
+        nodes['plant_sim']['wire_file'] = values['wire_file']
     nodes.setdefault('hardware_bridge', {})['payload_kg'] = round(values['payload_kg'], 4)
     if heat_balance_file:
         nodes['plant_sim']['heat_balance_file'] = heat_balance_file
-    tuning = loop_tuning(bool(joint['handed_over']), joint['heldout']['commissioned'])
+    tuning = loop_tuning(bool(hyst['handed_over']), joint['heldout']['compensator_wire'])
     if tuning:
         nodes.setdefault('tem_controller', {}).update(tuning)
         hyst['parameters']['loop'] = tuning | {
-            'why': f"the wire model's held-out angle error {joint['heldout']['commissioned']:.3g} mrad exceeds "
+            'why': f"the compensator's wire model's held-out angle error {joint['heldout']['compensator_wire']:.3g} mrad exceeds "
             f"{LOOSE_WIRE_MRAD:g} mrad: the TEMs follow the inverse's targets through a {LOOSE_TARGET_FILTER_S:g} s "
             'prefilter'
         }

@@ -163,6 +163,14 @@ def _identified(result: dict[str, Any]) -> list[str]:
     out.append('')
     for name, part in ident.items():
         out += [f'{name}: ' + _short(part['parameters']), '']
+        h = part['heldout']
+        if 'phase_fraction' in h:  # every wire candidate's held-out error: the model's wire is chosen by them
+            out += [
+                f'{name}, every wire candidate held out [{h["unit"]}]: built-in SD-GPI {h["builtin"]:.4g}, shifted '
+                f'{h["shift_only"]:.4g}, warped {h["warped"]:.4g}, phase-fraction {h["phase_fraction"]:.4g} (the '
+                f"angle's noise {h['angle_noise']:.3g})",
+                '',
+            ]
         per_tem = part['heldout'].get('per_tem')
         if per_tem:  # each TEM's held-out cycle: the heat balance is handed over only where both are better
             out += [f'{name}, held out per TEM (TEM 1, TEM 2) [{part["heldout"]["unit"]}]: ' + _short(per_tem), '']

@@ -577,6 +577,8 @@ def write_params(
         params['thermal_file'] = str(Path(thermal_file).resolve())
     if model is not None and model.heat_balance_file:  # the model's heat balance in another form (Peltier)
         params['heat_balance_file'] = str(Path(model.heat_balance_file).resolve())
+    if model is not None and model.wire_file:  # the model's phase-fraction wire (plant_sim's wire_file)
+        params['wire_file'] = str(Path(model.wire_file).resolve())
     if model is not None and model.preload_elongation_mm is not None:
         params['preload_elongation_mm'] = model.preload_elongation_mm
     ext = dict(model.extension) if model is not None else {}
@@ -618,7 +620,12 @@ def diagnose(
     (:func:`diagnose_run`). Raises DiagnoseInputError for unusable input."""
     if not (math.isfinite(settle_s) and settle_s >= 0.0):
         raise DiagnoseInputError(f'settle_s must be a finite number of seconds >= 0, got {settle_s!r}')
-    plant_model(params_file, hysteresis_file, thermal_file)  # a model that does not load, before the bag is read
+    from sma_wrist.plant_model import PlantModelFileError
+
+    try:  # a model that does not load (its files named, or their content), before the bag is read
+        plant_model(params_file, hysteresis_file, thermal_file).base()
+    except PlantModelFileError as exc:
+        raise DiagnoseInputError(str(exc)) from None
     run = load_run(path, recording=recording)
     run.settle_s = float(settle_s)
     return diagnose_run(run, report_dir, params_out, candidates, hysteresis_file, thermal_file, params_file)

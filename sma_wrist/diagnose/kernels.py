@@ -15,11 +15,13 @@ mechanics replay against its step (``step_mechanics``) and its own plain-Python 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from sma_wrist.core.hysteresis import kernel as hk
+from sma_wrist.core.hysteresis import phase_fraction_kernel as pfk
 from sma_wrist.core.jit import _jit as _jit_switch
 from sma_wrist.core.jit import _jit_inline
 from sma_wrist.core.joint.kernel import joint_step_one
@@ -324,12 +326,95 @@ def mechanics_sim(
             out_load[k, j, 1] = load[1]
 
 
+@_jit_inline
+def _pf_loads(T1, T2, q, mem, load, compliance, preload, commit, wc, mech):  # pragma: no cover - compiled
+    """:func:`_loads` for phase-fraction wires (:mod:`sma_wrist.core.hysteresis.phase_fraction_kernel`): both
+    bundles' loads at angle q against memory ``mem`` (2, 5); returns (torque, stiffness), with ``commit`` stores the
+    memory, loads and compliances."""
+    m_max, tol, max_it = mech[6], mech[7], int(mech[8])
+    n_g_r, r_eff, q_neutral = mech[14], mech[15], mech[16]
+    x_mm = 1e3 * r_eff * (q - q_neutral)
+    m1, dy1, _r1 = pfk.solve_load(wc, T1, preload - x_mm, mem[0], load[0], m_max, tol, max_it)
+    m2, dy2, _r2 = pfk.solve_load(wc, T2, preload + x_mm, mem[1], load[1], m_max, tol, max_it)
+    if commit:
+        pfk.commit(wc, T1, m1, mem[0])
+        pfk.commit(wc, T2, m2, mem[1])
+        load[0] = m1
+        load[1] = m2
+        compliance[0] = dy1
+        compliance[1] = dy2
+    torque = 0.0
+    torque += n_g_r * m1
+    torque += -n_g_r * m2
+    inv_c = 0.0
+    inv_c += 1.0 / dy1
+    inv_c += 1.0 / dy2
+    return torque, n_g_r * 1e3 * r_eff * inv_c
+
+
+@_jit
+def pf_mechanics_sim(T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_load):  # pragma: no cover - compiled
+    """:func:`mechanics_sim` with phase-fraction wires (``wc``: PhaseFractionWire.packed): the same rest state
+    (wires cooled from hot at T[0], loads from 0.8 kgf, static equilibrium by bisection), the same sub-steps, joint
+    rows and joint step; only the wire differs."""
+    K = T.shape[0]
+    N = T.shape[1]
+    h = dt / substeps
+    T_lo, T_hi = mech[10], mech[11]
+    lever = joint[1]
+    q_min, q_max, g = joint[7], joint[8], joint[9]
+    mem = np.empty((2, 5))
+    load = np.empty(2)
+    compliance = np.ones(2)
+    for j in range(N):
+        coulomb, viscous, static, preload, payload = jrow[j, 0], jrow[j, 1], jrow[j, 2], jrow[j, 3], jrow[j, 4]
+        jj = joint.copy()
+        jj[2] = coulomb
+        jj[3] = viscous
+        jj[4] = static
+        for side in range(2):
+            pfk.cooled(wc, min(max(T[0, j, side], T_lo), T_hi), 0.8, mem[side])
+            load[side] = 0.8
+        T1 = min(max(T[0, j, 0], T_lo), T_hi)
+        T2 = min(max(T[0, j, 1], T_lo), T_hi)
+        lo = q_min
+        hi = q_max
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            tau, _s = _pf_loads(T1, T2, mid, mem, load, compliance, preload, False, wc, mech)
+            tau -= payload * g * lever * math.cos(mid)
+            if tau > 0:
+                lo = mid
+            else:
+                hi = mid
+        q = 0.5 * (lo + hi)
+        _pf_loads(T1, T2, q, mem, load, compliance, preload, True, wc, mech)
+        qd = 0.0
+        out_q[0, j] = q
+        out_qd[0, j] = 0.0
+        out_load[0, j, 0] = load[0]
+        out_load[0, j, 1] = load[1]
+        for k in range(1, K):
+            for s in range(substeps):
+                frac = (s + 1.0) / substeps
+                Ts0 = min(max(T[k - 1, j, 0] + frac * (T[k, j, 0] - T[k - 1, j, 0]), T_lo), T_hi)
+                Ts1 = min(max(T[k - 1, j, 1] + frac * (T[k, j, 1] - T[k - 1, j, 1]), T_lo), T_hi)
+                torque, stiffness = _pf_loads(Ts0, Ts1, q, mem, load, compliance, preload, True, wc, mech)
+                q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
+            out_q[k, j] = q
+            out_qd[k, j] = qd
+            out_load[k, j, 0] = load[0]
+            out_load[k, j, 1] = load[1]
+
+
 class Constants:
     """The plant's constant arrays for the kernels, from a PlantParams."""
 
     def __init__(self, params: PlantParams | None = None) -> None:
         self.params = params or PlantParams()
-        th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint = pack_constants(self.params)
+        # the SD-GPI's arrays always (a phase-fraction plant's replay still packs its joint and heat balance so)
+        sdgpi = dataclasses.replace(self.params, wire=None) if self.params.wire is not None else self.params
+        th_coef, mech, stacked, edges, r, p, mem_c, mem_d, joint = pack_constants(sdgpi)
         self.th_coef = th_coef
         self.mech = np.concatenate([mech, [self.params.joint.q_neutral_rad]])
         self.stacked, self.edges, self.r, self.p = stacked, edges, r, p
@@ -339,6 +424,13 @@ class Constants:
             [jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm, self.params.preload_elongation_mm, jp.payload_kg]
         )
         self.u_limits = (self.params.thermal.u_min_V, self.params.thermal.u_max_V)
+        #: the phase-fraction wire's constant row where the plant's wire is one (PlantParams.wire), else None
+        self.wire = None
+        wire = self.params.wire
+        if wire is not None:
+            mg = self.params.muscle
+            self.wire = wire.packed(mg.wire_length_mm, mg.wire_area_m2)
+            self.mech[10], self.mech[11] = wire.T_valid
 
     def thermal(
         self, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift_per_s: np.ndarray, substeps: int = 1
@@ -371,6 +463,9 @@ class Constants:
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))
+        if self.wire is not None:
+            pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load)
+            return q, qd, load
         mechanics_sim(
             T,
             float(dt),

@@ -133,6 +133,13 @@ class PlantSim(WristNode):
                 runtime=False,
             ),
             HYSTERESIS_FILE_PARAM,
+            Param(
+                'wire_file',
+                '',
+                "the model's wire where it is not the SD-GPI of hysteresis_file: wire.yaml (form phase_fraction) "
+                'from sma-wrist commission (empty: that SD-GPI)',
+                runtime=False,
+            ),
             PRELOAD_PARAM,
         )
         + tuple(
@@ -172,6 +179,7 @@ class PlantSim(WristNode):
             p['hysteresis_file'],
             p['thermal_file'],
             p['heat_balance_file'],
+            p['wire_file'],
             dt=p['dt_s'],
             max_muscle_temperature_C=p['max_muscle_temperature_C'],
             preload_elongation_mm=p['preload_elongation_mm'],

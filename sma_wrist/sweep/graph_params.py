@@ -110,6 +110,9 @@ _INSTEAD = {
     ('plant_sim', 'heat_balance_file'): "the sweep's sampled plants spread Table 4.9's form of thermal_file; "
     'the Peltier form runs in plant_sim (sma-wrist run --params-file)',
     ('hysteresis_compensator', 'method'): "the sweep's inverse is the numerical one",
+    # the sampled plants perturb an SD-GPI wire (plants/spread.py); a phase-fraction model wire has no such family
+    ('plant_sim', 'wire_file'): "the sweep's sampled plants perturb the SD-GPI of hysteresis_file, not a "
+    'phase-fraction wire; run the commissioned model with sma-wrist run --params-file',
 }
 #: the pre-load three nodes must share (nodes.common.PRELOAD_PARAM)
 PRELOAD_NODES = ('plant_sim', 'adaptive_controller', 'hysteresis_compensator')

@@ -18,6 +18,7 @@ import math
 
 import numpy as np
 
+from sma_wrist.core.hysteresis import phase_fraction_kernel as pfk
 from sma_wrist.core.hysteresis.kernel import _solve_load_into
 from sma_wrist.core.jit import _jit, _jit_inline
 from sma_wrist.core.joint.kernel import joint_step_one
@@ -254,8 +255,80 @@ def step_many_into(
                 flags[j, 3] = True
 
 
+@_jit
+def fraction_step_segments(
+    n_steps,
+    u,
+    thermal,
+    q,
+    qd,
+    w,
+    heating,
+    T_prev,
+    load,
+    compliance,
+    payload,
+    flags,
+    th_coef,
+    mech,
+    wc,
+    joint,
+    thermal_out,
+    q_out,
+    qd_out,
+):  # pragma: no cover - compiled
+    """:func:`step_segments` of a wrist whose wires are phase-fraction wires (PlantParams.wire; ``wc`` its
+    PhaseFractionWire.packed row, ``w`` (2N, 5) their memory, :mod:`sma_wrist.core.hysteresis.phase_fraction_kernel`):
+    the same thermal RK4, chain, flags and joint step as :func:`step_many_into`, the wire's load solve in place of the
+    SD-GPI's. heating and T_prev are kept as the numpy path keeps them (the wire does not read them)."""
+    rk = np.empty((4, 2, 2))
+    y0, xs, kk, acc = rk[0], rk[1], rk[2], rk[3]
+    n = q.size
+    dt = mech[0]
+    m_max, tol, max_it = mech[6], mech[7], int(mech[8])
+    T_lo, T_hi, T_hot, e0, n_g_r, r_eff = mech[10], mech[11], mech[12], mech[13], mech[14], mech[15]
+    q_neutral, q_min, q_max = joint[6], joint[7], joint[8]
+    for seg in range(n_steps.size):
+        for _ in range(n_steps[seg]):
+            for j in range(n):
+                thermal_rk4(thermal[j], u[seg, j], dt, th_coef, y0, xs, kk, acc)
+                x_mm = 1e3 * r_eff * (q[j] - q_neutral)
+                torque = 0.0
+                inv_c = 0.0
+                for side in range(2):
+                    i = j + side * n
+                    T = thermal[j, side, 0]
+                    if T > T_hot:
+                        flags[j, 0] = True
+                    T = min(max(T, T_lo), T_hi)
+                    if T > T_prev[i]:
+                        heating[i] = True
+                    elif T < T_prev[i]:
+                        heating[i] = False
+                    T_prev[i] = T
+                    y_geo = e0 - x_mm if side == 0 else e0 + x_mm
+                    m, dy, res = pfk.solve_load(wc, T, y_geo, w[i], load[i], m_max, tol, max_it)
+                    pfk.commit(wc, T, m, w[i])
+                    load[i] = m
+                    compliance[i] = dy
+                    if m <= 1e-9 and res > tol:
+                        flags[j, 1] = True
+                    if m >= m_max - 1e-9 and res < -tol:
+                        flags[j, 2] = True
+                    torque += n_g_r * m if side == 0 else -n_g_r * m
+                    inv_c += 1.0 / dy
+                stiffness = n_g_r * 1e3 * r_eff * inv_c
+                q[j], qd[j] = joint_step_one(q[j], qd[j], torque, stiffness, payload[j], dt, joint)
+                if q[j] <= q_min or q[j] >= q_max:
+                    flags[j, 3] = True
+        thermal_out[seg] = thermal
+        q_out[seg] = q
+        qd_out[seg] = qd
+
+
 def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
-    """The kernel's constant arrays from a plant.PlantParams (see :func:`step_many`)."""
+    """The kernel's constant arrays from a plant.PlantParams (see :func:`step_many`; for a phase-fraction wire
+    :func:`fraction_step_segments`'s th_coef, mech, wc, joint)."""
     from sma_wrist.core.joint.dynamics import G
 
     tp, hp, mg, jp = params.thermal, params.hysteresis, params.muscle, params.joint
@@ -297,6 +370,9 @@ def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped
         ],
         dtype=float,
     )
+    if params.wire is not None:
+        mech[10], mech[11] = params.wire.T_valid
+        return th_coef, mech, params.wire.packed(mg.wire_length_mm, mg.wire_area_m2), joint
     env = hp.envelopes
     stacked = np.ascontiguousarray(np.concatenate([env.a, env.b], axis=1).transpose(0, 2, 1))
     return (

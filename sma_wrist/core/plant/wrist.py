@@ -28,6 +28,7 @@ from sma_wrist.core import jit
 from sma_wrist.core.errors import ModelInputError, check_finite, check_range
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry, MuscleModel
+from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionMuscle, PhaseFractionWire, cooled_memory
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, play_bounds
 from sma_wrist.core.joint.dynamics import G, JointParams, joint_step
 from sma_wrist.core.plant import kernel as plant_kernel
@@ -43,6 +44,9 @@ class PlantParams:
     """Everything that defines the simulated wrist."""
 
     hysteresis: SDGPIParams = field(default_factory=default_sdgpi)
+    #: the model's wire where it is not the SD-GPI: a phase-fraction wire (``wire_file``, form ``phase_fraction``);
+    #: None: the SD-GPI of ``hysteresis``. The compensator inverts ``hysteresis`` either way
+    wire: PhaseFractionWire | None = None
     muscle: MuscleGeometry = field(default_factory=MuscleGeometry)
     joint: JointParams = field(default_factory=JointParams)
     #: TEM heat balance; the plant clips commands at the *driver rating* (+-24 V), not at the
@@ -77,15 +81,21 @@ class PlantParams:
         hysteresis_file: str | Path | None = None,
         thermal_file: str | Path | None = None,
         heat_balance_file: str | Path | None = None,
+        wire_file: str | Path | None = None,
         **fields: Any,
     ) -> PlantParams:
         """The wrist with the wire of ``hysteresis_file`` (``sma-wrist identify hysteresis``; empty: the built-in set)
         and the TEMs of ``thermal_file`` (``identify thermal``; empty: Table 4.9), still clipped at the driver rating,
         their heat balance that of ``heat_balance_file`` where given (the Peltier form, ``sma-wrist commission``;
-        empty: Table 4.9's form of the thermal file); ``fields``: the other fields. What plant_sim, hardware_bridge
-        and diagnose build from their parameters."""
+        empty: Table 4.9's form of the thermal file); ``wire_file``: the model's wire where it is not that SD-GPI
+        (``wire.yaml`` of ``sma-wrist commission``, form ``phase_fraction``; empty: the SD-GPI); ``fields``: the
+        other fields. What plant_sim, hardware_bridge and diagnose build from their parameters."""
         from sma_wrist.core.hysteresis.params_file import hysteresis_params
 
+        if wire_file:
+            from sma_wrist.core.hysteresis.wire_file import load_wire_file
+
+            fields = {**fields, 'wire': load_wire_file(wire_file)}
         p = cls(hysteresis=hysteresis_params(hysteresis_file or None), **fields)
         if thermal_file:  # identified TEMs; the plant still clips at the driver rating
             from sma_wrist.core.thermal.params_file import load_thermal_file
@@ -166,16 +176,27 @@ class WristPlant:
         check_range('payload', payload, 0.0, 2.0, 'kg')
         self.n = payload.size
         self.muscles = MuscleModel(self.params.hysteresis, self.params.muscle)
+        #: the phase-fraction bundles where the model's wire is one (PlantParams.wire); their memory (2N, 5) is
+        #: ``state.w`` (the compiled step: plant_kernel.fraction_step_segments)
+        self.fraction = None
+        if self.params.wire is not None:
+            mg = self.params.muscle
+            self.fraction = PhaseFractionMuscle(self.params.wire, mg.wire_length_mm, mg.wire_area_m2, mg.max_load_kgf)
         self._kernel_constants: tuple[PlantParams, tuple[np.ndarray, ...]] | None = None
         self._kernel_arrays: tuple[np.ndarray, ...] | None = None  # state arrays checked for the kernel
         self.state = self.rest_state(payload)
-        if jit.AVAILABLE and self.params.engine == 'auto':
+        if self._compiled:
             # the first compiled step loads (or compiles) the kernel: 0.1-0.3 s from numba's cache.
             # Pay it here, not in the first step of a loop that runs against a clock (the device
             # emulator's thread, a plant_sim under ROS): one step on a copy, then the state is restored
             start = self.state.copy()
             self.advance(np.zeros((self.n, 2)), 1)
             self.state = start
+
+    @property
+    def _compiled(self) -> bool:
+        """Whether :meth:`advance` steps in the compiled kernel (numba installed, engine 'auto')."""
+        return jit.AVAILABLE and self.params.engine == 'auto'
 
     # ----------------------------------------------------------------- set-up
     def rest_state(self, payload_kg: FloatArray, q0: ArrayLike | None = None) -> PlantState:
@@ -185,13 +206,17 @@ class WristPlant:
         thermal = p.rest_thermal(n)
         T = th.muscle_temperature(p.thermal, thermal).T.reshape(-1)  # (2N,)
         m0 = np.full(2 * n, 0.8)
-        lower, upper = play_bounds(p.hysteresis, T, m0)
+        if self.fraction is not None:
+            T = np.minimum(np.maximum(T, p.wire.T_valid[0]), p.wire.T_valid[1])
+            memory = cooled_memory(self.fraction.wc, T, m0)
+        else:
+            memory = play_bounds(p.hysteresis, T, m0)[1].copy()
         state = PlantState(
             0.0,
             thermal,
             np.full(n, p.joint.q_neutral_rad),
             np.zeros(n),
-            upper.copy(),
+            memory,
             np.zeros(2 * n, bool),
             T.copy(),
             m0,
@@ -231,7 +256,12 @@ class WristPlant:
         p = self.params
         x = p.joint.chain_displacement_mm(state.q)
         y_geo = np.concatenate([p.preload_elongation_mm - x, p.preload_elongation_mm + x])
-        sol = self.muscles.solve_load(T, y_geo, state.w, state.heating, state.load_kgf, self.params.load_tolerance_mm)
+        if self.fraction is not None:
+            sol = self.fraction.solve_load(T, y_geo, state.w, state.load_kgf, self.params.load_tolerance_mm)
+        else:
+            sol = self.muscles.solve_load(
+                T, y_geo, state.w, state.heating, state.load_kgf, self.params.load_tolerance_mm
+            )
         if commit:
             state.w = sol.memory  # the memory at the root: what MuscleModel.commit would give
             state.load_kgf = sol.load_kgf
@@ -292,7 +322,7 @@ class WristPlant:
         are ORed over the steps. This is what the plant_sim node calls once per tick.
         """
         p = self.params
-        if not (jit.AVAILABLE and p.engine == 'auto'):
+        if not self._compiled:
             flags = self._no_flags(self.n)
             for _ in range(n_steps):
                 s = self.step(command_V)
@@ -315,7 +345,12 @@ class WristPlant:
                     setattr(s, name, np.ascontiguousarray(a).copy())
             self._kernel_arrays = arrays = tuple(getattr(s, name) for name in KERNEL_STATE)
         flags = np.zeros((self.n, 4), bool)
-        plant_kernel.step_many(int(n_steps), uc, *arrays, flags, *self._kernel_constants[1])
+        if self.fraction is not None:
+            out = np.empty((1, self.n, 2, 2)), np.empty((1, self.n)), np.empty((1, self.n))
+            steps = np.array([int(n_steps)], dtype=np.int64)
+            plant_kernel.fraction_step_segments(steps, uc[None], *arrays, flags, *self._kernel_constants[1], *out)
+        else:
+            plant_kernel.step_many(int(n_steps), uc, *arrays, flags, *self._kernel_constants[1])
         s.t += n_steps * p.dt
         s.flags = {
             'command_saturated': clipped,
@@ -346,7 +381,7 @@ class WristPlant:
         thermal = np.empty((K, self.n, 2, 2))
         q = np.empty((K, self.n))
         qd = np.empty((K, self.n))
-        if not (jit.AVAILABLE and p.engine == 'auto'):
+        if not self._compiled:
             for k in range(K):
                 s = self.advance(u[k], int(n_steps[k]))
                 thermal[k], q[k], qd[k] = s.thermal, s.q, s.qd
@@ -356,7 +391,8 @@ class WristPlant:
         self.advance(u[0], 0)  # the kernel's constants and writeable state arrays, as advance prepares them
         flags = np.zeros((self.n, 4), bool)
         steps = np.ascontiguousarray(n_steps, dtype=np.int64)
-        plant_kernel.step_segments(steps, u, *self._kernel_arrays, flags, *self._kernel_constants[1], thermal, q, qd)
+        kernel = plant_kernel.fraction_step_segments if self.fraction is not None else plant_kernel.step_segments
+        kernel(steps, u, *self._kernel_arrays, flags, *self._kernel_constants[1], thermal, q, qd)
         s.t += int(steps.sum()) * p.dt
         s.flags = {
             'command_saturated': clipped.any(axis=(0, 2)),
@@ -387,7 +423,7 @@ class WristPlant:
         s = self.state
         n = self.n
         hot = T > p.max_muscle_temperature_C
-        t_lo, t_hi = p.hysteresis.T_valid
+        t_lo, t_hi = p.hysteresis.T_valid if p.wire is None else p.wire.T_valid
         if T.min() < t_lo or T.max() > t_hi:
             T = np.minimum(np.maximum(T, t_lo), t_hi)
         dT = T - s.T_prev
