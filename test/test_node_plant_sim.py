@@ -254,6 +254,8 @@ def test_a_phase_fraction_wire_file_is_the_simulated_wire_and_a_malformed_one_is
     wire = save_wire_file(tmp_path / 'wire.yaml', PhaseFractionWire(A_s_C=28.0, A_f_C=45.0, M_s_C=40.0, M_f_C=30.0))
     hot, node = _measure(probe_factory, 20.0, params={'wire_file': str(wire)})
     assert node.plant.params.wire is not None
+    log = capsys.readouterr()
+    assert f'wire phase-fraction ({wire}), heat balance Table 4.9' in log.out + log.err  # the start-up line says so
     xi = node.plant.state.w[:, XI]
     assert xi[0] < xi[1] - 0.01 and xi[1] > 0.99  # muscle 1 heated transforms, muscle 2 does not
     bad = tmp_path / 'bad.yaml'

@@ -222,7 +222,10 @@ class PlantSim(WristNode):
         self._publish_measurements()
         self.get_logger().info(
             f'plant_sim: payload {p["payload_kg"]} kg, dt {p["dt_s"]} s, {self.steps_per_tick} steps per '
-            f'{1.0 / p["publish_rate_hz"]:g} s tick, start angle {float(self.plant.state.q[0]):.3f} rad'
+            f'{1.0 / p["publish_rate_hz"]:g} s tick, start angle {float(self.plant.state.q[0]):.3f} rad; '
+            # which model forms run: a commissioned params file may name the Peltier form or the phase-fraction wire
+            f'wire {"phase-fraction (" + p["wire_file"] + ")" if p["wire_file"] else "SD-GPI"}, heat balance '
+            f'{"Peltier (" + p["heat_balance_file"] + ")" if p["heat_balance_file"] else "Table 4.9"}'
         )
 
     def _test_plant(self, p: Mapping[str, Any], ext: Mapping[str, float], payload: float, q0: float | None) -> Any:
