@@ -124,7 +124,10 @@ def measure_identification(rate_hz: float = 1000.0) -> dict[str, Any]:
                 .get('tem1_gain_relative_to_tem2'),
                 'payload_kg': ident.get('joint', {}).get('parameters', {}).get('payload_kg'),
                 'payload_identified': ident.get('joint', {}).get('parameters', {}).get('payload_identified'),
+                # the compensator's SD-GPI candidate, and the model's wire (the SD-GPI or the phase-fraction wire)
                 'wire_model': ident.get('hysteresis', {}).get('parameters', {}).get('wire_model'),
+                'model_wire': ident.get('hysteresis', {}).get('parameters', {}).get('model_wire'),
+                'heat_balance_form': 'peltier' if ident.get('heat_balance', {}).get('handed_over') else 'table_4_9',
                 'warp': ident.get('hysteresis', {}).get('parameters', {}).get('warp'),
                 'preload_elongation_mm': ident.get('joint', {}).get('parameters', {}).get('preload_elongation_mm'),
                 'coulomb_Nm': ident.get('joint', {}).get('parameters', {}).get('coulomb_Nm'),
