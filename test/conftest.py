@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -35,6 +36,18 @@ def pytest_configure(config: pytest.Config) -> None:
     _warm_kernels(config)
 
 
+def package_env() -> dict[str, str]:
+    """The environment for a child Python that imports ``sma_wrist``: this run's copy of the package first on its path
+    (the installed one under .ci/run, which runs from test/; the checkout under ``python -m pytest test`` from the
+    root). numba caches per source folder: a child that imported another copy would compile every kernel it meets
+    again, on a fresh clone ~65 s of CPU for the monitor's command line alone. A child run in the checkout's root
+    finds the checkout first whatever the path says: give it another working directory."""
+    import sma_wrist
+
+    here = str(Path(sma_wrist.__file__).resolve().parent.parent)
+    return {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in (here, os.environ.get('PYTHONPATH')) if p)}
+
+
 def _warm_kernels(config: pytest.Config) -> None:
     """Under ``pytest -n N``, in the controller before the workers start: compile the numba kernels once,
     the parts of warm_kernels.py side by side, so the workers load the cache instead of each compiling
@@ -44,7 +57,6 @@ def _warm_kernels(config: pytest.Config) -> None:
     import subprocess
     import sys
     import time
-    from pathlib import Path
 
     from sma_wrist.core import jit
 
@@ -55,18 +67,15 @@ def _warm_kernels(config: pytest.Config) -> None:
         or not jit.AVAILABLE
     ):
         return
-    import sma_wrist
-
     script = Path(__file__).with_name('warm_kernels.py')
-    # the copy of the package this run imports (the installed one under .ci/run, which runs from test/; the
-    # checkout under ``python -m pytest test`` from the root): numba caches per source folder, so warming
-    # another copy would help nobody
-    here = str(Path(sma_wrist.__file__).resolve().parent.parent)
-    env = {**os.environ, 'PYTHONPATH': os.pathsep.join(p for p in (here, os.environ.get('PYTHONPATH')) if p)}
     t0 = time.perf_counter()
     procs = [
         subprocess.Popen(
-            [sys.executable, str(script), part], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=env
+            [sys.executable, str(script), part],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=package_env(),
         )
         for part in ('closed_loops', 'replays')
     ]

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import socket
 import struct
 import subprocess
@@ -198,7 +197,9 @@ class _Client:
 
 def _serve_run(tmp_path: Path, *args: str) -> tuple[subprocess.Popen, str, list[str]]:
     """Start ``sma-wrist run --foxglove 127.0.0.1:0 ...``; its URL from the line it prints first."""
-    env = {**os.environ, 'PYTHONPATH': str(ROOT)}
+    from conftest import package_env  # type: ignore[import-not-found]
+
+    env = package_env()  # this run's copy of the package: its compiled kernels are cached
     proc = subprocess.Popen(
         [sys.executable, '-m', 'sma_wrist', 'run', '--foxglove', '127.0.0.1:0', '--quiet', *args],
         stdout=subprocess.PIPE,

@@ -24,7 +24,6 @@ from sma_wrist.monitor.playback import monitor_bag
 
 RUN_S = 150.0
 ONSET_S = 70.0
-ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope='module')
@@ -43,14 +42,16 @@ def _bag(run, path, d=None, onset=ONSET_S, realistic=False):  # type: ignore[no-
     return td.write_run_bag(ds.apply(run, d, 0.1, 1e-3, 2, onset_s=onset), path)
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    env = {'PYTHONPATH': str(ROOT), 'PATH': '/usr/bin:/bin'}
+def _cli(bag: str, *args: str) -> subprocess.CompletedProcess:
+    """``sma-wrist monitor BAG ...`` run by this test run's copy of the package, in the bag's folder."""
+    from conftest import package_env  # type: ignore[import-not-found]
+
     return subprocess.run(
-        [sys.executable, '-m', 'sma_wrist', 'monitor', *args],
+        [sys.executable, '-m', 'sma_wrist', 'monitor', bag, *args],
         capture_output=True,
         text=True,
-        cwd=ROOT,
-        env={**__import__('os').environ, **env},
+        cwd=Path(bag).parent,
+        env=package_env(),
     )
 
 

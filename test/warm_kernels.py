@@ -14,18 +14,28 @@ import numpy as np
 
 
 def closed_loops() -> None:
-    """The sweep engine on the project's plant in every mode, the node laws' own kernels."""
+    """The sweep engine on both plants in every mode, plant_sim's plant, the node laws' own kernels, the
+    identification's Jacobian and solver."""
     from sma_wrist.core.control import adaptive_kernel, pid, tem_kernel
     from sma_wrist.core.control.joint_controller import JointController
+    from sma_wrist.core.hysteresis.identification import simulate_jac
+    from sma_wrist.core.hysteresis.trf import trf_solve
+    from sma_wrist.core.plant.wrist import WristPlant
     from sma_wrist.sweep.simulate import simulate
 
     simulate(_cases(), 0.05)
+    simulate(_cases(), 0.05, plant='phase_fraction')
+    WristPlant().advance(np.zeros((1, 2)), 5)
+    WristPlant().advance_segments(np.zeros((2, 1, 2)), np.array([5, 5]))  # the twin monitor's batches
     tem_kernel.warm_up()
     adaptive_kernel.warm_up()
     pid.warm_up()
     c = JointController()
     for k in range(3):
         c.update(0.5, 0.0, 0.5 + 0.01 * k, 0.01, 0.0, 0.01)
+    T = np.linspace(30.0, 80.0, 20)
+    simulate_jac(np.concatenate([T, T[::-1]]), np.full(20, 0.1), n=3)
+    trf_solve(lambda x: (x - 1.0, np.eye(2)), np.zeros(2), np.full(2, -5.0), np.full(2, 5.0), 5)
 
 
 def _cases() -> list:
@@ -41,21 +51,12 @@ def _cases() -> list:
 
 
 def replays() -> None:
-    """plant_sim's plant, the phase-fraction wrist, the diagnosis's replays, the identification's Jacobian, solver."""
-    from sma_wrist.core.hysteresis.identification import simulate_jac
-    from sma_wrist.core.hysteresis.trf import trf_solve
-    from sma_wrist.core.plant.wrist import WristPlant
+    """The diagnosis's synthetic runs and its replays (as much CPU as the other part, measured on a cold cache:
+    the two run side by side)."""
     from sma_wrist.diagnose import diagnose_run
     from sma_wrist.diagnose.testdata import run_from_truth, simulate
-    from sma_wrist.sweep.simulate import simulate as closed_loops_on
 
-    WristPlant().advance(np.zeros((1, 2)), 5)
-    WristPlant().advance_segments(np.zeros((2, 1, 2)), np.array([5, 5]))  # the twin monitor's batches
-    closed_loops_on(_cases(), 0.05, plant='phase_fraction')
     diagnose_run(run_from_truth(simulate('none', seed=0, duration_s=4.0)), candidates=['backlash', 'tem_mismatch'])
-    T = np.linspace(30.0, 80.0, 20)
-    simulate_jac(np.concatenate([T, T[::-1]]), np.full(20, 0.1), n=3)
-    trf_solve(lambda x: (x - 1.0, np.eye(2)), np.zeros(2), np.full(2, -5.0), np.full(2, 5.0), 5)
 
 
 PARTS = {'closed_loops': closed_loops, 'replays': replays}
