@@ -236,3 +236,18 @@ def test_without_a_budget_the_runs_fit_into_each_settling_takes_what_it_needs(tm
     errors = [[0.01, 0.012], [0.05, 0.06]] * 3
     _, graph, starts = verify_with(tmp_path, monkeypatch, f, errors, controllers=V.CONTROLLERS, budget_s=451.0)
     assert len(graph.calls) == 6 and {t for _, t in starts} == {V.SettleLimits().timeout_s}
+
+
+def test_the_report_names_every_model_file_the_commissioned_run_was_diagnosed_against(tmp_path, monkeypatch):
+    nodes = builtin_handed_over(tmp_path)
+    f = write(tmp_path / 'wrist_params.yaml', {n: {'ros__parameters': v} for n, v in nodes.items()})
+    res, _, _ = verify_with(tmp_path, monkeypatch, f, [[0.01, 0.02]])
+    files = {
+        'hysteresis_file': 'h.yaml',
+        'thermal_file': 't.yaml',
+        'heat_balance_file': 'hb.yaml',
+        'wire_file': 'w.yaml',
+    }
+    res['diagnosis'] = {'discrepancy': False, 'against': files, 'residual': {}}
+    text = '\n'.join(V.report_section(res, tmp_path / 'out'))
+    assert 'hysteresis: `h.yaml`, thermal: `t.yaml`, heat balance: `hb.yaml`, wire: `w.yaml`' in text

@@ -651,7 +651,10 @@ def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S
         return {'bag': str(bag), 'error': str(e), 'discrepancy': None}
     return {
         'bag': str(bag),
-        'against': {k: getattr(m, k) or 'built-in' for k in ('hysteresis_file', 'thermal_file', 'heat_balance_file')},
+        'against': {
+            k: getattr(m, k) or 'built-in'
+            for k in ('hysteresis_file', 'thermal_file', 'heat_balance_file', 'wire_file')
+        },
         'discrepancy': d.discrepancy,
         'unexplained': d.unexplained,
         'subsystem': d.subsystem,
@@ -749,7 +752,9 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             if not d['discrepancy']
             else f'discrepancy: {d["summary"]}'
         )
-        against = ', '.join(f'{k.split("_")[0]}: `{f}`' for k, f in d.get('against', {}).items())
+        against = ', '.join(
+            f'{k.removesuffix("_file").replace("_", " ")}: `{f}`' for k, f in d.get('against', {}).items()
+        )
         residual = '; '.join(
             f'{c} {r["rms"]:.4g} {"degC" if c == "thermal" else "rad"} RMS ({r["rms_over_noise"]:.3g} x noise)'
             for c, r in d.get('residual', {}).items()
