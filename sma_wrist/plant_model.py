@@ -70,7 +70,11 @@ class PlantModel:
             fields = {'preload_elongation_mm': self.preload_elongation_mm, **fields}
         try:
             return PlantParams.from_files(
-                self.hysteresis_file, self.thermal_file, self.heat_balance_file, self.wire_file, **fields
+                self.hysteresis_file,
+                self.thermal_file,
+                heat_balance_file=self.heat_balance_file,
+                wire_file=self.wire_file,
+                **fields,
             )
         except Exception as exc:  # noqa: BLE001 - a broken model file is the user's to fix, said in one line
             raise PlantModelFileError(

@@ -178,8 +178,8 @@ class PlantSim(WristNode):
         base = PlantParams.from_files(
             p['hysteresis_file'],
             p['thermal_file'],
-            p['heat_balance_file'],
-            p['wire_file'],
+            heat_balance_file=p['heat_balance_file'],
+            wire_file=p['wire_file'],
             dt=p['dt_s'],
             max_muscle_temperature_C=p['max_muscle_temperature_C'],
             preload_elongation_mm=p['preload_elongation_mm'],
