@@ -251,7 +251,7 @@ def bench_diagnose_full(quick: bool = False) -> dict:
 @section('monitor')
 def bench_monitor(quick: bool = False) -> dict:
     """The live model monitor: detection of effects beginning mid-run, false alarms over 30 min per controller,
-    CPU cost and the graph's speed with it (doc/howto/monitor.md)."""
+    CPU cost and the graph's speed with it (doc/explanation/monitor.md)."""
     from sma_wrist.monitor.bench import bench_monitor as run_monitor
 
     return run_monitor(quick)
@@ -260,7 +260,7 @@ def bench_monitor(quick: bool = False) -> dict:
 @section('live')
 def bench_live(quick: bool = False) -> dict:
     """The live view's cost to a run: with a server, and with a client that stopped reading, over none
-    (doc/howto/live_view.md)."""
+    (doc/explanation/runtime.md, the live view)."""
     from sma_wrist.closed_loop import bench_live as run_live
 
     return run_live(quick)
@@ -292,7 +292,7 @@ def bench_sweep(quick: bool = False) -> dict:
 
 @section('identify_thermal')
 def bench_identify_thermal(quick: bool = False) -> dict:
-    """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (doc/howto/identify_tems.md)."""
+    """Held-out Table 4.10 errors per frequency: own model vs the independent Peltier plant (doc/explanation/model.md)."""
     from sma_wrist.identify.thermal_testplant import holdout_table, speed
 
     return {'speed': speed(quick), **holdout_table(quick)}

@@ -1,8 +1,8 @@
 """sma-wrist identify thermal: the heat-balance fit (Table 4.9) on own-model and off-model data,
 the params file, the CLI's input handling, and a closed loop that loads the identified file.
 
-Bounds are measured (doc/howto/identify_tems.md): own-model noise-free data must come
-back exactly; the independent Peltier plant (sma_wrist/identify/thermal_testplant.py: back-EMF,
+Bounds are measured (doc/explanation/model.md, the heat-balance forms held out per frequency): own-model
+noise-free data must come back exactly; the independent Peltier plant (sma_wrist/identify/thermal_testplant.py: back-EMF,
 Kelvin Peltier term, convection law, thermocouple lag 0.15 s, noise 0.2 degC) is held out per
 frequency and must beat Table 4.9 by a wide margin.
 """

@@ -30,7 +30,7 @@ doc/explanation/diagnosis.md) on a rolling window of them:
 The check is split so that a node can run the costly part in a worker thread: :meth:`Monitor.window` (cheap, under
 the node's lock) cuts the window, :meth:`Monitor.diagnose` (seconds of CPU) diagnoses it, :meth:`Monitor.decide`
 (cheap) updates the verdict. ``sma-wrist monitor BAG`` (:mod:`.playback`) plays a bag through the same object.
-See doc/howto/monitor.md.
+See doc/explanation/monitor.md (the method) and doc/howto/monitor.md (its use).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Benchmark of the live model monitor: ``sma-wrist bench --section monitor`` (doc/howto/monitor.md).
+"""Benchmark of the live model monitor: ``sma-wrist bench --section monitor`` (doc/explanation/monitor.md).
 
 * **detection**: clean closed-loop recordings (plant_sim, 0.3 kg, embedded runtime) rewritten by the independent
   effect generator (:mod:`sma_wrist.diagnose.distort`) with an effect that begins at ``ONSET_S``, at the noise of
