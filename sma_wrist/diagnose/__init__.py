@@ -339,9 +339,11 @@ def diagnose_run(
             if c == 'thermal':
                 r = ev.residual(c, pred)[sl].T.ravel()
                 regs = {k: np.concatenate([v, v]) for k, v in reg.items()}
-                s = rp.channel_stats(r, ev.sigma[c], regs, meas[sl, 0], pred[sl, 0], run.dt)
+                ok = np.concatenate([ev.mask[sl], ev.mask[sl]]) > 0
+                s = rp.channel_stats(r, ev.sigma[c], regs, meas[sl, 0], pred[sl, 0], run.dt, ok)
             else:
-                s = rp.channel_stats(ev.residual(c, pred)[sl], ev.sigma[c], reg, meas[sl], pred[sl], run.dt)
+                r = ev.residual(c, pred)[sl]
+                s = rp.channel_stats(r, ev.sigma[c], reg, meas[sl], pred[sl], run.dt, ev.mask[sl][: r.shape[0]] > 0)
             stats[c][which] = s
         s = stats[c]['tolerated' if tolerated is not None else 'extended']
         if s['rms_over_noise'] > STRUCTURE_RATIO and not s['white']:

@@ -76,9 +76,22 @@ def binned(r: np.ndarray, x: np.ndarray, bins: int = 12) -> tuple[np.ndarray, np
 
 
 def channel_stats(
-    r: np.ndarray, sigma: float, regressors: dict[str, np.ndarray], meas: np.ndarray, model: np.ndarray, dt: float
+    r: np.ndarray,
+    sigma: float,
+    regressors: dict[str, np.ndarray],
+    meas: np.ndarray,
+    model: np.ndarray,
+    dt: float,
+    valid: np.ndarray | None = None,
 ) -> dict[str, Any]:
-    """Statistics of one channel's residual (1-D; thermal channels are passed per muscle, stacked)."""
+    """Statistics of one channel's residual (1-D; thermal channels are passed per muscle, stacked) over its
+    ``valid`` samples (a boolean mask like ``r``; None: all): the samples where the run bridged a gap carry no
+    measurement, and counting them as zero residual would understate the RMS by the share of the run bridged."""
+    if valid is not None:
+        keep = np.asarray(valid, bool)
+        if keep.any():
+            r = r[keep]
+            regressors = {k: np.asarray(v)[keep] for k, v in regressors.items()}
     q, p = ljung_box(r[::LB_DECIMATE])
     rms = float(np.sqrt(np.mean(r**2)))
     return {
