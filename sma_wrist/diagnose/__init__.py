@@ -28,6 +28,7 @@ import numpy as np
 from sma_wrist.cli_options import diagnose_arguments as add_arguments
 from sma_wrist.contract import ContractError, Recording
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.yaml_file import write_yaml_file
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
@@ -562,8 +563,6 @@ def write_params(
     :class:`~sma_wrist.plant_model.PlantModel` replayed instead (its files, pre-load and ``model.*``
     values carried, the fitted values replacing its).
     """
-    import yaml
-
     from sma_wrist.core.plant import extensions as mx
 
     # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
@@ -586,21 +585,18 @@ def write_params(
     params.update({f'model.{k}': v for k, v in ext.items()})
     replay_only = [k for k, v in ext.items() if k in mx.REPLAY_ONLY and v != mx.NOMINAL[k]]
     doc = {'plant_sim': {'ros__parameters': params}}
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    head = (
-        f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
-        f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
-        f'# schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
+    comment = (
+        f'sma-wrist diagnose: extended model of {res.source or "a run"}\n'
+        f'cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
+        f'schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py'
         + (
-            f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
-            f'which refuses this file\n'
+            f'\nnote: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
+            f'which refuses this file'
             if replay_only
             else ''
         )
     )
-    out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
-    return out
+    return write_yaml_file(path, doc, comment, flow_lists=True)
 
 
 def diagnose(
