@@ -127,6 +127,8 @@ class DiagnosisResult:
     wall_s: float = 0.0
     #: the TEM drive the replays ran on: 'applied' (the device's read-back) or 'commanded' (the commands)
     drive: str = 'commanded'
+    #: with the applied drive: how many samples of the run it differed from the commands (None: not compared)
+    drive_differs: int | None = None
     #: where the heat-balance replay's exchanger faces started: 'measured' (the bag's face temperatures), 'rest',
     #: or 'twin' (a live monitor's replay before the window)
     thermal_start: str = 'rest'
@@ -493,6 +495,7 @@ def diagnose_run(
         source=run.source,
         duration_s=run.duration,
         drive=run.drive,
+        drive_differs=run.drive_differs,
         thermal_start=run.thermal_start,
         model=pm.describe(),
     )
@@ -680,6 +683,8 @@ def run_cli(args: argparse.Namespace) -> int:
     for w in res.warnings:
         print(f'warning: {w}')
     print(res.summary)
+    if res.drive == 'applied':  # a bag of commands only (every simulator bag) replays them, as it always did
+        print(f'  {rp.drive_replayed(res.drive, res.drive_differs)}')
     if res.model != DiagnosisResult.model:  # a params file's or model files' model: say which
         print(f'  model replayed: {res.model}')
     for c, g in res.channels.items():
