@@ -291,6 +291,9 @@ def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulat
     assert bridge.command_to_send() == (0.0, 0.0)  # the safety cut-off, as before
     assert bridge.counters['windows_withheld'] >= 20
     assert len(probe.got['/wrist/joint_states']) < n_js + 10  # only the windows before the fault reached the device
+    # the drive is no measurement of the faulty channel: it goes on for the withheld windows, at the 0 V of the cut
+    drive = np.array([m.effort for m in probe.got['/wrist/tem_drive_applied']])
+    assert len(drive) >= len(probe.got['/wrist/joint_states']) + 20 and np.all(drive[-10:] == 0.0), drive[-12:]
     emu.inject('force', (ch, None))
     rt.spin_for(0.3, until='sim')
     assert len(probe.got['/wrist/joint_states']) > n_js + 10  # measurements resume when the reading is sane
