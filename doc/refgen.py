@@ -249,7 +249,7 @@ def topics_page() -> str:
                 code(t.type),
                 md(t.unit or '-'),
                 rate,
-                md(t.qos),
+                md(t.qos if t.depth == 10 or t.qos != 'reliable' else f'{t.qos}, depth {t.depth}'),
                 md(pub),
                 md(', '.join(t.subscribers) or '-'),
                 md(t.description),

@@ -34,8 +34,10 @@ class Topic:
     publisher: str
     subscribers: tuple[str, ...]
     description: str
-    qos: str = 'reliable'  # 'reliable' (depth 10) or 'transient_local' (latched, depth 1)
+    qos: str = 'reliable'  # 'reliable' (depth: ``depth``) or 'transient_local' (latched, depth 1)
     alt_publisher: str | None = None
+    #: KEEP_LAST depth of a reliable topic on both sides: deeper where a publisher sends a burst in one callback
+    depth: int = 10
 
     @property
     def package(self) -> str:
@@ -89,11 +91,14 @@ def load_contract(path: str | None = None) -> Contract:
                 description=t['description'],
                 qos=t.get('qos', 'reliable'),
                 alt_publisher=t.get('alt_publisher'),
+                depth=int(t.get('depth', 10)),
             )
             if topic.name in topics:
                 raise ContractError(f'{p}: topic {topic.name} listed twice')
             if topic.qos not in ('reliable', 'transient_local'):
                 raise ContractError(f'{p}: topic {topic.name}: qos {topic.qos!r} is not reliable|transient_local')
+            if topic.depth < 1:
+                raise ContractError(f'{p}: topic {topic.name}: depth {topic.depth} must be at least 1')
             topics[topic.name] = topic
         return Contract(int(raw['contract_version']), raw['frame_id'], raw['joint_name'], topics, p)
     except (KeyError, TypeError, ValueError, yaml.YAMLError) as e:

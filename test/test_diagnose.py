@@ -281,6 +281,38 @@ def test_a_drive_that_took_effect_after_its_commands_stamp_replays_right_from_th
     assert res.residual_stats['thermal']['nominal']['rms_over_noise'] < 1.2
 
 
+def test_a_drive_the_device_watchdog_zeroed_replays_right_from_the_applied_drive_and_is_counted(tmp_path):
+    """A host that stalls stops commanding; the device's watchdog zeroes the drive (three stretches of 0.8 s here)
+    while the last command, all the commands in a bag say, goes on heating. Replayed on the commands, a nominal wrist
+    is 13x the sensor noise off in its temperatures; on the drive the device applied (/wrist/tem_drive_applied), at
+    the noise. The report says which drive it replayed and on how many samples it differed from the commands; a bag
+    without the topic (here: the same bag with it mapped away) replays the commands as before."""
+    import dataclasses
+
+    from sma_wrist.contract import Recording
+    from sma_wrist.diagnose.report import drive_replayed
+
+    dt = 0.01
+    t = np.arange(int(40.0 / dt) + 1) * dt
+    heat_1 = np.sin(2.0 * np.pi * t / 6.0 + 0.3) > 0
+    u = np.stack([np.where(heat_1, 12.0, -8.0), np.where(heat_1, -8.0, 12.0)], axis=1)
+    applied = u.copy()
+    for a in (10.0, 20.0, 30.0):
+        applied[(t >= a) & (t < a + 0.8)] = 0.0  # the watchdog's zero drive
+    truth = dataclasses.replace(td.simulate('none', seed=4, duration_s=40.0, u=applied), u=u)
+    bag = td.write_bag(truth, tmp_path / 'bag', applied=applied)
+    candidates = ['actuator_delay', 'tem_mismatch']
+    res = diagnose(bag, candidates=candidates)
+    assert res.drive == 'applied' and res.drive_differs == 240 and not res.discrepancy, res.summary
+    assert res.residual_stats['thermal']['nominal']['rms_over_noise'] < 1.2
+    assert '(240 samples where it differed from the command)' in drive_replayed(res.drive, res.drive_differs)
+    without = Recording.from_options(['/wrist/tem_drive_applied=/not_recorded'])
+    res = diagnose(bag, candidates=candidates, recording=without)
+    assert res.drive == 'commanded' and res.drive_differs is None and res.discrepancy, res.summary
+    assert res.residual_stats['thermal']['nominal']['rms_over_noise'] > 5.0
+    assert 'replayed the TEM commands' in drive_replayed(res.drive, res.drive_differs)
+
+
 def test_missing_angle_still_checks_the_thermal_part(tmp_path):
     td.make_bag(
         tmp_path / 'b',

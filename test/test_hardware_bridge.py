@@ -291,6 +291,9 @@ def test_a_sample_rejected_for_safety_is_never_published_as_a_measurement(emulat
     assert bridge.command_to_send() == (0.0, 0.0)  # the safety cut-off, as before
     assert bridge.counters['windows_withheld'] >= 20
     assert len(probe.got['/wrist/joint_states']) < n_js + 10  # only the windows before the fault reached the device
+    # the drive is no measurement of the faulty channel: it goes on for the withheld windows, at the 0 V of the cut
+    drive = np.array([m.effort for m in probe.got['/wrist/tem_drive_applied']])
+    assert len(drive) >= len(probe.got['/wrist/joint_states']) + 20 and np.all(drive[-10:] == 0.0), drive[-12:]
     emu.inject('force', (ch, None))
     rt.spin_for(0.3, until='sim')
     assert len(probe.got['/wrist/joint_states']) > n_js + 10  # measurements resume when the reading is sane
@@ -1043,6 +1046,44 @@ def test_the_drive_the_device_read_back_is_published_where_it_took_effect(emulat
     assert stamps[k] - 0.005 < t_on <= stamps[k] + 0.005 + 1e-9, (stamps[k - 1 : k + 2], t_on)
     assert np.allclose(drive[k:], (20.0, -5.0), atol=1e-6)  # the muscles' drive, through the wiring
     assert t_on - stamps[0] > 0.025  # the device applied it well after the window its first command answered
+
+
+def test_a_stalled_host_publishes_the_drive_the_device_watchdog_zeroed(emulator, graph):
+    """A host that stalls (0.8 s here: no tick reads the line, no command goes out) lets the device's watchdog zero
+    the drive 0.5 s after the last command took effect, while the last command, all a bag of commands has, says
+    12 V throughout. When the host resumes, the bridge reads the backlog, skips to the newest window (no
+    measurements for the stall) and publishes the applied drive of every window it skipped: 0 V from the watchdog
+    on, the heat the TEMs got."""
+    clock = ManualClock()
+    emu = emulator(clock, noise_counts=0.0)
+    sample = emu._sample
+    watchdog: list[float] = []  # device time [s] of the samples the device flagged as zeroed by its watchdog
+
+    def recorded() -> bytes:
+        line = sample()
+        if P.Parser().feed(line)[0].flags & P.FLAG_WATCHDOG:
+            watchdog.append(emu.device_time_s)
+        return line
+
+    emu._sample = recorded
+    rt, bridge, probe = graph(emu, (12.0, -6.0), clock)
+    rt.run_until(0.3, until='sim')
+    watchdog.clear()  # the boot's: no command yet
+    n_js = len(probe.got['/wrist/joint_states'])
+    clock.now += 0.8  # the stall: the device goes on meanwhile, the host reads nothing and sends nothing
+    emu.serve(clock.now)
+    rt.run_until(1.5, until='sim')
+    got = probe.got['/wrist/tem_drive_applied']
+    stamps = np.array([m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in got])
+    drive = np.array([m.effort for m in got])
+    assert np.allclose(np.diff(stamps), 0.01, atol=1e-6)  # every window, the skipped ones included
+    zero = np.flatnonzero(np.all(drive == 0.0, axis=1) & (stamps > 0.1))
+    assert 25 <= zero.size <= 35 and np.all(np.diff(zero) == 1), zero  # 0.3 s: 0.8 s of stall less the watchdog's 0.5
+    assert len(watchdog) >= 250  # the device's own word for it
+    assert np.allclose(drive[zero[0] - 1], (12.0, -6.0)) and np.allclose(drive[-1], (12.0, -6.0))
+    assert bridge.counters['windows_skipped'] >= 70  # the stall's windows went out as drive only
+    js = [m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec for m in probe.got['/wrist/joint_states'][n_js:]]
+    assert sum(0.3 < t < 1.1 for t in js) < 10  # measurements: only the newest window of each read
 
 
 def test_a_drive_switching_inside_each_window_is_published_as_it_was_not_as_its_mean(emulator, graph):

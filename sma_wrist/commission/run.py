@@ -20,6 +20,7 @@ from typing import Any
 from sma_wrist.commission.bringup import BringUp, BringUpLimits
 from sma_wrist.commission.device import PortError, SerialDevice, SimDevice
 from sma_wrist.core.errors import ParameterError, SmaWristError
+from sma_wrist.core.yaml_file import write_yaml_file
 from sma_wrist.hw.calibration import Calibration, Wiring
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_FAULT, EXIT_INTERRUPTED = 0, 2, 3, 130
@@ -90,13 +91,12 @@ def write_params(
     for node, values in {**nodes, BRIDGE: {**nodes.get(BRIDGE, {}), **bridge}}.items():
         key = next((k for k in doc if k.strip('/') == node), node)
         doc.setdefault(key, {'ros__parameters': {}})['ros__parameters'].update(values)
-    head = (
-        '# sma_wrist parameters of a commissioned wrist (sma-wrist commission; doc/howto/commission.md).\n'
-        '# hardware_bridge: the wiring and the angle calibration the bring-up measured'
-        + ('; every node: the model identified from the excitation.\n' if nodes else '.\n')
+    comment = (
+        'sma_wrist parameters of a commissioned wrist (sma-wrist commission; doc/howto/commission.md).\n'
+        'hardware_bridge: the wiring and the angle calibration the bring-up measured'
+        + ('; every node: the model identified from the excitation.' if nodes else '.')
     )
-    path.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
-    return path
+    return write_yaml_file(path, doc, comment, flow_lists=True)
 
 
 def commission(

@@ -52,6 +52,7 @@ import numpy as np
 
 from sma_wrist.core.errors import ParameterError, SmaWristError
 from sma_wrist.core.metrics import SEED_PERIOD_S
+from sma_wrist.core.yaml_file import write_yaml_file
 
 #: run's soft start [s] (sma_wrist.core.control.trajectory.RUN_SOFT_START_S) before the compared cycles
 SOFT_START_S = 30.0
@@ -135,15 +136,14 @@ def controllers_of(text: str | Sequence[str] | None, params_files: Sequence[str 
 
 def write_defaults(path: Path, bridge_params: dict[str, Any]) -> Path:
     """The defaults' params file: only the bring-up's calibration under hardware_bridge."""
-    import yaml
-
     keep = {k: bridge_params[k] for k in CALIBRATION_KEYS if k in bridge_params}
-    path.write_text(
-        '# config/wrist.yaml with only the wiring and angle calibration the bring-up measured: the defaults the\n'
-        '# commissioned parameters are verified against (sma-wrist commission, doc/howto/commission.md).\n'
-        + yaml.safe_dump({'hardware_bridge': {'ros__parameters': keep}}, sort_keys=False, default_flow_style=None)
+    return write_yaml_file(
+        path,
+        {'hardware_bridge': {'ros__parameters': keep}},
+        'config/wrist.yaml with only the wiring and angle calibration the bring-up measured: the defaults the\n'
+        'commissioned parameters are verified against (sma-wrist commission, doc/howto/commission.md).',
+        flow_lists=True,
     )
-    return path
 
 
 def settle(bring: Any, lim: SettleLimits | None = None) -> dict[str, Any]:

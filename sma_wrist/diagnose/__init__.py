@@ -28,6 +28,7 @@ import numpy as np
 from sma_wrist.cli_options import diagnose_arguments as add_arguments
 from sma_wrist.contract import ContractError, Recording
 from sma_wrist.core.errors import ParameterError
+from sma_wrist.core.yaml_file import write_yaml_file
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
@@ -126,6 +127,8 @@ class DiagnosisResult:
     wall_s: float = 0.0
     #: the TEM drive the replays ran on: 'applied' (the device's read-back) or 'commanded' (the commands)
     drive: str = 'commanded'
+    #: with the applied drive: how many samples of the run it differed from the commands (None: not compared)
+    drive_differs: int | None = None
     #: where the heat-balance replay's exchanger faces started: 'measured' (the bag's face temperatures), 'rest',
     #: or 'twin' (a live monitor's replay before the window)
     thermal_start: str = 'rest'
@@ -494,6 +497,7 @@ def diagnose_run(
         source=run.source,
         duration_s=run.duration,
         drive=run.drive,
+        drive_differs=run.drive_differs,
         thermal_start=run.thermal_start,
         model=pm.describe(),
     )
@@ -564,8 +568,6 @@ def write_params(
     :class:`~sma_wrist.plant_model.PlantModel` replayed instead (its files, pre-load and ``model.*``
     values carried, the fitted values replacing its).
     """
-    import yaml
-
     from sma_wrist.core.plant import extensions as mx
 
     # payload_kg stays the recorded one (what /wrist/payload says); a payload mismatch is the
@@ -588,21 +590,18 @@ def write_params(
     params.update({f'model.{k}': v for k, v in ext.items()})
     replay_only = [k for k, v in ext.items() if k in mx.REPLAY_ONLY and v != mx.NOMINAL[k]]
     doc = {'plant_sim': {'ros__parameters': params}}
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    head = (
-        f'# sma-wrist diagnose: extended model of {res.source or "a run"}\n'
-        f'# cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
-        f'# schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py\n'
+    comment = (
+        f'sma-wrist diagnose: extended model of {res.source or "a run"}\n'
+        f'cause: {res.cause or "none"} ({res.subsystem or "-"}); {res.summary}\n'
+        f'schema: doc/explanation/diagnosis.md: plant_sim parameters, model.* as in sma_wrist/core/plant/extensions.py'
         + (
-            f'# note: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
-            f'which refuses this file\n'
+            f'\nnote: {", ".join(replay_only)} is replayed by the diagnosis but not simulated by plant_sim, '
+            f'which refuses this file'
             if replay_only
             else ''
         )
     )
-    out.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
-    return out
+    return write_yaml_file(path, doc, comment, flow_lists=True)
 
 
 def diagnose(
@@ -686,6 +685,8 @@ def run_cli(args: argparse.Namespace) -> int:
     for w in res.warnings:
         print(f'warning: {w}')
     print(res.summary)
+    if res.drive == 'applied':  # a bag of commands only (every simulator bag) replays them, as it always did
+        print(f'  {rp.drive_replayed(res.drive, res.drive_differs)}')
     if res.model != DiagnosisResult.model:  # a params file's or model files' model: say which
         print(f'  model replayed: {res.model}')
     for c, g in res.channels.items():

@@ -56,6 +56,9 @@ START_RANGE_C = (-40.0, 150.0)
 MIN_DURATION_S = 30.0
 DEFAULT_PAYLOAD_KG = 0.3
 MAX_COMMAND_V = 30.0
+#: an applied drive this far [V] from the command held at the same grid sample differs from it: well above the
+#: protocol's 1 mV steps, well below any drive that heats
+DRIVE_DIFF_V = 0.01
 #: gaps up to this long [s] are bridged (and masked); longer ones cut the run
 MAX_BRIDGE_S = 5.0
 #: a temperature repeated exactly for longer than this [s] while its TEM is driven harder than STALE_DRIVE_V [V]
@@ -95,6 +98,9 @@ class Run:
     settle_s: float = 0.0
     #: where ``u`` comes from: 'applied' (the device's read-back, DRIVE_TOPIC) or 'commanded' (the commands)
     drive: str = 'commanded'
+    #: with the applied drive: the grid samples where it differed from the command held there (by over DRIVE_DIFF_V
+    #: on either TEM: the graph's delay, the device's watchdog, a safety cut or clip); None: not compared
+    drive_differs: int | None = None
 
     @property
     def n(self) -> int:
@@ -262,6 +268,8 @@ def load_run(path: str | Path, max_rate_hz: float = 100.0, recording: Recording 
                 series[key] = s
     run = run_from_series(series, str(p), warnings, max_rate_hz)
     run.drive = drive
+    if drive == 'applied':
+        run.drive_differs = commands_differ(run, data, rec.joint)
     faces = face_series(data, warnings)
     if faces is not None and run.T is not None:
         why = start_at_faces(run, faces)
@@ -284,6 +292,36 @@ def drive_series(data: dict[str, Any], warnings: list[str]) -> dict[str, tuple[n
         raise DiagnoseInputError(
             f'{DRIVE_TOPIC}: unexpected message content ({exc}); the contract type is required (msg_defs/topics.yaml)'
         ) from None
+
+
+def zero_order_hold(t: np.ndarray, v: np.ndarray, grid: np.ndarray, before: float | None = None) -> np.ndarray:
+    """``v`` (stamped ``t`` [s], sorted) held from each stamp to the next, at ``grid`` [s]: a command drives from its
+    stamp on. Before the first stamp: ``before``, or the first value when None."""
+    i = np.searchsorted(t, grid + 1e-7, side='right') - 1
+    out = v[np.clip(i, 0, v.size - 1)]
+    return out if before is None else np.where(i >= 0, out, before)
+
+
+def commands_differ(run: Run, data: dict[str, Any], joint_name: str | None = None) -> int | None:
+    """How many of ``run``'s grid samples had an applied drive (``run.u``, the read-back) other than the TEM
+    commands in a bag's ``data`` held there (by over DRIVE_DIFF_V on either TEM); None when the bag has no usable
+    commands to compare with. What cleaning the commands finds is not warned about: the replay did not run on them."""
+    if run.u is None:
+        return None
+    held = []
+    for key in ('u1', 'u2'):
+        topic = TOPICS[key]
+        if topic not in data or not len(data[topic][1]):
+            return None
+        try:
+            t, v = _series(topic, data[topic][0], data[topic][1], 'float', [], joint_name)
+        except (AttributeError, TypeError, ValueError):
+            return None
+        if not t.size:
+            return None
+        # before the first command the device drove nothing: zero, as plant_sim and the device start
+        held.append(zero_order_hold(t, v, run.t0_s + run.t, before=0.0))
+    return int(np.count_nonzero(np.any(np.abs(run.u - np.stack(held, axis=1)) > DRIVE_DIFF_V, axis=1)))
 
 
 def face_series(data: dict[str, Any], warnings: list[str]) -> list[tuple[np.ndarray, np.ndarray]] | None:
@@ -439,9 +477,7 @@ def run_from_series(
         return np.interp(grid, t, v)
 
     def hold(key: str) -> np.ndarray:
-        t, v = series[key]
-        i = np.searchsorted(t, grid + 1e-7, side='right') - 1
-        return v[np.clip(i, 0, v.size - 1)]
+        return zero_order_hold(*series[key], grid)
 
     u = np.stack([hold('u1'), hold('u2')], axis=1) if have_u else None
     T = np.stack([interp('T1'), interp('T2')], axis=1) if have_T else None

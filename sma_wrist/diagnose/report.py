@@ -108,6 +108,15 @@ def channel_stats(
 
 
 # ----------------------------------------------------------------------------- report
+def drive_replayed(drive: str, differs: int | None) -> str:
+    """The report's line on the TEM drive the replays ran on (``drive``: 'applied' or 'commanded'; ``differs``: the
+    samples where the applied drive differed from the commands, None where the bag had no commands to compare)."""
+    if drive != 'applied':
+        return 'replayed the TEM commands (/wrist/tem_{1,2}/command): the bag has no applied drive'
+    where = '' if differs is None else f' ({differs} samples where it differed from the command)'
+    return f'replayed the applied TEM drive{where}, as the device read it back on /wrist/tem_drive_applied'
+
+
 def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Path:
     """Markdown summary + PNG plots into out_dir; returns the markdown path."""
     import matplotlib
@@ -193,12 +202,7 @@ def write_report(result: Any, out_dir: str | Path, traces: dict[str, Any]) -> Pa
         f'| held-out RMS before / after ({result.channel}) | {result.rmse_before:.4g} / {result.rmse_after:.4g} |',
         f'| gain | {result.gain_pct:.1f} % (bootstrap 5-95 %: {result.gain_ci[0]:.1f} .. {result.gain_ci[1]:.1f}) |',
         f'| confidence | {result.confidence:.2f} |',
-        '| TEM drive replayed | '
-        + (
-            "the device's read-back (/wrist/tem_drive_applied) |"
-            if result.drive == 'applied'
-            else 'the commands (/wrist/tem_{1,2}/command) |'
-        ),
+        f'| TEM drive | {drive_replayed(result.drive, result.drive_differs)} |',
         '| TEM exchanger faces started | '
         + {
             'measured': 'at the measured temperatures (/wrist/tem_{1,2}/face_temperature) |',

@@ -83,7 +83,7 @@ def qos_for(topic: Topic) -> QoSProfile:
         )
     return QoSProfile(
         history=HistoryPolicy.KEEP_LAST,
-        depth=10,
+        depth=topic.depth,
         reliability=ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.VOLATILE,
     )

@@ -34,6 +34,7 @@ import numpy as np
 
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.sdgpi import EnvelopeSections, SDGPIParams
+from sma_wrist.core.yaml_file import write_yaml_file
 
 FORMAT = 'sma_wrist.hysteresis'
 VERSION = 1
@@ -75,16 +76,12 @@ def params_to_dict(params: SDGPIParams, identification: dict[str, Any] | None = 
 
 def save_hysteresis(path: str | Path, params: SDGPIParams, identification: dict[str, Any] | None = None) -> Path:
     """Write ``hysteresis.yaml`` (format version 1)."""
-    import yaml
-
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    head = (
-        '# SD-GPI hysteresis of one wire (sma_wrist hysteresis file, format version 1; '
-        'see sma_wrist/core/hysteresis/params_file.py)\n'
+    return write_yaml_file(
+        path,
+        params_to_dict(params, identification),
+        'SD-GPI hysteresis of one wire (sma_wrist hysteresis file, format version 1; '
+        'see sma_wrist/core/hysteresis/params_file.py)',
     )
-    p.write_text(head + yaml.safe_dump(params_to_dict(params, identification), sort_keys=False))
-    return p
 
 
 def params_from_dict(doc: Any, where: str = 'hysteresis file') -> SDGPIParams:

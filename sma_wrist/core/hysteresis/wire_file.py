@@ -26,6 +26,7 @@ from typing import Any
 
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
+from sma_wrist.core.yaml_file import write_yaml_file
 
 FORMAT = 'sma_wrist.wire'
 VERSION = 1
@@ -45,13 +46,11 @@ def wire_to_dict(wire: PhaseFractionWire, identification: dict[str, Any] | None 
 
 def save_wire_file(path: str | Path, wire: PhaseFractionWire, identification: dict[str, Any] | None = None) -> Path:
     """Write ``wire.yaml`` (format version 1)."""
-    import yaml
-
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    head = "# the model wrist's wire (sma-wrist commission); name it as wire_file of plant_sim\n"
-    p.write_text(head + yaml.safe_dump(wire_to_dict(wire, identification), sort_keys=False))
-    return p
+    return write_yaml_file(
+        path,
+        wire_to_dict(wire, identification),
+        "the model wrist's wire (sma-wrist commission); name it as wire_file of plant_sim",
+    )
 
 
 def wire_from_dict(doc: Any, where: str = 'wire file') -> PhaseFractionWire:

@@ -38,6 +38,7 @@ from typing import Any
 
 from sma_wrist.core.errors import ParameterError
 from sma_wrist.core.thermal import heat_balance as th
+from sma_wrist.core.yaml_file import write_yaml_file
 
 FORMAT = 'sma_wrist/thermal'
 VERSION = 1
@@ -82,18 +83,7 @@ def write_thermal_file(
     path: str | Path, params: th.ThermalParams, identification: Mapping[str, Any] | None = None, header: str = ''
 ) -> Path:
     """Write ``params`` as a version-1 thermal file (YAML) with an optional comment header."""
-    return _write_yaml(path, thermal_file_dict(params, identification), header)
-
-
-def _write_yaml(path: str | Path, doc: Mapping[str, Any], header: str) -> Path:
-    """``doc`` as YAML (in its order) under a comment header of ``header``'s lines."""
-    import yaml
-
-    p = Path(path)
-    text = ''.join(f'# {line}\n' if line else '#\n' for line in header.splitlines())
-    text += yaml.safe_dump(dict(doc), sort_keys=False, default_flow_style=False)
-    p.write_text(text)
-    return p
+    return write_yaml_file(path, thermal_file_dict(params, identification), header)
 
 
 def _number(path: Path, where: str, value: Any) -> float:
@@ -207,7 +197,7 @@ def write_heat_balance_file(
     path: str | Path, params: Any, identification: Mapping[str, Any] | None = None, header: str = ''
 ) -> Path:
     """Write a peltier.PeltierParams as a version-1 heat-balance file (YAML) with an optional comment header."""
-    return _write_yaml(path, heat_balance_file_dict(params, identification), header)
+    return write_yaml_file(path, heat_balance_file_dict(params, identification), header)
 
 
 def load_heat_balance_file(path: str | Path) -> Any:
