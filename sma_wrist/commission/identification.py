@@ -1213,6 +1213,7 @@ def identify_mechanics(
             i_fit,
             i_held,
             pff,
+            {k: x[0] for k, x in pf_fits.items()},
             noise_mrad,
             Path(values['wire_file']),
             e0 - PlantParams().preload_elongation_mm,

@@ -6,19 +6,21 @@ tells the wire's values apart in: on the emulated phase-fraction wrist (doc/howt
 wire fitted on the excitation replayed its held-out cycle to a few mrad and missed the commissioned closed-loop run
 by tens. The verification records both of its runs (:mod:`sma_wrist.commission.verify`); this step:
 
-1. refits the phase-fraction wire handed over as the model's wire (``wire_file``), with the joint's friction, on
-   the excitation PLUS the defaults' run: one least-squares residual over both recordings, each replayed from its
-   own start (:func:`sma_wrist.commission.identification.fit_phase_fraction_wire` with ``extra``), once per
-   constitutive law (:data:`sma_wrist.core.hysteresis.phase_fraction.LAWS`), from the first fit's values;
+1. refits the phase-fraction wire, with the joint's friction and the payload, on the excitation PLUS the defaults'
+   run: one least-squares residual over both recordings, each replayed from its own start
+   (:func:`sma_wrist.commission.identification.fit_phase_fraction_wire` with ``extra``), once per constitutive law
+   (:data:`sma_wrist.core.hysteresis.phase_fraction.LAWS`), each from the identification's fit of that law (a
+   refit of the other law from the values of the one handed over stopped in another minimum: 35 against 12.6 mrad
+   held out on the emulated phase-fraction wrist);
 2. judges every candidate (the first fit, each refit) on the commissioned run, which no fit has seen: the RMS angle
    error of its replay from the measured temperatures after the run's soft start;
-3. hands the best refit over (``wire.yaml``, the model's friction in the params file) only where it predicts the
-   commissioned run better than the first fit by more than the angle's noise (:func:`hand_over_refined`); else the
-   first fit stays.
+3. hands the best refit over (``wire.yaml``, the model's friction and payload in the params file) only where it
+   predicts the commissioned run better than the first fit by more than the angle's noise (:func:`hand_over_refined`);
+   else the first fit stays.
 
-The payload stays the one handed over: it is what the bridge told the controllers in both runs (``/wrist/payload``),
-the payload every replay of a recorded run starts from (a refit with its own payload would be judged on the
-commissioned run with another payload than its diagnosis replays).
+The bridge's payload stays the one the controllers were verified with (``/wrist/payload`` in both runs); a refit's
+own payload is the model's, written as plant_sim's ``model.payload_err_kg`` (the true payload less the recorded
+one), which plant_sim, the diagnosis and the twin monitor add to ``/wrist/payload``.
 
 The compensator's SD-GPI is not refitted (it is what the verified loop inverted), nor an SD-GPI model wire: the
 refinement refits the phase-fraction wire only (an SD-GPI model wire is the built-in family whose fit the excitation
@@ -43,20 +45,24 @@ from sma_wrist.core.hysteresis.phase_fraction import LAWS
 #: value); they start at the first fit, which is near
 REFINE_MAX_NFEV = 15
 REFINE_ROUNDS = 1
+#: the payload refitted with the wire (the excitation alone does not tell it from the wire's values)
+REFINE_FREE_PAYLOAD = True
 
 
 @dataclass
 class WireRefinement:
     """What the identification hands to the refinement: the excitation's recording on the replay grid (from the
     recording's start: the bring-up's heatings are the wires' history) with its fit and held-out samples, the
-    phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`), the
-    angle's noise [mrad], ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less
-    ``datum_shift_mm``: the SD-GPI's pre-load elongation)."""
+    phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`: its
+    payload is the bridge's) and the fit of each law (``fits``, the refits' starts), the angle's noise [mrad],
+    ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's
+    pre-load elongation)."""
 
     excitation: Any
     i_fit: int
     i_held: int
     first: Any
+    fits: dict[str, Any]
     noise_mrad: float
     wire_file: Path
     datum_shift_mm: float
@@ -110,7 +116,8 @@ def refine_wire(
     """Refit the phase-fraction model wire on the excitation and the defaults' run, judge it on the commissioned run
     and hand the better one over (module docstring); returns what was done, JSON-ready:
     ``{'refined', 'law', 'heldout': {'metric', 'unit', 'first', <law>: ...}, 'fit_rms_mrad', 'angle_noise_mrad',
-    'coulomb_Nm', 'wire', 'seconds', 'why'}`` (the last three where a refit is handed over)."""
+    'coulomb_Nm', 'payload_kg', 'wire', 'seconds', 'why'}`` (friction, payload and wire where a refit is handed
+    over)."""
     from sma_wrist.commission.identification import fit_phase_fraction_wire, pf_start
     from sma_wrist.diagnose.data import DiagnoseInputError
 
@@ -126,19 +133,18 @@ def refine_wire(
     i_com = int(round(settle_s / held.dt))
     heldout = {'first': replay_rms_mrad(first.wire, first.coulomb_Nm, first.payload_kg, held, i_com)}
     fits: dict[str, Any] = {}
-    start = pf_start(first)
     for law in LAWS:
-        fit_run = dataclasses.replace(exc, payload_kg=first.payload_kg)
+        own = ctx.fits.get(law, first)
         f = fit_phase_fraction_wire(
-            fit_run,
+            dataclasses.replace(exc, payload_kg=own.payload_kg),
             ctx.i_held,
-            start,
+            pf_start(own),
             max_nfev=REFINE_MAX_NFEV,
             i_fit=ctx.i_fit,
             law=law,
-            extra=[(dataclasses.replace(defaults, payload_kg=first.payload_kg), i_def)],
+            extra=[(dataclasses.replace(defaults, payload_kg=own.payload_kg), i_def)],
             rounds=REFINE_ROUNDS,
-            free_payload=False,
+            free_payload=REFINE_FREE_PAYLOAD,
         )
         fits[law] = f
         heldout[law] = replay_rms_mrad(f.wire, f.coulomb_Nm, f.payload_kg, held, i_com)
@@ -166,6 +172,7 @@ def refine_wire(
                 'refined': True,
                 'law': best,
                 'coulomb_Nm': round(f.coulomb_Nm, 5),
+                'payload_kg': round(f.payload_kg, 4),
                 'wire': {k: round(x, 4) for k, x in f.wire.values().items()},
                 'why': f'the refit ({best} law) predicts the commissioned run {heldout[best]:.3g} mrad RMS against '
                 f"the first fit's {heldout['first']:.3g}, better beyond the angle's noise ({ctx.noise_mrad:.2g})",
@@ -184,8 +191,8 @@ def refine_wire(
 
 
 def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldout: dict[str, float], law: str) -> None:
-    """Hand a refit over: ``wire.yaml`` rewritten, the model's friction (plant_sim's ``model.coulomb_Nm``) in the
-    params file."""
+    """Hand a refit over: ``wire.yaml`` rewritten; in the params file plant_sim's ``model.coulomb_Nm`` and, where
+    the refit's payload is not the bridge's (``ctx.first``'s), ``model.payload_err_kg``."""
     import yaml
 
     from sma_wrist.core.hysteresis.wire_file import save_wire_file
@@ -207,6 +214,11 @@ def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldou
     head = ''.join(line for line in p.read_text().splitlines(keepends=True) if line.startswith('#'))
     ps = doc.setdefault('plant_sim', {}).setdefault('ros__parameters', {})
     ps['model.coulomb_Nm'] = round(fit.coulomb_Nm, 5)
+    err = round(fit.payload_kg - ctx.first.payload_kg, 4)
+    if err:
+        ps['model.payload_err_kg'] = err
+    else:
+        ps.pop('model.payload_err_kg', None)
     p.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
 
 
