@@ -95,6 +95,9 @@ def test_the_verification_runs_the_defaults_and_the_params_file_side_by_side(tmp
     d = v['diagnosis']
     assert d['bag'].endswith('pid_commissioned') and ('error' in d or d['discrepancy'] in (True, False)), d
     assert os.path.isfile(os.path.join(d['bag'], 'metadata.yaml'))  # recorded afresh over the earlier folder
+    # the defaults' run recorded beside it: device data the wire's refinement fits on
+    assert [os.path.basename(r['bag'] or '') for r in v['runs']] == ['pid_commissioned', 'pid_defaults']
+    assert os.path.isfile(os.path.join(v['runs'][1]['bag'], 'metadata.yaml'))
 
 
 def test_on_a_serial_port_the_verification_runs_the_graph_on_that_port(tmp_path):

@@ -30,8 +30,9 @@ def _histories(n: int, k: int) -> tuple[np.ndarray, np.ndarray]:
     return T, y
 
 
-def test_the_compiled_load_solve_is_the_numpy_reference():
-    muscle = pf.PhaseFractionMuscle(pf.PhaseFractionWire(), 83.0, AREA, 3.0)
+@pytest.mark.parametrize('law', pf.LAWS)
+def test_the_compiled_load_solve_is_the_numpy_reference(law):
+    muscle = pf.PhaseFractionMuscle(pf.PhaseFractionWire(law=law), 83.0, AREA, 3.0)
     T, y = _histories(5, 1000)
     mem = pf.cooled_memory(muscle.wc, T[0], np.full(5, 0.8))
     mem_k, m, m_k = mem.copy(), np.full(5, 0.8), np.full(5, 0.8)
@@ -45,6 +46,26 @@ def test_the_compiled_load_solve_is_the_numpy_reference():
         assert np.array_equal(s.compliance_mm_per_kgf, out[:, 1])
         seen.update(np.round(mem[:, pf.XI], 1))
     assert min(seen) <= 0.3 and max(seen) >= 0.9  # the histories go through the transformations
+
+
+def test_the_published_law_is_brinsons_cosine_detwinning_and_voigt_modulus():
+    """Eq. 4b against Eq. 4 at one state: the elastic strain sigma / (E_A + xi (E_M - E_A)) and the oriented share
+    (1 - cos(pi u)) / 2, written out here from Brinson 1993; and the slope the load solve uses is the strain's."""
+    w = pf.PhaseFractionWire(law='brinson')
+    wc = w.packed(83.0, AREA)
+    T, m = np.array([58.0]), np.array([0.75])
+    mem = pf.cooled_memory(wc, np.array([20.0]), m)  # martensite, heating on the major branch
+    y, dy, xi = pf.elongation(wc, T, m, mem)
+    sig = m[0] * pf.G / (AREA * 1e6)
+    u = (sig - w.sigma_s_MPa) / (w.sigma_f_MPa - w.sigma_s_MPa)
+    assert 0.0 < u < 1.0 and 0.0 < xi[0] < 1.0  # inside the ramp and the transformation: every term counts
+    E = 1e3 * (w.E_A_GPa + xi[0] * (w.E_M_GPa - w.E_A_GPa))
+    eps = sig / E + w.eps_L * 0.5 * (1.0 - math.cos(math.pi * u)) * xi[0] + w.alpha_per_C * (T[0] - w.T_ref_C)
+    assert y[0] == pytest.approx(83.0 * eps - w.offset_mm, rel=1e-12)
+    assert y[0] != pytest.approx(pf.elongation(pf.PhaseFractionWire().packed(83.0, AREA), T, m, mem)[0][0], rel=1e-3)
+    h = 1e-6
+    num = (pf.elongation(wc, T, m + h, mem)[0] - pf.elongation(wc, T, m - h, mem)[0]) / (2 * h)
+    assert dy[0] == pytest.approx(num[0], rel=1e-5)
 
 
 def test_a_reversal_inside_the_transformation_starts_a_minor_loop_without_a_jump():
@@ -116,6 +137,15 @@ def test_wire_yaml_round_trips_and_a_malformed_one_is_refused_naming_the_key(tmp
     (tmp_path / 'form.yaml').write_text(text.replace('form: phase_fraction', 'form: preisach'))
     with pytest.raises(ParameterError, match='form must be one of phase_fraction'):
         load_wire_file(tmp_path / 'form.yaml')
+    # the constitutive law: written, read back, a file without it the linear one, a bad one refused naming it
+    assert 'law: linear' in text
+    brinson = save_wire_file(tmp_path / 'brinson.yaml', dataclasses.replace(wire, law='brinson'))
+    assert load_wire_file(brinson) == dataclasses.replace(wire, law='brinson') != wire
+    (tmp_path / 'nolaw.yaml').write_text(text.replace('law: linear\n', ''))
+    assert load_wire_file(tmp_path / 'nolaw.yaml') == wire
+    (tmp_path / 'law.yaml').write_text(text.replace('law: linear', 'law: cosine'))
+    with pytest.raises(ParameterError, match='law must be one of linear, brinson'):
+        load_wire_file(tmp_path / 'law.yaml')
     # the diagnosis' and the twin's plant model: a params file whose plant_sim names a bad wire_file
     params = tmp_path / 'p.yaml'
     params.write_text('plant_sim:\n  ros__parameters:\n    wire_file: order.yaml\n')

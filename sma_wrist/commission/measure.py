@@ -259,6 +259,8 @@ def whole_procedure(quick: bool = False, seed: int = 11, progress: Any = None) -
                 if not diag
                 else diag.get('error') or ('no discrepancy' if not diag['discrepancy'] else diag['summary']),
                 'diagnosis_residual': diag.get('residual'),
+                # the model wire's refinement on the defaults run: its held-out errors on the commissioned run
+                'refinement': v.get('refinement'),
                 'thermal': {
                     k: (res.get('identified') or {}).get('thermal', {}).get(k) for k in ('handed_over', 'heldout')
                 }

@@ -170,7 +170,7 @@ def commission(
     if verification is not None and result['status'] == 'commissioned':
         from sma_wrist.commission.verify import run_verification
 
-        run_verification(result, out, device, verification, progress, bring)
+        run_verification(result, out, device, verification, progress, bring, ident.refinement if ident else None)
     # ---- end of verification
     return result
 

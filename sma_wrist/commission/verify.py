@@ -45,6 +45,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -356,6 +357,7 @@ def verify(
     bridge: dict[str, Any] | None = None,
     settle_to_start: Callable[[float], dict[str, Any]] | None = None,
     budget_s: float | None = None,
+    refine: Callable[[Path, Path, float], dict[str, Any]] | None = None,
 ) -> dict[str, Any]:
     """Run the sine per controller with the defaults and with ``params_file`` on the device ``serve()`` gives
     (a context manager yielding its port, entered for each run), each run after ``settle_to_start(timeout_s)`` (the
@@ -371,7 +373,9 @@ def verify(
     the device's own time (a served emulated device), else wall time counts as device time (a real one runs in
     real time). KeyboardInterrupt propagates (the bridge has left the TEMs at 0 V); VerificationStopped when the
     device stopped answering. The result is built in ``into`` (a dict of the caller's), so that what was measured
-    before either is kept."""
+    before either is kept. ``refine(commissioned bag, defaults bag, soft start [s])``: run after the first
+    controller's two recorded runs, before the diagnosis (:func:`sma_wrist.commission.refine.refine_wire`), its
+    result as ``refinement``."""
     from sma_wrist import runtime
 
     runtime.activate()  # the embedded runtime where rclpy is absent (as sma-wrist run)
@@ -396,6 +400,7 @@ def verify(
             'runs': [],
             'plots': [],
             'diagnosis': None,
+            'refinement': None,
         }
     )
 
@@ -432,8 +437,11 @@ def verify(
             start = settle_to_start(settle_timeout()) if settle_to_start is not None else None
             runs_left -= 1
             account()
-            recorded = diagnose and diagnosed is None and (which == 'commissioned' or same)
-            bag = folder / f'{ctrl}_commissioned' if recorded else None
+            # the first controller's runs are recorded: the commissioned one is diagnosed, the defaults' one is
+            # device data the refinement (sma_wrist.commission.refine) fits the wire on beside the excitation
+            recorded = diagnose and ctrl == controllers[0]
+            bag = folder / f'{ctrl}_{"commissioned" if which == "commissioned" or same else "defaults"}'
+            bag = bag if recorded else None
             if bag is not None and bag.is_dir():
                 shutil.rmtree(bag)  # an earlier commissioning into this folder: its report and params are replaced too
             payload, soft = run_settings(files)
@@ -448,7 +456,7 @@ def verify(
             account()
             if s.interrupted:
                 raise KeyboardInterrupt
-            if bag is not None:
+            if bag is not None and (which == 'commissioned' or same):
                 diagnosed, diagnosed_soft = bag, soft
             m = s.metrics or {}
             per = cycle_metrics(s.run, duration_s, soft) if s.run is not None else {'cycles': [], 'start_up': None}
@@ -491,6 +499,10 @@ def verify(
             order = [w for w in ('default', 'commissioned') if w in runs]
             plot_runs([runs[w] for w in order], [labels[w] for w in order], png, f'verification: {ctrl}')
             res['plots'].append(str(png))
+    bags = [Path(r['bag']) for r in res['runs'] if r['bag'] and r['controller'] == controllers[0]]
+    if refine is not None and len(bags) == 2:
+        progress('verification: refinement of the model wire on the defaults run')
+        res['refinement'] = refine(bags[0], bags[1], diagnosed_soft)
     if diagnosed is not None:
         progress('verification: diagnosis of the commissioned run')
         res['diagnosis'] = diagnosis(diagnosed, params_file, diagnosed_soft)
@@ -544,12 +556,15 @@ def run_verification(
     opts: VerifyOptions,
     progress: Callable[[str], None] | None = None,
     bring: Any = None,
+    refinement: Any = None,
 ) -> None:
     """Verify the commissioned wrist on ``device`` (closed: the bring-up is over) into ``result``
     (``verification``, ``device_time_s``, and ``status`` / ``message`` / ``faults`` when it is interrupted, the
     device stops answering or breaks a limit while settling); append its section to the report. ``bring``: the
     bring-up (:class:`~sma_wrist.commission.bringup.BringUp`) whose record gives the rest temperatures each run is
-    settled to (None, or ``opts.settle`` false: no settling). The TEMs are at 0 V afterwards in every case."""
+    settled to (None, or ``opts.settle`` false: no settling). ``refinement``: the identification's
+    :class:`~sma_wrist.commission.refine.WireRefinement` (None: nothing to refine). The TEMs are at 0 V afterwards in
+    every case."""
     from sma_wrist.commission.bringup import Stop
     from sma_wrist.commission.detect import Fault
     from sma_wrist.commission.device import DeviceLost
@@ -571,6 +586,11 @@ def run_verification(
         finally:
             bring.dev.close()
 
+    refine = None
+    if refinement is not None:
+        from sma_wrist.commission.refine import refine_wire
+
+        refine = partial(refine_wire, refinement, params_file=result['params_file'])
     try:
         ctrls = list(opts.controllers) if opts.controllers else controllers_of(None, [result['params_file']])
         with tempfile.TemporaryDirectory(prefix='sma_wrist_verify_') as tmp:
@@ -594,7 +614,13 @@ def run_verification(
                 bridge=SIM_BRIDGE if sim else None,
                 settle_to_start=settle_to_start if settling else None,
                 budget_s=BUDGET_S - result['device_time_s'],
+                refine=refine,
             )
+        if refinement is None and v.get('diagnosis') is not None:
+            v['refinement'] = {
+                'refined': False,
+                'why': "the model's wire is the SD-GPI of hysteresis_file: only a phase-fraction model wire is refitted",
+            }
         warning = diagnosis_warning(v.get('diagnosis'))
         if warning:
             result['warnings'].append(warning)
@@ -743,6 +769,9 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
     for p in v.get('plots', []):
         rel = Path(p).relative_to(out) if Path(p).is_relative_to(out) else Path(p)
         lines += [f'![{Path(p).stem}]({rel.as_posix()})', '']
+    rf = v.get('refinement')
+    if rf:
+        lines += [refinement_line(rf), '']
     d = v.get('diagnosis')
     if d:
         verdict = (
@@ -772,6 +801,24 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
     return lines
 
 
+def refinement_line(rf: dict[str, Any]) -> str:
+    """What the refinement of the model wire did (:func:`sma_wrist.commission.refine.refine_wire`), one line: the
+    held-out errors on the commissioned run of the first fit and of each refit, and what was handed over."""
+    h = rf.get('heldout') or {}
+    if not h:
+        return f'Refinement of the model wire: not refitted ({rf.get("why", "")}).'
+    errors = ', '.join(
+        f'{"first fit" if k == "first" else f"refit ({k} law)"} {x:.3g}'
+        for k, x in h.items()
+        if k not in ('metric', 'unit')
+    )
+    what = f'the refit ({rf["law"]} law) handed over' if rf.get('refined') else 'the first fit kept'
+    return (
+        'Refinement of the model wire on the excitation and the defaults run: RMS angle error of the commissioned '
+        f'run (held out): {errors} mrad; {what} ({rf.get("why", "")}; {rf.get("seconds", 0):g} s of CPU).'
+    )
+
+
 #: the verdicts as the report and the terminal say them
 VERDICTS = {
     'better': 'commissioned better (beyond the spread)',
@@ -792,6 +839,8 @@ def text_lines(v: dict[str, Any]) -> list[str]:
             f'verification {ctrl}: max {_pm(d, "max")} -> {_pm(c, "max")} %, RMS {_pm(d, "rms")} -> '
             f'{_pm(c, "rms")} % (defaults -> commissioned): {verdict}'
         )
+    if v.get('refinement'):
+        out.append(refinement_line(v['refinement']))
     d = v.get('diagnosis')
     if d:
         out.append(
@@ -828,6 +877,7 @@ __all__ = [
     'VerifyOptions',
     'run_verification',
     'text_lines',
+    'refinement_line',
     'CONTROLLERS',
     'DURATION_S',
 ]

@@ -23,6 +23,13 @@ wire, stress sigma [MPa] (sigma = m g / A of the per-wire load m [kgf]), tempera
   eps = sigma (xi / E_M + (1 - xi) / E_A) + eps_L d(sigma) xi + alpha (T - T_ref),
   d(sigma) = clip((sigma - sigma_s) / (sigma_f - sigma_s), 0, 1) the oriented share, a linear ramp between
   Brinson's critical detwinning stresses: martensite under little stress gives little strain.  (4)
+* the published form (``law = 'brinson'``: Brinson 1993's own details of Eq. 4): the phases' moduli averaged
+  linearly in the fraction (Voigt, Brinson's E(xi) = E_A + xi (E_M - E_A)) and the oriented share following his
+  cosine kinetics of the stress-induced martensite between the critical stresses:
+  eps = sigma / (E_A + xi (E_M - E_A)) + eps_L d_c(sigma) xi + alpha (T - T_ref),
+  d_c(sigma) = (1 - cos(pi u)) / 2, u = clip((sigma - sigma_s) / (sigma_f - sigma_s), 0, 1).  (4b)
+  Both forms have the same values; which one describes a wrist is measured (commissioning fits both and hands over
+  the one that predicts a held-out recording better).
 
 The wire's elongation is y = L eps - y_0 [mm] (L the bundle's wire length, 83 mm; y_0 the datum ``offset_mm``): the
 datum puts the wire on the scale of the chain's pre-load elongation e0 (Eq. 4.17) that the SD-GPI's mirror constant
@@ -62,6 +69,8 @@ XI_EPS = 1e-9
 #: compiled plant, whose torques round differently)
 X_EPS = 1e-9
 MEMORY_SIZE = 5
+#: the constitutive details (:attr:`PhaseFractionWire.law`), their index the kernel's ``law`` column
+LAWS = ('linear', 'brinson')
 
 
 @dataclass(frozen=True)
@@ -89,10 +98,14 @@ class PhaseFractionWire:
     sigma_ref_MPa: float = 150.0  # ~0.75 kgf per 0.25 mm wire: the chain's working load
     offset_mm: float = 1.2  # elongation datum y_0 [mm]: the built-in e0 (1.98 mm) at the cold wire's mid-stroke
     T_valid: tuple[float, float] = (-10.0, 130.0)
+    #: the constitutive details: 'linear' (Eq. 4: linear detwinning ramp, Reuss compliance) or 'brinson' (Eq. 4b)
+    law: str = 'linear'
     name: str = field(default='phase-fraction wire', compare=False)
 
     def __post_init__(self) -> None:
-        vals = [getattr(self, f.name) for f in fields(self) if f.name not in ('T_valid', 'name')]
+        if self.law not in LAWS:
+            raise ParameterError(f'{self.name}: law must be one of {", ".join(LAWS)}, got {self.law!r}')
+        vals = [getattr(self, f.name) for f in fields(self) if f.name not in ('T_valid', 'name', 'law')]
         if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in vals):
             raise ParameterError(f'{self.name}: every phase-fraction wire parameter must be a finite number')
         if not (self.M_f_C < self.M_s_C and self.A_s_C < self.A_f_C):
@@ -116,7 +129,7 @@ class PhaseFractionWire:
 
     def values(self) -> dict[str, float]:
         """The numbers (no name, no validity window), for files and reports."""
-        return {k: float(v) for k, v in asdict(self).items() if k not in ('T_valid', 'name')}
+        return {k: float(v) for k, v in asdict(self).items() if k not in ('T_valid', 'name', 'law')}
 
     def packed(self, wire_length_mm: float, wire_area_m2: float) -> FloatArray:
         """The kernel's constant row (:data:`PACKED`)."""
@@ -140,6 +153,7 @@ class PhaseFractionWire:
                 wire_length_mm,
                 per_kgf,
                 self.offset_mm,
+                float(LAWS.index(self.law)),
             ],
             dtype=float,
         )
@@ -164,6 +178,7 @@ PACKED = (
     'L_mm',
     'per_kgf',
     'offset_mm',
+    'law',
 )
 
 
@@ -215,11 +230,21 @@ def elongation(
     sig = m * per_kgf
     xi, dxi = fraction(wc, T, sig, mem)
     S_A, S_M, eps_L, s_s, s_f = wc[7], wc[8], wc[6], wc[9], wc[10]
-    d = np.clip((sig - s_s) / (s_f - s_s), 0.0, 1.0)
-    dd = np.where((sig > s_s) & (sig < s_f), 1.0 / (s_f - s_s), 0.0)
-    S = S_A + xi * (S_M - S_A)
-    eps = sig * S + eps_L * d * xi + wc[11] * (T - wc[12])
-    deps = S + eps_L * dd * xi + (sig * (S_M - S_A) + eps_L * d) * dxi
+    u = np.clip((sig - s_s) / (s_f - s_s), 0.0, 1.0)
+    inside = (sig > s_s) & (sig < s_f)
+    if wc[17] == 0.0:  # Eq. 4: linear ramp, Reuss compliance (linear in xi)
+        d = u
+        dd = np.where(inside, 1.0 / (s_f - s_s), 0.0)
+        S = S_A + xi * (S_M - S_A)
+        el, d_el_sig, d_el_xi = sig * S, S, sig * (S_M - S_A)
+    else:  # Eq. 4b: cosine ramp, Voigt modulus (linear in xi)
+        d = 0.5 * (1.0 - np.cos(np.pi * u))
+        dd = np.where(inside, 0.5 * np.pi * np.sin(np.pi * u) / (s_f - s_s), 0.0)
+        E_A, E_M = 1.0 / S_A, 1.0 / S_M
+        E = E_A + xi * (E_M - E_A)
+        el, d_el_sig, d_el_xi = sig / E, 1.0 / E, -sig * (E_M - E_A) / E**2
+    eps = el + eps_L * d * xi + wc[11] * (T - wc[12])
+    deps = d_el_sig + eps_L * dd * xi + (d_el_xi + eps_L * d) * dxi
     L = wc[14]
     return L * eps - wc[16], L * deps * per_kgf, xi
 
@@ -335,6 +360,7 @@ __all__ = [
     'PhaseFractionMuscle',
     'FractionLoadSolution',
     'PACKED',
+    'LAWS',
     'MEMORY_SIZE',
     'fraction',
     'elongation',

@@ -1,4 +1,4 @@
-"""Compiled load solve of a phase-fraction wire bundle (:mod:`sma_wrist.core.hysteresis.phase_fraction`, Eqs. 1-4).
+"""Compiled load solve of a phase-fraction wire bundle (:mod:`sma_wrist.core.hysteresis.phase_fraction`, Eqs. 1-4b).
 
 Scalar per-wire code compiled by numba when present (:mod:`sma_wrist.core.jit`); the numpy reference is
 :class:`sma_wrist.core.hysteresis.phase_fraction.PhaseFractionMuscle` (same operations, test_phase_fraction_wire).
@@ -76,15 +76,25 @@ def elongation(wc, T, m, mem):  # pragma: no cover - compiled
     sig = m * per_kgf
     xi, dxi = fraction(wc, T, sig, mem)
     S_A, S_M, eps_L, s_s, s_f = wc[7], wc[8], wc[6], wc[9], wc[10]
+    brinson = wc[17] != 0.0  # phase_fraction.LAWS: 0 Eq. 4 (linear ramp, Reuss), 1 Eq. 4b (cosine ramp, Voigt)
     if sig <= s_s:
         d, dd = 0.0, 0.0
     elif sig >= s_f:
         d, dd = 1.0, 0.0
+    elif brinson:
+        ph = math.pi * ((sig - s_s) / (s_f - s_s))
+        d, dd = 0.5 * (1.0 - math.cos(ph)), 0.5 * math.pi * math.sin(ph) / (s_f - s_s)
     else:
         d, dd = (sig - s_s) / (s_f - s_s), 1.0 / (s_f - s_s)
-    S = S_A + xi * (S_M - S_A)
-    eps = sig * S + eps_L * d * xi + wc[11] * (T - wc[12])
-    deps = S + eps_L * dd * xi + (sig * (S_M - S_A) + eps_L * d) * dxi
+    if brinson:
+        E_A, E_M = 1.0 / S_A, 1.0 / S_M
+        E = E_A + xi * (E_M - E_A)
+        el, d_el_sig, d_el_xi = sig / E, 1.0 / E, -sig * (E_M - E_A) / (E * E)
+    else:
+        S = S_A + xi * (S_M - S_A)
+        el, d_el_sig, d_el_xi = sig * S, S, sig * (S_M - S_A)
+    eps = el + eps_L * d * xi + wc[11] * (T - wc[12])
+    deps = d_el_sig + eps_L * dd * xi + (d_el_xi + eps_L * d) * dxi
     L = wc[14]
     return L * eps - wc[16], L * deps * per_kgf
 

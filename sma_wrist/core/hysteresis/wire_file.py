@@ -8,6 +8,9 @@ file is the model's wire, not the inverse's. Format version 1::
     format: sma_wrist.wire            # fixed
     version: 1
     form: phase_fraction              # the family (sma_wrist/core/hysteresis/phase_fraction.py)
+    law: linear                       # its constitutive details: linear (Eq. 4: linear detwinning ramp, Reuss
+                                      # compliance) or brinson (Eq. 4b: Brinson 1993's cosine ramp, Voigt modulus);
+                                      # absent: linear (the files written before the choice existed)
     name: <free text>
     model:                            # PhaseFractionWire's fields: temperatures [degC] at sigma_ref_MPa, slopes
       M_f_C: ...                      # [MPa/degC], moduli [GPa], stresses [MPa], strain [1], offset_mm [mm]
@@ -25,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from sma_wrist.core.errors import ParameterError
-from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
+from sma_wrist.core.hysteresis.phase_fraction import LAWS, PhaseFractionWire
 from sma_wrist.core.yaml_file import write_yaml_file
 
 FORMAT = 'sma_wrist.wire'
@@ -37,7 +40,8 @@ def wire_to_dict(wire: PhaseFractionWire, identification: dict[str, Any] | None 
     """The YAML document of a phase-fraction wire."""
     model: dict[str, Any] = {k: round(v, 6) for k, v in wire.values().items()}
     model['T_valid_C'] = [float(v) for v in wire.T_valid]
-    doc: dict[str, Any] = {'format': FORMAT, 'version': VERSION, 'form': 'phase_fraction', 'name': wire.name}
+    doc: dict[str, Any] = {'format': FORMAT, 'version': VERSION, 'form': 'phase_fraction', 'law': wire.law}
+    doc['name'] = wire.name
     doc['model'] = model
     if identification:
         doc['identification'] = identification
@@ -63,10 +67,13 @@ def wire_from_dict(doc: Any, where: str = 'wire file') -> PhaseFractionWire:
         raise ParameterError(f'{where}: version {doc.get("version")!r} is not supported (this reader: {VERSION})')
     if doc.get('form') not in FORMS:
         raise ParameterError(f'{where}: form must be one of {", ".join(FORMS)}, got {doc.get("form")!r}')
+    law = doc.get('law', 'linear')
+    if law not in LAWS:
+        raise ParameterError(f'{where}: law must be one of {", ".join(LAWS)}, got {law!r}')
     model = doc.get('model')
     if not isinstance(model, dict):
         raise ParameterError(f'{where}: model must be a mapping of the wire parameters')
-    known = {f.name for f in fields(PhaseFractionWire)} - {'T_valid', 'name'}
+    known = {f.name for f in fields(PhaseFractionWire)} - {'T_valid', 'name', 'law'}
     unknown = sorted(set(model) - known - {'T_valid_C'})
     if unknown:
         raise ParameterError(
@@ -83,7 +90,7 @@ def wire_from_dict(doc: Any, where: str = 'wire file') -> PhaseFractionWire:
         else:
             kw[k] = float(v)
     try:
-        return PhaseFractionWire(**kw, name=str(doc.get('name') or 'phase-fraction wire'))
+        return PhaseFractionWire(**kw, law=law, name=str(doc.get('name') or 'phase-fraction wire'))
     except ParameterError as e:
         raise ParameterError(f'{where}: {e}') from None
 

@@ -1,0 +1,225 @@
+"""Refinement of the model's wire after the verification: the closed-loop runs are recordings of the wrist too.
+
+The excitation covers the wires' transformations with relays and sines of its own; the closed loop drives them in
+another regime (the controllers' targets, the TEMs on both sides at once), which the excitation neither covers nor
+tells the wire's values apart in: on the emulated phase-fraction wrist (doc/howto/commission.md) the phase-fraction
+wire fitted on the excitation replayed its held-out cycle to a few mrad and missed the commissioned closed-loop run
+by tens. The verification records both of its runs (:mod:`sma_wrist.commission.verify`); this step:
+
+1. refits the phase-fraction wire, with the joint's friction and the payload, on the excitation PLUS the defaults'
+   run: one least-squares residual over both recordings, each replayed from its own start
+   (:func:`sma_wrist.commission.identification.fit_phase_fraction_wire` with ``extra``), once per constitutive law
+   (:data:`sma_wrist.core.hysteresis.phase_fraction.LAWS`), each from the identification's fit of that law (a
+   refit of the other law from the values of the one handed over stopped in another minimum: 35 against 12.6 mrad
+   held out on the emulated phase-fraction wrist);
+2. judges every candidate (the first fit, each refit) on the commissioned run, which no fit has seen: the RMS angle
+   error of its replay from the measured temperatures after the run's soft start;
+3. hands the best refit over (``wire.yaml``, the model's friction and payload in the params file) only where it
+   predicts the commissioned run better than the first fit by more than the angle's noise (:func:`hand_over_refined`);
+   else the first fit stays.
+
+The bridge's payload stays the one the controllers were verified with (``/wrist/payload`` in both runs); a refit's
+own payload is the model's, written as plant_sim's ``model.payload_err_kg`` (the true payload less the recorded
+one), which plant_sim, the diagnosis and the twin monitor add to ``/wrist/payload``.
+
+The compensator's SD-GPI is not refitted (it is what the verified loop inverted), nor an SD-GPI model wire: the
+refinement refits the phase-fraction wire only (an SD-GPI model wire is the built-in family whose fit the excitation
+covers; see doc/howto/commission.md). Device time: none (the runs are the verification's). The diagnosis of the
+commissioned run then replays the files handed over.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sma_wrist.core.hysteresis.phase_fraction import LAWS
+
+#: the refits' solver iterations and rounds (each iteration a Jacobian: one replay of every recording per free
+#: value); they start at the first fit, which is near
+REFINE_MAX_NFEV = 15
+REFINE_ROUNDS = 1
+#: the payload refitted with the wire (the excitation alone does not tell it from the wire's values)
+REFINE_FREE_PAYLOAD = True
+
+
+@dataclass
+class WireRefinement:
+    """What the identification hands to the refinement: the excitation's recording on the replay grid (from the
+    recording's start: the bring-up's heatings are the wires' history) with its fit and held-out samples, the
+    phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`: its
+    payload is the bridge's) and the fit of each law (``fits``, the refits' starts), the angle's noise [mrad],
+    ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's
+    pre-load elongation)."""
+
+    excitation: Any
+    i_fit: int
+    i_held: int
+    first: Any
+    fits: dict[str, Any]
+    noise_mrad: float
+    wire_file: Path
+    datum_shift_mm: float
+
+
+def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float | None = None) -> Any:
+    """A verification run's bag as a recording of the replay grid (:data:`~sma_wrist.commission.identification.
+    MECH_DT_S`): the measured temperatures and angle, the wrist's payload ``payload_kg`` (the bag's is what the
+    controllers were told); ``settle_s`` [s]: the soft start, replayed, not scored."""
+    from sma_wrist.commission.identification import MECH_DT_S
+    from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
+
+    dt = dt or MECH_DT_S
+    r = load_run(bag)
+    if r.T is None or r.q is None or r.duration < settle_s + 10.0:
+        raise DiagnoseInputError(f'{bag}: the run has no muscle temperatures and angle past its soft start')
+    t = np.arange(0.0, r.duration, dt)
+    T = np.column_stack([np.interp(t, r.t - r.t[0], r.T[:, m]) for m in (0, 1)])
+    q = np.interp(t, r.t - r.t[0], r.q)
+    return Run(t=t, dt=dt, u=None, T=T, q=q, payload_kg=payload_kg, settle_s=settle_s, source=str(bag))
+
+
+def replay_rms_mrad(wire: Any, coulomb_Nm: float, payload_kg: float, run: Any, i0: int, i1: int | None = None) -> float:
+    """RMS angle error [mrad] of the wire's replay of ``run`` from its start (the held-out replay's 10 ms step),
+    scored over samples ``i0:i1``."""
+    from sma_wrist.commission.identification import MECH_STEP_S
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose import effects as fx
+
+    row = fx.NOMINAL.copy()
+    row[fx.INDEX['coulomb_Nm']] = coulomb_Nm
+    model = fx.ExtendedModel(dataclasses.replace(run, payload_kg=payload_kg), PlantParams(dt=MECH_STEP_S, wire=wire))
+    q = model.angle_measured(row[None], i1, 'measured')[:, 0]
+    return 1e3 * float(np.sqrt(np.mean((q[i0:] - run.q[i0 : q.size]) ** 2)))
+
+
+def hand_over_refined(first_mrad: float, refined_mrad: float, noise_mrad: float) -> bool:
+    """Whether a refit replaces the first fit: only where it predicts the held-out run (the commissioned one, which
+    neither fit saw) better by more than the angle's noise; a refit that only fits the recordings it was fitted on
+    better is no better wire."""
+    return math.isfinite(refined_mrad) and refined_mrad < first_mrad - noise_mrad
+
+
+def refine_wire(
+    ctx: WireRefinement,
+    commissioned_bag: str | Path,
+    defaults_bag: str | Path,
+    settle_s: float,
+    params_file: str | Path,
+) -> dict[str, Any]:
+    """Refit the phase-fraction model wire on the excitation and the defaults' run, judge it on the commissioned run
+    and hand the better one over (module docstring); returns what was done, JSON-ready:
+    ``{'refined', 'law', 'heldout': {'metric', 'unit', 'first', <law>: ...}, 'fit_rms_mrad', 'angle_noise_mrad',
+    'coulomb_Nm', 'payload_kg', 'wire', 'seconds', 'why'}`` (friction, payload and wire where a refit is handed
+    over)."""
+    from sma_wrist.commission.identification import fit_phase_fraction_wire, pf_start
+    from sma_wrist.diagnose.data import DiagnoseInputError
+
+    t0 = time.process_time()
+    exc = ctx.excitation
+    first = ctx.first
+    try:
+        defaults = recording(defaults_bag, exc.payload_kg, settle_s)
+        held = recording(commissioned_bag, exc.payload_kg, settle_s)
+    except DiagnoseInputError as e:
+        return {'refined': False, 'why': f'the verification runs cannot be read: {e}'}
+    i_def = int(round(settle_s / defaults.dt))
+    i_com = int(round(settle_s / held.dt))
+    heldout = {'first': replay_rms_mrad(first.wire, first.coulomb_Nm, first.payload_kg, held, i_com)}
+    fits: dict[str, Any] = {}
+    for law in LAWS:
+        own = ctx.fits.get(law, first)
+        f = fit_phase_fraction_wire(
+            dataclasses.replace(exc, payload_kg=own.payload_kg),
+            ctx.i_held,
+            pf_start(own),
+            max_nfev=REFINE_MAX_NFEV,
+            i_fit=ctx.i_fit,
+            law=law,
+            extra=[(dataclasses.replace(defaults, payload_kg=own.payload_kg), i_def)],
+            rounds=REFINE_ROUNDS,
+            free_payload=REFINE_FREE_PAYLOAD,
+        )
+        fits[law] = f
+        heldout[law] = replay_rms_mrad(f.wire, f.coulomb_Nm, f.payload_kg, held, i_com)
+    eligible = {k: x for k, x in heldout.items() if k != 'first' and not fits[k].at_bounds}
+    best = min(eligible, key=eligible.get) if eligible else None
+    out: dict[str, Any] = {
+        'refined': False,
+        'law': first.wire.law,
+        'heldout': {
+            'metric': 'RMS angle error of the commissioned run after its soft start, replay from the measured '
+            'temperatures (not fitted on)',
+            'unit': 'mrad',
+            **{k: round(x, 3) for k, x in heldout.items()},
+        },
+        'fit_rms_mrad': {k: round(1e3 * f.fit_rms_rad, 3) for k, f in fits.items()},
+        'at_bounds': {k: f.at_bounds for k, f in fits.items() if f.at_bounds},
+        'angle_noise_mrad': round(ctx.noise_mrad, 3),
+        'recordings': ['excitation (fit phases)', f'{Path(defaults_bag).name} (after its {settle_s:g} s soft start)'],
+    }
+    if best is not None and hand_over_refined(heldout['first'], heldout[best], ctx.noise_mrad):
+        f = fits[best]
+        write_refined(ctx, f, params_file, heldout, best)
+        out.update(
+            {
+                'refined': True,
+                'law': best,
+                'coulomb_Nm': round(f.coulomb_Nm, 5),
+                'payload_kg': round(f.payload_kg, 4),
+                'wire': {k: round(x, 4) for k, x in f.wire.values().items()},
+                'why': f'the refit ({best} law) predicts the commissioned run {heldout[best]:.3g} mrad RMS against '
+                f"the first fit's {heldout['first']:.3g}, better beyond the angle's noise ({ctx.noise_mrad:.2g})",
+            }
+        )
+    else:
+        out['why'] = (
+            'every refit has a value at the end of the range the fit allows'
+            if best is None
+            else f'the best refit ({best} law) predicts the commissioned run {heldout[best]:.3g} mrad RMS, not better '
+            f"than the first fit's {heldout['first']:.3g} beyond the angle's noise ({ctx.noise_mrad:.2g}): the first "
+            'fit stays'
+        )
+    out['seconds'] = round(time.process_time() - t0, 1)
+    return out
+
+
+def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldout: dict[str, float], law: str) -> None:
+    """Hand a refit over: ``wire.yaml`` rewritten; in the params file plant_sim's ``model.coulomb_Nm`` and, where
+    the refit's payload is not the bridge's (``ctx.first``'s), ``model.payload_err_kg``."""
+    import yaml
+
+    from sma_wrist.core.hysteresis.wire_file import save_wire_file
+
+    wire = dataclasses.replace(fit.wire, offset_mm=fit.wire.offset_mm - ctx.datum_shift_mm)
+    save_wire_file(
+        ctx.wire_file,
+        wire,
+        {
+            'source': 'sma-wrist commission: angle against the measured muscle temperatures (excitation fit phases '
+            "and the verification's defaults run), judged on the commissioned run",
+            'heldout_angle_rms_mrad': {'first_fit': round(heldout['first'], 3), law: round(heldout[law], 3)},
+            'payload_kg': round(fit.payload_kg, 4),
+            'coulomb_Nm': round(fit.coulomb_Nm, 5),
+        },
+    )
+    p = Path(params_file)
+    doc = yaml.safe_load(p.read_text()) or {}
+    head = ''.join(line for line in p.read_text().splitlines(keepends=True) if line.startswith('#'))
+    ps = doc.setdefault('plant_sim', {}).setdefault('ros__parameters', {})
+    ps['model.coulomb_Nm'] = round(fit.coulomb_Nm, 5)
+    err = round(fit.payload_kg - ctx.first.payload_kg, 4)
+    if err:
+        ps['model.payload_err_kg'] = err
+    else:
+        ps.pop('model.payload_err_kg', None)
+    p.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+
+
+__all__ = ['WireRefinement', 'refine_wire', 'hand_over_refined', 'recording', 'replay_rms_mrad', 'write_refined']
