@@ -207,3 +207,36 @@ def test_the_wire_and_joint_are_fitted_from_the_history_the_bring_up_left_in_the
     # the wrist's wire is the model's SD-GPI: the phase-fraction wire, fitted too, does not replace it
     assert hyst['parameters']['model_wire'] == 'sdgpi' and 'wire_file' not in values, hyst['parameters']
     assert joint['heldout']['phase_fraction'] > joint['heldout']['commissioned'] + joint['heldout']['angle_noise']
+
+
+def test_the_onsets_coarse_to_fine_search_finds_the_shifts_of_the_whole_grid(monkeypatch):
+    """wire_shift_from_onset replays every ONSET_COARSE_STEP-th offset, then the best one's neighbours: the shifts of
+    the whole 1 degC grid (a step of 1) from half the replays, at payloads around the wire's own; at its own payload
+    the wire's shift."""
+    import sma_wrist.commission.identification as idf
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose.data import Run
+
+    half = int(round(30.0 / DT))  # _temperatures' relay: muscle 1 heated for the first 30 s
+    T = _temperatures()[0][: 2 * half]
+    t = np.arange(T.shape[0]) * DT
+    run = Run(t=t, dt=DT, u=None, T=T, q=np.zeros(t.size), payload_kg=0.3)
+    truth = fx.NOMINAL.copy()
+    truth[fx.INDEX['temp_offset_C']], truth[fx.INDEX['payload_err_kg']] = 6.0, 0.1
+    q = fx.ExtendedModel(run, PlantParams(dt=0.01)).angle_measured(truth[None])[:, 0]
+    model = fx.ExtendedModel(dataclasses.replace(run, q=q), PlantParams(dt=0.01))
+    rows = np.repeat(fx.NOMINAL[None], 5, axis=0)
+    rows[:, fx.INDEX['payload_err_kg']] = [-0.1, 0.0, 0.1, 0.2, 0.3]
+    columns: list[int] = []
+    replay = fx.ExtendedModel.angle_measured
+    monkeypatch.setattr(fx.ExtendedModel, 'angle_measured', lambda s, r, *a: columns.append(len(r)) or replay(s, r, *a))
+    shifts, replayed = {}, {}
+    for step in (1, idf.ONSET_COARSE_STEP):
+        monkeypatch.setattr(idf, 'ONSET_COARSE_STEP', step)
+        columns.clear()
+        shifts[step] = idf.wire_shift_from_onset(model, rows, t, 0.0, half * DT)
+        replayed[step] = sum(columns)
+    assert np.array_equal(shifts[1], shifts[3]), shifts
+    assert shifts[3][2] == pytest.approx(6.0, abs=0.05) and np.all(np.diff(shifts[3]) < 0)  # heavier reads colder
+    assert replayed[3] <= 0.55 * replayed[1] == 0.55 * 5 * 31, replayed

@@ -59,7 +59,31 @@ def replays() -> None:
     diagnose_run(run_from_truth(simulate('none', seed=0, duration_s=4.0)), candidates=['backlash', 'tem_mismatch'])
 
 
-PARTS = {'closed_loops': closed_loops, 'replays': replays}
+def model_wires() -> None:
+    """The diagnosis's replay of a phase-fraction wire, which commissioning fits on every device (the costliest
+    kernel to compile: ~80 s of CPU, as much as either part above, so a part of its own), the Peltier heat balance's
+    simulation it fits beside it, and the TEM loop's online estimate of the heat balance."""
+    from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.core.thermal import heat_balance as th
+    from sma_wrist.core.thermal import identification as ti
+    from sma_wrist.core.thermal import peltier as pe
+    from sma_wrist.core.thermal import peltier_fit as pf
+    from sma_wrist.core.thermal.online import ThermalScaleEstimator
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose.data import Run
+
+    n = 40
+    T = np.column_stack([np.linspace(25.0, 80.0, n), np.full(n, 25.0)])
+    run = Run(t=0.05 * np.arange(n), dt=0.05, u=None, T=T, q=np.zeros(n), payload_kg=0.3)
+    fx.ExtendedModel(run, PlantParams(dt=0.01, wire=PhaseFractionWire())).angle_measured(fx.NOMINAL[None])
+    pf.simulate_records(pe.PeltierParams(), [ti.ThermalRecord('warm', 0.25, np.full(n, 5.0), T, 0.0, layer=0)])
+    est = ThermalScaleEstimator(th.ThermalParams(), 1)
+    for k in range(400):
+        est.sample(0.01 * k, np.array([[30.0 + 0.01 * k, 28.0]]), np.array([[5.0, -5.0]]))
+
+
+PARTS = {'closed_loops': closed_loops, 'replays': replays, 'model_wires': model_wires}
 
 if __name__ == '__main__':
     PARTS[sys.argv[1]]()

@@ -76,6 +76,8 @@ MECH_DT_S = 0.05  # grid of the angle replay [s]
 MECH_STEP_S = 0.01  # the replay's plant step [s]
 MIN_SWEEP_RAD = 0.05  # the joint must move at least this much in the excitation for the wire and joint [rad]
 SHIFT_RANGE_C = 15.0  # the wire shifts searched [degC]: the emulator's range
+#: every this many of the 1 degC offsets replayed first by :func:`wire_shift_from_onset`, then the best one's neighbours
+ONSET_COARSE_STEP = 3
 #: the angle's moves [rad] whose muscle temperatures place the start of the transformation (the potentiometer's
 #: noise is 3 mrad; 0.3 rad is under half the stroke of a wire transforming at the window's top)
 ONSET_RAD = (0.1, 0.2, 0.3)
@@ -394,10 +396,26 @@ def onset_temperatures(T: np.ndarray, q: np.ndarray, sign: float) -> np.ndarray:
     return np.array([T[np.argmax(moved >= d)] if np.any(moved >= d) else np.nan for d in ONSET_RAD])
 
 
-def wire_shift_from_onset(model: Any, rows: np.ndarray, grid: np.ndarray, a: float, b: float) -> np.ndarray:
+def onset_replay(model: Any, grid: np.ndarray, b: float) -> Any:
+    """The replay :func:`wire_shift_from_onset` runs for a half-cycle ending at ``b`` of ``grid``: ``model``'s run from
+    its start up to there (the history is the wires' memory). One per identification: its replays are cached by row,
+    so a payload that two calls both try is replayed once."""
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose.data import Run
+
+    run = model.run
+    i1 = int(np.nonzero(grid < b)[0][-1]) + 1
+    sub = Run(t=run.t[:i1], dt=run.dt, u=None, T=run.T[:i1], q=run.q[:i1], payload_kg=run.payload_kg)
+    return fx.ExtendedModel(sub, model.consts.params)
+
+
+def wire_shift_from_onset(
+    model: Any, rows: np.ndarray, grid: np.ndarray, a: float, b: float, replay: Any | None = None
+) -> np.ndarray:
     """The wire's transition shift [degC] under each parameter row of ``rows`` (its payload) from the heating of
     muscle 1 over [a, b) of ``grid`` (the first relay half-cycle, muscle 2 cooled from rest: only muscle 1's wire
-    transforms); NaN if the angle does not move.
+    transforms); NaN if the angle does not move. ``replay``: :func:`onset_replay` of an earlier call on the same
+    half-cycle (its replays reused).
 
     The feature is the muscle 1 temperature at which the angle has moved :data:`ONSET_RAD` (the start of the
     reverse transformation, A_s and a little beyond), measured and in the built-in model's replay of the same
@@ -406,34 +424,66 @@ def wire_shift_from_onset(model: Any, rows: np.ndarray, grid: np.ndarray, a: flo
     transformation starts does not depend on the stroke, the stiffness or the shape of the branch, which differ
     between wire models. The load moves the transformation (the SD-GPI's stress dependence): hence one shift per
     payload.
+
+    The offsets' grid is searched coarse to fine (:data:`ONSET_COARSE_STEP`): the onsets move about one for one with
+    the offset, so the squared distance falls to one minimum and rises, and its minimum on the whole grid lies within
+    a coarse step of the coarse grid's best; a row whose coarse distances do not fall and rise that way gets the whole
+    grid. Same offsets as the whole grid's search for half the replays.
     """
     from sma_wrist.diagnose import effects as fx
-    from sma_wrist.diagnose.data import Run
 
     run = model.run
     idx = np.nonzero((grid >= a) & (grid < b))[0]
     i0, i1 = int(idx[0]), int(idx[-1]) + 1
-    sub = Run(t=run.t[:i1], dt=run.dt, u=None, T=run.T[:i1], q=run.q[:i1], payload_kg=run.payload_kg)
-    replay = fx.ExtendedModel(sub, model.consts.params)
-    offsets = np.arange(-SHIFT_RANGE_C, SHIFT_RANGE_C + 0.5, 1.0)
-    R = np.repeat(rows, offsets.size, axis=0)
-    R[:, fx.INDEX['temp_offset_C']] = np.tile(offsets, rows.shape[0])
-    P = replay.angle_measured(R, None, 'measured')[i0:]
     T1, q1 = run.T[i0:i1, 0], run.q[i0:i1]
+    out = np.full(rows.shape[0], np.nan)
+    if all(np.isnan(onset_temperatures(T1, q1, s)[0]) for s in (1.0, -1.0)):
+        return out  # the angle never moved ONSET_RAD[0] either way: no onset to match, nothing to replay
+    replay = replay if replay is not None else onset_replay(model, grid, b)
+    offsets = np.arange(-SHIFT_RANGE_C, SHIFT_RANGE_C + 0.5, 1.0)
+    i_off = fx.INDEX['temp_offset_C']
+
+    def predicted(cols: list[tuple[int, int]]) -> np.ndarray:
+        """The replayed angle over [a, b) for each (row, offset index) of ``cols`` (K, len(cols))."""
+        R = rows[[r for r, _ in cols]].copy()
+        R[:, i_off] = offsets[[k for _, k in cols]]
+        return replay.angle_measured(R, None, 'measured')[i0:]
+
+    coarse = list(range(0, offsets.size, ONSET_COARSE_STEP))
+    cols = [(r, k) for r in range(rows.shape[0]) for k in coarse]
+    P = predicted(cols)
     sign = float(np.sign(np.median(P[-1] - P[0]))) or 1.0  # the way heating muscle 1 turns the joint
     measured = onset_temperatures(T1, q1, sign)
-    out = np.full(rows.shape[0], np.nan)
     ok = ~np.isnan(measured)
     if not ok.any():
         return out
+    d: dict[tuple[int, int], np.ndarray] = {}  # (row, offset index) -> the onsets' differences [degC]
+    reached: dict[tuple[int, int], bool] = {}  # (row, offset index) -> the replay moved every distance
+
+    def score(cols: list[tuple[int, int]], P: np.ndarray) -> None:
+        for j, c in enumerate(cols):
+            pred = onset_temperatures(T1, P[:, j], sign)[ok]
+            reached[c] = bool(np.all(np.isfinite(pred)))
+            # a distance the model does not reach at an offset counts as far off (the transformation beyond the window)
+            d[c] = np.where(np.isnan(pred), 2.0 * SHIFT_RANGE_C, pred - measured[ok])
+
+    score(cols, P)
+    more = []
     for r in range(rows.shape[0]):
-        Pr = P[:, r * offsets.size : (r + 1) * offsets.size]
-        pred = np.array([onset_temperatures(T1, Pr[:, k], sign)[ok] for k in range(offsets.size)])
-        # a distance the model does not reach at an offset counts as far off (the transformation beyond the window)
-        d = np.where(np.isnan(pred), 2.0 * SHIFT_RANGE_C, pred - measured[ok])
-        k = int(np.argmin(np.sum(d**2, axis=1)))
+        cost = np.array([np.sum(d[r, k] ** 2) for k in coarse])
+        kc = coarse[int(np.argmin(cost))]
+        falls_then_rises = np.all(np.diff(cost[: coarse.index(kc) + 1]) <= 0) and np.all(
+            np.diff(cost[coarse.index(kc) :]) >= 0
+        )
+        near = range(kc - ONSET_COARSE_STEP + 1, kc + ONSET_COARSE_STEP) if falls_then_rises else range(offsets.size)
+        more += [(r, k) for k in near if 0 <= k < offsets.size and (r, k) not in d]
+    if more:
+        score(more, predicted(more))
+    for r in range(rows.shape[0]):
+        ks = sorted(k for rr, k in d if rr == r)
+        k = ks[int(np.argmin([np.sum(d[r, k] ** 2) for k in ks]))]
         # the onsets move about one for one with the offset: the grid's best refined by its mean remaining difference
-        rest = float(np.mean(d[k])) if np.all(np.isfinite(pred[k])) else 0.0
+        rest = float(np.mean(d[r, k])) if reached[r, k] else 0.0
         out[r] = round(float(np.clip(offsets[k] - rest, -SHIFT_RANGE_C, SHIFT_RANGE_C)), 1)
     return out
 
@@ -876,11 +926,14 @@ def identify_mechanics(
     lo_kg = max(0.0, prior_kg + fx.LOWER[i_pay])  # a payload is >= 0
     hi_kg = prior_kg + fx.UPPER[i_pay]
 
+    # one replay of the first half-cycle for every call below: a payload tried twice is replayed once
+    onset = onset_replay(builtin_model, grid, first['t_end_s'])
+
     def on_curve(payloads: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(payloads, their shifts, RMS angle error [rad] of the fit phases' replay) for the candidate payloads."""
         rows = np.repeat(fx.NOMINAL[None], payloads.size, axis=0)
         rows[:, i_pay] = payloads - prior_kg
-        shifts = wire_shift_from_onset(builtin_model, rows, grid, first['t_start_s'], first['t_end_s'])
+        shifts = wire_shift_from_onset(builtin_model, rows, grid, first['t_start_s'], first['t_end_s'], onset)
         keep = np.isfinite(shifts)
         if not keep.any():  # the angle never moved far enough at any candidate payload: nothing to replay
             return payloads[keep], shifts[keep], np.empty(0)
