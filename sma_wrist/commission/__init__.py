@@ -5,7 +5,8 @@ which way the angle turns; wiring faults found and named with their fix before a
 0 V on anything unsafe. Then an excitation (excite.py) through the same checks, from which the heat balance, the
 wire's shift, the payload, friction and pre-load are identified and validated on a held-out cycle
 (identification.py). Then the verification (verify.py): the closed loop with the params file handed over against
-the defaults. doc/howto/commission.md says how to run it and what it measured.
+the defaults. doc/howto/commission.md says how to run it, doc/explanation/commissioning.md what it
+was measured against.
 
 * :mod:`sma_wrist.commission.detect`: the numerical decisions (pure functions);
 * :mod:`sma_wrist.commission.device`: the serial port (the bridge's link) or the emulated device in lockstep;

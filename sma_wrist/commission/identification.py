@@ -209,8 +209,8 @@ def identify_heat_balance_form(
 
     Why: a wrist whose TEMs are Peltier modules driven by a voltage (back-EMF, heat pumped in proportion to the
     absolute junction temperature) is not described by Table 4.9's polynomial in degC over the closed loop's range;
-    on the emulated phase-fraction wrist (doc/howto/commission.md) the diagnosis of the commissioned loop left an
-    unexplained thermal discrepancy with Table 4.9's form."""
+    on the emulated phase-fraction wrist (doc/explanation/commissioning.md) the diagnosis of the commissioned loop
+    left an unexplained thermal discrepancy with Table 4.9's form."""
     from sma_wrist.core.thermal import peltier_fit as pf
     from sma_wrist.core.thermal.params_file import write_heat_balance_file
 
@@ -312,7 +312,8 @@ def identify_thermal_part(
     }
     # judged on the held-out cycle, the heat balance handed over is fitted again on every phase: the held-out relay
     # adds hot muscles cooled hard, which the closed loop does (refitted, one loop's muscle temperatures predicted
-    # to 1.51 / 1.79 degC RMS per TEM instead of 2.10 / 2.84 on the phase-fraction wrist, doc/howto/commission.md)
+    # to 1.51 / 1.79 degC RMS per TEM instead of 2.10 / 2.84 on the phase-fraction wrist,
+    # doc/explanation/commissioning.md)
     try:
         final = ti.fit_thermal(fit + held, both.params, faces='both', rest_C=rest_C, tem_gain=True)
         refit = True

@@ -1,4 +1,4 @@
-"""How well the bring-up names wiring faults, measured on emulated devices (doc/howto/commission.md).
+"""How well the bring-up names wiring faults, measured on emulated devices (doc/explanation/commissioning.md).
 
 ``python3 -m sma_wrist.commission.measure [--seeds N] [--rate-hz HZ]`` runs the bring-up (in lockstep with the
 emulated device) on every wiring fault alone, on each channel, on the model and the phase-fraction wrist, with

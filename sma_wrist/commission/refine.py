@@ -2,9 +2,9 @@
 
 The excitation covers the wires' transformations with relays and sines of its own; the closed loop drives them in
 another regime (the controllers' targets, the TEMs on both sides at once), which the excitation neither covers nor
-tells the wire's values apart in: on the emulated phase-fraction wrist (doc/howto/commission.md) the phase-fraction
-wire fitted on the excitation replayed its held-out cycle to a few mrad and missed the commissioned closed-loop run
-by tens. The verification records both of its runs (:mod:`sma_wrist.commission.verify`); this step:
+tells the wire's values apart in: on the emulated phase-fraction wrist (doc/explanation/commissioning.md) the
+phase-fraction wire fitted on the excitation replayed its held-out cycle to a few mrad and missed the commissioned
+closed-loop run by tens. The verification records both of its runs (:mod:`sma_wrist.commission.verify`); this step:
 
 1. refits the phase-fraction wire, with the joint's friction and the payload, on the excitation PLUS the defaults'
    run: one least-squares residual over both recordings, each replayed from its own start
@@ -24,7 +24,7 @@ one), which plant_sim, the diagnosis and the twin monitor add to ``/wrist/payloa
 
 The compensator's SD-GPI is not refitted (it is what the verified loop inverted), nor an SD-GPI model wire: the
 refinement refits the phase-fraction wire only (an SD-GPI model wire is the built-in family whose fit the excitation
-covers; see doc/howto/commission.md). Device time: none (the runs are the verification's). The diagnosis of the
+covers; see doc/explanation/commissioning.md). Device time: none (the runs are the verification's). The diagnosis of the
 commissioned run then replays the files handed over.
 """
 
