@@ -61,7 +61,7 @@ def replays() -> None:
 
 def model_wires() -> None:
     """The diagnosis's replay of a phase-fraction wire, which commissioning fits on every device (the costliest
-    kernel to compile: ~80 s of CPU, as much as either part above, so a part of its own), the Peltier heat balance's
+    kernel to compile: ~25 s of CPU; this part 38 s on a cold cache), the Peltier heat balance's
     simulation it fits beside it, and the TEM loop's online estimate of the heat balance."""
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
     from sma_wrist.core.plant.wrist import PlantParams
