@@ -61,10 +61,10 @@ def replays() -> None:
 
 def model_wires() -> None:
     """The diagnosis's replay of a phase-fraction wire, which commissioning fits on every device (the costliest
-    kernel to compile: ~80 s of CPU, as much as either part above, so a part of its own), the Peltier heat balance's
+    kernel to compile: ~25 s of CPU; this part 38 s on a cold cache), the Peltier heat balance's
     simulation it fits beside it, and the TEM loop's online estimate of the heat balance."""
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
-    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.core.plant.wrist import PlantParams, WristPlant
     from sma_wrist.core.thermal import heat_balance as th
     from sma_wrist.core.thermal import identification as ti
     from sma_wrist.core.thermal import peltier as pe
@@ -77,6 +77,7 @@ def model_wires() -> None:
     T = np.column_stack([np.linspace(25.0, 80.0, n), np.full(n, 25.0)])
     run = Run(t=0.05 * np.arange(n), dt=0.05, u=None, T=T, q=np.zeros(n), payload_kg=0.3)
     fx.ExtendedModel(run, PlantParams(dt=0.01, wire=PhaseFractionWire())).angle_measured(fx.NOMINAL[None])
+    WristPlant(PlantParams(wire=PhaseFractionWire())).advance(np.zeros((1, 2)), 5)  # the plant's phase-fraction step
     pf.simulate_records(pe.PeltierParams(), [ti.ThermalRecord('warm', 0.25, np.full(n, 5.0), T, 0.0, layer=0)])
     est = ThermalScaleEstimator(th.ThermalParams(), 1)
     for k in range(400):

@@ -326,7 +326,10 @@ def mechanics_sim(
             out_load[k, j, 1] = load[1]
 
 
-@_jit_inline
+# compiled once and called, not inlined like _loads: its two load solves inline the wire law's Newton iteration, and
+# three inlined copies in pf_mechanics_sim made it the costliest kernel to compile (cold cache, measured: 80-93 s of
+# CPU inlined, 24-27 s called; a replay of 8 runs x 3000 steps ~0.1 s either way, identical to the bit)
+@_jit
 def _pf_loads(T1, T2, q, mem, load, compliance, preload, commit, wc, mech):  # pragma: no cover - compiled
     """:func:`_loads` for phase-fraction wires (:mod:`sma_wrist.core.hysteresis.phase_fraction_kernel`): both
     bundles' loads at angle q against memory ``mem`` (2, 5); returns (torque, stiffness), with ``commit`` stores the

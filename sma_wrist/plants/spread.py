@@ -454,7 +454,8 @@ class VariedPlant(WristPlant):
         tp = self.params.thermal
         u = np.broadcast_to(np.asarray(command_V, dtype=float), (self.n, 2))
         if u.size <= 8 and all(tp.u_min_V <= v <= tp.u_max_V for v in u.ravel().tolist()):
-            uc, clipped = np.ascontiguousarray(u), np.zeros(self.n, bool)
+            # a copy, not the read-only broadcast view: numba compiles _step_each once more for a read-only array
+            uc, clipped = u.copy(), np.zeros(self.n, bool)
         else:
             check_finite('TEM command', u, 'V')
             uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)  # np.clip without its dispatch cost

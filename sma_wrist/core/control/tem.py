@@ -266,10 +266,10 @@ def feedback_linearising_command(
     if _one_wrist(T, compiled):
         command, face = np.empty((1, 2)), np.empty((1, 2, 2))
         no_root, saturated = np.empty((1, 2, 2), bool), np.empty((1, 2), bool)
-        if not tem_kernel.linearising_command(
-            np.ascontiguousarray(T[0]),
-            np.ascontiguousarray(T_d[0]),
-            np.ascontiguousarray(rate[0]),
+        if not tem_kernel.linearising_command(  # copies: a read-only (broadcast) array would compile it once more
+            np.array(T[0], order='C'),
+            np.array(T_d[0], order='C'),
+            np.array(rate[0], order='C'),
             _kernel_constants(thermal),
             float(params.gain_per_s),
             np.asarray(params.weights, dtype=float),

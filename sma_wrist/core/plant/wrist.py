@@ -332,7 +332,11 @@ class WristPlant:
             return s
         s = self.state
         uc, clipped = self._commands(command_V)
+        # writeable and C-ordered whatever the caller passed (a read-only or broadcast array): numba compiles the kernel
+        # once per array type, and a read-only array is another type (~10 s of CPU on a cold cache)
         uc = np.ascontiguousarray(uc)
+        if not uc.flags.writeable:
+            uc = uc.copy()
         if clipped is None:
             clipped = np.zeros(self.n, bool)
         if self._kernel_constants is None or self._kernel_constants[0] is not p:
