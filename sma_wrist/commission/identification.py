@@ -109,7 +109,7 @@ class Identified:
     node_params: dict[str, dict[str, Any]]
     figures: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-    #: what the refinement after the verification refits (:class:`sma_wrist.commission.refine.WireRefinement`);
+    #: what the refinement after the verification refits (:class:`WireRefinement`);
     #: None where the model's wire is no phase-fraction wire
     refinement: Any = None
 
@@ -869,6 +869,25 @@ def choose_model_wire(
     return not pf_on_bound and math.isfinite(pf_rms) and pf_rms < best - noise
 
 
+@dataclass
+class WireRefinement:
+    """What the identification hands to the refinement: the excitation's recording on the replay grid (from the
+    recording's start: the bring-up's heatings are the wires' history) with its fit and held-out samples, the
+    phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`: its
+    payload is the bridge's) and the fit of each law (``fits``, the refits' starts), the angle's noise [mrad],
+    ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's
+    pre-load elongation)."""
+
+    excitation: Any
+    i_fit: int
+    i_held: int
+    first: Any
+    fits: dict[str, Any]
+    noise_mrad: float
+    wire_file: Path
+    datum_shift_mm: float
+
+
 def identify_mechanics(
     bring: BringUp,
     out: Path,
@@ -1252,8 +1271,6 @@ def identify_mechanics(
             )
         )
         hyst['wire_file'] = values['wire_file']
-        from sma_wrist.commission.refine import WireRefinement
-
         values['refinement'] = WireRefinement(
             dataclasses.replace(run, payload_kg=prior_kg),
             i_fit,

@@ -33,12 +33,12 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sma_wrist.commission.identification import WireRefinement
 from sma_wrist.core.hysteresis.phase_fraction import LAWS
 
 #: the refits' solver iterations and rounds (each iteration a Jacobian: one replay of every recording per free
@@ -47,25 +47,6 @@ REFINE_MAX_NFEV = 15
 REFINE_ROUNDS = 1
 #: the payload refitted with the wire (the excitation alone does not tell it from the wire's values)
 REFINE_FREE_PAYLOAD = True
-
-
-@dataclass
-class WireRefinement:
-    """What the identification hands to the refinement: the excitation's recording on the replay grid (from the
-    recording's start: the bring-up's heatings are the wires' history) with its fit and held-out samples, the
-    phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`: its
-    payload is the bridge's) and the fit of each law (``fits``, the refits' starts), the angle's noise [mrad],
-    ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's
-    pre-load elongation)."""
-
-    excitation: Any
-    i_fit: int
-    i_held: int
-    first: Any
-    fits: dict[str, Any]
-    noise_mrad: float
-    wire_file: Path
-    datum_shift_mm: float
 
 
 def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float | None = None) -> Any:

@@ -563,7 +563,7 @@ def run_verification(
     device stops answering or breaks a limit while settling); append its section to the report. ``bring``: the
     bring-up (:class:`~sma_wrist.commission.bringup.BringUp`) whose record gives the rest temperatures each run is
     settled to (None, or ``opts.settle`` false: no settling). ``refinement``: the identification's
-    :class:`~sma_wrist.commission.refine.WireRefinement` (None: nothing to refine). The TEMs are at 0 V afterwards in
+    :class:`~sma_wrist.commission.identification.WireRefinement` (None: nothing to refine). The TEMs are at 0 V afterwards in
     every case."""
     from sma_wrist.commission.bringup import Stop
     from sma_wrist.commission.detect import Fault
