@@ -177,6 +177,7 @@ def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldou
     import yaml
 
     from sma_wrist.core.hysteresis.wire_file import save_wire_file
+    from sma_wrist.core.yaml_file import write_yaml_file
 
     wire = dataclasses.replace(fit.wire, offset_mm=fit.wire.offset_mm - ctx.datum_shift_mm)
     save_wire_file(
@@ -191,8 +192,10 @@ def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldou
         },
     )
     p = Path(params_file)
-    doc = yaml.safe_load(p.read_text()) or {}
-    head = ''.join(line for line in p.read_text().splitlines(keepends=True) if line.startswith('#'))
+    text = p.read_text()
+    doc = yaml.safe_load(text) or {}
+    # the file's comment kept as it was written (write_yaml_file's '# ' lines, a bare '#' an empty one)
+    head = '\n'.join(line[2:] if line.startswith('# ') else '' for line in text.splitlines() if line.startswith('#'))
     ps = doc.setdefault('plant_sim', {}).setdefault('ros__parameters', {})
     ps['model.coulomb_Nm'] = round(fit.coulomb_Nm, 5)
     err = round(fit.payload_kg - ctx.first.payload_kg, 4)
@@ -200,7 +203,7 @@ def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldou
         ps['model.payload_err_kg'] = err
     else:
         ps.pop('model.payload_err_kg', None)
-    p.write_text(head + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None))
+    write_yaml_file(p, doc, head, flow_lists=True)
 
 
 __all__ = ['WireRefinement', 'refine_wire', 'hand_over_refined', 'recording', 'replay_rms_mrad', 'write_refined']
