@@ -12,10 +12,11 @@ import pytest
 import yaml
 
 from sma_wrist.commission import refine as rf
-from sma_wrist.commission.identification import fit_phase_fraction_wire, pf_start
+from sma_wrist.commission.identification import FractionFit, fit_phase_fraction_wire, pf_start
 from sma_wrist.core.hysteresis import phase_fraction as pf
 from sma_wrist.core.hysteresis.wire_file import load_wire_file, save_wire_file
 from sma_wrist.core.plant.wrist import PlantParams
+from sma_wrist.core.signals import first_order
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose.data import Run
 
@@ -52,7 +53,7 @@ def _loop() -> Run:
 
 
 def _start(wire: pf.PhaseFractionWire) -> dict[str, float]:
-    return pf_start(type('Fit', (), {'wire': wire, 'coulomb_Nm': COULOMB, 'payload_kg': 0.4})())
+    return pf_start(FractionFit(wire, COULOMB, 0.4, 0.0, []))
 
 
 def test_the_fit_over_two_recordings_recovers_the_wire_each_replayed_from_its_own_start():
@@ -64,7 +65,7 @@ def test_the_fit_over_two_recordings_recovers_the_wire_each_replayed_from_its_ow
         assert getattr(fit.wire, k) == pytest.approx(getattr(TRUTH, k), abs=0.5), k
     assert fit.payload_kg == pytest.approx(0.4, abs=0.02)
     # the second recording is scored: its replay from its own start is the truth's, and the fit's RMS is over both
-    assert rf.replay_rms_mrad(fit.wire, fit.coulomb_Nm, fit.payload_kg, loop, 20) < 1.0
+    assert rf.replay_rms_mrad(fit, loop, 20) < 1.0
     assert fit.fit_rms_rad < 1e-3
 
 
@@ -72,7 +73,7 @@ def test_a_refit_is_handed_over_only_where_it_predicts_the_held_out_run_better_b
     # the first fit: a wire whose cooling branch (which the excitation barely covers for muscle 2) is 4 degC low, its
     # payload light (0.35 kg for 0.4: the bridge's, which the recorded runs say)
     first_wire = dataclasses.replace(TRUTH, M_f_C=40.0, M_s_C=54.0)
-    first = type('Fit', (), {'wire': first_wire, 'coulomb_Nm': COULOMB, 'payload_kg': 0.35, 'at_bounds': []})()
+    first = FractionFit(first_wire, COULOMB, 0.35, 0.0, [])
     exc = _excitation()
     wire_file = save_wire_file(tmp_path / 'wire.yaml', first_wire)
     params = tmp_path / 'wrist_params.yaml'
@@ -101,6 +102,84 @@ def test_a_refit_is_handed_over_only_where_it_predicts_the_held_out_run_better_b
     res = rf.refine_wire(ctx, 'commissioned', 'defaults', 1.0, params)
     assert not res['refined'] and 'first fit stays' in res['why'], res
     assert (wire_file.read_text(), params.read_text()) == before
+
+
+def _lagged(run: Run, lag_s: float) -> Run:
+    """The recording as thermocouples of first-order lag ``lag_s`` report it (the angle is the wire's): the lag
+    integrated at 1 ms, as the emulated device does (at the recording's 50 ms it would read a sample late)."""
+    fine = np.arange(0.0, run.t[-1] + 1e-9, 1e-3)
+    T = [np.interp(run.t, fine, first_order(np.interp(fine, run.t, run.T[:, m]), lag_s, 1e-3)) for m in (0, 1)]
+    return dataclasses.replace(run, T=np.column_stack(T))
+
+
+def _from_rest(period_s: float, mid1: float, amp1: float, mid2: float, amp2: float, seconds: float, wire) -> Run:
+    """Muscle temperatures that leave rest with zero rate (a lagged sensor agrees with them at the start)."""
+    c = np.cos(2 * np.pi * np.arange(0.0, seconds, DT) / period_s)
+    return _recording(np.c_[mid1 - amp1 * c, mid2 + amp2 * c], wire)
+
+
+def test_the_refit_finds_the_detwinning_stress_and_the_thermocouple_lag():
+    # a wire whose detwinning starts at 70 MPa, read through thermocouples 0.3 s late: the first fit's family (the
+    # literature's 100 MPa, no lag) cannot describe it
+    truth = dataclasses.replace(TRUTH, sigma_s_MPa=70.0, law='brinson')
+    exc, loop, held = (
+        _lagged(_from_rest(*args, truth), 0.3)
+        for args in (
+            (40.0, 48.0, 32.0, 45.0, 12.0, 80.0),
+            (30.0, 50.0, 30.0, 50.0, 30.0, 60.0),
+            (25.0, 52.0, 28.0, 52.0, 28.0, 60.0),
+        )
+    )
+    start = _start(dataclasses.replace(TRUTH, M_f_C=42.0, M_s_C=56.0))
+    kw = {'max_nfev': 25, 'rounds': 1, 'extra': [(loop, 20)], 'law': 'brinson'}
+    plain = fit_phase_fraction_wire(exc, exc.n, start, **kw)
+    freed = fit_phase_fraction_wire(exc, exc.n, start, free=rf.REFINE_FREE, **kw)
+    assert plain.temp_lag_s == 0.0 and plain.wire.sigma_s_MPa == 100.0
+    assert freed.temp_lag_s == pytest.approx(0.3, abs=0.03) and freed.wire.sigma_s_MPa == pytest.approx(70.0, abs=3.0)
+    # held out: the freed refit predicts the run it never saw, the plain one does not
+    freed_mrad, plain_mrad = rf.replay_rms_mrad(freed, held, 20), rf.replay_rms_mrad(plain, held, 20)
+    assert freed_mrad < 1.0 and plain_mrad > 5.0 * freed_mrad, (freed_mrad, plain_mrad)
+
+
+def test_the_refit_gives_the_reverse_transformation_its_own_slope():
+    truth = dataclasses.replace(TRUTH, C_M_MPa_per_C=7.0, C_A_MPa_per_C=11.0, law='brinson')
+    exc, loop, held = (
+        _from_rest(*args, truth)
+        for args in (
+            (40.0, 48.0, 32.0, 45.0, 12.0, 80.0),
+            (30.0, 50.0, 30.0, 50.0, 30.0, 60.0),
+            (25.0, 52.0, 28.0, 52.0, 28.0, 60.0),
+        )
+    )
+    start = _start(dataclasses.replace(TRUTH, M_f_C=42.0, M_s_C=56.0))
+    kw = {'max_nfev': 25, 'rounds': 1, 'extra': [(loop, 20)], 'law': 'brinson'}
+    plain = fit_phase_fraction_wire(exc, exc.n, start, **kw)
+    freed = fit_phase_fraction_wire(exc, exc.n, start, free=rf.REFINE_FREE, **kw)
+    assert plain.wire.C_A_MPa_per_C == plain.wire.C_M_MPa_per_C
+    assert freed.wire.C_A_MPa_per_C > freed.wire.C_M_MPa_per_C + 2.0, freed.wire
+    assert rf.replay_rms_mrad(freed, held, 20) < 0.7 * rf.replay_rms_mrad(plain, held, 20)
+    with pytest.raises(ValueError, match='PF_EXTRA_RANGE'):
+        fit_phase_fraction_wire(exc, exc.n, start, free=('E_A_GPa',), **kw)
+
+
+def test_a_refit_hands_its_thermocouple_lag_to_the_model(tmp_path):
+    wire_file = save_wire_file(tmp_path / 'wire.yaml', TRUTH)
+    params = tmp_path / 'wrist_params.yaml'
+    params.write_text('plant_sim:\n  ros__parameters:\n    wire_file: wire.yaml\n    payload_kg: 0.4\n')
+    ctx = rf.WireRefinement(_excitation(), 0, 10, FractionFit(TRUTH, COULOMB, 0.4, 0.0, []), {}, 0.2, wire_file, 0.0)
+    rf.write_refined(
+        ctx, FractionFit(TRUTH, COULOMB, 0.4, 0.0, [], 0.21), params, {'first': 9.0, 'brinson': 2.0}, 'brinson'
+    )
+    ps = yaml.safe_load(params.read_text())['plant_sim']['ros__parameters']
+    assert ps['model.temp_lag_s'] == 0.21 and 'model.payload_err_kg' not in ps
+    # what plant_sim, the diagnosis and the twin read: the model's thermocouple lag
+    from sma_wrist.plant_model import read_plant_model
+
+    assert read_plant_model(str(params)).extension['temp_lag_s'] == 0.21
+    rf.write_refined(
+        ctx, FractionFit(TRUTH, COULOMB, 0.4, 0.0, [], 0.0), params, {'first': 9.0, 'brinson': 2.0}, 'brinson'
+    )
+    assert 'model.temp_lag_s' not in yaml.safe_load(params.read_text())['plant_sim']['ros__parameters']
 
 
 def test_the_hand_over_rule_needs_the_held_out_run_better_beyond_the_noise():

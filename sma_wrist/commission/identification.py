@@ -658,18 +658,39 @@ PF_MAX_NFEV = 40  # solver iterations (each with a Jacobian: one replay per free
 PF_FIT_SUBSTEPS = 1
 PF_DIFF_STEP = 1e-2
 PF_ROUNDS = 3
+#: values a fit may free beyond :data:`PF_RANGE` (``free``; (low, high, scale) as there): the reverse transformation's
+#: own Clausius-Clapeyron slope (else C_A = C_M), the stress where detwinning starts (else the literature's), and the
+#: thermocouples' first-order lag [s] (the diagnosis' ``temp_lag_s``: the replay runs on the measured temperatures
+#: advanced by it). The excitation alone does not tell them apart; the refinement frees them on the closed-loop run
+PF_EXTRA_RANGE: dict[str, tuple[float, float, float]] = {
+    'C_A_MPa_per_C': (2.0, 50.0, 1.0),
+    'sigma_s_MPa': (0.0, 160.0, 5.0),
+    'temp_lag_s': (0.0, 2.0, 0.05),
+}
 
 
 @dataclass
 class FractionFit:
     """A phase-fraction wire fitted by :func:`fit_phase_fraction_wire`: the wire, the joint's values, the fit phases'
-    RMS angle error [rad] and the fitted values at the end of their range."""
+    RMS angle error [rad], the fitted values at the end of their range and the thermocouples' lag [s] the replay
+    assumed (0: none; fitted where ``free`` names ``temp_lag_s``)."""
 
     wire: Any
     coulomb_Nm: float
     payload_kg: float
     fit_rms_rad: float
     at_bounds: list[str]
+    temp_lag_s: float = 0.0
+
+    def row(self) -> np.ndarray:
+        """The diagnosis' parameter row of this fit's joint and sensor (:data:`sma_wrist.diagnose.effects.PARAMS`;
+        its payload is the recording's)."""
+        from sma_wrist.diagnose import effects as fx
+
+        r = fx.NOMINAL.copy()
+        r[fx.INDEX['coulomb_Nm']] = self.coulomb_Nm
+        r[fx.INDEX['temp_lag_s']] = self.temp_lag_s
+        return r
 
 
 def builtin_transitions(base: Any, load_kgf: float = 0.8) -> dict[str, float]:
@@ -700,6 +721,7 @@ def fit_phase_fraction_wire(
     extra: Sequence[tuple[Any, int]] = (),
     rounds: int = PF_ROUNDS,
     free_payload: bool = True,
+    free: Sequence[str] = (),
 ) -> FractionFit:
     """A phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`: transformation temperatures, both
     Clausius-Clapeyron slopes, recoverable strain, elongation datum; the moduli and detwinning stresses the
@@ -716,43 +738,65 @@ def fit_phase_fraction_wire(
     same wrist (:class:`~sma_wrist.diagnose.data.Run`, first scored sample), each replayed from its own start (the
     wires cooled, at rest) and scored from that sample to its end, their residuals appended to the excitation's:
     one least-squares fit over all recordings (the payload the same in all). ``free_payload`` false: the payload
-    stays ``start['payload_kg']`` (or the run's)."""
+    stays ``start['payload_kg']`` (or the run's). ``free``: values of :data:`PF_EXTRA_RANGE` fitted too (from
+    ``start``'s where it has them); a ``start['temp_lag_s']`` not freed is the replay's fixed lag."""
     from scipy.optimize import least_squares
 
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.diagnose import effects as fx
 
-    keys = list(PF_RANGE)
+    unknown = sorted(set(free) - set(PF_EXTRA_RANGE))
+    if unknown:
+        raise ValueError(f'free: {", ".join(unknown)} not in PF_EXTRA_RANGE')
+    ranges = PF_RANGE | {k: PF_EXTRA_RANGE[k] for k in PF_EXTRA_RANGE if k in free}
+    keys = list(ranges)
     n = len(keys)
-    i_c, i_p = fx.INDEX['coulomb_Nm'], fx.INDEX['payload_err_kg']
-    lo = np.array([PF_RANGE[k][0] for k in keys] + [fx.LOWER[i_c], max(fx.LOWER[i_p], -run.payload_kg)])
-    hi = np.array([PF_RANGE[k][1] for k in keys] + [fx.UPPER[i_c], fx.UPPER[i_p]])
-    scale = np.array([PF_RANGE[k][2] for k in keys] + [0.02, 0.02])
+    i_c, i_p, i_lag = fx.INDEX['coulomb_Nm'], fx.INDEX['payload_err_kg'], fx.INDEX['temp_lag_s']
+    lag0 = float(start.get('temp_lag_s', 0.0))
+    lo = np.array([ranges[k][0] for k in keys] + [fx.LOWER[i_c], max(fx.LOWER[i_p], -run.payload_kg)])
+    hi = np.array([ranges[k][1] for k in keys] + [fx.UPPER[i_c], fx.UPPER[i_p]])
+    scale = np.array([ranges[k][2] for k in keys] + [0.02, 0.02])
     p0 = start.get('payload_kg', run.payload_kg) - run.payload_kg
     n_free = n + 2 if free_payload else n + 1
     lo, hi, scale = lo[:n_free], hi[:n_free], scale[:n_free]
     w0 = PhaseFractionWire()
 
+    # the values not fitted: the start's, else the literature's (C_A = C_M where the start has no C_A of its own)
+    first = {
+        'A_s_C': start['A_s_C'],
+        'A_width_C': start['A_f_C'] - start['A_s_C'],
+        'M_f_C': start['M_f_C'],
+        'M_width_C': start['M_s_C'] - start['M_f_C'],
+        'C_MPa_per_C': start.get('C_MPa_per_C', w0.C_M_MPa_per_C),
+        'eps_L': start.get('eps_L', w0.eps_L),
+        'sigma_s_MPa': start.get('sigma_s_MPa', w0.sigma_s_MPa),
+        'sigma_f_MPa': start.get('sigma_f_MPa', w0.sigma_f_MPa),
+        'temp_lag_s': lag0,
+    }
+    first['C_A_MPa_per_C'] = start.get('C_A_MPa_per_C', first['C_MPa_per_C'])
+    if 'offset_mm' in start:
+        first['offset_mm'] = start['offset_mm']
+
     def unpack(x: np.ndarray) -> tuple[Any, np.ndarray]:
-        v = dict(zip(keys, (float(a) for a in x)))
-        s_s = v.get('sigma_s_MPa', w0.sigma_s_MPa)
+        v = first | dict(zip(keys, (float(a) for a in x)))
         wire = PhaseFractionWire(
             A_s_C=v['A_s_C'],
             A_f_C=v['A_s_C'] + v['A_width_C'],
             M_f_C=v['M_f_C'],
             M_s_C=v['M_f_C'] + v['M_width_C'],
             C_M_MPa_per_C=v['C_MPa_per_C'],
-            C_A_MPa_per_C=v['C_MPa_per_C'],
+            C_A_MPa_per_C=v['C_A_MPa_per_C'] if 'C_A_MPa_per_C' in free else v['C_MPa_per_C'],
             eps_L=v['eps_L'],
             offset_mm=v['offset_mm'],
-            sigma_s_MPa=s_s,
-            sigma_f_MPa=s_s + v.get('sigma_width_MPa', w0.sigma_f_MPa - w0.sigma_s_MPa),
+            sigma_s_MPa=v['sigma_s_MPa'],
+            sigma_f_MPa=v['sigma_f_MPa'],
             law=law,
             name='phase-fraction wire, commissioned',
         )
         row = fx.NOMINAL.copy()
         row[i_c], row[i_p] = x[n], (x[n + 1] if free_payload else p0)
+        row[i_lag] = v['temp_lag_s']
         return wire, row
 
     def replay(x: np.ndarray, substeps: int | None, upto: int | None) -> np.ndarray:
@@ -776,17 +820,6 @@ def fit_phase_fraction_wire(
         return np.concatenate([own, *((replay_extra(x, r) - r.q)[i0:] for r, i0 in extra)])
 
     inside = lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)
-    first = {
-        'A_s_C': start['A_s_C'],
-        'A_width_C': start['A_f_C'] - start['A_s_C'],
-        'M_f_C': start['M_f_C'],
-        'M_width_C': start['M_s_C'] - start['M_f_C'],
-        'C_MPa_per_C': w0.C_M_MPa_per_C,
-        'eps_L': w0.eps_L,
-        'sigma_s_MPa': w0.sigma_s_MPa,
-        'sigma_width_MPa': w0.sigma_f_MPa - w0.sigma_s_MPa,
-    }
-    first.update({k: start[k] for k in ('C_MPa_per_C', 'eps_L', 'offset_mm') if k in start})
     offsets = (start['offset_mm'],) if 'offset_mm' in start else PF_START_OFFSETS_MM
     x0s = [
         np.clip([first.get(k, off) for k in keys] + [start['coulomb_Nm'], p0][: n_free - n], *inside) for off in offsets
@@ -809,8 +842,8 @@ def fit_phase_fraction_wire(
     at = [
         f'{k} = {v:.3g}'
         for k, v, a, b, m in zip(keys + ['coulomb_Nm', 'payload_err_kg'], res.x, lo, hi, margin)
-        if k not in ('coulomb_Nm', 'payload_err_kg')  # friction 0 is a free joint; the payload is judged apart
-        and not a + m < v < b - m
+        # friction 0 is a free joint, lag 0 a sensor without one; the payload is judged apart
+        if k not in ('coulomb_Nm', 'payload_err_kg', 'temp_lag_s') and not a + m < v < b - m
     ]
     return FractionFit(
         wire,
@@ -818,12 +851,13 @@ def fit_phase_fraction_wire(
         float(run.payload_kg + row[i_p]),
         float(np.sqrt(2.0 * res.cost / res.fun.size)),
         at,
+        float(row[i_lag]),
     )
 
 
 def pf_start(fit: FractionFit) -> dict[str, float]:
-    """The start of :func:`fit_phase_fraction_wire` at a wire fitted before (every value of :data:`PF_RANGE`, its
-    friction and payload)."""
+    """The start of :func:`fit_phase_fraction_wire` at a wire fitted before (every value of :data:`PF_RANGE` and
+    :data:`PF_EXTRA_RANGE`, its friction and payload)."""
     w = fit.wire
     return {
         'A_s_C': w.A_s_C,
@@ -833,6 +867,10 @@ def pf_start(fit: FractionFit) -> dict[str, float]:
         'C_MPa_per_C': w.C_M_MPa_per_C,
         'eps_L': w.eps_L,
         'offset_mm': w.offset_mm,
+        'C_A_MPa_per_C': w.C_A_MPa_per_C,
+        'sigma_s_MPa': w.sigma_s_MPa,
+        'sigma_f_MPa': w.sigma_f_MPa,
+        'temp_lag_s': fit.temp_lag_s,
         'coulomb_Nm': fit.coulomb_Nm,
         'payload_kg': fit.payload_kg,
     }

@@ -47,6 +47,12 @@ REFINE_MAX_NFEV = 15
 REFINE_ROUNDS = 1
 #: the payload refitted with the wire (the excitation alone does not tell it from the wire's values)
 REFINE_FREE_PAYLOAD = True
+#: values the refits free beyond the first fit's (:data:`~sma_wrist.commission.identification.PF_EXTRA_RANGE`): the
+#: reverse transformation's own slope, the detwinning start stress, the thermocouples' lag. On the emulated
+#: phase-fraction wrist (doc/explanation/commissioning.md) the first fit's values (C_A = C_M, the literature's detwinning
+#: stress, no lag) fitted the defaults' run no better than 7.6 mrad RMS from any start; these freed, 2.7 mrad, the lag
+#: read 0.185 s (the emulated thermocouple's: 0.2 s)
+REFINE_FREE = ('C_A_MPa_per_C', 'sigma_s_MPa', 'temp_lag_s')
 
 
 def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float | None = None) -> Any:
@@ -66,17 +72,18 @@ def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float | N
     return Run(t=t, dt=dt, u=None, T=T, q=q, payload_kg=payload_kg, settle_s=settle_s, source=str(bag))
 
 
-def replay_rms_mrad(wire: Any, coulomb_Nm: float, payload_kg: float, run: Any, i0: int, i1: int | None = None) -> float:
-    """RMS angle error [mrad] of the wire's replay of ``run`` from its start (the held-out replay's 10 ms step),
-    scored over samples ``i0:i1``."""
+def replay_rms_mrad(fit: Any, run: Any, i0: int, i1: int | None = None) -> float:
+    """RMS angle error [mrad] of the replay of ``run`` from its start by a fit's wire, joint and thermocouple lag
+    (a :class:`~sma_wrist.commission.identification.FractionFit`; the held-out replay's 10 ms step), scored over
+    samples ``i0:i1``."""
     from sma_wrist.commission.identification import MECH_STEP_S
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.diagnose import effects as fx
 
-    row = fx.NOMINAL.copy()
-    row[fx.INDEX['coulomb_Nm']] = coulomb_Nm
-    model = fx.ExtendedModel(dataclasses.replace(run, payload_kg=payload_kg), PlantParams(dt=MECH_STEP_S, wire=wire))
-    q = model.angle_measured(row[None], i1, 'measured')[:, 0]
+    model = fx.ExtendedModel(
+        dataclasses.replace(run, payload_kg=fit.payload_kg), PlantParams(dt=MECH_STEP_S, wire=fit.wire)
+    )
+    q = model.angle_measured(fit.row()[None], i1, 'measured')[:, 0]
     return 1e3 * float(np.sqrt(np.mean((q[i0:] - run.q[i0 : q.size]) ** 2)))
 
 
@@ -112,7 +119,7 @@ def refine_wire(
         return {'refined': False, 'why': f'the verification runs cannot be read: {e}'}
     i_def = int(round(settle_s / defaults.dt))
     i_com = int(round(settle_s / held.dt))
-    heldout = {'first': replay_rms_mrad(first.wire, first.coulomb_Nm, first.payload_kg, held, i_com)}
+    heldout = {'first': replay_rms_mrad(first, held, i_com)}
     fits: dict[str, Any] = {}
     for law in LAWS:
         own = ctx.fits.get(law, first)
@@ -126,9 +133,10 @@ def refine_wire(
             extra=[(dataclasses.replace(defaults, payload_kg=own.payload_kg), i_def)],
             rounds=REFINE_ROUNDS,
             free_payload=REFINE_FREE_PAYLOAD,
+            free=REFINE_FREE,
         )
         fits[law] = f
-        heldout[law] = replay_rms_mrad(f.wire, f.coulomb_Nm, f.payload_kg, held, i_com)
+        heldout[law] = replay_rms_mrad(f, held, i_com)
     eligible = {k: x for k, x in heldout.items() if k != 'first' and not fits[k].at_bounds}
     best = min(eligible, key=eligible.get) if eligible else None
     out: dict[str, Any] = {
@@ -154,6 +162,7 @@ def refine_wire(
                 'law': best,
                 'coulomb_Nm': round(f.coulomb_Nm, 5),
                 'payload_kg': round(f.payload_kg, 4),
+                'temp_lag_s': round(f.temp_lag_s, 4),
                 'wire': {k: round(x, 4) for k, x in f.wire.values().items()},
                 'why': f'the refit ({best} law) predicts the commissioned run {heldout[best]:.3g} mrad RMS against '
                 f"the first fit's {heldout['first']:.3g}, better beyond the angle's noise ({ctx.noise_mrad:.2g})",
@@ -172,8 +181,10 @@ def refine_wire(
 
 
 def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldout: dict[str, float], law: str) -> None:
-    """Hand a refit over: ``wire.yaml`` rewritten; in the params file plant_sim's ``model.coulomb_Nm`` and, where
-    the refit's payload is not the bridge's (``ctx.first``'s), ``model.payload_err_kg``."""
+    """Hand a refit over: ``wire.yaml`` rewritten; in the params file plant_sim's ``model.coulomb_Nm``, where the
+    refit's payload is not the bridge's (``ctx.first``'s) ``model.payload_err_kg``, and where it found a thermocouple
+    lag ``model.temp_lag_s`` (what plant_sim, the diagnosis and the twin monitor lag the model's muscle temperatures
+    by)."""
     import yaml
 
     from sma_wrist.core.hysteresis.wire_file import save_wire_file
@@ -198,11 +209,15 @@ def write_refined(ctx: WireRefinement, fit: Any, params_file: str | Path, heldou
     head = '\n'.join(line[2:] if line.startswith('# ') else '' for line in text.splitlines() if line.startswith('#'))
     ps = doc.setdefault('plant_sim', {}).setdefault('ros__parameters', {})
     ps['model.coulomb_Nm'] = round(fit.coulomb_Nm, 5)
-    err = round(fit.payload_kg - ctx.first.payload_kg, 4)
-    if err:
-        ps['model.payload_err_kg'] = err
-    else:
-        ps.pop('model.payload_err_kg', None)
+    # the model's values that are not the bridge's: the payload's error, the thermocouples' lag
+    for key, value in (
+        ('model.payload_err_kg', fit.payload_kg - ctx.first.payload_kg),
+        ('model.temp_lag_s', fit.temp_lag_s),
+    ):
+        if round(value, 4):
+            ps[key] = round(value, 4)
+        else:
+            ps.pop(key, None)
     write_yaml_file(p, doc, head, flow_lists=True)
 
 
