@@ -147,14 +147,17 @@ def _records(t: np.ndarray, temps: np.ndarray, u: np.ndarray, a: float, b: float
     return out
 
 
-def _muscle_rms(params: Any, records: list[ti.ThermalRecord]) -> float:
+def _muscle_rms(params: Any, records: list[ti.ThermalRecord], sensor_lag_s: float = 0.0) -> float:
     """RMS muscle-face error [degC] of the free-run predictions of ``records`` (each from its measured start) under a
-    heat balance of Table 4.9's form (th.ThermalParams) or the Peltier form (peltier.PeltierParams)."""
+    heat balance of Table 4.9's form (th.ThermalParams) or the Peltier form (peltier.PeltierParams), the muscle face
+    as its thermocouple of first-order lag ``sensor_lag_s`` [s] reads it."""
     from sma_wrist.core.thermal import peltier as pe
     from sma_wrist.core.thermal import peltier_fit as pf
 
-    evaluate = pf.evaluate if isinstance(params, pe.PeltierParams) else ti.evaluate
-    ev = evaluate(params, records, 'heldout', settle_s=0.0)
+    if isinstance(params, pe.PeltierParams):
+        ev = pf.evaluate(params, records, 'heldout', settle_s=0.0, sensor_lag_s=sensor_lag_s)
+    else:
+        ev = ti.evaluate(params, records, 'heldout', settle_s=0.0, muscle_lag_s=sensor_lag_s)
     return float(np.sqrt(np.mean([e.faces['T1']['rms_C'] ** 2 for e in ev])))
 
 
@@ -199,6 +202,7 @@ def identify_heat_balance_form(
     rest_C: tuple[float, float],
     noise_C: float,
     table_per_tem: list[float],
+    sensor_lag_s: float = 0.0,
 ) -> tuple[dict[str, Any], str | None]:
     """The model's heat balance: the Peltier two-node form (:mod:`sma_wrist.core.thermal.peltier`, each TEM's module
     fitted on its own layer's fit phases, the ambients tied to the rest faces) against Table 4.9's form handed over
@@ -210,7 +214,10 @@ def identify_heat_balance_form(
     Why: a wrist whose TEMs are Peltier modules driven by a voltage (back-EMF, heat pumped in proportion to the
     absolute junction temperature) is not described by Table 4.9's polynomial in degC over the closed loop's range;
     on the emulated phase-fraction wrist (doc/explanation/commissioning.md) the diagnosis of the commissioned loop
-    left an unexplained thermal discrepancy with Table 4.9's form."""
+    left an unexplained thermal discrepancy with Table 4.9's form.
+
+    ``sensor_lag_s``: the muscle thermocouples' first-order lag [s] the model applies (``temp_lag_s``): the form's
+    muscle node is fitted and judged as they read it (``table_per_tem`` judged so too)."""
     from sma_wrist.core.thermal import peltier_fit as pf
     from sma_wrist.core.thermal.params_file import write_heat_balance_file
 
@@ -220,8 +227,8 @@ def identify_heat_balance_form(
     )
     table_rms = float(np.sqrt(np.mean(np.square(table_per_tem))))
     try:
-        first = pf.fit_peltier(fit, rest_C=rest_C)
-        per_tem = [_muscle_rms(first.params, [r]) for r in held]
+        first = pf.fit_peltier(fit, rest_C=rest_C, sensor_lag_s=sensor_lag_s)
+        per_tem = [_muscle_rms(first.params, [r], sensor_lag_s) for r in held]
     except ti.ThermalIdentificationError as e:
         part = {
             'parameters': {'form': 'table_4_9', 'why': f'the Peltier form could not be fitted: {e}'},
@@ -235,7 +242,7 @@ def identify_heat_balance_form(
     params, refit = first.params, False
     if better:
         try:
-            final = pf.fit_peltier(fit + held, first.params, rest_C=rest_C)
+            final = pf.fit_peltier(fit + held, first.params, rest_C=rest_C, sensor_lag_s=sensor_lag_s)
             params, refit = final.params, True
         except ti.ThermalIdentificationError:
             pass
@@ -295,27 +302,32 @@ def identify_thermal_part(
     out: Path,
     rest_C: tuple[float, float],
     noise_C: float = 0.0,
+    sensor_lag_s: float = 0.0,
 ) -> tuple[dict[str, Any], th.ThermalParams, list[str]]:
     """The heat balance of both layers, each TEM's drive gain from its own layer (written as ``thermal.yaml``);
     held-out errors per TEM against the built-in heat balance. Handed over where it predicts the held-out cycle
     better over both TEMs beyond the muscle sensors' noise ``noise_C`` [degC RMS] and neither TEM's worse than the
     built-in beyond it (where the built-in is right for one TEM, both are at the noise there: measured 0.0117 against
-    0.0098 degC on the emulated SD-GPI wrist with 8.3 mdegC of noise, TEM 1 13.3 degC better)."""
+    0.0098 degC on the emulated SD-GPI wrist with 8.3 mdegC of noise, TEM 1 13.3 degC better). ``sensor_lag_s``: the
+    muscle thermocouples' first-order lag [s] the model applies (``temp_lag_s``): the muscle face is fitted and
+    judged as they read it, both heat balances alike."""
     from sma_wrist.core.thermal.params_file import write_thermal_file
 
     warnings: list[str] = []
     builtin = th.ThermalParams()
-    both = ti.fit_thermal(fit, builtin, faces='both', rest_C=rest_C, tem_gain=True)
+    both = ti.fit_thermal(fit, builtin, faces='both', rest_C=rest_C, tem_gain=True, muscle_lag_s=sensor_lag_s)
     per_tem = {
-        'commissioned': [_muscle_rms(both.params, [r]) for r in held],
-        'builtin': [_muscle_rms(builtin, [r]) for r in held],
+        'commissioned': [_muscle_rms(both.params, [r], sensor_lag_s) for r in held],
+        'builtin': [_muscle_rms(builtin, [r], sensor_lag_s) for r in held],
     }
     # judged on the held-out cycle, the heat balance handed over is fitted again on every phase: the held-out relay
     # adds hot muscles cooled hard, which the closed loop does (refitted, one loop's muscle temperatures predicted
     # to 1.51 / 1.79 degC RMS per TEM instead of 2.10 / 2.84 on the phase-fraction wrist,
     # doc/explanation/commissioning.md)
     try:
-        final = ti.fit_thermal(fit + held, both.params, faces='both', rest_C=rest_C, tem_gain=True)
+        final = ti.fit_thermal(
+            fit + held, both.params, faces='both', rest_C=rest_C, tem_gain=True, muscle_lag_s=sensor_lag_s
+        )
         refit = True
     except ti.ThermalIdentificationError:
         final, refit = both, False

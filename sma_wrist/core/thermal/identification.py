@@ -325,16 +325,36 @@ def simulate_records(
     records: Sequence[ThermalRecord],
     base: th.ThermalParams | None = None,
     sensor_lag_s: float = 0.0,
+    muscle_lag_s: float = 0.0,
 ) -> list[FloatArray]:
     """Free-run simulation of each record (K_r, 2) [degC] from its measured start (see :func:`start_states`), as
-    sensors of first-order lag ``sensor_lag_s`` [s] read it (0: the faces themselves)."""
+    sensors of first-order lag ``sensor_lag_s`` [s] read it (0: the faces themselves) and the muscle face through
+    its thermocouple's lag ``muscle_lag_s`` [s] (:func:`muscle_lagged`)."""
     u, u2, _, _ = _pad(records)
     T0 = start_states(records, base or params)
     sim = simulate_tables(
         table_of(params)[None], record_input_per_volt(params, records), u, T0[None], records[0].dt, u2
     )
-    sim = first_order(sim, sensor_lag_s, records[0].dt)
+    sim = first_order(muscle_lagged(sim, muscle_lag_s, records[0].dt), sensor_lag_s, records[0].dt)
     return [sim[: r.n, 0, j] for j, r in enumerate(records)]
+
+
+def muscle_lagged(sim: NDArray, tau: float, dt: float) -> NDArray:
+    """Simulated faces (K, ..., 2) [degC] with the muscle face as its thermocouple reads it: a first-order lag of
+    time constant ``tau`` [s] along axis 0 (:func:`sma_wrist.core.signals.first_order`, exact for a face linear
+    between the samples dt [s] apart), starting at rest at the simulated start (a run that starts at rest starts
+    with the node at the measured temperature). The exchanger face as simulated. ``tau`` <= 0 returns ``sim``.
+
+    A model whose measured muscle temperature is its node's lagged (plant_sim's ``model.temp_lag_s``) is fitted
+    through this lag: fitted to the lagged measurement directly, the node would carry the lag once more. The lag
+    is linear in the samples, so the complex-step part of a complex ``sim`` is lagged alike. Linear between the
+    samples, not held: plant_sim lags at its 100 Hz tick, nearly the continuous lag, while the records' grid is
+    coarse (commissioning's 0.25 s, where a held face lags a smooth one by 0.10 s for 0.2 s)."""
+    if not tau > 0:
+        return sim
+    out = sim.copy()
+    out[..., MUSCLE] = first_order(sim[..., MUSCLE], tau, dt, linear=True)
+    return out
 
 
 def record_input_per_volt(params: th.ThermalParams, records: Sequence[ThermalRecord]) -> FloatArray:
@@ -409,6 +429,7 @@ class ThermalFit:
     at_bounds: tuple[str, ...] = ()  # free parameters the fit left on a bound, e.g. 'T1 K_R = 0 (lower bound)'
     sensor_lag_s: float = 0.0  # the temperature sensors' first-order lag [s] fitted with the heat balance (0: none)
     rest_C: tuple[float, float] | None = None  # the rest state the fitted faces' K_inf were tied to [degC]
+    muscle_lag_s: float = 0.0  # the muscle thermocouple's known lag [s] the fit read the muscle face through
 
 
 def _weights(mask: FloatArray) -> FloatArray:
@@ -479,9 +500,11 @@ class _Problem:
         sensor_lag: bool = False,
         rest_C: tuple[float, float] | None = None,
         tem_gain: bool = False,
+        muscle_lag_s: float = 0.0,
     ) -> None:
         self.records = records
         self.lag = sensor_lag  # x's last entry is then the sensors' lag [s]
+        self.muscle_lag = muscle_lag_s  # the muscle thermocouple's known lag [s] (muscle_lagged)
         self.base = base
         self.faces = faces
         self.rest_C = rest_C
@@ -526,6 +549,7 @@ class _Problem:
         tables = _table_from_free(xc[:m, : self.n_table], self.base_table, self.faces, self.rest_C)
         with np.errstate(all='ignore'):
             sim = simulate_tables(tables, self._ipv(xc[:m]), self.u, self.T0[None], self.dt, self.u2)  # (K, m, R, 2)
+            sim = muscle_lagged(sim, self.muscle_lag, self.dt)  # linear: the complex step's part lagged alike
             if self.lag:  # the table's columns through the lag at x's value; the lag's column: x's run, lag stepped
                 stepped = first_order(sim[:, :1].real.astype(complex), xc[-1, -1], self.dt)
                 sim = np.concatenate([first_order(sim, float(x[-1]), self.dt), stepped], axis=1)  # (K, n, R, 2)
@@ -545,7 +569,11 @@ class _Problem:
     def cost(self, x: FloatArray) -> float:
         tables = _table_from_free(x[None, : self.n_table], self.base_table, self.faces, self.rest_C)
         with np.errstate(all='ignore'):
-            sim = simulate_tables(tables, self._ipv(x[None]), self.u, self.T0[None], self.dt, self.u2)
+            sim = muscle_lagged(
+                simulate_tables(tables, self._ipv(x[None]), self.u, self.T0[None], self.dt, self.u2),
+                self.muscle_lag,
+                self.dt,
+            )
             if self.lag:
                 sim = first_order(sim, float(x[-1]), self.dt)
             r = ((sim[:, 0] - self.Tm) * self.w)[self.mask]
@@ -602,6 +630,7 @@ def fit_thermal(
     sensor_lag: bool = False,
     rest_C: tuple[float, float] | None = None,
     tem_gain: bool = False,
+    muscle_lag_s: float = 0.0,
 ) -> ThermalFit:
     """Fit Table 4.9 columns to runs by simulation-error least squares (module docstring).
 
@@ -615,6 +644,8 @@ def fit_thermal(
     face's loss at its bound 1e-5 /s with an implied ambient of 1078 degC, a model that holds no drive in the
     window); the rest state does. ``tem_gain``: fit TEM 1's drive gain relative to TEM 2's with the shared columns
     (the runs' ``layer`` says which TEM each measured; ``params.tem_gain`` = (base's x gain, base's)).
+    ``muscle_lag_s``: the muscle thermocouple's known first-order lag [s] (the model's ``temp_lag_s``): the muscle
+    face is fitted as it reads it (:func:`muscle_lagged`), the table then the node's; the exchanger face as measured.
     Raises ThermalIdentificationError when the data cannot support the fit.
     """
     t_wall = time.perf_counter()
@@ -646,7 +677,9 @@ def fit_thermal(
     rest = rest_C is not None
     if rest and not all(math.isfinite(t) for t in rest_C):  # type: ignore[union-attr]
         raise ThermalIdentificationError(f'rest temperatures {rest_C!r} must be finite degC')
-    prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag, rest_C, tem_gain)
+    if not (math.isfinite(muscle_lag_s) and muscle_lag_s >= 0):
+        raise ThermalIdentificationError(f'muscle thermocouple lag {muscle_lag_s!r} s must be >= 0')
+    prob = _Problem(records, base, fitted, masks, settle_s, sensor_lag, rest_C, tem_gain, muscle_lag_s)
     per = 5 if rest else 6
     lo, hi = np.tile(_LOWER[:per], len(fitted)), np.tile(_UPPER[:per], len(fitted))
     extra = [1.0] if tem_gain else []  # TEM 1's gain relative to the base's, from the base's
@@ -662,6 +695,7 @@ def fit_thermal(
             max_iter=max_iter,
             rest_C=rest_C,
             tem_gain=tem_gain,
+            muscle_lag_s=muscle_lag_s,
         )
         x0 = np.r_[_free_from_table(table_of(plain.params), fitted, rest), plain.params.tem_gain[0] / base.tem_gain[0]]
         x0 = x0 if tem_gain else x0[:-1]
@@ -713,6 +747,7 @@ def fit_thermal(
         at_bounds,
         float(x[-1]) if sensor_lag else 0.0,
         rest_C,
+        muscle_lag_s,
     )
 
 
@@ -742,14 +777,16 @@ def evaluate(
     settle_s: float = 30.0,
     base: th.ThermalParams | None = None,
     sensor_lag_s: float = 0.0,
+    muscle_lag_s: float = 0.0,
 ) -> list[RecordEvaluation]:
     """Free-run each record under ``params`` and return Table 4.10 statistics per measured face.
 
     ``masks``: per-record samples to evaluate (default all valid samples after the start,
     and after ``settle_s`` when T2 is not measured). The % is of the face's measured range
-    over the whole run. ``sensor_lag_s``: the simulation as sensors of that lag read it.
+    over the whole run. ``sensor_lag_s``: the simulation as sensors of that lag read it; ``muscle_lag_s``: the muscle
+    face as its thermocouple of that lag reads it (:func:`muscle_lagged`).
     """
-    sims = simulate_records(params, records, base, sensor_lag_s)
+    sims = simulate_records(params, records, base, sensor_lag_s, muscle_lag_s)
     out = []
     for j, r in enumerate(records):
         ev = r.valid.copy()

@@ -13,6 +13,11 @@ alike, Table 4.10's statistics. Here:
   data do not tell a small loss from a far ambient). R is fixed at the base's (the form's one unidentifiable scale).
 * **solver**: scipy's ``least_squares`` (trf, bounds), Jacobian by forward differences on the log scale, all its
   simulations one call of the compiled kernel (:func:`sma_wrist.core.thermal.kernel.peltier_simulate_runs`).
+* **sensor lag** (``sensor_lag_s``, fixed, not fitted): the muscle thermocouple's first-order lag
+  (:func:`sma_wrist.core.thermal.identification.muscle_lagged`, scipy's compiled recursive filter over all the
+  kernel's parameter rows at once): the muscle node is fitted as the thermocouple reads it, so a model that lags
+  its node by the same ``temp_lag_s`` predicts the measurement (fitted to the lagged reading directly, the node
+  would carry the lag twice).
 """
 
 from __future__ import annotations
@@ -53,13 +58,18 @@ class PeltierFit:
     wall_s: float
     at_bounds: tuple[str, ...] = ()
     rest_C: tuple[float, float] | None = None
+    sensor_lag_s: float = 0.0  # the muscle thermocouple's lag [s] the fit read the muscle node through
 
 
 def simulate_records(
-    params: pe.PeltierParams, records: Sequence[ti.ThermalRecord], base_rest: FloatArray | None = None
+    params: pe.PeltierParams,
+    records: Sequence[ti.ThermalRecord],
+    base_rest: FloatArray | None = None,
+    sensor_lag_s: float = 0.0,
 ) -> list[FloatArray]:
     """Free-run simulation (K_r, 2) [degC] of each record under its layer's vector, from its measured start (an
-    unmeasured exchanger face from the muscle face and ``params``' rest offset, ti.start_states)."""
+    unmeasured exchanger face from the muscle face and ``params``' rest offset, ti.start_states); the muscle face
+    as a thermocouple of first-order lag ``sensor_lag_s`` [s] reads it (ti.muscle_lagged; 0: the node)."""
     u, u2, _, _ = ti._pad(records)
     rest = pe.rest_state(params, 1, 2)[0, 0] if base_rest is None else base_rest
     T0 = ti.start_states(records, None, rest)
@@ -67,6 +77,7 @@ def simulate_records(
     out = np.empty((u.shape[0], 1, len(records), 2))
     with np.errstate(all='ignore'):
         tk.peltier_simulate_runs(np.ascontiguousarray(coef), u, u2, np.ascontiguousarray(T0), records[0].dt, out)
+        out = ti.muscle_lagged(out, sensor_lag_s, records[0].dt)
     return [out[: r.n, 0, j] for j, r in enumerate(records)]
 
 
@@ -76,9 +87,11 @@ def evaluate(
     mode: str,
     masks: Sequence[FloatArray] | None = None,
     settle_s: float = 30.0,
+    sensor_lag_s: float = 0.0,
 ) -> list[ti.RecordEvaluation]:
-    """Table 4.10 statistics per run and measured face of the free-run prediction (as ti.evaluate)."""
-    sims = simulate_records(params, records)
+    """Table 4.10 statistics per run and measured face of the free-run prediction (as ti.evaluate), the muscle face
+    as a thermocouple of lag ``sensor_lag_s`` [s] reads it."""
+    sims = simulate_records(params, records, sensor_lag_s=sensor_lag_s)
     out = []
     for j, r in enumerate(records):
         ev = r.valid.copy()
@@ -107,8 +120,10 @@ class _LayerProblem:
         masks: Sequence[FloatArray] | None,
         settle_s: float,
         rest_C: tuple[float, float] | None,
+        sensor_lag_s: float = 0.0,
     ) -> None:
         self.records = records
+        self.lag = sensor_lag_s
         self.base = base.vector()
         self.rest_C = rest_C
         self.dt = records[0].dt
@@ -155,6 +170,7 @@ class _LayerProblem:
         out = np.empty((self.u.shape[0], v.shape[0], R, 2))
         with np.errstate(all='ignore'):
             tk.peltier_simulate_runs(coef, self.u, self.u2, self.T0, self.dt, out)
+            out = ti.muscle_lagged(out, self.lag, self.dt)
             res = (out - self.Tm[:, None]) * self.w[None, None]
         r = np.moveaxis(res, 1, 0)[:, self.mask]
         return np.where(np.isfinite(r), r, 1e3)  # a run-away parameter set: a large, finite residual
@@ -179,10 +195,13 @@ def fit_peltier(
     settle_s: float = 30.0,
     rest_C: tuple[float, float] | None = None,
     max_nfev: int = 200,
+    sensor_lag_s: float = 0.0,
 ) -> PeltierFit:
     """Fit each layer's Peltier vector (Eqs. P.1-P.3) to its runs by simulation-error least squares (module
     docstring). ``masks``: per-run training samples; ``rest_C``: the measured (muscle, exchanger) rest faces
-    [degC] the ambients are tied to. Raises ThermalIdentificationError when the data cannot support the fit."""
+    [degC] the ambients are tied to; ``sensor_lag_s``: the muscle thermocouple's known first-order lag [s] (the
+    model's ``temp_lag_s``; module docstring). Raises ThermalIdentificationError when the data cannot support the
+    fit."""
     from scipy.optimize import least_squares
 
     t0 = time.perf_counter()
@@ -196,6 +215,8 @@ def fit_peltier(
             )
     if rest_C is not None and not all(math.isfinite(t) for t in rest_C):
         raise ti.ThermalIdentificationError(f'rest temperatures {rest_C!r} must be finite degC')
+    if not (math.isfinite(sensor_lag_s) and sensor_lag_s >= 0):
+        raise ti.ThermalIdentificationError(f'muscle thermocouple lag {sensor_lag_s!r} s must be >= 0')
     params = base or pe.PeltierParams()
     fitted = tuple(sorted({r.layer for r in records}))
     names = [pe.LAYER_KEYS[i] for i in LOG_IDX] + (
@@ -210,6 +231,7 @@ def fit_peltier(
             None if masks is None else [masks[j] for j in idx],
             settle_s,
             rest_C,
+            sensor_lag_s,
         )
         x0 = np.clip(prob.free(params.layers[layer]), prob.lo + 1e-9, prob.hi - 1e-9)
         sol = least_squares(
@@ -232,20 +254,33 @@ def fit_peltier(
             for i, (k, v, a, b, e) in enumerate(zip(names, sol.x, prob.lo, prob.hi, tol))
             if v <= a + e or v >= b - e
         ]
-    return PeltierFit(params, fitted, math.sqrt(cost / n_res), nfev, time.perf_counter() - t0, tuple(at_bounds), rest_C)
+    return PeltierFit(
+        params,
+        fitted,
+        math.sqrt(cost / n_res),
+        nfev,
+        time.perf_counter() - t0,
+        tuple(at_bounds),
+        rest_C,
+        sensor_lag_s,
+    )
 
 
 def leave_one_out(
-    records: Sequence[ti.ThermalRecord], base: pe.PeltierParams | None = None, settle_s: float = 30.0
+    records: Sequence[ti.ThermalRecord],
+    base: pe.PeltierParams | None = None,
+    settle_s: float = 30.0,
+    sensor_lag_s: float = 0.0,
 ) -> list[ti.RecordEvaluation]:
-    """Each run predicted by the fit on the others of its layer (as ti.identify_thermal's leave-one-out)."""
+    """Each run predicted by the fit on the others of its layer (as ti.identify_thermal's leave-one-out), fitted and
+    predicted through the muscle thermocouple's lag ``sensor_lag_s`` [s]."""
     out = []
     for j, r in enumerate(records):
         others = [q for i, q in enumerate(records) if i != j and q.layer == r.layer]
         if not others:
             raise ti.ThermalIdentificationError(f'{r.name}: leave-one-out needs another run of TEM {r.layer + 1}')
-        f = fit_peltier(others, base, settle_s=settle_s)
-        out += evaluate(f.params, [r], 'leave-one-out', settle_s=settle_s)
+        f = fit_peltier(others, base, settle_s=settle_s, sensor_lag_s=sensor_lag_s)
+        out += evaluate(f.params, [r], 'leave-one-out', settle_s=settle_s, sensor_lag_s=sensor_lag_s)
     return out
 
 
