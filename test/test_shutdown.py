@@ -7,6 +7,7 @@ the parent pytest process would end the test run instead of failing a test.
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import textwrap
@@ -156,6 +157,52 @@ def test_ctrl_c_inside_a_finaliser_is_not_raised_there():
     assert req.requested
     with pytest.raises(KeyboardInterrupt):
         _ShutdownRequest()._on_sigint(2, sys._getframe())
+
+
+def test_ctrl_c_inside_a_kernel_compile_callback_is_noted_and_the_node_stops_once_built(tmp_path):
+    """Humble: a Ctrl-C while plant_sim compiled its kernels at start-up landed in llvmlite's ctypes callback, where a
+    raised KeyboardInterrupt is printed as "Exception ignored on calling ctypes callback function" with a traceback
+    and dropped. There it is only noted; the node stops once it is built instead of spinning."""
+    import os
+
+    from sma_wrist.nodes import common
+
+    namespace: dict = {'sys': sys}
+    exec(
+        compile('def callback():\n    return sys._getframe()', os.path.join('x', 'llvmlite', 'ee.py'), 'exec'),
+        namespace,
+    )
+    req = common._ShutdownRequest()
+    req._on_sigint(2, namespace['callback']())
+    assert req.requested
+
+    spun = []
+
+    class Compiling:
+        """A node whose construction gets the Ctrl-C inside the compile callback."""
+
+        def __init__(self) -> None:
+            # the handler main_for installed, called as the signal would call it there
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, namespace['callback']())
+
+    class Rclpy:
+        def init(self, args=None) -> None:
+            pass
+
+        def spin(self, node) -> None:
+            spun.append(node)
+
+        def ok(self) -> bool:
+            return True
+
+    orig, orig_teardown = common.rclpy, common._teardown
+    common.rclpy, common._teardown = Rclpy(), lambda node: None
+    try:
+        assert common.main_for(Compiling) == 0
+    finally:
+        common.rclpy, common._teardown = orig, orig_teardown
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    assert spun == []
 
 
 def test_ctrl_c_shuts_the_context_down_before_the_node_is_destroyed_as_rclpy_does():

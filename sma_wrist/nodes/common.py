@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import os
 import signal
 import threading
 from collections.abc import Callable, Mapping, Sequence
@@ -402,6 +403,11 @@ class _ShutdownRequest:
             # `timeout -s INT ros2 launch`); rclpy's handler, which called this one, has already shut
             # the context down, so spin ends on ExternalShutdownException all the same
             return
+        if frame is not None and f'{os.sep}llvmlite{os.sep}' in frame.f_code.co_filename:
+            # raised in llvmlite's ctypes callback (a node compiling its kernels at start-up), Python prints
+            # "Exception ignored on calling ctypes callback function" with a traceback and drops it (seen under
+            # Humble: Ctrl-C during plant_sim's first compile); main_for stops the node once it is built
+            return
         raise KeyboardInterrupt
 
     def restore(self) -> None:
@@ -531,6 +537,8 @@ def main_for(node_class: type, args: Sequence[str] | None = None) -> int:
     try:
         rclpy.init(args=args)
         node = node_class()
+        if shutdown.requested:  # a Ctrl-C while the node was built (compiling) was only noted: _on_sigint
+            raise KeyboardInterrupt
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
