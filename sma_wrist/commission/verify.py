@@ -814,7 +814,7 @@ def refinement_line(rf: dict[str, Any]) -> str:
     )
     what = f'the refit ({rf["law"]} law) handed over' if rf.get('refined') else 'the first fit kept'
     if rf.get('refined') and rf.get('temp_lag_s'):
-        what += f', with the thermocouples\' lag it found, {rf["temp_lag_s"]:.3g} s (plant_sim model.temp_lag_s)'
+        what += f", with the thermocouples' lag it found, {rf['temp_lag_s']:.3g} s (plant_sim model.temp_lag_s)"
     return (
         'Refinement of the model wire on the excitation and the defaults run: RMS angle error of the commissioned '
         f'run (held out): {errors} mrad; {what} ({rf.get("why", "")}; {rf.get("seconds", 0):g} s of CPU).'
