@@ -87,7 +87,8 @@ def test_a_refit_is_handed_over_only_where_it_predicts_the_held_out_run_better_b
 
     res = rf.refine_wire(ctx, 'commissioned', 'defaults', 1.0, params)
     h = res['heldout']
-    assert res['refined'] and h[res['law']] < h['first'] - 0.2, res
+    assert res['refined'] and h[res['refit']] < h['first'] - 0.2 and res['refit'].startswith(res['law']), res
+    assert set(h) >= {'first', 'linear', 'linear' + rf.HELD, 'brinson', 'brinson' + rf.HELD}
     handed = load_wire_file(wire_file)
     assert handed.law == res['law'] and abs(handed.M_s_C - TRUTH.M_s_C) < abs(first_wire.M_s_C - TRUTH.M_s_C)
     ps = yaml.safe_load(params.read_text())['plant_sim']['ros__parameters']

@@ -807,12 +807,14 @@ def refinement_line(rf: dict[str, Any]) -> str:
     h = rf.get('heldout') or {}
     if not h:
         return f'Refinement of the model wire: not refitted ({rf.get("why", "")}).'
+    from sma_wrist.commission.refine import candidate_label
+
     errors = ', '.join(
-        f'{"first fit" if k == "first" else f"refit ({k} law)"} {x:.3g}'
+        f'{"first fit" if k == "first" else f"refit ({candidate_label(k)})"} {x:.3g}'
         for k, x in h.items()
         if k not in ('metric', 'unit')
     )
-    what = f'the refit ({rf["law"]} law) handed over' if rf.get('refined') else 'the first fit kept'
+    what = f'the refit ({candidate_label(rf["refit"])}) handed over' if rf.get('refined') else 'the first fit kept'
     if rf.get('refined') and rf.get('temp_lag_s'):
         what += f", with the thermocouples' lag it found, {rf['temp_lag_s']:.3g} s (plant_sim model.temp_lag_s)"
     return (
