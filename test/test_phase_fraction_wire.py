@@ -173,6 +173,34 @@ def test_the_plant_and_the_diagnosis_replay_step_the_same_phase_fraction_wrist()
     assert np.max(np.abs(q - q_k)) < 1e-12
 
 
+def test_a_replay_with_another_wire_is_that_of_a_model_built_with_it():
+    """ExtendedModel.with_wire, what the wire fit replays at each evaluation, against a model built from scratch:
+    bit for bit, from noisy (smoothed) temperatures, after the first model has replayed (its cache) and for the
+    SD-GPI too (the wire None); the first model keeps its own wire."""
+    from sma_wrist.diagnose import effects as fx
+    from sma_wrist.diagnose.data import Run
+
+    t = np.arange(0.0, 60.0, DT)
+    ph = 2 * np.pi * t / 30.0
+    T = np.c_[50.0 + 30.0 * np.sin(ph), 50.0 - 30.0 * np.sin(ph)] + np.random.default_rng(5).normal(0, 0.1, (t.size, 2))
+    run = Run(t=t, dt=DT, u=None, T=T, q=np.zeros(t.size), payload_kg=0.4)
+    row = fx.NOMINAL.copy()[None]
+    other = pf.PhaseFractionWire(M_f_C=40.0, M_s_C=55.0, A_s_C=60.0, A_f_C=80.0, law='brinson')
+    model = fx.ExtendedModel(run, PlantParams(dt=0.01, wire=pf.PhaseFractionWire()))
+    assert model.T_noise > fx.SMOOTH_ABOVE_C  # the smoothed temperatures drive the replay
+    own = model.angle_measured(row)
+    for wire in (other, None):
+        swapped = model.with_wire(wire)
+        built = fx.ExtendedModel(run, PlantParams(dt=0.01, wire=wire))
+        assert swapped.consts.params == built.consts.params
+        assert np.array_equal(swapped.consts.mech, built.consts.mech)
+        q = swapped.angle_measured(row)
+        assert np.array_equal(q, built.angle_measured(row))
+        assert np.max(np.abs(q - own)) > 0.01  # another wire, another angle [rad]
+    assert np.array_equal(model.angle_measured(row), own)
+    assert np.array_equal(model.with_wire(None).with_wire(pf.PhaseFractionWire()).angle_measured(row), own)
+
+
 def test_the_compiled_plant_steps_a_phase_fraction_wrist_as_the_numpy_path():
     from sma_wrist.core import jit
     from sma_wrist.core.plant.wrist import WristPlant

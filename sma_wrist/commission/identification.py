@@ -811,25 +811,23 @@ def fit_phase_fraction_wire(
         row[i_lag] = v['temp_lag_s']
         return wire, row
 
-    def replay(x: np.ndarray, substeps: int | None, upto: int | None) -> np.ndarray:
-        wire, row = unpack(x)
-        model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, wire=wire))
-        if substeps is not None:
-            model.substeps = substeps
-        return model.angle_measured(row[None], upto, 'measured')[:, 0]
+    # each recording's replay inputs (smoothed temperatures, rates, cycle counts) do not depend on the wire: prepared
+    # once, each evaluation replays them with its wire (ExtendedModel.with_wire)
+    models = [fx.ExtendedModel(r, PlantParams(dt=MECH_STEP_S, wire=w0)) for r in (run, *(r for r, _ in extra))]
+    for m in models:
+        m.substeps = PF_FIT_SUBSTEPS
 
-    def replay_extra(x: np.ndarray, other: Any) -> np.ndarray:
+    def replay(x: np.ndarray, model: Any, upto: int | None) -> np.ndarray:
         wire, row = unpack(x)
-        row[i_p] += run.payload_kg - other.payload_kg  # the payload fitted is one for all recordings
-        model = fx.ExtendedModel(other, PlantParams(dt=MECH_STEP_S, wire=wire))
-        model.substeps = PF_FIT_SUBSTEPS
-        return model.angle_measured(row[None], None, 'measured')[:, 0]
+        if model.run is not run:
+            row[i_p] += run.payload_kg - model.run.payload_kg  # the payload fitted is one for all recordings
+        return model.with_wire(wire).angle_measured(row[None], upto, 'measured')[:, 0]
 
     def residual(x: np.ndarray) -> np.ndarray:
-        own = replay(x, PF_FIT_SUBSTEPS, i_held)[i_fit:] - run.q[i_fit:i_held]
+        own = replay(x, models[0], i_held)[i_fit:] - run.q[i_fit:i_held]
         if not extra:
             return own
-        return np.concatenate([own, *((replay_extra(x, r) - r.q)[i0:] for r, i0 in extra)])
+        return np.concatenate([own, *((replay(x, m, None) - r.q)[i0:] for m, (r, i0) in zip(models[1:], extra))])
 
     inside = lo + 1e-3 * (hi - lo), hi - 1e-3 * (hi - lo)
     offsets = (start['offset_mm'],) if 'offset_mm' in start else PF_START_OFFSETS_MM

@@ -18,7 +18,9 @@ Signal chain of the extended model (doc/explanation/diagnosis.md has the equatio
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.signal import savgol_filter
@@ -28,6 +30,9 @@ from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.signals import first_order  # noqa: F401 - the catalogue's lags, re-exported
 from sma_wrist.core.thermal import kernel as tk
 from sma_wrist.diagnose.kernels import Constants, _jit
+
+if TYPE_CHECKING:
+    from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
 
 INDEX = {p.name: i for i, p in enumerate(PARAMS)}
 NOMINAL = np.array([p.nominal for p in PARAMS])
@@ -485,6 +490,17 @@ class ExtendedModel:
             )
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
+
+    def with_wire(self, wire: PhaseFractionWire | None) -> ExtendedModel:
+        """This run's replays for the plant with another wire (PlantParams.wire; None: the SD-GPI): the same as an
+        ExtendedModel of the run and ``dataclasses.replace(params, wire=wire)``, with this one's inputs (smoothed
+        temperatures and rates, their noise, cycle counts, thermal start, step and smoothing choices), which do not
+        depend on the wire, taken over instead of derived again; the replays' caches start empty. What a fit of the
+        wire replays at each of its evaluations."""
+        out = copy.copy(self)
+        out.consts = self.consts.with_wire(wire)
+        out._mech_cache, out._th_cache = {}, {}
+        return out
 
     def from_reference(self, cycles: np.ndarray) -> np.ndarray:
         """Cycle counts (K, 2) relative to the first scored sample (after ``Run.settle_s``, as the fit's split)."""

@@ -15,8 +15,10 @@ mechanics replay against its step (``step_mechanics``) and its own plain-Python 
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from sma_wrist.core.joint.kernel import joint_step_one
 from sma_wrist.core.plant.kernel import pack_constants
 from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.thermal import kernel as tk
+
+if TYPE_CHECKING:
+    from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
 
 _jit = _jit_switch  # numba.njit(cache=True, nogil=True) when numba is installed
 _envelopes = hk._envelopes
@@ -427,13 +432,28 @@ class Constants:
             [jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm, self.params.preload_elongation_mm, jp.payload_kg]
         )
         self.u_limits = (self.params.thermal.u_min_V, self.params.thermal.u_max_V)
-        #: the phase-fraction wire's constant row where the plant's wire is one (PlantParams.wire), else None
+        self._sdgpi_mech = self.mech
+        self._pack_wire()
+
+    def _pack_wire(self) -> None:
+        """The phase-fraction wire's constant row (``self.wire``) and validity window [degC] (mech 10-11) where the
+        plant's wire is one (PlantParams.wire); else None and the SD-GPI's window."""
+        self.mech = self._sdgpi_mech.copy()
         self.wire = None
         wire = self.params.wire
         if wire is not None:
             mg = self.params.muscle
             self.wire = wire.packed(mg.wire_length_mm, mg.wire_area_m2)
             self.mech[10], self.mech[11] = wire.T_valid
+
+    def with_wire(self, wire: PhaseFractionWire | None) -> Constants:
+        """These constants for the plant with another wire (PlantParams.wire: a phase-fraction wire, or None for the
+        SD-GPI of ``hysteresis``), the same as ``Constants(dataclasses.replace(params, wire=wire))``: only the wire's
+        row and window are packed again; the SD-GPI's, heat balance's and joint's arrays are shared (read-only)."""
+        out = copy.copy(self)
+        out.params = dataclasses.replace(self.params, wire=wire)
+        out._pack_wire()
+        return out
 
     def thermal(
         self, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift_per_s: np.ndarray, substeps: int = 1
