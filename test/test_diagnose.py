@@ -513,3 +513,47 @@ def test_a_run_with_bridged_gaps_reports_its_residual_over_the_measured_samples_
     part = diagnose_run(gapped, candidates=['temp_sensor_offsets']).residual_stats['thermal']['nominal']
     assert part['rms'] == pytest.approx(full['rms'], rel=0.05)
     assert part['rms_over_noise'] == pytest.approx(full['rms_over_noise'], rel=0.05)
+
+
+def test_a_window_cut_while_the_muscles_move_starts_its_nodes_ahead_of_their_lagged_readings():
+    # the model's thermocouples read its muscle nodes 0.5 s late; a window cut where the temperatures move fastest
+    # starts its replay from the readings advanced by that lag, not from the readings (whose error would decay over
+    # the heat balance's minute-long time constant: a monitor window of the model itself called a drift); a lag that
+    # is not the model's (a candidate's, a change within the window) starts from the readings
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose.data import Run
+
+    lag = 0.5
+    truth = td.simulate('none', seed=3, duration_s=200.0, params={'temp_lag_s': lag}, faces_start_C=(30.0, 30.0))
+    rate = np.gradient(truth.T_true, truth.dt, axis=0)
+    i0 = 10_000 + int(np.argmax(np.abs(rate[10_000:14_000, 0])))
+    sl = slice(i0, i0 + 6000)
+    window = Run(
+        t=truth.t[sl] - truth.t[i0],
+        dt=truth.dt,
+        u=truth.u[sl],
+        T=truth.T[sl],
+        q=truth.q[sl],
+        payload_kg=truth.payload_kg,
+        thermal_x0=np.stack([truth.T[i0], truth.faces[i0]], axis=1),
+        thermal_start='measured',
+    )
+    row = fx.theta(temp_lag_s=lag)[None]
+    model = fx.ExtendedModel(window, PlantParams(dt=truth.dt), nominal=row[0])  # the lag is the model's own
+    start = model.T_start.copy()
+    assert (
+        np.abs(model.T_start + lag * model.T_rate_start - truth.T_true[i0]).max() < 0.1 * np.abs(lag * rate[i0]).max()
+    )
+
+    def rms_first_30_s(m: fx.ExtendedModel) -> float:
+        res = (
+            m.thermal_measured(row)[:3000, 0]
+            - fx.thermocouples(truth.T_true, fx.theta(temp_lag_s=lag), truth.dt)[sl][:3000]
+        )
+        return float(np.sqrt(np.mean(res**2)))
+
+    advanced = rms_first_30_s(model)
+    at_readings = fx.ExtendedModel(window, PlantParams(dt=truth.dt))  # a lag that is no part of the model: a change
+    assert at_readings.thermal_true(row)[0, 0] == pytest.approx(start, abs=1e-9)
+    assert np.array_equal(at_readings.T_start, start)
+    assert advanced < 0.3 * rms_first_30_s(at_readings), (advanced, rms_first_30_s(at_readings))

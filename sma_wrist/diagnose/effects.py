@@ -483,11 +483,9 @@ class ExtendedModel:
             self.cycles = self.from_reference(cycle_count(run.T, run.dt))
             # the thermal replay starts from the first reading: of a noisy one, the start of a
             # local quadratic fit (a single noisy sample offsets the replay for tens of seconds)
-            self.T_start = (
-                run.T[0].copy()
-                if self.T_noise < SMOOTH_ABOVE_C
-                else smooth_and_rate(run.T[: max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)[0][0]
-            )
+            head = smooth_and_rate(run.T[: max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)
+            self.T_start = run.T[0].copy() if self.T_noise < SMOOTH_ABOVE_C else head[0][0]
+            self.T_rate_start = head[1][0]  # [degC/s], what a lagged reading trails its node by, per s of lag
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
 
@@ -522,13 +520,24 @@ class ExtendedModel:
             todo.setdefault((K,) + tuple(np.round(r[_TH_IDX], 12)), []).append(j)
         missing = [k for k in todo if k not in self._th_cache]
         if missing:
+            # the muscle nodes at the start: the first readings advanced by the model's own thermocouple lags (its
+            # nominal row's), which the readings had before the run began (a window cut while the muscles move
+            # starts with its nodes ahead of their readings; started at the readings, the node's error decays over
+            # the heat balance's minute-long time constant: a monitor window of a simulated run of the model itself
+            # with a 0.1 s lag was called a thermocouple drift). A row's departure from those lags is a change within
+            # the run (a monitor window is cut just before one), so it does not move the start
+            lead = self.nominal[INDEX['temp_lag_s']] + self.nominal[[c[3] for c in CHANNEL_IDX]]
             coefs, drifts, x0s = [], [], []
             for key in missing:
                 c, drift, off = self.thermal_coef(np.array(key[1:]))
                 coefs.append(c)
                 drifts.append(drift)
                 kv = dict(zip(THERMAL_KEYS, key[1:]))
-                T0 = self.temp_inverse_static(self.T_start, kv, 0.0) if run.T is not None else self._rest[:, 0]
+                T0 = (
+                    self.temp_inverse_static(self.T_start + lead * self.T_rate_start, kv, 0.0)
+                    if run.T is not None
+                    else self._rest[:, 0]
+                )
                 x0 = self._rest.copy()
                 x0[:, 1] += off  # exchanger face starts at its rest state, shifted by the ambient offset
                 if getattr(run, 'thermal_start', 'rest') == 'measured':
