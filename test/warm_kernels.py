@@ -51,8 +51,8 @@ def _cases() -> list:
 
 
 def replays() -> None:
-    """The diagnosis's synthetic runs and its replays (as much CPU as the other part, measured on a cold cache:
-    the two run side by side)."""
+    """The diagnosis's synthetic runs and its replays (25 s of CPU on a cold cache, measured on a loaded machine:
+    the SD-GPI replay compiled once; it was 52 s while a read-only joint row compiled it a second time)."""
     from sma_wrist.diagnose import diagnose_run
     from sma_wrist.diagnose.testdata import run_from_truth, simulate
 

@@ -449,8 +449,8 @@ class Constants:
             float(dt),
             int(substeps),
             coef,
-            np.ascontiguousarray(np.broadcast_to(x0, (n, 2, 2)), dtype=float),
-            np.ascontiguousarray(np.broadcast_to(drift_per_s, (n,)), dtype=float),
+            np.array(np.broadcast_to(x0, (n, 2, 2)), dtype=float, order='C'),  # writeable: see mechanics
+            np.array(np.broadcast_to(drift_per_s, (n,)), dtype=float, order='C'),
             out,
             X,
         )
@@ -462,7 +462,10 @@ class Constants:
         """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim`."""
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
-        jrow = np.ascontiguousarray(np.broadcast_to(jrow, (n, 5)), dtype=float)
+        # a writeable copy whatever the caller's shape: a row broadcast to (n, 5) is copied, an (n, 5) one was passed on
+        # as a read-only view, which numba types as another array and compiles the kernel for again (mechanics_sim:
+        # ~24 s of CPU on a cold cache)
+        jrow = np.array(np.broadcast_to(jrow, (n, 5)), dtype=float, order='C')
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))
