@@ -52,8 +52,8 @@ def _warm_kernels(config: pytest.Config) -> None:
     """Under ``pytest -n N``, in the controller before the workers start: compile the numba kernels once,
     the parts of warm_kernels.py side by side, so the workers load the cache instead of each compiling
     every kernel at the same time (a fresh clone's CI run: ~1 min of the suite's time on 2 cores). Three parts
-    of 40-80 s of CPU each on a cold cache (measured: closed_loops 77 s, replays 68 s, model_wires 38 s), side by side
-    on 2 cores. Warm cache: a few seconds of imports. ``SMA_WRIST_NO_WARM=1`` skips it; a part that fails only leaves its
+    of 25-60 s of CPU each on a cold cache (measured on a loaded machine: closed_loops 58 s, replays 25 s,
+    model_wires 26 s), side by side on 2 cores. Warm cache: a few seconds of imports. ``SMA_WRIST_NO_WARM=1`` skips it; a part that fails only leaves its
     kernels to the tests, as before."""
     import subprocess
     import sys

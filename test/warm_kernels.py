@@ -51,8 +51,8 @@ def _cases() -> list:
 
 
 def replays() -> None:
-    """The diagnosis's synthetic runs and its replays (as much CPU as the other part, measured on a cold cache:
-    the two run side by side)."""
+    """The diagnosis's synthetic runs and its replays (25 s of CPU on a cold cache, measured on a loaded machine:
+    the SD-GPI replay compiled once; it was 52 s while a read-only joint row compiled it a second time)."""
     from sma_wrist.diagnose import diagnose_run
     from sma_wrist.diagnose.testdata import run_from_truth, simulate
 
@@ -60,8 +60,8 @@ def replays() -> None:
 
 
 def model_wires() -> None:
-    """The diagnosis's replay of a phase-fraction wire, which commissioning fits on every device (the costliest
-    kernel to compile: ~25 s of CPU; this part 38 s on a cold cache), the Peltier heat balance's
+    """The diagnosis's replay of a phase-fraction wire, which commissioning fits on every device (~13 s of CPU to
+    compile; this part 26 s on a cold cache, measured on a loaded machine), the Peltier heat balance's
     simulation it fits beside it, and the TEM loop's online estimate of the heat balance."""
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
     from sma_wrist.core.plant.wrist import PlantParams, WristPlant

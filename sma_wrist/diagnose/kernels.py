@@ -333,24 +333,37 @@ def mechanics_sim(
 
 # compiled once and called, not inlined like _loads: its two load solves inline the wire law's Newton iteration, and
 # three inlined copies in pf_mechanics_sim made it the costliest kernel to compile (cold cache, measured: 80-93 s of
-# CPU inlined, 24-27 s called; a replay of 8 runs x 3000 steps ~0.1 s either way, identical to the bit)
+# CPU inlined, 24-27 s called; a replay of 8 runs x 3000 steps ~0.1 s either way, identical to the bit). It stores
+# nothing, so it takes no commit flag: numba compiles a called kernel once per literal argument, and a
+# ``commit`` passed as True and as False compiled it twice (~9 s of CPU each on a cold cache)
 @_jit
-def _pf_loads(T1, T2, q, mem, load, compliance, preload, commit, wc, mech):  # pragma: no cover - compiled
-    """:func:`_loads` for phase-fraction wires (:mod:`sma_wrist.core.hysteresis.phase_fraction_kernel`): both
-    bundles' loads at angle q against memory ``mem`` (2, 5); returns (torque, stiffness), with ``commit`` stores the
-    memory, loads and compliances."""
+def _pf_solve(T1, T2, q, mem, load, preload, wc, mech):  # pragma: no cover - compiled
+    """Both phase-fraction bundles' loads at angle q against memory ``mem`` (2, 5), from the guesses ``load``
+    (:func:`sma_wrist.core.hysteresis.phase_fraction_kernel.solve_load`): (m1, dy1, m2, dy2), loads [kgf] and
+    compliances [mm/kgf]; stores nothing."""
     m_max, tol, max_it = mech[6], mech[7], int(mech[8])
-    n_g_r, r_eff, q_neutral = mech[14], mech[15], mech[16]
+    r_eff, q_neutral = mech[15], mech[16]
     x_mm = 1e3 * r_eff * (q - q_neutral)
     m1, dy1, _r1 = pfk.solve_load(wc, T1, preload - x_mm, mem[0], load[0], m_max, tol, max_it)
     m2, dy2, _r2 = pfk.solve_load(wc, T2, preload + x_mm, mem[1], load[1], m_max, tol, max_it)
-    if commit:
-        pfk.commit(wc, T1, m1, mem[0])
-        pfk.commit(wc, T2, m2, mem[1])
-        load[0] = m1
-        load[1] = m2
-        compliance[0] = dy1
-        compliance[1] = dy2
+    return m1, dy1, m2, dy2
+
+
+@_jit_inline
+def _pf_commit(wc, T1, T2, m1, dy1, m2, dy2, mem, load, compliance):  # pragma: no cover - compiled
+    """Store what :func:`_pf_solve` found: both wires' memory at their loads, the loads and compliances."""
+    pfk.commit(wc, T1, m1, mem[0])
+    pfk.commit(wc, T2, m2, mem[1])
+    load[0] = m1
+    load[1] = m2
+    compliance[0] = dy1
+    compliance[1] = dy2
+
+
+@_jit_inline
+def _pf_torque(m1, dy1, m2, dy2, mech):  # pragma: no cover - compiled
+    """:func:`_loads`' (torque [N m], stiffness [N m/rad]) of the phase-fraction bundles' loads and compliances."""
+    n_g_r, r_eff = mech[14], mech[15]
     torque = 0.0
     torque += n_g_r * m1
     torque += -n_g_r * m2
@@ -389,14 +402,16 @@ def pf_mechanics_sim(T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_
         hi = q_max
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            tau, _s = _pf_loads(T1, T2, mid, mem, load, compliance, preload, False, wc, mech)
+            m1, dy1, m2, dy2 = _pf_solve(T1, T2, mid, mem, load, preload, wc, mech)
+            tau, _s = _pf_torque(m1, dy1, m2, dy2, mech)
             tau -= payload * g * lever * math.cos(mid)
             if tau > 0:
                 lo = mid
             else:
                 hi = mid
         q = 0.5 * (lo + hi)
-        _pf_loads(T1, T2, q, mem, load, compliance, preload, True, wc, mech)
+        m1, dy1, m2, dy2 = _pf_solve(T1, T2, q, mem, load, preload, wc, mech)
+        _pf_commit(wc, T1, T2, m1, dy1, m2, dy2, mem, load, compliance)
         qd = 0.0
         out_q[0, j] = q
         out_qd[0, j] = 0.0
@@ -407,7 +422,9 @@ def pf_mechanics_sim(T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_
                 frac = (s + 1.0) / substeps
                 Ts0 = min(max(T[k - 1, j, 0] + frac * (T[k, j, 0] - T[k - 1, j, 0]), T_lo), T_hi)
                 Ts1 = min(max(T[k - 1, j, 1] + frac * (T[k, j, 1] - T[k - 1, j, 1]), T_lo), T_hi)
-                torque, stiffness = _pf_loads(Ts0, Ts1, q, mem, load, compliance, preload, True, wc, mech)
+                m1, dy1, m2, dy2 = _pf_solve(Ts0, Ts1, q, mem, load, preload, wc, mech)
+                _pf_commit(wc, Ts0, Ts1, m1, dy1, m2, dy2, mem, load, compliance)
+                torque, stiffness = _pf_torque(m1, dy1, m2, dy2, mech)
                 q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
             out_q[k, j] = q
             out_qd[k, j] = qd
@@ -469,8 +486,8 @@ class Constants:
             float(dt),
             int(substeps),
             coef,
-            np.ascontiguousarray(np.broadcast_to(x0, (n, 2, 2)), dtype=float),
-            np.ascontiguousarray(np.broadcast_to(drift_per_s, (n,)), dtype=float),
+            np.array(np.broadcast_to(x0, (n, 2, 2)), dtype=float, order='C'),  # writeable: see mechanics
+            np.array(np.broadcast_to(drift_per_s, (n,)), dtype=float, order='C'),
             out,
             X,
         )
@@ -482,7 +499,10 @@ class Constants:
         """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim`."""
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
-        jrow = np.ascontiguousarray(np.broadcast_to(jrow, (n, 5)), dtype=float)
+        # a writeable copy whatever the caller's shape: a row broadcast to (n, 5) is copied, an (n, 5) one was passed on
+        # as a read-only view, which numba types as another array and compiles the kernel for again (mechanics_sim:
+        # ~24 s of CPU on a cold cache)
+        jrow = np.array(np.broadcast_to(jrow, (n, 5)), dtype=float, order='C')
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))

@@ -380,8 +380,10 @@ def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped
         mech,
         np.ascontiguousarray(stacked),
         np.ascontiguousarray(env.edges_kg, dtype=float),
-        np.ascontiguousarray(hp.thresholds, dtype=float),
-        np.ascontiguousarray(hp.weights, dtype=float),
+        # writeable copies: read-only in the parameters, writeable in parameters unpickled in another process; one array
+        # type, so the plant's kernels are compiled once (see InverseCompensator)
+        np.array(hp.thresholds, dtype=float, order='C'),
+        np.array(hp.weights, dtype=float, order='C'),
         np.ascontiguousarray(hp.c, dtype=float),
         np.ascontiguousarray(hp.d, dtype=float),
         joint,
