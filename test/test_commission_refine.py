@@ -119,22 +119,35 @@ def _from_rest(period_s: float, mid1: float, amp1: float, mid2: float, amp2: flo
     return _recording(np.c_[mid1 - amp1 * c, mid2 + amp2 * c], wire)
 
 
-def test_the_refit_finds_the_detwinning_stress_and_the_thermocouple_lag():
-    # a wire whose detwinning starts at 70 MPa, read through thermocouples 0.3 s late: the first fit's family (the
-    # literature's 100 MPa, no lag) cannot describe it
-    truth = dataclasses.replace(TRUTH, sigma_s_MPa=70.0, law='brinson')
-    exc, loop, held = (
-        _lagged(_from_rest(*args, truth), 0.3)
+def _plain_and_freed(truth, lag_s: float = 0.0):
+    """The excitation-like, loop-like and held-out recordings of ``truth`` (read through a thermocouple lag ``lag_s``),
+    and the refit of the first fit's family and the freed one (:data:`rf.REFINE_FREE`) over the first two."""
+    runs = [
+        _from_rest(*args, truth)
         for args in (
             (40.0, 48.0, 32.0, 45.0, 12.0, 80.0),
             (30.0, 50.0, 30.0, 50.0, 30.0, 60.0),
             (25.0, 52.0, 28.0, 52.0, 28.0, 60.0),
         )
-    )
+    ]
+    exc, loop, held = (_lagged(r, lag_s) for r in runs) if lag_s else runs
     start = _start(dataclasses.replace(TRUTH, M_f_C=42.0, M_s_C=56.0))
     kw = {'max_nfev': 25, 'rounds': 1, 'extra': [(loop, 20)], 'law': 'brinson'}
-    plain = fit_phase_fraction_wire(exc, exc.n, start, **kw)
-    freed = fit_phase_fraction_wire(exc, exc.n, start, free=rf.REFINE_FREE, **kw)
+    return (
+        exc,
+        start,
+        kw,
+        held,
+        fit_phase_fraction_wire(exc, exc.n, start, **kw),
+        fit_phase_fraction_wire(exc, exc.n, start, free=rf.REFINE_FREE, **kw),
+    )
+
+
+def test_the_refit_finds_the_detwinning_stress_and_the_thermocouple_lag():
+    # a wire whose detwinning starts at 70 MPa, read through thermocouples 0.3 s late: the first fit's family (the
+    # literature's 100 MPa, no lag) cannot describe it
+    truth = dataclasses.replace(TRUTH, sigma_s_MPa=70.0, law='brinson')
+    _, _, _, held, plain, freed = _plain_and_freed(truth, 0.3)
     assert plain.temp_lag_s == 0.0 and plain.wire.sigma_s_MPa == 100.0
     assert freed.temp_lag_s == pytest.approx(0.3, abs=0.03) and freed.wire.sigma_s_MPa == pytest.approx(70.0, abs=3.0)
     # held out: the freed refit predicts the run it never saw, the plain one does not
@@ -144,18 +157,7 @@ def test_the_refit_finds_the_detwinning_stress_and_the_thermocouple_lag():
 
 def test_the_refit_gives_the_reverse_transformation_its_own_slope():
     truth = dataclasses.replace(TRUTH, C_M_MPa_per_C=7.0, C_A_MPa_per_C=11.0, law='brinson')
-    exc, loop, held = (
-        _from_rest(*args, truth)
-        for args in (
-            (40.0, 48.0, 32.0, 45.0, 12.0, 80.0),
-            (30.0, 50.0, 30.0, 50.0, 30.0, 60.0),
-            (25.0, 52.0, 28.0, 52.0, 28.0, 60.0),
-        )
-    )
-    start = _start(dataclasses.replace(TRUTH, M_f_C=42.0, M_s_C=56.0))
-    kw = {'max_nfev': 25, 'rounds': 1, 'extra': [(loop, 20)], 'law': 'brinson'}
-    plain = fit_phase_fraction_wire(exc, exc.n, start, **kw)
-    freed = fit_phase_fraction_wire(exc, exc.n, start, free=rf.REFINE_FREE, **kw)
+    exc, start, kw, held, plain, freed = _plain_and_freed(truth)
     assert plain.wire.C_A_MPa_per_C == plain.wire.C_M_MPa_per_C
     assert freed.wire.C_A_MPa_per_C > freed.wire.C_M_MPa_per_C + 2.0, freed.wire
     assert rf.replay_rms_mrad(freed, held, 20) < 0.7 * rf.replay_rms_mrad(plain, held, 20)

@@ -52,10 +52,7 @@ def test_simulation_is_the_thermal_step_rk4() -> None:
     assert max(np.abs(s - r.T).max() for s, r in zip(sims, recs)) < 1e-9
 
 
-def test_complex_step_jacobian_matches_central_differences() -> None:
-    recs = sine_runs('own', frequencies_Hz=(1 / 32,), duration_s=60.0, sample_dt=0.2, noise_C=0.0, lag_s=0.0)
-    prob = ti._Problem(recs, th.ThermalParams(), (0, 1), None, 30.0)
-    x = ti._free_from_table(ti.table_of(th.ThermalParams()), (0, 1)) * 1.1
+def _assert_jacobian_is_central_differences(prob: ti._Problem, x: np.ndarray) -> None:
     J = prob.jacobian(x)
     for j in (0, 4, 5, 8):
         h = 1e-6 * max(abs(x[j]), 1e-3)
@@ -63,6 +60,13 @@ def test_complex_step_jacobian_matches_central_differences() -> None:
         e[j] = h
         fd = (prob.residuals(x + e) - prob.residuals(x - e)) / (2 * h)
         assert np.allclose(J[:, j], fd, rtol=1e-5, atol=1e-9 * np.abs(fd).max())
+
+
+def test_complex_step_jacobian_matches_central_differences() -> None:
+    recs = sine_runs('own', frequencies_Hz=(1 / 32,), duration_s=60.0, sample_dt=0.2, noise_C=0.0, lag_s=0.0)
+    prob = ti._Problem(recs, th.ThermalParams(), (0, 1), None, 30.0)
+    x = ti._free_from_table(ti.table_of(th.ThermalParams()), (0, 1)) * 1.1
+    _assert_jacobian_is_central_differences(prob, x)
 
 
 def test_own_model_round_trip_recovers_table_4_9_from_a_wrong_start() -> None:
@@ -114,13 +118,7 @@ def test_a_known_muscle_thermocouple_lag_is_fitted_through_and_its_jacobian_is_e
     assert max(e.faces[f]['rms_C'] for e in ev for f in e.faces) < 1e-3
     prob = ti._Problem(recs, truth, (0, 1), None, 30.0, muscle_lag_s=0.2)
     x = ti._free_from_table(ti.table_of(truth), (0, 1)) * 1.1
-    J = prob.jacobian(x)
-    for j in (0, 4, 5, 8):
-        h = 1e-6 * max(abs(x[j]), 1e-3)
-        e = np.zeros_like(x)
-        e[j] = h
-        fd = (prob.residuals(x + e) - prob.residuals(x - e)) / (2 * h)
-        assert np.allclose(J[:, j], fd, rtol=1e-5, atol=1e-9 * np.abs(fd).max())
+    _assert_jacobian_is_central_differences(prob, x)
 
 
 def test_muscle_face_only_runs_fit_the_t1_column_and_validate_by_time_split() -> None:
