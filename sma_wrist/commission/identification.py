@@ -774,7 +774,8 @@ def fit_phase_fraction_wire(
     lo, hi, scale = lo[:n_free], hi[:n_free], scale[:n_free]
     w0 = PhaseFractionWire()
 
-    # the values not fitted: the start's, else the literature's (C_A = C_M where the start has no C_A of its own)
+    # the values not fitted: the start's, else the literature's; C_A is C_M's unless freed (the start's C_A is
+    # where a freed one starts)
     first = {
         'A_s_C': start['A_s_C'],
         'A_width_C': start['A_f_C'] - start['A_s_C'],
@@ -1150,12 +1151,10 @@ def identify_mechanics(
         bounds = list(f.at_bounds)
         if payload_kg is None and not lo_kg + 1e-3 < f.payload_kg < hi_kg - 1e-3 and f.payload_kg > 1e-3:
             bounds.append(f'payload_kg = {f.payload_kg:.3g}')
-        row = fx.NOMINAL.copy()
-        row[fx.INDEX['coulomb_Nm']] = f.coulomb_Nm
         f_rms = rms_mrad(
             fx.ExtendedModel(
                 dataclasses.replace(run, payload_kg=f.payload_kg), PlantParams(dt=dt_step, wire=f.wire)
-            ).angle_measured(row[None], None, 'measured')[:, 0]
+            ).angle_measured(f.row()[None], None, 'measured')[:, 0]
         )
         pf_fits[law] = (f, bounds, f_rms)
     pf_law = PF_LAWS[0]

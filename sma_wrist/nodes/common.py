@@ -397,16 +397,15 @@ class _ShutdownRequest:
 
     def _on_sigint(self, signum: int, frame: Any) -> None:
         self.requested = True
-        if frame is not None and frame.f_code.co_name == '__del__':
-            # raised in a finaliser (rclpy's Future.__del__ during a collection), Python prints
-            # "Exception ignored in ... __del__" with a traceback and drops it (seen under Humble with
-            # `timeout -s INT ros2 launch`); rclpy's handler, which called this one, has already shut
-            # the context down, so spin ends on ExternalShutdownException all the same
-            return
-        if frame is not None and f'{os.sep}llvmlite{os.sep}' in frame.f_code.co_filename:
-            # raised in llvmlite's ctypes callback (a node compiling its kernels at start-up), Python prints
-            # "Exception ignored on calling ctypes callback function" with a traceback and drops it (seen under
-            # Humble: Ctrl-C during plant_sim's first compile); main_for stops the node once it is built
+        if frame is not None and (
+            frame.f_code.co_name == '__del__' or f'{os.sep}llvmlite{os.sep}' in frame.f_code.co_filename
+        ):
+            # where Python prints an exception raised there with a traceback and drops it: a finaliser ("Exception
+            # ignored in ... __del__", rclpy's Future.__del__ during a collection, seen under Humble with `timeout -s
+            # INT ros2 launch`) and llvmlite's ctypes callback while a node compiles its kernels ("Exception ignored
+            # on calling ctypes callback function", seen under Humble: Ctrl-C during plant_sim's first compile). The
+            # request is noted: rclpy's handler, which called this one, has shut the context down, so spin ends on
+            # ExternalShutdownException, and main_for stops a node that was still being built
             return
         raise KeyboardInterrupt
 
