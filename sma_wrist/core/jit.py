@@ -37,6 +37,9 @@ import functools
 import hashlib
 import os
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 #: the in-tree cache stamp of :func:`drop_stale_caches`: the digest of the sources its caches were
 #: written from
@@ -49,6 +52,14 @@ PACKAGE_ROOT = Path(__file__).resolve().parent.parent
 SOURCE_MARKER = 'sma_wrist-source.txt'
 #: the cache folder's stamp of the last :func:`prune_caches`, and how often it runs [s]
 PRUNE_STAMP, PRUNE_EVERY_S = '.sma_wrist-pruned', 3600.0
+
+
+def kernel_array(x: Any, dtype: Any = float) -> np.ndarray:
+    """``x`` as a C-ordered, writeable array of ``dtype``, copied only where it is not one already. numba compiles a
+    kernel once per argument type, and a read-only array (a parameter's cached array, a broadcast view, an array
+    that is writeable only once unpickled in a sweep's worker) is another type than a writeable one: passed both,
+    a kernel was compiled twice (10-24 s of CPU each on a cold cache)."""
+    return np.require(x, dtype, ['C_CONTIGUOUS', 'WRITEABLE'])
 
 
 def source_digest(root: Path, folders: tuple[str, ...] = KERNEL_FOLDERS) -> str:

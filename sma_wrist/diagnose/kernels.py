@@ -25,7 +25,7 @@ import numpy as np
 from sma_wrist.core.hysteresis import kernel as hk
 from sma_wrist.core.hysteresis import phase_fraction_kernel as pfk
 from sma_wrist.core.jit import _jit as _jit_switch
-from sma_wrist.core.jit import _jit_inline
+from sma_wrist.core.jit import _jit_inline, kernel_array
 from sma_wrist.core.joint.kernel import joint_step_one
 from sma_wrist.core.plant.kernel import pack_constants
 from sma_wrist.core.plant.wrist import PlantParams
@@ -486,8 +486,8 @@ class Constants:
             float(dt),
             int(substeps),
             coef,
-            np.array(np.broadcast_to(x0, (n, 2, 2)), dtype=float, order='C'),  # writeable: see mechanics
-            np.array(np.broadcast_to(drift_per_s, (n,)), dtype=float, order='C'),
+            kernel_array(np.broadcast_to(x0, (n, 2, 2))),
+            kernel_array(np.broadcast_to(drift_per_s, (n,))),
             out,
             X,
         )
@@ -499,10 +499,7 @@ class Constants:
         """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim`."""
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
-        # a writeable copy whatever the caller's shape: a row broadcast to (n, 5) is copied, an (n, 5) one was passed on
-        # as a read-only view, which numba types as another array and compiles the kernel for again (mechanics_sim:
-        # ~24 s of CPU on a cold cache)
-        jrow = np.array(np.broadcast_to(jrow, (n, 5)), dtype=float, order='C')
+        jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))  # whatever the caller's shape: (5,) or (n, 5)
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))

@@ -42,7 +42,7 @@ from sma_wrist.core.hysteresis.kernel import _solve_load
 from sma_wrist.core.hysteresis.muscle import MuscleModel
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, initial_state, mirrored_output, play_bounds
 from sma_wrist.core.hysteresis.warp import Warp, warped_wire
-from sma_wrist.core.jit import _jit
+from sma_wrist.core.jit import _jit, kernel_array
 from sma_wrist.core.plant import extensions as mx
 from sma_wrist.core.plant import kernel as plant_kernel
 from sma_wrist.core.plant.wrist import PlantParams, PlantState, WristPlant
@@ -454,8 +454,7 @@ class VariedPlant(WristPlant):
         tp = self.params.thermal
         u = np.broadcast_to(np.asarray(command_V, dtype=float), (self.n, 2))
         if u.size <= 8 and all(tp.u_min_V <= v <= tp.u_max_V for v in u.ravel().tolist()):
-            # a copy, not the read-only broadcast view: numba compiles _step_each once more for a read-only array
-            uc, clipped = u.copy(), np.zeros(self.n, bool)
+            uc, clipped = kernel_array(u), np.zeros(self.n, bool)  # a copy of the read-only broadcast view
         else:
             check_finite('TEM command', u, 'V')
             uc = np.minimum(np.maximum(u, tp.u_min_V), tp.u_max_V)  # np.clip without its dispatch cost

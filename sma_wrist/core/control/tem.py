@@ -44,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core.control import tem_kernel
 from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite
+from sma_wrist.core.jit import kernel_array
 from sma_wrist.core.thermal import heat_balance as th
 from sma_wrist.core.thermal import kernel as thermal_kernel
 from sma_wrist.core.thermal.online import OnlineThermalParams, ThermalScaleEstimator, scaled_constants, with_scales
@@ -266,10 +267,10 @@ def feedback_linearising_command(
     if _one_wrist(T, compiled):
         command, face = np.empty((1, 2)), np.empty((1, 2, 2))
         no_root, saturated = np.empty((1, 2, 2), bool), np.empty((1, 2), bool)
-        if not tem_kernel.linearising_command(  # copies: a read-only (broadcast) array would compile it once more
-            np.array(T[0], order='C'),
-            np.array(T_d[0], order='C'),
-            np.array(rate[0], order='C'),
+        if not tem_kernel.linearising_command(
+            kernel_array(T[0]),
+            kernel_array(T_d[0]),
+            kernel_array(rate[0]),
             _kernel_constants(thermal),
             float(params.gain_per_s),
             np.asarray(params.weights, dtype=float),

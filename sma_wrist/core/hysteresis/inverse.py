@@ -565,11 +565,8 @@ class InverseCompensator:
         self._kernel_params = (
             np.ascontiguousarray(env._stacked, f64),
             np.ascontiguousarray(env.edges_kg, f64),
-            # writeable copies: the parameters' cached thresholds and weights are read-only, but writeable in a copy
-            # of the parameters unpickled in another process (a sweep's workers); numba compiles a kernel once per
-            # array type, and these kernels were compiled twice (~10 s of CPU on a cold cache)
-            np.array(params.thresholds, f64, order='C'),
-            np.array(params.weights, f64, order='C'),
+            _jm.kernel_array(params.thresholds, f64),
+            _jm.kernel_array(params.weights, f64),
             np.ascontiguousarray(params.c, f64),
             np.ascontiguousarray(params.d, f64),
             float(params.p0),

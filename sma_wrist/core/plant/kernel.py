@@ -20,7 +20,7 @@ import numpy as np
 
 from sma_wrist.core.hysteresis import phase_fraction_kernel as pfk
 from sma_wrist.core.hysteresis.kernel import _solve_load_into
-from sma_wrist.core.jit import _jit, _jit_inline
+from sma_wrist.core.jit import _jit, _jit_inline, kernel_array
 from sma_wrist.core.joint.kernel import joint_step_one
 from sma_wrist.core.thermal.kernel import heat_balance_constants, thermal_rk4
 
@@ -380,10 +380,8 @@ def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped
         mech,
         np.ascontiguousarray(stacked),
         np.ascontiguousarray(env.edges_kg, dtype=float),
-        # writeable copies: read-only in the parameters, writeable in parameters unpickled in another process; one array
-        # type, so the plant's kernels are compiled once (see InverseCompensator)
-        np.array(hp.thresholds, dtype=float, order='C'),
-        np.array(hp.weights, dtype=float, order='C'),
+        kernel_array(hp.thresholds),
+        kernel_array(hp.weights),
         np.ascontiguousarray(hp.c, dtype=float),
         np.ascontiguousarray(hp.d, dtype=float),
         joint,

@@ -332,11 +332,7 @@ class WristPlant:
             return s
         s = self.state
         uc, clipped = self._commands(command_V)
-        # writeable and C-ordered whatever the caller passed (a read-only or broadcast array): numba compiles the kernel
-        # once per array type, and a read-only array is another type (~10 s of CPU on a cold cache)
-        uc = np.ascontiguousarray(uc)
-        if not uc.flags.writeable:
-            uc = uc.copy()
+        uc = jit.kernel_array(uc)  # whatever the caller passed (a read-only or broadcast array)
         if clipped is None:
             clipped = np.zeros(self.n, bool)
         if self._kernel_constants is None or self._kernel_constants[0] is not p:
@@ -345,8 +341,7 @@ class WristPlant:
         if self._kernel_arrays is None or any(a is not b for a, b in zip(arrays, self._kernel_arrays)):
             # the kernel writes the state in place: it needs its own writeable, C-ordered arrays
             for name, a in zip(KERNEL_STATE, arrays):
-                if not (a.flags.c_contiguous and a.flags.writeable):
-                    setattr(s, name, np.ascontiguousarray(a).copy())
+                setattr(s, name, jit.kernel_array(a, a.dtype))
             self._kernel_arrays = arrays = tuple(getattr(s, name) for name in KERNEL_STATE)
         flags = np.zeros((self.n, 4), bool)
         if self.fraction is not None:
