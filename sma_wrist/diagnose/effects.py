@@ -19,11 +19,12 @@ Signal chain of the extended model (doc/explanation/diagnosis.md has the equatio
 from __future__ import annotations
 
 import copy
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.signal import savgol_filter
+from scipy.signal import savgol_coeffs, savgol_filter
 
 from sma_wrist.core.plant.extensions import PARAMS, STATIC_PER_COULOMB, TEMP_CHANNEL_KEYS, TEMP_GAIN_REF_C, drive
 from sma_wrist.core.plant.wrist import PlantParams
@@ -45,6 +46,16 @@ SMOOTH_ABOVE_C = 0.01
 SMOOTH_WINDOW_S = 0.3
 #: candidate windows of the noise-matched smoothing [s] (input_noise_angle picks one)
 SMOOTH_WINDOWS_S = (0.1, 0.2, 0.3, 0.6)
+#: the rate window [s] where there are too few samples to choose one (:func:`rate_window`). Noise-free readings
+#: take central differences: the rate of a 1 s fit rounds each reversal of the heating, and the peaks it misses set
+#: the wires' memory. On the emulated phase-fraction wrist (thermocouple lag 0.2 s, readings 0.002 degC noisy) the
+#: emulator's own wire replayed its lagged readings (the lag undone by y + tau dy/dt) to 4.1 mrad RMS from the 1 s
+#: rate and to 0.7 mrad from central differences (0.2 mrad from the true node temperatures)
+RATE_WINDOW_S = 1.0
+#: candidate rate windows of a noisy run [s] (:func:`rate_window` picks one). On the emulated phase-fraction wrist's
+#: 0.2 s-lagged readings with white noise added, the emulator's own wire replayed best from 0.3 s at 0.07 degC noise
+#: (2.1 mrad RMS; 3.7-4.2 from 1 s) and from 0.6 s at 0.2 degC (4.2-5.0; 4.5-5.2 from 1 s)
+RATE_WINDOWS_S = (0.2, 0.3, 0.6, 1.0)
 #: window of the local fit that gives a noisy run's initial temperatures [s]
 START_WINDOW_S = 0.5
 #: realisations of the input-noise propagation (:meth:`ExtendedModel.input_noise_angle`)
@@ -375,13 +386,45 @@ def cycle_count(T: np.ndarray, dt: float) -> np.ndarray:
     return travel / CYCLE_TRAVEL_C
 
 
-def smooth_and_rate(T: np.ndarray, dt: float, window_s: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
-    """Zero-phase smoothed temperature (`window_s` window) and its rate (1 s window) [degC, degC/s]."""
+def smooth_and_rate(
+    T: np.ndarray, dt: float, window_s: float = 0.3, rate_window_s: float = RATE_WINDOW_S
+) -> tuple[np.ndarray, np.ndarray]:
+    """Zero-phase smoothed temperature (``window_s`` window) and its rate (``rate_window_s`` window; 0: central
+    differences of the readings, for noise-free ones) [degC, degC/s]."""
+    if rate_window_s <= 0.0 or T.shape[0] < 3:
+        return T.copy(), np.gradient(T, dt, axis=0) if T.shape[0] > 1 else np.zeros_like(T)
     w_s = max(5, int(round(window_s / dt)) | 1)
-    w_r = max(5, int(round(1.0 / dt)) | 1)
+    w_r = max(5, int(round(rate_window_s / dt)) | 1)
     if T.shape[0] <= w_r:
         return T.copy(), np.gradient(T, dt, axis=0)
     return savgol_filter(T, w_s, 2, axis=0), savgol_filter(T, w_r, 2, deriv=1, delta=dt, axis=0)
+
+
+def rate_window(T: np.ndarray, dt: float, sigma: np.ndarray, windows: Sequence[float] = RATE_WINDOWS_S) -> float:
+    """The window [s] of :data:`RATE_WINDOWS_S` whose local-fit rate of the readings T (K, C) has the smallest
+    estimated mean squared error, summed over the channels, for white noise of std ``sigma`` (C,) [degC].
+
+    The error of a window's rate is its noise, sigma^2 times the sum of its filter's squared coefficients, plus its
+    bias (it rounds the rate's changes). The bias is estimated against the shortest window's rate: the mean squared
+    difference of the two rates less what their noise alone gives (Stein-like unbiased risk). On the emulated
+    wrist's lagged readings with 0.02 / 0.07 / 0.2 / 0.5 degC of white noise it picked 0.3 / 0.6 / 1.0 / 1.0 s,
+    the windows of the smallest true rate error but one step longer at 0.07 degC, whose angle replay was best at
+    0.3 s (:data:`RATE_WINDOWS_S`)."""
+    sigma = np.asarray(sigma, float)
+    n = [max(5, int(round(w / dt)) | 1) for w in windows]
+    if T.shape[0] <= max(n):
+        return RATE_WINDOW_S
+    h = [savgol_coeffs(k, 2, deriv=1, delta=dt) for k in n]
+    r0 = savgol_filter(T, n[0], 2, deriv=1, delta=dt, axis=0)
+    risk = []
+    for k, hk in zip(n, h):
+        h0 = np.zeros(k)
+        o = (k - n[0]) // 2
+        h0[o : o + n[0]] = h[0]
+        d2 = ((savgol_filter(T, k, 2, deriv=1, delta=dt, axis=0) - r0) ** 2).mean(axis=0)
+        bias2 = np.maximum(d2 - sigma**2 * float(np.sum((hk - h0) ** 2)), 0.0)
+        risk.append(float(np.sum(bias2 + sigma**2 * float(np.sum(hk**2)))))
+    return float(windows[int(np.argmin(risk))])
 
 
 def thermocouples(T: np.ndarray, r: np.ndarray, dt: float) -> np.ndarray:
@@ -467,13 +510,18 @@ class ExtendedModel:
         self.extrapolate = False  # choose_mechanics_step: Richardson-extrapolate the mechanics replay
         self._rest = self.consts.params.rest_thermal(1)[0]  # (2 layers, 2 faces) of the model's heat balance
         self.T_noise = 0.0
+        self.rate_window_s = RATE_WINDOW_S
         if run.T is not None:
             self.T_noise = noise_sigma(run.T)
-            self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOW_S)
-            if self.T_noise < SMOOTH_ABOVE_C:
-                # noise-free (simulated) temperatures: smoothing would only distort the steep
-                # transitions (6x the replay error on a plant_sim run)
-                self.T_s = run.T.copy()
+            noise_free = self.T_noise < SMOOTH_ABOVE_C
+            # noise-free (simulated, emulated) temperatures: smoothing would only distort the steep transitions (6x
+            # the replay error on a plant_sim run), and their rates are central differences (RATE_WINDOW_S)
+            self.rate_window_s = (
+                0.0
+                if noise_free
+                else rate_window(run.T, run.dt, [noise_density_sigma(run.T[:, c], 200.0 / 2**16) for c in (0, 1)])
+            )
+            self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOW_S, self.rate_window_s)
             # cycles counted from where the scored data begin (after a monitor window's lead-in, Run.settle_s): a
             # drift acts from there. In a window cut after a located change that is the change, before which the
             # residuals say the wrist was its model; counted from the lead-in's start, the drift acted before the
@@ -483,8 +531,8 @@ class ExtendedModel:
             self.cycles = self.from_reference(cycle_count(run.T, run.dt))
             # the thermal replay starts from the first reading: of a noisy one, the start of a
             # local quadratic fit (a single noisy sample offsets the replay for tens of seconds)
-            head = smooth_and_rate(run.T[: max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S)
-            self.T_start = run.T[0].copy() if self.T_noise < SMOOTH_ABOVE_C else head[0][0]
+            head = smooth_and_rate(run.T[: max(50, int(5.0 / run.dt))], run.dt, START_WINDOW_S, self.rate_window_s)
+            self.T_start = run.T[0].copy() if noise_free else head[0][0]
             self.T_rate_start = head[1][0]  # [degC/s], what a lagged reading trails its node by, per s of lag
         self._mech_cache: dict[tuple, tuple[np.ndarray, ...]] = {}
         self._th_cache: dict[tuple, np.ndarray] = {}
@@ -679,7 +727,8 @@ class ExtendedModel:
         in for the truth (the shortest window), fresh noise of the estimated level per channel is added and
         smoothed with each window of :data:`SMOOTH_WINDOWS_S`, and the nominal replays are
         compared with the replay of the stand-in. The window with the smallest error drives
-        the replay from here on (``self.T_s``, ``self.T_rate``, ``self.smooth_window_s``).
+        the replay from here on (``self.T_s``, ``self.T_rate``, ``self.smooth_window_s``). The rates
+        that undo the thermocouple lags keep the run's window (:func:`rate_window`).
         """
         run = self.run
         self.smooth_window_s = 0.0 if self.T_noise < SMOOTH_ABOVE_C else SMOOTH_WINDOW_S
@@ -687,21 +736,21 @@ class ExtendedModel:
             return 0.0
         rng = np.random.default_rng(seed)
         sig = np.array([noise_density_sigma(run.T[:, c], 200.0 / 2**16) for c in (0, 1)])
-        r = self.nominal
-        # the stand-in for the truth: the least smoothed (a smoother one hides the transitions'
-        # distortion by smoothing: the error of a 0.3 s window came out 2x too small)
-        ref, ref_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOWS_S[0])
-        Ts = [self.wire_temperature(r, ref, ref_rate, self.cycles)]
         noise = [rng.normal(0.0, 1.0, run.T.shape) * sig for _ in range(INPUT_NOISE_REALISATIONS)]
+        # the stand-in for the truth: the least smoothed (a smoother one hides the transitions'
+        # distortion by smoothing: the error of a 0.3 s window came out 2x too small), at the run's rate window
+        ref, ref_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOWS_S[0], self.rate_window_s)
+        r = self.nominal
+        Ts = [self.wire_temperature(r, ref, ref_rate, self.cycles)]
         for w in SMOOTH_WINDOWS_S:
             for e in noise:
-                T_s, T_rate = smooth_and_rate(ref + e, run.dt, w)
+                T_s, T_rate = smooth_and_rate(ref + e, run.dt, w, self.rate_window_s)
                 Ts.append(self.wire_temperature(r, T_s, T_rate, self.cycles))
         q, _, _ = self.consts.mechanics(np.stack(Ts, axis=1), self.dt, self.joint_row(r), self.substeps)
         err = ((q[i0:, 1:] - q[i0:, :1]) ** 2).mean(axis=0).reshape(len(SMOOTH_WINDOWS_S), -1).mean(axis=1)
         k = int(np.argmin(err))
         self.smooth_window_s = SMOOTH_WINDOWS_S[k]
-        self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, self.smooth_window_s)
+        self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, self.smooth_window_s, self.rate_window_s)
         self._mech_cache.clear()
         return float(np.sqrt(err[k]))
 
