@@ -1,6 +1,8 @@
 """The temperature rates the replays undo a thermocouple lag with (T = y + tau dy/dt): central differences of
 noise-free readings, a local fit whose window follows the noise otherwise (effects.rate_window)."""
 
+from functools import lru_cache
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ DT = 0.01
 TAU = 0.2
 
 
+@lru_cache(maxsize=1)
 def _heating_cycles(seconds: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
     """A muscle node driven by relay heating and cooling (sharp reversals of its rate, as a TEM loop gives) and what
     a thermocouple with a TAU lag reads of it, on a 1 ms grid, returned on the DT grid: (node, reading) (K, 2)."""
@@ -26,7 +29,9 @@ def _heating_cycles(seconds: float = 120.0) -> tuple[np.ndarray, np.ndarray]:
         r += h / TAU * (T - r)
         node[k], y[k] = T, r
     step = int(round(DT / h))
-    return node[::step], y[::step]
+    node, y = node[::step], y[::step]
+    node.flags.writeable = y.flags.writeable = False  # shared by the tests
+    return node, y
 
 
 def _model(T: np.ndarray) -> fx.ExtendedModel:
