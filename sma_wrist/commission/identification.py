@@ -734,6 +734,7 @@ def fit_phase_fraction_wire(
     rounds: int = PF_ROUNDS,
     free_payload: bool = True,
     free: Sequence[str] = (),
+    substeps: int = PF_FIT_SUBSTEPS,
 ) -> FractionFit:
     """A phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`: transformation temperatures, both
     Clausius-Clapeyron slopes, recoverable strain, elongation datum; the moduli and detwinning stresses the
@@ -751,7 +752,8 @@ def fit_phase_fraction_wire(
     wires cooled, at rest) and scored from that sample to its end, their residuals appended to the excitation's:
     one least-squares fit over all recordings (the payload the same in all). ``free_payload`` false: the payload
     stays ``start['payload_kg']`` (or the run's). ``free``: values of :data:`PF_EXTRA_RANGE` fitted too (from
-    ``start``'s where it has them); a ``start['temp_lag_s']`` not freed is the replay's fixed lag."""
+    ``start``'s where it has them); a ``start['temp_lag_s']`` not freed is the replay's fixed lag. ``substeps``: plant
+    steps per sample of the fit's replays (:data:`PF_FIT_SUBSTEPS`)."""
     from scipy.optimize import least_squares
 
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
@@ -816,7 +818,7 @@ def fit_phase_fraction_wire(
     # once, each evaluation replays them with its wire (ExtendedModel.with_wire)
     models = [fx.ExtendedModel(r, PlantParams(dt=MECH_STEP_S, wire=w0)) for r in (run, *(r for r, _ in extra))]
     for m in models:
-        m.substeps = PF_FIT_SUBSTEPS
+        m.substeps = substeps
 
     def replay(x: np.ndarray, model: Any, upto: int | None) -> np.ndarray:
         wire, row = unpack(x)
