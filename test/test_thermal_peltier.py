@@ -276,6 +276,23 @@ def test_a_malformed_heat_balance_file_is_refused_naming_it(tmp_path, text, mess
         pe.PeltierLayer(muscle_capacity_J_per_K=-1.0)
 
 
+def test_the_latent_heat_is_written_read_back_and_checked(tmp_path):
+    latent = dataclasses.replace(TRUTH, latent_C=(0.78, 0.5))
+    assert load_heat_balance_file(write_heat_balance_file(tmp_path / 'hb.yaml', latent)) == latent
+    text = (tmp_path / 'hb.yaml').read_text()
+    (tmp_path / 'old.yaml').write_text(text.replace('latent_C:\n- 0.78\n- 0.5\n', ''))
+    assert 'latent_C' not in (tmp_path / 'old.yaml').read_text()
+    assert load_heat_balance_file(tmp_path / 'old.yaml').latent_C == (0.0, 0.0)  # a file without it: none
+    for bad, message in (
+        ('[0.5]', 'latent_C must be a list of two'),
+        ('[-0.5, 0.1]', 'must be two numbers in [0, 50]'),
+    ):
+        (tmp_path / 'bad.yaml').write_text(text.replace('latent_C:\n- 0.78\n- 0.5\n', f'latent_C: {bad}\n'))
+        with pytest.raises(ParameterError, match='bad.yaml') as e:
+            load_heat_balance_file(tmp_path / 'bad.yaml')
+        assert message in str(e.value)
+
+
 def test_plant_sim_refuses_a_bad_heat_balance_file_with_the_reason(tmp_path, capsys):
     from sma_wrist.nodes.common import main_for
     from sma_wrist.nodes.plant_sim import PlantSim

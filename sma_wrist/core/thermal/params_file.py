@@ -170,13 +170,14 @@ def load_thermal_file(path: str | Path, base: th.ThermalParams | None = None) ->
 #:     version: 1
 #:     form: peltier                # Eqs. P.1-P.3 (core.thermal.peltier)
 #:     coupling_per_s: 0.0          # optional: muscle-muscle conductance over the muscle node's capacity [1/s]
+#:     latent_C: [0.0, 0.0]         # optional: the wires' latent heat per layer (Eq. P.4) [degC per transformation]
 #:     layers:                      # TEM 1 (muscle 1), TEM 2 (muscle 2): peltier.LAYER_KEYS each
 #:       - {seebeck_V_per_K: 0.05, resistance_ohm: 2.0, conductance_W_per_K: 0.6, ...}
 #:       - {...}
 #:     identification: {...}       # provenance and held-out errors; informative only
 HEAT_BALANCE_FORMAT = 'sma_wrist/heat_balance'
 HEAT_BALANCE_FORMS = ('peltier',)
-_HB_KEYS = {'format', 'version', 'form', 'coupling_per_s', 'layers', 'identification'}
+_HB_KEYS = {'format', 'version', 'form', 'coupling_per_s', 'latent_C', 'layers', 'identification'}
 
 
 def heat_balance_file_dict(params: Any, identification: Mapping[str, Any] | None = None) -> dict[str, Any]:
@@ -188,6 +189,7 @@ def heat_balance_file_dict(params: Any, identification: Mapping[str, Any] | None
         'version': VERSION,
         'form': 'peltier',
         'coupling_per_s': float(params.coupling_per_s),
+        'latent_C': [float(x) for x in params.latent_C],
         'layers': [{k: float(getattr(layer, k)) for k in pe.LAYER_KEYS} for layer in params.layers],
         'identification': dict(identification or {}),
     }
@@ -245,7 +247,11 @@ def load_heat_balance_file(path: str | Path) -> Any:
         except ParameterError as e:
             raise ParameterError(f'{p}: layers[{i}]: {e}') from None
     coupling = _number(p, 'coupling_per_s', data.get('coupling_per_s', 0.0))
+    latent = data.get('latent_C', [0.0, 0.0])
+    if not (isinstance(latent, list) and len(latent) == 2):
+        raise ParameterError(f'{p}: latent_C must be a list of two numbers (TEM 1, TEM 2) [degC], got {latent!r}')
+    latent = [_number(p, f'latent_C[{i}]', x) for i, x in enumerate(latent)]
     try:
-        return pe.PeltierParams(layers=(out[0], out[1]), coupling_per_s=coupling)
+        return pe.PeltierParams(layers=(out[0], out[1]), coupling_per_s=coupling, latent_C=(latent[0], latent[1]))
     except ParameterError as e:
         raise ParameterError(f'{p}: {e}') from None

@@ -61,6 +61,9 @@ LAYER_KEYS = (
     'coolant_C',
 )
 N_LAYER = len(LAYER_KEYS)
+#: the largest latent heat a muscle node may carry [degC per full transformation]: NiTi's 15-25 J/g over a node of
+#: the bundle alone (0.5 J/(g K)) is 30-50 degC; a node with its TEM's ceramic and spreader is ~1 degC
+LATENT_MAX_C = 50.0
 
 
 @dataclass(frozen=True)
@@ -105,12 +108,22 @@ class PeltierParams:
     """The Peltier form of both layers (layer 0: TEM 1 under muscle 1). ``coupling_per_s`` [1/s]: conductance
     between the two muscle nodes over the muscle node's heat capacity (as ThermalParams.coupling_per_s).
     ``drive_gain`` scales the voltage the modules see (u -> drive_gain u), ``joule_scale`` their Joule heat: both 1
-    for an identified form, other values model a drifted device (:meth:`scaled`, the plant's extensions)."""
+    for an identified form, other values model a drifted device (:meth:`scaled`, the plant's extensions).
+
+    ``latent_C`` (per layer) [degC]: the wires' latent heat, what a full transformation of the muscle's bundle moves
+    its muscle node by (H m / C_m: transformation enthalpy x the bundle's mass over the node's heat capacity; the
+    martensite fraction xi rising on cooling releases it, falling on heating absorbs it)::
+
+        dT_m/dt += latent_C dxi/dt                                                                      (P.4)
+
+    It needs the wire's martensite fraction (a phase-fraction wire, :mod:`sma_wrist.core.hysteresis.phase_fraction`);
+    0 leaves it out."""
 
     layers: tuple[PeltierLayer, PeltierLayer] = (PeltierLayer(), PeltierLayer())
     coupling_per_s: float = 0.0
     drive_gain: float = 1.0
     joule_scale: float = 1.0
+    latent_C: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         layers = tuple(self.layers)
@@ -122,6 +135,15 @@ class PeltierParams:
         for k in ('drive_gain', 'joule_scale'):
             if not (np.isfinite(getattr(self, k)) and getattr(self, k) > 0):
                 raise ParameterError(f'{k} = {getattr(self, k)!r} must be finite and > 0')
+        try:
+            latent = tuple(float(x) for x in self.latent_C)
+        except (TypeError, ValueError):
+            latent = ()
+        if len(latent) != 2 or not all(np.isfinite(x) and 0.0 <= x <= LATENT_MAX_C for x in latent):
+            raise ParameterError(
+                f'latent_C = {self.latent_C!r} must be two numbers in [0, {LATENT_MAX_C:g}] degC (TEM 1, TEM 2)'
+            )
+        object.__setattr__(self, 'latent_C', latent)
 
     def coef(self, layers: int = 2) -> FloatArray:
         """(layers, N_LAYER) per-layer vectors (one layer: TEM 1's)."""
