@@ -10,6 +10,7 @@ runs many more cases and prints accuracy and false-alarm rate.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import json
 import subprocess
@@ -557,3 +558,33 @@ def test_a_window_cut_while_the_muscles_move_starts_its_nodes_ahead_of_their_lag
     assert at_readings.thermal_true(row)[0, 0] == pytest.approx(start, abs=1e-9)
     assert np.array_equal(at_readings.T_start, start)
     assert advanced < 0.3 * rms_first_30_s(at_readings), (advanced, rms_first_30_s(at_readings))
+
+
+def test_a_run_whose_drive_steps_up_just_after_its_start_starts_its_nodes_where_they_were():
+    # a run from rest whose TEMs go to full drive 0.1 s in: the readings' slope over a window that takes in the step
+    # is no rate the readings had at the start, and a replay started at reading + lag x that slope starts its nodes
+    # hot by an error that decays over the heat balance's minute-long time constant; the start fitted through the
+    # model's own replay of the first lags of readings is the nodes' rest
+    from sma_wrist.core.plant.wrist import PlantParams
+    from sma_wrist.diagnose.data import Run
+
+    lag, dt = 0.2, 0.01
+    u = td.commands(120.0, dt, np.random.default_rng(5))
+    u[:10] = 0.0
+    u[10:300] = (24.0, 20.0)
+    truth = td.simulate('none', seed=5, params={'temp_lag_s': lag}, u=u, dt=dt)
+    run = Run(t=truth.t, dt=dt, u=truth.u, T=truth.T, q=truth.q, payload_kg=truth.payload_kg)
+    row = fx.theta(temp_lag_s=lag)[None]
+    model = fx.ExtendedModel(run, PlantParams(dt=dt), nominal=row[0])
+    slope = fx.smooth_and_rate(run.T[:500], dt, fx.START_WINDOW_S)[1][0]
+    slope_error = np.abs(model.T_start + lag * slope - truth.T_true[0])
+    assert slope_error.min() > 0.05  # the step bends the readings within the slope's window
+    start_error = np.abs(model.thermal_true(row)[0, 0] - truth.T_true[0])
+    assert start_error.max() < 0.2 * slope_error.min(), (start_error, slope_error)
+    readings = fx.thermocouples(truth.T_true, row[0], dt)
+    res = model.thermal_measured(row)[3000:, 0] - readings[3000:]
+    started_on_slope = copy.copy(model)
+    started_on_slope._th_cache = {}
+    started_on_slope.T_rate_start = slope
+    res_slope = started_on_slope.thermal_measured(row)[3000:, 0] - readings[3000:]
+    assert np.sqrt(np.mean(res**2)) < 0.3 * np.sqrt(np.mean(res_slope**2))
