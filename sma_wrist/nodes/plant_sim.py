@@ -226,7 +226,15 @@ class PlantSim(WristNode):
             # which model forms run: a commissioned params file may name the Peltier form or the phase-fraction wire
             f'wire {"phase-fraction (" + p["wire_file"] + ")" if p["wire_file"] else "SD-GPI"}, heat balance '
             f'{"Peltier (" + p["heat_balance_file"] + ")" if p["heat_balance_file"] else "Table 4.9"}'
+            + self._latent_note()
         )
+
+    def _latent_note(self) -> str:
+        """The start-up line's note of the heat balance's latent heat (Eq. P.4), '' where there is none."""
+        hb = self.sim_params.heat_balance
+        if hb is None or not any(hb.latent_C):
+            return ''
+        return f" with the wires' latent heat {hb.latent_C[0]:g} / {hb.latent_C[1]:g} degC per transformation"
 
     def _test_plant(self, p: Mapping[str, Any], ext: Mapping[str, float], payload: float, q0: float | None) -> Any:
         """A registered plant (sma_wrist.plants) of the scenario given by scenario.* or scenario_file."""

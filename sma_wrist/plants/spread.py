@@ -384,6 +384,9 @@ class VariedPlant(WristPlant):
         dts = {p.dt for p in params}
         if len(dts) != 1:
             raise ParameterError(f'every scenario needs the same plant step, got {sorted(dts)} s')
+        for p in params:
+            if p.latent_heat_C() is not None:  # raises ParameterError: the SD-GPI has no fraction to carry it
+                raise ParameterError('VariedPlant steps SD-GPI wires only: it cannot run a latent heat')
         self.params = params[0]
         self.scenario_params = list(params)
         self.n = n = len(params)

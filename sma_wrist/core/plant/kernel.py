@@ -272,6 +272,7 @@ def fraction_step_segments(
     th_coef,
     mech,
     wc,
+    latent,
     joint,
     thermal_out,
     q_out,
@@ -280,7 +281,9 @@ def fraction_step_segments(
     """:func:`step_segments` of a wrist whose wires are phase-fraction wires (PlantParams.wire; ``wc`` its
     PhaseFractionWire.packed row, ``w`` (2N, 5) their memory, :mod:`sma_wrist.core.hysteresis.phase_fraction_kernel`):
     the same thermal RK4, chain, flags and joint step as :func:`step_many_into`, the wire's load solve in place of the
-    SD-GPI's. heating and T_prev are kept as the numpy path keeps them (the wire does not read them)."""
+    SD-GPI's. heating and T_prev are kept as the numpy path keeps them (the wire does not read them). latent (2,)
+    [degC]: the muscle nodes' latent heat (Eq. P.4, PlantParams.latent_heat_C; 0: none), applied once the wire's
+    fraction is committed, as WristPlant.step does."""
     rk = np.empty((4, 2, 2))
     y0, xs, kk, acc = rk[0], rk[1], rk[2], rk[3]
     n = q.size
@@ -307,8 +310,11 @@ def fraction_step_segments(
                         heating[i] = False
                     T_prev[i] = T
                     y_geo = e0 - x_mm if side == 0 else e0 + x_mm
+                    xi_old = w[i, 0]
                     m, dy, res = pfk.solve_load(wc, T, y_geo, w[i], load[i], m_max, tol, max_it)
                     pfk.commit(wc, T, m, w[i])
+                    if latent[side] != 0.0:
+                        thermal[j, side, 0] += latent[side] * (w[i, 0] - xi_old)
                     load[i] = m
                     compliance[i] = dy
                     if m <= 1e-9 and res > tol:
@@ -328,7 +334,7 @@ def fraction_step_segments(
 
 def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped-def]
     """The kernel's constant arrays from a plant.PlantParams (see :func:`step_many`; for a phase-fraction wire
-    :func:`fraction_step_segments`'s th_coef, mech, wc, joint)."""
+    :func:`fraction_step_segments`'s th_coef, mech, wc, latent, joint)."""
     from sma_wrist.core.joint.dynamics import G
 
     tp, hp, mg, jp = params.thermal, params.hysteresis, params.muscle, params.joint
@@ -372,7 +378,9 @@ def pack_constants(params) -> tuple[np.ndarray, ...]:  # type: ignore[no-untyped
     )
     if params.wire is not None:
         mech[10], mech[11] = params.wire.T_valid
-        return th_coef, mech, params.wire.packed(mg.wire_length_mm, mg.wire_area_m2), joint
+        latent = params.latent_heat_C()
+        latent = np.zeros(2) if latent is None else latent
+        return th_coef, mech, params.wire.packed(mg.wire_length_mm, mg.wire_area_m2), latent, joint
     env = hp.envelopes
     stacked = np.ascontiguousarray(np.concatenate([env.a, env.b], axis=1).transpose(0, 2, 1))
     return (

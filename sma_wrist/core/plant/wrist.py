@@ -2,14 +2,19 @@
 
 One step of length dt (doc/explanation/model.md):
 
-1. TEM heat balance (Eqs. 4.13-4.14, :mod:`sma_wrist.core.thermal.heat_balance`), RK4, from the drive
-   commands of both layers -> muscle temperatures T_i.
+1. TEM heat balance (Eqs. 4.13-4.14, :mod:`sma_wrist.core.thermal.heat_balance`, or the Peltier form's
+   Eqs. P.1-P.3, :mod:`sma_wrist.core.thermal.peltier`), RK4, from the drive commands of both layers -> muscle
+   temperatures T_i.
 2. Chain kinematics (Eq. 4.17) -> bundle elongations y_1 = e0 - x, y_2 = e0 + x,
    x = R_eff (q - q_neutral).
 3. Per-wire loads m_i from the SD-GPI elongation-load relation against frozen memory
    (:class:`sma_wrist.core.hysteresis.muscle.MuscleModel`), then the memory is committed.
 4. Joint (Eq. 4.18): torque (F_1 - F_2) R_eff with F_i = N_w m_i g, linearly implicit
    Euler with the bundles' stiffness from the load solve.
+5. Latent heat (Peltier form, Eq. P.4, a phase-fraction wire only): muscle node i moves by
+   latent_C_i (xi_i,new - xi_i,old) [degC], xi_i the martensite fraction committed in step 3 (the
+   step's integral of latent_C dxi/dt, taken once the fraction is known: it falls on heating, so
+   the node absorbs heat, and rises on cooling, releasing it).
 
 Everything is vectorised over N scenarios (payloads, commands, initial states); both
 muscles of all scenarios are stacked on one axis (2N) so each numpy call serves all.
@@ -25,10 +30,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from sma_wrist.core import jit
-from sma_wrist.core.errors import ModelInputError, check_finite, check_range
+from sma_wrist.core.errors import ModelInputError, ParameterError, check_finite, check_range
 from sma_wrist.core.hysteresis.default_params import default_sdgpi
 from sma_wrist.core.hysteresis.muscle import MuscleGeometry, MuscleModel
-from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionMuscle, PhaseFractionWire, cooled_memory
+from sma_wrist.core.hysteresis.phase_fraction import XI, PhaseFractionMuscle, PhaseFractionWire, cooled_memory
 from sma_wrist.core.hysteresis.sdgpi import SDGPIParams, play_bounds
 from sma_wrist.core.joint.dynamics import G, JointParams, joint_step
 from sma_wrist.core.plant import kernel as plant_kernel
@@ -114,6 +119,23 @@ class PlantParams:
             return pe.rest_state(self.heat_balance, n)
         return th.rest_state(self.thermal, n)
 
+    def latent_heat_C(self) -> FloatArray | None:
+        """The muscle nodes' latent heat (2,) [degC per full transformation] the plant applies (Eq. P.4,
+        ``heat_balance.latent_C``, layer i under muscle i); None where there is none (Table 4.9's form or latent_C
+        0). Raises ParameterError where it is set and the wire is the SD-GPI: that wire has no martensite fraction
+        whose change would carry the heat, and a plant that dropped the term would not be the model its file names."""
+        hb = self.heat_balance
+        if hb is None or not any(hb.latent_C):
+            return None
+        if self.wire is None:
+            raise ParameterError(
+                f'heat balance latent_C = [{hb.latent_C[0]:g}, {hb.latent_C[1]:g}] degC needs a phase-fraction wire: '
+                "the latent heat moves a muscle node by latent_C per change of its wire's martensite fraction "
+                '(Eq. P.4), and the SD-GPI wire has no fraction; name a wire_file (form phase_fraction) or set '
+                'latent_C to [0, 0] in the heat balance file'
+            )
+        return np.array(hb.latent_C, dtype=float)
+
     def thermal_step(self, state: FloatArray, command_V: FloatArray, dt: float) -> FloatArray:
         """One RK4 step of the model's heat balance, commands (N, 2) in range [V] (th.step or peltier.step)."""
         if self.heat_balance is not None:
@@ -179,6 +201,9 @@ class WristPlant:
         #: the phase-fraction bundles where the model's wire is one (PlantParams.wire); their memory (2N, 5) is
         #: ``state.w`` (the compiled step: plant_kernel.fraction_step_segments)
         self.fraction = None
+        #: (params, their latent_heat_C()): the muscle nodes' latent heat (2,) [degC] of Eq. P.4 or None; asked here
+        #: so that a plant whose wire cannot carry it is refused before it runs
+        self._latent = (self.params, self.params.latent_heat_C())
         if self.params.wire is not None:
             mg = self.params.muscle
             self.fraction = PhaseFractionMuscle(self.params.wire, mg.wire_length_mm, mg.wire_area_m2, mg.max_load_kgf)
@@ -307,9 +332,15 @@ class WristPlant:
         p = self.params
         s = self.state
         u, clipped = self._commands(command_V)
+        if self._latent[0] is not p:
+            self._latent = (p, p.latent_heat_C())
+        latent = self._latent[1]
+        xi_old = None if latent is None else s.w[:, XI].copy()
         # command in range, dt checked by PlantParams (<= 0.01 s < dt_max_s), state finite by construction
         s.thermal = p.thermal_step(s.thermal, u, p.dt)
         self._mechanics(s.thermal[:, :, th.MUSCLE_FACE].T.reshape(-1))
+        if xi_old is not None:  # step 5 (Eq. P.4): the wires' fractions are committed, rows muscle 1 then muscle 2
+            s.thermal[:, :, th.MUSCLE_FACE] += latent * (s.w[:, XI] - xi_old).reshape(2, self.n).T
         if clipped is not None:
             s.flags['command_saturated'] = clipped
         return s
