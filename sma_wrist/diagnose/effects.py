@@ -575,10 +575,14 @@ class ExtendedModel:
         if not self.consts.has_latent or self.run.T is None:
             return None
         if self._xi is None:
-            r = self.nominal
-            Tw = self.wire_temperature(r, self.T_s, self.T_rate, self.cycles)[:, None]
-            self._xi = self.consts.martensite_fraction(Tw, self.dt, self.joint_row(r), self.substeps)[:, 0]
+            self._xi = self.wire_fraction(self.nominal)
         return self._xi
+
+    def wire_fraction(self, r: np.ndarray) -> np.ndarray:
+        """(K, 2) the phase-fraction wires' martensite fractions in the mechanics replay on the measured temperatures
+        under the parameter row ``r`` (:meth:`wire_temperature`, the run's step); the model's wire must be one."""
+        Tw = self.wire_temperature(r, self.T_s, self.T_rate, self.cycles)[:, None]
+        return self.consts.martensite_fraction(Tw, self.dt, self.joint_row(r), self.substeps)[:, 0]
 
     def thermal_true(self, rows: np.ndarray, upto: int | None = None) -> np.ndarray:
         """(K, N, 2) true muscle temperatures from the commands for parameter rows (N, P)."""
