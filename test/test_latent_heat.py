@@ -132,9 +132,10 @@ def test_commissioning_refits_the_heat_balance_with_the_latent_heat_and_hands_it
     from sma_wrist.core.thermal.params_file import load_heat_balance_file, write_heat_balance_file
     from sma_wrist.diagnose import data
 
-    # the excitation: slow relays; held out, the commissioned run: faster ones, both through the transformations
+    # the excitation: slow relays; the defaults run and, held out, the commissioned run: faster ones, all through
+    # the transformations
     exc, _, plant = _emulate(40.0, 120.0)
-    com, _, _ = _emulate(24.0, 72.0, 18.0, -10.0)
+    runs = {'defaults': _emulate(30.0, 90.0, 19.0, -11.0)[0], 'commissioned': _emulate(24.0, 72.0, 18.0, -10.0)[0]}
     truth = model_of(plant)
     # handed over first: the emulator's own form without the latent heat (what it leaves out is the test)
     first_hb = dataclasses.replace(truth.heat_balance, latent_C=(0.0, 0.0))
@@ -160,13 +161,20 @@ def test_commissioning_refits_the_heat_balance_with_the_latent_heat_and_hands_it
     rest = tuple(float(x) for x in pe.rest_state(first_hb, 1)[0, 0])
     ctx = WireRefinement(mech, 0, mech.n, fit, {}, 0.2, wire_file, 0.0)
     ctx.thermal = HeatBalanceRefinement(records, [0.0, 0.0], rest, 0.01, hb_file, first_hb)
-    monkeypatch.setattr(data, 'load_run', lambda bag: com)
+    # the runs as their bags: the muscle thermocouples, the drive and the exchanger faces' thermocouples
+    import sma_wrist.bag
 
-    res = rf.refine_heat_balance(ctx, fit, 'commissioned', 5.0, params)
+    monkeypatch.setattr(data, 'load_run', lambda bag: runs[bag])
+    monkeypatch.setattr(sma_wrist.bag, 'read_bag', lambda path, topics=None: {'bag': str(path)})
+    monkeypatch.setattr(
+        data, 'face_series', lambda d, w: [(runs[d['bag']].t, runs[d['bag']].faces[:, m]) for m in (0, 1)]
+    )
+
+    res = rf.refine_heat_balance(ctx, fit, 'commissioned', 'defaults', 5.0, params)
     h = res['heldout']
     assert res['refined'], res
-    # the emulator's 0.777 degC per full transformation, found through its 0.2 s thermocouple lag (measured: 0.7766,
-    # 0.7781; held out 0.0056/0.0057 degC RMS against 0.13/0.035 without the latent heat)
+    # the emulator's 0.777 degC per full transformation, found through its 0.2 s thermocouple lag (measured: 0.7765,
+    # 0.7789; held out 0.0056/0.0057 degC RMS against 0.13/0.035 without the latent heat)
     np.testing.assert_allclose(res['latent_C'], 0.777, atol=0.01)
     assert max(h['latent']) < 0.3 * min(h['first']), h
     handed = load_heat_balance_file(hb_file)
@@ -175,6 +183,6 @@ def test_commissioning_refits_the_heat_balance_with_the_latent_heat_and_hands_it
     # handed over its own form with the latent heat, the refit is no better beyond the noise: nothing rewritten
     before = write_heat_balance_file(hb_file, truth.heat_balance).read_text()
     ctx.thermal = HeatBalanceRefinement(records, [0.0, 0.0], rest, 0.01, hb_file, truth.heat_balance)
-    res = rf.refine_heat_balance(ctx, fit, 'commissioned', 5.0, params)
+    res = rf.refine_heat_balance(ctx, fit, 'commissioned', 'defaults', 5.0, params)
     assert not res['refined'] and 'stays' in res['why'], res
     assert hb_file.read_text() == before
