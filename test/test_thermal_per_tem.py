@@ -94,7 +94,9 @@ def test_the_diagnosis_replay_takes_each_tems_gain() -> None:
     u = rng.uniform(-10.0, 12.0, (200, 2))
     x0 = th.rest_state(WEAK, 1)
     out_T, out_X = np.empty((200, 1, 2)), np.empty((1, 2, 2))
-    thermal_sim(u, 0.1, 1, thermal_constants(WEAK)[None], x0.copy(), np.zeros(1), out_T, out_X)
+    thermal_sim(
+        u, 0.1, 1, thermal_constants(WEAK)[None], x0.copy(), np.zeros(1), np.zeros(2), np.zeros((200, 2)), out_T, out_X
+    )
     ref = th.simulate(WEAK, u[:-1], 0.1, x0)[:, 0, :, 0]
     np.testing.assert_allclose(out_T[:, 0], ref, rtol=0, atol=1e-9)
 

@@ -937,6 +937,24 @@ class WireRefinement:
     noise_mrad: float
     wire_file: Path
     datum_shift_mm: float
+    #: the Peltier heat balance handed over and what it was fitted on, where it was (its refit with the wires'
+    #: latent heat, :func:`sma_wrist.commission.refine.refine_heat_balance`); None: Table 4.9's form stays
+    thermal: HeatBalanceRefinement | None = None
+
+
+@dataclass
+class HeatBalanceRefinement:
+    """What the refit of the Peltier heat balance with the wires' latent heat needs: the excitation's thermal
+    records the handed-over form was first fitted on (``records``) and where each starts on the excitation's replay
+    grid (``starts_s`` [s], WireRefinement.excitation's time), the rest faces the ambients are tied to [degC], the
+    muscle sensors' noise [degC RMS], ``heat_balance.yaml``'s path and the form it holds."""
+
+    records: list[ti.ThermalRecord]
+    starts_s: list[float]
+    rest_C: tuple[float, float]
+    noise_C: float
+    file: Path
+    params: Any
 
 
 def identify_mechanics(
@@ -1354,6 +1372,22 @@ def identify_wrist(bring: BringUp, out: Path, payload_kg: float | None = None) -
     heat_balance, heat_balance_file = identify_heat_balance_form(fit, held, out, rest, noise, table)
     hyst, joint, values, w2 = identify_mechanics(bring, out, payload_kg, ph, t_fit, t_held, t_end)
     warnings += w2
+    if values.get('refinement') is not None and heat_balance_file:
+        from sma_wrist.core.thermal.params_file import load_heat_balance_file
+
+        ref = values['refinement']
+        # the fit records start at the excitation's start, i_fit samples into the replay grid (identify_mechanics)
+        values['refinement'] = dataclasses.replace(
+            ref,
+            thermal=HeatBalanceRefinement(
+                fit,
+                [ref.i_fit * MECH_DT_S] * len(fit),
+                rest,
+                noise,
+                Path(heat_balance_file),
+                load_heat_balance_file(heat_balance_file),
+            ),
+        )
     nodes, problems = wrist_params(
         hyst['file'], values['wire'], thermal['file'], thermal_params.window_C, preload_mm=values['preload_mm']
     )

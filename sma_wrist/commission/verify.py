@@ -817,10 +817,23 @@ def refinement_line(rf: dict[str, Any]) -> str:
     what = f'the refit ({candidate_label(rf["refit"])}) handed over' if rf.get('refined') else 'the first fit kept'
     if rf.get('refined') and rf.get('temp_lag_s'):
         what += f", with the thermocouples' lag it found, {rf['temp_lag_s']:.3g} s (plant_sim model.temp_lag_s)"
-    return (
+    line = (
         'Refinement of the model wire on the excitation and the defaults run: RMS angle error of the commissioned '
         f'run (held out): {errors} mrad; {what} ({rf.get("why", "")}; {rf.get("seconds", 0):g} s of CPU).'
     )
+    th = rf.get('thermal') or {}
+    if th.get('heldout'):
+        h = th['heldout']
+        line += (
+            " The heat balance refitted with the wires' latent heat (latent_C "
+            f'{", ".join(f"{x:.3g}" for x in th["latent_C"])} degC, at the lag {th["temp_lag_s"]:.3g} s): RMS '
+            f'thermocouple error of the commissioned run per TEM {", ".join(f"{x:.3g}" for x in h["latent"])} degC '
+            f"against the first form's {', '.join(f'{x:.3g}' for x in h['first'])}; "
+            + ('handed over.' if th.get('refined') else 'the first form kept.')
+        )
+    elif th:
+        line += f" The heat balance was not refitted with the wires' latent heat ({th.get('why', '')})."
+    return line
 
 
 #: the verdicts as the report and the terminal say them

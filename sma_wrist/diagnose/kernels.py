@@ -110,13 +110,15 @@ def _rk4_layers(x, u0, u1, coef, ambient_shift, dt, k1, k2, k3, k4, tmp):  # pra
 
 
 @_jit
-def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma: no cover - compiled
+def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, latent, xi, out_T, out_X):  # pragma: no cover - compiled
     """Muscle temperatures under sampled commands.
 
     u (K, 2) [V] held from sample k to k+1 (already clipped); coef (N, 16) (or (N, 37), the Peltier form) as
     plant_kernel.pack_constants' th_coef; x0 (N, 2, 2) initial faces; drift_per_s (N,)
-    ambient shift rate [degC/s] of both faces; out_T (K, N, 2) muscle faces at the samples,
-    out_X (N, 2, 2) the final state.
+    ambient shift rate [degC/s] of both faces; latent (2,) [degC] the wires' latent heat per muscle node and xi
+    (K, 2) the muscles' martensite fractions at the samples (Eq. P.4: each sub-step of interval k adds
+    latent (xi[k] - xi[k-1]) / substeps to the muscle node; a muscle with latent 0 is left alone, bit for bit);
+    out_T (K, N, 2) muscle faces at the samples, out_X (N, 2, 2) the final state.
     """
     K = u.shape[0]
     N = coef.shape[0]
@@ -137,6 +139,9 @@ def thermal_sim(u, dt, substeps, coef, x0, drift_per_s, out_T, out_X):  # pragma
         for k in range(1, K):
             for _s in range(substeps):
                 _rk4_layers(x, u[k - 1, 0], u[k - 1, 1], coef[j], drift_per_s[j] * t, h, k1, k2, k3, k4, tmp)
+                for l in range(2):
+                    if latent[l] != 0.0:
+                        x[l, 0] += latent[l] * (xi[k, l] - xi[k - 1, l]) / substeps
                 t += h
             out_T[k, j, 0] = x[0, 0]
             out_T[k, j, 1] = x[1, 0]
@@ -374,10 +379,13 @@ def _pf_torque(m1, dy1, m2, dy2, mech):  # pragma: no cover - compiled
 
 
 @_jit
-def pf_mechanics_sim(T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_load):  # pragma: no cover - compiled
+def pf_mechanics_sim(
+    T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_load, out_xi
+):  # pragma: no cover - compiled
     """:func:`mechanics_sim` with phase-fraction wires (``wc``: PhaseFractionWire.packed): the same rest state
     (wires cooled from hot at T[0], loads from 0.8 kgf, static equilibrium by bisection), the same sub-steps, joint
-    rows and joint step; only the wire differs."""
+    rows and joint step; only the wire differs. out_xi (K, N, 2): the wires' martensite fractions at the samples
+    (what the heat balance's latent heat, Eq. P.4, follows)."""
     K = T.shape[0]
     N = T.shape[1]
     h = dt / substeps
@@ -417,6 +425,8 @@ def pf_mechanics_sim(T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_
         out_qd[0, j] = 0.0
         out_load[0, j, 0] = load[0]
         out_load[0, j, 1] = load[1]
+        out_xi[0, j, 0] = mem[0, 0]
+        out_xi[0, j, 1] = mem[1, 0]
         for k in range(1, K):
             for s in range(substeps):
                 frac = (s + 1.0) / substeps
@@ -430,6 +440,8 @@ def pf_mechanics_sim(T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_
             out_qd[k, j] = qd
             out_load[k, j, 0] = load[0]
             out_load[k, j, 1] = load[1]
+            out_xi[k, j, 0] = mem[0, 0]
+            out_xi[k, j, 1] = mem[1, 0]
 
 
 class Constants:
@@ -449,6 +461,9 @@ class Constants:
             [jp.coulomb_Nm, jp.viscous_Nms, jp.static_Nm, self.params.preload_elongation_mm, jp.payload_kg]
         )
         self.u_limits = (self.params.thermal.u_min_V, self.params.thermal.u_max_V)
+        hb = self.params.heat_balance
+        #: the wires' latent heat per muscle node [degC per full transformation] (PeltierParams.latent_C, Eq. P.4)
+        self.latent_C = np.array(hb.latent_C if hb is not None else (0.0, 0.0))
         self._sdgpi_mech = self.mech
         self._pack_wire()
 
@@ -472,15 +487,34 @@ class Constants:
         out._pack_wire()
         return out
 
+    @property
+    def has_latent(self) -> bool:
+        """Whether the heat balance follows the wires' transformation (Eq. P.4): a latent heat and a phase-fraction
+        wire whose martensite fraction carries it (the SD-GPI has none)."""
+        return self.wire is not None and bool(np.any(self.latent_C != 0.0))
+
     def thermal(
-        self, u: np.ndarray, dt: float, coef: np.ndarray, x0: np.ndarray, drift_per_s: np.ndarray, substeps: int = 1
+        self,
+        u: np.ndarray,
+        dt: float,
+        coef: np.ndarray,
+        x0: np.ndarray,
+        drift_per_s: np.ndarray,
+        substeps: int = 1,
+        xi: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
-        """(K, N, 2) muscle temperatures and the (N, 2, 2) final state; see :func:`thermal_sim`."""
+        """(K, N, 2) muscle temperatures and the (N, 2, 2) final state; see :func:`thermal_sim`. ``xi`` (K, 2): the
+        muscles' martensite fractions at the samples, the latent heat's input (Eq. P.4) where :attr:`has_latent`;
+        None leaves the latent heat out."""
         u = np.ascontiguousarray(np.clip(u, *self.u_limits), dtype=float)
         coef = np.ascontiguousarray(np.atleast_2d(coef), dtype=float)
         n = coef.shape[0]
         out = np.empty((u.shape[0], n, 2))
         X = np.empty((n, 2, 2))
+        latent = self.latent_C if xi is not None and self.has_latent else np.zeros(2)
+        xi = np.zeros((u.shape[0], 2)) if xi is None else np.asarray(xi, dtype=float)[: u.shape[0]]
+        if xi.shape != (u.shape[0], 2):
+            raise ValueError(f'martensite fractions of shape {xi.shape} for {u.shape[0]} samples of 2 muscles')
         thermal_sim(
             u,
             float(dt),
@@ -488,6 +522,8 @@ class Constants:
             coef,
             kernel_array(np.broadcast_to(x0, (n, 2, 2))),
             kernel_array(np.broadcast_to(drift_per_s, (n,))),
+            kernel_array(latent),
+            kernel_array(xi),
             out,
             X,
         )
@@ -504,7 +540,8 @@ class Constants:
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))
         if self.wire is not None:
-            pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load)
+            xi = np.empty((k, n, 2))
+            pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load, xi)
             return q, qd, load
         mechanics_sim(
             T,
@@ -524,3 +561,15 @@ class Constants:
             load,
         )
         return q, qd, load
+
+    def martensite_fraction(self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1) -> np.ndarray:
+        """(K, N, 2) the phase-fraction wires' martensite fractions of the mechanics replay (:meth:`mechanics`) from
+        T (K, N, 2) [degC]; the SD-GPI has none (ValueError)."""
+        if self.wire is None:
+            raise ValueError('the SD-GPI wire has no martensite fraction (PlantParams.wire is None)')
+        T = np.ascontiguousarray(T, dtype=float)
+        k, n = T.shape[:2]
+        jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))
+        q, qd, load, xi = np.empty((k, n)), np.empty((k, n)), np.empty((k, n, 2)), np.empty((k, n, 2))
+        pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load, xi)
+        return xi

@@ -125,10 +125,12 @@ def heat_balance_constants(tp, peltier=None) -> np.ndarray:  # type: ignore[no-u
 
 
 @_jit
-def peltier_simulate_runs(coef, u, u2, T0, dt, out):  # pragma: no cover - compiled
+def peltier_simulate_runs(coef, u, u2, T0, dt, latent, dxi, out):  # pragma: no cover - compiled
     """RK4 of Eqs. P.1-P.3 for parameter sets and runs: coef (P, R, N_PELTIER_LAYER) (each run its layer's vector),
     drive u and its interval mean square u2 (K, R) held over each step of dt [s], from T0 (R, 2) [degC]; out
-    (K, P, R, 2): row 0 T0, row k + 1 after u[k]. peltier.step_coef is the reference."""
+    (K, P, R, 2): row 0 T0, row k + 1 after u[k]. peltier.step_coef is the reference. The wires' latent heat (Eq.
+    P.4): latent (P, R) [degC per full transformation] of each parameter set and run, dxi (K, R) each run's martensite
+    fraction change over step k, added to the muscle node after the step (latent 0: left out, bit for bit)."""
     K, R = u.shape
     P = coef.shape[0]
     k1, k2, k3, k4 = np.empty(2), np.empty(2), np.empty(2), np.empty(2)
@@ -149,6 +151,8 @@ def peltier_simulate_runs(coef, u, u2, T0, dt, out):  # pragma: no cover - compi
                 k4[0], k4[1] = peltier_rate_layer(tm + dt * k3[0], tx + dt * k3[1], uk, u2k, c, 0, 1.0, 1.0, 0.0)
                 tm = tm + dt / 6.0 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0])
                 tx = tx + dt / 6.0 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1])
+                if latent[p, r] != 0.0:
+                    tm += latent[p, r] * dxi[k, r]
                 out[k + 1, p, r, 0], out[k + 1, p, r, 1] = tm, tx
 
 

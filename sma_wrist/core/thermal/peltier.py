@@ -14,11 +14,13 @@ S the module's Seebeck coefficient [V/K], R its electrical resistance [ohm], K i
 C_m, C_x the nodes' heat capacities [J/K], h_m, h_x their losses to the ambient T_amb and the coolant T_cool
 [W/K, degC]. Over an interval whose drive is not constant the Joule term uses the interval's mean of u^2
 (``u2``): I^2 R = (u2 - 2 u S dT + (S dT)^2) / R. The muscle nodes of the two layers may exchange heat
-(``coupling_per_s``, as in ThermalParams, [1/s] of the muscle node). Latent heat of the wires is left out: a full
-transformation of a muscle's bundle (3.7 g of NiTi at 15-25 J/g, 55-92 J) moves a ~90 J/K muscle node by ~0.8 degC,
-but on the emulated phase-fraction wrist, which has it and a 0.2 s thermocouple lag, a latent term fitted alone
-finds 0.03 and 0.34 degC per TEM of its 0.78, and with the lag fitted too it would take the loop's residual only
-from 0.224 to 0.185 degC (doc/explanation/model.md, "What it leaves out").
+(``coupling_per_s``, as in ThermalParams, [1/s] of the muscle node). The wires' latent heat (Eq. P.4,
+``PeltierParams.latent_C``): a full transformation of a muscle's bundle (3.7 g of NiTi at 15-25 J/g, 55-92 J) moves
+a ~90 J/K muscle node by ~0.8 degC. Its input, the wire's martensite fraction, is not simulated here: the diagnosis'
+replay (:mod:`sma_wrist.diagnose.effects`) and the fit (:mod:`sma_wrist.core.thermal.peltier_fit`) take it from the
+phase-fraction wire's replay on the measured temperatures. It is identified only through the thermocouple's lag: on
+the emulated phase-fraction wrist (0.78 degC, 0.2 s lag) a latent term fitted without the lag finds 0.03 and
+0.34 degC per TEM, through the lag commissioning's refinement reads 0.66 / 0.83 (doc/explanation/commissioning.md).
 
 Identifiability (decision): only temperatures and the drive are measured, so every power (P.2, P.3) and every
 heat capacity share one scale: R -> R / a, K, h_m, h_x, C_m, C_x -> a (K, h_m, h_x, C_m, C_x) leaves the

@@ -18,10 +18,16 @@ alike, Table 4.10's statistics. Here:
   kernel's parameter rows at once): the muscle node is fitted as the thermocouple reads it, so a model that lags
   its node by the same ``temp_lag_s`` predicts the measurement (fitted to the lagged reading directly, the node
   would carry the lag twice).
+* **latent heat** (``fractions``, optional): each run's martensite fraction of its muscle's wire at its samples, the
+  input of the wires' latent heat (Eq. P.4); given, each fitted layer's ``latent_C`` is free too (linear, in
+  [0, :data:`~sma_wrist.core.thermal.peltier.LATENT_MAX_C`]), the fraction's steps added to the muscle node after each
+  step of the simulation (the compiled kernel's forcing). The fractions are an input, not simulated: a wire model's
+  replay on the measured temperatures (:func:`sma_wrist.commission.refine.refine_heat_balance`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
@@ -47,6 +53,22 @@ _AMB_LO, _AMB_HI = -20.0, 120.0
 _FD_STEP = 1e-6
 
 
+def fraction_steps(records: Sequence[ti.ThermalRecord], fractions: Sequence[FloatArray] | None) -> FloatArray:
+    """(K, R) each run's martensite fraction change over each step (0 past its end, and everywhere without
+    ``fractions``), the latent heat's forcing of the compiled kernel."""
+    K = max(r.n for r in records)
+    d = np.zeros((K, len(records)))
+    if fractions is not None:
+        if len(fractions) != len(records):
+            raise ti.ThermalIdentificationError(f'{len(fractions)} martensite fractions for {len(records)} runs')
+        for j, (r, xi) in enumerate(zip(records, fractions)):
+            xi = np.asarray(xi, dtype=float)
+            if xi.shape != (r.n,) or not np.all(np.isfinite(xi)):
+                raise ti.ThermalIdentificationError(f'{r.name}: need a finite martensite fraction per sample')
+            d[: r.n - 1, j] = np.diff(xi)
+    return d
+
+
 @dataclass
 class PeltierFit:
     """Result of :func:`fit_peltier`."""
@@ -66,17 +88,29 @@ def simulate_records(
     records: Sequence[ti.ThermalRecord],
     base_rest: FloatArray | None = None,
     sensor_lag_s: float = 0.0,
+    fractions: Sequence[FloatArray] | None = None,
 ) -> list[FloatArray]:
     """Free-run simulation (K_r, 2) [degC] of each record under its layer's vector, from its measured start (an
     unmeasured exchanger face from the muscle face and ``params``' rest offset, ti.start_states); the muscle face
-    as a thermocouple of first-order lag ``sensor_lag_s`` [s] reads it (ti.muscle_lagged; 0: the node)."""
+    as a thermocouple of first-order lag ``sensor_lag_s`` [s] reads it (ti.muscle_lagged; 0: the node). With the
+    runs' martensite ``fractions`` (module docstring) the layers' latent heat ``params.latent_C`` acts."""
     u, u2, _, _ = ti._pad(records)
     rest = pe.rest_state(params, 1, 2)[0, 0] if base_rest is None else base_rest
     T0 = ti.start_states(records, None, rest)
     coef = params.coef(2)[[r.layer for r in records]][None]
+    latent = np.array([[params.latent_C[r.layer] if fractions is not None else 0.0 for r in records]])
     out = np.empty((u.shape[0], 1, len(records), 2))
     with np.errstate(all='ignore'):
-        tk.peltier_simulate_runs(np.ascontiguousarray(coef), u, u2, np.ascontiguousarray(T0), records[0].dt, out)
+        tk.peltier_simulate_runs(
+            np.ascontiguousarray(coef),
+            u,
+            u2,
+            np.ascontiguousarray(T0),
+            records[0].dt,
+            latent,
+            fraction_steps(records, fractions),
+            out,
+        )
         out = ti.muscle_lagged(out, sensor_lag_s, records[0].dt)
     return [out[: r.n, 0, j] for j, r in enumerate(records)]
 
@@ -88,10 +122,11 @@ def evaluate(
     masks: Sequence[FloatArray] | None = None,
     settle_s: float = 30.0,
     sensor_lag_s: float = 0.0,
+    fractions: Sequence[FloatArray] | None = None,
 ) -> list[ti.RecordEvaluation]:
     """Table 4.10 statistics per run and measured face of the free-run prediction (as ti.evaluate), the muscle face
-    as a thermocouple of lag ``sensor_lag_s`` [s] reads it."""
-    sims = simulate_records(params, records, sensor_lag_s=sensor_lag_s)
+    as a thermocouple of lag ``sensor_lag_s`` [s] reads it; ``fractions``: as :func:`simulate_records`."""
+    sims = simulate_records(params, records, sensor_lag_s=sensor_lag_s, fractions=fractions)
     out = []
     for j, r in enumerate(records):
         ev = r.valid.copy()
@@ -121,8 +156,13 @@ class _LayerProblem:
         settle_s: float,
         rest_C: tuple[float, float] | None,
         sensor_lag_s: float = 0.0,
+        fractions: Sequence[FloatArray] | None = None,
+        latent_C: float = 0.0,
     ) -> None:
         self.records = records
+        self.latent_free = fractions is not None
+        self.latent_C = latent_C
+        self.dxi = fraction_steps(records, fractions)
         self.lag = sensor_lag_s
         self.base = base.vector()
         self.rest_C = rest_C
@@ -143,33 +183,40 @@ class _LayerProblem:
         self.T0 = np.ascontiguousarray(ti.start_states(records, None, rest))
         self.Tm = np.where(mask, self.T, 0.0)
         n = len(LOG_IDX) + (0 if rest_C is not None else 2)
-        self.lo = np.r_[_LOG_LO, [_AMB_LO] * (n - 6)]
-        self.hi = np.r_[_LOG_HI, [_AMB_HI] * (n - 6)]
+        self.lo = np.r_[_LOG_LO, [_AMB_LO] * (n - 6), [0.0] * self.latent_free]
+        self.hi = np.r_[_LOG_HI, [_AMB_HI] * (n - 6), [pe.LATENT_MAX_C] * self.latent_free]
 
     def vectors(self, x: FloatArray) -> FloatArray:
         """(P, N_LAYER) layer vectors of free rows x (P, n)."""
         v = np.tile(self.base, (x.shape[0], 1))
         v[:, LOG_IDX] = np.exp(x[:, : len(LOG_IDX)])
         if self.rest_C is None:
-            v[:, AMBIENT_IDX] = x[:, len(LOG_IDX) :]
+            v[:, AMBIENT_IDX] = x[:, len(LOG_IDX) : len(LOG_IDX) + 2]
         else:
             ta, tc = pe.ambients_for_rest(v, self.rest_C)
             v[:, 7], v[:, 8] = ta, tc
         return v
 
-    def free(self, layer: pe.PeltierLayer) -> FloatArray:
+    def latent(self, x: FloatArray) -> FloatArray:
+        """(P,) the latent heat [degC] of free rows x (P, n): the last entry where free, else the base's."""
+        return x[:, -1] if self.latent_free else np.full(x.shape[0], self.latent_C)
+
+    def free(self, layer: pe.PeltierLayer, latent_C: float = 0.0) -> FloatArray:
         v = layer.vector()
         x = np.log(v[list(LOG_IDX)])
-        return x if self.rest_C is not None else np.r_[x, v[list(AMBIENT_IDX)]]
+        x = x if self.rest_C is not None else np.r_[x, v[list(AMBIENT_IDX)]]
+        return np.r_[x, [latent_C] * self.latent_free]
 
     def residuals_many(self, x: FloatArray) -> FloatArray:
         """(P, M) weighted residuals of free rows x (P, n)."""
-        v = self.vectors(np.atleast_2d(x))
+        x = np.atleast_2d(x)
+        v = self.vectors(x)
         R = len(self.records)
         coef = np.ascontiguousarray(np.repeat(v[:, None, :], R, axis=1))
+        latent = np.ascontiguousarray(np.repeat(self.latent(x)[:, None], R, axis=1))
         out = np.empty((self.u.shape[0], v.shape[0], R, 2))
         with np.errstate(all='ignore'):
-            tk.peltier_simulate_runs(coef, self.u, self.u2, self.T0, self.dt, out)
+            tk.peltier_simulate_runs(coef, self.u, self.u2, self.T0, self.dt, latent, self.dxi, out)
             out = ti.muscle_lagged(out, self.lag, self.dt)
             res = (out - self.Tm[:, None]) * self.w[None, None]
         r = np.moveaxis(res, 1, 0)[:, self.mask]
@@ -196,12 +243,14 @@ def fit_peltier(
     rest_C: tuple[float, float] | None = None,
     max_nfev: int = 200,
     sensor_lag_s: float = 0.0,
+    fractions: Sequence[FloatArray] | None = None,
 ) -> PeltierFit:
     """Fit each layer's Peltier vector (Eqs. P.1-P.3) to its runs by simulation-error least squares (module
     docstring). ``masks``: per-run training samples; ``rest_C``: the measured (muscle, exchanger) rest faces
     [degC] the ambients are tied to; ``sensor_lag_s``: the muscle thermocouple's known first-order lag [s] (the
-    model's ``temp_lag_s``; module docstring). Raises ThermalIdentificationError when the data cannot support the
-    fit."""
+    model's ``temp_lag_s``; module docstring); ``fractions``: each run's martensite fraction (K_r,), which frees each
+    fitted layer's latent heat ``latent_C`` (Eq. P.4, from the base's). Raises ThermalIdentificationError when the
+    data cannot support the fit."""
     from scipy.optimize import least_squares
 
     t0 = time.perf_counter()
@@ -232,8 +281,10 @@ def fit_peltier(
             settle_s,
             rest_C,
             sensor_lag_s,
+            None if fractions is None else [fractions[j] for j in idx],
+            params.latent_C[layer],
         )
-        x0 = np.clip(prob.free(params.layers[layer]), prob.lo + 1e-9, prob.hi - 1e-9)
+        x0 = np.clip(prob.free(params.layers[layer], params.latent_C[layer]), prob.lo + 1e-9, prob.hi - 1e-9)
         sol = least_squares(
             prob.residuals,
             x0,
@@ -248,6 +299,10 @@ def fit_peltier(
         cost += float(r @ r)
         n_res += 1
         params = params.with_layer(layer, pe.PeltierLayer.from_vector(prob.vectors(sol.x[None])[0]))
+        if prob.latent_free:
+            latent = list(params.latent_C)
+            latent[layer] = float(np.clip(sol.x[-1], 0.0, pe.LATENT_MAX_C))
+            params = dataclasses.replace(params, latent_C=tuple(latent))
         tol = 1e-6 * (prob.hi - prob.lo)
         at_bounds += [
             f'TEM {layer + 1} {k} = {math.exp(v) if i < len(LOG_IDX) else v:.4g}'
@@ -284,4 +339,4 @@ def leave_one_out(
     return out
 
 
-__all__ = ['PeltierFit', 'fit_peltier', 'evaluate', 'simulate_records', 'leave_one_out']
+__all__ = ['PeltierFit', 'fit_peltier', 'evaluate', 'simulate_records', 'leave_one_out', 'fraction_steps']
