@@ -1,5 +1,5 @@
-"""The temperature rates the replays undo a thermocouple lag with (T = y + tau dy/dt): central differences of
-noise-free readings, a local fit whose window follows the noise otherwise (effects.rate_window)."""
+"""The temperature rates the replays undo a thermocouple lag with (T = y + tau dy/dt): central differences or a
+local fit whose window follows the readings' noise (effects.rate_window)."""
 
 from functools import lru_cache
 
@@ -48,12 +48,14 @@ def _undone(m: fx.ExtendedModel) -> np.ndarray:
 def test_noise_free_readings_have_their_lag_undone_at_every_reversal() -> None:
     node, y = _heating_cycles()
     m = _model(y)
-    assert m.rate_window_s == 0.0
+    assert m.rate_window_s <= 0.05  # central differences or the shortest fit
     err = np.abs(_undone(m) - node)[50:-50]
-    # the lag itself: the readings trail the node by up to tau x 4 degC/s; a 1 s local fit's rate rounds each
-    # reversal and leaves tenths of a degree at the peaks, which set the wires' memory
+    # the lag itself: the readings trail the node by up to tau x 4 degC/s
     assert np.abs(y - node)[50:-50].max() > 0.5
-    assert err.max() < 0.03, err.max()
+    # a 1 s local fit's rate rounds each reversal and leaves tenths of a degree at the peaks, which set the wires'
+    # memory: the chosen rate undoes the lag at least ten times closer
+    m.T_rate = fx.smooth_and_rate(y, DT, 0.3, 1.0)[1]
+    assert err.max() < 0.1 * np.abs(_undone(m) - node)[50:-50].max(), err.max()
 
 
 @pytest.mark.parametrize('sigma', [0.02, 0.07, 0.2, 0.5])
