@@ -68,7 +68,7 @@ def test_rate_window_is_near_the_best_for_the_noise(sigma: float) -> None:
     for w in fx.RATE_WINDOWS_S:
         rate = fx.smooth_and_rate(T, DT, 0.3, w)[1]
         err[w] = float(np.sqrt(np.mean((rate - true_rate)[200:-200] ** 2)))
-    got = fx.rate_window(T, DT, np.full(2, sigma))
+    got = fx.rate_window(T, DT, np.full(2, sigma), fx.RATE_WINDOWS_S)
     assert err[got] <= 1.3 * min(err.values()), (got, err)
     # and the model of a noisy run uses it
     assert _model(T).rate_window_s == got
@@ -78,5 +78,5 @@ def test_rate_window_grows_with_the_noise() -> None:
     node, y = _heating_cycles()
     rng = np.random.default_rng(3)
     e = rng.normal(0.0, 1.0, y.shape)
-    got = [fx.rate_window(y + s * e, DT, np.full(2, s)) for s in (0.01, 0.1, 1.0)]
+    got = [fx.rate_window(y + s * e, DT, np.full(2, s), fx.RATE_WINDOWS_S) for s in (0.01, 0.1, 1.0)]
     assert got == sorted(got) and got[0] < got[-1], got

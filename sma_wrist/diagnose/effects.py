@@ -51,16 +51,17 @@ SMOOTH_WINDOWS_S = (0.1, 0.2, 0.3, 0.6)
 #: keeps: on the emulated phase-fraction wrist (lag 0.2 s) the emulator's own wire replayed its lagged readings to
 #: 4.1 mrad RMS from the 1 s rate and to 0.7 mrad from central differences (0.2 mrad from the true node temperatures)
 RATE_WINDOW_S = 1.0
-#: candidate rate windows [s] (0: central differences; :func:`rate_window` picks one for the run's noise). On the
-#: emulated phase-fraction wrist's 0.2 s-lagged readings the emulator's own wire replayed best from central
-#: differences without noise (0.3 mrad RMS on a 10 ms grid), from 0.1 s with the emulated ADC's 0.002 degC (0.5-0.6
-#: mrad; 1.9 from central differences), from 0.3 s with 0.07 degC of white noise added (2.1; 2.7-2.9 from 0.6 s,
-#: 3.7-4.2 from 1 s) and from 0.6 s with 0.2 degC (4.2-5.0; 4.5-5.2 from 1 s)
-RATE_WINDOWS_S = (0.0, 0.05, 0.1, 0.2, 0.3, 0.6, 1.0)
-#: the weight of a window's bias against its noise in :func:`rate_window`: the bias sits at the reversals of the
-#: heating, whose peaks the wires' memory keeps, so it costs the angle more than noise of the same RMS. With weight 1
-#: the emulated ADC's case above took 0.2 s (0.9 mrad), with 4 it takes 0.1 s; the others: central differences, 0.6 s
-#: (0.07 degC), 1 s (0.2 degC), the same with either
+#: candidate rate windows of noisy readings [s] (:func:`rate_window` picks one, bias and noise weighted alike). On
+#: the emulated phase-fraction wrist's 0.2 s-lagged readings with white noise added, the emulator's own wire replayed
+#: best from 0.3 s at 0.07 degC (2.1 mrad RMS; 3.7-4.2 from 1 s) and from 0.6 s at 0.2 degC (4.2-5.0; 4.5-5.2 from 1 s)
+RATE_WINDOWS_S = (0.2, 0.3, 0.6, 1.0)
+#: ... and of readings below SMOOTH_ABOVE_C of noise, where central differences are the reference: an emulated ADC's
+#: 0.002 degC, amplified by them, left the emulator's own wire 1.9 mrad RMS off its replay (from central differences),
+#: 0.6 from 0.1 s; without noise they are best (0.3 mrad on a 10 ms grid)
+RATE_WINDOWS_NOISE_FREE_S = (0.0, 0.05, 0.1)
+#: the weight of a window's bias against its noise among RATE_WINDOWS_NOISE_FREE_S: the bias sits at the reversals
+#: of the heating, whose peaks the wires' memory keeps, so it costs the angle more than noise of the same RMS; with
+#: weight 1 the emulated ADC's case took 0.2 s of the longer list (0.9 mrad), with 4 it takes 0.1 s
 RATE_BIAS_WEIGHT = 4.0
 #: window of the local fit that gives a noisy run's initial temperatures [s]
 START_WINDOW_S = 0.5
@@ -408,42 +409,36 @@ def smooth_and_rate(
     return savgol_filter(T, w_s, 2, axis=0), savgol_filter(T, w_r, 2, deriv=1, delta=dt, axis=0)
 
 
-def rate_window(T: np.ndarray, dt: float, sigma: np.ndarray, windows: Sequence[float] = RATE_WINDOWS_S) -> float:
+def rate_window(
+    T: np.ndarray, dt: float, sigma: np.ndarray, windows: Sequence[float], bias_weight: float = 1.0
+) -> float:
     """The window [s] of ``windows`` (0: central differences) whose rate of the readings T (K, C) has the smallest
     estimated error, summed over the channels, for white noise of std ``sigma`` (C,) [degC].
 
     The error of a window's rate is its noise, sigma^2 times the sum of its filter's squared coefficients, plus its
-    bias (it rounds the rate's changes), weighted by :data:`RATE_BIAS_WEIGHT`. The bias is estimated against each
-    shorter window whose noise lets it be measured (Lepski's comparison): the mean squared difference of the two
-    rates less what their noise alone gives, where that noise, over the run's independent stretches, is known to
-    within the longer window's own noise; the largest such estimate counts. Windows that span the same number of
-    samples on this grid are one candidate (the shortest named)."""
+    bias (it rounds the rate's changes) times ``bias_weight``. The bias is estimated against the shortest window's
+    rate: the mean squared difference of the two rates less what their noise alone gives (Stein-like unbiased risk).
+    Windows that span the same number of samples on this grid are one candidate (the shortest named)."""
     sigma = np.asarray(sigma, float)
     # (samples, polynomial order): central differences are the slope of a line through three samples
     cand: dict[tuple[int, int], float] = {}
-    for w in windows:
+    for w in sorted(windows):
         key = (3, 1) if w <= 0.0 else (max(5, int(round(w / dt)) | 1), 2)
         cand.setdefault(key, float(w))
     if T.shape[0] <= max(k for k, _ in cand):
         return RATE_WINDOW_S
     keys = list(cand)
     h = [savgol_coeffs(k, o, deriv=1, delta=dt) for k, o in keys]
-    rates = [savgol_filter(T, k, o, deriv=1, delta=dt, axis=0) for k, o in keys]
-    s2 = float(np.sum(sigma**2))
+    r0 = savgol_filter(T, keys[0][0], keys[0][1], deriv=1, delta=dt, axis=0)
+    s2 = sigma**2
     risk = []
-    for i, (k, _) in enumerate(keys):
-        own = s2 * float(np.sum(h[i] ** 2))
-        bias2 = 0.0
-        for j in range(i):
-            ref = np.zeros(k)
-            o = (k - h[j].size) // 2
-            ref[o : o + h[j].size] = h[j]
-            noise = s2 * float(np.sum((h[i] - ref) ** 2))
-            d2 = float(np.sum(((rates[i] - rates[j]) ** 2).mean(axis=0)))
-            # counted where it stands out of the noise's own scatter over the run's independent stretches
-            if d2 - noise > 2.0 * noise * np.sqrt(2.0 * k / T.shape[0]):
-                bias2 = max(bias2, d2 - noise)
-        risk.append(RATE_BIAS_WEIGHT * bias2 + own)
+    for (k, o), hk in zip(keys, h):
+        ref = np.zeros(max(k, h[0].size))
+        off = (ref.size - h[0].size) // 2
+        ref[off : off + h[0].size] = h[0]
+        d2 = ((savgol_filter(T, k, o, deriv=1, delta=dt, axis=0) - r0) ** 2).mean(axis=0)
+        bias2 = np.maximum(d2 - s2 * float(np.sum((hk - ref) ** 2)), 0.0)
+        risk.append(float(np.sum(bias_weight * bias2 + s2 * float(np.sum(hk**2)))))
     return list(cand.values())[int(np.argmin(risk))]
 
 
@@ -539,7 +534,12 @@ class ExtendedModel:
             # the replay error on a plant_sim run). The rate window follows the readings' own noise (an ADC's
             # quantisation shows in it): floored at a resolution, noise-free simulated readings would look noisy and
             # lose their central differences
-            self.rate_window_s = rate_window(run.T, run.dt, [noise_density_sigma(run.T[:, c]) for c in (0, 1)])
+            sigma = [noise_density_sigma(run.T[:, c]) for c in (0, 1)]
+            self.rate_window_s = (
+                rate_window(run.T, run.dt, sigma, RATE_WINDOWS_NOISE_FREE_S, RATE_BIAS_WEIGHT)
+                if noise_free
+                else rate_window(run.T, run.dt, sigma, RATE_WINDOWS_S)
+            )
             self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOW_S, self.rate_window_s)
             # cycles counted from where the scored data begin (after a monitor window's lead-in, Run.settle_s): a
             # drift acts from there. In a window cut after a located change that is the change, before which the
