@@ -399,14 +399,16 @@ def smooth_and_rate(
     T: np.ndarray, dt: float, window_s: float = 0.3, rate_window_s: float = RATE_WINDOW_S
 ) -> tuple[np.ndarray, np.ndarray]:
     """Zero-phase smoothed temperature (``window_s`` window) and its rate (``rate_window_s`` window; 0: central
-    differences of the readings, for noise-free ones) [degC, degC/s]."""
-    if rate_window_s <= 0.0 or T.shape[0] < 3:
+    differences of the readings) [degC, degC/s]; a run shorter than a window keeps its readings and their central
+    differences."""
+    if T.shape[0] < 3:
         return T.copy(), np.gradient(T, dt, axis=0) if T.shape[0] > 1 else np.zeros_like(T)
     w_s = max(5, int(round(window_s / dt)) | 1)
-    w_r = max(5, int(round(rate_window_s / dt)) | 1)
-    if T.shape[0] <= w_r:
+    w_r = max(5, int(round(rate_window_s / dt)) | 1) if rate_window_s > 0.0 else 0
+    if T.shape[0] <= max(w_s, w_r):
         return T.copy(), np.gradient(T, dt, axis=0)
-    return savgol_filter(T, w_s, 2, axis=0), savgol_filter(T, w_r, 2, deriv=1, delta=dt, axis=0)
+    rate = np.gradient(T, dt, axis=0) if w_r == 0 else savgol_filter(T, w_r, 2, deriv=1, delta=dt, axis=0)
+    return savgol_filter(T, w_s, 2, axis=0), rate
 
 
 def rate_window(
@@ -541,6 +543,8 @@ class ExtendedModel:
                 else rate_window(run.T, run.dt, sigma, RATE_WINDOWS_S)
             )
             self.T_s, self.T_rate = smooth_and_rate(run.T, run.dt, SMOOTH_WINDOW_S, self.rate_window_s)
+            if noise_free:
+                self.T_s = run.T.copy()
             # cycles counted from where the scored data begin (after a monitor window's lead-in, Run.settle_s): a
             # drift acts from there. In a window cut after a located change that is the change, before which the
             # residuals say the wrist was its model; counted from the lead-in's start, the drift acted before the
