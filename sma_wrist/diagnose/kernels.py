@@ -532,17 +532,16 @@ class Constants:
     def mechanics(
         self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim`."""
+        """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim` (:func:`pf_mechanics_sim` for a phase-fraction
+        wire)."""
+        if self.wire is not None:
+            return self._pf_replay(T, dt, jrow, substeps)[:3]
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
         jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))  # whatever the caller's shape: (5,) or (n, 5)
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))
-        if self.wire is not None:
-            xi = np.empty((k, n, 2))
-            pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load, xi)
-            return q, qd, load
         mechanics_sim(
             T,
             float(dt),
@@ -567,9 +566,15 @@ class Constants:
         T (K, N, 2) [degC]; the SD-GPI has none (ValueError)."""
         if self.wire is None:
             raise ValueError('the SD-GPI wire has no martensite fraction (PlantParams.wire is None)')
+        return self._pf_replay(T, dt, jrow, substeps)[3]
+
+    def _pf_replay(
+        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(q, qd, load, xi) of :func:`pf_mechanics_sim` for T (K, N, 2) and joint rows (5,) or (N, 5)."""
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
-        jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))
+        jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))  # whatever the caller's shape: (5,) or (n, 5)
         q, qd, load, xi = np.empty((k, n)), np.empty((k, n)), np.empty((k, n, 2)), np.empty((k, n, 2))
         pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load, xi)
-        return xi
+        return q, qd, load, xi
