@@ -735,6 +735,7 @@ def fit_phase_fraction_wire(
     free_payload: bool = True,
     free: Sequence[str] = (),
     substeps: int = PF_FIT_SUBSTEPS,
+    robust_scale_rad: float | None = None,
 ) -> FractionFit:
     """A phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`: transformation temperatures, both
     Clausius-Clapeyron slopes, recoverable strain, elongation datum; the moduli and detwinning stresses the
@@ -753,7 +754,9 @@ def fit_phase_fraction_wire(
     one least-squares fit over all recordings (the payload the same in all). ``free_payload`` false: the payload
     stays ``start['payload_kg']`` (or the run's). ``free``: values of :data:`PF_EXTRA_RANGE` fitted too (from
     ``start``'s where it has them); a ``start['temp_lag_s']`` not freed is the replay's fixed lag. ``substeps``: plant
-    steps per sample of the fit's replays (:data:`PF_FIT_SUBSTEPS`)."""
+    steps per sample of the fit's replays (:data:`PF_FIT_SUBSTEPS`). ``robust_scale_rad``: solve with the Cauchy loss
+    of that scale [rad] instead of plain least squares (a segment the start replays far off then weighs little more
+    than one it replays a few scales off); the fit's RMS is of the plain residuals either way."""
     from scipy.optimize import least_squares
 
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
@@ -844,7 +847,14 @@ def fit_phase_fraction_wire(
     best = None
     for _ in range(rounds):
         res = least_squares(
-            residual, x0, bounds=(lo, hi), x_scale=scale, diff_step=PF_DIFF_STEP, max_nfev=max_nfev, xtol=1e-12
+            residual,
+            x0,
+            bounds=(lo, hi),
+            x_scale=scale,
+            diff_step=PF_DIFF_STEP,
+            max_nfev=max_nfev,
+            xtol=1e-12,
+            **({} if robust_scale_rad is None else {'loss': 'cauchy', 'f_scale': robust_scale_rad}),
         )
         if best is None or res.cost < best.cost:
             best = res
@@ -862,7 +872,7 @@ def fit_phase_fraction_wire(
         wire,
         float(row[i_c]),
         float(run.payload_kg + row[i_p]),
-        float(np.sqrt(2.0 * res.cost / res.fun.size)),
+        float(np.sqrt(np.mean(res.fun**2))),  # the plain residuals whatever the loss
         at,
         float(row[i_lag]),
     )
