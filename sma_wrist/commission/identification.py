@@ -673,11 +673,14 @@ PF_ROUNDS = 3
 #: values a fit may free beyond :data:`PF_RANGE` (``free``; (low, high, scale) as there): the reverse transformation's
 #: own Clausius-Clapeyron slope (else C_A = C_M), the stress where detwinning starts (else the literature's), and the
 #: thermocouples' first-order lag [s] (the diagnosis' ``temp_lag_s``: the replay runs on the measured temperatures
-#: advanced by it). The excitation alone does not tell them apart; the refinement frees them on the closed-loop run
+#: advanced by it), the austenite and martensite moduli [GPa] (else the literature's). The excitation alone does not
+#: tell them apart; the refinement frees them on the closed-loop run
 PF_EXTRA_RANGE: dict[str, tuple[float, float, float]] = {
     'C_A_MPa_per_C': (2.0, 50.0, 1.0),
     'sigma_s_MPa': (0.0, 160.0, 5.0),
     'temp_lag_s': (0.0, 2.0, 0.05),
+    'E_M_GPa': (10.0, 80.0, 2.0),
+    'E_A_GPa': (30.0, 120.0, 2.0),
 }
 
 
@@ -791,6 +794,8 @@ def fit_phase_fraction_wire(
         'sigma_s_MPa': start.get('sigma_s_MPa', w0.sigma_s_MPa),
         'sigma_f_MPa': start.get('sigma_f_MPa', w0.sigma_f_MPa),
         'temp_lag_s': lag0,
+        'E_M_GPa': start.get('E_M_GPa', w0.E_M_GPa),
+        'E_A_GPa': start.get('E_A_GPa', w0.E_A_GPa),
     }
     first['C_A_MPa_per_C'] = start.get('C_A_MPa_per_C', first['C_MPa_per_C'])
     if 'offset_mm' in start:
@@ -809,6 +814,8 @@ def fit_phase_fraction_wire(
             offset_mm=v['offset_mm'],
             sigma_s_MPa=v['sigma_s_MPa'],
             sigma_f_MPa=v['sigma_f_MPa'],
+            E_M_GPa=v['E_M_GPa'],
+            E_A_GPa=v['E_A_GPa'],
             law=law,
             name='phase-fraction wire, commissioned',
         )
@@ -893,6 +900,8 @@ def pf_start(fit: FractionFit) -> dict[str, float]:
         'C_A_MPa_per_C': w.C_A_MPa_per_C,
         'sigma_s_MPa': w.sigma_s_MPa,
         'sigma_f_MPa': w.sigma_f_MPa,
+        'E_M_GPa': w.E_M_GPa,
+        'E_A_GPa': w.E_A_GPa,
         'temp_lag_s': fit.temp_lag_s,
         'coulomb_Nm': fit.coulomb_Nm,
         'payload_kg': fit.payload_kg,
