@@ -226,3 +226,23 @@ def test_the_hand_over_rule_needs_the_held_out_run_better_beyond_the_noise():
     assert not rf.hand_over_refined(30.0, 29.8, 0.3)  # better by less than the angle's noise
     assert not rf.hand_over_refined(30.0, 31.0, 0.3)
     assert not rf.hand_over_refined(30.0, float('nan'), 0.3)
+
+
+def test_the_reports_line_names_the_refit_handed_over_its_lag_and_moduli():
+    from sma_wrist.commission.verify import refinement_line
+
+    heldout = {'metric': 'm', 'unit': 'mrad', 'first': 34.1, 'brinson': 1.72, 'brinson' + rf.ROBUST: 1.73}
+    handed = {
+        'refined': True,
+        'refit': 'brinson',
+        'heldout': heldout,
+        'temp_lag_s': 0.229,
+        'wire': {'E_A_GPa': 72.14, 'E_M_GPa': 31.53, 'M_s_C': 64.0},
+        'why': 'better',
+        'seconds': 40.4,
+    }
+    line = refinement_line(handed)
+    assert 'refit (brinson law, robust loss) 1.73' in line and 'the refit (brinson law) handed over' in line
+    assert '0.229 s (plant_sim model.temp_lag_s)' in line and 'moduli 72.1 / 31.5 GPa' in line
+    kept = refinement_line(handed | {'refined': False})
+    assert 'the first fit kept' in kept and 'moduli' not in kept and 'lag it found' not in kept

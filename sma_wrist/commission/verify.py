@@ -817,6 +817,9 @@ def refinement_line(rf: dict[str, Any]) -> str:
     what = f'the refit ({candidate_label(rf["refit"])}) handed over' if rf.get('refined') else 'the first fit kept'
     if rf.get('refined') and rf.get('temp_lag_s'):
         what += f", with the thermocouples' lag it found, {rf['temp_lag_s']:.3g} s (plant_sim model.temp_lag_s)"
+    w = rf.get('wire') or {}
+    if rf.get('refined') and 'E_A_GPa' in w:
+        what += f" and the wire's moduli {w['E_A_GPa']:.3g} / {w['E_M_GPa']:.3g} GPa (austenite / martensite)"
     line = (
         'Refinement of the model wire on the excitation and the defaults run: RMS angle error of the commissioned '
         f'run (held out): {errors} mrad; {what} ({rf.get("why", "")}; {rf.get("seconds", 0):g} s of CPU).'
