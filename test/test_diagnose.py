@@ -85,6 +85,27 @@ def test_several_magnitudes(open_loop, k):
     _check_found(*open_loop[len(BASE_CATALOGUE) + k])
 
 
+@pytest.mark.parametrize('i', range(len(CASES)), ids=[f'{c[0]}-{c[1]}' for c in CASES])
+def test_no_effect_of_the_catalogue_nor_a_clean_run_reads_as_a_step_of_the_angle(open_loop, i):
+    _, res = open_loop[i]
+    assert res.angle_steps == [] and 'stepped' not in res.summary, res.summary
+
+
+def test_a_step_of_the_angle_is_named_with_its_time_and_size():
+    # a clean run whose measured angle jumps 0.15 rad at 50 s and back at 62 s (a wire slipping in its crimp and
+    # caught again, a snap and its release): nothing the model's replay does
+    truth = td.simulate('none', seed=5, duration_s=90.0)
+    run = td.run_from_truth(truth)
+    t = run.t - run.t[0]
+    run.q = run.q + 0.15 * ((t >= 50.0) & (t < 62.0))
+    res = diagnose_run(run, candidates=['payload_mismatch', 'sensor_offset_gain'])
+    assert res.discrepancy and 'mechanics' in res.summary, res.summary
+    assert [round(s['t_s'] - run.t[0]) for s in res.angle_steps] in ([50, 62], [62, 50]), res.angle_steps
+    assert all(s['step_rad'] == pytest.approx(0.15, abs=0.01) for s in res.angle_steps)
+    assert all(s['model_max_rad'] < 0.15 / 2.5 for s in res.angle_steps)
+    assert 'the measured angle stepped within 0.1 s (0.15' in res.summary and 'rad at 50.0 s' in res.summary
+
+
 @pytest.mark.parametrize('k', range(len(CLEAN_SEEDS)), ids=[f'seed{s}' for s in CLEAN_SEEDS])
 def test_clean_run_is_no_false_alarm(open_loop, k):
     _, res = open_loop[len(BASE_CATALOGUE) + len(MAGNITUDES) + k]

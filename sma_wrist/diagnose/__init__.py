@@ -32,6 +32,7 @@ from sma_wrist.core.yaml_file import write_yaml_file
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose import fit as ft
 from sma_wrist.diagnose import report as rp
+from sma_wrist.diagnose import steps as st
 from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
 __all__ = ['DiagnosisResult', 'DiagnoseInputError', 'diagnose', 'diagnose_run', 'main', 'nominal_plant']
@@ -122,6 +123,9 @@ class DiagnosisResult:
     #: PARTIAL_GAIN_PCT), so not named: {cause, subsystem, channel, gain_pct, parameters}; None otherwise
     partial: dict[str, Any] | None = None
     warnings: list[str] = field(default_factory=list)
+    #: steps of the measured angle the model's replay does not make (:func:`sma_wrist.diagnose.steps.angle_steps`):
+    #: ``{'t_s', 'step_rad', 'model_max_rad'}``, largest first
+    angle_steps: list[dict[str, Any]] = field(default_factory=list)
     source: str = ''
     duration_s: float = 0.0
     wall_s: float = 0.0
@@ -328,6 +332,13 @@ def diagnose_run(
         src = 'measured' if 'mechanics' in ev.channels else 'chain'
         qq, _, ll = model.mechanics(ev.nominal[None], None, src)
         q_nom, load_nom = qq[:, 0], ll[:, 0]
+    # steps of the measured angle the replay does not make (a snap, a slipping crimp): named, whatever the verdict
+    angle_steps = []
+    if q_nom is not None and run.q is not None:
+        k = q_nom.shape[0]
+        angle_steps = st.angle_steps(
+            run.t[ev.i0 : k], run.q[ev.i0 : k], q_nom[ev.i0 :], ev.sigma['mechanics'], ev.mask[ev.i0 : k] > 0
+        )
     reg = _regressors(ev, q_nom, load_nom, sl)
     stats: dict[str, dict[str, Any]] = {}
     structure = []
@@ -447,6 +458,8 @@ def diagnose_run(
             f'unexplained discrepancy in {structure[0]}: no catalogue effect explains it within its range; ' + hit_text
         )
         hit_text = ''
+    if angle_steps:
+        summary += '; ' + st.describe(angle_steps, float(run.t[0]))
     unnamed = unexplained and not significant
     confidence = ft.verdict_confidence(
         ev, fits if unnamed else eligible, best if significant else None, MIN_SCORE, N_CONFIDENCE, unexplained=unnamed
@@ -494,6 +507,7 @@ def diagnose_run(
             else None
         ),
         warnings=list(run.warnings),
+        angle_steps=angle_steps,
         source=run.source,
         duration_s=run.duration,
         drive=run.drive,
