@@ -72,7 +72,7 @@ REFINE_SUBSTEPS = 5
 #: recording holds a segment the first fit replays far off, plain least squares spends the solve on that segment. On
 #: one commissioning of the emulated phase-fraction wrist the defaults' run held a snap of the pair (0.29 rad in
 #: 0.1 s, the temperatures smooth) that the first fit replayed 235 mrad off: the least-squares refits stopped at
-#: 24 mrad on the recordings and 70-82 held out (lag 0, friction 10x the emulated), the robust brinson refit 2.0 held
+#: 24 mrad on the recordings and 68-82 held out (lag 0, friction 10x the emulated), the robust brinson refit 2.0 held
 #: out; where least squares does well the robust solve can land worse (2.5 against 29 mrad held out on another
 #: commissioning), hence both, chosen on the held-out run
 ROBUST = '_robust'
