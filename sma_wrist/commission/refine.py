@@ -79,9 +79,10 @@ ROBUST = '_robust'
 REFINE_ROBUST_SCALE_RAD = 0.002
 #: suffix of the candidates fitted on the defaults' run alone: the excitation drives the wires in a regime of its
 #: own (relays and sines, one muscle at a time) and pulls the refit's traded values (payload, friction, moduli)
-#: towards it. On five commissionings of the emulated phase-fraction wrist the least-squares brinson refit on the
-#: defaults' run alone held the commissioned run out to 1.18 / 4.74 / 1.33 / 1.11 / 1.16 mrad against 2.27 / 4.96 /
-#: 1.72 / 1.25 / 1.49 on both recordings; a snap in the defaults' run is the robust candidates' case
+#: towards it. On five commissionings of the emulated phase-fraction wrist the brinson refit on the defaults' run
+#: alone held the commissioned run out to 1.49 / 4.56 / 1.50 / 1.14 / 1.21 mrad against the best on both recordings'
+#: 2.27 / 4.62 / 1.72 / 1.16 / 1.32, and was handed over each time; a snap in the defaults' run is the robust
+#: candidates' case
 LOOP = '_loop'
 
 
