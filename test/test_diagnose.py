@@ -100,7 +100,7 @@ def test_a_step_of_the_angle_is_named_with_its_time_and_size():
     run.q = run.q + 0.15 * ((t >= 50.0) & (t < 62.0))
     res = diagnose_run(run, candidates=['payload_mismatch', 'sensor_offset_gain'])
     assert res.discrepancy and 'mechanics' in res.summary, res.summary
-    assert [round(s['t_s'] - run.t[0]) for s in res.angle_steps] in ([50, 62], [62, 50]), res.angle_steps
+    assert [round(s['t_s']) for s in res.angle_steps] in ([50, 62], [62, 50]), res.angle_steps
     assert all(s['step_rad'] == pytest.approx(0.15, abs=0.01) for s in res.angle_steps)
     assert all(s['model_max_rad'] < 0.15 / 2.5 for s in res.angle_steps)
     assert 'the measured angle stepped within 0.1 s (0.15' in res.summary and 'rad at 50.0 s' in res.summary

@@ -25,7 +25,7 @@ def test_a_jump_the_replay_does_not_make_is_found_once_with_its_time_and_size():
     s = found[0]
     assert s['step_rad'] == pytest.approx(0.2, abs=0.02) and 29.9 <= s['t_s'] <= 30.0
     assert s['model_max_rad'] == pytest.approx(np.max(np.abs(model[10:] - model[:-10])))
-    text = st.describe(found, t0_s=0.0)
+    text = st.describe(found)
     assert '0.2 rad at 29.9 s' in text or '0.2 rad at 30.0 s' in text
 
 

@@ -9,8 +9,8 @@ closed-loop run by tens. The verification records both of its runs (:mod:`sma_wr
 1. refits the phase-fraction wire, with the joint's friction and the payload (and :data:`REFINE_FREE`: the reverse
    slope, the detwinning start stress, the thermocouples' lag, then from there the moduli too:
    :data:`REFINE_FREE_THEN`; once by least squares, once with a robust loss: :data:`REFINE_ROBUST_SCALE_RAD`; and once
-   by least squares on the defaults' run alone: :data:`LOOP`), on the excitation PLUS the defaults' run: one least-squares residual over both recordings, each replayed from its
-   own start
+   by least squares on the defaults' run alone: :data:`LOOP`), on the excitation PLUS the defaults' run: one
+   least-squares residual over both recordings, each replayed from its own start
    (:func:`sma_wrist.commission.identification.fit_phase_fraction_wire` with ``extra``), once per constitutive law
    (:data:`sma_wrist.core.hysteresis.phase_fraction.LAWS`), each from the identification's fit of that law (a
    refit of the other law from the values of the one handed over stopped in another minimum: 35 against 12.6 mrad
@@ -165,7 +165,7 @@ def refine_wire(
     fits: dict[str, Any] = {}
     for law in LAWS:
         own = ctx.fits.get(law, first)
-        # (the recording fitted first and its scored samples, the other recordings, the loss)
+        # (the first recording, the end and start of its scored samples, the further recordings with their starts)
         both = (exc, ctx.i_held, ctx.i_fit, [(dataclasses.replace(defaults, payload_kg=own.payload_kg), i_def)])
         loop = (defaults, defaults.n, i_def, [])
         for key, (main, i_end, i_fit, extra), robust in (

@@ -124,7 +124,7 @@ class DiagnosisResult:
     partial: dict[str, Any] | None = None
     warnings: list[str] = field(default_factory=list)
     #: steps of the measured angle the model's replay does not make (:func:`sma_wrist.diagnose.steps.angle_steps`):
-    #: ``{'t_s', 'step_rad', 'model_max_rad'}``, largest first
+    #: ``{'t_s', 'step_rad', 'model_max_rad'}``, largest first, ``t_s`` from the run's start
     angle_steps: list[dict[str, Any]] = field(default_factory=list)
     source: str = ''
     duration_s: float = 0.0
@@ -332,12 +332,13 @@ def diagnose_run(
         src = 'measured' if 'mechanics' in ev.channels else 'chain'
         qq, _, ll = model.mechanics(ev.nominal[None], None, src)
         q_nom, load_nom = qq[:, 0], ll[:, 0]
-    # steps of the measured angle the replay does not make (a snap, a slipping crimp): named, whatever the verdict
+    # steps of the measured angle the replay does not make (a snap, a slipping crimp): named, whatever the verdict,
+    # at times from the run's start (a monitor window's too), as the summary says them
     angle_steps = []
     if q_nom is not None and run.q is not None:
         k = q_nom.shape[0]
         angle_steps = st.angle_steps(
-            run.t[ev.i0 : k], run.q[ev.i0 : k], q_nom[ev.i0 :], ev.sigma['mechanics'], ev.mask[ev.i0 : k] > 0
+            run.t[ev.i0 : k] - run.t[0], run.q[ev.i0 : k], q_nom[ev.i0 :], ev.sigma['mechanics'], ev.mask[ev.i0 : k] > 0
         )
     reg = _regressors(ev, q_nom, load_nom, sl)
     stats: dict[str, dict[str, Any]] = {}
@@ -459,7 +460,7 @@ def diagnose_run(
         )
         hit_text = ''
     if angle_steps:
-        summary += '; ' + st.describe(angle_steps, float(run.t[0]))
+        summary += '; ' + st.describe(angle_steps)
     unnamed = unexplained and not significant
     confidence = ft.verdict_confidence(
         ev, fits if unnamed else eligible, best if significant else None, MIN_SCORE, N_CONFIDENCE, unexplained=unnamed

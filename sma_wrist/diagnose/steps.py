@@ -38,8 +38,8 @@ def angle_steps(
     """The steps of the measured angle ``q`` [rad] that the replay ``q_model`` [rad] (same samples, times ``t``
     [s], uniform) does not make (module docstring), largest first: ``{'t_s', 'step_rad', 'model_max_rad'}``, the
     time where the window starts, the change over :data:`WINDOW_S` of the measured angle less the replay's (the
-    step the replay does not make) and the replay's largest change over that window in the whole stretch. ``valid`` (bool per sample, optional): samples with a measurement; a window
-    touching one without is skipped."""
+    step the replay does not make) and the replay's largest change over that window in the whole stretch.
+    ``valid`` (bool per sample, optional): samples with a measurement; a window touching one without is skipped."""
     t, q, q_model = (np.asarray(a, float) for a in (t, q, q_model))
     if t.size < 3:
         return []
@@ -74,11 +74,11 @@ def angle_steps(
     return sorted(steps, key=lambda s: -s['step_rad'])
 
 
-def describe(steps: list[dict[str, Any]], t0_s: float = 0.0) -> str:
+def describe(steps: list[dict[str, Any]]) -> str:
     """One sentence for the diagnosis' summary ('' for none): the largest steps, when, and what may make them."""
     if not steps:
         return ''
-    shown = ', '.join(f'{s["step_rad"]:.3g} rad at {s["t_s"] - t0_s:.1f} s' for s in steps[:3])
+    shown = ', '.join(f'{s["step_rad"]:.3g} rad at {s["t_s"]:.1f} s' for s in steps[:3])
     more = f' (and {len(steps) - 3} more)' if len(steps) > 3 else ''
     return (
         f'the measured angle stepped within {WINDOW_S:g} s ({shown}{more}) where the model moves at most '
