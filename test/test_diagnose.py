@@ -106,6 +106,18 @@ def test_a_step_of_the_angle_is_named_with_its_time_and_size():
     assert 'the measured angle stepped within 0.1 s (0.15' in res.summary and 'rad at 50.0 s' in res.summary
 
 
+def test_the_replay_restarted_after_a_step_does_not_hide_a_potentiometer_that_jumped_for_good():
+    # the replay restarts from the measured angle after a step; a wrist that did not move (the reading jumped 0.15 rad
+    # at 50 s and stayed) pulls the restarted replay back to where the wires hold it: still a discrepancy
+    truth = td.simulate('none', seed=5, duration_s=90.0)
+    run = td.run_from_truth(truth)
+    t = run.t - run.t[0]
+    run.q = run.q + 0.15 * (t >= 50.0)
+    res = diagnose_run(run, candidates=['payload_mismatch'])
+    assert [round(s['t_s']) for s in res.angle_steps] == [50], res.angle_steps
+    assert res.discrepancy and 'mechanics' in res.summary and 'restarts from the measured angle' in res.summary
+
+
 @pytest.mark.parametrize('k', range(len(CLEAN_SEEDS)), ids=[f'seed{s}' for s in CLEAN_SEEDS])
 def test_clean_run_is_no_false_alarm(open_loop, k):
     _, res = open_loop[len(BASE_CATALOGUE) + len(MAGNITUDES) + k]

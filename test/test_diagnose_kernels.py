@@ -29,11 +29,14 @@ def _inputs(n: int) -> tuple[np.ndarray, np.ndarray]:
     return T, jrow
 
 
-def _replay(fn, T: np.ndarray, jrow: np.ndarray, substeps: int) -> tuple[np.ndarray, ...]:
+def _replay(
+    fn, T: np.ndarray, jrow: np.ndarray, substeps: int, resync: np.ndarray | None = None
+) -> tuple[np.ndarray, ...]:
     c = kernels.Constants()
     k, n = T.shape[:2]
     q, qd, load = np.empty((k, n)), np.empty((k, n)), np.empty((k, n, 2))
-    fn(T, DT, substeps, jrow, c.stacked, c.edges, c.r, c.p, c.mem_c, c.mem_d, c.mech, c.joint, q, qd, load)
+    resync = np.full(k, np.nan) if resync is None else resync
+    fn(T, DT, substeps, jrow, c.stacked, c.edges, c.r, c.p, c.mem_c, c.mem_d, c.mech, c.joint, resync, q, qd, load)
     return q, qd, load
 
 
@@ -86,3 +89,26 @@ def test_mechanics_replay_is_the_plants_own_step(j):
     np.testing.assert_allclose(q[:, 0], ref[:, 0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(qd[:, 0], ref[:, 1], rtol=0, atol=1e-12)
     np.testing.assert_allclose(load[1:, 0, 0], ref[1:, 2], rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize('wire', ['sd-gpi', 'phase-fraction'])
+def test_a_restart_sets_the_angle_at_rest_and_the_replay_goes_on_from_there(wire):
+    """Restart angles (a replay restarted after a step of the measured angle): none at all is the free replay to the
+    bit; up to the restart the replay is the free one, at it the angle is the given one with the joint at rest, and
+    after it the replay moves on from there (towards its equilibrium, from the new angle)."""
+    from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
+
+    T, jrow = _inputs(1)
+    c = kernels.Constants() if wire == 'sd-gpi' else kernels.Constants().with_wire(PhaseFractionWire())
+    free = c.mechanics(T, DT, jrow, 1)
+    assert all(np.array_equal(a, b) for a, b in zip(free, c.mechanics(T, DT, jrow, 1, np.full(K, np.nan))))
+    k = 120
+    target = free[0][k, 0] + 0.1
+    resync = np.full(K, np.nan)
+    resync[k] = target
+    q, qd, _ = c.mechanics(T, DT, jrow, 1, resync)
+    assert np.array_equal(q[:k], free[0][:k])
+    assert q[k, 0] == target and qd[k, 0] == 0.0
+    assert abs(q[k + 1, 0] - target) < abs(free[0][k + 1, 0] - target) - 0.05
+    with pytest.raises(ValueError, match='restart angles for 10 samples'):
+        c.mechanics(T, DT, jrow, 1, np.full(10, np.nan))

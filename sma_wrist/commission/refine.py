@@ -115,7 +115,10 @@ def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float | N
 def replay_rms_mrad(fit: Any, run: Any, i0: int, i1: int | None = None) -> float:
     """RMS angle error [mrad] of the replay of ``run`` from its start by a fit's wire, joint and thermocouple lag
     (a :class:`~sma_wrist.commission.identification.FractionFit`; the held-out replay's 10 ms step), scored over
-    samples ``i0:i1``."""
+    samples ``i0:i1``. After a step of the angle that this replay does not make (a snap of the pair), the replay
+    restarts from the measured angle and the step itself is not scored, as in the diagnosis
+    (:meth:`~sma_wrist.diagnose.effects.ExtendedModel.restart_after_steps`): one snap in the commissioned run of the
+    emulated phase-fraction wrist held every candidate out to 62-78 mrad, which chose among them by the snap."""
     from sma_wrist.commission.identification import MECH_STEP_S
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.diagnose import effects as fx
@@ -123,8 +126,11 @@ def replay_rms_mrad(fit: Any, run: Any, i0: int, i1: int | None = None) -> float
     model = fx.ExtendedModel(
         dataclasses.replace(run, payload_kg=fit.payload_kg), PlantParams(dt=MECH_STEP_S, wire=fit.wire)
     )
-    q = model.angle_measured(fit.row()[None], i1, 'measured')[:, 0]
-    return 1e3 * float(np.sqrt(np.mean((q[i0:] - run.q[i0 : q.size]) ** 2)))
+    row = fit.row()
+    model.restart_after_steps(row, i0, fx.noise_sigma(run.q, 2 * np.pi / 2**16))
+    q = model.angle_measured(row[None], i1, 'measured')[:, 0]
+    ok = np.ones(q.size, bool) if model.run.valid is None else np.asarray(model.run.valid, bool)[: q.size]
+    return 1e3 * float(np.sqrt(np.mean(((q - run.q[: q.size]) ** 2)[i0:][ok[i0:]])))
 
 
 def hand_over_refined(first_mrad: float, refined_mrad: float, noise_mrad: float) -> bool:

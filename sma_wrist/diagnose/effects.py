@@ -19,6 +19,7 @@ Signal chain of the extended model (doc/explanation/diagnosis.md has the equatio
 from __future__ import annotations
 
 import copy
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -31,6 +32,7 @@ from sma_wrist.core.plant.wrist import PlantParams
 from sma_wrist.core.signals import first_order  # noqa: F401 - the catalogue's lags, re-exported
 from sma_wrist.core.thermal import kernel as tk
 from sma_wrist.diagnose.kernels import Constants, _jit
+from sma_wrist.diagnose.steps import angle_steps, event_samples, restarts
 
 if TYPE_CHECKING:
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
@@ -529,6 +531,7 @@ class ExtendedModel:
         self.T_noise = 0.0
         self.rate_window_s = RATE_WINDOW_S
         self._xi: np.ndarray | None = None  # the latent heat's martensite fractions (latent_fraction)
+        self.resync: np.ndarray | None = None  # (K,) angles [rad] the mechanics replays restart from (restart_at)
         if run.T is not None:
             self.T_noise = noise_sigma(run.T)
             noise_free = self.T_noise < SMOOTH_ABOVE_C
@@ -571,6 +574,44 @@ class ExtendedModel:
         out._mech_cache, out._th_cache, out._xi = {}, {}, None
         return out
 
+    def restart_at(self, samples: Sequence[int], angles_rad: Sequence[float]) -> None:
+        """Restart every mechanics replay (and the latent heat's fractions) from these angles [rad], the joint at rest,
+        at the end of these samples: after a step of the measured angle that the model does not make
+        (:mod:`sma_wrist.diagnose.steps`), so that the rest of the run is judged from where the wrist went rather than
+        from where the model stayed. The wires are committed at the new angle, as the device's were on its way
+        there. No samples: no restart."""
+        samples = np.asarray(samples, dtype=int)
+        if samples.size == 0:
+            self.resync = None
+        else:
+            if samples.min() < 1 or samples.max() >= self.run.n:
+                raise ValueError(f'restart samples must lie in 1..{self.run.n - 1}, not {samples.tolist()}')
+            self.resync = np.full(self.run.n, np.nan)
+            self.resync[samples] = np.asarray(angles_rad, dtype=float)
+        self._mech_cache.clear()
+        self._th_cache.clear()
+        self._xi = None
+
+    def restart_after_steps(self, row: np.ndarray, i0: int, noise_rad: float, source: str = 'measured') -> list[dict]:
+        """Find the steps of the measured angle that the replay under ``row`` does not make (after sample ``i0``;
+        :func:`sma_wrist.diagnose.steps.angle_steps`, times from the run's start, ``noise_rad`` the angle's noise
+        [rad]), restart every replay after each (:meth:`restart_at`, the readings turned into true angles under
+        ``row``) and mark the steps' samples as not measured (``run.valid``: the event is named, no replay is scored
+        on it). Returns the steps (none: nothing changes)."""
+        run = self.run
+        if run.q is None:
+            return []
+        q_model = self.mechanics(np.asarray(row, float)[None], None, source)[0][:, 0]
+        k = q_model.shape[0]
+        valid = np.ones(run.n, bool) if run.valid is None else np.asarray(run.valid, bool)
+        t = run.t - run.t[0]
+        steps = angle_steps(t[i0:k], run.q[i0:k], q_model[i0:], noise_rad, valid[i0:k])
+        if steps:
+            idx, ang = restarts(t, run.q, steps)
+            self.restart_at(idx, [self.angle_unsensed(a, i, row) for i, a in zip(idx, ang, strict=True)])
+            self.run = dataclasses.replace(run, valid=valid & ~event_samples(t, steps))
+        return steps
+
     def from_reference(self, cycles: np.ndarray) -> np.ndarray:
         """Cycle counts (K, 2) relative to the first scored sample (after ``Run.settle_s``, as the fit's split)."""
         settle = getattr(self.run, 'settle_s', 0.0) or 0.0
@@ -602,7 +643,7 @@ class ExtendedModel:
         """(K, 2) the phase-fraction wires' martensite fractions in the mechanics replay on the measured temperatures
         under the parameter row ``r`` (:meth:`wire_temperature`, the run's step); the model's wire must be one."""
         Tw = self.wire_temperature(r, self.T_s, self.T_rate, self.cycles)[:, None]
-        return self.consts.martensite_fraction(Tw, self.dt, self.joint_row(r), self.substeps)[:, 0]
+        return self.consts.martensite_fraction(Tw, self.dt, self.joint_row(r), self.substeps, self.resync)[:, 0]
 
     def thermal_true(self, rows: np.ndarray, upto: int | None = None) -> np.ndarray:
         """(K, N, 2) true muscle temperatures from the commands for parameter rows (N, P)."""
@@ -846,7 +887,7 @@ class ExtendedModel:
             for e in noise:
                 T_s, T_rate = smooth_and_rate(ref + e, run.dt, w, self.rate_window_s)
                 Ts.append(self.wire_temperature(r, T_s, T_rate, self.cycles))
-        q, _, _ = self.consts.mechanics(np.stack(Ts, axis=1), self.dt, self.joint_row(r), self.substeps)
+        q, _, _ = self.consts.mechanics(np.stack(Ts, axis=1), self.dt, self.joint_row(r), self.substeps, self.resync)
         err = ((q[i0:, 1:] - q[i0:, :1]) ** 2).mean(axis=0).reshape(len(SMOOTH_WINDOWS_S), -1).mean(axis=1)
         k = int(np.argmin(err))
         self.smooth_window_s = SMOOTH_WINDOWS_S[k]
@@ -876,8 +917,8 @@ class ExtendedModel:
             return 0.0
         Tw = self.wire_temperature(self.nominal, self.T_s, self.T_rate, self.cycles)[:, None]
         jr = self.joint_row(self.nominal)
-        q_h = self.consts.mechanics(Tw, self.dt, jr, self.substeps)[0][i0:, 0]
-        q_h2 = self.consts.mechanics(Tw, self.dt, jr, 2 * self.substeps)[0][i0:, 0]
+        q_h = self.consts.mechanics(Tw, self.dt, jr, self.substeps, self.resync)[0][i0:, 0]
+        q_h2 = self.consts.mechanics(Tw, self.dt, jr, 2 * self.substeps, self.resync)[0][i0:, 0]
         err = 2.0 * float(np.sqrt(np.mean((q_h - q_h2) ** 2)))
         extrapolate = err > STEP_ERROR_FRACTION * sigma
         if extrapolate != self.extrapolate:
@@ -887,10 +928,10 @@ class ExtendedModel:
 
     def _joint_replay(self, T: np.ndarray, jrows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Kernel mechanics (q, qd, load) at the run's step, or extrapolated to a vanishing step."""
-        out = self.consts.mechanics(T, self.dt, jrows, self.substeps)
+        out = self.consts.mechanics(T, self.dt, jrows, self.substeps, self.resync)
         if not self.extrapolate:
             return out
-        fine = self.consts.mechanics(T, self.dt, jrows, 2 * self.substeps)
+        fine = self.consts.mechanics(T, self.dt, jrows, 2 * self.substeps, self.resync)
         return 2.0 * fine[0] - out[0], 2.0 * fine[1] - out[1], 2.0 * fine[2] - out[2]
 
     def angle_sensor(self, q: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -905,6 +946,13 @@ class ExtendedModel:
             else 0.0
         )
         return y + r[INDEX['angle_offset_rad']] + r[INDEX['angle_gain_err']] * (y - qn) + drift
+
+    def angle_unsensed(self, y: float, i: int, r: np.ndarray) -> float:
+        """The true angle [rad] whose reading at sample ``i`` is ``y`` [rad] under the row ``r``: :meth:`angle_sensor`'s
+        offset, gain error and drift undone (its lag, delay and backlash are transient: a reading at rest has none)."""
+        qn = self.consts.params.joint.q_neutral_rad
+        drift = r[INDEX['angle_drift_rad_per_h']] / 3600.0 * i * self.dt
+        return float(qn + (y - r[INDEX['angle_offset_rad']] - drift - qn) / (1.0 + r[INDEX['angle_gain_err']]))
 
     def angle_measured(self, rows: np.ndarray, upto: int | None = None, source: str = 'measured') -> np.ndarray:
         q, _, _ = self.mechanics(rows, upto, source)

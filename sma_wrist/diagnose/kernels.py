@@ -246,7 +246,7 @@ def _memoryless(T, heating, mem_c, mem_d, p0):  # pragma: no cover - compiled
 
 @_jit
 def mechanics_sim(
-    T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mech, joint, out_q, out_qd, out_load
+    T, dt, substeps, jrow, stacked, edges, r, p, mem_c, mem_d, mech, joint, resync, out_q, out_qd, out_load
 ):  # pragma: no cover - compiled
     """Angle from prescribed muscle temperatures (WristPlant.step_mechanics, compiled).
 
@@ -254,7 +254,9 @@ def mechanics_sim(
     interval when substeps > 1 (substeps = 1: the plant's step at the sample's temperature).
     jrow (N, 5): coulomb [N m], viscous [N m s], static [N m], pre-load elongation [mm],
     payload [kg]. The start is WristPlant.rest_state's: memory cooled from hot at T[0], loads
-    from 0.8 kgf, static equilibrium by bisection. Outputs (K, N), (K, N), (K, N, 2) [kgf].
+    from 0.8 kgf, static equilibrium by bisection. resync (K,) [rad]: where finite, the joint is
+    set to that angle at rest at the end of sample k and the wires committed there (a replay
+    restarted after a step the model does not make). Outputs (K, N), (K, N), (K, N, 2) [kgf].
     """
     K = T.shape[0]
     N = T.shape[1]
@@ -330,6 +332,12 @@ def mechanics_sim(
                     Ts0, Ts1, q, w, w_now, load, compliance, ym1, ym2, preload, True, stacked, edges, r, p, mech, c8, s8
                 )
                 q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
+            if not math.isnan(resync[k]):
+                q = resync[k]
+                qd = 0.0
+                _loads(
+                    Ts0, Ts1, q, w, w_now, load, compliance, ym1, ym2, preload, True, stacked, edges, r, p, mech, c8, s8
+                )
             out_q[k, j] = q
             out_qd[k, j] = qd
             out_load[k, j, 0] = load[0]
@@ -380,11 +388,11 @@ def _pf_torque(m1, dy1, m2, dy2, mech):  # pragma: no cover - compiled
 
 @_jit
 def pf_mechanics_sim(
-    T, dt, substeps, jrow, wc, mech, joint, out_q, out_qd, out_load, out_xi
+    T, dt, substeps, jrow, wc, mech, joint, resync, out_q, out_qd, out_load, out_xi
 ):  # pragma: no cover - compiled
     """:func:`mechanics_sim` with phase-fraction wires (``wc``: PhaseFractionWire.packed): the same rest state
     (wires cooled from hot at T[0], loads from 0.8 kgf, static equilibrium by bisection), the same sub-steps, joint
-    rows and joint step; only the wire differs. out_xi (K, N, 2): the wires' martensite fractions at the samples
+    rows, joint step and restarts (``resync``); only the wire differs. out_xi (K, N, 2): the wires' martensite fractions at the samples
     (what the heat balance's latent heat, Eq. P.4, follows)."""
     K = T.shape[0]
     N = T.shape[1]
@@ -436,6 +444,11 @@ def pf_mechanics_sim(
                 _pf_commit(wc, Ts0, Ts1, m1, dy1, m2, dy2, mem, load, compliance)
                 torque, stiffness = _pf_torque(m1, dy1, m2, dy2, mech)
                 q, qd = joint_step_one(q, qd, torque, stiffness, payload, h, jj)
+            if not math.isnan(resync[k]):
+                q = resync[k]
+                qd = 0.0
+                m1, dy1, m2, dy2 = _pf_solve(Ts0, Ts1, q, mem, load, preload, wc, mech)
+                _pf_commit(wc, Ts0, Ts1, m1, dy1, m2, dy2, mem, load, compliance)
             out_q[k, j] = q
             out_qd[k, j] = qd
             out_load[k, j, 0] = load[0]
@@ -530,15 +543,16 @@ class Constants:
         return out, X
 
     def mechanics(
-        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1
+        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1, resync: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, load) for T (K, N, 2); see :func:`mechanics_sim` (:func:`pf_mechanics_sim` for a phase-fraction
-        wire)."""
+        wire). ``resync`` (K,) [rad], NaN where free: angles the replay restarts from (default: none)."""
         if self.wire is not None:
-            return self._pf_replay(T, dt, jrow, substeps)[:3]
+            return self._pf_replay(T, dt, jrow, substeps, resync)[:3]
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
         jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))  # whatever the caller's shape: (5,) or (n, 5)
+        resync = _resync_array(resync, k)
         q = np.empty((k, n))
         qd = np.empty((k, n))
         load = np.empty((k, n, 2))
@@ -555,26 +569,52 @@ class Constants:
             self.mem_d,
             self.mech,
             self.joint,
+            resync,
             q,
             qd,
             load,
         )
         return q, qd, load
 
-    def martensite_fraction(self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1) -> np.ndarray:
+    def martensite_fraction(
+        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int = 1, resync: np.ndarray | None = None
+    ) -> np.ndarray:
         """(K, N, 2) the phase-fraction wires' martensite fractions of the mechanics replay (:meth:`mechanics`) from
         T (K, N, 2) [degC]; the SD-GPI has none (ValueError)."""
         if self.wire is None:
             raise ValueError('the SD-GPI wire has no martensite fraction (PlantParams.wire is None)')
-        return self._pf_replay(T, dt, jrow, substeps)[3]
+        return self._pf_replay(T, dt, jrow, substeps, resync)[3]
 
     def _pf_replay(
-        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int
+        self, T: np.ndarray, dt: float, jrow: np.ndarray, substeps: int, resync: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, load, xi) of :func:`pf_mechanics_sim` for T (K, N, 2) and joint rows (5,) or (N, 5)."""
         T = np.ascontiguousarray(T, dtype=float)
         k, n = T.shape[:2]
         jrow = kernel_array(np.broadcast_to(jrow, (n, 5)))  # whatever the caller's shape: (5,) or (n, 5)
         q, qd, load, xi = np.empty((k, n)), np.empty((k, n)), np.empty((k, n, 2)), np.empty((k, n, 2))
-        pf_mechanics_sim(T, float(dt), int(substeps), jrow, self.wire, self.mech, self.joint, q, qd, load, xi)
+        pf_mechanics_sim(
+            T,
+            float(dt),
+            int(substeps),
+            jrow,
+            self.wire,
+            self.mech,
+            self.joint,
+            _resync_array(resync, k),
+            q,
+            qd,
+            load,
+            xi,
+        )
         return q, qd, load, xi
+
+
+def _resync_array(resync: np.ndarray | None, k: int) -> np.ndarray:
+    """The kernels' (k,) restart angles [rad] (NaN: none) from an optional longer or equal array."""
+    if resync is None:
+        return np.full(k, np.nan)
+    resync = np.asarray(resync, dtype=float)
+    if resync.shape[0] < k:
+        raise ValueError(f'restart angles for {resync.shape[0]} samples, the replay has {k}')
+    return kernel_array(resync[:k])

@@ -30,15 +30,20 @@ RATIO = 2.5
 NOISE_RATIO = 10.0
 #: steps closer than this [s] are one
 MERGE_S = 1.0
+#: the replay restarts from the measured angle this long [s] after a step's last window ends (past its bounce) ...
+RESTART_AFTER_S = 0.1
+#: ... at the median of the measured angle over this long [s] (one noisy reading would offset what follows)
+RESTART_MEDIAN_S = 0.05
 
 
 def angle_steps(
     t: np.ndarray, q: np.ndarray, q_model: np.ndarray, noise_rad: float, valid: np.ndarray | None = None
 ) -> list[dict[str, Any]]:
     """The steps of the measured angle ``q`` [rad] that the replay ``q_model`` [rad] (same samples, times ``t``
-    [s], uniform) does not make (module docstring), largest first: ``{'t_s', 'step_rad', 'model_max_rad'}``, the
-    time where the window starts, the change over :data:`WINDOW_S` of the measured angle less the replay's (the
-    step the replay does not make) and the replay's largest change over that window in the whole stretch.
+    [s], uniform) does not make (module docstring), largest first: ``{'t_s', 'start_s', 'end_s', 'step_rad',
+    'model_max_rad'}``, the time where the window of the largest change starts, where the step's first window starts
+    and its last ends (windows within :data:`MERGE_S` are one step), the change over :data:`WINDOW_S` of the measured angle less the replay's (the step the replay does not
+    make) and the replay's largest change over that window in the whole stretch.
     ``valid`` (bool per sample, optional): samples with a measurement; a window touching one without is skipped."""
     t, q, q_model = (np.asarray(a, float) for a in (t, q, q_model))
     if t.size < 3:
@@ -68,10 +73,62 @@ def angle_steps(
             if dr[i] > s['step_rad']:
                 s['t_s'], s['step_rad'] = float(t[i]), float(dr[i])
             continue
-        steps.append({'t_s': float(t[i]), 'step_rad': float(dr[i]), 'model_max_rad': model_max, '_last': float(t[i])})
+        steps.append(
+            {
+                't_s': float(t[i]),
+                'start_s': float(t[i]),
+                'step_rad': float(dr[i]),
+                'model_max_rad': model_max,
+                '_last': float(t[i]),
+            }
+        )
     for s in steps:
-        del s['_last']
+        s['end_s'] = s.pop('_last') + n * dt
     return sorted(steps, key=lambda s: -s['step_rad'])
+
+
+def event_samples(t: np.ndarray, steps: list[dict[str, Any]]) -> np.ndarray:
+    """Bool per sample of ``t`` [s]: inside a step, from its first window's start to where the replay restarts after
+    it (:func:`restarts`): the event itself, which the summary names and no model replay is scored on."""
+    t = np.asarray(t, float)
+    out = np.zeros(t.size, bool)
+    for s in steps:
+        out |= (t >= s['start_s'] - 1e-9) & (t <= s['end_s'] + RESTART_AFTER_S + RESTART_MEDIAN_S / 2 + 1e-9)
+    return out
+
+
+def restarts(t: np.ndarray, q: np.ndarray, steps: list[dict[str, Any]]) -> tuple[list[int], list[float]]:
+    """Where the replay restarts from the measured angle after each step (:func:`angle_steps` of the same times
+    ``t`` [s] and angle ``q`` [rad]): (sample indices into ``t``, angles [rad]), two per step: where the angle went
+    farthest in the step's direction (the reading: a sampled snap peaks between readings), then the median of the
+    finite readings over :data:`RESTART_MEDIAN_S` from :data:`RESTART_AFTER_S` after the step's end, at that window's
+    middle sample; a step too close to the end of the run gets none."""
+    t, q = np.asarray(t, float), np.asarray(q, float)
+    if t.size < 2:
+        return [], []
+    dt = float(t[1] - t[0])
+    m = max(1, int(round(RESTART_MEDIAN_S / dt)))
+    idx, ang = [], []
+    for s in sorted(steps, key=lambda s: s['t_s']):
+        i = int(np.searchsorted(t, s['end_s'] + RESTART_AFTER_S - 1e-9 * dt))
+        w = q[i : i + m]
+        w = w[np.isfinite(w)]
+        if i + m > t.size or w.size == 0:
+            continue
+        # first to the farthest the angle went: the wires remember that stretch (after a snap of the emulated pair, its
+        # own values replayed the 5 s after 21.6 mrad RMS off restarted at the settled angle alone, 7.2 so)
+        a = int(np.searchsorted(t, s['start_s'] - 1e-9 * dt))
+        seg = q[max(a - 1, 0) : i + 1]
+        ok = np.flatnonzero(np.isfinite(seg))
+        if ok.size >= 2:
+            far = int(ok[np.argmax(seg[ok])] if np.median(w) > seg[ok[0]] else ok[np.argmin(seg[ok])])
+            k_far = max(a - 1, 0) + far
+            if 1 <= k_far < i + (m - 1) // 2:
+                idx.append(k_far)
+                ang.append(float(seg[far]))
+        idx.append(i + (m - 1) // 2)  # the median's middle sample: the angle there, not a lagged one
+        ang.append(float(np.median(w)))
+    return idx, ang
 
 
 def describe(steps: list[dict[str, Any]]) -> str:
@@ -83,8 +140,20 @@ def describe(steps: list[dict[str, Any]]) -> str:
     return (
         f'the measured angle stepped within {WINDOW_S:g} s ({shown}{more}) where the model moves at most '
         f'{steps[0]["model_max_rad"]:.3g} rad in {WINDOW_S:g} s: a snap of the pair, a wire slipping in its crimp, '
-        'the chain skipping or the potentiometer, which no smooth model describes'
+        'the chain skipping or the potentiometer, which no smooth model describes; the replay restarts from the '
+        'measured angle after each step, so the verdict judges the model between them'
     )
 
 
-__all__ = ['angle_steps', 'describe', 'WINDOW_S', 'RATIO', 'NOISE_RATIO', 'MERGE_S']
+__all__ = [
+    'angle_steps',
+    'describe',
+    'event_samples',
+    'restarts',
+    'WINDOW_S',
+    'RATIO',
+    'NOISE_RATIO',
+    'MERGE_S',
+    'RESTART_AFTER_S',
+    'RESTART_MEDIAN_S',
+]
