@@ -254,3 +254,37 @@ def test_the_reports_line_names_the_refit_handed_over_its_lag_and_moduli():
     assert '0.229 s (plant_sim model.temp_lag_s)' in line and 'moduli 72.1 / 31.5 GPa' in line
     kept = refinement_line(handed | {'refined': False})
     assert 'the first fit kept' in kept and 'moduli' not in kept and 'lag it found' not in kept
+
+
+def test_the_least_squares_refits_start_from_a_low_friction_too_and_keep_the_lower_fit_error(tmp_path, monkeypatch):
+    # from too much friction the replay sticks where the wrist moves and the solve stalls: each least-squares refit is
+    # solved from the first fit's friction and from REFINE_LOW_COULOMB_NM, the one with the lower fit error kept; the
+    # robust refit once (its loss is not the plain RMS the two would be compared on)
+    from sma_wrist.commission import identification as ident
+
+    first = FractionFit(TRUTH, 0.05, 0.4, 0.0, [])
+    exc = _excitation()
+    wire_file = save_wire_file(tmp_path / 'wire.yaml', TRUTH)
+    params = tmp_path / 'wrist_params.yaml'
+    params.write_text('plant_sim:\n  ros__parameters:\n    wire_file: wire.yaml\n    payload_kg: 0.4\n')
+    ctx = rf.WireRefinement(exc, 0, exc.n, first, {}, 0.2, wire_file, 0.0)
+    calls = []
+
+    def fake_fit(run, i_held, start, robust_scale_rad=None, **kw):
+        calls.append((start['coulomb_Nm'], robust_scale_rad))
+        # the low start fits better in the least-squares solves, worse in the robust one
+        low = start['coulomb_Nm'] == rf.REFINE_LOW_COULOMB_NM
+        rms = (1e-3 if low else 2e-3) if robust_scale_rad is None else 3e-3
+        return FractionFit(TRUTH, start['coulomb_Nm'], 0.4, rms, [])
+
+    monkeypatch.setattr(ident, 'fit_phase_fraction_wire', fake_fit)
+    monkeypatch.setattr(rf, 'recording', lambda bag, payload_kg, settle_s: dataclasses.replace(_loop(), settle_s=1.0))
+    monkeypatch.setattr(rf, 'replay_rms_mrad', lambda fit, run, i0, i1=None: 1e3 * fit.fit_rms_rad)
+    res = rf.refine_wire(ctx, 'commissioned', 'defaults', 1.0, params)
+    starts = {(c, r) for c, r in calls}
+    assert starts == {(0.05, None), (rf.REFINE_LOW_COULOMB_NM, None), (0.05, rf.REFINE_ROBUST_SCALE_RAD)}, starts
+    # two stages per start: 2 laws x (2 least-squares candidates x 2 starts + 1 robust) x 2 stages
+    assert len(calls) == 2 * (2 * 2 + 1) * 2
+    fit_rms = res['fit_rms_mrad']
+    assert all(fit_rms[law + s] == 1.0 for law in ('linear', 'brinson') for s in ('', rf.LOOP)), fit_rms
+    assert all(fit_rms[law + rf.ROBUST] == 3.0 for law in ('linear', 'brinson')), fit_rms

@@ -68,6 +68,12 @@ REFINE_FREE_THEN = ('E_A_GPa', 'E_M_GPa')
 #: phase-fraction wrist the refit held out 4.0 mrad at one step per sample, 2.1 at two, 1.8 at five (the thermocouple
 #: lag read 0.11, 0.21, 0.21 s; the emulated one is 0.2 s), each refit 1-2 s of CPU more
 REFINE_SUBSTEPS = 5
+#: the least-squares refits are solved from the first fit's friction and from this Coulomb friction [N m] (half the
+#: built-in joint's), the lower fit error kept: from too much friction the replay sticks where the wrist moves, and a
+#: stuck replay does not tell the solve by how much. On the emulated phase-fraction wrist the first fit read 0.025 N m
+#: (emulated 0.004); refitted from there the friction stopped at 0.009, 0.98 mrad RMS on the defaults run and 1.49
+#: on the commissioned run held out; from 0.002 at 0.0065, 0.78 and 1.27 mrad
+REFINE_LOW_COULOMB_NM = 0.002
 #: suffix of the candidates solved with the Cauchy loss of scale :data:`REFINE_ROBUST_SCALE_RAD` [rad]: where a
 #: recording holds a segment the first fit replays far off, plain least squares spends the solve on that segment. On
 #: one commissioning of the emulated phase-fraction wrist the defaults' run held a snap of the pair (0.29 rad in
@@ -153,7 +159,8 @@ def refine_wire(
     'refit', 'coulomb_Nm', 'payload_kg', 'temp_lag_s', 'wire', 'seconds', 'why'}`` (the candidate, friction, payload,
     lag and wire where a refit is handed over). The candidates per law, :data:`REFINE_FREE` free in each: ``<law>``
     by least squares, ``<law>_robust`` (:data:`ROBUST`) with the Cauchy loss of :data:`REFINE_ROBUST_SCALE_RAD`, both
-    on the two recordings, and ``<law>_loop`` (:data:`LOOP`) by least squares on the defaults' run alone."""
+    on the two recordings, and ``<law>_loop`` (:data:`LOOP`) by least squares on the defaults' run alone; the
+    least-squares ones from the first fit's friction and from :data:`REFINE_LOW_COULOMB_NM`, the lower fit error kept."""
     from sma_wrist.commission.identification import fit_phase_fraction_wire, pf_start
     from sma_wrist.diagnose.data import DiagnoseInputError
 
@@ -179,22 +186,30 @@ def refine_wire(
             (law + ROBUST, both, REFINE_ROBUST_SCALE_RAD),
             (law + LOOP, loop, None),
         ):
-            f = own
-            for free in (REFINE_FREE, REFINE_FREE + REFINE_FREE_THEN):
-                f = fit_phase_fraction_wire(
-                    dataclasses.replace(main, payload_kg=own.payload_kg),
-                    i_end,
-                    pf_start(f),
-                    max_nfev=REFINE_MAX_NFEV,
-                    i_fit=i_fit,
-                    law=law,
-                    extra=extra,
-                    rounds=REFINE_ROUNDS,
-                    free_payload=REFINE_FREE_PAYLOAD,
-                    free=free,
-                    substeps=REFINE_SUBSTEPS,
-                    robust_scale_rad=robust,
-                )
+            starts = [pf_start(own)]
+            if robust is None and own.coulomb_Nm > REFINE_LOW_COULOMB_NM:
+                starts.append(pf_start(own) | {'coulomb_Nm': REFINE_LOW_COULOMB_NM})
+            tried = []
+            for start in starts:
+                f = None
+                for free in (REFINE_FREE, REFINE_FREE + REFINE_FREE_THEN):
+                    f = fit_phase_fraction_wire(
+                        dataclasses.replace(main, payload_kg=own.payload_kg),
+                        i_end,
+                        start if f is None else pf_start(f),
+                        max_nfev=REFINE_MAX_NFEV,
+                        i_fit=i_fit,
+                        law=law,
+                        extra=extra,
+                        rounds=REFINE_ROUNDS,
+                        free_payload=REFINE_FREE_PAYLOAD,
+                        free=free,
+                        substeps=REFINE_SUBSTEPS,
+                        robust_scale_rad=robust,
+                    )
+                tried.append(f)
+            # the solve's own objective decides between the starts (least squares: the plain RMS)
+            f = min(tried, key=lambda x: x.fit_rms_rad)
             fits[key] = f
             heldout[key] = replay_rms_mrad(f, held, i_com)
     eligible = {k: x for k, x in heldout.items() if k != 'first' and not fits[k].at_bounds}
