@@ -156,6 +156,12 @@ def test_on_the_phase_fraction_wrist_the_shift_is_found_and_the_undetermined_pay
     assert joint['heldout']['compensator_wire'] > LOOSE_WIRE_MRAD
     assert ident.node_params['tem_controller']['target_filter_s'] == LOOSE_TARGET_FILTER_S
     assert hyst['parameters']['loop']['target_filter_s'] == LOOSE_TARGET_FILTER_S
+    # the payload given (--payload-kg): the phase-fraction fits hold it (the recordings fix the wire's stresses only
+    # relative to it), and the refinement is told to hold it too
+    given = identify_wrist(bring, tmp_path / 'given', payload_kg=0.5)
+    pfw = given.identified['hysteresis']['parameters']['phase_fraction']
+    assert pfw['payload_kg'] == 0.5 and given.identified['joint']['parameters']['payload_given'] is True
+    assert given.refinement.payload_given and not ident.refinement.payload_given
 
 
 def test_commission_on_the_nominal_device_identifies_values_near_the_defaults(tmp_path):

@@ -288,3 +288,27 @@ def test_the_least_squares_refits_start_from_a_low_friction_too_and_keep_the_low
     fit_rms = res['fit_rms_mrad']
     assert all(fit_rms[law + s] == 1.0 for law in ('linear', 'brinson') for s in ('', rf.LOOP)), fit_rms
     assert all(fit_rms[law + rf.ROBUST] == 3.0 for law in ('linear', 'brinson')), fit_rms
+
+
+@pytest.mark.parametrize('given', [False, True])
+def test_a_payload_given_on_the_command_line_is_held_by_every_refit(tmp_path, monkeypatch, given):
+    # the angle and temperatures fix the wire's stresses only relative to the payload: a known one is held
+    from sma_wrist.commission import identification as ident
+
+    first = FractionFit(TRUTH, COULOMB, 0.4, 0.0, [])
+    exc = _excitation()
+    wire_file = save_wire_file(tmp_path / 'wire.yaml', TRUTH)
+    params = tmp_path / 'wrist_params.yaml'
+    params.write_text('plant_sim:\n  ros__parameters:\n    wire_file: wire.yaml\n    payload_kg: 0.4\n')
+    ctx = rf.WireRefinement(exc, 0, exc.n, first, {}, 0.2, wire_file, 0.0, payload_given=given)
+    free = []
+
+    def fake_fit(run, i_held, start, free_payload=True, **kw):
+        free.append(free_payload)
+        return FractionFit(TRUTH, start['coulomb_Nm'], 0.4, 1e-3, [])
+
+    monkeypatch.setattr(ident, 'fit_phase_fraction_wire', fake_fit)
+    monkeypatch.setattr(rf, 'recording', lambda bag, payload_kg, settle_s: dataclasses.replace(_loop(), settle_s=1.0))
+    monkeypatch.setattr(rf, 'replay_rms_mrad', lambda fit, run, i0, i1=None: 1.0)
+    rf.refine_wire(ctx, 'commissioned', 'defaults', 1.0, params)
+    assert free and set(free) == {not given}

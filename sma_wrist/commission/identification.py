@@ -959,6 +959,10 @@ class WireRefinement:
     #: the Peltier heat balance handed over and what it was fitted on, where it was (its refit with the wires'
     #: latent heat, :func:`sma_wrist.commission.refine.refine_heat_balance`); None: Table 4.9's form stays
     thermal: HeatBalanceRefinement | None = None
+    #: the payload was given (``--payload-kg``): the refits hold it. The angle and temperatures fix the wire's
+    #: stresses only relative to the payload (scaling every stress and the payload together nearly leaves the replay
+    #: unchanged), so a known payload is what sets their scale
+    payload_given: bool = False
 
 
 @dataclass
@@ -1172,7 +1176,7 @@ def identify_mechanics(
     warp_rms = rms_mrad(pw_all)
     chosen = choose_wire(builtin_rms, shift_rms, bool(on_bound), warp_rms, bool(wf.at_bounds), noise_mrad)
     # the phase-fraction wire (fit_phase_fraction_wire), from the built-in wire's transitions moved by the onset's
-    # shift, its payload fitted with it; the model's wire (wire_file) only where it predicts the held-out cycle better
+    # shift, its payload fitted with it unless given (then held: it sets the scale of the wire's stresses); the model's wire (wire_file) only where it predicts the held-out cycle better
     # than every SD-GPI candidate beyond the angle's noise with no value at its bound (choose_model_wire)
     # Each constitutive law of the family (PF_LAWS) is fitted; the linear one is handed over. The excitation does not
     # tell them apart, and the published one (Brinson's cosine detwinning and Voigt modulus), where it came out ahead
@@ -1185,7 +1189,12 @@ def identify_mechanics(
     pf_fits: dict[str, Any] = {}
     for law in PF_LAWS:
         f = fit_phase_fraction_wire(
-            dataclasses.replace(run, payload_kg=prior_kg), i_held, pf_first, i_fit=i_fit, law=law
+            dataclasses.replace(run, payload_kg=prior_kg),
+            i_held,
+            pf_first,
+            i_fit=i_fit,
+            law=law,
+            free_payload=payload_kg is None,
         )
         bounds = list(f.at_bounds)
         if payload_kg is None and not lo_kg + 1e-3 < f.payload_kg < hi_kg - 1e-3 and f.payload_kg > 1e-3:
@@ -1366,6 +1375,7 @@ def identify_mechanics(
             noise_mrad,
             Path(values['wire_file']),
             e0 - PlantParams().preload_elongation_mm,
+            payload_given=payload_kg is not None,
         )
     return hyst, joint, values, warnings
 

@@ -49,7 +49,8 @@ from sma_wrist.core.hysteresis.phase_fraction import LAWS
 #: run held out 4.6 mrad at 15, 2.5 at 40, 2.4 at 80 (one commissioning; 1.4 at both 15 and 40 on another)
 REFINE_MAX_NFEV = 40
 REFINE_ROUNDS = 1
-#: the payload refitted with the wire (the excitation alone does not tell it from the wire's values)
+#: the payload refitted with the wire (the excitation alone does not tell it from the wire's values), unless it was
+#: given (``WireRefinement.payload_given``: held)
 REFINE_FREE_PAYLOAD = True
 #: values the refits free beyond the first fit's (:data:`~sma_wrist.commission.identification.PF_EXTRA_RANGE`): the
 #: reverse transformation's own slope, the detwinning start stress, the thermocouples' lag. On the emulated
@@ -202,7 +203,7 @@ def refine_wire(
                         law=law,
                         extra=extra,
                         rounds=REFINE_ROUNDS,
-                        free_payload=REFINE_FREE_PAYLOAD,
+                        free_payload=REFINE_FREE_PAYLOAD and not ctx.payload_given,
                         free=free,
                         substeps=REFINE_SUBSTEPS,
                         robust_scale_rad=robust,
