@@ -314,3 +314,12 @@ def test_a_commissioned_model_that_does_not_describe_the_loop_is_said_with_what_
     assert 'mechanics 0.31 rad' in text and 'thermal' not in text  # only the channels with structure left
     named = dict(off, unexplained=False, summary='thermal: tem_gain_err')
     assert 'departs from (thermal: tem_gain_err)' in diagnosis_warning(named)
+    # the angle off with a model wire refitted on a payload of its own: giving the payload is the remedy
+    refit = {'refined': True, 'payload_given': False, 'payload_kg': 0.36}
+    assert 'payload of its own, 0.36 kg' in diagnosis_warning(off, refit) and '--payload-kg' in diagnosis_warning(
+        off, refit
+    )
+    assert '--payload-kg' not in diagnosis_warning(off, dict(refit, payload_given=True))
+    assert '--payload-kg' not in diagnosis_warning(off, dict(refit, refined=False))
+    thermal_only = dict(off, residual={'thermal': {'rms': 0.2, 'rms_over_noise': 4.0}})
+    assert '--payload-kg' not in diagnosis_warning(thermal_only, refit)

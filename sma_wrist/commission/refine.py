@@ -227,6 +227,7 @@ def refine_wire(
         'fit_rms_mrad': {k: round(1e3 * f.fit_rms_rad, 3) for k, f in fits.items()},
         'at_bounds': {k: f.at_bounds for k, f in fits.items() if f.at_bounds},
         'angle_noise_mrad': round(ctx.noise_mrad, 3),
+        'payload_given': ctx.payload_given,
         'recordings': ['excitation (fit phases)', f'{Path(defaults_bag).name} (after its {settle_s:g} s soft start)'],
     }
     if best is not None and hand_over_refined(heldout['first'], heldout[best], ctx.noise_mrad):

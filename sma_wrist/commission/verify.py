@@ -621,7 +621,7 @@ def run_verification(
                 'refined': False,
                 'why': "the model's wire is the SD-GPI of hysteresis_file: only a phase-fraction model wire is refitted",
             }
-        warning = diagnosis_warning(v.get('diagnosis'))
+        warning = diagnosis_warning(v.get('diagnosis'), v.get('refinement'))
         if warning:
             result['warnings'].append(warning)
     except KeyboardInterrupt:
@@ -695,26 +695,39 @@ def diagnosis(bag: Path, params_file: str | Path, settle_s: float = SOFT_START_S
     }
 
 
-def diagnosis_warning(d: dict[str, Any] | None) -> str:
+def diagnosis_warning(d: dict[str, Any] | None, refinement: dict[str, Any] | None = None) -> str:
     """What a discrepancy in the commissioned run's diagnosis (:func:`diagnosis`) means for the wrist's user ('' when
     there is none): the params file's model is what ``sma-wrist diagnose --params-file`` and the twin monitor judge
-    the wrist against, so a model that does not describe the loop makes them report this wrist from its first run."""
+    the wrist against, so a model that does not describe the loop makes them report this wrist from its first run.
+    Where the angle is off and the model wire was refitted with a payload of its own (``refinement``, no
+    ``--payload-kg``), it says that giving the payload is the remedy: the recordings fix the wire's stresses only
+    relative to the payload (doc/explanation/commissioning.md)."""
     if not d or not d.get('discrepancy'):
         return ''
     from sma_wrist.diagnose import STRUCTURE_RATIO
 
+    structure = {
+        c: r for c, r in (d.get('residual') or {}).items() if r.get('rms_over_noise', 0.0) > STRUCTURE_RATIO
+    }  # the channels the diagnosis finds structure in
     off = [
         f'{c} {r["rms"]:.3g} {"degC" if c == "thermal" else "rad"} RMS, {r["rms_over_noise"]:.3g}x the noise'
-        for c, r in (d.get('residual') or {}).items()
-        if r.get('rms_over_noise', 0.0) > STRUCTURE_RATIO  # the channels the diagnosis finds structure in
+        for c, r in structure.items()
     ]
     what = 'does not describe' if d.get('unexplained') else f'departs from ({d.get("summary")})'
+    rf = refinement or {}
+    payload = ''
+    if 'mechanics' in structure and rf.get('refined') and not rf.get('payload_given') and rf.get('payload_kg'):
+        payload = (
+            f'; the model wire was refitted with a payload of its own, {rf["payload_kg"]:.3g} kg, and the recordings '
+            "fix the wire's stresses only relative to it: if you know the wrist's payload, commission again with "
+            '--payload-kg'
+        )
     return (
         f'verification: the commissioned model {what} this wrist in closed loop'
         + (f' ({"; ".join(off)})' if off else '')
         + ': `sma-wrist diagnose --params-file` and the twin monitor judge the wrist against this model and will '
         'report this from its first run; read their verdicts on this wrist as departures from the commissioned '
-        'model (doc/howto/commission.md#limits)'
+        'model (doc/howto/commission.md#limits)' + payload
     )
 
 
@@ -793,7 +806,7 @@ def report_section(v: dict[str, Any], out: Path) -> list[str]:
             + (f' Residual of the commissioned model: {residual}.' if residual else ''),
             '',
         ]
-        warning = diagnosis_warning(d)
+        warning = diagnosis_warning(d, v.get('refinement'))
         if warning:
             lines += [f'**{warning}**', '']
     if v.get('stopped'):
