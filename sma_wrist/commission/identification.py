@@ -1176,8 +1176,9 @@ def identify_mechanics(
     warp_rms = rms_mrad(pw_all)
     chosen = choose_wire(builtin_rms, shift_rms, bool(on_bound), warp_rms, bool(wf.at_bounds), noise_mrad)
     # the phase-fraction wire (fit_phase_fraction_wire), from the built-in wire's transitions moved by the onset's
-    # shift, its payload fitted with it unless given (then held: it sets the scale of the wire's stresses); the model's wire (wire_file) only where it predicts the held-out cycle better
-    # than every SD-GPI candidate beyond the angle's noise with no value at its bound (choose_model_wire)
+    # shift, its payload fitted with it unless given (then held: it sets the scale of the wire's stresses); the model's
+    # wire (wire_file) only where it predicts the held-out cycle better than every SD-GPI candidate beyond the angle's
+    # noise with no value at its bound (choose_model_wire)
     # Each constitutive law of the family (PF_LAWS) is fitted; the linear one is handed over. The excitation does not
     # tell them apart, and the published one (Brinson's cosine detwinning and Voigt modulus), where it came out ahead
     # on the held-out cycle, read the payload worse and predicted the loop worse: on the emulated phase-fraction wrist

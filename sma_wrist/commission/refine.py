@@ -161,7 +161,8 @@ def refine_wire(
     lag and wire where a refit is handed over). The candidates per law, :data:`REFINE_FREE` free in each: ``<law>``
     by least squares, ``<law>_robust`` (:data:`ROBUST`) with the Cauchy loss of :data:`REFINE_ROBUST_SCALE_RAD`, both
     on the two recordings, and ``<law>_loop`` (:data:`LOOP`) by least squares on the defaults' run alone; the
-    least-squares ones from the first fit's friction and from :data:`REFINE_LOW_COULOMB_NM`, the lower fit error kept."""
+    least-squares ones from the first fit's friction and from :data:`REFINE_LOW_COULOMB_NM`, the lower fit error
+    kept."""
     from sma_wrist.commission.identification import fit_phase_fraction_wire, pf_start
     from sma_wrist.diagnose.data import DiagnoseInputError
 

@@ -124,7 +124,7 @@ class DiagnosisResult:
     partial: dict[str, Any] | None = None
     warnings: list[str] = field(default_factory=list)
     #: steps of the measured angle the model's replay does not make (:func:`sma_wrist.diagnose.steps.angle_steps`):
-    #: ``{'t_s', 'step_rad', 'model_max_rad'}``, largest first, ``t_s`` from the run's start
+    #: ``{'t_s', 'start_s', 'end_s', 'step_rad', 'model_max_rad'}``, largest first, times from the run's start
     angle_steps: list[dict[str, Any]] = field(default_factory=list)
     source: str = ''
     duration_s: float = 0.0

@@ -392,8 +392,8 @@ def pf_mechanics_sim(
 ):  # pragma: no cover - compiled
     """:func:`mechanics_sim` with phase-fraction wires (``wc``: PhaseFractionWire.packed): the same rest state
     (wires cooled from hot at T[0], loads from 0.8 kgf, static equilibrium by bisection), the same sub-steps, joint
-    rows, joint step and restarts (``resync``); only the wire differs. out_xi (K, N, 2): the wires' martensite fractions at the samples
-    (what the heat balance's latent heat, Eq. P.4, follows)."""
+    rows, joint step and restarts (``resync``); only the wire differs. out_xi (K, N, 2): the wires' martensite
+    fractions at the samples (what the heat balance's latent heat, Eq. P.4, follows)."""
     K = T.shape[0]
     N = T.shape[1]
     h = dt / substeps

@@ -42,8 +42,9 @@ def angle_steps(
     """The steps of the measured angle ``q`` [rad] that the replay ``q_model`` [rad] (same samples, times ``t``
     [s], uniform) does not make (module docstring), largest first: ``{'t_s', 'start_s', 'end_s', 'step_rad',
     'model_max_rad'}``, the time where the window of the largest change starts, where the step's first window starts
-    and its last ends (windows within :data:`MERGE_S` are one step), the change over :data:`WINDOW_S` of the measured angle less the replay's (the step the replay does not
-    make) and the replay's largest change over that window in the whole stretch.
+    and its last ends (windows within :data:`MERGE_S` are one step), the change over :data:`WINDOW_S` of the measured
+    angle less the replay's (the step the replay does not make) and the replay's largest change over that window in
+    the whole stretch.
     ``valid`` (bool per sample, optional): samples with a measurement; a window touching one without is skipped."""
     t, q, q_model = (np.asarray(a, float) for a in (t, q, q_model))
     if t.size < 3:
@@ -87,13 +88,25 @@ def angle_steps(
     return sorted(steps, key=lambda s: -s['step_rad'])
 
 
+def _settled(t: np.ndarray, step: dict[str, Any]) -> tuple[int, int]:
+    """(first sample, length) of the readings whose median the replay restarts from after ``step``: from
+    :data:`RESTART_AFTER_S` after its last window, :data:`RESTART_MEDIAN_S` long; the restart is at the window's middle
+    sample (the angle there, not a lagged one)."""
+    dt = float(t[1] - t[0])
+    m = max(1, int(round(RESTART_MEDIAN_S / dt)))
+    return int(np.searchsorted(t, step['end_s'] + RESTART_AFTER_S - 1e-9 * dt)), m
+
+
 def event_samples(t: np.ndarray, steps: list[dict[str, Any]]) -> np.ndarray:
     """Bool per sample of ``t`` [s]: inside a step, from its first window's start to where the replay restarts after
     it (:func:`restarts`): the event itself, which the summary names and no model replay is scored on."""
     t = np.asarray(t, float)
     out = np.zeros(t.size, bool)
+    if t.size < 2:
+        return out
     for s in steps:
-        out |= (t >= s['start_s'] - 1e-9) & (t <= s['end_s'] + RESTART_AFTER_S + RESTART_MEDIAN_S / 2 + 1e-9)
+        i, m = _settled(t, s)
+        out[int(np.searchsorted(t, s['start_s'] - 1e-9)) : i + (m - 1) // 2 + 1] = True
     return out
 
 
@@ -106,27 +119,24 @@ def restarts(t: np.ndarray, q: np.ndarray, steps: list[dict[str, Any]]) -> tuple
     t, q = np.asarray(t, float), np.asarray(q, float)
     if t.size < 2:
         return [], []
-    dt = float(t[1] - t[0])
-    m = max(1, int(round(RESTART_MEDIAN_S / dt)))
     idx, ang = [], []
     for s in sorted(steps, key=lambda s: s['t_s']):
-        i = int(np.searchsorted(t, s['end_s'] + RESTART_AFTER_S - 1e-9 * dt))
+        i, m = _settled(t, s)
         w = q[i : i + m]
         w = w[np.isfinite(w)]
         if i + m > t.size or w.size == 0:
             continue
         # first to the farthest the angle went: the wires remember that stretch (after a snap of the emulated pair, its
         # own values replayed the 5 s after 21.6 mrad RMS off restarted at the settled angle alone, 7.2 so)
-        a = int(np.searchsorted(t, s['start_s'] - 1e-9 * dt))
-        seg = q[max(a - 1, 0) : i + 1]
+        a = max(int(np.searchsorted(t, s['start_s'] - 1e-9)) - 1, 0)
+        seg = q[a : i + 1]
         ok = np.flatnonzero(np.isfinite(seg))
         if ok.size >= 2:
             far = int(ok[np.argmax(seg[ok])] if np.median(w) > seg[ok[0]] else ok[np.argmin(seg[ok])])
-            k_far = max(a - 1, 0) + far
-            if 1 <= k_far < i + (m - 1) // 2:
-                idx.append(k_far)
+            if 1 <= a + far < i + (m - 1) // 2:
+                idx.append(a + far)
                 ang.append(float(seg[far]))
-        idx.append(i + (m - 1) // 2)  # the median's middle sample: the angle there, not a lagged one
+        idx.append(i + (m - 1) // 2)
         ang.append(float(np.median(w)))
     return idx, ang
 
