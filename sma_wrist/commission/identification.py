@@ -74,6 +74,14 @@ from sma_wrist.core.thermal import identification as ti
 THERMAL_DT_S = 0.25  # grid of the heat-balance records [s]: 48 samples a period of the fastest sine (12 s)
 MECH_DT_S = 0.05  # grid of the angle replay [s]
 MECH_STEP_S = 0.01  # the replay's plant step [s]
+#: grid of the recordings the refinement after the verification refits and judges the wire on [s]: the replay's plant
+#: step. The replay undoes the thermocouples' lag from the readings' smoothed rate, whose windows are at least five
+#: samples: 0.25 s on the 0.05 s grid, which rounds the heating's reversals that the wires' memory keeps. With the
+#: emulated phase-fraction wire's own values (lag 0.2 s) one commissioned run replayed 1.15 mrad RMS off on the 0.05 s
+#: grid, 0.51 on 0.02 s, 0.48 on this one (the diagnosis' replay: 0.50), 7.4 on each without the lag: on the coarse grid
+#: the refits fitted the grid's own error and the judgement hardly told the emulated values from the refit handed over
+#: (1.15 against 1.42 mrad; 0.48 against 1.71 on this grid)
+REFINE_DT_S = MECH_STEP_S
 MIN_SWEEP_RAD = 0.05  # the joint must move at least this much in the excitation for the wire and joint [rad]
 SHIFT_RANGE_C = 15.0  # the wire shifts searched [degC]: the emulator's range
 #: every this many of the 1 degC offsets replayed first by :func:`wire_shift_from_onset`, then the best one's neighbours
@@ -665,9 +673,10 @@ PF_RANGE: dict[str, tuple[float, float, float]] = {
 #: the phase-fraction fit's starts: the elongation datum [mm] (the pair's pre-tension, which no temperature moves)
 PF_START_OFFSETS_MM = (0.6, 1.2, 1.8, 2.4)
 PF_MAX_NFEV = 40  # solver iterations (each with a Jacobian: one replay per free value)
-#: the fit's replay steps once per sample (5x fewer plant steps than the held-out replay's 10 ms; the fit's angle
-#: moves by less than the angle's noise, measured on the phase-fraction wrist), the held-out error at 10 ms
-PF_FIT_SUBSTEPS = 1
+#: the fit's replay steps once per sample of the :data:`MECH_DT_S` grid (5x fewer plant steps than the held-out
+#: replay's 10 ms; the fit's angle moves by less than the angle's noise, measured on the phase-fraction wrist), the
+#: held-out error at 10 ms
+PF_FIT_STEP_S = MECH_DT_S
 PF_DIFF_STEP = 1e-2
 PF_ROUNDS = 3
 #: values a fit may free beyond :data:`PF_RANGE` (``free``; (low, high, scale) as there): the reverse transformation's
@@ -737,7 +746,7 @@ def fit_phase_fraction_wire(
     rounds: int = PF_ROUNDS,
     free_payload: bool = True,
     free: Sequence[str] = (),
-    substeps: int = PF_FIT_SUBSTEPS,
+    step_s: float = PF_FIT_STEP_S,
     robust_scale_rad: float | None = None,
 ) -> FractionFit:
     """A phase-fraction wire (:mod:`sma_wrist.core.hysteresis.phase_fraction`: transformation temperatures, both
@@ -756,10 +765,11 @@ def fit_phase_fraction_wire(
     wires cooled, at rest) and scored from that sample to its end, their residuals appended to the excitation's:
     one least-squares fit over all recordings (the payload the same in all). ``free_payload`` false: the payload
     stays ``start['payload_kg']`` (or the run's). ``free``: values of :data:`PF_EXTRA_RANGE` fitted too (from
-    ``start``'s where it has them); a ``start['temp_lag_s']`` not freed is the replay's fixed lag. ``substeps``: plant
-    steps per sample of the fit's replays (:data:`PF_FIT_SUBSTEPS`). ``robust_scale_rad``: solve with the Cauchy loss
-    of that scale [rad] instead of plain least squares (a segment the start replays far off then weighs little more
-    than one it replays a few scales off); the fit's RMS is of the plain residuals either way."""
+    ``start``'s where it has them); a ``start['temp_lag_s']`` not freed is the replay's fixed lag. ``step_s``: the
+    plant step of the fit's replays [s] (:data:`PF_FIT_STEP_S`; a recording on a coarser grid is replayed in
+    substeps). ``robust_scale_rad``: solve with the Cauchy loss of that scale [rad] instead of plain least squares (a
+    segment the start replays far off then weighs little more than one it replays a few scales off); the fit's RMS
+    is of the plain residuals either way."""
     from scipy.optimize import least_squares
 
     from sma_wrist.core.hysteresis.phase_fraction import PhaseFractionWire
@@ -828,7 +838,7 @@ def fit_phase_fraction_wire(
     # once, each evaluation replays them with its wire (ExtendedModel.with_wire)
     models = [fx.ExtendedModel(r, PlantParams(dt=MECH_STEP_S, wire=w0)) for r in (run, *(r for r, _ in extra))]
     for m in models:
-        m.substeps = substeps
+        m.substeps = max(1, round(m.run.dt / step_s))
 
     def replay(x: np.ndarray, model: Any, upto: int | None) -> np.ndarray:
         wire, row = unpack(x)
@@ -941,8 +951,9 @@ def choose_model_wire(
 
 @dataclass
 class WireRefinement:
-    """What the identification hands to the refinement: the excitation's recording on the replay grid (from the
-    recording's start: the bring-up's heatings are the wires' history) with its fit and held-out samples, the
+    """What the identification hands to the refinement: the excitation's recording on the refinement's grid
+    (:data:`REFINE_DT_S`; from the recording's start: the bring-up's heatings are the wires' history) with its fit and
+    held-out samples, the
     phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`: its
     payload is the bridge's) and the fit of each law (``fits``, the refits' starts), the angle's noise [mrad],
     ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's
@@ -980,6 +991,30 @@ class HeatBalanceRefinement:
     params: Any
 
 
+def replay_grid(
+    t: np.ndarray,
+    temps: np.ndarray,
+    q: np.ndarray,
+    t_fit: float,
+    t_held: float,
+    t_end: float,
+    dt: float,
+    payload_kg: float,
+) -> tuple[Any, int, int]:
+    """The recording (time ``t`` [s], muscle temperatures ``temps`` (N, 2) [degC], angle ``q`` [rad]) from its start
+    to the excitation's end ``t_end`` on a grid of ``dt`` [s] whose sample ``i_fit`` is the excitation's start
+    ``t_fit`` (the bring-up before it is the wires' history, replayed, not scored), with the wrist's payload
+    [kg]: ``(run, i_fit, i_held)``, ``i_held`` the first sample at or after ``t_held`` (the held-out cycle)."""
+    from sma_wrist.diagnose.data import Run
+
+    i_fit = int(np.floor((t_fit - t[0]) / dt + 1e-9)) if t.size else 0
+    n_excitation = np.arange(t_fit, t_end - dt, dt).size  # the samples of the grid the excitation had alone
+    grid = t_fit + dt * np.arange(-i_fit, n_excitation)
+    T = np.column_stack([np.interp(grid, t, temps[:, m]) for m in (0, 1)])
+    run = Run(t=grid - grid[0], dt=dt, u=None, T=T, q=np.interp(grid, t, q), payload_kg=payload_kg, settle_s=i_fit * dt)
+    return run, i_fit, i_fit + int(round((t_held - t_fit) / dt))
+
+
 def identify_mechanics(
     bring: BringUp,
     out: Path,
@@ -994,7 +1029,7 @@ def identify_mechanics(
     from sma_wrist.core.hysteresis.params_file import save_hysteresis
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.diagnose import effects as fx
-    from sma_wrist.diagnose.data import DEFAULT_PAYLOAD_KG, Run
+    from sma_wrist.diagnose.data import DEFAULT_PAYLOAD_KG
     from sma_wrist.diagnose.fit import Evaluator
     from sma_wrist.identify.wrist import shifted_wire
 
@@ -1008,12 +1043,9 @@ def identify_mechanics(
     # closed-loop run was 4.1 mrad RMS off that model, 5.3 x the angle's noise. The history is replayed, never
     # scored: every fit and error below is over the excitation (from i_fit)
     t, temps, q, _ = _signals(bring, -math.inf)
-    dt = MECH_DT_S
-    i_fit = int(np.floor((t_fit - t[0]) / dt + 1e-9)) if t.size else 0
-    n_excitation = np.arange(t_fit, t_end - dt, dt).size  # the samples of the grid the excitation had alone
-    grid = t_fit + dt * np.arange(-i_fit, n_excitation)
-    T = np.column_stack([np.interp(grid, t, temps[:, m]) for m in (0, 1)])
-    qg = np.interp(grid, t, q)
+    prior_kg = payload_kg if payload_kg is not None else DEFAULT_PAYLOAD_KG
+    run, i_fit, i_held = replay_grid(t, temps, q, t_fit, t_held, t_end, MECH_DT_S, prior_kg)
+    grid, T, qg = t_fit + MECH_DT_S * np.arange(-i_fit, run.n - i_fit), run.T, run.q
     exc = slice(i_fit, None)
     if np.ptp(qg[exc]) < MIN_SWEEP_RAD:
         raise IdentificationError(
@@ -1021,9 +1053,6 @@ def identify_mechanics(
             f'{T[exc].min():.0f}-{T[exc].max():.0f} degC): the wire and joint cannot be identified; check that the '
             'wires pull the joint, or a wire transforming beyond the TEMs window'
         )
-    prior_kg = payload_kg if payload_kg is not None else DEFAULT_PAYLOAD_KG
-    run = Run(t=grid - grid[0], dt=dt, u=None, T=T, q=qg, payload_kg=prior_kg, settle_s=i_fit * dt)
-    i_held = i_fit + int(round((t_held - t_fit) / dt))
     base = default_sdgpi()
     builtin_model = fx.ExtendedModel(run, PlantParams(dt=MECH_STEP_S, hysteresis=base))
     pred = builtin_model.angle_measured(fx.NOMINAL[None], None, 'measured')[:, 0]
@@ -1368,9 +1397,7 @@ def identify_mechanics(
         )
         hyst['wire_file'] = values['wire_file']
         values['refinement'] = WireRefinement(
-            dataclasses.replace(run, payload_kg=prior_kg),
-            i_fit,
-            i_held,
+            *replay_grid(t, temps, q, t_fit, t_held, t_end, REFINE_DT_S, prior_kg),
             pff,
             {k: x[0] for k, x in pf_fits.items()},
             noise_mrad,
@@ -1411,7 +1438,7 @@ def identify_wrist(bring: BringUp, out: Path, payload_kg: float | None = None) -
             ref,
             thermal=HeatBalanceRefinement(
                 fit,
-                [ref.i_fit * MECH_DT_S] * len(fit),
+                [ref.i_fit * ref.excitation.dt] * len(fit),
                 rest,
                 noise,
                 Path(heat_balance_file),

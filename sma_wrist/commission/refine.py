@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from sma_wrist.commission.identification import WireRefinement
+from sma_wrist.commission.identification import MECH_STEP_S, REFINE_DT_S, WireRefinement
 from sma_wrist.core.hysteresis.phase_fraction import LAWS
 
 #: the refits' solver iterations (each a Jacobian: one replay of every recording per free value). On the emulated
@@ -64,11 +64,12 @@ REFINE_FREE = ('C_A_MPa_per_C', 'sigma_s_MPa', 'temp_lag_s')
 #: against 2.5 mrad held out on one commissioning); freed from the refit, 2.5 -> 1.6, 1.4 -> 1.3 (moduli 70.5 / 30.0)
 #: and 2.0 -> 1.5 mrad on three commissionings (doc/explanation/commissioning.md)
 REFINE_FREE_THEN = ('E_A_GPa', 'E_M_GPa')
-#: the refits replay at the held-out replay's step (MECH_STEP_S, 5 steps per sample), not the first fit's one step per
-#: sample: with the thermocouple lag undone from sharp rates the coarse step was what the refits fitted. On the emulated
-#: phase-fraction wrist the refit held out 4.0 mrad at one step per sample, 2.1 at two, 1.8 at five (the thermocouple
-#: lag read 0.11, 0.21, 0.21 s; the emulated one is 0.2 s), each refit 1-2 s of CPU more
-REFINE_SUBSTEPS = 5
+#: the refits replay at the held-out replay's step (MECH_STEP_S), not the first fit's one step per 0.05 s sample: with
+#: the thermocouple lag undone from sharp rates the coarse step was what the refits fitted. On the emulated
+#: phase-fraction wrist the refit held out 4.0 mrad at 0.05 s, 2.1 at 0.025, 1.8 at 0.01 (the thermocouple lag read
+#: 0.11, 0.21, 0.21 s; the emulated one is 0.2 s), each refit 1-2 s of CPU more. The recordings are on the grid of
+#: :data:`~sma_wrist.commission.identification.REFINE_DT_S`, one step per sample
+REFINE_STEP_S = MECH_STEP_S
 #: the least-squares refits are solved from the first fit's friction and from this Coulomb friction [N m] (half the
 #: built-in joint's), the lower fit error kept: from too much friction the replay sticks where the wrist moves, and a
 #: stuck replay does not tell the solve by how much. On the emulated phase-fraction wrist the first fit read 0.025 N m
@@ -102,14 +103,12 @@ def candidate_label(key: str) -> str:
     return f'{key} law'
 
 
-def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float | None = None) -> Any:
-    """A verification run's bag as a recording of the replay grid (:data:`~sma_wrist.commission.identification.
-    MECH_DT_S`): the measured temperatures and angle, the wrist's payload ``payload_kg`` (the bag's is what the
-    controllers were told); ``settle_s`` [s]: the soft start, replayed, not scored."""
-    from sma_wrist.commission.identification import MECH_DT_S
+def recording(bag: str | Path, payload_kg: float, settle_s: float, dt: float = REFINE_DT_S) -> Any:
+    """A verification run's bag as a recording on the refinement's grid (``dt`` [s]: :data:`~sma_wrist.commission.
+    identification.REFINE_DT_S`): the measured temperatures and angle, the wrist's payload ``payload_kg`` (the bag's is
+    what the controllers were told); ``settle_s`` [s]: the soft start, replayed, not scored."""
     from sma_wrist.diagnose.data import DiagnoseInputError, Run, load_run
 
-    dt = dt or MECH_DT_S
     r = load_run(bag)
     if r.T is None or r.q is None or r.duration < settle_s + 10.0:
         raise DiagnoseInputError(f'{bag}: the run has no muscle temperatures and angle past its soft start')
@@ -126,7 +125,6 @@ def replay_rms_mrad(fit: Any, run: Any, i0: int, i1: int | None = None) -> float
     restarts from the measured angle and the step itself is not scored, as in the diagnosis
     (:meth:`~sma_wrist.diagnose.effects.ExtendedModel.restart_after_steps`): one snap in the commissioned run of the
     emulated phase-fraction wrist held every candidate out to 62-78 mrad, which chose among them by the snap."""
-    from sma_wrist.commission.identification import MECH_STEP_S
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.diagnose import effects as fx
 
@@ -206,7 +204,7 @@ def refine_wire(
                         rounds=REFINE_ROUNDS,
                         free_payload=REFINE_FREE_PAYLOAD and not ctx.payload_given,
                         free=free,
-                        substeps=REFINE_SUBSTEPS,
+                        step_s=REFINE_STEP_S,
                         robust_scale_rad=robust,
                     )
                 tried.append(f)
@@ -329,7 +327,7 @@ def refine_heat_balance(
 
     Returns ``{'refined', 'latent_C', 'temp_lag_s', 'heldout': {'metric', 'unit', 'first', 'latent'}, 'fit_rms_C',
     'recordings', 'why'}`` (JSON-ready)."""
-    from sma_wrist.commission.identification import MECH_STEP_S, predicts_better
+    from sma_wrist.commission.identification import predicts_better
     from sma_wrist.core.plant.wrist import PlantParams
     from sma_wrist.core.thermal import peltier_fit as pf
     from sma_wrist.core.thermal.identification import ThermalIdentificationError
