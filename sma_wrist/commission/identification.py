@@ -1184,7 +1184,7 @@ def identify_mechanics(
     # shift-only fit on, at its payload (the warp's stress dependence and the payload trade: a free payload came out
     # 0.36 kg for 0.45 kg on the phase-fraction wrist). The angle's noise [mrad]: a model better by less than that is
     # not better (on the model wrist the warp fits to 0.34 against the built-in's 0.42 mrad held out, noise 0.24)
-    noise_mrad = 1e3 * fx.noise_sigma(qg[exc], 2 * np.pi / 2**16)
+    noise_mrad = 1e3 * fx.noise_sigma(qg[exc], fx.ANGLE_LSB_RAD)
     start = {'shift_C': shift, 'coulomb_Nm': v['coulomb_Nm'], 'preload_err_mm': v['preload_err_mm']}
     fit_run = dataclasses.replace(run, payload_kg=payload)
     wf = fit_warped_wire(fit_run, base, i_held, start, i_fit=i_fit)

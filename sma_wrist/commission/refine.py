@@ -132,7 +132,7 @@ def replay_rms_mrad(fit: Any, run: Any, i0: int, i1: int | None = None) -> float
         dataclasses.replace(run, payload_kg=fit.payload_kg), PlantParams(dt=MECH_STEP_S, wire=fit.wire)
     )
     row = fit.row()
-    model.restart_after_steps(row, i0, fx.noise_sigma(run.q, 2 * np.pi / 2**16))
+    model.restart_after_steps(row, i0, fx.noise_sigma(run.q, fx.ANGLE_LSB_RAD))
     q = model.angle_measured(row[None], i1, 'measured')[:, 0]
     ok = np.ones(q.size, bool) if model.run.valid is None else np.asarray(model.run.valid, bool)[: q.size]
     return 1e3 * float(np.sqrt(np.mean(((q - run.q[: q.size]) ** 2)[i0:][ok[i0:]])))

@@ -325,6 +325,13 @@ def _d2_var(x: np.ndarray, lag: int) -> float:
     return float((np.median(np.abs(d2 - np.median(d2))) * 1.4826) ** 2)
 
 
+#: the quantisation steps the noise floors assume (:func:`noise_sigma`'s ``lsb``): a 16-bit ADC over one turn of the
+#: angle potentiometer [rad] and over a 200 degC thermocouple span [degC], about the bridge's default calibration's
+#: 0.1 mrad and 4 mdegC per count (:mod:`sma_wrist.hw.calibration`)
+ANGLE_LSB_RAD = 2 * np.pi / 2**16
+TEMP_LSB_C = 200.0 / 2**16
+
+
 def noise_sigma(x: np.ndarray, lsb: float = 0.0) -> float:
     """White-noise std of a smooth signal's samples, from its second differences two samples apart (robust, MAD).
 
@@ -876,7 +883,7 @@ class ExtendedModel:
         if run.T is None or self.T_noise < SMOOTH_ABOVE_C:
             return 0.0
         rng = np.random.default_rng(seed)
-        sig = np.array([noise_density_sigma(run.T[:, c], 200.0 / 2**16) for c in (0, 1)])
+        sig = np.array([noise_density_sigma(run.T[:, c], TEMP_LSB_C) for c in (0, 1)])
         noise = [rng.normal(0.0, 1.0, run.T.shape) * sig for _ in range(INPUT_NOISE_REALISATIONS)]
         # the stand-in for the truth: the least smoothed (a smoother one hides the transitions'
         # distortion by smoothing: the error of a 0.3 s window came out 2x too small), at the run's rate window

@@ -110,12 +110,12 @@ class Evaluator:
         # (simulated) data is not held to a standard the replay cannot meet
         self.sigma = {}
         if run.T is not None:
-            self.sigma['thermal'] = max(fx.noise_sigma(run.T, 200.0 / 2**16), REPLAY_RESOLUTION * float(np.ptp(run.T)))
+            self.sigma['thermal'] = max(fx.noise_sigma(run.T, fx.TEMP_LSB_C), REPLAY_RESOLUTION * float(np.ptp(run.T)))
         self.input_noise = 0.0
         self.step_error = 0.0
         if run.q is not None:
             self.sigma['mechanics'] = self.sigma['chain'] = max(
-                fx.noise_sigma(run.q, 2 * np.pi / 2**16), REPLAY_RESOLUTION * float(np.ptp(run.q))
+                fx.noise_sigma(run.q, fx.ANGLE_LSB_RAD), REPLAY_RESOLUTION * float(np.ptp(run.q))
             )
             if run.T is not None and 'mechanics' in ch:
                 # errors in the input variables: the thermocouple noise the replay is driven by

@@ -135,7 +135,7 @@ def ambient_drift_fit(run, base=None) -> DriftFit | None:  # type: ignore[no-unt
     rate = s * typical
     # the diagnosis' rule for a cause that explains only part of a channel (PARTIAL_RATIO, PARTIAL_GAIN_PCT), on the
     # blocks: what the fit leaves is above PARTIAL_RATIO x the noise of a block and it removed less than 80 %
-    sigma_block = fx.noise_sigma(run.T, 200.0 / 2**16) / np.sqrt(n)
+    sigma_block = fx.noise_sigma(run.T, fx.TEMP_LSB_C) / np.sqrt(n)
     left = float(np.sqrt(np.mean(R * R)))
     partial = left > PARTIAL_RATIO * sigma_block and explained < PARTIAL_GAIN_PCT / 100.0
     agree = per[0] * per[1] > 0 and max(abs(per[0]), abs(per[1])) <= CHANNEL_AGREEMENT * min(abs(per[0]), abs(per[1]))
