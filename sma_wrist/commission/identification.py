@@ -953,11 +953,10 @@ def choose_model_wire(
 class WireRefinement:
     """What the identification hands to the refinement: the excitation's recording on the refinement's grid
     (:data:`REFINE_DT_S`; from the recording's start: the bring-up's heatings are the wires' history) with its fit and
-    held-out samples, the
-    phase-fraction fit handed over (``first``, a :class:`~sma_wrist.commission.identification.FractionFit`: its
-    payload is the bridge's) and the fit of each law (``fits``, the refits' starts), the angle's noise [mrad],
-    ``wire.yaml``'s path and the datum it writes (the fit's ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's
-    pre-load elongation)."""
+    held-out samples, the phase-fraction fit handed over (``first``, a
+    :class:`~sma_wrist.commission.identification.FractionFit`: its payload is the bridge's) and the fit of each law
+    (``fits``, the refits' starts), the angle's noise [mrad], ``wire.yaml``'s path and the datum it writes (the fit's
+    ``offset_mm`` less ``datum_shift_mm``: the SD-GPI's pre-load elongation)."""
 
     excitation: Any
     i_fit: int
