@@ -621,3 +621,22 @@ def test_a_run_whose_drive_steps_up_just_after_its_start_starts_its_nodes_where_
     started_on_slope.T_rate_start = slope
     res_slope = started_on_slope.thermal_measured(row)[3000:, 0] - readings[3000:]
     assert np.sqrt(np.mean(res**2)) < 0.3 * np.sqrt(np.mean(res_slope**2))
+
+
+def test_a_fit_is_on_its_bound_only_where_it_went_nearly_all_the_way_there():
+    # the joint's damping: catalogue range 0-20 N m s about 0.15. A fitted 0.059 is a damping, not "the bound 0" (the
+    # summary then asked for a damping below zero); 0.0005 is on the bound; a nominal on its bound is never on it
+    from sma_wrist.diagnose import at_bound
+    from sma_wrist.diagnose import fit as ft
+
+    effect = next(e for e in fx.CATALOGUE if e.id == 'viscous_damping')
+    i = fx.INDEX['viscous_Nms']
+
+    def fitted(v: float, nominal: float = 0.15) -> list:
+        row, nom = fx.NOMINAL.copy(), fx.NOMINAL.copy()
+        row[i], nom[i] = v, nominal
+        return at_bound(ft.Fit(effect, row), nom)
+
+    assert fitted(0.059) == [] and fitted(0.3) == []
+    assert [h['bound'] for h in fitted(0.0005)] == [0.0] and [h['bound'] for h in fitted(19.99)] == [20.0]
+    assert fitted(0.0, nominal=0.0) == []

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sma_wrist.diagnose import BOUND_FRACTION, diagnose_run
+from sma_wrist.diagnose import bound_tolerance, diagnose_run
 from sma_wrist.diagnose import distort as ds
 from sma_wrist.diagnose import effects as fx
 from sma_wrist.diagnose.data import load_run
@@ -141,8 +141,8 @@ def test_a_fit_on_its_bound_is_never_reported_as_the_value(clean_run):
     assert res.bound_hits and 'larger than the catalogue allows' in res.summary
     for k, v in res.parameters.items():
         i = fx.INDEX[k]
-        span = fx.UPPER[i] - fx.LOWER[i]
-        assert min(abs(v['value'] - fx.LOWER[i]), abs(v['value'] - fx.UPPER[i])) > BOUND_FRACTION * span, k
+        lo, hi, nom = fx.LOWER[i], fx.UPPER[i], v['nominal']
+        assert all(abs(v['value'] - b) > bound_tolerance(lo, hi, nom, b) for b in (lo, hi)), k
 
 
 def test_generator_reproduces_the_recording_and_does_not_use_the_extension_code(clean_run):

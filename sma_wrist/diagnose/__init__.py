@@ -51,6 +51,10 @@ CONSISTENT_LOG = 0.02
 #: a fitted value within this fraction of its range from a bound (that is not its nominal
 #: value) has hit the bound: the fit says "at least this much", not "this much"
 BOUND_FRACTION = 0.005
+#: ... and within this share of the way from its nominal value to that bound: a catalogue range can be far wider than
+#: the parameter near its nominal (the joint's damping: 0-20 N m s about 0.15), where the range's fraction alone called
+#: a damping fitted to 0.059 N m s "on the bound 0" and the summary asked for a damping below zero
+BOUND_SHARE = 0.05
 #: causes of other subsystems scoring within this (log SSE) of the named one make the verdict ambiguous
 AMBIGUITY_LOG = 0.3
 #: a verdict that names two subsystems is given at most this confidence
@@ -558,6 +562,13 @@ def effect_over_noise(ev: ft.Evaluator, f: ft.Fit, c: str) -> float:
     return float(np.sqrt(np.sum(d[ev.i_train :] ** 2) / ev.n_test(c)) / ev.sigma[c])
 
 
+def bound_tolerance(lo: float, hi: float, nominal: float, bound: float) -> float:
+    """How near ``bound`` (``lo`` or ``hi``, a parameter's catalogue range) a value fitted from ``nominal`` counts as
+    on it: :data:`BOUND_FRACTION` of the range, and at most :data:`BOUND_SHARE` of the way from the nominal value to
+    the bound (0 where the nominal value is the bound: no fit is on it)."""
+    return min(BOUND_FRACTION * (hi - lo), BOUND_SHARE * abs(nominal - bound))
+
+
 def at_bound(f: ft.Fit, nominal: np.ndarray = fx.NOMINAL) -> list[dict[str, Any]]:
     """The fitted parameters of `f` that ended on a catalogue bound other than their ``nominal`` value (the row the
     fits start from)."""
@@ -565,8 +576,8 @@ def at_bound(f: ft.Fit, nominal: np.ndarray = fx.NOMINAL) -> list[dict[str, Any]
     for k in f.effect.params:
         i = fx.INDEX[k]
         v, lo, hi, nom = f.row[i], fx.LOWER[i], fx.UPPER[i], nominal[i]
-        tol = BOUND_FRACTION * (hi - lo)
         for b in (lo, hi):
+            tol = bound_tolerance(lo, hi, nom, b)
             if abs(v - b) <= tol and abs(nom - b) > tol:
                 out.append({'parameter': k, 'value': float(v), 'bound': float(b)})
     return out
