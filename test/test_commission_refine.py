@@ -332,10 +332,10 @@ def test_the_refinements_grid_replays_the_wires_own_angle_where_the_coarse_grid_
     truth = FractionFit(TRUTH, COULOMB, 0.4, 0.0, [], 0.2)
     err = {}
     for dt in (MECH_DT_S, REFINE_DT_S):
-        run, i_fit, i_held = replay_grid(t, readings, q, 20.0, 50.0, 60.0, dt, 0.4)
+        run, i_fit, i_held, grid = replay_grid(t, readings, q, 20.0, 50.0, 60.0, dt, 0.4)
         # the excitation's start and the held-out cycle's fall on the same times whatever the grid
         assert run.t[i_fit] == pytest.approx(20.0, abs=1e-9) and run.t[i_held] == pytest.approx(50.0, abs=1e-9)
-        assert run.dt == dt and np.allclose(run.q, np.interp(run.t, t, q))
+        assert run.dt == dt and np.allclose(run.q, np.interp(grid, t, q)) and np.allclose(grid - grid[0], run.t)
         err[dt] = rf.replay_rms_mrad(truth, run, i_fit)
     # measured 0.34 against 0.97 mrad
     assert err[REFINE_DT_S] < 0.5 < err[MECH_DT_S] and err[REFINE_DT_S] < 0.5 * err[MECH_DT_S], err

@@ -999,11 +999,12 @@ def replay_grid(
     t_end: float,
     dt: float,
     payload_kg: float,
-) -> tuple[Any, int, int]:
+) -> tuple[Any, int, int, np.ndarray]:
     """The recording (time ``t`` [s], muscle temperatures ``temps`` (N, 2) [degC], angle ``q`` [rad]) from its start
     to the excitation's end ``t_end`` on a grid of ``dt`` [s] whose sample ``i_fit`` is the excitation's start
     ``t_fit`` (the bring-up before it is the wires' history, replayed, not scored), with the wrist's payload
-    [kg]: ``(run, i_fit, i_held)``, ``i_held`` the first sample at or after ``t_held`` (the held-out cycle)."""
+    [kg]: ``(run, i_fit, i_held, grid)``, ``i_held`` the first sample at or after ``t_held`` (the held-out cycle),
+    ``grid`` the samples' times on ``t``'s clock (the run's own start at 0)."""
     from sma_wrist.diagnose.data import Run
 
     i_fit = int(np.floor((t_fit - t[0]) / dt + 1e-9)) if t.size else 0
@@ -1011,7 +1012,7 @@ def replay_grid(
     grid = t_fit + dt * np.arange(-i_fit, n_excitation)
     T = np.column_stack([np.interp(grid, t, temps[:, m]) for m in (0, 1)])
     run = Run(t=grid - grid[0], dt=dt, u=None, T=T, q=np.interp(grid, t, q), payload_kg=payload_kg, settle_s=i_fit * dt)
-    return run, i_fit, i_fit + int(round((t_held - t_fit) / dt))
+    return run, i_fit, i_fit + int(round((t_held - t_fit) / dt)), grid
 
 
 def identify_mechanics(
@@ -1043,8 +1044,8 @@ def identify_mechanics(
     # scored: every fit and error below is over the excitation (from i_fit)
     t, temps, q, _ = _signals(bring, -math.inf)
     prior_kg = payload_kg if payload_kg is not None else DEFAULT_PAYLOAD_KG
-    run, i_fit, i_held = replay_grid(t, temps, q, t_fit, t_held, t_end, MECH_DT_S, prior_kg)
-    grid, T, qg = t_fit + MECH_DT_S * np.arange(-i_fit, run.n - i_fit), run.T, run.q
+    run, i_fit, i_held, grid = replay_grid(t, temps, q, t_fit, t_held, t_end, MECH_DT_S, prior_kg)
+    T, qg = run.T, run.q
     exc = slice(i_fit, None)
     if np.ptp(qg[exc]) < MIN_SWEEP_RAD:
         raise IdentificationError(
@@ -1396,7 +1397,7 @@ def identify_mechanics(
         )
         hyst['wire_file'] = values['wire_file']
         values['refinement'] = WireRefinement(
-            *replay_grid(t, temps, q, t_fit, t_held, t_end, REFINE_DT_S, prior_kg),
+            *replay_grid(t, temps, q, t_fit, t_held, t_end, REFINE_DT_S, prior_kg)[:3],
             pff,
             {k: x[0] for k, x in pf_fits.items()},
             noise_mrad,
